@@ -1,0 +1,1 @@
+//! Reader for recorded ITP captures (SPEC §7).

@@ -1,0 +1,1 @@
+//! ITP master-to-slave frame codec (SPEC §2).

@@ -1,0 +1,172 @@
+//! Degradation models: one file per model, and the [`Stage`] that wraps one.
+//!
+//! Contract (SPEC §3): a model validates its parameters once, in `new`, and
+//! returns a [`ParamError`] naming the offending field; afterwards
+//! [`Model::decide`] cannot fail. A model never reads a clock: the frame's time
+//! at the stage (`t_ns`, CLOCK_MONOTONIC-like nanoseconds) is passed in, and so
+//! is the stage's own random stream. A model that drops a frame adds no delay;
+//! a dropped frame is never shown to later stages, so they draw nothing for it.
+
+pub mod bernoulli;
+pub mod delay;
+pub mod ge_lomax;
+pub mod gilbert_elliott;
+pub mod markov4;
+pub mod outage;
+pub mod units;
+
+pub use bernoulli::{Bernoulli, BernoulliParams};
+pub use delay::{Delay, DelayDist, DelayParams, Order};
+pub use ge_lomax::{GeLomax, GeLomaxParams};
+pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
+pub use markov4::{Markov4, Markov4Params};
+pub use outage::{Outage, OutageParams, OutageUnit};
+pub use units::{Millis, Probability};
+
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// The random generator of every stage: portable and seedable, so the same
+/// seed gives the same fates on every platform.
+pub type StageRng = Xoshiro256PlusPlus;
+
+/// What one stage decides for one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// The frame goes on, `delay_ns` later than it arrived at this stage.
+    Pass { delay_ns: u64 },
+    /// The frame is lost at this stage.
+    Drop,
+}
+
+impl Verdict {
+    /// A pass without delay.
+    pub const PASS: Verdict = Verdict::Pass { delay_ns: 0 };
+}
+
+/// A parameter that failed validation: which field, and what was wrong with it
+/// (including what would be accepted).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("`{field}`: {problem}")]
+pub struct ParamError {
+    /// The field as written in a scenario file, with an index where it is a
+    /// list element, e.g. `transition[1]`.
+    pub field: String,
+    /// What is wrong and what would be accepted.
+    pub problem: String,
+}
+
+impl ParamError {
+    pub fn new(field: impl Into<String>, problem: impl Into<String>) -> Self {
+        ParamError { field: field.into(), problem: problem.into() }
+    }
+}
+
+/// One degradation model's per-frame decision.
+pub trait Model {
+    /// Decides the fate of the frame that reaches this stage at `t_ns`.
+    fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict;
+}
+
+/// The kinds of model, as named in scenario files and drop reasons.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ModelKind {
+    Bernoulli,
+    GeLomax,
+    Markov4,
+    GilbertElliott,
+    Delay,
+    Outage,
+}
+
+impl ModelKind {
+    pub const ALL: [ModelKind; 6] = [
+        ModelKind::Bernoulli,
+        ModelKind::GeLomax,
+        ModelKind::Markov4,
+        ModelKind::GilbertElliott,
+        ModelKind::Delay,
+        ModelKind::Outage,
+    ];
+
+    /// The name used in scenario files (`model = "..."`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            ModelKind::Bernoulli => "bernoulli",
+            ModelKind::GeLomax => "ge_lomax",
+            ModelKind::Markov4 => "markov4",
+            ModelKind::GilbertElliott => "gilbert_elliott",
+            ModelKind::Delay => "delay",
+            ModelKind::Outage => "outage",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<ModelKind> {
+        ModelKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// A validated model of any kind. Dispatch is a `match`, not a trait object,
+/// so a pipeline is a flat array and a decision inlines.
+#[derive(Debug, Clone)]
+pub enum AnyModel {
+    Bernoulli(Bernoulli),
+    GeLomax(GeLomax),
+    Markov4(Markov4),
+    GilbertElliott(GilbertElliott),
+    Delay(Delay),
+    Outage(Outage),
+}
+
+impl AnyModel {
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            AnyModel::Bernoulli(_) => ModelKind::Bernoulli,
+            AnyModel::GeLomax(_) => ModelKind::GeLomax,
+            AnyModel::Markov4(_) => ModelKind::Markov4,
+            AnyModel::GilbertElliott(_) => ModelKind::GilbertElliott,
+            AnyModel::Delay(_) => ModelKind::Delay,
+            AnyModel::Outage(_) => ModelKind::Outage,
+        }
+    }
+
+    #[inline]
+    pub fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
+        match self {
+            AnyModel::Bernoulli(m) => m.decide(t_ns, rng),
+            AnyModel::GeLomax(m) => m.decide(t_ns, rng),
+            AnyModel::Markov4(m) => m.decide(t_ns, rng),
+            AnyModel::GilbertElliott(m) => m.decide(t_ns, rng),
+            AnyModel::Delay(m) => m.decide(t_ns, rng),
+            AnyModel::Outage(m) => m.decide(t_ns, rng),
+        }
+    }
+
+    /// The exact long-run fraction of frames this model drops, where it has a
+    /// closed form (`None` for models that never drop: 0.0 is returned).
+    /// For `outage` in time units this depends on the frame interval, so it is
+    /// given for a fixed interval `frame_interval_ns`.
+    pub fn loss_rate_exact(&self, frame_interval_ns: u64) -> Option<f64> {
+        match self {
+            AnyModel::Bernoulli(m) => Some(m.loss_rate_exact()),
+            AnyModel::GeLomax(m) => Some(m.loss_rate_exact()),
+            AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
+            AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
+            AnyModel::Delay(_) => Some(0.0),
+            AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
+        }
+    }
+
+    /// Outage windows opened so far and their total length in ns (0 for other
+    /// models).
+    pub fn outage_windows(&self) -> (u64, u64) {
+        match self {
+            AnyModel::Outage(m) => m.windows(),
+            _ => (0, 0),
+        }
+    }
+
+    /// Whether this model can release frames out of their arrival order.
+    pub fn may_reorder(&self) -> bool {
+        matches!(self, AnyModel::Delay(d) if d.may_reorder())
+    }
+}

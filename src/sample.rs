@@ -1,0 +1,96 @@
+//! The fixed-size shared-memory sample that carries one ITP frame between the
+//! console, the emulator and the simulator on one host (SPEC §2).
+//!
+//! Layout is `#[repr(C)]`, pinned by a compile-time size assertion, and
+//! published under a stable iceoryx2 type name: bump the `.vN` suffix of
+//! [`FrameSample::TYPE_NAME`] whenever the layout changes, so processes built
+//! from different layouts refuse to connect instead of misreading each other.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Length of an ITP master-to-slave frame on the wire.
+pub const ITP_FRAME_LEN: usize = 124;
+
+/// One frame in shared memory: the 124 wire bytes plus the metadata the
+/// injector and the simulator need. All times are CLOCK_MONOTONIC ns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("netfi::FrameSample.v1")]
+#[repr(C)]
+pub struct FrameSample {
+    /// Console send time, stamped just before publishing.
+    pub send_ns: u64,
+    /// The console's own send counter for this run (0, 1, 2, ...); gaps tell
+    /// the emulator that frames were lost before they reached it.
+    pub console_index: u64,
+    /// Assigned by the emulator when the frame enters it (0, 1, 2, ...).
+    pub ingress_index: u64,
+    /// Time the emulator took the frame off the console port.
+    pub ingress_ns: u64,
+    /// Delay the scenario injected (scheduled release − ingress).
+    pub injected_delay_ns: u64,
+    /// Scheduled release time (ingress + injected delay).
+    pub release_sched_ns: u64,
+    /// Actual release time, stamped just before publishing to the simulator.
+    pub release_ns: u64,
+    /// Number of valid bytes in `wire` (124 for ITP).
+    pub len: u32,
+    /// Reserved, zero.
+    pub flags: u32,
+    /// The ITP frame as it travels on the wire (little-endian, packed).
+    pub wire: [u8; ITP_FRAME_LEN],
+    /// Keeps the size a multiple of 8 explicitly, so nothing is implicit.
+    pub _pad: [u8; 4],
+}
+
+const _: () = assert!(core::mem::size_of::<FrameSample>() == 192);
+const _: () = assert!(core::mem::align_of::<FrameSample>() == 8);
+
+impl FrameSample {
+    /// The iceoryx2 type name; must match between all processes.
+    pub const TYPE_NAME: &'static str = "netfi::FrameSample.v1";
+
+    /// An all-zero sample (a valid initial value for loaned shared memory).
+    pub const ZERO: FrameSample = FrameSample {
+        send_ns: 0,
+        console_index: 0,
+        ingress_index: 0,
+        ingress_ns: 0,
+        injected_delay_ns: 0,
+        release_sched_ns: 0,
+        release_ns: 0,
+        len: 0,
+        flags: 0,
+        wire: [0; ITP_FRAME_LEN],
+        _pad: [0; 4],
+    };
+
+    /// The valid wire bytes.
+    pub fn payload(&self) -> &[u8] {
+        &self.wire[..(self.len as usize).min(ITP_FRAME_LEN)]
+    }
+}
+
+impl Default for FrameSample {
+    fn default() -> Self {
+        FrameSample::ZERO
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use iceoryx2::prelude::ZeroCopySend;
+
+    #[test]
+    fn type_name_is_stable() {
+        // SAFETY: type_name only returns the attribute's string.
+        assert_eq!(unsafe { FrameSample::type_name() }, FrameSample::TYPE_NAME);
+    }
+
+    #[test]
+    fn layout_offsets_are_pinned() {
+        assert_eq!(core::mem::offset_of!(FrameSample, send_ns), 0);
+        assert_eq!(core::mem::offset_of!(FrameSample, len), 56);
+        assert_eq!(core::mem::offset_of!(FrameSample, wire), 64);
+    }
+}
