@@ -9,3 +9,8 @@ pub mod model;
 pub mod capture;
 pub mod frame;
 pub mod sample;
+pub mod scenario;
+pub mod scheduler;
+pub mod injector;
+pub mod stats;
+pub mod check;

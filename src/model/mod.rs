@@ -29,6 +29,9 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 /// seed gives the same fates on every platform.
 pub type StageRng = Xoshiro256PlusPlus;
 
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct OutageWindows { pub count: u64, pub total_ns: u64, pub total_frames: u64 }
+
 /// What one stage decides for one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
@@ -158,10 +161,17 @@ impl AnyModel {
 
     /// Outage windows opened so far and their total length in ns (0 for other
     /// models).
-    pub fn outage_windows(&self) -> (u64, u64) {
+    pub fn outage_windows(&self) -> OutageWindows {
         match self {
-            AnyModel::Outage(m) => m.windows(),
-            _ => (0, 0),
+            AnyModel::Outage(m) => { let (count, total_ns) = m.windows(); OutageWindows { count, total_ns, total_frames: 0 } }
+            _ => OutageWindows::default(),
+        }
+    }
+
+    pub fn mean_delay_ms_exact(&self) -> f64 {
+        match self {
+            AnyModel::Delay(d) => d.mean_ms_exact(),
+            _ => 0.0,
         }
     }
 

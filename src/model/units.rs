@@ -45,22 +45,26 @@ impl fmt::Display for Probability {
 
 impl<'de> Deserialize<'de> for Probability {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Num(f64),
-            Int(i64),
-            Str(String),
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Probability;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a probability: a number in [0, 1] or a percentage like \"30%\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Probability, E> {
+                Probability::new(v).map_err(E::custom)
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Probability, E> {
+                Probability::new(v as f64).map_err(E::custom)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Probability, E> {
+                Probability::new(v as f64).map_err(E::custom)
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Probability, E> {
+                Probability::parse(v).map_err(E::custom)
+            }
         }
-        let r = Raw::deserialize(d).map_err(|_| {
-            serde::de::Error::custom("expected a probability: a number in [0, 1] or a percentage like \"30%\"")
-        })?;
-        match r {
-            Raw::Num(v) => Probability::new(v),
-            Raw::Int(v) => Probability::new(v as f64),
-            Raw::Str(s) => Probability::parse(&s),
-        }
-        .map_err(serde::de::Error::custom)
+        d.deserialize_any(V)
     }
 }
 
@@ -90,19 +94,23 @@ impl Millis {
 
 impl<'de> Deserialize<'de> for Millis {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Num(f64),
-            Int(i64),
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Millis;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a number of milliseconds ≥ 0 (decimals allowed)")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Millis, E> {
+                Millis::new(v).map_err(E::custom)
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Millis, E> {
+                Millis::new(v as f64).map_err(E::custom)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Millis, E> {
+                Millis::new(v as f64).map_err(E::custom)
+            }
         }
-        let r = Raw::deserialize(d)
-            .map_err(|_| serde::de::Error::custom("expected a number of milliseconds (decimals allowed)"))?;
-        let v = match r {
-            Raw::Num(v) => v,
-            Raw::Int(v) => v as f64,
-        };
-        Millis::new(v).map_err(serde::de::Error::custom)
+        d.deserialize_any(V)
     }
 }
 

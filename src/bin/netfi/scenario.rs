@@ -1,0 +1,123 @@
+//! `netfi scenario …`
+
+use crate::cli::{CheckArgs, ScenarioCmd};
+use anyhow::{bail, Context, Result};
+use netfi::check::{self, Arrivals, CheckReport};
+use netfi::scenario::{self, Scenario, PRESET_NAMES};
+
+/// Default release-queue capacity: 65,536 frames, i.e. 65 s of frames at
+/// 1 kHz or 0.65 s at 100 kHz.
+pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
+
+pub fn run(cmd: ScenarioCmd) -> Result<()> {
+    match cmd {
+        ScenarioCmd::Check(args) => check_cmd(args),
+        ScenarioCmd::List => {
+            for name in PRESET_NAMES {
+                println!("{name:8} {}", scenario::preset_label(name).unwrap_or(""));
+            }
+            Ok(())
+        }
+        ScenarioCmd::Show { scenario } => {
+            let spec = scenario::resolve(&scenario)?;
+            print!("{}", spec.to_toml());
+            Ok(())
+        }
+    }
+}
+
+/// A seed for runs that were given none: from the time and the process id.
+pub fn fresh_seed() -> u64 {
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
+    scenario::splitmix64(t ^ (u64::from(std::process::id()) << 32))
+}
+
+fn check_cmd(args: CheckArgs) -> Result<()> {
+    let spec = scenario::resolve(&args.scenario)?;
+    let seed = args.seed.or(spec.seed).unwrap_or_else(fresh_seed);
+    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
+    if queue_capacity == 0 {
+        bail!("--queue-capacity must be at least 1 frame");
+    }
+    let arrivals = match &args.capture {
+        Some(path) => {
+            let cap = netfi::capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+            let t0 = cap.records.first().map_or(0, |r| r.time_ns);
+            let mut times: Vec<u64> = cap.records.iter().map(|r| r.time_ns.saturating_sub(t0)).collect();
+            // Wall-clock captures can step backwards; the injector's clock cannot.
+            for i in 1..times.len() {
+                times[i] = times[i].max(times[i - 1]);
+            }
+            Arrivals::Times(times)
+        }
+        None => {
+            if !(args.rate_hz.is_finite() && args.rate_hz > 0.0) {
+                bail!("--rate-hz must be a positive number of frames per second, got {}", args.rate_hz);
+            }
+            Arrivals::Rate { frames: args.frames, rate_hz: args.rate_hz }
+        }
+    };
+    if arrivals.is_empty() {
+        bail!("nothing to check: 0 frames");
+    }
+    eprintln!("scenario {} seed {seed}", spec.name);
+    let scenario = Scenario::new(&spec, seed)?;
+    let bar = indicatif::ProgressBar::new(arrivals.len());
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames ({per_sec}, eta {eta})")
+            .expect("static template"),
+    );
+    if arrivals.len() < 2_000_000 {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let report = check::run(scenario, &arrivals, queue_capacity, |done| bar.set_position(done));
+    bar.finish_and_clear();
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report);
+    }
+    Ok(())
+}
+
+fn print_table(r: &CheckReport) {
+    println!("scenario          {}", r.scenario);
+    println!("seed              {}", r.seed);
+    println!("frames            {} at {:.1} Hz", r.frames, r.rate_hz);
+    println!("delivered         {}", r.delivered);
+    for (reason, n) in &r.dropped {
+        println!("dropped           {n} by {reason}");
+    }
+    println!(
+        "loss rate         {:.5}  95% CI [{:.5}, {:.5}]",
+        r.loss_rate, r.loss_rate_ci95[0], r.loss_rate_ci95[1]
+    );
+    println!("mean loss run     {:.3} frames", r.loss_run_mean);
+    println!(
+        "delay ms          mean {:.3}  p50 {:.3}  p99 {:.3}  max {:.3}",
+        r.delay_ms.mean, r.delay_ms.p50, r.delay_ms.p99, r.delay_ms.max
+    );
+    println!("reordered         {:.5} of delivered", r.reordered_fraction);
+    println!("outages           {} windows, mean {:.1} ms", r.outages.count, r.outages.mean_ms);
+    println!("queue             depth max {} of {}", r.queue_depth_max, r.queue_capacity);
+    if !r.stages.is_empty() {
+        println!("stages:");
+        println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
+        for s in &r.stages {
+            let model = match (s.loss_rate_model, s.delay_ms_model) {
+                (_, Some(d)) => format!("{d:.3} ms"),
+                (Some(l), None) => format!("{l:.5}"),
+                (None, None) => "-".into(),
+            };
+            println!(
+                "  {:>5}  {:<16} {:>12} {:>12} {:>9.5} {:>9}",
+                s.phase + 1,
+                s.label,
+                s.reached,
+                s.dropped,
+                s.loss_rate,
+                model
+            );
+        }
+    }
+}

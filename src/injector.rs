@@ -1,0 +1,225 @@
+//! The sans-IO injector core: a frame enters at `now` → its fate, and frames
+//! leave the release queue when their time comes.
+//!
+//! Contract:
+//! - Every frame that enters gets an ingress index (0, 1, 2, …) and exactly
+//!   one fate: scheduled for release, or dropped with a [`DropCause`]. A
+//!   scheduled frame is later either released ([`Injector::pop_due`]) or
+//!   still held when the run ends ([`Injector::held`]). So at every moment
+//!   `entered = dropped + released + held`, which [`Counts::balanced`] checks.
+//! - No clock, I/O or allocation after construction: `now_ns` is passed in,
+//!   the queue's capacity is fixed, and a frame that does not fit is a fate of
+//!   its own ([`DropCause::QueueFull`]), never a silent loss.
+//! - The timeline's phases are selected by the time since the first frame.
+
+use crate::model::ModelKind;
+use crate::scenario::{Decision, Scenario};
+use crate::scheduler::{QueueOrder, ReleaseQueue, Released};
+
+/// Why an entering frame could not be decided at all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Invalid {
+    /// Its length is not the protocol's.
+    WrongSize,
+    /// Its checksum does not match its contents (when such frames are dropped).
+    BadChecksum,
+}
+
+impl Invalid {
+    pub const fn name(self) -> &'static str {
+        match self {
+            Invalid::WrongSize => "wrong_size",
+            Invalid::BadChecksum => "bad_checksum",
+        }
+    }
+}
+
+/// Why a frame was dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DropCause {
+    /// A stage of the scenario dropped it (indices from 0).
+    Stage { phase: u16, stage: u16, kind: ModelKind },
+    /// The release queue was full.
+    QueueFull,
+    /// The frame was malformed.
+    Invalid(Invalid),
+}
+
+impl DropCause {
+    /// The reason as reported: the model's name, `queue_full`, `wrong_size`
+    /// or `bad_checksum`.
+    pub fn reason(self) -> &'static str {
+        match self {
+            DropCause::Stage { kind, .. } => kind.name(),
+            DropCause::QueueFull => "queue_full",
+            DropCause::Invalid(i) => i.name(),
+        }
+    }
+}
+
+/// A frame's fate at ingress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fate {
+    /// Held until `release_ns` (`delay_ns` after ingress).
+    Scheduled { release_ns: u64, delay_ns: u64 },
+    Dropped(DropCause),
+}
+
+/// What [`Injector::ingress`] returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Entered {
+    pub ingress_index: u64,
+    pub fate: Fate,
+}
+
+/// Running totals. Per-stage drops live in the scenario's stages.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    pub entered: u64,
+    pub released: u64,
+    pub dropped_by_stage: u64,
+    pub dropped_queue_full: u64,
+    pub dropped_wrong_size: u64,
+    pub dropped_bad_checksum: u64,
+    pub held: u64,
+}
+
+impl Counts {
+    pub fn dropped(&self) -> u64 {
+        self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum
+    }
+
+    /// `entered = released + dropped + held`.
+    pub fn balanced(&self) -> bool {
+        self.entered == self.released + self.dropped() + self.held
+    }
+}
+
+/// The injector: a scenario and a release queue holding items of type `T`
+/// (the shared-memory sample in the emulator, `()` in simulated time).
+#[derive(Debug, Clone)]
+pub struct Injector<T> {
+    scenario: Scenario,
+    queue: ReleaseQueue<T>,
+    start_ns: Option<u64>,
+    counts: Counts,
+}
+
+impl<T: Copy + Default> Injector<T> {
+    /// The queue is a FIFO ring when no stage can reorder, else a heap; it
+    /// holds at most `queue_capacity` frames.
+    pub fn new(scenario: Scenario, queue_capacity: usize) -> Self {
+        let order = if scenario.may_reorder() { QueueOrder::Reorder } else { QueueOrder::Fifo };
+        Injector { scenario, queue: ReleaseQueue::new(order, queue_capacity), start_ns: None, counts: Counts::default() }
+    }
+
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    pub fn queue_order(&self) -> QueueOrder {
+        self.queue.order()
+    }
+
+    pub fn queue_capacity(&self) -> usize {
+        self.queue.capacity()
+    }
+
+    pub fn counts(&self) -> Counts {
+        Counts { held: self.queue.len() as u64, ..self.counts }
+    }
+
+    /// Frames scheduled but not yet released.
+    pub fn held(&self) -> usize {
+        self.queue.len()
+    }
+
+    /// The run's start: the first frame's ingress time.
+    pub fn start_ns(&self) -> Option<u64> {
+        self.start_ns
+    }
+
+    fn enter(&mut self, now_ns: u64) -> (u64, u64) {
+        let start = *self.start_ns.get_or_insert(now_ns);
+        let index = self.counts.entered;
+        self.counts.entered += 1;
+        (index, now_ns.saturating_sub(start))
+    }
+
+    /// A frame enters at `now_ns`: decide it, and queue it if it survives.
+    #[inline]
+    pub fn ingress(&mut self, now_ns: u64, item: T) -> Entered {
+        let (ingress_index, offset_ns) = self.enter(now_ns);
+        let fate = match self.scenario.decide(offset_ns, now_ns) {
+            Decision::Drop { phase, stage } => {
+                self.counts.dropped_by_stage += 1;
+                let kind = self.scenario.stage(phase, stage).kind();
+                Fate::Dropped(DropCause::Stage { phase, stage, kind })
+            }
+            Decision::Pass { delay_ns } => {
+                match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, item) {
+                    Ok(release_ns) => Fate::Scheduled { release_ns, delay_ns: release_ns - now_ns },
+                    Err(_) => {
+                        self.counts.dropped_queue_full += 1;
+                        Fate::Dropped(DropCause::QueueFull)
+                    }
+                }
+            }
+        };
+        Entered { ingress_index, fate }
+    }
+
+    /// A malformed frame enters at `now_ns`: it gets an ingress index and is
+    /// dropped for `why`, without reaching the scenario.
+    pub fn reject(&mut self, now_ns: u64, why: Invalid) -> Entered {
+        let (ingress_index, _) = self.enter(now_ns);
+        match why {
+            Invalid::WrongSize => self.counts.dropped_wrong_size += 1,
+            Invalid::BadChecksum => self.counts.dropped_bad_checksum += 1,
+        }
+        Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)) }
+    }
+
+    /// The earliest scheduled release, if any frame is held.
+    #[inline]
+    pub fn next_release_ns(&self) -> Option<u64> {
+        self.queue.next_release_ns()
+    }
+
+    /// Takes the next frame due at `now_ns`.
+    #[inline]
+    pub fn pop_due(&mut self, now_ns: u64) -> Option<Released<T>> {
+        let r = self.queue.pop_due(now_ns)?;
+        self.counts.released += 1;
+        Some(r)
+    }
+
+    /// Drop counts by reason (model name, `queue_full`, `wrong_size`,
+    /// `bad_checksum`), zero counts omitted, in a stable order.
+    pub fn drops_by_reason(&self) -> Vec<(&'static str, u64)> {
+        let mut out: Vec<(&'static str, u64)> = Vec::new();
+        for kind in ModelKind::ALL {
+            let n: u64 = self
+                .scenario
+                .phases()
+                .iter()
+                .flat_map(|p| p.stages())
+                .filter(|s| s.kind() == kind)
+                .map(|s| s.dropped())
+                .sum();
+            if n > 0 {
+                out.push((kind.name(), n));
+            }
+        }
+        for (name, n) in [
+            ("queue_full", self.counts.dropped_queue_full),
+            ("wrong_size", self.counts.dropped_wrong_size),
+            ("bad_checksum", self.counts.dropped_bad_checksum),
+        ] {
+            if n > 0 {
+                out.push((name, n));
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,505 @@
+//! TOML scenario files → validated [`ScenarioSpec`]s, with errors that name
+//! the file, the line, the field, and what would be accepted.
+//!
+//! The file format (see `config/scenarios/*.toml` and the README):
+//!
+//! ```toml
+//! name = "PLM-2 then DLM-2"     # optional; defaults to the file stem
+//! seed = 7                      # optional; the command line wins
+//! queue_capacity = 65536        # optional
+//!
+//! [[stage]]                     # a pipeline, in order
+//! preset = "PLM-2"              # a study preset as one stage …
+//!
+//! [[stage]]
+//! model = "delay"               # … or a model with its parameters
+//! min_ms = 210
+//! dist = "hyperexp"
+//! weights = [0.89258, 0.10742]
+//! rates_per_ms = [0.01081, 0.01624]
+//! ```
+//!
+//! A timeline uses `[[phase]]` tables (`start_s` or `start_ms`, and either
+//! `preset = "..."` or `[[phase.stage]]` tables) instead of top-level stages.
+//! A whole-file `preset = "..."` is also accepted.
+
+use super::presets::{canonical_name, preset_stages, PRESET_NAMES};
+use super::spec::{ModelSpec, PhaseSpec, ScenarioSpec, StageSpec};
+use crate::model::ModelKind;
+use serde::de::DeserializeOwned;
+use serde::Deserialize;
+use std::fmt;
+use std::path::Path;
+use toml::Spanned;
+
+/// A scenario that could not be read, with where and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScenarioError {
+    /// The file, or `<preset>`/`<inline>` for scenarios not read from a file.
+    pub origin: String,
+    /// 1-based line in the file, when known.
+    pub line: Option<usize>,
+    /// Which part of the scenario, e.g. `stage 2 (ge_lomax)` or `phase 1`.
+    pub location: Option<String>,
+    /// The field as written, e.g. `alpha[1]`.
+    pub field: Option<String>,
+    /// What is wrong, and what would be accepted.
+    pub problem: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.origin)?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        write!(f, ": ")?;
+        if let Some(loc) = &self.location {
+            write!(f, "{loc}: ")?;
+        }
+        if let Some(field) = &self.field {
+            write!(f, "`{field}`: ")?;
+        }
+        write!(f, "{}", self.problem)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    name: Option<String>,
+    description: Option<String>,
+    seed: Option<u64>,
+    queue_capacity: Option<usize>,
+    preset: Option<String>,
+    stage: Option<Vec<Spanned<toml::Table>>>,
+    phase: Option<Vec<Spanned<RawPhase>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPhase {
+    name: Option<String>,
+    start_s: Option<f64>,
+    start_ms: Option<f64>,
+    preset: Option<String>,
+    stage: Option<Vec<Spanned<toml::Table>>>,
+}
+
+/// Reads and validates a scenario file.
+pub fn parse_file(path: &Path) -> Result<ScenarioSpec, ScenarioError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
+        origin: origin.clone(),
+        line: None,
+        location: None,
+        field: None,
+        problem: format!("cannot read the scenario file: {e}"),
+    })?;
+    let default_name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    parse_str(&text, &origin, &default_name)
+}
+
+/// Parses scenario TOML. `origin` names the source in errors; `default_name`
+/// is used when the file has no `name`.
+pub fn parse_str(text: &str, origin: &str, default_name: &str) -> Result<ScenarioSpec, ScenarioError> {
+    let ctx = Ctx { text, origin };
+    let raw: RawScenario = toml::from_str(text).map_err(|e| ctx.toml_error(&e))?;
+    if let Some(0) = raw.queue_capacity {
+        return Err(ctx.err(ctx.key_line(0..text.len(), "queue_capacity"), None, Some("queue_capacity"), "must be at least 1 frame"));
+    }
+    let given = [raw.preset.is_some(), raw.stage.is_some(), raw.phase.is_some()];
+    if given.iter().filter(|g| **g).count() > 1 {
+        return Err(ctx.err(None, None, None, "give exactly one of `preset`, `[[stage]]` tables or `[[phase]]` tables"));
+    }
+    let phases = if let Some(raw_phases) = raw.phase {
+        parse_phases(&ctx, raw_phases)?
+    } else {
+        let stages = if let Some(p) = &raw.preset {
+            resolve_preset(&ctx, ctx.key_line(0..text.len(), "preset"), None, p)?
+        } else {
+            parse_stages(&ctx, raw.stage.unwrap_or_default(), None)?
+        };
+        vec![PhaseSpec { name: None, start_ms: 0.0, stages }]
+    };
+    Ok(ScenarioSpec {
+        name: raw.name.unwrap_or_else(|| default_name.to_string()),
+        description: raw.description,
+        seed: raw.seed,
+        queue_capacity: raw.queue_capacity,
+        phases,
+    })
+}
+
+fn parse_phases(ctx: &Ctx, raw_phases: Vec<Spanned<RawPhase>>) -> Result<Vec<PhaseSpec>, ScenarioError> {
+    let mut phases = Vec::with_capacity(raw_phases.len());
+    for (i, sp) in raw_phases.into_iter().enumerate() {
+        let span = sp.span();
+        let line = Some(ctx.line_of(span.start));
+        let loc = format!("phase {}", i + 1);
+        let rp = sp.into_inner();
+        let start_ms = match (rp.start_s, rp.start_ms) {
+            (Some(s), None) => s * 1e3,
+            (None, Some(ms)) => ms,
+            (None, None) if i == 0 => 0.0,
+            (None, None) => {
+                return Err(ctx.err(line, Some(&loc), Some("start_s"), "missing: every phase after the first needs `start_s` or `start_ms`"))
+            }
+            (Some(_), Some(_)) => return Err(ctx.err(line, Some(&loc), Some("start_ms"), "give `start_s` or `start_ms`, not both")),
+        };
+        let field = if rp.start_s.is_some() { "start_s" } else { "start_ms" };
+        if !start_ms.is_finite() || start_ms < 0.0 {
+            return Err(ctx.err(ctx.key_line(span.clone(), field), Some(&loc), Some(field), "must be a finite time ≥ 0"));
+        }
+        if i == 0 && start_ms != 0.0 {
+            return Err(ctx.err(ctx.key_line(span.clone(), field), Some(&loc), Some(field), "the first phase must start at 0"));
+        }
+        if let Some(prev) = phases.last().map(|p: &PhaseSpec| p.start_ms) {
+            if start_ms <= prev {
+                return Err(ctx.err(
+                    ctx.key_line(span.clone(), field),
+                    Some(&loc),
+                    Some(field),
+                    format!("phases must start in increasing order: this one starts at {start_ms} ms, the previous at {prev} ms"),
+                ));
+            }
+        }
+        let stages = match (rp.preset, rp.stage) {
+            (Some(p), None) => resolve_preset(ctx, ctx.key_line(span.clone(), "preset"), Some(&loc), &p)?,
+            (None, Some(st)) => parse_stages(ctx, st, Some(i + 1))?,
+            (None, None) => Vec::new(),
+            (Some(_), Some(_)) => {
+                return Err(ctx.err(line, Some(&loc), Some("preset"), "give `preset` or `[[phase.stage]]` tables, not both"))
+            }
+        };
+        phases.push(PhaseSpec { name: rp.name, start_ms, stages });
+    }
+    if phases.is_empty() {
+        return Err(ctx.err(None, None, Some("phase"), "a timeline needs at least one `[[phase]]`"));
+    }
+    Ok(phases)
+}
+
+fn resolve_preset(ctx: &Ctx, line: Option<usize>, loc: Option<&str>, name: &str) -> Result<Vec<StageSpec>, ScenarioError> {
+    preset_stages(name).ok_or_else(|| {
+        ctx.err(line, loc, Some("preset"), format!("unknown preset `{name}`: expected one of {}", PRESET_NAMES.join(", ")))
+    })
+}
+
+fn parse_stages(ctx: &Ctx, raw: Vec<Spanned<toml::Table>>, phase: Option<usize>) -> Result<Vec<StageSpec>, ScenarioError> {
+    let mut stages = Vec::with_capacity(raw.len());
+    for (i, st) in raw.into_iter().enumerate() {
+        let n = i + 1;
+        let loc = match phase {
+            Some(p) => format!("phase {p}, stage {n}"),
+            None => format!("stage {n}"),
+        };
+        stages.extend(parse_stage(ctx, &loc, st)?);
+    }
+    Ok(stages)
+}
+
+fn take_string(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &str, t: &mut toml::Table, key: &str) -> Result<Option<String>, ScenarioError> {
+    match t.remove(key) {
+        None => Ok(None),
+        Some(toml::Value::String(s)) => Ok(Some(s)),
+        Some(other) => Err(ctx.err(
+            ctx.key_line(span.clone(), key),
+            Some(loc),
+            Some(key),
+            format!("expected a string, found {}", other.type_str()),
+        )),
+    }
+}
+
+fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<StageSpec>, ScenarioError> {
+    let span = st.span();
+    let header_line = Some(ctx.line_of(span.start));
+    let mut t = st.into_inner();
+    let name = take_string(ctx, &span, loc, &mut t, "name")?;
+    let preset = take_string(ctx, &span, loc, &mut t, "preset")?;
+    let model = take_string(ctx, &span, loc, &mut t, "model")?;
+    match (preset, model) {
+        (Some(p), None) => {
+            if let Some(k) = t.keys().next() {
+                return Err(ctx.err(
+                    ctx.key_line(span.clone(), k),
+                    Some(loc),
+                    Some(k),
+                    "does not apply to a preset stage: a preset stage takes only `preset` and `name`",
+                ));
+            }
+            let mut stages = resolve_preset(ctx, ctx.key_line(span.clone(), "preset"), Some(loc), &p)?;
+            if name.is_some() {
+                if stages.len() != 1 {
+                    return Err(ctx.err(ctx.key_line(span, "name"), Some(loc), Some("name"), format!("preset `{p}` has no stage to name")));
+                }
+                stages[0].name = name;
+            }
+            Ok(stages)
+        }
+        (None, Some(m)) => {
+            let Some(kind) = ModelKind::from_name(&m) else {
+                let names: Vec<_> = ModelKind::ALL.iter().map(|k| k.name()).collect();
+                return Err(ctx.err(
+                    ctx.key_line(span, "model"),
+                    Some(loc),
+                    Some("model"),
+                    format!("unknown model `{m}`: expected one of {}", names.join(", ")),
+                ));
+            };
+            let loc = format!("{loc} ({})", kind.name());
+            let model = match kind {
+                ModelKind::Bernoulli => ModelSpec::Bernoulli(params(ctx, &span, &loc, t)?),
+                ModelKind::GeLomax => ModelSpec::GeLomax(params(ctx, &span, &loc, t)?),
+                ModelKind::Markov4 => ModelSpec::Markov4(params(ctx, &span, &loc, t)?),
+                ModelKind::GilbertElliott => ModelSpec::GilbertElliott(params(ctx, &span, &loc, t)?),
+                ModelKind::Delay => ModelSpec::Delay(params(ctx, &span, &loc, t)?),
+                ModelKind::Outage => ModelSpec::Outage(params(ctx, &span, &loc, t)?),
+            };
+            if let Err(e) = model.build() {
+                let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
+                return Err(ctx.err(ctx.key_line(span, &key).or(header_line), Some(&loc), Some(&e.field), e.problem));
+            }
+            Ok(vec![StageSpec { name, preset: None, model }])
+        }
+        (Some(_), Some(_)) => Err(ctx.err(header_line, Some(loc), Some("preset"), "give `model` or `preset`, not both")),
+        (None, None) => {
+            let names: Vec<_> = ModelKind::ALL.iter().map(|k| k.name()).collect();
+            Err(ctx.err(
+                header_line,
+                Some(loc),
+                None,
+                format!("a stage needs `model` (one of {}) or `preset` (one of {})", names.join(", "), PRESET_NAMES.join(", ")),
+            ))
+        }
+    }
+}
+
+/// Deserializes a stage's remaining keys into the model's parameter struct,
+/// keeping the path of the offending field.
+fn params<P: DeserializeOwned>(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &str, t: toml::Table) -> Result<P, ScenarioError> {
+    serde_path_to_error::deserialize::<_, P>(toml::Value::Table(t)).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        let mut message = inner.message().trim().to_string();
+        // Unknown and missing fields are reported at the table's level, with
+        // the field only inside the message: pull it out.
+        let mut field = if path == "." { None } else { Some(path) };
+        for prefix in ["unknown field `", "missing field `"] {
+            if let Some(rest) = message.strip_prefix(prefix) {
+                if let Some(end) = rest.find('`') {
+                    field = Some(rest[..end].to_string());
+                    message = if prefix.starts_with("unknown") {
+                        format!("unknown field{}", &rest[end + 1..])
+                    } else {
+                        "missing: this model requires it".to_string()
+                    };
+                }
+            }
+        }
+        let line = field
+            .as_deref()
+            .and_then(|f| ctx.key_line(span.clone(), f.split(['[', '.']).next().unwrap_or(f)))
+            .or(Some(ctx.line_of(span.start)));
+        ctx.err(line, Some(loc), field.as_deref(), message)
+    })
+}
+
+struct Ctx<'a> {
+    text: &'a str,
+    origin: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, line: Option<usize>, loc: Option<&str>, field: Option<&str>, problem: impl Into<String>) -> ScenarioError {
+        ScenarioError {
+            origin: self.origin.to_string(),
+            line,
+            location: loc.map(str::to_string),
+            field: field.map(str::to_string),
+            problem: problem.into(),
+        }
+    }
+
+    fn line_of(&self, byte: usize) -> usize {
+        self.text[..byte.min(self.text.len())].matches('\n').count() + 1
+    }
+
+    /// The line of `key = ...` in the table whose header is at `span` (the
+    /// header and its key/value lines up to the next table header), if there.
+    fn key_line(&self, span: std::ops::Range<usize>, key: &str) -> Option<usize> {
+        let start = span.start.min(self.text.len());
+        let end = self.table_end(span.end.min(self.text.len()));
+        let mut offset = start;
+        for line in self.text[start..end].split_inclusive('\n') {
+            let trimmed = line.trim_start();
+            let k = trimmed.strip_prefix(key).or_else(|| trimmed.strip_prefix(&format!("\"{key}\"")));
+            if let Some(rest) = k {
+                if rest.trim_start().starts_with('=') {
+                    return Some(self.line_of(offset));
+                }
+            }
+            offset += line.len();
+        }
+        None
+    }
+
+    /// Where the table that starts before `from` ends: the start of the next
+    /// line that is a table header (`[name]` or `[[name]]`), or the end.
+    fn table_end(&self, from: usize) -> usize {
+        let mut offset = from;
+        for line in self.text[from..].split_inclusive('\n') {
+            let t = line.trim_start();
+            let after = t.strip_prefix("[[").or_else(|| t.strip_prefix('['));
+            let is_header = offset > from
+                && after.and_then(|a| a.trim_start().chars().next()).is_some_and(|c| c.is_alphabetic() || c == '_' || c == '"' || c == '\'');
+            if is_header {
+                return offset;
+            }
+            offset += line.len();
+        }
+        self.text.len()
+    }
+
+    fn toml_error(&self, e: &toml::de::Error) -> ScenarioError {
+        let line = e.span().map(|s| self.line_of(s.start));
+        let message = e.message().trim().to_string();
+        let mut field = None;
+        let mut problem = message.clone();
+        if let Some(rest) = message.strip_prefix("unknown field `") {
+            if let Some(end) = rest.find('`') {
+                field = Some(rest[..end].to_string());
+                problem = format!("unknown field{}", &rest[end + 1..]);
+            }
+        }
+        ScenarioError { origin: self.origin.to_string(), line, location: None, field, problem }
+    }
+}
+
+/// Resolves a command-line scenario argument: a preset name, or a file.
+pub fn resolve(arg: &str) -> Result<ScenarioSpec, ScenarioError> {
+    if let Some(name) = canonical_name(arg) {
+        let stages = preset_stages(name).expect("canonical names are presets");
+        return Ok(ScenarioSpec::single(name, stages));
+    }
+    let path = Path::new(arg);
+    if path.exists() {
+        return parse_file(path);
+    }
+    Err(ScenarioError {
+        origin: arg.to_string(),
+        line: None,
+        location: None,
+        field: None,
+        problem: format!("neither a scenario file nor a preset (presets: {})", PRESET_NAMES.join(", ")),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(text: &str) -> ScenarioError {
+        parse_str(text, "s.toml", "s").expect_err("must be rejected")
+    }
+
+    #[test]
+    fn a_bernoulli_pipeline_parses() {
+        let spec = parse_str("seed = 3\n[[stage]]\nmodel = \"bernoulli\"\np = \"30%\"\n", "s.toml", "s").unwrap();
+        assert_eq!(spec.name, "s");
+        assert_eq!(spec.seed, Some(3));
+        assert_eq!(spec.phases.len(), 1);
+        match &spec.phases[0].stages[0].model {
+            ModelSpec::Bernoulli(p) => assert!((p.p.get() - 0.3).abs() < 1e-15),
+            other => panic!("parsed as {other:?}"),
+        }
+    }
+
+    #[test]
+    fn an_unknown_field_names_file_line_and_field() {
+        let e = err("name = \"x\"\n\n[[stage]]\nmodel = \"bernoulli\"\np = 0.1\nq = 2\n");
+        assert_eq!(e.origin, "s.toml");
+        assert_eq!(e.line, Some(6), "{e}");
+        assert_eq!(e.field.as_deref(), Some("q"));
+        assert!(e.problem.contains("expected") && e.problem.contains("`p`"), "{e}");
+        assert_eq!(e.location.as_deref(), Some("stage 1 (bernoulli)"));
+    }
+
+    #[test]
+    fn a_bad_probability_names_its_line() {
+        let e = err("[[stage]]\nmodel = \"bernoulli\"\n\np = 1.5\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(4), Some("p")), "{e}");
+        assert!(e.problem.contains("[0, 1]"), "{e}");
+        let e = err("[[stage]]\nmodel = \"bernoulli\"\np = \"abc\"\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(3), Some("p")), "{e}");
+        let e = err("[[stage]]\nmodel = \"bernoulli\"\np = true\n");
+        assert_eq!(e.field.as_deref(), Some("p"), "{e}");
+    }
+
+    #[test]
+    fn a_missing_field_is_named() {
+        let e = err("[[stage]]\nmodel = \"bernoulli\"\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(1), Some("p")), "{e}");
+        assert!(e.problem.contains("missing"), "{e}");
+    }
+
+    #[test]
+    fn unknown_models_and_presets_list_what_is_accepted() {
+        let e = err("[[stage]]\nmodel = \"bernouli\"\np = 0.1\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("model")), "{e}");
+        assert!(e.problem.contains("ge_lomax") && e.problem.contains("outage"), "{e}");
+        let e = err("[[stage]]\npreset = \"PLM-9\"\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("preset")), "{e}");
+        assert!(e.problem.contains("PLM-2") && e.problem.contains("CLM-3"), "{e}");
+        let e = err("[[stage]]\n");
+        assert!(e.problem.contains("needs `model`"), "{e}");
+    }
+
+    #[test]
+    fn top_level_mistakes_are_located() {
+        let e = err("name = \"x\"\nsed = 4\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("sed")), "{e}");
+        let e = err("name = \"x\"\nseed = -4\n");
+        assert_eq!(e.line, Some(2), "{e}");
+        let e = err("name = \"x\"\n[[stage]\nmodel = 1\n");
+        assert_eq!(e.line, Some(2), "{e}");
+        let e = err("queue_capacity = 0\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(1), Some("queue_capacity")), "{e}");
+    }
+
+    #[test]
+    fn phases_must_be_ordered_and_start_at_zero() {
+        let e = err("[[phase]]\nstart_s = 1\npreset = \"Normal\"\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("start_s")), "{e}");
+        let e = err("[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 5\npreset = \"Normal\"\n[[phase]]\nstart_ms = 5000\npreset = \"Normal\"\n");
+        assert_eq!((e.line, e.location.as_deref()), (Some(7), Some("phase 3")), "{e}");
+        let e = err("[[phase]]\npreset = \"Normal\"\n[[phase]]\npreset = \"Normal\"\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(3), Some("start_s")), "{e}");
+        let ok = parse_str(
+            "[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 2.5\n[[phase.stage]]\nmodel = \"bernoulli\"\np = 0.5\n",
+            "s.toml",
+            "s",
+        )
+        .unwrap();
+        assert_eq!(ok.phases.len(), 2);
+        assert_eq!(ok.phases[1].start_ms, 2500.0);
+        assert_eq!(ok.phases[1].stages.len(), 1);
+    }
+
+    #[test]
+    fn preset_stages_take_only_a_name() {
+        let e = err("[[stage]]\npreset = \"PLM-2\"\np = 0.1\n");
+        assert_eq!((e.line, e.field.as_deref()), (Some(3), Some("p")), "{e}");
+        let e = err("[[stage]]\npreset = \"PLM-2\"\nmodel = \"bernoulli\"\n");
+        assert!(e.problem.contains("not both"), "{e}");
+    }
+
+    #[test]
+    fn display_reads_like_a_compiler_message() {
+        let e = err("[[stage]]\nmodel = \"bernoulli\"\np = 2\n");
+        assert_eq!(e.to_string(), format!("s.toml:3: stage 1 (bernoulli): `p`: {}", e.problem));
+    }
+}

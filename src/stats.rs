@@ -1,0 +1,165 @@
+//! Small statistics used to report what a scenario realizes.
+
+/// Fine batches kept while simulating; merged into fewer, longer batches for
+/// the interval.
+pub const FINE_BATCHES: usize = 1024;
+
+/// Two-sided 97.5% Student-t quantiles for the batch counts used below.
+fn t975(df: usize) -> f64 {
+    match df {
+        0 => f64::INFINITY,
+        1..=7 => [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365][df - 1],
+        8..=15 => 2.131,
+        16..=31 => 2.040,
+        32..=63 => 1.998,
+        _ => 1.96,
+    }
+}
+
+/// Counts of events (e.g. drops) over consecutive batches of trials (frames),
+/// for a confidence interval on the event rate that accounts for correlation
+/// between neighbouring trials (bursts): the method of batch means.
+#[derive(Debug, Clone)]
+pub struct BatchMeans {
+    trials_per_batch: u64,
+    trials: Vec<u64>,
+    events: Vec<u64>,
+    n: u64,
+}
+
+impl BatchMeans {
+    /// For a run of `total_trials` trials, known in advance.
+    pub fn new(total_trials: u64) -> Self {
+        let trials_per_batch = total_trials.div_ceil(FINE_BATCHES as u64).max(1);
+        BatchMeans { trials_per_batch, trials: vec![0; FINE_BATCHES], events: vec![0; FINE_BATCHES], n: 0 }
+    }
+
+    #[inline]
+    pub fn record(&mut self, event: bool) {
+        let b = ((self.n / self.trials_per_batch) as usize).min(FINE_BATCHES - 1);
+        self.trials[b] += 1;
+        self.events[b] += u64::from(event);
+        self.n += 1;
+    }
+
+    pub fn trials(&self) -> u64 {
+        self.n
+    }
+
+    pub fn events(&self) -> u64 {
+        self.events.iter().sum()
+    }
+
+    /// The rate and its 95% interval. Batch means over 64 batches, halved
+    /// (merging neighbours) while the batch means' lag-1 autocorrelation is
+    /// significant, down to 8 batches. With no event (or only events) the
+    /// interval is the "rule of three" bound `[0, 3/n]` (resp. `[1 − 3/n, 1]`).
+    pub fn rate_ci95(&self) -> (f64, [f64; 2]) {
+        let n = self.n;
+        if n == 0 {
+            return (0.0, [0.0, 1.0]);
+        }
+        let events = self.events();
+        let rate = events as f64 / n as f64;
+        if events == 0 {
+            return (0.0, [0.0, (3.0 / n as f64).min(1.0)]);
+        }
+        if events == n {
+            return (1.0, [(1.0 - 3.0 / n as f64).max(0.0), 1.0]);
+        }
+        let used = self.trials.iter().rposition(|t| *t > 0).map_or(0, |i| i + 1);
+        let mut batches = 64usize.min(used);
+        let mut half_width;
+        loop {
+            let (means, r1) = self.merged(used, batches);
+            let b = means.len() as f64;
+            let mean = means.iter().sum::<f64>() / b;
+            let var = means.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (b - 1.0).max(1.0);
+            half_width = t975(means.len() - 1) * (var / b).sqrt();
+            if batches <= 8 || r1.abs() <= 2.0 / b.sqrt() {
+                break;
+            }
+            batches /= 2;
+        }
+        // Never narrower than the independent-trials (binomial) interval.
+        let binomial = 1.96 * (rate * (1.0 - rate) / n as f64).sqrt();
+        let h = half_width.max(binomial);
+        (rate, [(rate - h).max(0.0), (rate + h).min(1.0)])
+    }
+
+    /// Batch rates over `batches` merged batches of the first `used` fine
+    /// ones, and their lag-1 autocorrelation.
+    fn merged(&self, used: usize, batches: usize) -> (Vec<f64>, f64) {
+        let per = used.div_ceil(batches.max(1));
+        let means: Vec<f64> = (0..used)
+            .step_by(per)
+            .filter_map(|s| {
+                let e = (s + per).min(used);
+                let t: u64 = self.trials[s..e].iter().sum();
+                (t > 0).then(|| self.events[s..e].iter().sum::<u64>() as f64 / t as f64)
+            })
+            .collect();
+        let b = means.len();
+        if b < 3 {
+            return (means, 0.0);
+        }
+        let mean = means.iter().sum::<f64>() / b as f64;
+        let var: f64 = means.iter().map(|m| (m - mean).powi(2)).sum();
+        let cov: f64 = means.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+        let r1 = if var > 0.0 { cov / var } else { 0.0 };
+        (means, r1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    #[test]
+    fn independent_trials_give_about_the_binomial_interval() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        let n = 1_000_000;
+        let mut bm = BatchMeans::new(n);
+        for _ in 0..n {
+            bm.record(rng.random::<f64>() < 0.3);
+        }
+        let (rate, [lo, hi]) = bm.rate_ci95();
+        let binomial = 1.96 * (0.3f64 * 0.7 / n as f64).sqrt();
+        assert!((rate - 0.3).abs() < 4.0 * binomial / 1.96, "rate {rate}");
+        // The half-width estimate from 64 batches is within ~±35% of the
+        // truth at 99% confidence (chi-square with 63 df), and never below
+        // the binomial one.
+        let h = (hi - lo) / 2.0;
+        assert!(h >= binomial * 0.999 && h < binomial * 1.35, "half width {h} vs binomial {binomial}");
+    }
+
+    #[test]
+    fn correlated_trials_widen_the_interval() {
+        // Runs of 1000 identical outcomes: the effective sample is 1000×
+        // smaller, so the interval must be ~sqrt(1000) ≈ 32× the binomial one.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(2);
+        let n = 1_000_000u64;
+        let mut bm = BatchMeans::new(n);
+        let mut state = false;
+        for i in 0..n {
+            if i % 1000 == 0 {
+                state = rng.random::<f64>() < 0.5;
+            }
+            bm.record(state);
+        }
+        let (rate, [lo, hi]) = bm.rate_ci95();
+        let binomial = 1.96 * (rate * (1.0 - rate) / n as f64).sqrt();
+        assert!((hi - lo) / 2.0 > 15.0 * binomial, "half width {} vs binomial {binomial}", (hi - lo) / 2.0);
+    }
+
+    #[test]
+    fn degenerate_rates_use_the_rule_of_three() {
+        let mut bm = BatchMeans::new(1000);
+        for _ in 0..1000 {
+            bm.record(false);
+        }
+        assert_eq!(bm.rate_ci95(), (0.0, [0.0, 0.003]));
+    }
+}
