@@ -1,0 +1,53 @@
+//! The `netfi scenario` command as a user runs it.
+
+use std::process::Command;
+
+fn netfi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_netfi"))
+}
+
+#[test]
+fn check_json_has_the_documented_fields() {
+    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in ["frames", "delivered", "dropped", "loss_rate", "loss_rate_ci95", "loss_run_mean", "delay_ms", "reordered_fraction", "outages", "seed"] {
+        assert!(v.get(key).is_some(), "missing `{key}` in {v}");
+    }
+    for key in ["mean", "p50", "p99", "max"] {
+        assert!(v["delay_ms"].get(key).is_some(), "missing delay_ms.{key}");
+    }
+    assert_eq!(v["frames"], 200_000);
+    assert_eq!(v["seed"], 5);
+    let dropped = v["dropped"]["ge_lomax"].as_u64().unwrap();
+    assert_eq!(v["delivered"].as_u64().unwrap() + dropped, 200_000);
+    let ci = v["loss_rate_ci95"].as_array().unwrap();
+    let rate = v["loss_rate"].as_f64().unwrap();
+    assert!(ci[0].as_f64().unwrap() < rate && rate < ci[1].as_f64().unwrap());
+    // The same seed gives the same report.
+    let again = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).output().unwrap();
+    assert_eq!(out.stdout, again.stdout);
+}
+
+#[test]
+fn a_run_without_seed_prints_the_seed_it_chose() {
+    let out = netfi().args(["scenario", "check", "CLM-2", "--frames", "20000"]).output().unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let seed: u64 = stderr.split("seed ").nth(1).and_then(|s| s.split_whitespace().next()).and_then(|s| s.parse().ok()).unwrap_or_else(|| panic!("no seed in {stderr}"));
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains(&format!("seed              {seed}")), "{table}");
+}
+
+#[test]
+fn a_bad_scenario_file_is_a_clear_error() {
+    let dir = std::env::temp_dir().join(format!("netfi-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bad.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"ge_lomax\"\ntransition = [[0.9, 0.05], [0.1, 0.9]]\nalpha = [1.0, 1.0]\nlambda = [1.0, 1.0]\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad.toml:3: stage 1 (ge_lomax): `transition[0]`"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
