@@ -14,3 +14,4 @@ pub mod scheduler;
 pub mod injector;
 pub mod stats;
 pub mod check;
+pub mod host;

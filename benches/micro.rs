@@ -1,0 +1,109 @@
+//! Micro benchmarks of the hot path: one decision per model, one injector
+//! step, and the release queue at several depths. Run with
+//! `cargo bench --bench micro`; steal time is printed beside the results.
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use netfi::host::CpuTimes;
+use netfi::injector::Injector;
+use netfi::model::{AnyModel, StageRng};
+use netfi::sample::FrameSample;
+use netfi::scenario::{self, ModelSpec, Scenario};
+use netfi::scheduler::{QueueOrder, ReleaseQueue};
+use rand::SeedableRng;
+use std::hint::black_box;
+
+fn model(text: &str) -> AnyModel {
+    let spec = scenario::parse_str(text, "bench", "bench").unwrap();
+    let m: &ModelSpec = &spec.phases[0].stages[0].model;
+    m.build().unwrap()
+}
+
+fn decisions(c: &mut Criterion) {
+    let cases = [
+        ("bernoulli", "[[stage]]\nmodel = \"bernoulli\"\np = 0.3\n"),
+        ("ge_lomax PLM-2", "[[stage]]\npreset = \"PLM-2\"\n"),
+        ("markov4", "[[stage]]\nmodel = \"markov4\"\np13 = 0.01\np31 = 0.3\np32 = 0.1\np23 = 0.05\np14 = 0.005\n"),
+        ("gilbert_elliott", "[[stage]]\nmodel = \"gilbert_elliott\"\np = 0.01\nr = 0.1\nloss_bad = 0.7\nloss_good = 0.001\n"),
+        ("delay DLM-2", "[[stage]]\npreset = \"DLM-2\"\n"),
+        ("outage CLM-2", "[[stage]]\npreset = \"CLM-2\"\n"),
+    ];
+    let mut g = c.benchmark_group("decide");
+    for (name, text) in cases {
+        let mut m = model(text);
+        let mut rng = StageRng::seed_from_u64(1);
+        let mut t = 0u64;
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                t += 1_000_000;
+                black_box(m.decide(black_box(t), &mut rng))
+            })
+        });
+    }
+    g.finish();
+}
+
+fn injector_step(c: &mut Criterion) {
+    let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n", "bench", "bench").unwrap();
+    let mut inj: Injector<FrameSample> = Injector::new(Scenario::new(&spec, 1).unwrap(), 1 << 16);
+    let mut now = 0u64;
+    // Warm up to the steady-state queue depth (~300 frames at 1 kHz).
+    for _ in 0..5_000 {
+        now += 1_000_000;
+        while inj.pop_due(now).is_some() {}
+        inj.ingress(now, FrameSample::ZERO);
+    }
+    c.bench_function("injector step PLM-2 → DLM-2 (ingress + due releases, 1 kHz)", |b| {
+        b.iter(|| {
+            now += 1_000_000;
+            while let Some(r) = inj.pop_due(now) {
+                black_box(r);
+            }
+            black_box(inj.ingress(now, FrameSample::ZERO))
+        })
+    });
+}
+
+fn queue_depths(c: &mut Criterion) {
+    let mut g = c.benchmark_group("release queue push+pop");
+    for order in [QueueOrder::Fifo, QueueOrder::Reorder] {
+        for depth in [1usize, 1_000, 100_000] {
+            g.bench_function(format!("{order:?} depth {depth}"), |b| {
+                b.iter_batched_ref(
+                    || {
+                        let mut q = ReleaseQueue::<FrameSample>::new(order, depth + 1);
+                        // Release times spread over the depth so pushes land mid-heap.
+                        for i in 0..depth as u64 {
+                            q.push(i.wrapping_mul(2_654_435_761) % 1_000_000_000, i, FrameSample::ZERO).unwrap();
+                        }
+                        (q, depth as u64)
+                    },
+                    |(q, i)| {
+                        *i += 1;
+                        q.push(i.wrapping_mul(2_654_435_761) % 1_000_000_000, *i, FrameSample::ZERO).unwrap();
+                        black_box(q.pop())
+                    },
+                    BatchSize::LargeInput,
+                )
+            });
+        }
+    }
+    g.finish();
+}
+
+fn report_steal(_c: &mut Criterion) {
+    if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
+        let s = now.steal_since(start);
+        println!("host steal during the benchmarks: {} ms ({:.3}% of CPU time)", s.ms, s.fraction * 100.0);
+    }
+}
+
+static START: std::sync::OnceLock<CpuTimes> = std::sync::OnceLock::new();
+
+fn start(_c: &mut Criterion) {
+    if let Some(t) = CpuTimes::read() {
+        let _ = START.set(t);
+    }
+}
+
+criterion_group!(benches, start, decisions, injector_step, queue_depths, report_steal);
+criterion_main!(benches);
