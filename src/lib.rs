@@ -15,3 +15,6 @@ pub mod injector;
 pub mod stats;
 pub mod check;
 pub mod host;
+pub mod clock;
+pub mod metrics;
+pub mod trace;
