@@ -60,7 +60,7 @@ impl Arrivals {
     }
 }
 
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct DelayStats {
     pub mean: f64,
     pub p50: f64,
@@ -68,18 +68,18 @@ pub struct DelayStats {
     pub max: f64,
 }
 
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct OutageStats {
     pub count: u64,
     pub mean_ms: f64,
 }
 
 /// One stage's share of the outcome.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct StageReport {
     pub phase: usize,
     pub label: String,
-    pub model: &'static str,
+    pub model: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
     /// Frames that reached the stage.
@@ -96,7 +96,7 @@ pub struct StageReport {
 }
 
 /// What a scenario realized over a run in simulated time.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct CheckReport {
     pub scenario: String,
     pub seed: u64,
@@ -183,28 +183,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
     };
     let interval_ns = arrivals.mean_interval_ns();
     let scenario = inj.scenario();
-    let mut outage_count = 0u64;
-    let mut outage_ns = 0f64;
-    let mut stages = Vec::new();
-    for (pi, phase) in scenario.phases().iter().enumerate() {
-        for st in phase.stages() {
-            let w = st.model().outage_windows();
-            outage_count += w.count;
-            outage_ns += w.total_ns as f64 + w.total_frames as f64 * interval_ns;
-            let reached = st.reached();
-            stages.push(StageReport {
-                phase: pi,
-                label: st.label().to_string(),
-                model: st.kind().name(),
-                preset: st.preset().map(str::to_string),
-                reached,
-                dropped: st.dropped(),
-                loss_rate: if reached > 0 { st.dropped() as f64 / reached as f64 } else { 0.0 },
-                loss_rate_model: st.model().loss_rate_exact(interval_ns.round() as u64),
-                delay_ms_model: (st.kind() == crate::model::ModelKind::Delay).then(|| st.model().mean_delay_ms_exact()),
-            });
-        }
-    }
+    let (stages, outages) = stage_reports(scenario, interval_ns);
     CheckReport {
         scenario: scenario.name().to_string(),
         seed: scenario.seed(),
@@ -217,11 +196,40 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
         loss_run_mean: if runs > 0 { dropped_total as f64 / runs as f64 } else { 0.0 },
         delay_ms,
         reordered_fraction: if delivered > 0 { release.reordered as f64 / delivered as f64 } else { 0.0 },
-        outages: OutageStats { count: outage_count, mean_ms: if outage_count > 0 { outage_ns / outage_count as f64 / 1e6 } else { 0.0 } },
+        outages,
         queue_capacity: inj.queue_capacity(),
         queue_depth_max: depth_max,
         stages,
     }
+}
+
+/// Per-stage outcome of a scenario so far, and its outage windows, with the
+/// models' long-run values at a mean frame interval of `interval_ns`.
+pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>, OutageStats) {
+    let mut outage_count = 0u64;
+    let mut outage_ns = 0f64;
+    let mut stages = Vec::new();
+    for (pi, phase) in scenario.phases().iter().enumerate() {
+        for st in phase.stages() {
+            let w = st.model().outage_windows();
+            outage_count += w.count;
+            outage_ns += w.total_ns as f64 + w.total_frames as f64 * interval_ns;
+            let reached = st.reached();
+            stages.push(StageReport {
+                phase: pi,
+                label: st.label().to_string(),
+                model: st.kind().name().to_string(),
+                preset: st.preset().map(str::to_string),
+                reached,
+                dropped: st.dropped(),
+                loss_rate: if reached > 0 { st.dropped() as f64 / reached as f64 } else { 0.0 },
+                loss_rate_model: st.model().loss_rate_exact(interval_ns.round() as u64),
+                delay_ms_model: (st.kind() == crate::model::ModelKind::Delay).then(|| st.model().mean_delay_ms_exact()),
+            });
+        }
+    }
+    let mean_ms = if outage_count > 0 { outage_ns / outage_count as f64 / 1e6 } else { 0.0 };
+    (stages, OutageStats { count: outage_count, mean_ms })
 }
 
 #[derive(Default)]

@@ -134,6 +134,11 @@ impl<T: Copy + Default> Injector<T> {
         self.queue.len()
     }
 
+    /// The ingress index the next frame will get.
+    pub fn next_ingress_index(&self) -> u64 {
+        self.counts.entered
+    }
+
     /// The run's start: the first frame's ingress time.
     pub fn start_ns(&self) -> Option<u64> {
         self.start_ns

@@ -18,3 +18,4 @@ pub mod host;
 pub mod clock;
 pub mod metrics;
 pub mod trace;
+pub mod service;

@@ -34,7 +34,7 @@ pub struct FrameSample {
     pub release_ns: u64,
     /// Number of valid bytes in `wire` (124 for ITP).
     pub len: u32,
-    /// Reserved, zero.
+    /// Control bits: [`FrameSample::FLAG_END`]; zero for frames.
     pub flags: u32,
     /// The ITP frame as it travels on the wire (little-endian, packed).
     pub wire: [u8; ITP_FRAME_LEN],
@@ -48,6 +48,20 @@ const _: () = assert!(core::mem::align_of::<FrameSample>() == 8);
 impl FrameSample {
     /// The iceoryx2 type name; must match between all processes.
     pub const TYPE_NAME: &'static str = "netfi::FrameSample.v1";
+
+    /// Control sample marking the end of a stream: not a frame. Its
+    /// `console_index` carries the number of frames sent before it.
+    pub const FLAG_END: u32 = 1;
+
+    /// An end-of-stream marker after `frames_sent` frames.
+    pub fn end_marker(frames_sent: u64) -> FrameSample {
+        FrameSample { console_index: frames_sent, flags: FrameSample::FLAG_END, ..FrameSample::ZERO }
+    }
+
+    /// Whether this sample is an end-of-stream marker rather than a frame.
+    pub fn is_end(&self) -> bool {
+        self.flags & FrameSample::FLAG_END != 0
+    }
 
     /// An all-zero sample (a valid initial value for loaned shared memory).
     pub const ZERO: FrameSample = FrameSample {
