@@ -1,0 +1,139 @@
+//! Command-line arguments of the services, shared by `netfi <service>` and
+//! the stand-alone `netfi-console`, `netfi-emulator`, `netfi-simulator`.
+
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Args)]
+pub struct ConsoleArgs {
+    /// Run id shared by the three processes (letters, digits, '-', '_').
+    #[arg(long)]
+    pub run_id: String,
+    /// Frame rate in Hz (synthetic motion, or a capture replayed at a fixed rate).
+    #[arg(long)]
+    pub rate_hz: Option<f64>,
+    /// Frames to send (default: --duration-s worth).
+    #[arg(long, conflicts_with = "duration_s")]
+    pub frames: Option<u64>,
+    /// Seconds to stream (default 10; with --capture, the whole capture).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Replay a recorded capture (LZ4 ITP records) instead of synthetic motion;
+    /// original timing unless --rate-hz is given.
+    #[arg(long)]
+    pub capture: Option<PathBuf>,
+    /// Seed of the synthetic motion (default: random, printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Core to pin the console to.
+    #[arg(long)]
+    pub core: Option<usize>,
+    /// Directory for `console.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Do not also send each frame directly to the simulator (the baseline hop).
+    #[arg(long)]
+    pub no_direct: bool,
+    /// Seconds to wait for the emulator to subscribe before streaming.
+    #[arg(long, default_value_t = 10.0)]
+    pub wait_for_peer_s: f64,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EmulatorArgs {
+    #[arg(long)]
+    pub run_id: String,
+    /// A scenario file or preset name.
+    #[arg(long)]
+    pub scenario: String,
+    /// Seed (default: the scenario file's, else random; printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Release-queue capacity in frames (default: the file's, else 65536).
+    #[arg(long)]
+    pub queue_capacity: Option<usize>,
+    /// Core to pin the emulator's loop to (default: the last core).
+    #[arg(long)]
+    pub core: Option<usize>,
+    /// Do not pin the emulator at all.
+    #[arg(long, conflicts_with = "core")]
+    pub no_pin: bool,
+    /// Drop frames with a wrong ITP checksum (default: count and pass them).
+    #[arg(long)]
+    pub drop_bad_checksum: bool,
+    /// Frames expected (sizes the trace table and the loss interval's batches).
+    #[arg(long, default_value_t = 100_000)]
+    pub expected_frames: u64,
+    /// Directory for the trace, histograms and `emulator.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SimulatorArgs {
+    #[arg(long)]
+    pub run_id: String,
+    /// Core to pin the simulator to.
+    #[arg(long)]
+    pub core: Option<usize>,
+    /// A gap between received frames longer than this is a stall.
+    #[arg(long, default_value_t = 10.0)]
+    pub stall_ms: f64,
+    /// Ignore frames with a wrong ITP checksum (default: count and apply them).
+    #[arg(long)]
+    pub drop_bad_checksum: bool,
+    /// Busy-poll without yielding (only on a core of its own).
+    #[arg(long)]
+    pub spin: bool,
+    /// Directory for `received.csv`, `end_to_end.hlog` and `simulator.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3).
+    pub scenario: String,
+    /// Seconds to stream (default 10; with --capture, the whole capture).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Frames to stream instead of a duration.
+    #[arg(long, conflicts_with = "duration_s")]
+    pub frames: Option<u64>,
+    /// Frame rate in Hz (default 1000; with --capture, replays at this fixed rate).
+    #[arg(long)]
+    pub rate_hz: Option<f64>,
+    /// Seed of the scenario and the synthetic motion (default: random, printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Replay a recorded capture instead of synthetic motion.
+    #[arg(long)]
+    pub capture: Option<PathBuf>,
+    /// Core for the emulator (default: the last core).
+    #[arg(long)]
+    pub emulator_core: Option<usize>,
+    /// Core for the console (default: not pinned).
+    #[arg(long)]
+    pub console_core: Option<usize>,
+    /// Core for the simulator (default: not pinned).
+    #[arg(long)]
+    pub simulator_core: Option<usize>,
+    /// Release-queue capacity in frames.
+    #[arg(long)]
+    pub queue_capacity: Option<usize>,
+    /// Drop frames with a wrong ITP checksum in the emulator and simulator.
+    #[arg(long)]
+    pub drop_bad_checksum: bool,
+    /// Output directory (default: out/<run-id>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also write the report as JSON here (always written to <out>/report.json).
+    #[arg(long)]
+    pub report_json: Option<PathBuf>,
+    /// Run id (default: generated).
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// Print the JSON report instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}

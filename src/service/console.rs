@@ -1,0 +1,217 @@
+//! The console service: streams ITP frames at a fixed rate (synthetic
+//! bimanual motion) or replays a recorded capture with its original timing
+//! or at a fixed rate, stamping each sample with its send time just before
+//! publishing it.
+//!
+//! Pacing: sleeps until shortly before each frame's time, then polls the
+//! clock, yielding the core on each turn (it shares a core with the
+//! simulator on small machines). At rates above 20 kHz it never sleeps.
+//! Each frame is also sent directly to the simulator (unless `--no-direct`),
+//! stamped separately: the simulator measures the bare hop beside the
+//! emulated one, in the same run, and integrates it as the console's pose.
+
+use crate::capture;
+use crate::clock::{now_ns, wait_until_ns, Wait};
+use crate::host::CpuTimes;
+use crate::metrics::{LatencyHistogram, Summary};
+use crate::motion::Motion;
+use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::service::args::ConsoleArgs;
+use crate::service::ipc::open_node;
+use crate::service::ports::FrameSink;
+use crate::service::signals;
+use crate::transport::{Channel, Role};
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+/// The console's report, written as `console.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsoleReport {
+    pub frames_sent: u64,
+    /// `synthetic` or `capture:<path>`.
+    pub source: String,
+    /// Mean send rate achieved.
+    pub rate_hz: f64,
+    pub seed: u64,
+    pub duration_s: f64,
+    /// Actual send time − planned send time.
+    pub send_lateness_ns: Summary,
+    /// Frames the transport refused (e.g. the emulator's queue was full).
+    pub send_errors: u64,
+    /// Frames sent while no emulator was subscribed.
+    pub sent_unsubscribed: u64,
+    pub direct_sent: u64,
+    /// `done` or `signal`.
+    pub ended_by: String,
+    pub steal_ms: u64,
+    pub steal_fraction: f64,
+}
+
+/// Where frames come from: each call gives the frame's planned offset from
+/// the stream's start and its wire bytes.
+enum Script {
+    Synthetic { motion: Motion, period_ns: f64 },
+    Replay { records: Vec<(u64, [u8; ITP_FRAME_LEN])>, period_ns: Option<f64> },
+}
+
+impl Script {
+    fn len(&self, frames: Option<u64>, duration_s: Option<f64>) -> u64 {
+        match self {
+            Script::Synthetic { period_ns, .. } => frames.unwrap_or_else(|| (duration_s.unwrap_or(10.0) * 1e9 / period_ns).round() as u64),
+            Script::Replay { records, period_ns } => {
+                let all = records.len() as u64;
+                let by_time = duration_s.map(|d| match period_ns {
+                    Some(p) => (d * 1e9 / p).round() as u64,
+                    None => records.iter().take_while(|r| r.0 as f64 <= d * 1e9).count() as u64,
+                });
+                frames.or(by_time).unwrap_or(all).min(all)
+            }
+        }
+    }
+
+    #[inline]
+    fn frame(&mut self, i: u64) -> (u64, [u8; ITP_FRAME_LEN]) {
+        match self {
+            Script::Synthetic { motion, period_ns } => ((i as f64 * *period_ns).round() as u64, motion.next_wire()),
+            Script::Replay { records, period_ns } => {
+                let r = &records[i as usize];
+                match period_ns {
+                    Some(p) => ((i as f64 * *p).round() as u64, r.1),
+                    None => (r.0, r.1),
+                }
+            }
+        }
+    }
+}
+
+/// Runs the console with `args`; returns its report (also `console.json`).
+pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
+    let seed = args.seed.unwrap_or_else(crate::service::run::fresh_seed);
+    let mut script = match &args.capture {
+        Some(path) => {
+            let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+            let t0 = cap.records.first().map_or(0, |r| r.time_ns);
+            let mut last = 0;
+            let records = cap
+                .records
+                .iter()
+                .map(|r| {
+                    // Wall-clock captures can step backwards; a schedule cannot.
+                    last = r.time_ns.saturating_sub(t0).max(last);
+                    (last, r.payload)
+                })
+                .collect();
+            Script::Replay { records, period_ns: args.rate_hz.map(|r| 1e9 / r) }
+        }
+        None => {
+            let rate = args.rate_hz.unwrap_or(1000.0);
+            Script::Synthetic { motion: Motion::new(seed, rate), period_ns: 1e9 / rate }
+        }
+    };
+    if let Some(r) = args.rate_hz {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--rate-hz must be a positive number, got {r}");
+        }
+    }
+    let n = script.len(args.frames, args.duration_s);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let node = open_node(&args.run_id, Role::Console)?;
+    let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
+    let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
+    signals::install();
+    if let Some(core) = args.core {
+        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: core }), "could not pin the console to core {core}");
+    }
+    // Wait for the emulator to subscribe, so the first frames are not lost.
+    let deadline = now_ns() + (args.wait_for_peer_s * 1e9) as u64;
+    while port.peers_connected() == 0 {
+        if now_ns() > deadline {
+            bail!("no emulator subscribed to netfi/{}/console within {} s", args.run_id, args.wait_for_peer_s);
+        }
+        if signals::stop_requested() || node.termination_requested() {
+            bail!("stopped before streaming");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let source = match &args.capture {
+        Some(p) => format!("capture:{}", p.display()),
+        None => "synthetic".into(),
+    };
+    eprintln!("console: {n} frames from {source}, seed {seed}");
+    let period_ns = match &script {
+        Script::Synthetic { period_ns, .. } => *period_ns,
+        Script::Replay { period_ns, .. } => period_ns.unwrap_or(1e9 / 517.0),
+    };
+    // Sleep until this long before a frame's time, then poll: a VM's wake-up
+    // latency is tens of µs; at ≥ 20 kHz there is no time to sleep at all.
+    let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else { 200_000 };
+    let mut lateness = LatencyHistogram::new();
+    let (mut send_errors, mut sent_unsubscribed, mut direct_sent, mut sent) = (0u64, 0u64, 0u64, 0u64);
+    let steal0 = CpuTimes::read();
+    let t_start = now_ns() + 1_000_000;
+    let mut ended_by = "done";
+    let mut sample = FrameSample::ZERO;
+    sample.len = ITP_FRAME_LEN as u32;
+    for i in 0..n {
+        let (offset_ns, wire) = script.frame(i);
+        let target = t_start + offset_ns;
+        if target > now_ns() + slack_ns {
+            // Only a sleeping console checks for a stop: cheap, and often enough.
+            if signals::stop_requested() || node.termination_requested() {
+                ended_by = "signal";
+                break;
+            }
+        }
+        wait_until_ns(target, slack_ns, Wait::SpinYield);
+        sample.wire = wire;
+        sample.console_index = i;
+        let mut send_ns = 0;
+        match FrameSink::send_with(&mut port, &sample, |s| {
+            send_ns = now_ns();
+            s.send_ns = send_ns;
+        }) {
+            Ok(Some(0)) => sent_unsubscribed += 1,
+            Ok(_) => {}
+            Err(_) => send_errors += 1,
+        }
+        sent += 1;
+        lateness.record(send_ns.saturating_sub(target));
+        if let Some(d) = direct.as_mut() {
+            if FrameSink::send_with(d, &sample, |s| s.send_ns = now_ns()).is_ok() {
+                direct_sent += 1;
+            }
+        }
+        if i % 1024 == 1023 && (signals::stop_requested() || node.termination_requested()) {
+            ended_by = "signal";
+            break;
+        }
+    }
+    let t_end = now_ns();
+    let end = FrameSample::end_marker(sent);
+    let _ = FrameSink::send_with(&mut port, &end, |_| {});
+    if let Some(d) = direct.as_mut() {
+        let _ = FrameSink::send_with(d, &end, |_| {});
+    }
+    let steal = match (steal0, CpuTimes::read()) {
+        (Some(a), Some(b)) => b.steal_since(&a),
+        _ => Default::default(),
+    };
+    let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
+    let report = ConsoleReport {
+        frames_sent: sent,
+        source,
+        rate_hz: if duration_s > 0.0 { sent as f64 / duration_s } else { 0.0 },
+        seed,
+        duration_s,
+        send_lateness_ns: lateness.summary(),
+        send_errors,
+        sent_unsubscribed,
+        direct_sent,
+        ended_by: ended_by.into(),
+        steal_ms: steal.ms,
+        steal_fraction: steal.fraction,
+    };
+    let path = args.out.join("console.json");
+    std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    Ok(report)
+}

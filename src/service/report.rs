@@ -1,0 +1,235 @@
+//! The run report: the three services' own reports joined into one account
+//! of every frame, with the overhead histograms and the host's steal time.
+
+use crate::check::StageReport;
+use crate::metrics::{fmt_ns, Summary};
+use crate::service::console::ConsoleReport;
+use crate::service::emulator::{EmulatorReport, PeerEvent};
+use crate::service::simulator::SimulatorReport;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// Every frame, from the console's send to the simulator's receive.
+///
+/// `sent = entered + lost_before_emulator`,
+/// `entered = delivered + dropped + held_at_end`,
+/// `delivered = received + lost_after_emulator`; `balanced` is true when
+/// nothing was lost outside the scenario (no frame vanished between the
+/// processes) and the emulator's own account closes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameAccount {
+    pub sent: Option<u64>,
+    pub entered: Option<u64>,
+    pub delivered: Option<u64>,
+    pub received: Option<u64>,
+    pub dropped: BTreeMap<String, u64>,
+    pub held_at_end: Option<u64>,
+    pub lost_before_emulator: Option<u64>,
+    pub lost_after_emulator: Option<u64>,
+    pub balanced: bool,
+}
+
+/// Percentiles in ns as the JSON report carries them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Percentiles {
+    pub p50: u64,
+    pub p90: u64,
+    pub p99: u64,
+    pub p999: u64,
+    pub p9999: u64,
+    pub max: u64,
+    pub mean: f64,
+    pub count: u64,
+}
+
+impl From<Summary> for Percentiles {
+    fn from(s: Summary) -> Self {
+        Percentiles { p50: s.p50, p90: s.p90, p99: s.p99, p999: s.p999, p9999: s.p9999, max: s.max, mean: s.mean, count: s.count }
+    }
+}
+
+/// What the injector itself adds, in ns.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Overhead {
+    /// Frame taken off the console port → fate decided.
+    pub decision: Option<Percentiles>,
+    /// Actual − scheduled release.
+    pub release_lateness: Option<Percentiles>,
+    /// Simulator receive − console send − injected delay, through the emulator.
+    pub end_to_end_extra: Option<Percentiles>,
+    /// Simulator receive − console send of the same frames sent directly
+    /// (the physical floor of one hop, measured in the same run).
+    pub direct_hop: Option<Percentiles>,
+    /// `end_to_end_extra − direct_hop`, percentile by percentile: what the
+    /// emulator adds over a direct console → simulator hop.
+    pub added_over_direct: Option<BTreeMap<String, i64>>,
+}
+
+/// How one process ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProcessEnd {
+    pub role: String,
+    pub pid: u32,
+    pub core: Option<usize>,
+    /// `exit 0`, `exit N`, `signal N`, or `running` (still running when the
+    /// runner gave up on it).
+    pub status: String,
+    pub log: PathBuf,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Steal {
+    pub ms: u64,
+    pub fraction: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Files {
+    pub out_dir: PathBuf,
+    pub scenario: PathBuf,
+    pub trace: Option<PathBuf>,
+    pub decision_hlog: Option<PathBuf>,
+    pub lateness_hlog: Option<PathBuf>,
+    pub end_to_end_hlog: Option<PathBuf>,
+    pub report_json: PathBuf,
+}
+
+/// The report of one `netfi run`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    pub run_id: String,
+    pub scenario: String,
+    pub seed: u64,
+    pub duration_s: f64,
+    pub frames: FrameAccount,
+    pub loss_rate: Option<f64>,
+    pub loss_rate_ci95: Option<[f64; 2]>,
+    pub stages: Vec<StageReport>,
+    /// Injected delay of delivered frames (ns).
+    pub injected_delay_ns: Option<Percentiles>,
+    pub overhead_ns: Overhead,
+    pub kinematics: Option<serde_json::Value>,
+    pub processes: Vec<ProcessEnd>,
+    /// What went wrong: dead processes, frames lost between processes.
+    pub faults: Vec<String>,
+    pub peer_events: Vec<PeerEvent>,
+    pub steal: Steal,
+    pub files: Files,
+    pub console: Option<ConsoleReport>,
+    pub emulator: Option<EmulatorReport>,
+    pub simulator: Option<SimulatorReport>,
+}
+
+/// Joins the services' reports.
+pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport>, simulator: Option<&SimulatorReport>) -> FrameAccount {
+    let sent = console.map(|c| c.frames_sent).or_else(|| emulator.and_then(|e| e.frames.sent_by_console));
+    let entered = emulator.map(|e| e.frames.entered);
+    let delivered = emulator.map(|e| e.frames.delivered);
+    let received = simulator.map(|s| s.received);
+    let held_at_end = emulator.map(|e| e.frames.held_at_end);
+    let dropped = emulator.map(|e| e.frames.dropped.clone()).unwrap_or_default();
+    let lost_before_emulator = sent.zip(entered).map(|(s, e)| s.saturating_sub(e));
+    let lost_after_emulator = delivered.zip(received).map(|(d, r)| d.saturating_sub(r));
+    let emulator_closes = match (entered, delivered, held_at_end) {
+        (Some(e), Some(d), Some(h)) => e == d + dropped.values().sum::<u64>() + h,
+        _ => false,
+    };
+    let balanced = emulator_closes && lost_before_emulator == Some(0) && lost_after_emulator == Some(0) && sent == entered && delivered == received;
+    FrameAccount { sent, entered, delivered, received, dropped, held_at_end, lost_before_emulator, lost_after_emulator, balanced }
+}
+
+/// `a − b` for the main percentiles.
+pub fn difference(a: &Percentiles, b: &Percentiles) -> BTreeMap<String, i64> {
+    [("p50", a.p50, b.p50), ("p90", a.p90, b.p90), ("p99", a.p99, b.p99), ("p999", a.p999, b.p999)]
+        .into_iter()
+        .map(|(k, x, y)| (k.to_string(), x as i64 - y as i64))
+        .collect()
+}
+
+fn line(p: &Option<Percentiles>) -> String {
+    match p {
+        Some(p) => format!(
+            "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",
+            fmt_ns(p.p50),
+            fmt_ns(p.p90),
+            fmt_ns(p.p99),
+            fmt_ns(p.p999),
+            fmt_ns(p.p9999),
+            fmt_ns(p.max)
+        ),
+        None => "unavailable".into(),
+    }
+}
+
+impl RunReport {
+    /// The report as a person reads it.
+    pub fn to_text(&self) -> String {
+        let mut s = String::new();
+        let opt = |v: Option<u64>| v.map_or("?".to_string(), |x| x.to_string());
+        let f = &self.frames;
+        s += &format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        s += &format!(
+            "frames     sent {}  entered {}  delivered {}  received {}  held at end {}\n",
+            opt(f.sent),
+            opt(f.entered),
+            opt(f.delivered),
+            opt(f.received),
+            opt(f.held_at_end)
+        );
+        let dropped: Vec<String> = f.dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
+        s += &format!("dropped    {}\n", if dropped.is_empty() { "none".into() } else { dropped.join(", ") });
+        s += &format!(
+            "accounting {}\n",
+            if f.balanced {
+                "balanced: every frame that entered was delivered, dropped by the scenario, or held at the end".to_string()
+            } else {
+                format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator))
+            }
+        );
+        if let (Some(l), Some([lo, hi])) = (self.loss_rate, self.loss_rate_ci95) {
+            s += &format!("loss       {:.4} realized, 95% CI [{lo:.4}, {hi:.4}]\n", l);
+        }
+        for st in &self.stages {
+            let model = match (st.loss_rate_model, st.delay_ms_model) {
+                (_, Some(d)) => format!("model mean delay {d:.3} ms"),
+                (Some(l), None) => format!("model loss {l:.4}"),
+                _ => String::new(),
+            };
+            s += &format!("  stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase + 1, st.label, st.reached, st.dropped, st.loss_rate);
+        }
+        if let Some(d) = &self.injected_delay_ns {
+            s += &format!("delay      injected mean {:.3} ms; {}\n", d.mean / 1e6, line(&self.injected_delay_ns));
+        }
+        s += "overhead (what netfi itself adds)\n";
+        s += &format!("  decision          {}\n", line(&self.overhead_ns.decision));
+        s += &format!("  release lateness  {}\n", line(&self.overhead_ns.release_lateness));
+        s += &format!("  end-to-end extra  {}\n", line(&self.overhead_ns.end_to_end_extra));
+        s += &format!("  direct hop        {}\n", line(&self.overhead_ns.direct_hop));
+        if let Some(a) = &self.overhead_ns.added_over_direct {
+            s += &format!("  added over direct p50 {} ns  p99 {} ns  p99.9 {} ns\n", a["p50"], a["p99"], a["p999"]);
+        }
+        if let Some(k) = &self.kinematics {
+            s += &format!("kinematics {}\n", k);
+        }
+        s += &format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
+        for p in &self.processes {
+            s += &format!("process    {:<9} pid {:<7} core {:<5} {}\n", p.role, p.pid, p.core.map_or("-".into(), |c| c.to_string()), p.status);
+        }
+        for e in &self.peer_events {
+            s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, e.peer, e.connected);
+        }
+        for fault in &self.faults {
+            s += &format!("FAULT      {fault}\n");
+        }
+        s += &format!("files      {}\n", self.files.out_dir.display());
+        if let Some(t) = &self.files.trace {
+            s += &format!("  trace     {}\n", t.display());
+        }
+        for h in [&self.files.decision_hlog, &self.files.lateness_hlog, &self.files.end_to_end_hlog].into_iter().flatten() {
+            s += &format!("  histogram {}\n", h.display());
+        }
+        s += &format!("  report    {}\n", self.files.report_json.display());
+        s
+    }
+}

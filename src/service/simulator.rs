@@ -1,0 +1,193 @@
+//! The simulator service: receives the frames the emulator releases, applies
+//! ITP semantics (clutch, incremental motion, absolute grasp) to a robot-side
+//! pose, and measures what arrives: end-to-end latency beyond the injected
+//! delay (HDR), the bare hop of the console's direct copies, and the
+//! kinematics of SPEC §6 — console vs robot motion, divergence, clutch
+//! activations, stalls.
+//!
+//! It shares a core with the console on small machines, so it polls and
+//! yields the core on each idle turn (`--spin` polls without yielding, for a
+//! core of its own). On SIGINT/SIGTERM it keeps draining until the
+//! emulator's end marker or 200 ms of silence.
+
+use crate::clock::{now_ns, Wait};
+use crate::frame::ItpView;
+use crate::host::CpuTimes;
+use crate::kinematics::{Kinematics, KinematicsConfig};
+use crate::metrics::{LatencyHistogram, Summary};
+use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::service::args::SimulatorArgs;
+use crate::service::ipc::open_node;
+use crate::service::ports::FrameSource;
+use crate::service::signals;
+use crate::transport::{Channel, Role};
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// The simulator's report, written as `simulator.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimulatorReport {
+    /// Frames received from the emulator.
+    pub received: u64,
+    /// Frames received on the direct (baseline) port.
+    pub received_direct: u64,
+    pub wrong_size: u64,
+    pub bad_checksum: u64,
+    /// Frames the emulator said it released (from its end marker).
+    pub released_by_emulator: Option<u64>,
+    /// Receive − console send − injected delay.
+    pub end_to_end_extra_ns: Summary,
+    /// Receive − send of the direct copies.
+    pub direct_hop_ns: Summary,
+    /// Receive − console send (what the robot experiences).
+    pub delay_seen_ns: Summary,
+    /// Robot (emulated stream) vs console (direct stream) kinematics.
+    pub kinematics: Option<serde_json::Value>,
+    /// `end_marker` or `signal`.
+    pub ended_by: String,
+    pub duration_s: f64,
+    pub receive_errors: u64,
+    pub steal_ms: u64,
+    pub steal_fraction: f64,
+    pub received_csv: Option<PathBuf>,
+    pub end_to_end_hlog: Option<PathBuf>,
+}
+
+/// Runs the simulator; returns its report (also `simulator.json`).
+pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let node = open_node(&args.run_id, Role::Simulator)?;
+    let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
+    let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
+    signals::install();
+    if let Some(core) = args.core {
+        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: core }), "could not pin the simulator to core {core}");
+    }
+    let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
+    let stall_ns = (args.stall_ms * 1e6) as u64;
+    let mut robot = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, ..Default::default() });
+    let mut console = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, ..Default::default() });
+    let mut e2e = LatencyHistogram::new();
+    let mut hop = LatencyHistogram::new();
+    let mut seen = LatencyHistogram::new();
+    let mut received_log: Vec<(u64, u64)> = Vec::with_capacity(1 << 20);
+    let (mut received, mut received_direct, mut wrong_size, mut bad_checksum, mut receive_errors) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    let mut released_by_emulator = None;
+    let mut direct_ended = false;
+    let steal0 = CpuTimes::read();
+    std::fs::write(args.out.join("simulator.ready"), b"").context("writing simulator.ready")?;
+    let t_start = now_ns();
+    let mut s = FrameSample::ZERO;
+    let mut d = FrameSample::ZERO;
+    let mut iter = 0u64;
+    let mut stop_at: Option<u64> = None;
+    let mut last_frame_ns = now_ns();
+    let ended_by = loop {
+        let mut idle = true;
+        match port.try_recv(&mut s) {
+            Ok(true) => {
+                let t = now_ns();
+                idle = false;
+                last_frame_ns = t;
+                if s.is_end() {
+                    released_by_emulator = Some(s.console_index);
+                } else {
+                    received += 1;
+                    received_log.push((s.ingress_index, t));
+                    e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
+                    seen.record(t.saturating_sub(s.send_ns));
+                    if s.len as usize != ITP_FRAME_LEN {
+                        wrong_size += 1;
+                    } else {
+                        let view = ItpView::new_unchecked(&s.wire[..]);
+                        let ok = view.checksum_ok();
+                        if !ok {
+                            bad_checksum += 1;
+                        }
+                        if ok || !args.drop_bad_checksum {
+                            robot.apply_view(t, &view);
+                        }
+                    }
+                }
+            }
+            Ok(false) => {}
+            Err(_) => receive_errors += 1,
+        }
+        match direct.try_recv(&mut d) {
+            Ok(true) => {
+                let t = now_ns();
+                idle = false;
+                if d.is_end() {
+                    direct_ended = true;
+                } else {
+                    received_direct += 1;
+                    hop.record(t.saturating_sub(d.send_ns));
+                    if d.len as usize == ITP_FRAME_LEN {
+                        console.apply_view(t, &ItpView::new_unchecked(&d.wire[..]));
+                    }
+                }
+            }
+            Ok(false) => {}
+            Err(_) => receive_errors += 1,
+        }
+        if idle {
+            wait.relax();
+        }
+        iter = iter.wrapping_add(1);
+        if iter % 1024 == 0 {
+            if released_by_emulator.is_some() && (direct_ended || direct.peers_connected() == 0) {
+                break "end_marker";
+            }
+            if stop_at.is_none() && (signals::stop_requested() || node.termination_requested()) {
+                stop_at = Some(now_ns());
+            }
+            if let Some(_t) = stop_at {
+                if released_by_emulator.is_some() || now_ns().saturating_sub(last_frame_ns) > 200_000_000 {
+                    break "signal";
+                }
+            }
+        }
+    };
+    let t_end = now_ns();
+    let received_csv = args.out.join("received.csv");
+    {
+        let mut w = std::io::BufWriter::new(std::fs::File::create(&received_csv).with_context(|| format!("creating {}", received_csv.display()))?);
+        writeln!(w, "ingress_index,recv_ns")?;
+        for (i, t) in &received_log {
+            writeln!(w, "{i},{t}")?;
+        }
+        w.flush()?;
+    }
+    let duration_s = (t_end - t_start) as f64 / 1e9;
+    let e2e_hlog = args.out.join("end_to_end.hlog");
+    e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s)?;
+    hop.write_log(&args.out.join("direct_hop.hlog"), "direct_hop", 0.0, duration_s)?;
+    let steal = match (steal0, CpuTimes::read()) {
+        (Some(a), Some(b)) => b.steal_since(&a),
+        _ => Default::default(),
+    };
+    let kinematics = serde_json::to_value(crate::kinematics::compare(&console, &robot)).ok();
+    let report = SimulatorReport {
+        received,
+        received_direct,
+        wrong_size,
+        bad_checksum,
+        released_by_emulator,
+        end_to_end_extra_ns: e2e.summary(),
+        direct_hop_ns: hop.summary(),
+        delay_seen_ns: seen.summary(),
+        kinematics,
+        ended_by: ended_by.into(),
+        duration_s,
+        receive_errors,
+        steal_ms: steal.ms,
+        steal_fraction: steal.fraction,
+        received_csv: Some(received_csv),
+        end_to_end_hlog: Some(e2e_hlog),
+    };
+    let path = args.out.join("simulator.json");
+    std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    Ok(report)
+}
