@@ -287,3 +287,34 @@ fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (In
     }
     Ok((seq, bad))
 }
+
+/// Wires the emulator: arguments → scenario → iceoryx2 ports → [`run`].
+pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<EmulatorReport> {
+    use anyhow::Context;
+    let spec = crate::scenario::resolve(&args.scenario)?;
+    let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::run::fresh_seed);
+    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(crate::service::run::DEFAULT_QUEUE_CAPACITY);
+    anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
+    let core = if args.no_pin {
+        None
+    } else {
+        args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id)))
+    };
+    let node = crate::service::ipc::open_node(&args.run_id, crate::transport::Role::Emulator)?;
+    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
+    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
+    signals::install();
+    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", spec.name);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
+    let cfg = EmulatorConfig {
+        scenario: spec,
+        seed,
+        queue_capacity,
+        core,
+        drop_bad_checksum: args.drop_bad_checksum,
+        expected_frames: args.expected_frames,
+        out_dir: args.out.clone(),
+    };
+    run(&cfg, &mut source, &mut sink)
+}

@@ -13,9 +13,18 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run a scenario end to end: console, emulator and simulator as three
+    /// processes over iceoryx2, then print the report.
+    Run(netfi::service::args::RunArgs),
     /// Inspect and check scenarios in simulated time.
     #[command(subcommand)]
     Scenario(ScenarioCmd),
+    /// The console service alone (streams ITP frames).
+    Console(netfi::service::args::ConsoleArgs),
+    /// The emulator service alone (injects the scenario's faults).
+    Emulator(netfi::service::args::EmulatorArgs),
+    /// The simulator service alone (receives and measures).
+    Simulator(netfi::service::args::SimulatorArgs),
 }
 
 #[derive(Debug, Subcommand)]

@@ -9,6 +9,10 @@ fn main() -> std::process::ExitCode {
     let args = cli::Cli::parse();
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
+        cli::Command::Run(a) => run(&a),
+        cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()),
+        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|_| ()),
+        cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -17,4 +21,19 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// `netfi run`: the report on stdout; a failure exit status when a frame is
+/// unaccounted for or a process failed.
+fn run(args: &netfi::service::args::RunArgs) -> anyhow::Result<()> {
+    let report = netfi::service::run::run(args)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    if !report.frames.balanced || !report.faults.is_empty() {
+        anyhow::bail!("the run had faults (see the report above and {})", report.files.report_json.display());
+    }
+    Ok(())
 }

@@ -5,9 +5,7 @@ use anyhow::{bail, Context, Result};
 use netfi::check::{self, Arrivals, CheckReport};
 use netfi::scenario::{self, Scenario, PRESET_NAMES};
 
-/// Default release-queue capacity: 65,536 frames, i.e. 65 s of frames at
-/// 1 kHz or 0.65 s at 100 kHz.
-pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
+use netfi::service::run::{fresh_seed, DEFAULT_QUEUE_CAPACITY};
 
 pub fn run(cmd: ScenarioCmd) -> Result<()> {
     match cmd {
@@ -26,11 +24,6 @@ pub fn run(cmd: ScenarioCmd) -> Result<()> {
     }
 }
 
-/// A seed for runs that were given none: from the time and the process id.
-pub fn fresh_seed() -> u64 {
-    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
-    scenario::splitmix64(t ^ (u64::from(std::process::id()) << 32))
-}
 
 fn check_cmd(args: CheckArgs) -> Result<()> {
     let spec = scenario::resolve(&args.scenario)?;

@@ -1,0 +1,16 @@
+//! `netfi-emulator`: the emulator service alone (the same as `netfi emulator`).
+
+use clap::Parser;
+
+#[derive(Parser)]
+#[command(name = "netfi-emulator", version, about = "The netfi emulator service")]
+struct Cli {
+    #[command(flatten)]
+    args: netfi::service::args::EmulatorArgs,
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    netfi::service::emulator::main(&cli.args)?;
+    Ok(())
+}
