@@ -1,5 +1,642 @@
-//! Reader for recorded ITP captures (SPEC §7).
-// placeholder until the capture reader lands
-pub struct Record { pub time_ns: u64 }
-pub struct Capture { pub records: Vec<Record> }
-pub fn load(_p: &std::path::Path) -> Result<Capture, std::io::Error> { unimplemented!() }
+//! Recorded ITP captures (SPEC §7): reading, writing and summarising them.
+//!
+//! A capture is one standard LZ4 frame whose decompressed content is a
+//! sequence of records:
+//!
+//! ```text
+//! u64 BE time_ns | u16 BE length | u8 dropped | payload (length bytes)
+//! ```
+//!
+//! `time_ns` is the recorder's receive time (the shipped capture uses the wall
+//! clock), `dropped` a flag byte kept as written, and the payload one ITP frame
+//! of 124 bytes. A record of any other length is an error that names the record
+//! index and its byte offset in the decompressed stream; so is a stream that
+//! ends inside a record.
+//!
+//! [`CaptureReader`] streams records from any [`Read`] without allocating per
+//! record; [`CaptureWriter`] writes the same format; [`load`] reads a whole file
+//! and derives [`CaptureStats`]. This is I/O code: the sans-IO core never calls
+//! it, only the services and tools do.
+
+use crate::frame::{FrameError, ItpFrame, ItpView, FRAME_LEN, SURGEON_ENGAGED};
+use lz4_flex::frame::{FrameDecoder, FrameEncoder};
+use std::fmt;
+use std::fs::File;
+use std::io::{self, BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// Bytes in a record header: time (8), length (2), dropped flag (1).
+pub const RECORD_HEADER_LEN: usize = 11;
+
+/// Bytes in a record that carries one ITP frame.
+pub const RECORD_LEN: usize = RECORD_HEADER_LEN + FRAME_LEN;
+
+/// Where a capture came from, for error messages.
+struct Origin<'a>(&'a Option<PathBuf>);
+
+impl fmt::Display for Origin<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            Some(path) => write!(f, "capture `{}`", path.display()),
+            None => f.write_str("capture stream"),
+        }
+    }
+}
+
+/// Everything that can go wrong reading or writing a capture. Every variant
+/// names the file (`path`, `None` for an anonymous stream) and, where there is
+/// one, the record (0-based index) and its byte offset in the decompressed
+/// stream.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// The file could not be opened or created.
+    #[error("{}: cannot open: {source}", Origin(.path))]
+    Open {
+        path: Option<PathBuf>,
+        #[source]
+        source: io::Error,
+    },
+    /// The bytes are not a valid LZ4 frame (wrong magic number, corrupt block,
+    /// bad checksum): the file is not a capture, or it is damaged.
+    #[error("{}: record {record} at byte {offset}: not a valid LZ4 frame ({source}); \
+             a capture is one standard LZ4 frame", Origin(.path))]
+    Lz4 {
+        path: Option<PathBuf>,
+        record: u64,
+        offset: u64,
+        #[source]
+        source: lz4_flex::frame::Error,
+    },
+    /// Reading the underlying file failed (including a compressed stream that
+    /// ends in the middle of an LZ4 block).
+    #[error("{}: record {record} at byte {offset}: read failed: {source}", Origin(.path))]
+    Read {
+        path: Option<PathBuf>,
+        record: u64,
+        offset: u64,
+        #[source]
+        source: io::Error,
+    },
+    /// A record's length field is not 124, the size of an ITP frame.
+    #[error("{}: record {record} at byte {offset}: payload length {length}, expected {expected} \
+             (one ITP frame)", Origin(.path))]
+    WrongLength {
+        path: Option<PathBuf>,
+        record: u64,
+        offset: u64,
+        /// The length field as written.
+        length: u16,
+        /// Always [`FRAME_LEN`].
+        expected: usize,
+    },
+    /// The content ends inside a record: the capture was cut short.
+    #[error("{}: record {record} at byte {offset}: truncated, {found} of {needed} bytes present",
+            Origin(.path))]
+    Truncated {
+        path: Option<PathBuf>,
+        record: u64,
+        offset: u64,
+        /// Bytes the record needs (header, or header and payload).
+        needed: usize,
+        /// Bytes present before the content ended.
+        found: usize,
+    },
+    /// The file holds no records at all.
+    #[error("{}: contains no records", Origin(.path))]
+    Empty { path: Option<PathBuf> },
+    /// A payload handed to the writer is longer than the `u16` length field
+    /// can describe.
+    #[error("{}: record {record}: payload of {length} bytes does not fit the u16 length field",
+            Origin(.path))]
+    PayloadTooLong { path: Option<PathBuf>, record: u64, length: usize },
+    /// Writing (or finishing the LZ4 frame) failed.
+    #[error("{}: record {record}: write failed: {source}", Origin(.path))]
+    Write {
+        path: Option<PathBuf>,
+        record: u64,
+        #[source]
+        source: io::Error,
+    },
+}
+
+/// One record of a capture carrying an ITP frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CaptureRecord {
+    /// Receive time at the recorder, ns.
+    pub time_ns: u64,
+    /// The "dropped" flag byte as written (0: the frame was delivered).
+    pub dropped: u8,
+    /// The ITP frame's wire bytes.
+    pub payload: [u8; FRAME_LEN],
+}
+
+impl CaptureRecord {
+    /// A record of a delivered frame.
+    pub fn new(time_ns: u64, frame: &ItpFrame) -> CaptureRecord {
+        CaptureRecord { time_ns, dropped: 0, payload: frame.to_bytes() }
+    }
+
+    /// Whether the recorder flagged the frame as dropped.
+    pub fn is_dropped(&self) -> bool {
+        self.dropped != 0
+    }
+
+    /// A view of the payload (always one frame long).
+    pub fn view(&self) -> ItpView<&[u8; FRAME_LEN]> {
+        ItpView::new_unchecked(&self.payload)
+    }
+
+    /// The payload parsed, checksum verified.
+    pub fn frame(&self) -> Result<ItpFrame, FrameError> {
+        ItpFrame::parse(&self.view())
+    }
+
+    /// The payload parsed without judging the checksum.
+    pub fn frame_unverified(&self) -> ItpFrame {
+        ItpFrame::parse_unverified(&self.view())
+    }
+}
+
+/// Fills `buf` from `reader` until it is full or the content ends; returns the
+/// number of bytes read. Unlike `read_exact` it reports how much was there.
+fn read_full<R: Read>(reader: &mut R, buf: &mut [u8]) -> io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+/// Streams the records of a capture. Yields `Err` once and then ends if the
+/// content is malformed, except for a record of the wrong length, which is
+/// skipped (its length field says how far) so reading can go on.
+pub struct CaptureReader<R: Read> {
+    decoder: FrameDecoder<R>,
+    path: Option<PathBuf>,
+    record: u64,
+    offset: u64,
+    done: bool,
+}
+
+impl CaptureReader<BufReader<File>> {
+    /// Opens a capture file.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, CaptureError> {
+        let path = path.as_ref();
+        let file = File::open(path)
+            .map_err(|source| CaptureError::Open { path: Some(path.to_path_buf()), source })?;
+        Ok(CaptureReader::new(BufReader::new(file)).with_path(path))
+    }
+}
+
+impl<R: Read> CaptureReader<R> {
+    /// Reads a capture from an LZ4-compressed stream.
+    pub fn new(reader: R) -> Self {
+        CaptureReader { decoder: FrameDecoder::new(reader), path: None, record: 0, offset: 0, done: false }
+    }
+
+    /// Names the stream's file in error messages.
+    pub fn with_path(mut self, path: impl AsRef<Path>) -> Self {
+        self.path = Some(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// Records read so far (also the index of the next one).
+    pub fn records_read(&self) -> u64 {
+        self.record
+    }
+
+    /// Decompressed bytes consumed so far (also the offset of the next record).
+    pub fn offset(&self) -> u64 {
+        self.offset
+    }
+
+    fn read_error(&self, e: io::Error) -> CaptureError {
+        let (path, record, offset) = (self.path.clone(), self.record, self.offset);
+        match lz4_flex::frame::Error::from(e) {
+            lz4_flex::frame::Error::IoError(source) => CaptureError::Read { path, record, offset, source },
+            source => CaptureError::Lz4 { path, record, offset, source },
+        }
+    }
+
+    fn truncated(&self, needed: usize, found: usize) -> CaptureError {
+        CaptureError::Truncated { path: self.path.clone(), record: self.record, offset: self.offset, needed, found }
+    }
+
+    /// Reads the next record; `Ok(None)` at a clean end of the content.
+    pub fn read_record(&mut self) -> Result<Option<CaptureRecord>, CaptureError> {
+        let mut header = [0u8; RECORD_HEADER_LEN];
+        let got = read_full(&mut self.decoder, &mut header).map_err(|e| self.read_error(e))?;
+        if got == 0 {
+            return Ok(None);
+        }
+        if got < RECORD_HEADER_LEN {
+            return Err(self.truncated(RECORD_HEADER_LEN, got));
+        }
+        let time_ns = u64::from_be_bytes(header[0..8].try_into().expect("8 bytes"));
+        let length = u16::from_be_bytes([header[8], header[9]]);
+        let dropped = header[10];
+        let needed = RECORD_HEADER_LEN + length as usize;
+
+        if length as usize != FRAME_LEN {
+            // Skip the payload so a reader may carry on past this record.
+            let skipped = io::copy(&mut (&mut self.decoder).take(length as u64), &mut io::sink())
+                .map_err(|e| self.read_error(e))? as usize;
+            if skipped < length as usize {
+                return Err(self.truncated(needed, RECORD_HEADER_LEN + skipped));
+            }
+            let err = CaptureError::WrongLength {
+                path: self.path.clone(),
+                record: self.record,
+                offset: self.offset,
+                length,
+                expected: FRAME_LEN,
+            };
+            self.record += 1;
+            self.offset += needed as u64;
+            return Err(err);
+        }
+
+        let mut payload = [0u8; FRAME_LEN];
+        let got = read_full(&mut self.decoder, &mut payload).map_err(|e| self.read_error(e))?;
+        if got < FRAME_LEN {
+            return Err(self.truncated(needed, RECORD_HEADER_LEN + got));
+        }
+        self.record += 1;
+        self.offset += needed as u64;
+        Ok(Some(CaptureRecord { time_ns, dropped, payload }))
+    }
+}
+
+impl<R: Read> Iterator for CaptureReader<R> {
+    type Item = Result<CaptureRecord, CaptureError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        match self.read_record() {
+            Ok(Some(record)) => Some(Ok(record)),
+            Ok(None) => {
+                self.done = true;
+                None
+            }
+            Err(e) => {
+                self.done = !matches!(e, CaptureError::WrongLength { .. });
+                Some(Err(e))
+            }
+        }
+    }
+}
+
+/// Writes a capture: records into one LZ4 frame. Call [`CaptureWriter::finish`]
+/// to close the frame; a writer dropped without it leaves a truncated file.
+pub struct CaptureWriter<W: Write> {
+    encoder: FrameEncoder<W>,
+    path: Option<PathBuf>,
+    record: u64,
+}
+
+impl CaptureWriter<BufWriter<File>> {
+    /// Creates (or truncates) a capture file.
+    pub fn create(path: impl AsRef<Path>) -> Result<Self, CaptureError> {
+        let path = path.as_ref();
+        let file = File::create(path)
+            .map_err(|source| CaptureError::Open { path: Some(path.to_path_buf()), source })?;
+        Ok(CaptureWriter::new(BufWriter::new(file)).with_path(path))
+    }
+}
+
+impl<W: Write> CaptureWriter<W> {
+    /// Writes a capture into a stream.
+    pub fn new(writer: W) -> Self {
+        CaptureWriter { encoder: FrameEncoder::new(writer), path: None, record: 0 }
+    }
+
+    /// Names the stream's file in error messages.
+    pub fn with_path(mut self, path: impl AsRef<Path>) -> Self {
+        self.path = Some(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// Records written so far.
+    pub fn records_written(&self) -> u64 {
+        self.record
+    }
+
+    fn write_error(&self, source: io::Error) -> CaptureError {
+        CaptureError::Write { path: self.path.clone(), record: self.record, source }
+    }
+
+    /// Appends one record.
+    pub fn write_record(&mut self, record: &CaptureRecord) -> Result<(), CaptureError> {
+        let mut bytes = [0u8; RECORD_LEN];
+        bytes[0..8].copy_from_slice(&record.time_ns.to_be_bytes());
+        bytes[8..10].copy_from_slice(&(FRAME_LEN as u16).to_be_bytes());
+        bytes[10] = record.dropped;
+        bytes[RECORD_HEADER_LEN..].copy_from_slice(&record.payload);
+        self.encoder.write_all(&bytes).map_err(|e| self.write_error(e))?;
+        self.record += 1;
+        Ok(())
+    }
+
+    /// Appends a record of a delivered frame received at `time_ns`.
+    pub fn write_frame(&mut self, time_ns: u64, frame: &ItpFrame) -> Result<(), CaptureError> {
+        self.write_record(&CaptureRecord::new(time_ns, frame))
+    }
+
+    /// Appends a record with an arbitrary payload, for payloads that are not
+    /// ITP frames (readers of this crate reject them; tests use it to build
+    /// malformed captures).
+    pub fn write_raw(&mut self, time_ns: u64, dropped: u8, payload: &[u8]) -> Result<(), CaptureError> {
+        let length = u16::try_from(payload.len()).map_err(|_| CaptureError::PayloadTooLong {
+            path: self.path.clone(),
+            record: self.record,
+            length: payload.len(),
+        })?;
+        let mut header = [0u8; RECORD_HEADER_LEN];
+        header[0..8].copy_from_slice(&time_ns.to_be_bytes());
+        header[8..10].copy_from_slice(&length.to_be_bytes());
+        header[10] = dropped;
+        self.encoder.write_all(&header).map_err(|e| self.write_error(e))?;
+        self.encoder.write_all(payload).map_err(|e| self.write_error(e))?;
+        self.record += 1;
+        Ok(())
+    }
+
+    /// Closes the LZ4 frame, flushes, and returns the underlying writer.
+    pub fn finish(self) -> Result<W, CaptureError> {
+        let path = self.path;
+        let record = self.record;
+        let mut inner = self
+            .encoder
+            .finish()
+            .map_err(|e| CaptureError::Write { path: path.clone(), record, source: e.into() })?;
+        inner.flush().map_err(|source| CaptureError::Write { path, record, source })?;
+        Ok(inner)
+    }
+}
+
+/// Summary of a capture, built record by record with [`CaptureStats::push`].
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct CaptureStats {
+    /// Records (frames).
+    pub frames: u64,
+    /// Time of the first record, ns.
+    pub first_ns: u64,
+    /// Time of the last record, ns.
+    pub last_ns: u64,
+    /// Longest interval between consecutive records, ns.
+    pub gap_ns_max: u64,
+    /// Records stamped earlier than the one before them (a wall clock may step
+    /// back); such intervals count as zero in `gap_ns_max`.
+    pub time_steps_backward: u64,
+    /// Frames whose carried checksum disagrees with their fields.
+    pub checksum_failures: u64,
+    /// Frames whose `surgeon_mode` is not engaged (1): their increments do
+    /// not apply.
+    pub clutch_released_frames: u64,
+    /// Records whose dropped flag is set.
+    pub dropped_flagged: u64,
+}
+
+impl CaptureStats {
+    /// Accounts for one more record.
+    pub fn push(&mut self, record: &CaptureRecord) {
+        if self.frames == 0 {
+            self.first_ns = record.time_ns;
+        } else if record.time_ns < self.last_ns {
+            self.time_steps_backward += 1;
+        } else {
+            self.gap_ns_max = self.gap_ns_max.max(record.time_ns - self.last_ns);
+        }
+        self.last_ns = record.time_ns;
+        self.frames += 1;
+        let view = record.view();
+        if !view.verify_checksum() {
+            self.checksum_failures += 1;
+        }
+        if view.surgeon_mode() != SURGEON_ENGAGED {
+            self.clutch_released_frames += 1;
+        }
+        if record.is_dropped() {
+            self.dropped_flagged += 1;
+        }
+    }
+
+    /// Statistics of a slice of records.
+    pub fn from_records(records: &[CaptureRecord]) -> CaptureStats {
+        let mut stats = CaptureStats::default();
+        records.iter().for_each(|r| stats.push(r));
+        stats
+    }
+
+    /// Time from the first record to the last, ns.
+    pub fn duration_ns(&self) -> u64 {
+        self.last_ns.saturating_sub(self.first_ns)
+    }
+
+    /// Time from the first record to the last, s.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_ns() as f64 * 1e-9
+    }
+
+    /// Mean frame rate, Hz: intervals per second, `(frames − 1) / duration`;
+    /// 0 with fewer than two frames or no elapsed time.
+    pub fn rate_hz_mean(&self) -> f64 {
+        if self.frames < 2 || self.duration_ns() == 0 {
+            0.0
+        } else {
+            (self.frames - 1) as f64 / self.duration_s()
+        }
+    }
+}
+
+/// A whole capture in memory.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    /// The file it was read from.
+    pub path: PathBuf,
+    /// Every record, in file order.
+    pub records: Vec<CaptureRecord>,
+    /// Derived statistics.
+    pub stats: CaptureStats,
+}
+
+/// Reads a whole capture file. Any malformed record is an error; so is a file
+/// without records.
+pub fn load(path: impl AsRef<Path>) -> Result<Capture, CaptureError> {
+    let path = path.as_ref();
+    let mut records = Vec::new();
+    let mut stats = CaptureStats::default();
+    for record in CaptureReader::open(path)? {
+        let record = record?;
+        stats.push(&record);
+        records.push(record);
+    }
+    if records.is_empty() {
+        return Err(CaptureError::Empty { path: Some(path.to_path_buf()) });
+    }
+    Ok(Capture { path: path.to_path_buf(), records, stats })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::SURGEON_DISENGAGED;
+
+    fn frame(sequence: u32, surgeon_mode: i32) -> ItpFrame {
+        ItpFrame { sequence, delx: [3, -1], qw: [1.0, 1.0], surgeon_mode, ..ItpFrame::default() }.with_checksum()
+    }
+
+    fn capture_bytes(records: &[CaptureRecord]) -> Vec<u8> {
+        let mut w = CaptureWriter::new(Vec::new());
+        for r in records {
+            w.write_record(r).unwrap();
+        }
+        w.finish().unwrap()
+    }
+
+    fn lz4(content: &[u8]) -> Vec<u8> {
+        let mut enc = FrameEncoder::new(Vec::new());
+        enc.write_all(content).unwrap();
+        enc.finish().unwrap()
+    }
+
+    #[test]
+    fn writer_reader_round_trip() {
+        let records: Vec<_> = (0..1000u32)
+            .map(|i| CaptureRecord {
+                time_ns: 1_000_000 * i as u64 + 7,
+                dropped: (i % 3) as u8,
+                payload: frame(i, (i % 5 != 0) as i32).to_bytes(),
+            })
+            .collect();
+        let bytes = capture_bytes(&records);
+        let back: Vec<_> = CaptureReader::new(&bytes[..]).collect::<Result<_, _>>().unwrap();
+        assert_eq!(back, records);
+    }
+
+    #[test]
+    fn record_layout_is_big_endian_header_then_payload() {
+        let r = CaptureRecord::new(0x0102_0304_0506_0708, &frame(9, 1));
+        let bytes = capture_bytes(&[r]);
+        let mut content = Vec::new();
+        FrameDecoder::new(&bytes[..]).read_to_end(&mut content).unwrap();
+        assert_eq!(content.len(), RECORD_LEN);
+        assert_eq!(&content[..11], &[1, 2, 3, 4, 5, 6, 7, 8, 0, 124, 0]);
+        assert_eq!(&content[11..], &r.payload[..]);
+    }
+
+    #[test]
+    fn stats_count_what_they_say() {
+        let mut bad = frame(3, 1);
+        bad.checksum += 1;
+        let records = [
+            CaptureRecord::new(1_000, &frame(0, 1)),
+            CaptureRecord::new(3_000, &frame(1, SURGEON_DISENGAGED)),
+            CaptureRecord::new(2_500, &frame(2, 1)),
+            CaptureRecord { dropped: 1, ..CaptureRecord::new(10_000, &bad) },
+        ];
+        let s = CaptureStats::from_records(&records);
+        assert_eq!(s.frames, 4);
+        assert_eq!(s.duration_ns(), 9_000);
+        assert_eq!(s.gap_ns_max, 7_500);
+        assert_eq!(s.time_steps_backward, 1);
+        assert_eq!(s.checksum_failures, 1);
+        assert_eq!(s.clutch_released_frames, 1);
+        assert_eq!(s.dropped_flagged, 1);
+        assert!((s.rate_hz_mean() - 3.0 / 9e-6).abs() < 1e-6);
+    }
+
+    #[test]
+    fn wrong_length_names_record_and_offset_and_reading_goes_on() {
+        let mut w = CaptureWriter::new(Vec::new());
+        w.write_frame(1, &frame(0, 1)).unwrap();
+        w.write_raw(2, 0, &[0u8; 100]).unwrap();
+        w.write_frame(3, &frame(2, 1)).unwrap();
+        let bytes = w.finish().unwrap();
+        let items: Vec<_> = CaptureReader::new(&bytes[..]).collect();
+        assert_eq!(items.len(), 3);
+        match &items[1] {
+            Err(CaptureError::WrongLength { record: 1, offset, length: 100, expected: 124, .. }) => {
+                assert_eq!(*offset, RECORD_LEN as u64)
+            }
+            other => panic!("expected WrongLength, got {other:?}"),
+        }
+        assert_eq!(items[2].as_ref().unwrap().time_ns, 3);
+        let msg = items[1].as_ref().unwrap_err().to_string();
+        assert!(msg.contains("record 1 at byte 135") && msg.contains("payload length 100"), "{msg}");
+    }
+
+    #[test]
+    fn truncated_tail_is_an_error() {
+        let mut content = Vec::new();
+        for i in 0..3u32 {
+            content.extend_from_slice(&(i as u64).to_be_bytes());
+            content.extend_from_slice(&124u16.to_be_bytes());
+            content.push(0);
+            content.extend_from_slice(&frame(i, 1).to_bytes());
+        }
+        // Cut inside the payload of the last record.
+        let cut = &content[..2 * RECORD_LEN + 50];
+        let items: Vec<_> = CaptureReader::new(&lz4(cut)[..]).collect();
+        assert_eq!(items.len(), 3);
+        match &items[2] {
+            Err(CaptureError::Truncated { record: 2, offset, needed: 135, found: 50, .. }) => {
+                assert_eq!(*offset, 2 * RECORD_LEN as u64)
+            }
+            other => panic!("expected Truncated, got {other:?}"),
+        }
+        // Cut inside a header.
+        let items: Vec<_> = CaptureReader::new(&lz4(&content[..RECORD_LEN + 5])[..]).collect();
+        assert!(matches!(items[1], Err(CaptureError::Truncated { record: 1, needed: 11, found: 5, .. })));
+    }
+
+    #[test]
+    fn not_lz4_is_an_error() {
+        let items: Vec<_> = CaptureReader::new(&b"definitely not an lz4 frame"[..]).collect();
+        assert_eq!(items.len(), 1);
+        assert!(
+            matches!(items[0], Err(CaptureError::Lz4 { record: 0, offset: 0, .. })),
+            "{:?}",
+            items[0]
+        );
+    }
+
+    #[test]
+    fn errors_name_the_path() {
+        let dir = std::env::temp_dir().join(format!("netfi-capture-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cut.bin");
+        let mut content = vec![0u8; RECORD_HEADER_LEN];
+        content[9] = FRAME_LEN as u8;
+        content.extend_from_slice(&frame(0, 1).to_bytes());
+        content.extend_from_slice(&[0u8; 5]);
+        std::fs::write(&path, lz4(&content)).unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(err.to_string().contains("cut.bin") && err.to_string().contains("record 1"), "{err}");
+
+        let empty = dir.join("empty.bin");
+        CaptureWriter::create(&empty).unwrap().finish().unwrap();
+        assert!(matches!(load(&empty), Err(CaptureError::Empty { .. })));
+
+        let missing = dir.join("missing.bin");
+        let err = load(&missing).unwrap_err();
+        assert!(matches!(err, CaptureError::Open { .. }) && err.to_string().contains("missing.bin"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn payload_too_long_is_an_error() {
+        let mut w = CaptureWriter::new(Vec::new());
+        assert!(matches!(
+            w.write_raw(0, 0, &vec![0u8; 70_000]),
+            Err(CaptureError::PayloadTooLong { length: 70_000, record: 0, .. })
+        ));
+    }
+}

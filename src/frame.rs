@@ -1,1 +1,783 @@
 //! ITP master-to-slave frame codec (SPEC §2).
+//!
+//! Two layers, as in a network stack's wire module:
+//!
+//! - [`ItpView`] is a checked view over a byte buffer: construction verifies
+//!   the length once, after which every field getter (and, for a mutable
+//!   buffer, setter) reads or writes its bytes in place and cannot fail.
+//! - [`ItpFrame`] is the validated representation with typed fields.
+//!   [`ItpFrame::parse`] reads a view and verifies the checksum;
+//!   [`ItpFrame::emit`] writes every field back into a view.
+//!
+//! The frame is 124 bytes, packed, little-endian. Byte offsets live in the
+//! private `field` module and nowhere else. Nothing here allocates: a frame is
+//! a plain `Copy` value and a view borrows the caller's buffer, so the codec
+//! can sit on the per-frame hot path of the emulator and the simulator.
+//!
+//! Arrays indexed by arm hold arm 0 then arm 1, as on the wire.
+
+use crate::sample::{FrameSample, ITP_FRAME_LEN};
+
+/// Length of an ITP frame on the wire, in bytes.
+pub const FRAME_LEN: usize = ITP_FRAME_LEN;
+
+/// Number of arms an ITP frame commands.
+pub const ARMS: usize = 2;
+
+/// `surgeon_mode` value meaning the clutch (foot pedal) is engaged and the
+/// frame's increments apply.
+pub const SURGEON_ENGAGED: i32 = 1;
+
+/// `surgeon_mode` value meaning the clutch is released: the robot holds still.
+pub const SURGEON_DISENGAGED: i32 = 0;
+
+mod field {
+    //! Byte ranges of every field (SPEC §2). Arrays of two are arm 0 then arm 1.
+
+    pub type Field = core::ops::Range<usize>;
+
+    pub const SEQUENCE: Field = 0..4;
+    pub const PACTYP: Field = 4..8;
+    pub const VERSION: Field = 8..12;
+    pub const DELX: Field = 12..20;
+    pub const DELY: Field = 20..28;
+    pub const DELZ: Field = 28..36;
+    pub const QX: Field = 36..52;
+    pub const QY: Field = 52..68;
+    pub const QZ: Field = 68..84;
+    pub const QW: Field = 84..100;
+    pub const BUTTONSTATE: Field = 100..108;
+    pub const GRASP: Field = 108..116;
+    pub const SURGEON_MODE: Field = 116..120;
+    pub const CHECKSUM: Field = 120..124;
+
+    /// One past the last byte of the frame.
+    pub const END: usize = CHECKSUM.end;
+}
+
+const _: () = assert!(field::END == FRAME_LEN);
+
+/// Why bytes are not a valid ITP frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// The buffer is not exactly one frame long. ITP frames have a fixed size,
+    /// so a shorter buffer is truncated and a longer one is something else.
+    #[error("wrong ITP frame length: expected {expected} bytes, got {found}")]
+    WrongLength {
+        /// Always [`FRAME_LEN`] (124).
+        expected: usize,
+        /// Length of the buffer that was offered.
+        found: usize,
+    },
+    /// The `checksum` field disagrees with the sum SPEC §2 defines over the
+    /// other fields: the frame was corrupted or built without sealing it.
+    #[error("ITP checksum mismatch: computed {expected} from the fields, frame carries {found}")]
+    ChecksumMismatch {
+        /// The checksum computed from the frame's fields.
+        expected: i32,
+        /// The checksum the frame carries.
+        found: i32,
+    },
+}
+
+/// The checksum rule of SPEC §2: the wrapping 32-bit sum of `surgeon_mode`,
+/// both arms' position increments, both `buttonstate`s and `sequence` (as
+/// `i32`). `grasp`, the rotations, `pactyp` and `version` are not included.
+#[inline]
+pub fn checksum(
+    sequence: u32,
+    delx: [i32; ARMS],
+    dely: [i32; ARMS],
+    delz: [i32; ARMS],
+    buttonstate: [i32; ARMS],
+    surgeon_mode: i32,
+) -> i32 {
+    surgeon_mode
+        .wrapping_add(delx[0])
+        .wrapping_add(dely[0])
+        .wrapping_add(delz[0])
+        .wrapping_add(delx[1])
+        .wrapping_add(dely[1])
+        .wrapping_add(delz[1])
+        .wrapping_add(buttonstate[0])
+        .wrapping_add(buttonstate[1])
+        .wrapping_add(sequence as i32)
+}
+
+#[inline]
+fn read_u32(b: &[u8]) -> u32 {
+    u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+}
+
+#[inline]
+fn read_i32(b: &[u8]) -> i32 {
+    i32::from_le_bytes([b[0], b[1], b[2], b[3]])
+}
+
+#[inline]
+fn read_f64(b: &[u8]) -> f64 {
+    f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
+}
+
+#[inline]
+fn read_i32x2(b: &[u8]) -> [i32; ARMS] {
+    [read_i32(&b[0..4]), read_i32(&b[4..8])]
+}
+
+#[inline]
+fn read_f64x2(b: &[u8]) -> [f64; ARMS] {
+    [read_f64(&b[0..8]), read_f64(&b[8..16])]
+}
+
+#[inline]
+fn write_i32x2(b: &mut [u8], v: [i32; ARMS]) {
+    b[0..4].copy_from_slice(&v[0].to_le_bytes());
+    b[4..8].copy_from_slice(&v[1].to_le_bytes());
+}
+
+#[inline]
+fn write_f64x2(b: &mut [u8], v: [f64; ARMS]) {
+    b[0..8].copy_from_slice(&v[0].to_le_bytes());
+    b[8..16].copy_from_slice(&v[1].to_le_bytes());
+}
+
+/// A checked view of one ITP frame in a byte buffer.
+///
+/// Once constructed with [`ItpView::new_checked`] the buffer is known to be
+/// exactly [`FRAME_LEN`] bytes, so the accessors index without failing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ItpView<T: AsRef<[u8]>> {
+    buffer: T,
+}
+
+impl<T: AsRef<[u8]>> ItpView<T> {
+    /// Wraps a buffer without checking its length. Accessors panic if it is
+    /// shorter than a frame; prefer [`ItpView::new_checked`] for untrusted
+    /// input.
+    pub const fn new_unchecked(buffer: T) -> ItpView<T> {
+        ItpView { buffer }
+    }
+
+    /// Wraps a buffer after checking that it is exactly one frame long.
+    pub fn new_checked(buffer: T) -> Result<ItpView<T>, FrameError> {
+        let view = ItpView::new_unchecked(buffer);
+        view.check_len()?;
+        Ok(view)
+    }
+
+    /// Checks that the buffer is exactly [`FRAME_LEN`] bytes.
+    pub fn check_len(&self) -> Result<(), FrameError> {
+        let found = self.buffer.as_ref().len();
+        if found == FRAME_LEN {
+            Ok(())
+        } else {
+            Err(FrameError::WrongLength { expected: FRAME_LEN, found })
+        }
+    }
+
+    /// Returns the underlying buffer.
+    pub fn into_inner(self) -> T {
+        self.buffer
+    }
+
+    #[inline]
+    fn bytes(&self, f: field::Field) -> &[u8] {
+        &self.buffer.as_ref()[f]
+    }
+
+    /// Console servo counter.
+    #[inline]
+    pub fn sequence(&self) -> u32 {
+        read_u32(self.bytes(field::SEQUENCE))
+    }
+
+    /// Packet type.
+    #[inline]
+    pub fn pactyp(&self) -> u32 {
+        read_u32(self.bytes(field::PACTYP))
+    }
+
+    /// Protocol version.
+    #[inline]
+    pub fn version(&self) -> u32 {
+        read_u32(self.bytes(field::VERSION))
+    }
+
+    /// Position increment along x, per arm.
+    #[inline]
+    pub fn delx(&self) -> [i32; ARMS] {
+        read_i32x2(self.bytes(field::DELX))
+    }
+
+    /// Position increment along y, per arm.
+    #[inline]
+    pub fn dely(&self) -> [i32; ARMS] {
+        read_i32x2(self.bytes(field::DELY))
+    }
+
+    /// Position increment along z, per arm.
+    #[inline]
+    pub fn delz(&self) -> [i32; ARMS] {
+        read_i32x2(self.bytes(field::DELZ))
+    }
+
+    /// Rotation increment, x component, per arm.
+    #[inline]
+    pub fn qx(&self) -> [f64; ARMS] {
+        read_f64x2(self.bytes(field::QX))
+    }
+
+    /// Rotation increment, y component, per arm.
+    #[inline]
+    pub fn qy(&self) -> [f64; ARMS] {
+        read_f64x2(self.bytes(field::QY))
+    }
+
+    /// Rotation increment, z component, per arm.
+    #[inline]
+    pub fn qz(&self) -> [f64; ARMS] {
+        read_f64x2(self.bytes(field::QZ))
+    }
+
+    /// Rotation increment, w component, per arm.
+    #[inline]
+    pub fn qw(&self) -> [f64; ARMS] {
+        read_f64x2(self.bytes(field::QW))
+    }
+
+    /// Button state per arm.
+    #[inline]
+    pub fn buttonstate(&self) -> [i32; ARMS] {
+        read_i32x2(self.bytes(field::BUTTONSTATE))
+    }
+
+    /// Absolute grasper command per arm.
+    #[inline]
+    pub fn grasp(&self) -> [i32; ARMS] {
+        read_i32x2(self.bytes(field::GRASP))
+    }
+
+    /// Clutch state: [`SURGEON_ENGAGED`] or [`SURGEON_DISENGAGED`].
+    #[inline]
+    pub fn surgeon_mode(&self) -> i32 {
+        read_i32(self.bytes(field::SURGEON_MODE))
+    }
+
+    /// The checksum the frame carries.
+    #[inline]
+    pub fn checksum(&self) -> i32 {
+        read_i32(self.bytes(field::CHECKSUM))
+    }
+
+    /// The checksum computed from the frame's fields.
+    #[inline]
+    pub fn computed_checksum(&self) -> i32 {
+        checksum(
+            self.sequence(),
+            self.delx(),
+            self.dely(),
+            self.delz(),
+            self.buttonstate(),
+            self.surgeon_mode(),
+        )
+    }
+
+    /// Whether the carried checksum matches the fields.
+    #[inline]
+    pub fn verify_checksum(&self) -> bool {
+        self.checksum() == self.computed_checksum()
+    }
+}
+
+impl<T: AsRef<[u8]> + AsMut<[u8]>> ItpView<T> {
+    #[inline]
+    fn bytes_mut(&mut self, f: field::Field) -> &mut [u8] {
+        &mut self.buffer.as_mut()[f]
+    }
+
+    /// Sets the console servo counter.
+    #[inline]
+    pub fn set_sequence(&mut self, value: u32) {
+        self.bytes_mut(field::SEQUENCE).copy_from_slice(&value.to_le_bytes());
+    }
+
+    /// Sets the packet type.
+    #[inline]
+    pub fn set_pactyp(&mut self, value: u32) {
+        self.bytes_mut(field::PACTYP).copy_from_slice(&value.to_le_bytes());
+    }
+
+    /// Sets the protocol version.
+    #[inline]
+    pub fn set_version(&mut self, value: u32) {
+        self.bytes_mut(field::VERSION).copy_from_slice(&value.to_le_bytes());
+    }
+
+    /// Sets the x position increments.
+    #[inline]
+    pub fn set_delx(&mut self, value: [i32; ARMS]) {
+        write_i32x2(self.bytes_mut(field::DELX), value);
+    }
+
+    /// Sets the y position increments.
+    #[inline]
+    pub fn set_dely(&mut self, value: [i32; ARMS]) {
+        write_i32x2(self.bytes_mut(field::DELY), value);
+    }
+
+    /// Sets the z position increments.
+    #[inline]
+    pub fn set_delz(&mut self, value: [i32; ARMS]) {
+        write_i32x2(self.bytes_mut(field::DELZ), value);
+    }
+
+    /// Sets the rotation increments' x components.
+    #[inline]
+    pub fn set_qx(&mut self, value: [f64; ARMS]) {
+        write_f64x2(self.bytes_mut(field::QX), value);
+    }
+
+    /// Sets the rotation increments' y components.
+    #[inline]
+    pub fn set_qy(&mut self, value: [f64; ARMS]) {
+        write_f64x2(self.bytes_mut(field::QY), value);
+    }
+
+    /// Sets the rotation increments' z components.
+    #[inline]
+    pub fn set_qz(&mut self, value: [f64; ARMS]) {
+        write_f64x2(self.bytes_mut(field::QZ), value);
+    }
+
+    /// Sets the rotation increments' w components.
+    #[inline]
+    pub fn set_qw(&mut self, value: [f64; ARMS]) {
+        write_f64x2(self.bytes_mut(field::QW), value);
+    }
+
+    /// Sets the button states.
+    #[inline]
+    pub fn set_buttonstate(&mut self, value: [i32; ARMS]) {
+        write_i32x2(self.bytes_mut(field::BUTTONSTATE), value);
+    }
+
+    /// Sets the grasper commands.
+    #[inline]
+    pub fn set_grasp(&mut self, value: [i32; ARMS]) {
+        write_i32x2(self.bytes_mut(field::GRASP), value);
+    }
+
+    /// Sets the clutch state.
+    #[inline]
+    pub fn set_surgeon_mode(&mut self, value: i32) {
+        self.bytes_mut(field::SURGEON_MODE).copy_from_slice(&value.to_le_bytes());
+    }
+
+    /// Sets the carried checksum as is.
+    #[inline]
+    pub fn set_checksum(&mut self, value: i32) {
+        self.bytes_mut(field::CHECKSUM).copy_from_slice(&value.to_le_bytes());
+    }
+
+    /// Computes the checksum from the fields and stores it.
+    #[inline]
+    pub fn fill_checksum(&mut self) {
+        let value = self.computed_checksum();
+        self.set_checksum(value);
+    }
+}
+
+/// A decoded ITP frame: every wire field, typed. Per-arm arrays are arm 0
+/// then arm 1.
+///
+/// Position increments are integers in the console's position unit (see
+/// [`crate::kinematics`] for the unit the shipped capture implies); the
+/// rotation fields are carried as the console wrote them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ItpFrame {
+    /// Console servo counter.
+    pub sequence: u32,
+    /// Packet type (0 in the shipped capture).
+    pub pactyp: u32,
+    /// Protocol version (0 in the shipped capture).
+    pub version: u32,
+    /// Position increment along x.
+    pub delx: [i32; ARMS],
+    /// Position increment along y.
+    pub dely: [i32; ARMS],
+    /// Position increment along z.
+    pub delz: [i32; ARMS],
+    /// Rotation increment, x component.
+    pub qx: [f64; ARMS],
+    /// Rotation increment, y component.
+    pub qy: [f64; ARMS],
+    /// Rotation increment, z component.
+    pub qz: [f64; ARMS],
+    /// Rotation increment, w component (1.0 in the shipped capture).
+    pub qw: [f64; ARMS],
+    /// Button state per arm.
+    pub buttonstate: [i32; ARMS],
+    /// Absolute grasper command per arm.
+    pub grasp: [i32; ARMS],
+    /// Clutch: [`SURGEON_ENGAGED`] (increments apply) or [`SURGEON_DISENGAGED`].
+    pub surgeon_mode: i32,
+    /// The checksum the frame carries; see [`ItpFrame::checksum`] for the one
+    /// its fields imply.
+    pub checksum: i32,
+}
+
+impl ItpFrame {
+    /// Reads every field of a checked view and verifies the checksum.
+    pub fn parse<T: AsRef<[u8]>>(view: &ItpView<T>) -> Result<ItpFrame, FrameError> {
+        let frame = ItpFrame::parse_unverified(view);
+        frame.verify()?;
+        Ok(frame)
+    }
+
+    /// Reads every field of a checked view without judging the checksum, for
+    /// receivers that count mismatches and decide themselves what to do.
+    pub fn parse_unverified<T: AsRef<[u8]>>(view: &ItpView<T>) -> ItpFrame {
+        ItpFrame {
+            sequence: view.sequence(),
+            pactyp: view.pactyp(),
+            version: view.version(),
+            delx: view.delx(),
+            dely: view.dely(),
+            delz: view.delz(),
+            qx: view.qx(),
+            qy: view.qy(),
+            qz: view.qz(),
+            qw: view.qw(),
+            buttonstate: view.buttonstate(),
+            grasp: view.grasp(),
+            surgeon_mode: view.surgeon_mode(),
+            checksum: view.checksum(),
+        }
+    }
+
+    /// Checks the length of `bytes` and parses them, verifying the checksum.
+    pub fn from_bytes(bytes: &[u8]) -> Result<ItpFrame, FrameError> {
+        ItpFrame::parse(&ItpView::new_checked(bytes)?)
+    }
+
+    /// Writes every field, the carried `checksum` included, into a view.
+    pub fn emit<T: AsRef<[u8]> + AsMut<[u8]>>(&self, view: &mut ItpView<T>) {
+        view.set_sequence(self.sequence);
+        view.set_pactyp(self.pactyp);
+        view.set_version(self.version);
+        view.set_delx(self.delx);
+        view.set_dely(self.dely);
+        view.set_delz(self.delz);
+        view.set_qx(self.qx);
+        view.set_qy(self.qy);
+        view.set_qz(self.qz);
+        view.set_qw(self.qw);
+        view.set_buttonstate(self.buttonstate);
+        view.set_grasp(self.grasp);
+        view.set_surgeon_mode(self.surgeon_mode);
+        view.set_checksum(self.checksum);
+    }
+
+    /// The frame's wire bytes.
+    pub fn to_bytes(&self) -> [u8; FRAME_LEN] {
+        let mut bytes = [0u8; FRAME_LEN];
+        self.emit(&mut ItpView::new_unchecked(&mut bytes[..]));
+        bytes
+    }
+
+    /// The checksum SPEC §2 defines over this frame's fields (not the carried
+    /// `checksum` field).
+    #[inline]
+    pub fn checksum(&self) -> i32 {
+        checksum(self.sequence, self.delx, self.dely, self.delz, self.buttonstate, self.surgeon_mode)
+    }
+
+    /// Whether the carried `checksum` matches the fields.
+    #[inline]
+    pub fn has_valid_checksum(&self) -> bool {
+        self.checksum == self.checksum()
+    }
+
+    /// Fails with [`FrameError::ChecksumMismatch`] if the carried checksum
+    /// does not match the fields.
+    pub fn verify(&self) -> Result<(), FrameError> {
+        let expected = self.checksum();
+        if self.checksum == expected {
+            Ok(())
+        } else {
+            Err(FrameError::ChecksumMismatch { expected, found: self.checksum })
+        }
+    }
+
+    /// Fills in the checksum from the current fields.
+    #[inline]
+    pub fn seal(&mut self) {
+        self.checksum = self.checksum();
+    }
+
+    /// This frame with its checksum filled in.
+    #[inline]
+    pub fn with_checksum(mut self) -> ItpFrame {
+        self.seal();
+        self
+    }
+
+    /// Whether the clutch is engaged, i.e. the increments apply.
+    #[inline]
+    pub fn clutch_engaged(&self) -> bool {
+        self.surgeon_mode == SURGEON_ENGAGED
+    }
+
+    /// Position increment `[x, y, z]` of one arm.
+    #[inline]
+    pub fn increment(&self, arm: usize) -> [i32; 3] {
+        [self.delx[arm], self.dely[arm], self.delz[arm]]
+    }
+
+    /// Rotation increment `[x, y, z, w]` of one arm.
+    #[inline]
+    pub fn rotation(&self, arm: usize) -> [f64; 4] {
+        [self.qx[arm], self.qy[arm], self.qz[arm], self.qw[arm]]
+    }
+
+    /// Writes the frame into a shared-memory sample's wire bytes and sets its
+    /// length; the sample's metadata is left alone.
+    pub fn write_to_sample(&self, sample: &mut FrameSample) {
+        self.emit(&mut ItpView::new_unchecked(&mut sample.wire[..]));
+        sample.len = FRAME_LEN as u32;
+    }
+
+    /// Parses the frame a shared-memory sample carries, verifying its length
+    /// and checksum.
+    pub fn from_sample(sample: &FrameSample) -> Result<ItpFrame, FrameError> {
+        ItpFrame::parse(&sample_view(sample)?)
+    }
+}
+
+/// A checked view of the frame a shared-memory sample carries; fails if the
+/// sample's `len` is not one frame.
+pub fn sample_view(sample: &FrameSample) -> Result<ItpView<&[u8]>, FrameError> {
+    ItpView::new_checked(sample.payload())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame whose every field has a distinct value.
+    fn sample_frame() -> ItpFrame {
+        ItpFrame {
+            sequence: 20468,
+            pactyp: 7,
+            version: 3,
+            delx: [-39, 13],
+            dely: [19, -44],
+            delz: [34, -10],
+            qx: [0.25, -1.0],
+            qy: [2.0, 0.5],
+            qz: [-0.125, 1.5],
+            qw: [1.0, 0.75],
+            buttonstate: [2597, 845],
+            grasp: [120, -30],
+            surgeon_mode: SURGEON_ENGAGED,
+            checksum: 0,
+        }
+        .with_checksum()
+    }
+
+    #[test]
+    fn round_trip_through_bytes() {
+        let frame = sample_frame();
+        let bytes = frame.to_bytes();
+        assert_eq!(ItpFrame::from_bytes(&bytes), Ok(frame));
+        let mut again = [0u8; FRAME_LEN];
+        ItpFrame::from_bytes(&bytes).unwrap().emit(&mut ItpView::new_unchecked(&mut again[..]));
+        assert_eq!(again, bytes);
+    }
+
+    #[test]
+    fn round_trip_preserves_arbitrary_bytes() {
+        // Every byte pattern is a frame (the rotations may be any f64, NaNs
+        // included); parsing and re-emitting must not change a bit.
+        let mut bytes = [0u8; FRAME_LEN];
+        for (i, b) in bytes.iter_mut().enumerate() {
+            *b = (i as u8).wrapping_mul(37).wrapping_add(11);
+        }
+        bytes[36..44].copy_from_slice(&f64::from_bits(0x7ff8_dead_beef_0001).to_le_bytes());
+        let view = ItpView::new_checked(&bytes[..]).unwrap();
+        let frame = ItpFrame::parse_unverified(&view);
+        assert_eq!(frame.to_bytes(), bytes);
+    }
+
+    #[test]
+    fn every_field_at_its_offset() {
+        let f = sample_frame();
+        let b = f.to_bytes();
+        let i32_at = |o: usize| i32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+        let f64_at = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+        assert_eq!(u32_at(0), 20468);
+        assert_eq!(u32_at(4), 7);
+        assert_eq!(u32_at(8), 3);
+        assert_eq!([i32_at(12), i32_at(16)], [-39, 13]);
+        assert_eq!([i32_at(20), i32_at(24)], [19, -44]);
+        assert_eq!([i32_at(28), i32_at(32)], [34, -10]);
+        assert_eq!([f64_at(36), f64_at(44)], [0.25, -1.0]);
+        assert_eq!([f64_at(52), f64_at(60)], [2.0, 0.5]);
+        assert_eq!([f64_at(68), f64_at(76)], [-0.125, 1.5]);
+        assert_eq!([f64_at(84), f64_at(92)], [1.0, 0.75]);
+        assert_eq!([i32_at(100), i32_at(104)], [2597, 845]);
+        assert_eq!([i32_at(108), i32_at(112)], [120, -30]);
+        assert_eq!(i32_at(116), 1);
+        assert_eq!(i32_at(120), f.checksum);
+    }
+
+    #[test]
+    fn view_reads_a_known_byte_pattern() {
+        // Byte i holds i, so each little-endian field is predictable.
+        let mut bytes = [0u8; FRAME_LEN];
+        for (i, b) in bytes.iter_mut().enumerate() {
+            *b = i as u8;
+        }
+        let le32 = |o: usize| u32::from_le_bytes([o as u8, o as u8 + 1, o as u8 + 2, o as u8 + 3]);
+        let lef = |o: usize| f64::from_le_bytes(core::array::from_fn(|k| (o + k) as u8));
+        let v = ItpView::new_checked(&bytes).unwrap();
+        assert_eq!(v.sequence(), le32(0));
+        assert_eq!(v.pactyp(), le32(4));
+        assert_eq!(v.version(), le32(8));
+        assert_eq!(v.delx(), [le32(12) as i32, le32(16) as i32]);
+        assert_eq!(v.dely(), [le32(20) as i32, le32(24) as i32]);
+        assert_eq!(v.delz(), [le32(28) as i32, le32(32) as i32]);
+        assert_eq!(v.qx().map(f64::to_bits), [lef(36), lef(44)].map(f64::to_bits));
+        assert_eq!(v.qy().map(f64::to_bits), [lef(52), lef(60)].map(f64::to_bits));
+        assert_eq!(v.qz().map(f64::to_bits), [lef(68), lef(76)].map(f64::to_bits));
+        assert_eq!(v.qw().map(f64::to_bits), [lef(84), lef(92)].map(f64::to_bits));
+        assert_eq!(v.buttonstate(), [le32(100) as i32, le32(104) as i32]);
+        assert_eq!(v.grasp(), [le32(108) as i32, le32(112) as i32]);
+        assert_eq!(v.surgeon_mode(), le32(116) as i32);
+        assert_eq!(v.checksum(), le32(120) as i32);
+    }
+
+    #[test]
+    fn setters_touch_only_their_bytes() {
+        let mut bytes = [0xAAu8; FRAME_LEN];
+        let mut v = ItpView::new_checked(&mut bytes[..]).unwrap();
+        v.set_grasp([0x0102_0304, 0x0506_0708]);
+        assert_eq!(&bytes[108..116], &[4, 3, 2, 1, 8, 7, 6, 5]);
+        assert!(bytes[..108].iter().chain(&bytes[116..]).all(|&b| b == 0xAA));
+    }
+
+    #[test]
+    fn checksum_matches_a_capture_frame() {
+        // First frame of the shipped capture: sequence 20468, no motion,
+        // buttonstate [0, -30], clutch engaged, checksum 20439.
+        let f = ItpFrame {
+            sequence: 20468,
+            qw: [1.0, 1.0],
+            buttonstate: [0, -30],
+            grasp: [0, -30],
+            surgeon_mode: 1,
+            checksum: 20439,
+            ..ItpFrame::default()
+        };
+        assert_eq!(f.checksum(), 20439);
+        assert!(f.has_valid_checksum());
+    }
+
+    #[test]
+    fn checksum_sums_the_specified_fields() {
+        let f = ItpFrame {
+            sequence: 1000,
+            delx: [1, 10],
+            dely: [2, 20],
+            delz: [3, 30],
+            buttonstate: [100, 200],
+            surgeon_mode: 1,
+            ..ItpFrame::default()
+        };
+        assert_eq!(f.checksum(), 1000 + 1 + 10 + 2 + 20 + 3 + 30 + 100 + 200 + 1);
+    }
+
+    #[test]
+    fn checksum_wraps_and_reads_sequence_as_i32() {
+        let f = ItpFrame { sequence: u32::MAX, delx: [i32::MAX, 0], surgeon_mode: 1, ..ItpFrame::default() };
+        // u32::MAX as i32 is -1; -1 + i32::MAX + 1 = i32::MAX.
+        assert_eq!(f.checksum(), i32::MAX);
+        let g = ItpFrame { delx: [i32::MAX, 1], ..ItpFrame::default() };
+        assert_eq!(g.checksum(), i32::MIN);
+    }
+
+    #[test]
+    fn checksum_excludes_grasp_rotation_and_header() {
+        let f = sample_frame();
+        let g = ItpFrame {
+            grasp: [9999, -9999],
+            qx: [5.0, 5.0],
+            qy: [6.0, 6.0],
+            qz: [7.0, 7.0],
+            qw: [0.0, 0.0],
+            pactyp: 99,
+            version: 98,
+            ..f
+        };
+        assert_eq!(g.checksum(), f.checksum());
+        assert!(g.has_valid_checksum());
+    }
+
+    #[test]
+    fn wrong_length_is_an_error() {
+        assert_eq!(
+            ItpView::new_checked(&[0u8; 123][..]),
+            Err(FrameError::WrongLength { expected: 124, found: 123 })
+        );
+        assert_eq!(
+            ItpFrame::from_bytes(&[0u8; 125]),
+            Err(FrameError::WrongLength { expected: 124, found: 125 })
+        );
+        assert_eq!(
+            ItpFrame::from_bytes(&[]).unwrap_err().to_string(),
+            "wrong ITP frame length: expected 124 bytes, got 0"
+        );
+    }
+
+    #[test]
+    fn wrong_checksum_is_an_error() {
+        let mut f = sample_frame();
+        let good = f.checksum;
+        f.checksum = good.wrapping_add(1);
+        let bytes = f.to_bytes();
+        assert_eq!(
+            ItpFrame::from_bytes(&bytes),
+            Err(FrameError::ChecksumMismatch { expected: good, found: good + 1 })
+        );
+        let view = ItpView::new_checked(&bytes[..]).unwrap();
+        assert!(!view.verify_checksum());
+        assert_eq!(ItpFrame::parse_unverified(&view), f);
+    }
+
+    #[test]
+    fn view_fill_checksum_agrees_with_repr() {
+        let mut f = sample_frame();
+        f.checksum = 0;
+        let mut bytes = f.to_bytes();
+        let mut view = ItpView::new_checked(&mut bytes[..]).unwrap();
+        view.fill_checksum();
+        assert!(view.verify_checksum());
+        assert_eq!(view.checksum(), f.checksum());
+    }
+
+    #[test]
+    fn sample_round_trip() {
+        let f = sample_frame();
+        let mut s = FrameSample { send_ns: 42, ..FrameSample::ZERO };
+        f.write_to_sample(&mut s);
+        assert_eq!(s.len, 124);
+        assert_eq!(s.send_ns, 42);
+        assert_eq!(ItpFrame::from_sample(&s), Ok(f));
+        s.len = 100;
+        assert_eq!(
+            ItpFrame::from_sample(&s),
+            Err(FrameError::WrongLength { expected: 124, found: 100 })
+        );
+    }
+}
