@@ -281,7 +281,7 @@ fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (In
     }
     let view = ItpView::new_unchecked(&s.wire[..]);
     let seq = view.sequence();
-    let bad = !view.checksum_ok();
+    let bad = !view.verify_checksum();
     if bad && drop_bad_checksum {
         return Err((Invalid::BadChecksum, Some(seq)));
     }

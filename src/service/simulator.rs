@@ -102,7 +102,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                         wrong_size += 1;
                     } else {
                         let view = ItpView::new_unchecked(&s.wire[..]);
-                        let ok = view.checksum_ok();
+                        let ok = view.verify_checksum();
                         if !ok {
                             bad_checksum += 1;
                         }
