@@ -114,7 +114,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         }
     }
     let n = script.len(args.frames, args.duration_s);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
     let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };

@@ -300,6 +300,7 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
     } else {
         args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id)))
     };
+    crate::service::write_pid(&args.out, "emulator")?;
     let node = crate::service::ipc::open_node(&args.run_id, crate::transport::Role::Emulator)?;
     let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
     let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;

@@ -12,3 +12,11 @@ pub mod report;
 pub mod run;
 pub mod signals;
 pub mod simulator;
+
+/// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
+pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
+    use anyhow::Context;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join(format!("{role}.pid"));
+    std::fs::write(&path, std::process::id().to_string()).with_context(|| format!("writing {}", path.display()))
+}

@@ -141,7 +141,10 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let run_id = args.run_id.clone().unwrap_or_else(fresh_run_id);
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(&run_id));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    for stale in ["console.ready", "emulator.ready", "simulator.ready", "console.json", "emulator.json", "simulator.json"] {
+    for stale in [
+        "console.ready", "emulator.ready", "simulator.ready", "console.json", "emulator.json", "simulator.json", "console.pid", "emulator.pid",
+        "simulator.pid",
+    ] {
         let _ = std::fs::remove_file(out.join(stale));
     }
     let scenario_path = out.join("scenario.toml");

@@ -57,7 +57,7 @@ pub struct SimulatorReport {
 
 /// Runs the simulator; returns its report (also `simulator.json`).
 pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    crate::service::write_pid(&args.out, "simulator")?;
     let node = open_node(&args.run_id, Role::Simulator)?;
     let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;

@@ -1,0 +1,186 @@
+//! The three real processes over iceoryx2: short runs (seconds) that assert
+//! exact conservation, realized loss, delays, replay of the real capture, and
+//! the behaviour under killed processes.
+//!
+//! The runs are serialized: each has a busy-waiting emulator pinned to a
+//! core, and a 2-core machine has room for one at a time.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+fn netfi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_netfi"))
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("netfi-it-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// `netfi run` with `args`; returns the JSON report and whether it exited 0.
+fn run(name: &str, args: &[&str]) -> (Value, bool, PathBuf) {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir(name);
+    let o = netfi().arg("run").args(args).arg("--out").arg(&out).arg("--json").output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let report: Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+        panic!("{name}: no JSON report ({e}); stderr:\n{}", String::from_utf8_lossy(&o.stderr))
+    });
+    (report, o.status.success(), out)
+}
+
+fn u(v: &Value) -> u64 {
+    v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
+}
+
+/// sent = entered = delivered + dropped + held_at_end, delivered = received.
+fn assert_conserved(r: &Value) {
+    let f = &r["frames"];
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["sent"]), u(&f["entered"]), "{f}");
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert_eq!(u(&f["delivered"]), u(&f["received"]), "{f}");
+    assert_eq!(f["balanced"], true, "{f}");
+}
+
+#[test]
+fn normal_delivers_every_frame_and_measures_overhead() {
+    let (r, ok, out) = run("normal", &["Normal", "--duration-s", "2", "--seed", "1"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    assert_eq!(u(&r["frames"]["sent"]), 2000);
+    assert_eq!(u(&r["frames"]["delivered"]), 2000);
+    assert_eq!(u(&r["frames"]["held_at_end"]), 0);
+    for h in ["decision", "release_lateness", "end_to_end_extra"] {
+        for p in ["p50", "p99", "p999", "max"] {
+            assert!(r["overhead_ns"][h][p].is_u64(), "overhead_ns.{h}.{p} missing");
+        }
+        assert_eq!(u(&r["overhead_ns"][h]["count"]), 2000, "{h}");
+    }
+    // The trace has one row per frame and the receive time of each.
+    let trace = std::fs::read_to_string(out.join("trace.csv")).unwrap();
+    let rows: Vec<&str> = trace.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2000);
+    assert!(rows.iter().all(|l| l.contains(",delivered,") && !l.ends_with(',')), "{}", rows[0]);
+    for f in ["decision.hlog", "lateness.hlog", "end_to_end.hlog", "report.json"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+}
+
+#[test]
+fn plm_loss_is_conserved_and_realizes_the_model() {
+    // ge_lomax decides per frame, not per time: with the seed fixed, its
+    // fates do not depend on the timing of this run.
+    let (r, ok, _) = run("plm", &["PLM-2", "--frames", "20000", "--rate-hz", "5000", "--seed", "3"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let exact = r["stages"][0]["loss_rate_model"].as_f64().unwrap();
+    let [lo, hi] = [r["loss_rate_ci95"][0].as_f64().unwrap(), r["loss_rate_ci95"][1].as_f64().unwrap()];
+    assert!(lo <= exact && exact <= hi, "model {exact} outside [{lo}, {hi}]");
+    // The same seed in simulated time gives the very same drops.
+    let o = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "3", "--json"]).output().unwrap();
+    let c: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(c["dropped"]["ge_lomax"], r["frames"]["dropped"]["ge_lomax"]);
+}
+
+#[test]
+fn dlm_delays_are_injected_and_held_frames_released() {
+    let (r, ok, _) = run("dlm", &["DLM-1", "--duration-s", "2", "--seed", "4"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    assert_eq!(u(&r["frames"]["delivered"]), 2000);
+    // The mean of 2000 draws of a law with mean 103.0 ms and sd ≈ 33 ms:
+    // within ±5 standard errors (3.7 ms).
+    let mean_ms = r["injected_delay_ns"]["mean"].as_f64().unwrap() / 1e6;
+    let model = r["stages"][0]["delay_ms_model"].as_f64().unwrap();
+    assert!((mean_ms - model).abs() < 3.7, "mean {mean_ms} vs {model}");
+    // What the simulator saw is the injected delay plus microseconds.
+    let seen = &r["simulator"]["delay_seen_ns"];
+    assert!((u(&seen["p50"]) as f64 / 1e6 - r["injected_delay_ns"]["p50"].as_f64().unwrap() / 1e6).abs() < 1.0);
+}
+
+#[test]
+fn clm_outages_are_conserved() {
+    let (r, ok, _) = run("clm", &["CLM-2", "--duration-s", "4", "--seed", "5"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let lost = u(&r["frames"]["dropped"]["outage"]);
+    // Windows of U(0, 1 s) after 1 s cooldowns: in 4 s at least one opens.
+    assert!(lost > 0 && lost < 4000, "{lost}");
+    let [lo, hi] = [r["loss_rate_ci95"][0].as_f64().unwrap(), r["loss_rate_ci95"][1].as_f64().unwrap()];
+    let realized = r["loss_rate"].as_f64().unwrap();
+    assert!(lo <= realized && realized <= hi);
+}
+
+fn capture_path() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/itp/dvtrainer_peg_transfer.bin");
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} is absent", p.display());
+        None
+    }
+}
+
+#[test]
+fn the_real_capture_replays_with_its_timing() {
+    let Some(cap) = capture_path() else { return };
+    let (r, ok, _) = run("replay", &["PLM-1", "--capture", cap.to_str().unwrap(), "--duration-s", "3", "--seed", "6"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let sent = u(&r["frames"]["sent"]);
+    // About 517 Hz for 3 s of the recording.
+    assert!((1300..=1800).contains(&sent), "{sent}");
+    assert_eq!(r["console"]["source"].as_str().map(|s| s.starts_with("capture:")), Some(true));
+    // Every frame of the recording has a valid checksum.
+    assert_eq!(u(&r["simulator"]["bad_checksum"]), 0);
+}
+
+/// Waits for `<out>/<role>.pid` and returns the pid.
+fn wait_pid(out: &Path, role: &str) -> i32 {
+    let t0 = Instant::now();
+    loop {
+        if let Ok(s) = std::fs::read_to_string(out.join(format!("{role}.pid"))) {
+            if let Ok(p) = s.trim().parse() {
+                return p;
+            }
+        }
+        assert!(t0.elapsed() < Duration::from_secs(30), "{role} never started");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_killed_console_is_reported_and_the_others_finish() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("kill-console");
+    let mut child = netfi()
+        .args(["run", "Normal", "--duration-s", "3", "--seed", "7", "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = wait_pid(&out, "console");
+    std::thread::sleep(Duration::from_millis(700));
+    // SAFETY: signalling a process this test started (through the runner).
+    unsafe { libc::kill(pid, libc::SIGKILL) };
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success(), "a run with a killed process must fail");
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let faults: Vec<String> = r["faults"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
+    assert!(faults.iter().any(|f| f.contains("console ended abnormally (signal 9)")), "{faults:?}");
+    // The emulator and simulator finished and closed their own accounts.
+    let f = &r["frames"];
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert!(u(&f["entered"]) > 300, "{f}");
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]));
+    assert_eq!(u(&f["delivered"]), u(&f["received"]));
+    assert_eq!(r["emulator"]["ended_by"], "signal");
+}
