@@ -8,4 +8,6 @@
 pub mod model;
 pub mod capture;
 pub mod frame;
+pub mod kinematics;
+pub mod motion;
 pub mod sample;
