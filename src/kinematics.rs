@@ -21,9 +21,9 @@
 //!
 //! ITP positions are integers. The shipped dVTrainer capture implies one unit
 //! is about 10 µm ([`UNIT_MM`] = 0.01 mm): integrated over the recording, each
-//! arm's position spans 5 to 10 thousand units per axis, which is 5–10 cm at
+//! arm's position spans 4 to 10 thousand units per axis, which is 4–10 cm at
 //! 10 µm (the size of a peg-transfer board), and its fastest moves reach 8 to
-//! 10 thousand units/s, i.e. 8–10 cm/s. Read as micrometres (the Raven II
+//! 10 thousand units/s over 100 ms, i.e. 8–10 cm/s. Read as micrometres (the Raven II
 //! convention), the same task would fit within one centimetre, which a
 //! peg transfer does not. The unit is a setting ([`KinematicsConfig::unit_mm`]);
 //! only the millimetre figures depend on it.
