@@ -508,6 +508,12 @@ mod tests {
     }
 
     #[test]
+    fn errors_can_cross_threads() {
+        fn send_sync<T: Send + Sync + 'static>() {}
+        send_sync::<CaptureError>();
+    }
+
+    #[test]
     fn writer_reader_round_trip() {
         let records: Vec<_> = (0..1000u32)
             .map(|i| CaptureRecord {

@@ -8,6 +8,8 @@
 pub mod model;
 pub mod capture;
 pub mod frame;
+pub mod kinematics;
+pub mod motion;
 pub mod sample;
 pub mod scenario;
 pub mod scheduler;
