@@ -14,7 +14,7 @@ use crate::capture;
 use crate::clock::{now_ns, wait_until_ns, Wait};
 use crate::host::CpuTimes;
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::motion::Motion;
+use crate::motion::{MotionGenerator, MotionParams};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::args::ConsoleArgs;
 use crate::service::ipc::open_node;
@@ -50,7 +50,7 @@ pub struct ConsoleReport {
 /// Where frames come from: each call gives the frame's planned offset from
 /// the stream's start and its wire bytes.
 enum Script {
-    Synthetic { motion: Motion, period_ns: f64 },
+    Synthetic { motion: MotionGenerator, period_ns: f64 },
     Replay { records: Vec<(u64, [u8; ITP_FRAME_LEN])>, period_ns: Option<f64> },
 }
 
@@ -72,7 +72,7 @@ impl Script {
     #[inline]
     fn frame(&mut self, i: u64) -> (u64, [u8; ITP_FRAME_LEN]) {
         match self {
-            Script::Synthetic { motion, period_ns } => ((i as f64 * *period_ns).round() as u64, motion.next_wire()),
+            Script::Synthetic { motion, period_ns } => ((i as f64 * *period_ns).round() as u64, motion.next_frame().to_bytes()),
             Script::Replay { records, period_ns } => {
                 let r = &records[i as usize];
                 match period_ns {
@@ -105,7 +105,9 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         }
         None => {
             let rate = args.rate_hz.unwrap_or(1000.0);
-            Script::Synthetic { motion: Motion::new(seed, rate), period_ns: 1e9 / rate }
+            anyhow::ensure!(rate.is_finite() && rate > 0.0, "--rate-hz must be a positive number, got {rate}");
+            let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
+            Script::Synthetic { motion, period_ns: 1e9 / rate }
         }
     };
     if let Some(r) = args.rate_hz {

@@ -13,7 +13,8 @@
 use crate::clock::{now_ns, Wait};
 use crate::frame::ItpView;
 use crate::host::CpuTimes;
-use crate::kinematics::{Kinematics, KinematicsConfig};
+use crate::frame::ItpFrame;
+use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
@@ -67,8 +68,9 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     }
     let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
     let stall_ns = (args.stall_ms * 1e6) as u64;
-    let mut robot = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, ..Default::default() });
-    let mut console = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, ..Default::default() });
+    let checksum_policy = if args.drop_bad_checksum { ChecksumPolicy::Discard } else { ChecksumPolicy::Apply };
+    let mut kin = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, checksum_policy, ..Default::default() })
+        .context("--stall-ms")?;
     let mut e2e = LatencyHistogram::new();
     let mut hop = LatencyHistogram::new();
     let mut seen = LatencyHistogram::new();
@@ -102,13 +104,10 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                         wrong_size += 1;
                     } else {
                         let view = ItpView::new_unchecked(&s.wire[..]);
-                        let ok = view.verify_checksum();
-                        if !ok {
+                        if !view.verify_checksum() {
                             bad_checksum += 1;
                         }
-                        if ok || !args.drop_bad_checksum {
-                            robot.apply_view(t, &view);
-                        }
+                        kin.robot(t, &ItpFrame::parse_unverified(&view));
                     }
                 }
             }
@@ -125,7 +124,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                     received_direct += 1;
                     hop.record(t.saturating_sub(d.send_ns));
                     if d.len as usize == ITP_FRAME_LEN {
-                        console.apply_view(t, &ItpView::new_unchecked(&d.wire[..]));
+                        kin.console(t, &ItpFrame::parse_unverified(&ItpView::new_unchecked(&d.wire[..])));
                     }
                 }
             }
@@ -168,7 +167,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
         (Some(a), Some(b)) => b.steal_since(&a),
         _ => Default::default(),
     };
-    let kinematics = serde_json::to_value(crate::kinematics::compare(&console, &robot)).ok();
+    kin.close(t_end);
+    let kinematics = serde_json::to_value(kin.report()).ok();
     let report = SimulatorReport {
         received,
         received_direct,

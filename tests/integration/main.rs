@@ -1,1 +1,4 @@
 mod capture;
+mod core;
+mod scenario_cli;
+mod services;
