@@ -9,3 +9,4 @@ pub mod model;
 pub mod capture;
 pub mod frame;
 pub mod sample;
+pub mod transport;
