@@ -1,23 +1,27 @@
 //! netfi: a network fault injector for teleoperation.
 //!
 //! The sans-IO core (`frame`, `model`, `scenario`, `scheduler`, `injector`,
-//! `check`) never reads a clock or touches a socket, file or thread: time is
-//! passed in as nanoseconds, so the same code runs in simulated time (tests,
-//! Monte Carlo) and in the real-time emulator.
+//! `check`, `stats`, `motion`, `kinematics`) never reads a clock or touches a
+//! socket, file or thread: time is passed in as nanoseconds, so the same code
+//! runs in simulated time (tests, Monte Carlo) and in the real-time emulator.
+//! `transport` is the only module that touches iceoryx2; `service` holds the
+//! real-time loops that wire the core to it.
 
-pub mod model;
 pub mod capture;
+pub mod check;
 pub mod frame;
+pub mod injector;
 pub mod kinematics;
+pub mod model;
 pub mod motion;
 pub mod sample;
 pub mod scenario;
 pub mod scheduler;
-pub mod injector;
 pub mod stats;
-pub mod check;
-pub mod host;
+
 pub mod clock;
+pub mod host;
 pub mod metrics;
-pub mod trace;
 pub mod service;
+pub mod trace;
+pub mod transport;

@@ -1,0 +1,287 @@
+//! Peer liveness: finding the nodes of a run whose process died and removing
+//! what they left behind.
+//!
+//! iceoryx2 marks each node with a file lock held by its process; the lock
+//! disappears with the process however it ends, so a node whose lock is gone
+//! is dead. Removing a dead node deregisters its ports from the channels,
+//! which is what lets a restarted console or simulator open its port again
+//! and what makes the survivors' `peers_connected` drop.
+
+use iceoryx2::node::{NodeCleanupFailure, NodeListFailure, NodeView};
+use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
+
+use super::{init_log_level, Ipc, IpcConfig, Role, RunId, FILE_PREFIX};
+
+/// A node of the run whose process is gone.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DeadPeer {
+    /// Its role, when its node name is one of this run's.
+    pub role: Option<Role>,
+    /// Its node name, empty when its details were unreadable.
+    pub node_name: String,
+    /// The process id it had, when its details were readable.
+    pub pid: Option<i32>,
+    /// The executable it ran, when its details were readable.
+    pub executable: Option<String>,
+}
+
+impl core::fmt::Display for DeadPeer {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.role {
+            Some(role) => write!(f, "{role}")?,
+            None if self.node_name.is_empty() => f.write_str("unnamed node")?,
+            None => write!(f, "node `{}`", self.node_name)?,
+        }
+        match (&self.executable, self.pid) {
+            (Some(exe), Some(pid)) => write!(f, " ({exe}, pid {pid})"),
+            (None, Some(pid)) => write!(f, " (pid {pid})"),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// A dead node whose resources could not be removed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FailedCleanup {
+    /// The dead node.
+    pub peer: DeadPeer,
+    /// Why its resources stay (iceoryx2's reason, in words).
+    pub reason: String,
+}
+
+/// What one scan of a run found.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CleanupReport {
+    /// Dead nodes whose resources this call removed.
+    pub removed: Vec<DeadPeer>,
+    /// Dead nodes that another process was removing, or had just removed,
+    /// at the same time.
+    pub removed_elsewhere: Vec<DeadPeer>,
+    /// Dead nodes whose resources could not be removed.
+    pub failed: Vec<FailedCleanup>,
+    /// Live nodes of the run, the caller's own included.
+    pub alive: usize,
+    /// Nodes whose state could not be determined: not accessible to this
+    /// user, or half created or half removed.
+    pub undetermined: usize,
+}
+
+impl CleanupReport {
+    /// All dead nodes found, however they ended.
+    pub fn dead(&self) -> impl Iterator<Item = &DeadPeer> {
+        self.removed
+            .iter()
+            .chain(&self.removed_elsewhere)
+            .chain(self.failed.iter().map(|f| &f.peer))
+    }
+
+    /// Whether no dead node was found.
+    pub fn is_clean(&self) -> bool {
+        self.dead().next().is_none()
+    }
+}
+
+/// Why the nodes of a run could not be scanned.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CleanupError {
+    /// This user may not list or inspect the run's node files (the run was
+    /// started by another user).
+    #[error("cannot scan the nodes of run `{run}` for dead peers: insufficient permissions on iceoryx2's node directory")]
+    InsufficientPermissions {
+        /// The run.
+        run: String,
+    },
+    /// A signal interrupted the scan; calling again is safe.
+    #[error("scanning the nodes of run `{run}` for dead peers was interrupted by a signal")]
+    Interrupted {
+        /// The run.
+        run: String,
+    },
+    /// iceoryx2 failed internally while listing the nodes.
+    #[error("cannot scan the nodes of run `{run}` for dead peers: iceoryx2 failed internally ({detail})")]
+    Internal {
+        /// The run.
+        run: String,
+        /// iceoryx2's failure.
+        detail: String,
+    },
+}
+
+/// Removes the resources of every dead node of the run of `config`, for
+/// instance those left by a console killed in an earlier session with the
+/// same run id. Needs no node of its own; [`IpcNode::open`] calls it first.
+///
+/// [`IpcNode::open`]: super::IpcNode::open
+pub fn cleanup_dead_nodes(config: &IpcConfig) -> Result<CleanupReport, CleanupError> {
+    init_log_level();
+    let run = || config.run_id().to_string();
+    let mut report = CleanupReport::default();
+    let mut dead = Vec::new();
+    Node::<Ipc>::list(config.iceoryx2(), |state| {
+        match state {
+            NodeState::Alive(_) => report.alive += 1,
+            NodeState::Dead(view) => dead.push(view),
+            NodeState::Inaccessible(_) | NodeState::Undefined(_) => report.undetermined += 1,
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| match e {
+        NodeListFailure::InsufficientPermissions => {
+            CleanupError::InsufficientPermissions { run: run() }
+        }
+        NodeListFailure::Interrupt => CleanupError::Interrupted { run: run() },
+        NodeListFailure::InternalError => CleanupError::Internal {
+            run: run(),
+            detail: format!("{e:?}"),
+        },
+    })?;
+
+    for view in dead {
+        let peer = describe(config, view.details());
+        if view.details().is_none() {
+            // Removal without details would make iceoryx2 fall back to its
+            // file-based global configuration; leave such a node alone.
+            report.failed.push(FailedCleanup {
+                peer,
+                reason: "its node details are unreadable, so its resources cannot be located"
+                    .to_owned(),
+            });
+            continue;
+        }
+        match view.try_remove_stale_resources() {
+            Ok(()) => report.removed.push(peer),
+            Err(
+                NodeCleanupFailure::ResourcesAlreadyCleanedUp
+                | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
+            ) => report.removed_elsewhere.push(peer),
+            Err(e) => report.failed.push(FailedCleanup {
+                peer,
+                reason: cleanup_failure_reason(e).to_owned(),
+            }),
+        }
+    }
+    Ok(report)
+}
+
+/// Runs [`cleanup_dead_nodes`] for every netfi run with node files on this
+/// host for which `select` returns true (`|_| true`: all of them), whatever
+/// its run id. What processes of earlier runs left when they were killed is
+/// removed (each killed publisher leaves its shared-memory pool behind,
+/// several MiB); live nodes are only listed. Returns one report per run
+/// scanned, in run id order.
+///
+/// Meant for start-up or a `clean` command, not for the service loop: it
+/// reads iceoryx2's whole node directory.
+pub fn cleanup_dead_runs(
+    mut select: impl FnMut(&RunId) -> bool,
+) -> Result<Vec<(RunId, CleanupReport)>, CleanupError> {
+    init_log_level();
+    let defaults = iceoryx2::config::Config::default();
+    let node_dir = defaults.global.node_dir();
+    let monitor_suffix = defaults.global.node.monitor_suffix;
+    let entries = match std::fs::read_dir(node_dir.as_str()) {
+        Ok(entries) => entries,
+        // No node was ever created on this host.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(list_error("every run", &e)),
+    };
+    let mut runs = std::collections::BTreeMap::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| list_error("every run", &e))?;
+        let name = entry.file_name();
+        if let Some(run) = name
+            .to_str()
+            .and_then(|n| run_of_monitor_file(n, monitor_suffix.as_str()))
+        {
+            runs.entry(run.as_str().to_owned()).or_insert(run);
+        }
+    }
+    runs.into_values()
+        .filter(|run| select(run))
+        .map(|run| {
+            let report = cleanup_dead_nodes(&IpcConfig::new(run.clone()))?;
+            Ok((run, report))
+        })
+        .collect()
+}
+
+/// The run id in a node monitor file name
+/// `netfi_<run>_<node id><suffix>`, if it is one.
+fn run_of_monitor_file(file_name: &str, suffix: &str) -> Option<RunId> {
+    let middle = file_name.strip_prefix(FILE_PREFIX)?.strip_suffix(suffix)?;
+    let (run, node_id) = middle.rsplit_once('_')?;
+    if node_id.is_empty() || !node_id.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    RunId::new(run).ok()
+}
+
+fn list_error(run: &str, e: &std::io::Error) -> CleanupError {
+    match e.kind() {
+        std::io::ErrorKind::PermissionDenied => CleanupError::InsufficientPermissions {
+            run: run.to_owned(),
+        },
+        std::io::ErrorKind::Interrupted => CleanupError::Interrupted {
+            run: run.to_owned(),
+        },
+        _ => CleanupError::Internal {
+            run: run.to_owned(),
+            detail: e.to_string(),
+        },
+    }
+}
+
+fn describe(config: &IpcConfig, details: &Option<iceoryx2::node::NodeDetails>) -> DeadPeer {
+    match details {
+        Some(d) => {
+            let node_name = d.name().as_str().to_owned();
+            DeadPeer {
+                role: config.role_of_node_name(&node_name),
+                node_name,
+                pid: Some(d.process_id().value()),
+                executable: Some(d.executable().as_str().to_owned()),
+            }
+        }
+        None => DeadPeer {
+            role: None,
+            node_name: String::new(),
+            pid: None,
+            executable: None,
+        },
+    }
+}
+
+fn cleanup_failure_reason(e: NodeCleanupFailure) -> &'static str {
+    match e {
+        NodeCleanupFailure::Interrupt => "interrupted by a signal; the next scan retries",
+        NodeCleanupFailure::InternalError => "iceoryx2 failed internally while removing it",
+        NodeCleanupFailure::InsufficientPermissions => {
+            "insufficient permissions to remove its files (started by another user?)"
+        }
+        NodeCleanupFailure::VersionMismatch => {
+            "it was created by another iceoryx2 version; remove its files by hand"
+        }
+        NodeCleanupFailure::ResourcesAlreadyCleanedUp
+        | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode => {
+            "another process is removing it"
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monitor_file_names_yield_their_run() {
+        let suffix = ".node_monitor";
+        let run = |n: &str| run_of_monitor_file(n, suffix).map(|r| r.as_str().to_owned());
+        assert_eq!(run("netfi_r1_123.node_monitor").as_deref(), Some("r1"));
+        assert_eq!(run("netfi_a_b-c_9.node_monitor").as_deref(), Some("a_b-c"));
+        assert_eq!(run("netfi__9.node_monitor"), None);
+        assert_eq!(run("netfi_r1_12x.node_monitor"), None);
+        assert_eq!(run("netfi_r1_.node_monitor"), None);
+        assert_eq!(run("iox2_123.node_monitor"), None);
+        assert_eq!(run("netfi_r1_123.details"), None);
+    }
+}

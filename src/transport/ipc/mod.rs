@@ -1,0 +1,457 @@
+//! iceoryx2 zero-copy publish/subscribe between the processes of one run.
+//!
+//! # Service type
+//!
+//! All ports use `iceoryx2::service::ipc::Service`: inter-process, with the
+//! single-threaded port policy, so a send or receive takes no mutex. The price
+//! is that [`FramePublisher`] and [`FrameSubscriber`] are not `Send`: create
+//! each endpoint on the thread that uses it (an [`IpcNode`] itself may be
+//! moved). `ipc_threadsafe` would only be needed to share one port between
+//! threads, which none of the services does.
+//!
+//! # Queues and limits (fixed at start-up, identical in every process)
+//!
+//! | setting | value | why |
+//! |---|---|---|
+//! | subscriber queue | [`SUBSCRIBER_BUFFER_FRAMES`] = 16 384 frames | a receiver may stall 163 ms at 100 kHz (16 s at 1 kHz) and lose nothing |
+//! | safe overflow | off | an overwritten frame would be a silent, unrecorded loss |
+//! | full queue | the frame is not delivered to that subscriber; `send` returns [`FrameSendError::QueueFull`] | the sender never blocks (console timing, emulator release times stay honest) and the loss is counted |
+//! | history | 0 | a restarted subscriber must never receive old commands |
+//! | publishers per channel | [`MAX_PUBLISHERS_PER_CHANNEL`] = 1 | a second console (or emulator) in one run is a mistake and fails to open |
+//! | subscribers per channel | [`MAX_SUBSCRIBERS_PER_CHANNEL`] = 2 | the next stage plus one observer |
+//! | nodes per channel | [`MAX_NODES_PER_CHANNEL`] = 8 | the participants plus dead ones awaiting clean-up |
+//! | loans | 1 per publisher, 1 borrowed sample per subscriber | every sample is written and sent, or read and released, within one call |
+//!
+//! The publisher's shared-memory pool holds
+//! `MAX_SUBSCRIBERS_PER_CHANNEL × (SUBSCRIBER_BUFFER_FRAMES + 1) + 1` samples
+//! (about 8 MiB); a frame lost because of a full queue is the only loss the
+//! transport can cause.
+//!
+//! # Configuration
+//!
+//! [`IpcConfig`] builds an `iceoryx2::config::Config` from its defaults in
+//! code, never from a file (iceoryx2 would otherwise look for
+//! `./config/iceoryx2.toml`, a user and a system file), with the file prefix
+//! `netfi_<run>_`. The automatic dead-node clean-ups of iceoryx2 are switched
+//! off: they fall back to the file-based global configuration for nodes whose
+//! details are unreadable. Clean-up is explicit instead
+//! ([`cleanup_dead_nodes`], [`IpcNode::reap_dead_peers`]) and reported.
+//!
+//! # Signals
+//!
+//! iceoryx2 installs its own handlers for SIGINT, SIGTERM and other
+//! non-fatal signals the first time it zeroes shared memory or is asked for
+//! a termination request, whatever the node's `SignalHandlingMode`; from then
+//! on these signals only set a flag. Disabling its signal handling would
+//! therefore make Ctrl-C silently do nothing. Nodes are created with
+//! `SignalHandlingMode::HandleTerminationRequests`, the handlers are installed
+//! deterministically when the [`IpcNode`] is opened, and
+//! [`IpcNode::termination_requested`] latches the request so that the
+//! service loop can stop cleanly (and let the ports deregister).
+//!
+//! # Logging
+//!
+//! iceoryx2 logs to stderr. Its level defaults to warn (or `IOX2_LOG_LEVEL`
+//! when set) the first time a transport object is created; [`set_log_level`]
+//! overrides it.
+
+mod liveness;
+mod node;
+mod publisher;
+mod service;
+mod subscriber;
+
+use core::fmt;
+use std::str::FromStr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use iceoryx2::config::Config;
+use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
+
+pub use liveness::{cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup};
+pub use node::{IpcNode, NodeOpenError};
+pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
+pub use subscriber::{FrameRecvError, FrameSubscriber, SubscriberOpenError, SubscriberStats};
+
+/// The iceoryx2 service type of every port (see the module docs).
+type Ipc = iceoryx2::service::ipc::Service;
+
+/// Capacity of each subscriber's queue, in frames. A receiver can stall for
+/// `SUBSCRIBER_BUFFER_FRAMES / rate` (163 ms at 100 kHz) without loss.
+pub const SUBSCRIBER_BUFFER_FRAMES: usize = 16_384;
+/// Publishers per channel: one producer per run.
+pub const MAX_PUBLISHERS_PER_CHANNEL: usize = 1;
+/// Subscribers per channel: the next stage and one observer.
+pub const MAX_SUBSCRIBERS_PER_CHANNEL: usize = 2;
+/// Nodes that may have a channel open at the same time, dead ones included
+/// until they are cleaned up.
+pub const MAX_NODES_PER_CHANNEL: usize = 8;
+/// Samples a publisher may hold between loan and send.
+const PUBLISHER_MAX_LOANED_SAMPLES: usize = 1;
+/// Samples a subscriber may hold between receive and release.
+const SUBSCRIBER_MAX_BORROWED_SAMPLES: usize = 1;
+/// Frames replayed to a late subscriber: none, commands are never replayed.
+const HISTORY_FRAMES: usize = 0;
+
+/// Prefix of every iceoryx2 file of netfi; the run id and `_` follow.
+const FILE_PREFIX: &str = "netfi_";
+
+/// Identifier of one run: 1 to [`RunId::MAX_LEN`] ASCII letters, digits,
+/// `_` or `-`. It names every iceoryx2 resource of the run, so runs with
+/// different ids never interfere. Cloning is cheap (shared string), so
+/// errors on the hot path can carry it without allocating.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct RunId(Arc<str>);
+
+impl RunId {
+    /// Longest accepted run id, in bytes.
+    pub const MAX_LEN: usize = 48;
+
+    /// Validates `value` as a run id.
+    pub fn new(value: &str) -> Result<Self, RunIdError> {
+        if value.is_empty() {
+            return Err(RunIdError::Empty);
+        }
+        if value.len() > Self::MAX_LEN {
+            return Err(RunIdError::TooLong {
+                run: value.to_owned(),
+                len: value.len(),
+            });
+        }
+        if let Some((index, ch)) = value
+            .char_indices()
+            .find(|&(_, c)| !(c.is_ascii_alphanumeric() || c == '_' || c == '-'))
+        {
+            return Err(RunIdError::InvalidCharacter {
+                run: value.to_owned(),
+                ch,
+                index,
+            });
+        }
+        Ok(Self(Arc::from(value)))
+    }
+
+    /// The run id as written.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Display for RunId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl FromStr for RunId {
+    type Err = RunIdError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::new(s)
+    }
+}
+
+/// Why a string is not a valid [`RunId`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RunIdError {
+    /// The run id is the empty string.
+    #[error("run id is empty; use 1 to 48 ASCII letters, digits, `_` or `-`")]
+    Empty,
+    /// The run id is longer than [`RunId::MAX_LEN`] bytes.
+    #[error("run id `{run}` is {len} bytes long; at most 48 are accepted")]
+    TooLong {
+        /// The rejected run id.
+        run: String,
+        /// Its length in bytes.
+        len: usize,
+    },
+    /// The run id contains a character other than an ASCII letter, digit,
+    /// `_` or `-`.
+    #[error(
+        "run id `{run}` contains {ch:?} at byte {index}; only ASCII letters, digits, `_` and `-` are accepted"
+    )]
+    InvalidCharacter {
+        /// The rejected run id.
+        run: String,
+        /// The first offending character.
+        ch: char,
+        /// Its byte offset in `run`.
+        index: usize,
+    },
+}
+
+/// One hop of the pipeline, carried by one publish/subscribe service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Channel {
+    /// Console → emulator: the frames as the console sent them.
+    Console,
+    /// Emulator → simulator: the frames that survived the scenario.
+    Emulator,
+}
+
+impl Channel {
+    /// Both channels, in pipeline order.
+    pub const ALL: [Channel; 2] = [Channel::Console, Channel::Emulator];
+
+    /// The last component of the service name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Channel::Console => "console",
+            Channel::Emulator => "emulator",
+        }
+    }
+
+    /// The role that publishes on this channel.
+    pub fn producer(self) -> Role {
+        match self {
+            Channel::Console => Role::Console,
+            Channel::Emulator => Role::Emulator,
+        }
+    }
+
+    /// The role that subscribes to this channel.
+    pub fn consumer(self) -> Role {
+        match self {
+            Channel::Console => Role::Emulator,
+            Channel::Emulator => Role::Simulator,
+        }
+    }
+}
+
+impl fmt::Display for Channel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// What a process is in the run; names its iceoryx2 node, so that a dead
+/// peer can be reported by role.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Role {
+    /// The surgeon-side command source.
+    Console,
+    /// The fault injector.
+    Emulator,
+    /// The patient-side receiver.
+    Simulator,
+    /// Anything else attached to the run: a recorder, an inspector, a test.
+    Tool,
+}
+
+impl Role {
+    /// All roles.
+    pub const ALL: [Role; 4] = [Role::Console, Role::Emulator, Role::Simulator, Role::Tool];
+
+    /// The lowercase name used in node names and messages.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Console => "console",
+            Role::Emulator => "emulator",
+            Role::Simulator => "simulator",
+            Role::Tool => "tool",
+        }
+    }
+}
+
+impl fmt::Display for Role {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// The explicit iceoryx2 configuration of one run.
+#[derive(Debug, Clone)]
+pub struct IpcConfig {
+    run: RunId,
+    iceoryx2: Config,
+}
+
+impl IpcConfig {
+    /// Builds the configuration of run `run` from iceoryx2's compiled-in
+    /// defaults; no configuration file is read.
+    pub fn new(run: RunId) -> Self {
+        let mut config = Config::default();
+        let prefix = format!("{FILE_PREFIX}{run}_");
+        // A validated run id is at most 48 bytes of [A-Za-z0-9_-], which is
+        // always a valid file name.
+        config.global.prefix = FileName::new(prefix.as_bytes())
+            .expect("a validated run id always forms a valid iceoryx2 file prefix");
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
+        config.global.service.cleanup_dead_nodes_on_open = false;
+
+        // The service builders set every limit explicitly as well; setting the
+        // defaults too keeps any service opened through this configuration
+        // within the same limits.
+        let pubsub = &mut config.defaults.publish_subscribe;
+        pubsub.max_publishers = MAX_PUBLISHERS_PER_CHANNEL;
+        pubsub.max_subscribers = MAX_SUBSCRIBERS_PER_CHANNEL;
+        pubsub.max_nodes = MAX_NODES_PER_CHANNEL;
+        pubsub.subscriber_max_buffer_size = SUBSCRIBER_BUFFER_FRAMES;
+        pubsub.subscriber_max_borrowed_samples = SUBSCRIBER_MAX_BORROWED_SAMPLES;
+        pubsub.publisher_max_loaned_samples = PUBLISHER_MAX_LOANED_SAMPLES;
+        pubsub.publisher_history_size = HISTORY_FRAMES;
+        pubsub.enable_safe_overflow = false;
+        pubsub.backpressure_strategy = iceoryx2::prelude::BackpressureStrategy::DiscardData;
+
+        Self {
+            run,
+            iceoryx2: config,
+        }
+    }
+
+    /// The run this configuration belongs to.
+    pub fn run_id(&self) -> &RunId {
+        &self.run
+    }
+
+    /// The file prefix of every iceoryx2 resource of the run (`netfi_<run>_`).
+    pub fn prefix(&self) -> &str {
+        self.iceoryx2.global.prefix.as_str()
+    }
+
+    /// The service name of `channel`: `netfi/<run>/<channel>`.
+    pub fn service_name(&self, channel: Channel) -> String {
+        format!("netfi/{}/{}", self.run, channel)
+    }
+
+    /// The node name of a process with `role`: `netfi/<run>/<role>`.
+    pub fn node_name(&self, role: Role) -> String {
+        format!("netfi/{}/{}", self.run, role)
+    }
+
+    /// The role encoded in a node name of this run, if it is one.
+    pub(crate) fn role_of_node_name(&self, node_name: &str) -> Option<Role> {
+        Role::ALL
+            .into_iter()
+            .find(|role| node_name == self.node_name(*role))
+    }
+
+    /// The iceoryx2 configuration itself, for diagnostics.
+    pub fn iceoryx2(&self) -> &Config {
+        &self.iceoryx2
+    }
+}
+
+/// Verbosity of iceoryx2's own log on stderr.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum IpcLogLevel {
+    /// Every resource created or destroyed.
+    Trace,
+    /// Every error result, including expected ones.
+    Debug,
+    /// Informational messages.
+    Info,
+    /// Recoverable misbehaviour; the default.
+    Warn,
+    /// Severe but handled failures.
+    Error,
+    /// Only messages that precede a panic.
+    Fatal,
+}
+
+impl FromStr for IpcLogLevel {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "trace" => Ok(Self::Trace),
+            "debug" => Ok(Self::Debug),
+            "info" => Ok(Self::Info),
+            "warn" | "warning" => Ok(Self::Warn),
+            "error" => Ok(Self::Error),
+            "fatal" => Ok(Self::Fatal),
+            other => Err(format!(
+                "unknown iceoryx2 log level `{other}`; expected trace, debug, info, warn, error or fatal"
+            )),
+        }
+    }
+}
+
+impl From<IpcLogLevel> for LogLevel {
+    fn from(level: IpcLogLevel) -> Self {
+        match level {
+            IpcLogLevel::Trace => LogLevel::Trace,
+            IpcLogLevel::Debug => LogLevel::Debug,
+            IpcLogLevel::Info => LogLevel::Info,
+            IpcLogLevel::Warn => LogLevel::Warn,
+            IpcLogLevel::Error => LogLevel::Error,
+            IpcLogLevel::Fatal => LogLevel::Fatal,
+        }
+    }
+}
+
+/// Set once a level has been chosen, explicitly or by default.
+static LOG_LEVEL_CHOSEN: AtomicBool = AtomicBool::new(false);
+
+/// Sets iceoryx2's log level for the whole process.
+pub fn set_log_level(level: IpcLogLevel) {
+    LOG_LEVEL_CHOSEN.store(true, Ordering::Relaxed);
+    iceoryx2::prelude::set_log_level(level.into());
+}
+
+/// Applies the default log level (warn, or `IOX2_LOG_LEVEL`) unless a level
+/// was already chosen; iceoryx2's own default would be info.
+fn init_log_level() {
+    if !LOG_LEVEL_CHOSEN.swap(true, Ordering::Relaxed) {
+        iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Warn);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_id_accepts_the_documented_alphabet() {
+        for ok in ["a", "run-1", "R_2024-05-01", &"x".repeat(RunId::MAX_LEN)] {
+            assert_eq!(RunId::new(ok).unwrap().as_str(), ok);
+        }
+    }
+
+    #[test]
+    fn run_id_rejects_the_rest() {
+        assert_eq!(RunId::new(""), Err(RunIdError::Empty));
+        assert!(matches!(
+            RunId::new(&"x".repeat(RunId::MAX_LEN + 1)),
+            Err(RunIdError::TooLong { len: 49, .. })
+        ));
+        for (bad, ch, index) in [("a/b", '/', 1), ("a b", ' ', 1), (".", '.', 0), ("é", 'é', 0)] {
+            assert_eq!(
+                RunId::new(bad),
+                Err(RunIdError::InvalidCharacter {
+                    run: bad.to_owned(),
+                    ch,
+                    index
+                })
+            );
+        }
+    }
+
+    #[test]
+    fn config_is_explicit_and_prefixed_per_run() {
+        let config = IpcConfig::new(RunId::new("r1").unwrap());
+        assert_eq!(config.prefix(), "netfi_r1_");
+        assert_eq!(config.service_name(Channel::Console), "netfi/r1/console");
+        assert_eq!(config.node_name(Role::Simulator), "netfi/r1/simulator");
+        assert_eq!(
+            config.role_of_node_name("netfi/r1/emulator"),
+            Some(Role::Emulator)
+        );
+        assert_eq!(config.role_of_node_name("netfi/r2/emulator"), None);
+        let iox = config.iceoryx2();
+        assert!(!iox.defaults.publish_subscribe.enable_safe_overflow);
+        assert_eq!(
+            iox.defaults.publish_subscribe.subscriber_max_buffer_size,
+            SUBSCRIBER_BUFFER_FRAMES
+        );
+        assert!(!iox.global.node.cleanup_dead_nodes_on_creation);
+    }
+
+    #[test]
+    fn log_level_parses() {
+        assert_eq!("WARN".parse::<IpcLogLevel>(), Ok(IpcLogLevel::Warn));
+        assert!("loud".parse::<IpcLogLevel>().is_err());
+    }
+}

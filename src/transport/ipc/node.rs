@@ -1,0 +1,170 @@
+//! One process's membership in a run: its iceoryx2 node, the factory of its
+//! endpoints, and its view of signals.
+
+use core::time::Duration;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use iceoryx2::node::{Node, NodeCreationFailure, NodeWaitFailure};
+use iceoryx2::prelude::{NodeBuilder, NodeName, SignalHandlingMode};
+
+use super::liveness::{cleanup_dead_nodes, CleanupError, CleanupReport};
+use super::publisher::{FramePublisher, PublisherOpenError};
+use super::subscriber::{FrameSubscriber, SubscriberOpenError};
+use super::{init_log_level, Channel, Ipc, IpcConfig, Role};
+
+/// Latched once SIGINT or SIGTERM has been seen: iceoryx2 reports a signal
+/// only once, and every node of the process must keep seeing the request.
+static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// A process's node in a run. Open one per process, then open its
+/// endpoints from it.
+#[derive(Debug)]
+pub struct IpcNode {
+    node: Node<Ipc>,
+    config: IpcConfig,
+    role: Role,
+    startup_cleanup: CleanupReport,
+}
+
+/// Why [`IpcNode::open`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeOpenError {
+    /// The node name `netfi/<run>/<role>` was rejected by iceoryx2; cannot
+    /// happen for a validated run id and is kept for completeness.
+    #[error("node name `{name}` of run `{run}` is not accepted by iceoryx2")]
+    InvalidName {
+        /// The rejected node name.
+        name: String,
+        /// The run.
+        run: String,
+    },
+    /// Scanning the run for nodes left by killed processes failed.
+    #[error("cannot open the {role} node of run `{run}`: {source}")]
+    Cleanup {
+        /// The role of the node being opened.
+        role: Role,
+        /// The run.
+        run: String,
+        /// What went wrong while scanning.
+        #[source]
+        source: CleanupError,
+    },
+    /// iceoryx2 could not create the node (permissions on its directories
+    /// under `/tmp/iceoryx2`, or a corrupted system).
+    #[error("cannot create the {role} node of run `{run}` (iceoryx2: {source})")]
+    Create {
+        /// The role of the node being opened.
+        role: Role,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: NodeCreationFailure,
+    },
+}
+
+impl IpcNode {
+    /// Joins the run of `config` as `role`.
+    ///
+    /// First removes what processes of this run killed earlier left behind
+    /// (see [`IpcNode::startup_cleanup`]), so that a restarted process finds
+    /// its channel free; then creates the node and installs iceoryx2's
+    /// signal capture (see the module docs).
+    pub fn open(config: &IpcConfig, role: Role) -> Result<Self, NodeOpenError> {
+        init_log_level();
+        let run = config.run_id().to_string();
+        let startup_cleanup =
+            cleanup_dead_nodes(config).map_err(|source| NodeOpenError::Cleanup {
+                role,
+                run: run.clone(),
+                source,
+            })?;
+
+        let name = config.node_name(role);
+        let node_name = NodeName::new(&name).map_err(|_| NodeOpenError::InvalidName {
+            name: name.clone(),
+            run: run.clone(),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(config.iceoryx2())
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<Ipc>()
+            .map_err(|source| NodeOpenError::Create { role, run, source })?;
+
+        let this = Self {
+            node,
+            config: config.clone(),
+            role,
+            startup_cleanup,
+        };
+        // Asking once installs iceoryx2's handlers now rather than at the
+        // first shared-memory allocation, so that Ctrl-C behaves the same
+        // in every process from here on.
+        this.termination_requested();
+        Ok(this)
+    }
+
+    /// The run configuration.
+    pub fn config(&self) -> &IpcConfig {
+        &self.config
+    }
+
+    /// The role this node was opened with.
+    pub fn role(&self) -> Role {
+        self.role
+    }
+
+    /// The dead nodes of this run that [`IpcNode::open`] found and removed.
+    pub fn startup_cleanup(&self) -> &CleanupReport {
+        &self.startup_cleanup
+    }
+
+    /// Opens the publishing end of `channel`, creating the channel if this
+    /// process is the first to use it.
+    pub fn publisher(&self, channel: Channel) -> Result<FramePublisher, PublisherOpenError> {
+        FramePublisher::open(&self.node, &self.config, channel)
+    }
+
+    /// Opens a subscribing end of `channel`, creating the channel if this
+    /// process is the first to use it.
+    pub fn subscriber(&self, channel: Channel) -> Result<FrameSubscriber, SubscriberOpenError> {
+        FrameSubscriber::open(&self.node, &self.config, channel)
+    }
+
+    /// Finds the nodes of this run whose process died without cleaning up
+    /// (kill -9, crash, power loss of a container), removes their resources
+    /// and reports them.
+    ///
+    /// Until this runs, a killed peer's port stays registered: the
+    /// endpoints' `peers_connected` still count it, and a publisher keeps
+    /// filling a killed subscriber's queue until [`FrameSendError::QueueFull`].
+    /// It lists the run's node directory and checks one lock per node:
+    /// call it a few times per second from the service loop, never per frame.
+    /// Any process of the run may reap; concurrent reapers are reported as
+    /// [`CleanupReport::removed_elsewhere`].
+    ///
+    /// [`FrameSendError::QueueFull`]: super::FrameSendError::QueueFull
+    pub fn reap_dead_peers(&self) -> Result<CleanupReport, CleanupError> {
+        cleanup_dead_nodes(&self.config)
+    }
+
+    /// Whether SIGINT or SIGTERM has been received by this process. Latched:
+    /// once true it stays true. Costs an uncontended mutex and an atomic, no
+    /// system call; cheap enough for every loop iteration, though once per
+    /// millisecond is plenty.
+    pub fn termination_requested(&self) -> bool {
+        if TERMINATION_REQUESTED.load(Ordering::Relaxed) {
+            return true;
+        }
+        // A zero wait does not sleep; it only asks iceoryx2's signal handler
+        // whether SIGINT or SIGTERM was the last signal received.
+        match self.node.wait(Duration::ZERO) {
+            Err(NodeWaitFailure::TerminationRequest) => {
+                TERMINATION_REQUESTED.store(true, Ordering::Relaxed);
+                true
+            }
+            Ok(()) | Err(NodeWaitFailure::Interrupt) => false,
+        }
+    }
+}

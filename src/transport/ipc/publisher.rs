@@ -1,0 +1,290 @@
+//! The sending end of a channel.
+
+use iceoryx2::node::Node;
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::{BackpressureAction, BackpressureInfo, LoanError, SendError};
+use iceoryx2::prelude::{BackpressureStrategy, PortFactory as _};
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use super::service::{is_incompatible, open_service};
+use super::{
+    Channel, Ipc, IpcConfig, RunId, MAX_PUBLISHERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES,
+    SUBSCRIBER_BUFFER_FRAMES,
+};
+use crate::sample::FrameSample;
+
+/// The publishing end of a channel. Not `Send`: create it on the thread that
+/// sends.
+#[derive(Debug)]
+pub struct FramePublisher {
+    // Declared before `service` so that the port is dropped first.
+    port: Publisher<Ipc, FrameSample, ()>,
+    service: PortFactory<Ipc, FrameSample, ()>,
+    run: RunId,
+    channel: Channel,
+    stats: PublisherStats,
+}
+
+/// Counters of one publisher since it was opened.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PublisherStats {
+    /// Frames handed to the channel (delivered, refused by a full queue, or
+    /// sent while nobody subscribed).
+    pub sent: u64,
+    /// Frames that at least one registered subscriber did not receive
+    /// (each also returned [`FrameSendError::QueueFull`]).
+    pub queue_full: u64,
+    /// Frames sent while no subscriber was connected; they went nowhere.
+    pub unsubscribed: u64,
+}
+
+/// Why [`IpcNode::publisher`](super::IpcNode::publisher) failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PublisherOpenError {
+    /// The channel exists with another sample type or layout, other limits,
+    /// or from another iceoryx2 version: the processes of the run were not
+    /// built from the same netfi.
+    #[error(
+        "service `{service}` of run `{run}` exists but is incompatible (iceoryx2: {source}); every process of a run must be built from the same netfi"
+    )]
+    Incompatible {
+        /// The service name.
+        service: String,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// The channel could not be opened or created for another reason
+    /// (permissions, too many processes attached, a corrupted service).
+    #[error("cannot open or create service `{service}` of run `{run}` (iceoryx2: {source})")]
+    Service {
+        /// The service name.
+        service: String,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// The channel already has its one publisher: another process with the
+    /// same role is running in this run, or died and was not yet cleaned up.
+    #[error(
+        "service `{service}` of run `{run}` already has its publisher: another {producer} of this run is running (at most {max} per run)"
+    )]
+    PublisherTaken {
+        /// The service name.
+        service: String,
+        /// The run.
+        run: String,
+        /// The role that normally publishes on the channel.
+        producer: &'static str,
+        /// The limit.
+        max: usize,
+    },
+    /// The publisher port could not be created (its shared-memory pool, for
+    /// instance, when `/dev/shm` is full).
+    #[error("cannot create the publisher of service `{service}` of run `{run}` (iceoryx2: {source})")]
+    Port {
+        /// The service name.
+        service: String,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: PublisherCreateError,
+    },
+}
+
+/// Why a frame was not sent to every subscriber.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameSendError {
+    /// A registered subscriber did not receive the frame because its queue
+    /// was full (it was delivered to the other subscribers, if any): the
+    /// subscriber is stalled, dead and not yet reaped, or has not polled since
+    /// this publisher appeared. Recoverable: frames are delivered again once
+    /// it has caught up or has been reaped. Counted in
+    /// [`PublisherStats::queue_full`]. A subscriber that deregisters during
+    /// the send is reported the same way.
+    #[error(
+        "frame not delivered on `netfi/{run}/{channel}`: a subscriber's queue of {capacity} frames is full (stalled or dead {consumer})"
+    )]
+    QueueFull {
+        /// The run.
+        run: RunId,
+        /// The channel.
+        channel: Channel,
+        /// The consumer role of the channel.
+        consumer: &'static str,
+        /// The queue capacity in frames.
+        capacity: usize,
+    },
+    /// No shared-memory sample could be loaned: the publisher's pool is
+    /// exhausted, which the pool sizing rules out unless a subscriber holds
+    /// samples it should have released.
+    #[error("cannot loan a sample on `netfi/{run}/{channel}` (iceoryx2: {source})")]
+    Loan {
+        /// The run.
+        run: RunId,
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 failure.
+        #[source]
+        source: LoanError,
+    },
+    /// Delivery failed for another reason (a corrupted connection, a
+    /// subscriber that could not be connected).
+    #[error("cannot deliver a frame on `netfi/{run}/{channel}` (iceoryx2: {source})")]
+    Delivery {
+        /// The run.
+        run: RunId,
+        /// The channel.
+        channel: Channel,
+        /// The iceoryx2 failure.
+        #[source]
+        source: SendError,
+    },
+}
+
+impl FramePublisher {
+    pub(super) fn open(
+        node: &Node<Ipc>,
+        config: &IpcConfig,
+        channel: Channel,
+    ) -> Result<Self, PublisherOpenError> {
+        let service_name = config.service_name(channel);
+        let run = config.run_id();
+        let service = open_service(node, config, channel).map_err(|source| {
+            let (service, run) = (service_name.clone(), run.to_string());
+            if is_incompatible(&source) {
+                PublisherOpenError::Incompatible {
+                    service,
+                    run,
+                    source,
+                }
+            } else {
+                PublisherOpenError::Service {
+                    service,
+                    run,
+                    source,
+                }
+            }
+        })?;
+        let port = service
+            .publisher_builder()
+            .max_loaned_samples(PUBLISHER_MAX_LOANED_SAMPLES)
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            // Called only when a connected subscriber's queue is full: refuse
+            // the frame for that subscriber and make `send` fail, so the loss
+            // is reported instead of being swallowed.
+            .set_backpressure_handler(|_: &BackpressureInfo| BackpressureAction::DiscardDataAndFail)
+            .create()
+            .map_err(|source| match source {
+                PublisherCreateError::ExceedsMaxSupportedPublishers => {
+                    PublisherOpenError::PublisherTaken {
+                        service: service_name.clone(),
+                        run: run.to_string(),
+                        producer: channel.producer().as_str(),
+                        max: MAX_PUBLISHERS_PER_CHANNEL,
+                    }
+                }
+                source => PublisherOpenError::Port {
+                    service: service_name.clone(),
+                    run: run.to_string(),
+                    source,
+                },
+            })?;
+        Ok(Self {
+            port,
+            service,
+            run: run.clone(),
+            channel,
+            stats: PublisherStats::default(),
+        })
+    }
+
+    /// Sends one frame: loans a sample in shared memory, initializes it to
+    /// [`FrameSample::ZERO`], lets `fill` write it, and publishes it at once.
+    /// `fill` runs immediately before the send, so a timestamp taken inside
+    /// it is as late as the transport allows.
+    ///
+    /// Returns the number of subscribers that received the frame (0 when
+    /// none is registered), or [`FrameSendError::QueueFull`] when a
+    /// registered subscriber did not receive it.
+    pub fn send_with<F: FnOnce(&mut FrameSample)>(
+        &mut self,
+        fill: F,
+    ) -> Result<usize, FrameSendError> {
+        let mut sample = self
+            .port
+            .loan_uninit()
+            .map_err(|source| FrameSendError::Loan {
+                run: self.run.clone(),
+                channel: self.channel,
+                source,
+            })?
+            .write_payload(FrameSample::ZERO);
+        // Counted before sending: a subscriber that registers during the send
+        // may get the frame without being expected, never the reverse.
+        let subscribers = self.peers_connected();
+        fill(sample.payload_mut());
+        let result = sample.send();
+        self.stats.sent += 1;
+        match result {
+            Ok(0) if subscribers == 0 => {
+                self.stats.unsubscribed += 1;
+                Ok(0)
+            }
+            // The backpressure handler reports a full queue of a subscriber
+            // that has attached to this publisher. A subscriber that has not
+            // polled since this publisher appeared has not attached yet: its
+            // queue fills without it, and once full iceoryx2 drops the frame
+            // for it without an error, visible only as a missing recipient.
+            Ok(receivers) if receivers >= subscribers => Ok(receivers),
+            Ok(_) | Err(SendError::UnableToDeliver) => {
+                self.stats.queue_full += 1;
+                Err(FrameSendError::QueueFull {
+                    run: self.run.clone(),
+                    channel: self.channel,
+                    consumer: self.channel.consumer().as_str(),
+                    capacity: SUBSCRIBER_BUFFER_FRAMES,
+                })
+            }
+            Err(source) => Err(FrameSendError::Delivery {
+                run: self.run.clone(),
+                channel: self.channel,
+                source,
+            }),
+        }
+    }
+
+    /// Sends a copy of `frame`; see [`FramePublisher::send_with`].
+    pub fn send(&mut self, frame: &FrameSample) -> Result<usize, FrameSendError> {
+        self.send_with(|sample| *sample = *frame)
+    }
+
+    /// Subscribers registered on the channel. A killed subscriber stays
+    /// counted until it is reaped ([`IpcNode::reap_dead_peers`]).
+    ///
+    /// [`IpcNode::reap_dead_peers`]: super::IpcNode::reap_dead_peers
+    pub fn peers_connected(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Counters since the publisher was opened.
+    pub fn stats(&self) -> PublisherStats {
+        self.stats
+    }
+
+    /// The channel this publisher sends on.
+    pub fn channel(&self) -> Channel {
+        self.channel
+    }
+
+    /// The run this publisher belongs to.
+    pub fn run_id(&self) -> &RunId {
+        &self.run
+    }
+}

@@ -1,0 +1,61 @@
+//! The definition of a channel's publish/subscribe service, shared by both
+//! ends.
+
+use iceoryx2::node::Node;
+use iceoryx2::prelude::ServiceName;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use super::{
+    Channel, Ipc, IpcConfig, HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL,
+    MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES, SUBSCRIBER_MAX_BORROWED_SAMPLES,
+};
+use crate::sample::FrameSample;
+
+/// Opens the service of `channel`, creating it if needed, with every limit
+/// stated explicitly: opening a service created with smaller limits, another
+/// overflow mode or another sample type fails instead of silently adopting
+/// the other's settings.
+pub(super) fn open_service(
+    node: &Node<Ipc>,
+    config: &IpcConfig,
+    channel: Channel,
+) -> Result<PortFactory<Ipc, FrameSample, ()>, PublishSubscribeOpenOrCreateError> {
+    let name = ServiceName::new(&config.service_name(channel))
+        .expect("a validated run id always forms a valid service name");
+    node.service_builder(&name)
+        .publish_subscribe::<FrameSample>()
+        .max_publishers(MAX_PUBLISHERS_PER_CHANNEL)
+        .max_subscribers(MAX_SUBSCRIBERS_PER_CHANNEL)
+        .max_nodes(MAX_NODES_PER_CHANNEL)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER_FRAMES)
+        .subscriber_max_borrowed_samples(SUBSCRIBER_MAX_BORROWED_SAMPLES)
+        .history_size(HISTORY_FRAMES)
+        .enable_safe_overflow(false)
+        .open_or_create()
+}
+
+/// Whether an open-or-create failure means the existing service does not
+/// match what this build expects.
+pub(super) fn is_incompatible(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use PublishSubscribeOpenError as E;
+    matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            E::IncompatibleTypes
+                | E::IncompatibleMessagingPattern
+                | E::IncompatibleAttributes
+                | E::IncompatibleOverflowBehavior
+                | E::DoesNotSupportRequestedMinBufferSize
+                | E::DoesNotSupportRequestedMinHistorySize
+                | E::DoesNotSupportRequestedMinSubscriberBorrowedSamples
+                | E::DoesNotSupportRequestedAmountOfPublishers
+                | E::DoesNotSupportRequestedAmountOfSubscribers
+                | E::DoesNotSupportRequestedAmountOfNodes
+                | E::VersionMismatch
+                | E::InvalidTypeDefinition
+        )
+    )
+}

@@ -1,0 +1,34 @@
+//! The only door to the outside world: moving frames between processes.
+//!
+//! Everything that touches iceoryx2 lives under [`ipc`]; no other module of
+//! the crate names an iceoryx2 type, and the services only wire the types
+//! exported here. The sans-IO core never depends on this module.
+//!
+//! # Contract
+//!
+//! - One run (one console, one emulator, one simulator) is identified by a
+//!   validated [`RunId`]. Every iceoryx2 resource of a run lives under the
+//!   file prefix `netfi_<run>_`, taken from an explicit configuration
+//!   ([`IpcConfig`]); no iceoryx2 configuration file is ever read, so two runs
+//!   on one host (or two tests in one process) never see each other.
+//! - Two channels per run, each one publish/subscribe service carrying
+//!   [`FrameSample`](crate::sample::FrameSample): [`Channel::Console`]
+//!   (console → emulator) and [`Channel::Emulator`] (emulator → simulator).
+//! - Sending and receiving a frame allocate nothing and never block: a full
+//!   subscriber queue is reported to the publisher as
+//!   [`FrameSendError::QueueFull`] and counted, never overwritten silently.
+//! - A killed peer is noticed by [`IpcNode::reap_dead_peers`] (called at a
+//!   low rate from the service loop) and its resources are removed, so the
+//!   peer can be restarted and reconnects without any action by the others.
+//! - Ctrl-C / SIGTERM are latched by the transport and read with
+//!   [`IpcNode::termination_requested`]; the services decide how to stop.
+
+pub mod ipc;
+
+pub use ipc::{
+    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport, DeadPeer,
+    FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber, IpcConfig,
+    IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role, RunId,
+    RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
+    MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
+};
