@@ -49,6 +49,10 @@ impl FrameSample {
     /// The iceoryx2 type name; must match between all processes.
     pub const TYPE_NAME: &'static str = "netfi::FrameSample.v1";
 
+    /// The sample carries an opaque datagram kept elsewhere (the UDP bridge's
+    /// raw mode): no ITP validation applies to it.
+    pub const FLAG_RAW: u32 = 2;
+
     /// Control sample marking the end of a stream: not a frame. Its
     /// `console_index` carries the number of frames sent before it.
     pub const FLAG_END: u32 = 1;
@@ -56,6 +60,11 @@ impl FrameSample {
     /// An end-of-stream marker after `frames_sent` frames.
     pub fn end_marker(frames_sent: u64) -> FrameSample {
         FrameSample { console_index: frames_sent, flags: FrameSample::FLAG_END, ..FrameSample::ZERO }
+    }
+
+    /// Whether this sample stands for an opaque datagram (raw mode).
+    pub fn is_raw(&self) -> bool {
+        self.flags & FrameSample::FLAG_RAW != 0
     }
 
     /// Whether this sample is an end-of-stream marker rather than a frame.

@@ -171,7 +171,10 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
                 decision.record(t_decided - t_take);
                 let (dropped, release_sched_ns) = match entered.fate {
                     Fate::Scheduled { release_ns, .. } => (None, release_ns),
-                    Fate::Dropped(c) => (Some(c), 0),
+                    Fate::Dropped(c) => {
+                        source.dropped(&sample);
+                        (Some(c), 0)
+                    }
                 };
                 batches.record(dropped.is_some());
                 tsink.push(TraceEvent::Ingress {
@@ -276,6 +279,10 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
 /// decide; `Err` for one to reject, with its sequence if readable.
 #[inline]
 fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+    if s.is_raw() {
+        // An opaque datagram: no protocol to check; its "sequence" is its console index.
+        return Ok((s.console_index as u32, false));
+    }
     if s.len as usize != ITP_FRAME_LEN {
         return Err((Invalid::WrongSize, None));
     }

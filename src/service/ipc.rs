@@ -3,7 +3,7 @@
 
 use crate::sample::FrameSample;
 use crate::service::ports::{FrameSink, FrameSource, PortError};
-use crate::transport::{Channel, FramePublisher, FrameSendError, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
+use crate::transport::{FramePublisher, FrameSendError, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
 use anyhow::{Context, Result};
 
 /// Opens this process's node in run `run_id`.

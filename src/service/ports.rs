@@ -22,6 +22,11 @@ pub trait FrameSource {
     fn peers(&mut self) -> Option<usize> {
         None
     }
+
+    /// The emulator dropped `sample` (any cause) and will never send it:
+    /// a source that keeps payloads outside the sample frees them here.
+    #[inline]
+    fn dropped(&mut self, _sample: &FrameSample) {}
 }
 
 /// A frame sink.

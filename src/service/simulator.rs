@@ -88,7 +88,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut last_frame_ns = now_ns();
     let ended_by = loop {
         let mut idle = true;
-        match port.try_recv(&mut s) {
+        match FrameSource::try_recv(&mut port, &mut s) {
             Ok(true) => {
                 let t = now_ns();
                 idle = false;
@@ -114,7 +114,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
             Ok(false) => {}
             Err(_) => receive_errors += 1,
         }
-        match direct.try_recv(&mut d) {
+        match FrameSource::try_recv(&mut direct, &mut d) {
             Ok(true) => {
                 let t = now_ns();
                 idle = false;

@@ -188,24 +188,28 @@ pub enum Channel {
     Console,
     /// Emulator → simulator: the frames that survived the scenario.
     Emulator,
+    /// Console → simulator directly: the same frames without the emulator,
+    /// the baseline hop measured in the same run.
+    Direct,
 }
 
 impl Channel {
-    /// Both channels, in pipeline order.
-    pub const ALL: [Channel; 2] = [Channel::Console, Channel::Emulator];
+    /// Every channel: the pipeline in order, then the direct baseline.
+    pub const ALL: [Channel; 3] = [Channel::Console, Channel::Emulator, Channel::Direct];
 
     /// The last component of the service name.
     pub fn as_str(self) -> &'static str {
         match self {
             Channel::Console => "console",
             Channel::Emulator => "emulator",
+            Channel::Direct => "direct",
         }
     }
 
     /// The role that publishes on this channel.
     pub fn producer(self) -> Role {
         match self {
-            Channel::Console => Role::Console,
+            Channel::Console | Channel::Direct => Role::Console,
             Channel::Emulator => Role::Emulator,
         }
     }
@@ -214,7 +218,7 @@ impl Channel {
     pub fn consumer(self) -> Role {
         match self {
             Channel::Console => Role::Emulator,
-            Channel::Emulator => Role::Simulator,
+            Channel::Emulator | Channel::Direct => Role::Simulator,
         }
     }
 }
