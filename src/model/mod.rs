@@ -9,6 +9,7 @@
 
 pub mod bernoulli;
 pub mod delay;
+mod draw;
 pub mod ge_lomax;
 pub mod gilbert_elliott;
 pub mod markov4;
@@ -20,7 +21,7 @@ pub use delay::{Delay, DelayDist, DelayParams, Order};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
 pub use markov4::{Markov4, Markov4Params};
-pub use outage::{Outage, OutageParams, OutageUnit};
+pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
 pub use units::{Millis, Probability};
 
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -156,12 +157,23 @@ impl AnyModel {
         }
     }
 
-    /// Outage windows opened so far and their total length in ns (0 for other
-    /// models).
-    pub fn outage_windows(&self) -> (u64, u64) {
+    /// Outage windows opened so far and their total drawn length (all zero
+    /// for other models).
+    pub fn outage_windows(&self) -> OutageWindows {
         match self {
             AnyModel::Outage(m) => m.windows(),
-            _ => (0, 0),
+            _ => OutageWindows::default(),
+        }
+    }
+
+    /// The exact mean delay this model adds to a frame it passes, in ms
+    /// (`E[D]`, SPEC §3.4); 0 for models that add no delay. For `fifo` order
+    /// this is the drawn delay; holding a frame behind its predecessor adds
+    /// to it.
+    pub fn mean_delay_ms_exact(&self) -> f64 {
+        match self {
+            AnyModel::Delay(m) => m.mean_ms_exact(),
+            _ => 0.0,
         }
     }
 
