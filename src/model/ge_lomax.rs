@@ -29,11 +29,14 @@
 //! length dividing 12 (the periods of chains with at most 4 states); its tail
 //! is then split by `b mod 12`, each residue class's mass summed in closed
 //! form by Euler–Maclaurin. `E_s[b]` is summed directly and its tail by
-//! Euler–Maclaurin too. The result is exact to about 1e-12.
+//! Euler–Maclaurin too. The result is exact to about 1e-12. Only a chain
+//! that has neither converged nor settled into its cycle after 2^20 terms (a
+//! mode with `|μ|` within ~3e-5 of 1, such as switching states once in 10^9
+//! frames) is approximated: its tail extrapolates `P^n` linearly in `n`,
+//! which leaves an error near 2e-7 for that example with `α = 1.5`.
 
 use super::draw::{threshold, u53, ALWAYS};
 use super::{Model, ParamError, StageRng, Verdict};
-use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 /// The most states a chain may have (the paper's Good, Bad and two
@@ -42,6 +45,10 @@ pub const MAX_STATES: usize = 4;
 
 /// How far a transition row may be from summing to 1.
 const ROW_SUM_TOLERANCE: f64 = 1e-9;
+
+/// Burst lengths below this are read from a per-state table of inverse-CDF
+/// thresholds; longer ones are computed.
+const BURST_TABLE: usize = 16;
 
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -69,6 +76,9 @@ pub struct GeLomax {
     lambda: [f64; MAX_STATES],
     /// `−1/α` per state, the exponent of the inverse CDF.
     neg_inv_alpha: [f64; MAX_STATES],
+    /// `burst_thresholds[s][k − 1]`: the smallest 53-bit draw whose burst in
+    /// state `s` is at least `k` (ascending in `k`).
+    burst_thresholds: [[u64; BURST_TABLE]; MAX_STATES],
     state: usize,
     /// Whether a burst has been drawn and its delivered frame not yet seen.
     in_burst: bool,
@@ -121,8 +131,12 @@ impl GeLomax {
         let alpha = per_state(&params.alpha, "alpha", n)?;
         let lambda = per_state(&params.lambda, "lambda", n)?;
         let mut neg_inv_alpha = [0.0; MAX_STATES];
+        let mut burst_thresholds = [[ALWAYS; BURST_TABLE]; MAX_STATES];
         for s in 0..n {
             neg_inv_alpha[s] = -1.0 / alpha[s];
+            for (k, t) in burst_thresholds[s].iter_mut().enumerate() {
+                *t = first_draw_at_least(alpha[s], lambda[s], k as f64 + 1.0);
+            }
         }
         Ok(GeLomax {
             states: n,
@@ -131,6 +145,7 @@ impl GeLomax {
             alpha,
             lambda,
             neg_inv_alpha,
+            burst_thresholds,
             state: 0,
             in_burst: false,
             pending: 0,
@@ -149,20 +164,35 @@ impl GeLomax {
     }
 
     /// Draws one burst length in `state` (the number of frames it drops):
-    /// `floor(λ((1 − U)^(−1/α) − 1))`. Saturates at `u64::MAX` for the
-    /// astronomically long bursts of very small `α`.
+    /// `floor(λ((1 − U)^(−1/α) − 1))`, `U` one 53-bit uniform draw. Since
+    /// `b ≥ k` exactly when `U ≥ 1 − (1 + k/λ)^(−α)`, lengths below 16 are
+    /// found by comparing the draw with a table of those thresholds (integer
+    /// comparisons, no `powf` on the common path); longer ones use the formula.
+    /// Saturates at `u64::MAX` for the astronomically long bursts of very
+    /// small `α`.
     ///
     /// # Panics
     /// If `state` is not a state of the chain.
     #[inline]
     pub fn sample_burst(&self, state: usize, rng: &mut StageRng) -> u64 {
         assert!(state < self.states, "state {state} of a {}-state chain", self.states);
-        // `U` has 53 random bits, so `1 − U` is exact and lies in (0, 1]: the
-        // power is finite and at least 1, and the cast floors a value ≥ 0
-        // (saturating at `u64::MAX` if it overflowed to infinity).
-        let u: f64 = rng.random();
+        let r = u53(rng);
+        let table = &self.burst_thresholds[state];
+        if r < table[BURST_TABLE - 1] {
+            // Most bursts are short: scan from the shortest.
+            let mut b = 0;
+            while r >= table[b] {
+                b += 1;
+            }
+            return b as u64;
+        }
+        // `U = r·2^−53`, so `1 − U` is exact and lies in (0, 1]: the power is
+        // finite and at least 1, and the cast floors a value ≥ 0 (saturating
+        // at `u64::MAX` if it overflowed to infinity). The table already
+        // established `b ≥ 16`; rounding in `powf` cannot undo that.
+        let u = r as f64 * (1.0 / ALWAYS as f64);
         let x = self.lambda[state] * ((1.0 - u).powf(self.neg_inv_alpha[state]) - 1.0);
-        x as u64
+        (x as u64).max(BURST_TABLE as u64)
     }
 
     /// `P(b ≥ k)` in `state`: `(1 + k/λ)^(−α)`.
@@ -182,26 +212,26 @@ impl GeLomax {
     }
 
     /// The exact long-run fraction of frames dropped (see the module docs for
-    /// the derivation). Costs a few hundred small matrix products for typical
-    /// chains; at most about 2^20 for chains that mix extremely slowly while
-    /// bursts are heavy-tailed, where the residual tail is spread over the
-    /// last twelve powers of `P` (error below the burst mass left, `P(b ≥ 2^20)`).
+    /// the derivation and its accuracy). Costs a few hundred 4×4 matrix
+    /// products for typical chains (tens of µs for the PLM presets), at most
+    /// 2^20 of them (about 0.1 s) for chains that mix extremely slowly while
+    /// bursts are heavy-tailed.
     pub fn loss_rate_exact(&self) -> f64 {
         let n = self.states;
         let q = self.draw_kernel();
         let pi = long_run(&q, &self.transition[0], n);
         let mut dropped = 0.0;
         let mut frames = 0.0;
-        for s in 0..n {
-            if pi[s] == 0.0 {
+        for (s, &weight) in pi.iter().enumerate().take(n) {
+            if weight == 0.0 {
                 continue;
             }
             let mean = self.mean_burst(s);
             if mean.is_infinite() {
                 return 1.0;
             }
-            dropped += pi[s] * mean;
-            frames += pi[s] * (mean + 1.0);
+            dropped += weight * mean;
+            frames += weight * (mean + 1.0);
         }
         dropped / frames
     }
@@ -255,14 +285,33 @@ impl GeLomax {
                 return q;
             }
             if big_b >= MAX_TERMS {
-                let mut mean_power = [[0.0; MAX_STATES]; MAX_STATES];
-                for m in &recent {
-                    for s in 0..n {
-                        add_scaled(&mut mean_power[s], &m[s], 1.0 / CYCLE as f64);
-                    }
+                // `P^n` still drifts: its slow modes have `|μ|` within ~3e-5 of 1.
+                // Extrapolate each residue class linearly in `n` with the drift
+                // over the last 12 steps, `Δ = P^(B+1) − P^(B−11)`:
+                // `P^(B+1+r+12m) ≈ P^(B+1+r−12) + (m + 1)Δ`.
+                let mut drift = next_power;
+                for s in 0..n {
+                    add_scaled(&mut drift[s], &recent[cycle_index][s], -1.0);
                 }
                 for s in 0..n {
-                    add_scaled(&mut q[s], &mean_power[s], tail[s]);
+                    let (a, l) = (self.alpha[s], self.lambda[s]);
+                    let accurate = residue_sums_accurate(a, l, big_b, CYCLE);
+                    let mut steps_weight = tail[s];
+                    // `Σ_{b≥B} pmf(b)(b − B) = Σ_{k>B} S(k)`, infinite for α ≤ 1
+                    // (no drift term then: the loss is 1 if `s` is visited).
+                    let first_moment = if a > 1.0 && accurate { survival_sum_from(a, l, (big_b + 1) as f64) } else { 0.0 };
+                    let mut residue_offsets = 0.0;
+                    for r in 0..CYCLE {
+                        let w = if accurate {
+                            residue_mass(a, l, (big_b + r as u64) as f64, CYCLE as f64)
+                        } else {
+                            tail[s] / CYCLE as f64
+                        };
+                        add_scaled(&mut q[s], &recent[(big_b as usize + r) % CYCLE][s], w);
+                        residue_offsets += r as f64 * w;
+                    }
+                    steps_weight += (first_moment - residue_offsets).max(0.0) / CYCLE as f64;
+                    add_scaled(&mut q[s], &drift[s], steps_weight);
                 }
                 return q;
             }
@@ -363,6 +412,18 @@ fn long_run(q: &Matrix, start: &[f64; MAX_STATES], n: usize) -> [f64; MAX_STATES
     pi
 }
 
+/// The smallest 53-bit draw `r` with `b ≥ k`, that is with
+/// `r·2^−53 ≥ 1 − (1 + k/λ)^(−α)`; [`ALWAYS`] when no draw reaches it.
+fn first_draw_at_least(alpha: f64, lambda: f64, k: f64) -> u64 {
+    let below = -(-alpha * (k / lambda).ln_1p()).exp_m1();
+    let scaled = (below * ALWAYS as f64).ceil();
+    if scaled >= ALWAYS as f64 {
+        ALWAYS
+    } else {
+        scaled as u64
+    }
+}
+
 /// `(1 + x/λ)^(−α)`: the floored Lomax's `P(b ≥ x)` at integers `x`.
 fn survival(alpha: f64, lambda: f64, x: f64) -> f64 {
     (-alpha * (x / lambda).ln_1p()).exp()
@@ -411,18 +472,24 @@ pub(crate) fn mean_floored_lomax(alpha: f64, lambda: f64) -> f64 {
     let mut k = 1.0;
     loop {
         if euler_maclaurin_accurate(alpha, lambda, k, 1.0) {
-            let integral = lambda / (alpha - 1.0) * survival(alpha - 1.0, lambda, k);
-            let odd = std::array::from_fn(|j| survival_derivative(alpha, lambda, k, 2 * j as u32 + 1));
-            return sum + euler_maclaurin(integral, survival(alpha, lambda, k), odd, 1.0);
+            return sum + survival_sum_from(alpha, lambda, k);
         }
         let term = survival(alpha, lambda, k);
         sum += term;
         // Beyond `k` the sum is below `term · (1 + (λ + k)/(α − 1))`.
-        if term * (1.0 + (lambda + k) / (alpha - 1.0)) < 1e-17 * sum {
+        if term == 0.0 || term * (1.0 + (lambda + k) / (alpha - 1.0)) < 1e-17 * sum {
             return sum;
         }
         k += 1.0;
     }
+}
+
+/// `Σ_{k≥k0} (1 + k/λ)^(−α)` by Euler–Maclaurin, for `α > 1` and `k0` where
+/// [`euler_maclaurin_accurate`] holds.
+fn survival_sum_from(alpha: f64, lambda: f64, k0: f64) -> f64 {
+    let integral = lambda / (alpha - 1.0) * survival(alpha - 1.0, lambda, k0);
+    let odd = std::array::from_fn(|j| survival_derivative(alpha, lambda, k0, 2 * j as u32 + 1));
+    euler_maclaurin(integral, survival(alpha, lambda, k0), odd, 1.0)
 }
 
 fn residue_sums_accurate(alpha: f64, lambda: f64, from: u64, step: usize) -> bool {
@@ -452,7 +519,7 @@ fn residue_mass(alpha: f64, lambda: f64, x0: f64, step: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
+    use rand::{RngExt, SeedableRng};
 
     fn params(transition: Vec<Vec<f64>>, alpha: Vec<f64>, lambda: Vec<f64>) -> GeLomaxParams {
         GeLomaxParams { transition, alpha, lambda }
@@ -590,7 +657,30 @@ mod tests {
             rebuilt.push(Verdict::PASS);
         }
         assert!(rebuilt.starts_with(&got[..]) || got.starts_with(&rebuilt[..]));
-        assert!(bursts.iter().any(|&b| b == 0) && bursts.iter().any(|&b| b >= 2));
+        assert!(bursts.contains(&0) && bursts.iter().any(|&b| b >= 2));
+    }
+
+    /// The table of thresholds gives the formula's burst for every draw
+    /// (differences could only arise within rounding of a threshold).
+    #[test]
+    fn burst_table_agrees_with_the_formula() {
+        for &(a, l) in &[(4.428, 1.638), (4.966, 0.271), (1.5, 8.0), (0.3, 0.01), (50.0, 200.0), (2.0, 1e6)] {
+            let m = GeLomax::new(&params(vec![vec![1.0]], vec![a], vec![l])).unwrap();
+            let mut rng = StageRng::seed_from_u64(21);
+            let mut formula_rng = rng.clone();
+            for _ in 0..200_000 {
+                let b = m.sample_burst(0, &mut rng);
+                let u: f64 = formula_rng.random();
+                let formula = (l * ((1.0 - u).powf(-1.0 / a) - 1.0)).floor() as u64;
+                assert_eq!(b, formula, "α {a} λ {l} U {u}");
+            }
+            // The thresholds themselves, at a few k.
+            for k in 1..=BURST_TABLE as u64 {
+                let t = m.burst_thresholds[0][k as usize - 1];
+                let u_at = t as f64 / ALWAYS as f64;
+                assert!(u_at >= 1.0 - m.burst_survival(0, k) - 1e-15);
+            }
+        }
     }
 
     #[test]
@@ -661,6 +751,49 @@ mod tests {
         assert!((m.loss_rate_exact() - e / (e + 1.0)).abs() < 1e-14);
         let heavy = GeLomax::new(&params(vec![vec![1.0]], vec![0.9], vec![2.0])).unwrap();
         assert_eq!(heavy.loss_rate_exact(), 1.0);
+    }
+
+    #[test]
+    fn sticky_chain_with_heavy_bursts() {
+        // P barely moves while bursts have infinite variance: P^n has not
+        // converged when the term budget runs out. The chain spends half of
+        // its frames in each state, in stretches of ~10^9 frames, so the loss
+        // is the average of the two single-state losses.
+        let m = GeLomax::new(&params(
+            vec![vec![1.0 - 1e-9, 1e-9], vec![1e-9, 1.0 - 1e-9]],
+            vec![1.5, 2.0],
+            vec![1.0, 1.0],
+        ))
+        .unwrap();
+        let (e0, e1) = (m.mean_burst(0), m.mean_burst(1));
+        // ζ(1.5) − 1 and ζ(2) − 1.
+        assert!((e0 - 1.612_375_348_685_488).abs() < 1e-12, "{e0}");
+        assert!((e1 - (std::f64::consts::PI.powi(2) / 6.0 - 1.0)).abs() < 1e-12, "{e1}");
+        let expected = 0.5 * (e0 / (e0 + 1.0) + e1 / (e1 + 1.0));
+        let loss = m.loss_rate_exact();
+        assert!((loss - expected).abs() < 1e-6, "{loss} vs {expected}");
+
+        // Nearly periodic: the slow mode oscillates. The draw chain is within
+        // ~1e-9 of the exactly periodic one, which is irreducible, so the loss
+        // is within about that of the periodic chain's.
+        let near = GeLomax::new(&params(
+            vec![vec![1e-9, 1.0 - 1e-9], vec![1.0 - 1e-9, 1e-9]],
+            vec![1.5, 2.0],
+            vec![1.0, 1.0],
+        ))
+        .unwrap()
+        .loss_rate_exact();
+        let periodic = GeLomax::new(&params(vec![vec![0.0, 1.0], vec![1.0, 0.0]], vec![1.5, 2.0], vec![1.0, 1.0]))
+            .unwrap()
+            .loss_rate_exact();
+        assert!((near - periodic).abs() < 1e-6, "{near} vs {periodic}");
+    }
+
+    #[test]
+    fn huge_shapes_do_not_stall() {
+        let m = GeLomax::new(&params(vec![vec![1.0]], vec![1e7], vec![0.5])).unwrap();
+        assert_eq!(m.mean_burst(0), 0.0);
+        assert_eq!(m.loss_rate_exact(), 0.0);
     }
 
     #[test]

@@ -298,7 +298,7 @@ fn ge_lomax_plm_loss_matches_exact() {
         let exact = m.loss_rate_exact();
         let mut rng = StageRng::seed_from_u64(500 + seed as u64);
         let (mean, se) = batch_means(&mut m, &mut rng, 100, 100_000);
-        println!("{name}: exact long-run loss {exact:.6} (label {label}), simulated {mean:.6} ± {se:.6}");
+        println!("{name}: exact long-run loss {exact:.9} (label {label}), simulated {mean:.6} ± {se:.6}");
         assert!(
             (mean - exact).abs() < T99_TWO_SIDED_0_05 * se,
             "{name}: simulated {mean} ± {se}, exact {exact} (95% interval)"
@@ -337,6 +337,7 @@ fn ge_lomax_other_chains_match_exact() {
         let exact = m.loss_rate_exact();
         let mut rng = StageRng::seed_from_u64(600 + seed as u64);
         let (mean, se) = batch_means(&mut m, &mut rng, 100, 100_000);
+        println!("{} states: exact long-run loss {exact:.6}, simulated {mean:.6} ± {se:.6}", m.states());
         assert!(
             (mean - exact).abs() < T99_TWO_SIDED_0_001 * se,
             "{params:?}: simulated {mean} ± {se}, exact {exact} (α = 0.001)"
