@@ -444,22 +444,22 @@ fn outage_cycles(params: &OutageParams, seed: u64, frames: u64, interval_ns: u64
     (ratio, s2.sqrt() / (mean_length * n.sqrt()), cycles.len())
 }
 
-/// The CLM presets at 1 kHz (10^7 frames, about 1000–2000 cycles each) and
-/// two fine-grained cases where the frame grid matters (window lengths of a
-/// few frames, `p_start < 1`): lost fraction against `loss_rate_approx` at
-/// α = 0.001.
+/// The CLM presets at 1 kHz (10^8 frames, 10^4–10^5 cycles each) and two
+/// fine-grained cases where the frame grid matters (window lengths of a few
+/// frames, `p_start < 1`; 10^7 frames): lost fraction against
+/// `loss_rate_approx` at α = 0.001.
 #[test]
 fn outage_lost_fraction_matches_formula() {
     let cases = [
-        ("CLM-1", outage_time(1.0, 0.0, 3000.0, 8500.0), FRAME_NS),
-        ("CLM-2", outage_time(1.0, 0.0, 1000.0, 1000.0), FRAME_NS),
-        ("CLM-3", outage_time(1.0, 0.0, 2000.0, 1000.0), FRAME_NS),
-        ("short windows", outage_time(0.3, 0.3, 7.3, 2.1), FRAME_NS),
-        ("517 Hz", outage_time(0.05, 1.0, 12.0, 4.0), 1_934_236),
+        ("CLM-1", outage_time(1.0, 0.0, 3000.0, 8500.0), FRAME_NS, 100_000_000),
+        ("CLM-2", outage_time(1.0, 0.0, 1000.0, 1000.0), FRAME_NS, 100_000_000),
+        ("CLM-3", outage_time(1.0, 0.0, 2000.0, 1000.0), FRAME_NS, 100_000_000),
+        ("short windows", outage_time(0.3, 0.3, 7.3, 2.1), FRAME_NS, 10_000_000),
+        ("517 Hz", outage_time(0.05, 1.0, 12.0, 4.0), 1_934_236, 10_000_000),
     ];
-    for (seed, (name, params, interval_ns)) in cases.into_iter().enumerate() {
+    for (seed, (name, params, interval_ns, frames)) in cases.into_iter().enumerate() {
         let exact = Outage::new(&params).unwrap().loss_rate_approx(interval_ns).unwrap();
-        let (ratio, se, cycles) = outage_cycles(&params, 1000 + seed as u64, 10_000_000, interval_ns);
+        let (ratio, se, cycles) = outage_cycles(&params, 1000 + seed as u64, frames, interval_ns);
         println!("{name}: exact lost fraction {exact:.6}, simulated {ratio:.6} ± {se:.6} over {cycles} cycles");
         assert!(
             (ratio - exact).abs() < Z_TWO_SIDED_0_001 * se,
