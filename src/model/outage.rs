@@ -8,9 +8,9 @@
 //! `L` frames (a uniform integer in `[min_frames, max_frames]`, at least 1,
 //! the opening frame included) and the cooldown `cooldown_frames` frames.
 //!
-//! Draws per frame: one (`p_start`) at an eligible frame, plus one for `L`
-//! when a window opens (none if `L` cannot vary); none inside a window or
-//! cooldown.
+//! Draws per frame: one (`p_start`; none when it is 1) at an eligible frame,
+//! plus one for `L` when a window opens (none if `L` cannot vary); none
+//! inside a window or cooldown.
 //!
 //! Long-run loss at a fixed frame interval `Δ` ([`Outage::loss_rate_approx`]).
 //! The frames from one window opening to the next form independent cycles,
