@@ -132,7 +132,9 @@ impl Delay {
                 }
                 let width_ms = params
                     .jitter_ms
-                    .ok_or_else(|| ParamError::new("jitter_ms", "missing: dist = \"uniform\" needs the jitter width in ms"))?
+                    .ok_or_else(|| {
+                        ParamError::new("jitter_ms", "missing: dist = \"uniform\" needs the jitter width in ms")
+                    })?
                     .get();
                 (Jitter::Uniform { width_ms }, width_ms / 2.0)
             }
@@ -191,10 +193,11 @@ impl Delay {
 
 /// Validates the hyperexponential's lists; returns the sampler and `Σ w_i/λ_i`.
 fn hyperexp(weights: Option<&[f64]>, rates: Option<&[f64]>) -> Result<(Jitter, f64), ParamError> {
-    let weights =
-        weights.ok_or_else(|| ParamError::new("weights", "missing: dist = \"hyperexp\" needs the component weights"))?;
-    let rates = rates
-        .ok_or_else(|| ParamError::new("rates_per_ms", "missing: dist = \"hyperexp\" needs the component rates per ms"))?;
+    let weights = weights
+        .ok_or_else(|| ParamError::new("weights", "missing: dist = \"hyperexp\" needs the component weights"))?;
+    let rates = rates.ok_or_else(|| {
+        ParamError::new("rates_per_ms", "missing: dist = \"hyperexp\" needs the component rates per ms")
+    })?;
     let n = weights.len();
     if n == 0 || n > MAX_COMPONENTS {
         return Err(ParamError::new("weights", format!("{n} components: expected 1 to {MAX_COMPONENTS}")));
@@ -212,10 +215,7 @@ fn hyperexp(weights: Option<&[f64]>, rates: Option<&[f64]>) -> Result<(Jitter, f
     }
     let sum: f64 = weights.iter().sum();
     if (sum - 1.0).abs() > WEIGHT_SUM_TOLERANCE {
-        return Err(ParamError::new(
-            "weights",
-            format!("sum to {sum}: expected 1 (within {WEIGHT_SUM_TOLERANCE:e})"),
-        ));
+        return Err(ParamError::new("weights", format!("sum to {sum}: expected 1 (within {WEIGHT_SUM_TOLERANCE:e})")));
     }
     for (i, &rate) in rates.iter().enumerate() {
         if !(rate.is_finite() && rate > 0.0) {
@@ -261,7 +261,14 @@ mod tests {
     }
 
     fn constant(min_ms: f64) -> DelayParams {
-        DelayParams { min_ms: ms(min_ms), dist: DelayDist::None, weights: None, rates_per_ms: None, jitter_ms: None, order: Order::Reorder }
+        DelayParams {
+            min_ms: ms(min_ms),
+            dist: DelayDist::None,
+            weights: None,
+            rates_per_ms: None,
+            jitter_ms: None,
+            order: Order::Reorder,
+        }
     }
 
     fn hyper(min_ms: f64, weights: &[f64], rates: &[f64], order: Order) -> DelayParams {
@@ -276,7 +283,14 @@ mod tests {
     }
 
     fn uniform(min_ms: f64, jitter_ms: f64, order: Order) -> DelayParams {
-        DelayParams { min_ms: ms(min_ms), dist: DelayDist::Uniform, weights: None, rates_per_ms: None, jitter_ms: Some(ms(jitter_ms)), order }
+        DelayParams {
+            min_ms: ms(min_ms),
+            dist: DelayDist::Uniform,
+            weights: None,
+            rates_per_ms: None,
+            jitter_ms: Some(ms(jitter_ms)),
+            order,
+        }
     }
 
     fn dlm1() -> DelayParams {
@@ -451,6 +465,7 @@ mod tests {
         let delays: Vec<u64> = (0..8).map(|i| delay_of(u.decide(i * 1_000_000, &mut rng))).collect();
         assert_eq!(delays, PINNED_UNIFORM_FIFO);
     }
-    const PINNED_HYPEREXP: [u64; 8] = [75478622, 78511398, 81778481, 127246774, 95234548, 218472806, 72518504, 110127656];
+    const PINNED_HYPEREXP: [u64; 8] =
+        [75478622, 78511398, 81778481, 127246774, 95234548, 218472806, 72518504, 110127656];
     const PINNED_UNIFORM_FIFO: [u64; 8] = [9143051, 8143051, 10838942, 9838942, 8935045, 7935045, 6935045, 7051224];
 }

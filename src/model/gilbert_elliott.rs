@@ -101,7 +101,12 @@ mod tests {
     }
 
     fn params(p: f64, r: Option<f64>, loss_good: Option<f64>, loss_bad: Option<f64>) -> GilbertElliottParams {
-        GilbertElliottParams { p: prob(p), r: r.map(prob), loss_good: loss_good.map(prob), loss_bad: loss_bad.map(prob) }
+        GilbertElliottParams {
+            p: prob(p),
+            r: r.map(prob),
+            loss_good: loss_good.map(prob),
+            loss_bad: loss_bad.map(prob),
+        }
     }
 
     #[test]
@@ -149,8 +154,7 @@ mod tests {
     fn value_stability() {
         let mut m = GilbertElliott::new(&params(0.1, Some(0.3), Some(0.05), Some(0.7))).unwrap();
         let mut rng = StageRng::seed_from_u64(42);
-        let fates: String =
-            (0..64).map(|i| if m.decide(i, &mut rng) == Verdict::Drop { 'x' } else { '.' }).collect();
+        let fates: String = (0..64).map(|i| if m.decide(i, &mut rng) == Verdict::Drop { 'x' } else { '.' }).collect();
         assert_eq!(fates, PINNED_FATES);
     }
     const PINNED_FATES: &str = "................x.x.xxx...........x.xx.xxx.x........x.xxxx......";

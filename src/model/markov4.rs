@@ -274,8 +274,7 @@ mod tests {
     fn value_stability() {
         let mut m = Markov4::new(&params(0.05, Some(0.4), Some(0.1), Some(0.2), Some(0.01))).unwrap();
         let mut rng = StageRng::seed_from_u64(42);
-        let fates: String =
-            (0..64).map(|i| if m.decide(i, &mut rng) == Verdict::Drop { 'x' } else { '.' }).collect();
+        let fates: String = (0..64).map(|i| if m.decide(i, &mut rng) == Verdict::Drop { 'x' } else { '.' }).collect();
         assert_eq!(fates, PINNED_FATES);
     }
     const PINNED_FATES: &str = ".................xx.........................x...................";

@@ -149,10 +149,10 @@ impl AnyModel {
         }
     }
 
-    /// The exact long-run fraction of frames this model drops, where it has a
-    /// closed form (`None` for models that never drop: 0.0 is returned).
-    /// For `outage` in time units this depends on the frame interval, so it is
-    /// given for a fixed interval `frame_interval_ns`.
+    /// The exact long-run fraction of frames this model drops (0 for `delay`,
+    /// which never drops). For `outage` in time units it depends on the frame
+    /// interval, so it is given for frames every `frame_interval_ns`; `None`
+    /// only there, for a zero interval.
     pub fn loss_rate_exact(&self, frame_interval_ns: u64) -> Option<f64> {
         match self {
             AnyModel::Bernoulli(m) => Some(m.loss_rate_exact()),

@@ -8,9 +8,9 @@
 //! `L` frames (a uniform integer in `[min_frames, max_frames]`, at least 1,
 //! the opening frame included) and the cooldown `cooldown_frames` frames.
 //!
-//! Draws per frame: one (`p_start`) at an eligible frame, plus one for `L`
-//! when a window opens (none if `L` cannot vary); none inside a window or
-//! cooldown.
+//! Draws per frame: one (`p_start`; none when it is 1) at an eligible frame,
+//! plus one for `L` when a window opens (none if `L` cannot vary); none
+//! inside a window or cooldown.
 //!
 //! Long-run loss at a fixed frame interval `Δ` ([`Outage::loss_rate_approx`]).
 //! The frames from one window opening to the next form independent cycles,
@@ -157,7 +157,10 @@ impl Outage {
                 let cooldown_ms = params
                     .cooldown_ms
                     .ok_or_else(|| {
-                        ParamError::new("cooldown_ms", "missing: the time after a window in which none opens, in ms (0 for none)")
+                        ParamError::new(
+                            "cooldown_ms",
+                            "missing: the time after a window in which none opens, in ms (0 for none)",
+                        )
                     })?
                     .get();
                 let (min_ns, max_ns) = (ms_to_ns(min_ms), ms_to_ns(max_ms));
@@ -179,12 +182,15 @@ impl Outage {
                         return Err(not_for(name));
                     }
                 }
-                let max = params
-                    .max_frames
-                    .ok_or_else(|| ParamError::new("max_frames", "missing: the longest window in frames (unit = \"frames\")"))?;
+                let max = params.max_frames.ok_or_else(|| {
+                    ParamError::new("max_frames", "missing: the longest window in frames (unit = \"frames\")")
+                })?;
                 let min = params.min_frames.unwrap_or(1);
                 if min == 0 {
-                    return Err(ParamError::new("min_frames", "0: a window drops at least its opening frame; expected ≥ 1"));
+                    return Err(ParamError::new(
+                        "min_frames",
+                        "0: a window drops at least its opening frame; expected ≥ 1",
+                    ));
                 }
                 if min > max {
                     return Err(ParamError::new(
@@ -193,7 +199,10 @@ impl Outage {
                     ));
                 }
                 let cooldown = params.cooldown_frames.ok_or_else(|| {
-                    ParamError::new("cooldown_frames", "missing: the frames after a window in which none opens (0 for none)")
+                    ParamError::new(
+                        "cooldown_frames",
+                        "missing: the frames after a window in which none opens (0 for none)",
+                    )
                 })?;
                 Clock::Frames { length_min: min, length_max: max, cooldown, drops_left: 0, quiet_left: 0 }
             }

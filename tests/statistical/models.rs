@@ -10,8 +10,8 @@
 
 use netfi::model::{
     Bernoulli, BernoulliParams, Delay, DelayDist, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Markov4, Markov4Params, Millis, Model, Order, Outage, OutageParams, OutageUnit,
-    Probability, StageRng, Verdict,
+    GilbertElliottParams, Markov4, Markov4Params, Millis, Model, Order, Outage, OutageParams, OutageUnit, Probability,
+    StageRng, Verdict,
 };
 use rand::SeedableRng;
 
@@ -315,7 +315,11 @@ fn ge_lomax_plm_loss_matches_exact() {
 #[test]
 fn ge_lomax_other_chains_match_exact() {
     let cases = [
-        GeLomaxParams { transition: vec![vec![0.0, 1.0], vec![1.0, 0.0]], alpha: vec![2.5, 6.0], lambda: vec![4.0, 0.5] },
+        GeLomaxParams {
+            transition: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
+            alpha: vec![2.5, 6.0],
+            lambda: vec![4.0, 0.5],
+        },
         GeLomaxParams {
             transition: vec![vec![0.0, 1.0, 0.0], vec![0.0, 0.0, 1.0], vec![0.5, 0.0, 0.5]],
             alpha: vec![3.0, 5.0, 2.8],
@@ -350,8 +354,20 @@ fn ge_lomax_other_chains_match_exact() {
 #[test]
 fn markov4_loss_matches_closed_form() {
     let cases = [
-        Markov4Params { p13: prob(0.05), p31: Some(prob(0.4)), p32: Some(prob(0.1)), p23: Some(prob(0.2)), p14: Some(prob(0.01)) },
-        Markov4Params { p13: prob(0.01), p31: Some(prob(0.3)), p32: Some(prob(0.5)), p23: Some(prob(0.05)), p14: Some(prob(0.02)) },
+        Markov4Params {
+            p13: prob(0.05),
+            p31: Some(prob(0.4)),
+            p32: Some(prob(0.1)),
+            p23: Some(prob(0.2)),
+            p14: Some(prob(0.01)),
+        },
+        Markov4Params {
+            p13: prob(0.01),
+            p31: Some(prob(0.3)),
+            p32: Some(prob(0.5)),
+            p23: Some(prob(0.05)),
+            p14: Some(prob(0.02)),
+        },
         Markov4Params { p13: prob(0.25), p31: None, p32: None, p23: None, p14: None },
     ];
     for (seed, params) in cases.into_iter().enumerate() {
@@ -369,7 +385,12 @@ fn markov4_loss_matches_closed_form() {
 #[test]
 fn gilbert_elliott_loss_matches_closed_form() {
     let cases = [
-        GilbertElliottParams { p: prob(0.01), r: Some(prob(0.3)), loss_good: Some(prob(0.02)), loss_bad: Some(prob(0.6)) },
+        GilbertElliottParams {
+            p: prob(0.01),
+            r: Some(prob(0.3)),
+            loss_good: Some(prob(0.02)),
+            loss_bad: Some(prob(0.6)),
+        },
         GilbertElliottParams { p: prob(0.1), r: None, loss_good: None, loss_bad: None },
         GilbertElliottParams { p: prob(0.002), r: Some(prob(0.05)), loss_good: None, loss_bad: Some(prob(0.9)) },
     ];
