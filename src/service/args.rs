@@ -1,7 +1,9 @@
 //! Command-line arguments of the services, shared by `netfi <service>` and
 //! the stand-alone `netfi-console`, `netfi-emulator`, `netfi-simulator`.
 
+use crate::service::udp::{Endpoint, Payload};
 use clap::Args;
+use std::net::SocketAddr;
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Args)]
@@ -41,8 +43,10 @@ pub struct ConsoleArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct EmulatorArgs {
+    /// Run id shared with the console and simulator (needed when either side
+    /// is iceoryx2).
     #[arg(long)]
-    pub run_id: String,
+    pub run_id: Option<String>,
     /// A scenario file or preset name.
     #[arg(long)]
     pub scenario: String,
@@ -67,6 +71,45 @@ pub struct EmulatorArgs {
     /// Directory for the trace, histograms and `emulator.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// Where frames come from: `iceoryx2` (the console's port) or
+    /// `udp://ADDR:PORT` (a socket bound there; `udp://:PORT` binds loopback).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub ingress: Endpoint,
+    /// Where survivors go: `iceoryx2` (the simulator's port) or
+    /// `udp://ADDR:PORT` (the robot's address).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub egress: Endpoint,
+    /// What a UDP datagram carries: one ITP frame (validated), or any bytes
+    /// up to 64 KiB (UDP on both sides).
+    #[arg(long, value_enum, default_value_t = Payload::Itp)]
+    pub payload: Payload,
+    /// Local address the UDP egress sends from (default: an ephemeral port,
+    /// on loopback when the robot is on loopback).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub egress_bind: Option<SocketAddr>,
+    /// Pass datagrams coming back from the robot side through this scenario
+    /// (file or preset) instead of relaying them untouched.
+    #[arg(long, value_name = "SCENARIO")]
+    pub return_scenario: Option<String>,
+    /// Seed of the return path's scenario (default: the file's, else derived
+    /// from --seed; printed).
+    #[arg(long)]
+    pub return_seed: Option<u64>,
+    /// Send return datagrams here instead of to the console's latest source
+    /// address (`udp://ADDR:PORT`).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub return_to: Option<Endpoint>,
+    /// Do not relay datagrams from the robot side at all.
+    #[arg(long)]
+    pub no_return: bool,
+    /// With a UDP ingress: end the run as if the console had ended, once no
+    /// datagram has arrived for this many milliseconds (default: run until
+    /// SIGINT/SIGTERM).
+    #[arg(long, value_name = "MS")]
+    pub idle_end_ms: Option<f64>,
+    /// Requested kernel receive/send buffer of each UDP socket, bytes.
+    #[arg(long, default_value_t = crate::service::udp::DEFAULT_UDP_BUFFER_BYTES)]
+    pub udp_buffer_bytes: usize,
 }
 
 #[derive(Debug, Clone, Args)]

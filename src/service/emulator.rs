@@ -295,12 +295,18 @@ fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (In
     Ok((seq, bad))
 }
 
-/// Wires the emulator: arguments → scenario → iceoryx2 ports → [`run`].
+/// Wires the emulator: arguments → scenario → ports → [`run`]. The ports
+/// are iceoryx2's unless `--ingress` or `--egress` names a UDP endpoint
+/// (then [`crate::service::udp::main`] wires them).
 pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     let spec = crate::scenario::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::run::fresh_seed);
-    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(crate::service::run::DEFAULT_QUEUE_CAPACITY);
+    let default_capacity = match args.payload {
+        crate::service::udp::Payload::Raw => crate::service::udp::RAW_DEFAULT_QUEUE_CAPACITY,
+        crate::service::udp::Payload::Itp => crate::service::run::DEFAULT_QUEUE_CAPACITY,
+    };
+    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(default_capacity);
     anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
     let core = if args.no_pin {
         None
@@ -308,13 +314,6 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id)))
     };
     crate::service::write_pid(&args.out, "emulator")?;
-    let node = crate::service::ipc::open_node(&args.run_id, crate::transport::Role::Emulator)?;
-    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
-    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
-    signals::install();
-    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", spec.name);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     let cfg = EmulatorConfig {
         scenario: spec,
         seed,
@@ -324,5 +323,16 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         expected_frames: args.expected_frames,
         out_dir: args.out.clone(),
     };
+    if args.ingress.is_udp() || args.egress.is_udp() {
+        return crate::service::udp::main(args, cfg);
+    }
+    let run_id = args.run_id.as_deref().context("--run-id is required with the iceoryx2 ingress and egress")?;
+    let node = crate::service::ipc::open_node(run_id, crate::transport::Role::Emulator)?;
+    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
+    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
+    signals::install();
+    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", cfg.scenario.name);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     run(&cfg, &mut source, &mut sink)
 }

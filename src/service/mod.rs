@@ -12,6 +12,7 @@ pub mod report;
 pub mod run;
 pub mod signals;
 pub mod simulator;
+pub mod udp;
 
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
 pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {

@@ -1,7 +1,8 @@
 //! The only door to the outside world: moving frames between processes.
 //!
-//! Everything that touches iceoryx2 lives under [`ipc`]; no other module of
-//! the crate names an iceoryx2 type, and the services only wire the types
+//! Everything that touches iceoryx2 lives under [`ipc`], everything that
+//! touches a socket under [`udp`]; no other module of the crate names an
+//! iceoryx2 type or opens a socket, and the services only wire the types
 //! exported here. The sans-IO core never depends on this module.
 //!
 //! # Contract
@@ -24,6 +25,7 @@
 //!   [`IpcNode::termination_requested`]; the services decide how to stop.
 
 pub mod ipc;
+pub mod udp;
 
 pub use ipc::{
     cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport, DeadPeer,

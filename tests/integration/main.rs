@@ -2,3 +2,4 @@ mod capture;
 mod core;
 mod scenario_cli;
 mod services;
+mod udp;

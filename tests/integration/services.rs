@@ -11,7 +11,8 @@ use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+/// Held by every test that runs an emulator (here and in `udp`).
+pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn netfi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_netfi"))
