@@ -41,3 +41,40 @@ impl Model for Bernoulli {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn model(p: f64) -> Bernoulli {
+        Bernoulli::new(&BernoulliParams { p: Probability::new(p).unwrap() }).unwrap()
+    }
+
+    #[test]
+    fn construction_and_loss() {
+        assert_eq!(model(0.25).loss_rate_exact(), 0.25);
+        let p: BernoulliParams = toml::from_str("p = \"30%\"").unwrap();
+        assert!((Bernoulli::new(&p).unwrap().loss_rate_exact() - 0.3).abs() < 1e-15);
+        assert!(toml::from_str::<BernoulliParams>("p = 1.2").is_err());
+        assert!(toml::from_str::<BernoulliParams>("p = 0.1\nq = 0.2").is_err());
+    }
+
+    #[test]
+    fn certain_outcomes() {
+        let mut rng = StageRng::seed_from_u64(1);
+        let (mut never, mut always) = (model(0.0), model(1.0));
+        assert!((0..10_000).all(|t| never.decide(t, &mut rng) == Verdict::PASS));
+        assert!((0..10_000).all(|t| always.decide(t, &mut rng) == Verdict::Drop));
+    }
+
+    #[test]
+    fn value_stability() {
+        let mut m = model(0.3);
+        let mut rng = StageRng::seed_from_u64(42);
+        let fates: String =
+            (0..64).map(|t| if m.decide(t, &mut rng) == Verdict::Drop { 'x' } else { '.' }).collect();
+        assert_eq!(fates, PINNED_FATES);
+    }
+    const PINNED_FATES: &str = "......x.x....x..xx..x....x....x..x.......x..x....x.....x.x.x....";
+}

@@ -81,6 +81,9 @@ pub struct EmulatorReport {
     pub stages: Vec<StageReport>,
     /// Injected delay of delivered frames.
     pub injected_delay_ns: Summary,
+    /// Console send → frame taken off the console port (the first hop plus
+    /// any time the frame waited in the port for the emulator).
+    pub ingress_wait_ns: Summary,
     /// Frame taken off the console port → fate decided.
     pub decision_ns: Summary,
     /// Actual − scheduled release.
@@ -116,6 +119,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
     }
     let mut decision = LatencyHistogram::new();
+    let mut ingress_wait = LatencyHistogram::new();
     let mut lateness = LatencyHistogram::new();
     let mut injected = LatencyHistogram::new();
     let mut batches = BatchMeans::new(cfg.expected_frames.max(1));
@@ -169,6 +173,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
                 };
                 let t_decided = now_ns();
                 decision.record(t_decided - t_take);
+                ingress_wait.record(t_take.saturating_sub(sample.send_ns));
                 let (dropped, release_sched_ns) = match entered.fate {
                     Fate::Scheduled { release_ns, .. } => (None, release_ns),
                     Fate::Dropped(c) => {
@@ -255,6 +260,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         loss_rate_ci95,
         stages,
         injected_delay_ns: injected.summary(),
+        ingress_wait_ns: ingress_wait.summary(),
         decision_ns: decision.summary(),
         release_lateness_ns: lateness.summary(),
         peer_events,

@@ -52,6 +52,8 @@ impl From<Summary> for Percentiles {
 /// What the injector itself adds, in ns.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Overhead {
+    /// Console send → taken off the console port by the emulator.
+    pub ingress_wait: Option<Percentiles>,
     /// Frame taken off the console port → fate decided.
     pub decision: Option<Percentiles>,
     /// Actual − scheduled release.
@@ -202,6 +204,7 @@ impl RunReport {
             s += &format!("delay      injected mean {:.3} ms; {}\n", d.mean / 1e6, line(&self.injected_delay_ns));
         }
         s += "overhead (what netfi itself adds)\n";
+        s += &format!("  ingress wait      {}\n", line(&self.overhead_ns.ingress_wait));
         s += &format!("  decision          {}\n", line(&self.overhead_ns.decision));
         s += &format!("  release lateness  {}\n", line(&self.overhead_ns.release_lateness));
         s += &format!("  end-to-end extra  {}\n", line(&self.overhead_ns.end_to_end_extra));

@@ -339,6 +339,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         }
     };
 
+    let ingress_wait = emulator.as_ref().map(|e| Percentiles::from(e.ingress_wait_ns));
     let decision = emulator.as_ref().map(|e| Percentiles::from(e.decision_ns));
     let release_lateness = emulator.as_ref().map(|e| Percentiles::from(e.release_lateness_ns));
     let end_to_end_extra = simulator.as_ref().map(|s| Percentiles::from(s.end_to_end_extra_ns)).filter(|p| p.count > 0);
@@ -355,7 +356,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         loss_rate_ci95: emulator.as_ref().map(|e| e.loss_rate_ci95),
         stages: emulator.as_ref().map(|e| e.stages.clone()).unwrap_or_default(),
         injected_delay_ns: emulator.as_ref().map(|e| Percentiles::from(e.injected_delay_ns)),
-        overhead_ns: Overhead { decision, release_lateness, end_to_end_extra, direct_hop, added_over_direct },
+        overhead_ns: Overhead { ingress_wait, decision, release_lateness, end_to_end_extra, direct_hop, added_over_direct },
         kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
         processes: [&con, &emu, &sim]
             .iter()

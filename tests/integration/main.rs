@@ -1,5 +1,3 @@
 mod capture;
 mod core;
 mod scenario_cli;
-mod services;
-mod udp;

@@ -3,12 +3,12 @@
 //! raw mode; the return path, untouched and shaped.
 //!
 //! The test plays the console and the robot with its own sockets. Every run
-//! is short, and runs are serialized with the other service tests (one
-//! busy-waiting emulator at a time). Conservation is checked including what
+//! is short, and runs are serialized (one busy-waiting emulator at a time).
+//! Conservation is checked including what
 //! the kernel dropped: `sent = entered + kernel drops at the ingress`, and
 //! `delivered = received by the robot + kernel drops at the robot`.
 
-use crate::services::ONE_RUN_AT_A_TIME;
+use crate::ONE_RUN_AT_A_TIME;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
 use serde_json::Value;
@@ -227,7 +227,7 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     let n = 3000u32;
     let emu = Emulator::start(
         &out,
-        &["--scenario", "PLM-2", "--seed", "3", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "500", "--expected-frames", "3000"],
+        &["--scenario", "PLM-2", "--seed", "3", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000", "--expected-frames", "3000"],
     );
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
@@ -289,7 +289,7 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     }
     let emu = Emulator::start(
         &out,
-        &["--run-id", &run_id, "--scenario", "PLM-1", "--seed", "8", "--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2", "--idle-end-ms", "400"],
+        &["--run-id", &run_id, "--scenario", "PLM-1", "--seed", "8", "--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2", "--idle-end-ms", "1000"],
     );
     let console = socket();
     let sent = send_paced(&console, emu.ingress(), (0..1500).map(|i| itp(i).to_vec()), 20);
@@ -365,7 +365,7 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
         let egress = format!("udp://{}", robot.local_addr());
         let stop = Arc::new(AtomicBool::new(false));
         let rx = receiver(robot, stop.clone(), None);
-        let mut args = vec!["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "300"];
+        let mut args = vec!["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000"];
         if drop_bad {
             args.push("--drop-bad-checksum");
         }
@@ -405,7 +405,7 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let rx = receiver(robot, stop.clone(), None);
     let emu = Emulator::start(
         &out,
-        &["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--drop-bad-checksum", "--idle-end-ms", "500"],
+        &["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--drop-bad-checksum", "--idle-end-ms", "1000"],
     );
     let console = socket();
     // 20,000 datagrams of random bytes and sizes (0..=1500), as fast as the
@@ -452,7 +452,7 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let egress = format!("udp://{}", robot.local_addr());
     let emu = Emulator::start(
         &out,
-        &["--scenario", "Normal", "--seed", "1", "--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "400"],
+        &["--scenario", "Normal", "--seed", "1", "--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000"],
     );
     // Before any console has spoken, a robot datagram has nowhere to go.
     robot.send_to(b"early", &PeerAddr::new(emu.egress_local())).unwrap();

@@ -11,8 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-/// Held by every test that runs an emulator (here and in `udp`).
-pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn netfi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_netfi"))
