@@ -31,12 +31,12 @@ fn out_dir(name: &str) -> PathBuf {
     d
 }
 
-fn read_json(path: &Path) -> Value {
+pub(crate) fn read_json(path: &Path) -> Value {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-fn u(v: &Value) -> u64 {
+pub(crate) fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
 }
 
@@ -55,6 +55,11 @@ fn itp(seq: u32) -> [u8; 124] {
     v.set_surgeon_mode(1);
     v.fill_checksum();
     b
+}
+
+/// A UDP port that was free on loopback a moment ago.
+pub(crate) fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 fn socket() -> UdpPort {
@@ -116,15 +121,26 @@ fn receiver(port: UdpPort, stop: Arc<AtomicBool>, reply: Option<Vec<u8>>) -> Joi
     })
 }
 
+/// A child process killed (if still running) when dropped, so a failing
+/// test leaves nothing behind.
+pub(crate) struct Reaped(pub(crate) Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// One emulator process.
-struct Emulator {
+pub(crate) struct Emulator {
     child: Option<Child>,
     out: PathBuf,
 }
 
 impl Emulator {
     /// Starts `netfi emulator` with `args` and waits until it is ready.
-    fn start(out: &Path, args: &[&str]) -> Emulator {
+    pub(crate) fn start(out: &Path, args: &[&str]) -> Emulator {
         let log = std::fs::File::create(out.join("emulator.log")).unwrap();
         let child = netfi()
             .arg("emulator")
@@ -156,7 +172,7 @@ impl Emulator {
         read_json(&self.out.join("udp_endpoints.json"))
     }
 
-    fn ingress(&self) -> SocketAddr {
+    pub(crate) fn ingress(&self) -> SocketAddr {
         self.endpoints()["ingress"].as_str().unwrap().parse().unwrap()
     }
 
@@ -166,7 +182,7 @@ impl Emulator {
 
     /// Waits for the emulator to end by itself (at most `timeout`, then
     /// SIGTERM), and returns `emulator.json` and `udp.json`.
-    fn finish(mut self, timeout: Duration) -> (Value, Value) {
+    pub(crate) fn finish(mut self, timeout: Duration) -> (Value, Value) {
         let mut child = self.child.take().unwrap();
         let t0 = Instant::now();
         let status = loop {
@@ -185,7 +201,7 @@ impl Emulator {
     }
 
     /// SIGTERM now; returns the reports.
-    fn stop(self) -> (Value, Value) {
+    pub(crate) fn stop(self) -> (Value, Value) {
         // SAFETY: signalling a process this test started.
         unsafe { libc::kill(self.child.as_ref().unwrap().id() as libc::pid_t, libc::SIGTERM) };
         self.finish(Duration::from_secs(20))
@@ -274,13 +290,10 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     let out = out_dir("u2i");
     let run_id = format!("u2i{}", std::process::id());
     let sim_log = std::fs::File::create(out.join("simulator.log")).unwrap();
-    let mut sim = netfi()
-        .args(["simulator", "--run-id", &run_id, "--out"])
-        .arg(&out)
-        .stdout(sim_log.try_clone().unwrap())
-        .stderr(sim_log)
-        .spawn()
-        .unwrap();
+    let mut sim = Reaped(
+        netfi().args(["simulator", "--run-id", &run_id, "--out"]).arg(&out).stdout(sim_log.try_clone().unwrap()).stderr(sim_log).spawn().unwrap(),
+    );
+    let sim = &mut sim.0;
     let t0 = Instant::now();
     while !out.join("simulator.ready").exists() {
         assert!(sim.try_wait().unwrap().is_none(), "the simulator ended early");

@@ -9,5 +9,6 @@
 use std::sync::Mutex;
 
 mod bridge;
+mod tools;
 
 pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
