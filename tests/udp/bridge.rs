@@ -45,7 +45,7 @@ fn dropped_total(frames: &Value) -> u64 {
 }
 
 /// A valid ITP frame with sequence `seq`.
-fn itp(seq: u32) -> [u8; 124] {
+pub(crate) fn itp(seq: u32) -> [u8; 124] {
     let mut b = [0u8; 124];
     let mut v = ItpView::new_unchecked(&mut b[..]);
     v.set_sequence(seq);
@@ -141,9 +141,16 @@ pub(crate) struct Emulator {
 impl Emulator {
     /// Starts `netfi emulator` with `args` and waits until it is ready.
     pub(crate) fn start(out: &Path, args: &[&str]) -> Emulator {
+        let mut cmd = netfi();
+        cmd.arg("emulator");
+        Emulator::start_command(cmd, out, args)
+    }
+
+    /// Starts `cmd` (which runs `netfi emulator`, perhaps through a wrapper
+    /// such as `ip netns exec`) with `args`, and waits until it is ready.
+    pub(crate) fn start_command(mut cmd: Command, out: &Path, args: &[&str]) -> Emulator {
         let log = std::fs::File::create(out.join("emulator.log")).unwrap();
-        let child = netfi()
-            .arg("emulator")
+        let child = cmd
             .args(args)
             .arg("--out")
             .arg(out)

@@ -9,6 +9,7 @@
 use std::sync::Mutex;
 
 mod bridge;
+mod netns;
 mod tools;
 
 pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
