@@ -41,7 +41,8 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 fn bind() -> UdpPort {
-    UdpPort::bind("127.0.0.1:0".parse().unwrap(), &UdpOptions { reuse_address: false, buffer_bytes: Some(1 << 20) }).unwrap()
+    UdpPort::bind("127.0.0.1:0".parse().unwrap(), &UdpOptions { reuse_address: false, buffer_bytes: Some(1 << 20) })
+        .unwrap()
 }
 
 /// Polls `f` until it yields, at most 5 s.
@@ -59,7 +60,12 @@ fn until<T>(mut f: impl FnMut() -> Option<T>) -> T {
 /// time, through `scenario` forward and `return_scenario` (or untouched)
 /// back; returns the allocations made during the last `measured`, and the
 /// replies the console got.
-fn allocations_in_steady_state(scenario_text: &str, return_scenario: Option<&str>, datagrams: u64, measured: u64) -> (u64, u64) {
+fn allocations_in_steady_state(
+    scenario_text: &str,
+    return_scenario: Option<&str>,
+    datagrams: u64,
+    measured: u64,
+) -> (u64, u64) {
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
     let capacity = 256;
     let mut inj: Injector<FrameSample> = Injector::new(Scenario::new(&spec, 3).unwrap(), capacity);
@@ -114,7 +120,9 @@ fn allocations_in_steady_state(scenario_text: &str, return_scenario: Option<&str
 fn the_udp_bridge_does_not_allocate_per_datagram() {
     let plm = "[[stage]]\npreset = \"PLM-2\"\n";
     let back = "[[stage]]\nmodel = \"bernoulli\"\np = 0.3\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.02\norder = \"reorder\"\n";
-    for (name, forward, ret) in [("PLM-2, return untouched", plm, None), ("PLM-2, return through loss and delay", plm, Some(back))] {
+    for (name, forward, ret) in
+        [("PLM-2, return untouched", plm, None), ("PLM-2, return through loss and delay", plm, Some(back))]
+    {
         let (n, replies) = allocations_in_steady_state(forward, ret, 6000, 4000);
         assert_eq!(n, 0, "{name}: {n} allocations in 4000 datagrams");
         // PLM-2 passes about 70% forward, and the way back about 70% of those.

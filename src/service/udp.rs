@@ -211,7 +211,12 @@ impl Arena {
     /// An arena of `slots` slots of [`ARENA_SLOT_BYTES`].
     pub fn new(slots: usize) -> Arena {
         assert!(slots >= 1 && slots <= u32::MAX as usize, "an arena needs 1..=2^32-1 slots, got {slots}");
-        Arena { bytes: vec![0u8; slots * ARENA_SLOT_BYTES], free: (0..slots as u32).rev().collect(), in_use: vec![false; slots], high_water: 0 }
+        Arena {
+            bytes: vec![0u8; slots * ARENA_SLOT_BYTES],
+            free: (0..slots as u32).rev().collect(),
+            in_use: vec![false; slots],
+            high_water: 0,
+        }
     }
 
     pub fn slots(&self) -> usize {
@@ -415,7 +420,11 @@ impl UdpSink {
 
 impl FrameSink for UdpSink {
     #[inline]
-    fn send_with(&mut self, sample: &FrameSample, stamp: impl FnOnce(&mut FrameSample)) -> Result<Option<usize>, PortError> {
+    fn send_with(
+        &mut self,
+        sample: &FrameSample,
+        stamp: impl FnOnce(&mut FrameSample),
+    ) -> Result<Option<usize>, PortError> {
         // UDP has no end of stream: the end marker is not a datagram.
         if sample.is_end() {
             return Ok(None);
@@ -483,7 +492,13 @@ impl ReturnPath {
     /// Relays untouched what arrives at `port` (a handle on the egress
     /// socket), to `to` or else to the console's latest address.
     pub fn untouched(port: UdpPort, to: Option<SocketAddr>) -> ReturnPath {
-        ReturnPath { port, to: to.map(PeerAddr::new), buf: vec![0u8; MAX_DATAGRAM_BYTES].into_boxed_slice(), shaped: None, counts: ReturnCounts::default() }
+        ReturnPath {
+            port,
+            to: to.map(PeerAddr::new),
+            buf: vec![0u8; MAX_DATAGRAM_BYTES].into_boxed_slice(),
+            shaped: None,
+            counts: ReturnCounts::default(),
+        }
     }
 
     /// Relays through `scenario` (seeded with `seed`), holding at most
@@ -511,7 +526,13 @@ impl ReturnPath {
             injected: LatencyHistogram::new(),
             batches: BatchMeans::new(expected.max(1)),
         };
-        ReturnPath { port, to: to.map(PeerAddr::new), buf: Box::default(), shaped: Some(Box::new(shaped)), counts: ReturnCounts::default() }
+        ReturnPath {
+            port,
+            to: to.map(PeerAddr::new),
+            buf: Box::default(),
+            shaped: Some(Box::new(shaped)),
+            counts: ReturnCounts::default(),
+        }
     }
 
     /// Releases what is due, then takes at most one datagram from the robot
@@ -596,7 +617,8 @@ impl ReturnPath {
     /// `out_dir`, and reports.
     fn finish(&mut self, out_dir: &Path) -> anyhow::Result<ReturnReport> {
         let c = self.counts;
-        let destination = self.to.as_ref().map_or("the console's latest address".to_string(), |t| format!("udp://{}", t.addr()));
+        let destination =
+            self.to.as_ref().map_or("the console's latest address".to_string(), |t| format!("udp://{}", t.addr()));
         let kernel_drops = self.port.kernel_drops();
         let Some(s) = self.shaped.as_deref_mut() else {
             return Ok(ReturnReport {
@@ -725,7 +747,9 @@ fn validate(args: &EmulatorArgs) -> anyhow::Result<()> {
     }
     let return_opts = args.return_scenario.is_some() || args.return_to.is_some() || args.return_seed.is_some();
     if return_opts && !(i && e) {
-        bail!("--return-scenario, --return-to and --return-seed apply to the return path, which needs UDP on both sides");
+        bail!(
+            "--return-scenario, --return-to and --return-seed apply to the return path, which needs UDP on both sides"
+        );
     }
     if args.no_return && return_opts {
         bail!("--no-return cannot be combined with --return-scenario, --return-to or --return-seed");
@@ -787,11 +811,16 @@ pub fn main(args: &EmulatorArgs, cfg: EmulatorConfig) -> anyhow::Result<Emulator
                 let ret = match &args.return_scenario {
                     None => ReturnPath::untouched(rport, to),
                     Some(name) => {
-                        let spec = crate::scenario::resolve(name).with_context(|| format!("--return-scenario {name}"))?;
-                        let seed = args.return_seed.or(spec.seed).unwrap_or_else(|| crate::scenario::splitmix64(cfg.seed ^ 0x7265_7475_726e));
+                        let spec =
+                            crate::scenario::resolve(name).with_context(|| format!("--return-scenario {name}"))?;
+                        let seed = args
+                            .return_seed
+                            .or(spec.seed)
+                            .unwrap_or_else(|| crate::scenario::splitmix64(cfg.seed ^ 0x7265_7475_726e));
                         let capacity = spec.queue_capacity.unwrap_or(RAW_DEFAULT_QUEUE_CAPACITY);
                         anyhow::ensure!(capacity >= 1, "the return scenario's queue_capacity must be at least 1");
-                        let scenario = Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
+                        let scenario =
+                            Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
                         eprintln!("emulator: return path through scenario {} seed {seed}, queue {capacity}", spec.name);
                         ReturnPath::shaped(rport, to, scenario, seed, capacity, cfg.expected_frames)
                     }

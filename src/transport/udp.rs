@@ -233,8 +233,12 @@ impl UdpPort {
         match self.socket.send_to(buf, &to.raw) {
             Ok(sent) if sent == len => Ok(()),
             Ok(sent) => Err(UdpSendError::Truncated { local: self.local, to: to.addr, len, sent }),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Err(UdpSendError::WouldBlock { local: self.local, to: to.addr, len }),
-            Err(e) if e.raw_os_error() == Some(libc::EMSGSIZE) => Err(UdpSendError::TooLarge { local: self.local, to: to.addr, len }),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                Err(UdpSendError::WouldBlock { local: self.local, to: to.addr, len })
+            }
+            Err(e) if e.raw_os_error() == Some(libc::EMSGSIZE) => {
+                Err(UdpSendError::TooLarge { local: self.local, to: to.addr, len })
+            }
             Err(source) => Err(UdpSendError::Io { local: self.local, to: to.addr, len, source }),
         }
     }

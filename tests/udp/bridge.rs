@@ -63,7 +63,8 @@ pub(crate) fn free_udp_port() -> u16 {
 }
 
 fn socket() -> UdpPort {
-    UdpPort::bind("127.0.0.1:0".parse().unwrap(), &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) }).unwrap()
+    UdpPort::bind("127.0.0.1:0".parse().unwrap(), &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) })
+        .unwrap()
 }
 
 /// Sends `datagrams`, pausing 1 ms every `burst` of them so the emulator
@@ -76,7 +77,9 @@ fn send_paced(from: &UdpPort, to: SocketAddr, datagrams: impl IntoIterator<Item 
             match from.send_to(&d, &to) {
                 Ok(()) => break,
                 // Our own send buffer is full: wait for it to drain.
-                Err(netfi::transport::udp::UdpSendError::WouldBlock { .. }) => std::thread::sleep(Duration::from_micros(200)),
+                Err(netfi::transport::udp::UdpSendError::WouldBlock { .. }) => {
+                    std::thread::sleep(Duration::from_micros(200))
+                }
                 Err(e) => panic!("{e}"),
             }
         }
@@ -250,7 +253,20 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     let n = 3000u32;
     let emu = Emulator::start(
         &out,
-        &["--scenario", "PLM-2", "--seed", "3", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000", "--expected-frames", "3000"],
+        &[
+            "--scenario",
+            "PLM-2",
+            "--seed",
+            "3",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            &egress,
+            "--idle-end-ms",
+            "1000",
+            "--expected-frames",
+            "3000",
+        ],
     );
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
@@ -277,7 +293,8 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     // ge_lomax decides per frame: with every frame entered, the very drops
     // `scenario check` makes in simulated time.
     if u(&e["frames"]["entered"]) == u64::from(n) {
-        let o = netfi().args(["scenario", "check", "PLM-2", "--frames", "3000", "--seed", "3", "--json"]).output().unwrap();
+        let o =
+            netfi().args(["scenario", "check", "PLM-2", "--frames", "3000", "--seed", "3", "--json"]).output().unwrap();
         let c: Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(c["dropped"]["ge_lomax"], e["frames"]["dropped"]["ge_lomax"]);
     } else {
@@ -298,7 +315,13 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     let run_id = format!("u2i{}", std::process::id());
     let sim_log = std::fs::File::create(out.join("simulator.log")).unwrap();
     let mut sim = Reaped(
-        netfi().args(["simulator", "--run-id", &run_id, "--out"]).arg(&out).stdout(sim_log.try_clone().unwrap()).stderr(sim_log).spawn().unwrap(),
+        netfi()
+            .args(["simulator", "--run-id", &run_id, "--out"])
+            .arg(&out)
+            .stdout(sim_log.try_clone().unwrap())
+            .stderr(sim_log)
+            .spawn()
+            .unwrap(),
     );
     let sim = &mut sim.0;
     let t0 = Instant::now();
@@ -309,7 +332,20 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     }
     let emu = Emulator::start(
         &out,
-        &["--run-id", &run_id, "--scenario", "PLM-1", "--seed", "8", "--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2", "--idle-end-ms", "1000"],
+        &[
+            "--run-id",
+            &run_id,
+            "--scenario",
+            "PLM-1",
+            "--seed",
+            "8",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            "iceoryx2",
+            "--idle-end-ms",
+            "1000",
+        ],
     );
     let console = socket();
     let sent = send_paced(&console, emu.ingress(), (0..1500).map(|i| itp(i).to_vec()), 20);
@@ -345,9 +381,24 @@ fn iceoryx2_to_udp_drives_a_udp_robot() {
     let egress = format!("udp://{}", robot.local_addr());
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
-    let emu = Emulator::start(&out, &["--run-id", &run_id, "--scenario", "DLM-1", "--seed", "9", "--ingress", "iceoryx2", "--egress", &egress]);
+    let emu = Emulator::start(
+        &out,
+        &["--run-id", &run_id, "--scenario", "DLM-1", "--seed", "9", "--ingress", "iceoryx2", "--egress", &egress],
+    );
     let con = netfi()
-        .args(["console", "--run-id", &run_id, "--frames", "2000", "--rate-hz", "5000", "--seed", "9", "--no-direct", "--out"])
+        .args([
+            "console",
+            "--run-id",
+            &run_id,
+            "--frames",
+            "2000",
+            "--rate-hz",
+            "5000",
+            "--seed",
+            "9",
+            "--no-direct",
+            "--out",
+        ])
         .arg(&out)
         .output()
         .unwrap();
@@ -385,7 +436,18 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
         let egress = format!("udp://{}", robot.local_addr());
         let stop = Arc::new(AtomicBool::new(false));
         let rx = receiver(robot, stop.clone(), None);
-        let mut args = vec!["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000"];
+        let mut args = vec![
+            "--scenario",
+            "Normal",
+            "--seed",
+            "1",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            &egress,
+            "--idle-end-ms",
+            "1000",
+        ];
         if drop_bad {
             args.push("--drop-bad-checksum");
         }
@@ -425,7 +487,19 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let rx = receiver(robot, stop.clone(), None);
     let emu = Emulator::start(
         &out,
-        &["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--drop-bad-checksum", "--idle-end-ms", "1000"],
+        &[
+            "--scenario",
+            "Normal",
+            "--seed",
+            "1",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            &egress,
+            "--drop-bad-checksum",
+            "--idle-end-ms",
+            "1000",
+        ],
     );
     let console = socket();
     // 20,000 datagrams of random bytes and sizes (0..=1500), as fast as the
@@ -472,7 +546,20 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let egress = format!("udp://{}", robot.local_addr());
     let emu = Emulator::start(
         &out,
-        &["--scenario", "Normal", "--seed", "1", "--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--idle-end-ms", "1000"],
+        &[
+            "--scenario",
+            "Normal",
+            "--seed",
+            "1",
+            "--payload",
+            "raw",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            &egress,
+            "--idle-end-ms",
+            "1000",
+        ],
     );
     // Before any console has spoken, a robot datagram has nowhere to go.
     robot.send_to(b"early", &PeerAddr::new(emu.egress_local())).unwrap();
@@ -485,7 +572,8 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let console_stop = Arc::new(AtomicBool::new(false));
     let console_rx = console.try_clone().unwrap();
     let replies = receiver(console_rx, console_stop.clone(), None);
-    let mut datagrams: Vec<Vec<u8>> = vec![vec![], vec![0xab], vec![7u8; 1000], (0..60_000u32).map(|i| i as u8).collect()];
+    let mut datagrams: Vec<Vec<u8>> =
+        vec![vec![], vec![0xab], vec![7u8; 1000], (0..60_000u32).map(|i| i as u8).collect()];
     datagrams.extend((0..500u32).map(|i| i.to_le_bytes().repeat(16)));
     let sent = send_paced(&console, emu.ingress(), datagrams.clone(), 10);
     let (e, udp) = emu.finish(Duration::from_secs(30));
@@ -586,7 +674,10 @@ fn a_stopped_bridge_reports_what_it_held() {
     let egress = format!("udp://{}", robot.local_addr());
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
-    let emu = Emulator::start(&out, &["--scenario", "DLM-2", "--seed", "2", "--ingress", "udp://127.0.0.1:0", "--egress", &egress]);
+    let emu = Emulator::start(
+        &out,
+        &["--scenario", "DLM-2", "--seed", "2", "--ingress", "udp://127.0.0.1:0", "--egress", &egress],
+    );
     let console = socket();
     let sent = send_paced(&console, emu.ingress(), (0..200).map(|i| itp(i).to_vec()), 20);
     std::thread::sleep(Duration::from_millis(50));
@@ -605,7 +696,10 @@ fn a_stopped_bridge_reports_what_it_held() {
 fn bad_udp_options_are_clear_errors() {
     for (args, expect) in [
         (vec!["--ingress", "tcp://127.0.0.1:5"], "expected `iceoryx2` or `udp://ADDR:PORT`"),
-        (vec!["--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2", "--payload", "raw", "--run-id", "x"], "--payload raw needs UDP on both sides"),
+        (
+            vec!["--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2", "--payload", "raw", "--run-id", "x"],
+            "--payload raw needs UDP on both sides",
+        ),
         (vec!["--ingress", "udp://127.0.0.1:0", "--egress", "iceoryx2"], "--run-id is needed"),
         (vec!["--ingress", "udp://127.0.0.1:0", "--egress", "udp://127.0.0.1:0"], "a port other than 0"),
     ] {

@@ -39,7 +39,11 @@ impl Hosts {
     /// Builds the topology of `docs/udp.md`; `Err` says why it could not.
     fn build() -> Result<Hosts, String> {
         let id = std::process::id() % 100_000;
-        let h = Hosts { console: format!("netfi-con-{id}"), emu: format!("netfi-emu-{id}"), robot: format!("netfi-rob-{id}") };
+        let h = Hosts {
+            console: format!("netfi-con-{id}"),
+            emu: format!("netfi-emu-{id}"),
+            robot: format!("netfi-rob-{id}"),
+        };
         ip(&["netns", "add", &h.console])?;
         // From here on, `h` removes whatever was made if a step fails.
         ip(&["netns", "add", &h.emu])?;
@@ -49,9 +53,12 @@ impl Hosts {
         ip(&["link", "add", &c0, "netns", &h.console, "type", "veth", "peer", "name", &c1, "netns", &h.emu])?;
         // Robot side: r1 (emulator) ↔ r0 (robot).
         ip(&["link", "add", &r0, "netns", &h.robot, "type", "veth", "peer", "name", &r1, "netns", &h.emu])?;
-        for (ns, dev, addr) in
-            [(&h.console, &c0, "192.0.2.1/24"), (&h.emu, &c1, "192.0.2.2/24"), (&h.emu, &r1, "198.51.100.1/24"), (&h.robot, &r0, "198.51.100.2/24")]
-        {
+        for (ns, dev, addr) in [
+            (&h.console, &c0, "192.0.2.1/24"),
+            (&h.emu, &c1, "192.0.2.2/24"),
+            (&h.emu, &r1, "198.51.100.1/24"),
+            (&h.robot, &r0, "198.51.100.2/24"),
+        ] {
             ip(&["-n", ns, "addr", "add", addr, "dev", dev])?;
             ip(&["-n", ns, "link", "set", dev, "up"])?;
         }
@@ -84,7 +91,8 @@ fn socket_in(ns: &str, addr: &str) -> Result<UdpPort, String> {
         if unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
             return Err(format!("setns({path}): {}", std::io::Error::last_os_error()));
         }
-        UdpPort::bind(addr, &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) }).map_err(|e| e.to_string())
+        UdpPort::bind(addr, &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) })
+            .map_err(|e| e.to_string())
     })
     .join()
     .unwrap()

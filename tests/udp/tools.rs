@@ -38,7 +38,11 @@ fn port_bound(proto: &str, port: u16) -> bool {
     [format!("/proc/net/{proto}"), format!("/proc/net/{proto}6")]
         .iter()
         .filter_map(|p| std::fs::read_to_string(p).ok())
-        .any(|t| t.lines().skip(1).any(|l| l.split_whitespace().nth(1).is_some_and(|local| format!("{local} ").ends_with(&needle))))
+        .any(|t| {
+            t.lines()
+                .skip(1)
+                .any(|l| l.split_whitespace().nth(1).is_some_and(|local| format!("{local} ").ends_with(&needle)))
+        })
 }
 
 fn wait_bound(proto: &str, port: u16, child: &mut Child, what: &str) {
@@ -68,7 +72,12 @@ fn run_bounded(cmd: &mut Command, timeout: Duration) -> Output {
 fn sockperf_summary(text: &str) -> (u64, u64, f64, f64) {
     let num_after = |text: &str, key: &str| -> Option<f64> {
         let at = text.find(key)? + key.len();
-        text[at..].trim_start_matches([' ', '=']).split(|c: char| !(c.is_ascii_digit() || c == '.')).next()?.parse().ok()
+        text[at..]
+            .trim_start_matches([' ', '='])
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .next()?
+            .parse()
+            .ok()
     };
     let valid = text.find("[Valid Duration]").map_or(text, |i| &text[i..]);
     let sent = num_after(valid, "SentMessages=").unwrap_or(0.0) as u64;
@@ -96,7 +105,18 @@ fn sockperf_ping_pong_through_the_bridge() {
     wait_bound("udp", server_port, &mut server.0, "sockperf server");
     let ping = |port: u16| {
         let o = run_bounded(
-            Command::new("sockperf").args(["ping-pong", "-i", "127.0.0.1", "-p", &port.to_string(), "-t", "2", "-m", "64", "--full-rtt"]),
+            Command::new("sockperf").args([
+                "ping-pong",
+                "-i",
+                "127.0.0.1",
+                "-p",
+                &port.to_string(),
+                "-t",
+                "2",
+                "-m",
+                "64",
+                "--full-rtt",
+            ]),
             Duration::from_secs(30),
         );
         let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
@@ -105,7 +125,21 @@ fn sockperf_ping_pong_through_the_bridge() {
     };
     let direct = ping(server_port);
     let egress = format!("udp://127.0.0.1:{server_port}");
-    let emu = Emulator::start(&out, &["--scenario", "Normal", "--seed", "1", "--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress]);
+    let emu = Emulator::start(
+        &out,
+        &[
+            "--scenario",
+            "Normal",
+            "--seed",
+            "1",
+            "--payload",
+            "raw",
+            "--ingress",
+            "udp://127.0.0.1:0",
+            "--egress",
+            &egress,
+        ],
+    );
     let through = ping(emu.ingress().port());
     let (e, udp) = emu.stop();
     eprintln!(
@@ -125,7 +159,12 @@ fn sockperf_ping_pong_through_the_bridge() {
     let r = &udp["return_path"];
     assert_eq!(u(&r["unroutable"]), 0, "{r}");
     assert_eq!(u(&r["delivered"]), u(&r["entered"]), "{r}");
-    assert!(u(&r["delivered"]) >= through.1, "sockperf received {} replies, the return path relayed {}", through.1, r["delivered"]);
+    assert!(
+        u(&r["delivered"]) >= through.1,
+        "sockperf received {} replies, the return path relayed {}",
+        through.1,
+        r["delivered"]
+    );
 }
 
 /// The first seed from 1 whose scenario passes frame 0: iperf3 opens a UDP
@@ -196,7 +235,11 @@ fn iperf3_through(name: &str, scenario: &str, seed: u64, datagrams: u64) -> (Val
     std::thread::sleep(Duration::from_millis(200));
     let (e, udp) = emu.stop();
     let client: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|err| {
-        panic!("iperf3 client printed no JSON ({err}):\n{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+        panic!(
+            "iperf3 client printed no JSON ({err}):\n{}\n{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        )
     });
     assert!(o.status.success(), "iperf3 client failed: {}", client["error"]);
     (client, e, udp, out)
