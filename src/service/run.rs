@@ -13,7 +13,7 @@ use crate::scenario::{self, Scenario};
 use crate::service::args::RunArgs;
 use crate::service::console::ConsoleReport;
 use crate::service::emulator::EmulatorReport;
-use crate::service::report::{self, Files, Overhead, Percentiles, ProcessEnd, RunReport, Steal};
+use crate::service::report::{self, DelayCheck, DelayQuantile, Files, Overhead, Percentiles, ProcessEnd, RunReport, Steal};
 use crate::service::signals;
 use crate::service::simulator::SimulatorReport;
 use anyhow::{bail, Context, Result};
@@ -331,7 +331,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     }
 
     // The trace: the emulator's rows joined with the simulator's receive times.
-    let trace = match merge_trace(&out) {
+    let mut delays = Delays::default();
+    let trace = match merge_trace(&out, &mut delays) {
         Ok(p) => p,
         Err(e) => {
             faults.push(format!("trace not written: {e:#}"));
@@ -345,8 +346,10 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let end_to_end_extra = simulator.as_ref().map(|s| Percentiles::from(s.end_to_end_extra_ns)).filter(|p| p.count > 0);
     let direct_hop = simulator.as_ref().map(|s| Percentiles::from(s.direct_hop_ns)).filter(|p| p.count > 0);
     let added_over_direct = end_to_end_extra.as_ref().zip(direct_hop.as_ref()).map(|(a, b)| report::difference(a, b));
+    let delay_check = delay_check(&spec, seed, delays);
     let report_json = out.join("report.json");
     let report = RunReport {
+        delay_check,
         run_id: run_id.clone(),
         scenario: spec.name.clone(),
         seed,
@@ -386,8 +389,17 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     Ok(report)
 }
 
-/// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`.
-fn merge_trace(out: &Path) -> Result<Option<PathBuf>> {
+/// Per delivered and received frame: the injected delay and the delay the
+/// simulator saw (receive − console send), in ns.
+#[derive(Debug, Default)]
+struct Delays {
+    injected: Vec<u64>,
+    seen: Vec<u64>,
+}
+
+/// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`, and
+/// collects the delays of the frames that made it through.
+fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
     let emu = out.join("trace_emulator.csv");
     if !emu.exists() {
         return Ok(None);
@@ -413,13 +425,62 @@ fn merge_trace(out: &Path) -> Result<Option<PathBuf>> {
             writeln!(w, "{line}")?;
             continue;
         }
-        let index: usize = line.split(',').next().and_then(|x| x.parse().ok()).unwrap_or(usize::MAX);
+        let cols: Vec<&str> = line.split(',').collect();
+        let index: usize = cols[0].parse().unwrap_or(usize::MAX);
         match recv.get(index).filter(|t| **t != 0) {
-            Some(t) => writeln!(w, "{line}{t}")?,
+            Some(t) => {
+                writeln!(w, "{line}{t}")?;
+                // Columns: 3 send_ns, 9 delay_ns (see `trace`).
+                if let (Some(Ok(send)), Some(Ok(delay))) = (cols.get(3).map(|x| x.parse::<u64>()), cols.get(9).map(|x| x.parse::<u64>())) {
+                    delays.injected.push(delay);
+                    delays.seen.push(t.saturating_sub(send));
+                }
+            }
             None => writeln!(w, "{line}")?,
         }
     }
     w.flush()?;
     std::fs::remove_file(&emu)?;
     Ok(Some(path))
+}
+
+/// Quantiles of the delays the simulator saw against the delays the
+/// emulator drew and, when the scenario is a single `reorder` delay stage
+/// (possibly behind loss stages), against the model's analytic law.
+fn delay_check(spec: &scenario::ScenarioSpec, seed: u64, mut d: Delays) -> Option<DelayCheck> {
+    let n = d.seen.len();
+    if n < 100 || d.injected.iter().all(|x| *x == 0) {
+        return None;
+    }
+    d.injected.sort_unstable();
+    d.seen.sort_unstable();
+    let model = Scenario::new(spec, seed).ok().and_then(|sc| {
+        let [phase] = sc.phases() else { return None };
+        let delays: Vec<_> = phase.stages().iter().filter_map(|s| match s.model() {
+            crate::model::AnyModel::Delay(m) => Some(m.clone()),
+            _ => None,
+        }).collect();
+        match delays.as_slice() {
+            [one] if one.may_reorder() || one.cdf_ms(one.mean_ms_exact()) >= 0.0 => Some(one.clone()),
+            _ => None,
+        }
+    });
+    // Dvoretzky–Kiefer–Wolfowitz: with 95% confidence the empirical
+    // distribution is within ε of the true one everywhere.
+    let eps = ((2.0f64 / 0.05).ln() / (2.0 * n as f64)).sqrt();
+    let pick = |v: &[u64], q: f64| v[((q * n as f64) as usize).min(n - 1)] as f64 / 1e6;
+    let quantiles: Vec<DelayQuantile> = [0.01, 0.1, 0.25, 0.5, 0.75, 0.9, 0.99]
+        .into_iter()
+        .map(|q| {
+            let (injected_ms, seen_ms) = (pick(&d.injected, q), pick(&d.seen, q));
+            let model_ms = model.as_ref().map(|m| m.quantile_ms(q));
+            let model_band_ms = model.as_ref().map(|m| [m.quantile_ms((q - eps).max(1e-9)), m.quantile_ms((q + eps).min(1.0 - 1e-9))]);
+            DelayQuantile { q, model_ms, model_band_ms, injected_ms, seen_ms, seen_minus_injected_us: (seen_ms - injected_ms) * 1e3 }
+        })
+        .collect();
+    let worst = quantiles.iter().map(|x| x.seen_minus_injected_us.abs()).fold(0.0, f64::max);
+    let injected_within_model_band = model.as_ref().map(|_| {
+        quantiles.iter().all(|x| x.model_band_ms.is_some_and(|[lo, hi]| lo <= x.injected_ms && x.injected_ms <= hi))
+    });
+    Some(DelayCheck { frames: n as u64, dkw_epsilon: eps, quantiles, max_abs_seen_minus_injected_us: worst, injected_within_model_band })
 }
