@@ -13,8 +13,9 @@ use std::time::{Duration, Instant};
 
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::{
-    cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode, PublisherOpenError, Role,
-    RunId, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
+    cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode,
+    PublisherOpenError, Role, RunId, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL,
+    SUBSCRIBER_BUFFER_FRAMES,
 };
 
 /// Environment variable that turns this binary into a child process; its
@@ -285,7 +286,10 @@ fn gracefully_restarted_publisher_reconnects() {
         assert_eq!(sub.peers_connected(), 0);
         // Frames sent before the publisher left are still delivered.
         let got: Vec<u64> = drain(&mut sub).iter().map(|f| f.console_index).collect();
-        assert_eq!(got, (generation * 100..generation * 100 + 10).collect::<Vec<_>>());
+        assert_eq!(
+            got,
+            (generation * 100..generation * 100 + 10).collect::<Vec<_>>()
+        );
     }
 }
 
@@ -341,7 +345,12 @@ impl ChildPeer {
     fn spawn(mode: &str, config: &IpcConfig) -> Self {
         let exe = std::env::current_exe().unwrap();
         let mut child = Command::new(exe)
-            .args(["child_process_entry", "--exact", "--nocapture", "--test-threads=1"])
+            .args([
+                "child_process_entry",
+                "--exact",
+                "--nocapture",
+                "--test-threads=1",
+            ])
             .env(CHILD_ENV, format!("{mode}:{}", config.run_id()))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -364,7 +373,9 @@ impl ChildPeer {
         let (done_tx, done_rx) = mpsc::channel::<()>();
         let watchdog = std::thread::spawn(move || {
             if done_rx.recv_timeout(WATCHDOG).is_err() {
-                let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+                let _ = Command::new("kill")
+                    .args(["-KILL", &pid.to_string()])
+                    .status();
             }
         });
         let mut buf = String::new();
@@ -458,7 +469,11 @@ fn leftovers_of_a_killed_run_are_removed_at_start_up() {
 
     // Opening a node scans again; nothing is left, and the channel opens.
     let node = IpcNode::open(&config, Role::Console).unwrap();
-    assert!(node.startup_cleanup().is_clean(), "{:?}", node.startup_cleanup());
+    assert!(
+        node.startup_cleanup().is_clean(),
+        "{:?}",
+        node.startup_cleanup()
+    );
     let _publisher = node.publisher(Channel::Console).unwrap();
 }
 
@@ -514,8 +529,16 @@ fn sigint_is_latched_as_a_termination_request() {
     let mut child = ChildPeer::spawn("until_signal", &config);
     // The handlers are installed when the node opens, before READY.
     let caught = caught_signals(child.pid());
-    assert_ne!(caught & (1 << (SIGINT - 1)), 0, "SIGINT not caught: {caught:x}");
-    assert_ne!(caught & (1 << (SIGTERM - 1)), 0, "SIGTERM not caught: {caught:x}");
+    assert_ne!(
+        caught & (1 << (SIGINT - 1)),
+        0,
+        "SIGINT not caught: {caught:x}"
+    );
+    assert_ne!(
+        caught & (1 << (SIGTERM - 1)),
+        0,
+        "SIGTERM not caught: {caught:x}"
+    );
 
     let status = Command::new("kill")
         .args(["-INT", &child.pid().to_string()])
@@ -594,7 +617,9 @@ fn latency_one_hop_between_threads() {
 
     let node = IpcNode::open(&config, Role::Console).unwrap();
     let mut publisher = node.publisher(Channel::Console).unwrap();
-    wait_until("the receiver to connect", || publisher.peers_connected() == 1);
+    wait_until("the receiver to connect", || {
+        publisher.peers_connected() == 1
+    });
 
     let (steal_before, total_before) = cpu_steal_and_total();
     let mut next_ns = now_ns();

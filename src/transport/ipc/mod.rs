@@ -69,7 +69,9 @@ use std::sync::Arc;
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
 
-pub use liveness::{cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup};
+pub use liveness::{
+    cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup,
+};
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
 pub use subscriber::{FrameRecvError, FrameSubscriber, SubscriberOpenError, SubscriberStats};
@@ -417,7 +419,12 @@ mod tests {
             RunId::new(&"x".repeat(RunId::MAX_LEN + 1)),
             Err(RunIdError::TooLong { len: 49, .. })
         ));
-        for (bad, ch, index) in [("a/b", '/', 1), ("a b", ' ', 1), (".", '.', 0), ("é", 'é', 0)] {
+        for (bad, ch, index) in [
+            ("a/b", '/', 1),
+            ("a b", ' ', 1),
+            (".", '.', 0),
+            ("é", 'é', 0),
+        ] {
             assert_eq!(
                 RunId::new(bad),
                 Err(RunIdError::InvalidCharacter {

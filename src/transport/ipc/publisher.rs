@@ -86,7 +86,9 @@ pub enum PublisherOpenError {
     },
     /// The publisher port could not be created (its shared-memory pool, for
     /// instance, when `/dev/shm` is full).
-    #[error("cannot create the publisher of service `{service}` of run `{run}` (iceoryx2: {source})")]
+    #[error(
+        "cannot create the publisher of service `{service}` of run `{run}` (iceoryx2: {source})"
+    )]
     Port {
         /// The service name.
         service: String,
