@@ -141,8 +141,8 @@ impl IpcNode {
     /// filling a killed subscriber's queue until [`FrameSendError::QueueFull`].
     /// It lists the run's node directory and checks one lock per node:
     /// call it a few times per second from the service loop, never per frame.
-    /// Any process of the run may reap; concurrent reapers are reported as
-    /// [`CleanupReport::removed_elsewhere`].
+    /// Any process of the run may reap; each of several concurrent reapers
+    /// reports the dead peer, and one may wait up to 100 ms for another.
     ///
     /// [`FrameSendError::QueueFull`]: super::FrameSendError::QueueFull
     pub fn reap_dead_peers(&self) -> Result<CleanupReport, CleanupError> {
