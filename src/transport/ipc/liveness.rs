@@ -75,7 +75,9 @@ pub struct CleanupReport {
 impl CleanupReport {
     /// All dead nodes found, removed or not.
     pub fn dead(&self) -> impl Iterator<Item = &DeadPeer> {
-        self.removed.iter().chain(self.failed.iter().map(|f| &f.peer))
+        self.removed
+            .iter()
+            .chain(self.failed.iter().map(|f| &f.peer))
     }
 
     /// Whether no dead node was found.
