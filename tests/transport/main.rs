@@ -268,6 +268,40 @@ fn port_limits_are_enforced_with_clear_errors() {
 }
 
 #[test]
+fn a_channel_of_another_sample_type_is_refused() {
+    use iceoryx2::prelude::{ipc, NodeBuilder, ServiceName};
+
+    let config = unique_config("compat");
+    // A process built with another payload type got there first.
+    let other = NodeBuilder::new()
+        .config(config.iceoryx2())
+        .create::<ipc::Service>()
+        .unwrap();
+    let _service = other
+        .service_builder(&ServiceName::new(&config.service_name(Channel::Console)).unwrap())
+        .publish_subscribe::<u64>()
+        .create()
+        .unwrap();
+
+    let node = IpcNode::open(&config, Role::Console).unwrap();
+    let err = node.publisher(Channel::Console).unwrap_err();
+    assert!(
+        matches!(err, PublisherOpenError::Incompatible { .. }),
+        "{err:?}"
+    );
+    assert!(err
+        .to_string()
+        .contains(&config.service_name(Channel::Console)));
+    let err = node.subscriber(Channel::Console).unwrap_err();
+    assert!(
+        matches!(err, SubscriberOpenError::Incompatible { .. }),
+        "{err:?}"
+    );
+    // The other channel is unaffected.
+    node.publisher(Channel::Emulator).unwrap();
+}
+
+#[test]
 fn gracefully_restarted_publisher_reconnects() {
     let config = unique_config("restart");
     let consumer = IpcNode::open(&config, Role::Emulator).unwrap();
