@@ -654,6 +654,14 @@ fn cpu_steal_and_total() -> (u64, u64) {
     (fields[7], total)
 }
 
+/// Nanoseconds the calling thread has spent on a CPU and waiting on a run
+/// queue, from `/proc/thread-self/schedstat`.
+fn thread_schedstat() -> (u64, u64) {
+    let stat = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
+    let mut fields = stat.split_whitespace().map(|v| v.parse::<u64>().unwrap());
+    (fields.next().unwrap(), fields.next().unwrap())
+}
+
 /// One-way latency of one publisher → subscriber hop between two threads of
 /// one process, at a paced 100 kHz, with a busy-polling receiver. Both ends
 /// read `std::time::Instant` (CLOCK_MONOTONIC on Linux) relative to one
@@ -679,6 +687,7 @@ fn latency_one_hop_between_threads() {
         let node = IpcNode::open(&receiver_config, Role::Simulator).unwrap();
         let mut sub = node.subscriber(Channel::Console).unwrap();
         ready_tx.send(()).unwrap();
+        let sched_before = thread_schedstat();
         let mut histogram = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).unwrap();
         let mut expected = 0u64;
         while expected < WARMUP + SAMPLES {
@@ -695,7 +704,12 @@ fn latency_one_hop_between_threads() {
                 std::hint::spin_loop();
             }
         }
-        histogram
+        let sched_after = thread_schedstat();
+        (
+            histogram,
+            sched_after.0 - sched_before.0,
+            sched_after.1 - sched_before.1,
+        )
     });
     ready_rx.recv().unwrap();
 
@@ -719,7 +733,7 @@ fn latency_one_hop_between_threads() {
             .unwrap();
         next_ns += PERIOD_NS;
     }
-    let histogram = receiver.join().unwrap();
+    let (histogram, on_cpu_ns, waiting_ns) = receiver.join().unwrap();
     let (steal_after, total_after) = cpu_steal_and_total();
     let steal = steal_after - steal_before;
     let total = total_after - total_before;
@@ -737,6 +751,12 @@ fn latency_one_hop_between_threads() {
     println!(
         "steal during the measurement: {steal} of {total} jiffies ({:.2} %)",
         100.0 * steal as f64 / total.max(1) as f64
+    );
+    println!(
+        "receiver thread: {} ms on a CPU, {} ms runnable but waiting for one ({:.0} % of its time)",
+        on_cpu_ns / 1_000_000,
+        waiting_ns / 1_000_000,
+        100.0 * waiting_ns as f64 / (on_cpu_ns + waiting_ns).max(1) as f64
     );
 
     // The transport's own cost, free of scheduling: one frame sent and
