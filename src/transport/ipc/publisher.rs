@@ -137,8 +137,8 @@ pub enum FrameSendError {
         #[source]
         source: LoanError,
     },
-    /// Delivery failed for another reason (a corrupted connection, a
-    /// subscriber that could not be connected).
+    /// Delivery failed for another reason: a corrupted connection, or the
+    /// connections to new subscribers could not be updated.
     #[error("cannot deliver a frame on `netfi/{run}/{channel}` (iceoryx2: {source})")]
     Delivery {
         /// The run.
