@@ -27,11 +27,42 @@ const CHILD_FRAMES: u64 = 10;
 /// hung test, it asserts nothing about speed.
 const WATCHDOG: Duration = Duration::from_secs(60);
 
-fn unique_config(tag: &str) -> IpcConfig {
+/// The configuration of a run private to one test. Declare it before the
+/// test's nodes and children, so that it is dropped after them.
+fn unique_config(tag: &str) -> TestRun {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let run = format!("t{}-{tag}-{n}", std::process::id());
-    IpcConfig::new(RunId::new(&run).expect("test run ids are valid"))
+    TestRun(IpcConfig::new(
+        RunId::new(&run).expect("test run ids are valid"),
+    ))
+}
+
+/// A test's run; removes the run's last iceoryx2 file when the test ends.
+struct TestRun(IpcConfig);
+
+impl std::ops::Deref for TestRun {
+    type Target = IpcConfig;
+
+    fn deref(&self) -> &IpcConfig {
+        &self.0
+    }
+}
+
+impl Drop for TestRun {
+    /// iceoryx2 keeps one small shared-memory segment per file prefix (a
+    /// node counter) that no node removes; with a run id per test, they would
+    /// pile up in /dev/shm.
+    fn drop(&mut self) {
+        // SAFETY: the run id is this test's alone, and every node of the run
+        // has been dropped or belonged to a child that has exited or been
+        // killed, so no process uses the segment any more.
+        let _ = unsafe {
+            iceoryx2::testing::remove_global_mgmt_segment::<iceoryx2::prelude::ipc::Service>(
+                self.0.iceoryx2(),
+            )
+        };
+    }
 }
 
 /// A frame whose every field and wire byte depends on `i`.
