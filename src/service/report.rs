@@ -252,7 +252,7 @@ impl RunReport {
             }
         }
         if let Some(k) = &self.kinematics {
-            s += &format!("kinematics {}\n", k);
+            s += &kinematics_text(k);
         }
         s += &format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
         for p in &self.processes {
@@ -274,4 +274,30 @@ impl RunReport {
         s += &format!("  report    {}\n", self.files.report_json.display());
         s
     }
+}
+
+/// The kinematics as lines: per arm, the motion length on each side and the
+/// divergence; clutch activations; stalls at the robot.
+fn kinematics_text(k: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut s = String::new();
+    for arm in 0..2 {
+        s += &format!(
+            "kinematics arm {arm}: motion console {:.1} mm, robot {:.1} mm; divergence final {:.2} mm, max {:.2} mm\n",
+            f(&k["console"]["length_mm"][arm]),
+            f(&k["robot"]["length_mm"][arm]),
+            f(&k["divergence"][arm]["final_mm"]),
+            f(&k["divergence"][arm]["max_mm"]),
+        );
+    }
+    let st = &k["robot"]["stalls"];
+    s += &format!(
+        "           clutch activations console {} robot {}; robot stalls {} (longest {:.1} ms, total {:.1} ms)\n",
+        k["console"]["clutch_activations"],
+        k["robot"]["clutch_activations"],
+        st["count"],
+        f(&st["longest_ns"]) / 1e6,
+        f(&st["total_ns"]) / 1e6,
+    );
+    s
 }

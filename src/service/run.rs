@@ -165,20 +165,31 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         (Some(_), None, None) => (60.0, (60.0 * rate_hz) as u64),
         (None, None, None) => (10.0, (10.0 * rate_hz) as u64),
     };
-    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-    let emulator_core = args.emulator_core.or((cores >= 2).then(|| cores - 1));
+    // Placement: the emulator busy-waits on a core of its own (the last). With
+    // four cores or more the console and the simulator get one each too;
+    // with fewer they share the rest, and are kept off the emulator's core.
+    let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+    let emulator_core = args.emulator_core.or((cores.len() >= 2).then(|| cores[cores.len() - 1]));
+    let (console_core, simulator_core) = match (args.console_core, args.simulator_core) {
+        (None, None) if cores.len() >= 4 && args.emulator_core.is_none() => (Some(cores[cores.len() - 3]), Some(cores[cores.len() - 2])),
+        given => given,
+    };
     eprintln!(
-        "netfi run {run_id}: scenario {} seed {seed}; emulator on core {}; output {}",
+        "netfi run {run_id}: scenario {} seed {seed}; cores: emulator {}, console {}, simulator {}; output {}",
         spec.name,
         emulator_core.map_or("(not pinned)".into(), |c| c.to_string()),
+        console_core.map_or("(shared)".into(), |c| c.to_string()),
+        simulator_core.map_or("(shared)".into(), |c| c.to_string()),
         out.display()
     );
 
     let s = |x: &dyn ToString| x.to_string();
     let out_s = out.display().to_string();
     let mut sim_args = vec![s(&"--run-id"), run_id.clone(), s(&"--out"), out_s.clone()];
-    if let Some(c) = args.simulator_core {
-        sim_args.extend([s(&"--core"), c.to_string(), s(&"--spin")]);
+    match (simulator_core, emulator_core) {
+        (Some(c), _) => sim_args.extend([s(&"--core"), c.to_string(), s(&"--spin")]),
+        (None, Some(e)) => sim_args.extend([s(&"--avoid-core"), e.to_string()]),
+        (None, None) => {}
     }
     if args.drop_bad_checksum {
         sim_args.push(s(&"--drop-bad-checksum"));
@@ -218,13 +229,15 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(c) = &args.capture {
         con_args.extend([s(&"--capture"), c.display().to_string()]);
     }
-    if let Some(c) = args.console_core {
-        con_args.extend([s(&"--core"), c.to_string()]);
+    match (console_core, emulator_core) {
+        (Some(c), _) => con_args.extend([s(&"--core"), c.to_string()]),
+        (None, Some(e)) => con_args.extend([s(&"--avoid-core"), e.to_string()]),
+        (None, None) => {}
     }
 
     let steal0 = CpuTimes::read();
     let t0 = now_ns();
-    let mut sim = spawn("simulator", sim_args, args.simulator_core, &out)?;
+    let mut sim = spawn("simulator", sim_args, simulator_core, &out)?;
     wait_ready(&mut sim, &out, Duration::from_secs(30))?;
     let mut emu = match spawn("emulator", emu_args, emulator_core, &out) {
         Ok(p) => p,
@@ -237,7 +250,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         sim.terminate();
         return Err(e);
     }
-    let mut con = match spawn("console", con_args, args.console_core, &out) {
+    let mut con = match spawn("console", con_args, console_core, &out) {
         Ok(p) => p,
         Err(e) => {
             emu.terminate();
