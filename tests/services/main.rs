@@ -200,3 +200,65 @@ fn a_killed_console_is_reported_and_the_others_finish() {
     assert_eq!(u(&f["delivered"]), u(&f["received"]));
     assert_eq!(r["emulator"]["ended_by"], "signal");
 }
+
+/// Starts one service alone (`netfi <role> --run-id … --out …`).
+fn service(role: &str, run_id: &str, out: &Path, extra: &[&str]) -> std::process::Child {
+    netfi()
+        .arg(role)
+        .args(["--run-id", run_id, "--out"])
+        .arg(out)
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn wait_file(path: &Path) {
+    let t0 = Instant::now();
+    while !path.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(30), "{} never appeared", path.display());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_restarted_console_reconnects() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("restart");
+    let run_id = format!("it-restart-{}", std::process::id());
+    let mut sim = service("simulator", &run_id, &out, &[]);
+    wait_file(&out.join("simulator.ready"));
+    let cores = core_affinity_count();
+    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
+    let mut emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal"], pin.as_slice()].concat());
+    wait_file(&out.join("emulator.ready"));
+    // The first console streams for a while and is killed mid-stream.
+    let mut first = service("console", &run_id, &out, &["--duration-s", "10", "--no-direct"]);
+    std::thread::sleep(Duration::from_millis(1500));
+    first.kill().unwrap();
+    first.wait().unwrap();
+    // A second console with the same run id takes over the port and ends the stream.
+    let second = service("console", &run_id, &out, &["--frames", "1000", "--no-direct"]);
+    let o = second.wait_with_output().unwrap();
+    assert!(o.status.success(), "second console: {}", String::from_utf8_lossy(&o.stderr));
+    let e = emu.wait_with_output().unwrap();
+    assert!(e.status.success(), "emulator: {}", String::from_utf8_lossy(&e.stderr));
+    let s = sim.wait().unwrap();
+    // The simulator ends on the emulator's end marker once the direct port is idle.
+    assert!(s.success());
+    let emu: Value = serde_json::from_slice(&std::fs::read(out.join("emulator.json")).unwrap()).unwrap();
+    let simr: Value = serde_json::from_slice(&std::fs::read(out.join("simulator.json")).unwrap()).unwrap();
+    let entered = u(&emu["frames"]["entered"]);
+    // ~1500 frames from the first console, then exactly 1000 from the second.
+    assert!(entered > 1000 + 500, "entered {entered}");
+    assert_eq!(emu["frames"]["sent_by_console"], 1000);
+    assert_eq!(emu["ended_by"], "end_marker");
+    assert_eq!(u(&emu["frames"]["delivered"]), entered);
+    assert_eq!(u(&simr["received"]), entered);
+}
+
+fn core_affinity_count() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
