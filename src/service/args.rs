@@ -30,6 +30,9 @@ pub struct ConsoleArgs {
     /// Core to pin the console to.
     #[arg(long)]
     pub core: Option<usize>,
+    /// Run on any core but this one (the emulator's), when not pinned.
+    #[arg(long, conflicts_with = "core")]
+    pub avoid_core: Option<usize>,
     /// Directory for `console.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
@@ -119,6 +122,9 @@ pub struct SimulatorArgs {
     /// Core to pin the simulator to.
     #[arg(long)]
     pub core: Option<usize>,
+    /// Run on any core but this one (the emulator's), when not pinned.
+    #[arg(long, conflicts_with = "core")]
+    pub avoid_core: Option<usize>,
     /// A gap between received frames longer than this is a stall.
     #[arg(long, default_value_t = 10.0)]
     pub stall_ms: f64,

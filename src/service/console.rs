@@ -121,9 +121,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
     signals::install();
-    if let Some(core) = args.core {
-        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: core }), "could not pin the console to core {core}");
-    }
+    crate::service::place("console", args.core, args.avoid_core)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     let deadline = now_ns() + (args.wait_for_peer_s * 1e9) as u64;
     while port.peers_connected() == 0 {

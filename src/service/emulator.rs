@@ -107,7 +107,13 @@ pub struct EmulatorReport {
 /// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
 /// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
 /// `emulator.json` into `out_dir`, and returns the report.
-pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, sink: &mut K) -> anyhow::Result<EmulatorReport> {
+/// `stop_requested` is polled off the hot path (every 4096 iterations).
+pub fn run<S: FrameSource, K: FrameSink>(
+    cfg: &EmulatorConfig,
+    source: &mut S,
+    sink: &mut K,
+    mut stop_requested: impl FnMut() -> bool,
+) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
@@ -201,7 +207,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         // 3. Housekeeping, off the per-frame path.
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
-            if signals::stop_requested() {
+            if stop_requested() {
                 break "signal";
             }
             if sent_by_console.is_some() && inj.held() == 0 {
@@ -340,5 +346,5 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
     eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", cfg.scenario.name);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
-    run(&cfg, &mut source, &mut sink)
+    run(&cfg, &mut source, &mut sink, || signals::stop_requested() || node.termination_requested())
 }

@@ -21,3 +21,27 @@ pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
     let path = out.join(format!("{role}.pid"));
     std::fs::write(&path, std::process::id().to_string()).with_context(|| format!("writing {}", path.display()))
 }
+
+/// Where a service runs: pinned to `core`, or anywhere but `avoid` (the
+/// emulator's busy core), or wherever the scheduler likes.
+pub fn place(role: &str, core: Option<usize>, avoid: Option<usize>) -> anyhow::Result<()> {
+    if let Some(c) = core {
+        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: c }), "could not pin the {role} to core {c}");
+    } else if let Some(a) = avoid {
+        let cores = core_affinity::get_core_ids().unwrap_or_default();
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET and
+        // sched_setaffinity only read and write that set.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            let mut any = false;
+            for c in cores.iter().filter(|c| c.id != a) {
+                libc::CPU_SET(c.id, &mut set);
+                any = true;
+            }
+            if any && libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                anyhow::bail!("could not keep the {role} off core {a}: {}", std::io::Error::last_os_error());
+            }
+        }
+    }
+    Ok(())
+}

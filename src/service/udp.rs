@@ -865,21 +865,23 @@ pub fn main(args: &EmulatorArgs, cfg: EmulatorConfig) -> anyhow::Result<Emulator
         std::fs::write(out.join("emulator.ready"), b"").context("writing emulator.ready")
     };
 
+    // iceoryx2, once a node is open, may take SIGINT/SIGTERM for itself.
+    let stop = || signals::stop_requested() || node.as_ref().is_some_and(|n| n.termination_requested());
     let mut source = source;
     let report = match (&mut source, &mut sink, &node) {
         (Some(src), Some(snk), _) => {
             ready(&cfg.out_dir)?;
-            emulator::run(&cfg, src, snk)?
+            emulator::run(&cfg, src, snk, stop)?
         }
         (Some(src), None, Some(node)) => {
             let mut publisher = node.publisher(Channel::Emulator).context("opening the emulator → simulator port")?;
             ready(&cfg.out_dir)?;
-            emulator::run(&cfg, src, &mut publisher)?
+            emulator::run(&cfg, src, &mut publisher, stop)?
         }
         (None, Some(snk), Some(node)) => {
             let mut subscriber = node.subscriber(Channel::Console).context("opening the console → emulator port")?;
             ready(&cfg.out_dir)?;
-            emulator::run(&cfg, &mut subscriber, snk)?
+            emulator::run(&cfg, &mut subscriber, snk, stop)?
         }
         _ => bail!("the UDP bridge needs a UDP ingress or egress (ingress {}, egress {})", args.ingress, args.egress),
     };

@@ -24,13 +24,15 @@
 //! - Ctrl-C / SIGTERM are latched by the transport and read with
 //!   [`IpcNode::termination_requested`]; the services decide how to stop.
 
+#![warn(missing_docs)]
+
 pub mod ipc;
 pub mod udp;
 
 pub use ipc::{
-    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport, DeadPeer,
-    FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber, IpcConfig,
-    IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role, RunId,
-    RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
+    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,
+    DeadPeer, FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber,
+    IpcConfig, IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role,
+    RunId, RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
     MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };

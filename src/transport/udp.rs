@@ -50,15 +50,20 @@ pub enum UdpOpenError {
     /// such address family).
     #[error("creating a UDP socket for {addr}: {source}")]
     Create {
+        /// The address the port was to be bound to.
         addr: SocketAddr,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
     /// A socket option could not be set (`option` names it).
     #[error("setting {option} on the UDP socket for {addr}: {source}")]
     Option {
+        /// The address the port was to be bound to.
         addr: SocketAddr,
+        /// The option, as its C name (`SO_RCVBUF`, …).
         option: &'static str,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
@@ -67,14 +72,18 @@ pub enum UdpOpenError {
     /// namespace), or a privileged port.
     #[error("binding UDP {addr}: {source} (is the port in use, or the address not on this host?)")]
     Bind {
+        /// The address the port was to be bound to.
         addr: SocketAddr,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
     /// The socket is bound but its local address could not be read back.
     #[error("reading the local address of UDP {addr}: {source}")]
     LocalAddr {
+        /// The address the port was to be bound to.
         addr: SocketAddr,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
@@ -86,14 +95,19 @@ pub enum UdpRecvError {
     /// The kernel reported an error on the socket.
     #[error("receiving on UDP {local}: {source}")]
     Io {
+        /// The port's local address.
         local: SocketAddr,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
     /// A datagram came from an address that is not IPv4 or IPv6 (cannot
     /// happen on a UDP/IP socket; reported rather than assumed).
     #[error("receiving on UDP {local}: a datagram from a non-IP address")]
-    NotIp { local: SocketAddr },
+    NotIp {
+        /// The port's local address.
+        local: SocketAddr,
+    },
 }
 
 /// Why a datagram was not sent.
@@ -101,19 +115,46 @@ pub enum UdpRecvError {
 pub enum UdpSendError {
     /// The socket's kernel send buffer is full; the datagram was not sent.
     #[error("sending {len} bytes from UDP {local} to {to}: the send buffer is full")]
-    WouldBlock { local: SocketAddr, to: SocketAddr, len: usize },
+    WouldBlock {
+        /// The port's local address.
+        local: SocketAddr,
+        /// The destination.
+        to: SocketAddr,
+        /// Bytes offered.
+        len: usize,
+    },
     /// The datagram is larger than the path allows (`EMSGSIZE`).
     #[error("sending {len} bytes from UDP {local} to {to}: datagram too large for the path")]
-    TooLarge { local: SocketAddr, to: SocketAddr, len: usize },
+    TooLarge {
+        /// The port's local address.
+        local: SocketAddr,
+        /// The destination.
+        to: SocketAddr,
+        /// Bytes offered.
+        len: usize,
+    },
     /// The kernel sent fewer bytes than given (not expected of UDP).
     #[error("sending {len} bytes from UDP {local} to {to}: only {sent} were sent")]
-    Truncated { local: SocketAddr, to: SocketAddr, len: usize, sent: usize },
+    Truncated {
+        /// The port's local address.
+        local: SocketAddr,
+        /// The destination.
+        to: SocketAddr,
+        /// Bytes offered.
+        len: usize,
+        /// Bytes sent.
+        sent: usize,
+    },
     /// Any other error from the kernel (no route, network unreachable, …).
     #[error("sending {len} bytes from UDP {local} to {to}: {source}")]
     Io {
+        /// The port's local address.
         local: SocketAddr,
+        /// The destination.
         to: SocketAddr,
+        /// Bytes offered.
         len: usize,
+        /// The kernel's error.
         #[source]
         source: io::Error,
     },
@@ -128,10 +169,12 @@ pub struct PeerAddr {
 }
 
 impl PeerAddr {
+    /// Converts `addr`.
     pub fn new(addr: SocketAddr) -> PeerAddr {
         PeerAddr { addr, raw: SockAddr::from(addr) }
     }
 
+    /// The address.
     pub fn addr(&self) -> SocketAddr {
         self.addr
     }
@@ -147,7 +190,9 @@ impl From<SocketAddr> for PeerAddr {
 /// buffer it was received into) and its source.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Datagram {
+    /// Bytes in the datagram (not only those kept).
     pub len: usize,
+    /// Its source address.
     pub from: SocketAddr,
 }
 
