@@ -245,14 +245,17 @@ fn iperf3_through(name: &str, scenario: &str, seed: u64, datagrams: u64) -> (Val
     (client, e, udp, out)
 }
 
-/// A port free for both UDP and TCP on loopback, as far as one can tell.
+/// A port free for both UDP and TCP (IPv4, and IPv6 where there is IPv6),
+/// as far as one can tell.
 fn free_tcp_and_udp_port() -> u16 {
-    loop {
-        let p = free_udp_port();
-        if std::net::TcpListener::bind(("127.0.0.1", p)).is_ok() && std::net::TcpListener::bind(("::", p)).is_ok() {
-            return p;
-        }
-    }
+    let free_v6 = |p: u16| match std::net::TcpListener::bind(("::", p)) {
+        Ok(_) => true,
+        Err(e) => e.kind() != std::io::ErrorKind::AddrInUse,
+    };
+    (0..100)
+        .map(|_| free_udp_port())
+        .find(|p| std::net::TcpListener::bind(("0.0.0.0", *p)).is_ok() && free_v6(*p))
+        .expect("no free port in 100 tries")
 }
 
 /// Of the datagrams with ingress index `1..=last` (the hello is index 0 and
@@ -283,7 +286,7 @@ fn check_iperf3_loss(label: &str, client: &Value, e: &Value, udp: &Value, out: &
     assert_eq!(u(&f["entered"]), datagrams + 1, "{f}");
     assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
     assert_eq!(drops_in_trace(&out.join("trace_emulator.csv"), datagrams), dropped, "the hello datagram passed");
-    assert!(highest <= datagrams && highest + 100 > datagrams, "iperf3 counted up to {highest} of {datagrams}");
+    assert!(highest <= datagrams && highest > datagrams / 2, "iperf3 counted up to {highest} of {datagrams}");
     let netfi_lost = drops_in_trace(&out.join("trace_emulator.csv"), highest);
     assert_eq!(lost, netfi_lost, "iperf3 lost {lost} of datagrams 1..={highest}; netfi dropped {netfi_lost} of them");
     assert_eq!(bytes, (highest - lost) * 1000, "iperf3 received every datagram it did not count as lost");
