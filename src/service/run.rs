@@ -229,6 +229,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(c) = &args.capture {
         con_args.extend([s(&"--capture"), c.display().to_string()]);
     }
+    if args.no_direct {
+        con_args.push(s(&"--no-direct"));
+    }
     match (console_core, emulator_core) {
         (Some(c), _) => con_args.extend([s(&"--core"), c.to_string()]),
         (None, Some(e)) => con_args.extend([s(&"--avoid-core"), e.to_string()]),
