@@ -185,4 +185,9 @@ pub struct RunArgs {
     /// Print the JSON report instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Do not send the direct (baseline) copy of each frame to the simulator:
+    /// halves the console's and simulator's work at very high rates, at the
+    /// price of the in-run baseline and the console-side kinematics.
+    #[arg(long)]
+    pub no_direct: bool,
 }

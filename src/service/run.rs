@@ -229,6 +229,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(c) = &args.capture {
         con_args.extend([s(&"--capture"), c.display().to_string()]);
     }
+    if args.no_direct {
+        con_args.push(s(&"--no-direct"));
+    }
     match (console_core, emulator_core) {
         (Some(c), _) => con_args.extend([s(&"--core"), c.to_string()]),
         (None, Some(e)) => con_args.extend([s(&"--avoid-core"), e.to_string()]),
@@ -268,10 +271,25 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let hard_deadline = planned + drain_grace + Duration::from_secs(60);
     let mut interrupted = false;
     let mut console_done_at: Option<Instant> = None;
+    // The runner reaps the run's dead processes, off the emulator's core, so
+    // the survivors see their peer counts drop and a restarted peer can take
+    // over its port.
+    let ipc = crate::transport::RunId::new(&run_id).ok().map(crate::transport::IpcConfig::new);
+    let mut last_reap = Instant::now();
     let mut emulator_done_at: Option<Instant> = None;
     loop {
         std::thread::sleep(Duration::from_millis(5));
         let (c, e, m) = (con.poll(), emu.poll(), sim.poll());
+        if last_reap.elapsed() > Duration::from_millis(200) {
+            last_reap = Instant::now();
+            if let Some(cfg) = &ipc {
+                if let Ok(r) = crate::transport::cleanup_dead_nodes(cfg) {
+                    for dead in r.dead() {
+                        eprintln!("reaped a dead peer: {dead}");
+                    }
+                }
+            }
+        }
         if signals::stop_requested() && !interrupted {
             interrupted = true;
             eprintln!("stopping: console, then emulator, then simulator");

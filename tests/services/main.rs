@@ -199,6 +199,9 @@ fn a_killed_console_is_reported_and_the_others_finish() {
     assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]));
     assert_eq!(u(&f["delivered"]), u(&f["received"]));
     assert_eq!(r["emulator"]["ended_by"], "signal");
+    // The emulator saw its console go away (the runner reaps dead peers).
+    let events = r["peer_events"].as_array().unwrap();
+    assert!(events.iter().any(|e| e["peer"] == "console" && e["connected"] == 0), "{events:?}");
 }
 
 /// Starts one service alone (`netfi <role> --run-id … --out …`).
