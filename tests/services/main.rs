@@ -176,7 +176,7 @@ fn wait_pid(out: &Path, role: &str) -> i32 {
 fn a_killed_console_is_reported_and_the_others_finish() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let out = out_dir("kill-console");
-    let mut child = netfi()
+    let child = netfi()
         .args(["run", "Normal", "--duration-s", "3", "--seed", "7", "--json", "--out"])
         .arg(&out)
         .stdout(Stdio::piped())
@@ -235,7 +235,7 @@ fn a_restarted_console_reconnects() {
     let cores = core_affinity_count();
     let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
     let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
-    let mut emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal"], pin.as_slice()].concat());
+    let emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal"], pin.as_slice()].concat());
     wait_file(&out.join("emulator.ready"));
     // The first console streams for a while and is killed mid-stream.
     let mut first = service("console", &run_id, &out, &["--duration-s", "10", "--no-direct"]);
