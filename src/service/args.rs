@@ -65,6 +65,10 @@ pub struct EmulatorArgs {
     /// Do not pin the emulator at all.
     #[arg(long, conflicts_with = "core")]
     pub no_pin: bool,
+    /// Run the emulator's loop at this SCHED_FIFO priority (1–99; needs root
+    /// or CAP_SYS_NICE), so no ordinary process on its core preempts it.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// Drop frames with a wrong ITP checksum (default: count and pass them).
     #[arg(long)]
     pub drop_bad_checksum: bool,
@@ -161,6 +165,10 @@ pub struct RunArgs {
     /// Core for the emulator (default: the last core).
     #[arg(long)]
     pub emulator_core: Option<usize>,
+    /// Run the emulator at this SCHED_FIFO priority (1–99; needs root or
+    /// CAP_SYS_NICE): ordinary processes on its core cannot preempt it.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// Core for the console (default: not pinned).
     #[arg(long)]
     pub console_core: Option<usize>,

@@ -41,6 +41,8 @@ pub struct EmulatorConfig {
     pub expected_frames: u64,
     /// Where the trace, histograms and report go.
     pub out_dir: PathBuf,
+    /// Run the loop at this SCHED_FIFO priority (needs root or CAP_SYS_NICE).
+    pub rt_priority: Option<i32>,
 }
 
 /// A change in a peer's presence, seen by the emulator.
@@ -73,6 +75,8 @@ pub struct EmulatorReport {
     pub scenario: String,
     pub seed: u64,
     pub core: Option<usize>,
+    /// SCHED_FIFO priority the loop ran at, if any.
+    pub realtime_priority: Option<i32>,
     pub queue_order: String,
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
@@ -124,6 +128,16 @@ pub fn run<S: FrameSource, K: FrameSink>(
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
     }
+    let realtime_priority = match cfg.rt_priority {
+        Some(p) => match crate::service::set_realtime(p) {
+            Ok(()) => Some(p),
+            Err(e) => {
+                eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
+                None
+            }
+        },
+        None => None,
+    };
     let mut decision = LatencyHistogram::new();
     let mut ingress_wait = LatencyHistogram::new();
     let mut lateness = LatencyHistogram::new();
@@ -252,6 +266,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
         scenario: inj.scenario().name().to_string(),
         seed: cfg.seed,
         core: cfg.core,
+        realtime_priority,
         queue_order: format!("{:?}", inj.queue_order()).to_lowercase(),
         queue_capacity: inj.queue_capacity(),
         frames: EmulatorFrames {
@@ -334,6 +349,7 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         drop_bad_checksum: args.drop_bad_checksum,
         expected_frames: args.expected_frames,
         out_dir: args.out.clone(),
+        rt_priority: args.rt_priority,
     };
     if args.ingress.is_udp() || args.egress.is_udp() {
         return crate::service::udp::main(args, cfg);

@@ -213,6 +213,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(q) = args.queue_capacity {
         emu_args.extend([s(&"--queue-capacity"), q.to_string()]);
     }
+    if let Some(p) = args.rt_priority {
+        emu_args.extend([s(&"--rt-priority"), p.to_string()]);
+    }
     if args.drop_bad_checksum {
         emu_args.push(s(&"--drop-bad-checksum"));
     }
