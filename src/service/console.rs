@@ -50,7 +50,7 @@ pub struct ConsoleReport {
 /// Where frames come from: each call gives the frame's planned offset from
 /// the stream's start and its wire bytes.
 enum Script {
-    Synthetic { motion: MotionGenerator, period_ns: f64 },
+    Synthetic { motion: Box<MotionGenerator>, period_ns: f64 },
     Replay { records: Vec<(u64, [u8; ITP_FRAME_LEN])>, period_ns: Option<f64> },
 }
 
@@ -107,7 +107,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             let rate = args.rate_hz.unwrap_or(1000.0);
             anyhow::ensure!(rate.is_finite() && rate > 0.0, "--rate-hz must be a positive number, got {rate}");
             let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
-            Script::Synthetic { motion, period_ns: 1e9 / rate }
+            Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
         }
     };
     if let Some(r) = args.rate_hz {
