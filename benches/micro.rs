@@ -90,6 +90,20 @@ fn queue_depths(c: &mut Criterion) {
     g.finish();
 }
 
+fn codec(c: &mut Criterion) {
+    use netfi::frame::{ItpFrame, ItpView};
+    let frame = ItpFrame { sequence: 7, delx: [12, -3], dely: [4, 5], delz: [-6, 7], qw: [1.0, 1.0], grasp: [30, 60], surgeon_mode: 1, ..ItpFrame::default() }
+        .with_checksum();
+    let bytes = frame.to_bytes();
+    let mut g = c.benchmark_group("codec");
+    g.bench_function("encode ItpFrame → 124 bytes", |b| b.iter(|| black_box(black_box(&frame).to_bytes())));
+    g.bench_function("decode + verify 124 bytes → ItpFrame", |b| {
+        b.iter(|| ItpFrame::parse(&ItpView::new_unchecked(black_box(&bytes[..]))).unwrap())
+    });
+    g.bench_function("checksum check on the view", |b| b.iter(|| ItpView::new_unchecked(black_box(&bytes[..])).verify_checksum()));
+    g.finish();
+}
+
 fn report_steal(_c: &mut Criterion) {
     if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
         let s = now.steal_since(start);
@@ -105,5 +119,9 @@ fn start(_c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, start, decisions, injector_step, queue_depths, report_steal);
+criterion_group! {
+    name = benches;
+    config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2));
+    targets = start, codec, decisions, injector_step, queue_depths, report_steal
+}
 criterion_main!(benches);

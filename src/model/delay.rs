@@ -170,6 +170,52 @@ impl Delay {
         varies && !self.fifo
     }
 
+    /// `P(D ≤ x_ms)`, the law's distribution function (without the `fifo`
+    /// hold).
+    pub fn cdf_ms(&self, x_ms: f64) -> f64 {
+        let min_ms = self.min_ns as f64 / 1e6;
+        let y = x_ms - min_ms;
+        match &self.jitter {
+            Jitter::None => f64::from(u8::from(y >= 0.0)),
+            _ if y < 0.0 => 0.0,
+            Jitter::Uniform { width_ms } if *width_ms > 0.0 => (y / width_ms).min(1.0),
+            Jitter::Uniform { .. } => 1.0,
+            Jitter::Hyperexp { components, pick_thresholds, mean_ms } => {
+                let scale = (1u64 << 53) as f64;
+                let mut prev = 0.0;
+                let mut cdf = 0.0;
+                for i in 0..*components {
+                    let upto = if i + 1 < *components { pick_thresholds[i] as f64 / scale } else { 1.0 };
+                    cdf += (upto - prev) * -(-y / mean_ms[i]).exp_m1();
+                    prev = upto;
+                }
+                cdf
+            }
+        }
+    }
+
+    /// The `q`-quantile of `D` in ms (`0 < q < 1`), by bisection on
+    /// [`Delay::cdf_ms`] to 1 ns.
+    pub fn quantile_ms(&self, q: f64) -> f64 {
+        let min_ms = self.min_ns as f64 / 1e6;
+        let (mut lo, mut hi) = (min_ms, min_ms + 1.0);
+        while self.cdf_ms(hi) < q {
+            hi = min_ms + (hi - min_ms) * 2.0;
+            if hi > 1e12 {
+                return f64::INFINITY;
+            }
+        }
+        while hi - lo > 1e-6 {
+            let mid = 0.5 * (lo + hi);
+            if self.cdf_ms(mid) < q {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
     /// Draws one delay `D` in ns (without the `fifo` hold).
     #[inline]
     pub fn sample_ns(&self, rng: &mut StageRng) -> u64 {
@@ -248,6 +294,53 @@ impl Model for Delay {
         let release_ns = if self.fifo { own_ns.max(self.last_release_ns) } else { own_ns };
         self.last_release_ns = release_ns;
         Verdict::Pass { delay_ns: release_ns - t_ns }
+    }
+}
+
+#[cfg(test)]
+mod quantile_tests {
+    use super::*;
+
+    fn dlm2() -> Delay {
+        Delay::new(&DelayParams {
+            min_ms: Millis::new(210.0).unwrap(),
+            dist: DelayDist::Hyperexp,
+            weights: Some(vec![0.89258, 0.10742]),
+            rates_per_ms: Some(vec![0.01081, 0.01624]),
+            jitter_ms: None,
+            order: Order::Reorder,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn quantiles_invert_the_distribution_function() {
+        let d = dlm2();
+        // Hand-computed: F(210 + y) = 1 − 0.89258 e^(−0.01081 y) − 0.10742 e^(−0.01624 y).
+        let y: f64 = 100.0;
+        let f = 1.0 - 0.89258 * (-0.01081 * y).exp() - 0.10742 * (-0.01624 * y).exp();
+        assert!((d.cdf_ms(310.0) - f).abs() < 1e-9, "{} vs {f}", d.cdf_ms(310.0));
+        for q in [0.01, 0.1, 0.5, 0.9, 0.99, 0.999] {
+            let x = d.quantile_ms(q);
+            assert!((d.cdf_ms(x) - q).abs() < 1e-8, "q {q}: x {x}");
+        }
+        assert_eq!(d.cdf_ms(209.9), 0.0);
+    }
+
+    #[test]
+    fn uniform_and_constant_quantiles() {
+        let u = Delay::new(&DelayParams {
+            min_ms: Millis::new(5.0).unwrap(),
+            dist: DelayDist::Uniform,
+            weights: None,
+            rates_per_ms: None,
+            jitter_ms: Some(Millis::new(10.0).unwrap()),
+            order: Order::Reorder,
+        })
+        .unwrap();
+        assert!((u.quantile_ms(0.25) - 7.5).abs() < 1e-5);
+        let c = Delay::new(&DelayParams { min_ms: Millis::new(20.0).unwrap(), dist: DelayDist::None, weights: None, rates_per_ms: None, jitter_ms: None, order: Order::Fifo }).unwrap();
+        assert!((c.quantile_ms(0.5) - 20.0).abs() < 1e-5);
     }
 }
 

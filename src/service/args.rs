@@ -1,7 +1,9 @@
 //! Command-line arguments of the services, shared by `netfi <service>` and
 //! the stand-alone `netfi-console`, `netfi-emulator`, `netfi-simulator`.
 
+use crate::service::udp::{Endpoint, Payload};
 use clap::Args;
+use std::net::SocketAddr;
 use std::path::PathBuf;
 
 #[derive(Debug, Clone, Args)]
@@ -28,6 +30,9 @@ pub struct ConsoleArgs {
     /// Core to pin the console to.
     #[arg(long)]
     pub core: Option<usize>,
+    /// Run on any core but this one (the emulator's), when not pinned.
+    #[arg(long, conflicts_with = "core")]
+    pub avoid_core: Option<usize>,
     /// Directory for `console.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
@@ -41,8 +46,10 @@ pub struct ConsoleArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct EmulatorArgs {
+    /// Run id shared with the console and simulator (needed when either side
+    /// is iceoryx2).
     #[arg(long)]
-    pub run_id: String,
+    pub run_id: Option<String>,
     /// A scenario file or preset name.
     #[arg(long)]
     pub scenario: String,
@@ -58,6 +65,10 @@ pub struct EmulatorArgs {
     /// Do not pin the emulator at all.
     #[arg(long, conflicts_with = "core")]
     pub no_pin: bool,
+    /// Run the emulator's loop at this SCHED_FIFO priority (1–99; needs root
+    /// or CAP_SYS_NICE), so no ordinary process on its core preempts it.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// Drop frames with a wrong ITP checksum (default: count and pass them).
     #[arg(long)]
     pub drop_bad_checksum: bool,
@@ -67,6 +78,45 @@ pub struct EmulatorArgs {
     /// Directory for the trace, histograms and `emulator.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// Where frames come from: `iceoryx2` (the console's port) or
+    /// `udp://ADDR:PORT` (a socket bound there; `udp://:PORT` binds loopback).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub ingress: Endpoint,
+    /// Where survivors go: `iceoryx2` (the simulator's port) or
+    /// `udp://ADDR:PORT` (the robot's address).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub egress: Endpoint,
+    /// What a UDP datagram carries: one ITP frame (validated), or any bytes
+    /// up to 64 KiB (UDP on both sides).
+    #[arg(long, value_enum, default_value_t = Payload::Itp)]
+    pub payload: Payload,
+    /// Local address the UDP egress sends from (default: an ephemeral port,
+    /// on loopback when the robot is on loopback).
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub egress_bind: Option<SocketAddr>,
+    /// Pass datagrams coming back from the robot side through this scenario
+    /// (file or preset) instead of relaying them untouched.
+    #[arg(long, value_name = "SCENARIO")]
+    pub return_scenario: Option<String>,
+    /// Seed of the return path's scenario (default: the file's, else derived
+    /// from --seed; printed).
+    #[arg(long)]
+    pub return_seed: Option<u64>,
+    /// Send return datagrams here instead of to the console's latest source
+    /// address (`udp://ADDR:PORT`).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub return_to: Option<Endpoint>,
+    /// Do not relay datagrams from the robot side at all.
+    #[arg(long)]
+    pub no_return: bool,
+    /// With a UDP ingress: end the run as if the console had ended, once no
+    /// datagram has arrived for this many milliseconds (default: run until
+    /// SIGINT/SIGTERM).
+    #[arg(long, value_name = "MS")]
+    pub idle_end_ms: Option<f64>,
+    /// Requested kernel receive/send buffer of each UDP socket, bytes.
+    #[arg(long, default_value_t = crate::service::udp::DEFAULT_UDP_BUFFER_BYTES)]
+    pub udp_buffer_bytes: usize,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -76,6 +126,9 @@ pub struct SimulatorArgs {
     /// Core to pin the simulator to.
     #[arg(long)]
     pub core: Option<usize>,
+    /// Run on any core but this one (the emulator's), when not pinned.
+    #[arg(long, conflicts_with = "core")]
+    pub avoid_core: Option<usize>,
     /// A gap between received frames longer than this is a stall.
     #[arg(long, default_value_t = 10.0)]
     pub stall_ms: f64,
@@ -112,6 +165,10 @@ pub struct RunArgs {
     /// Core for the emulator (default: the last core).
     #[arg(long)]
     pub emulator_core: Option<usize>,
+    /// Run the emulator at this SCHED_FIFO priority (1–99; needs root or
+    /// CAP_SYS_NICE): ordinary processes on its core cannot preempt it.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// Core for the console (default: not pinned).
     #[arg(long)]
     pub console_core: Option<usize>,
@@ -136,4 +193,9 @@ pub struct RunArgs {
     /// Print the JSON report instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Do not send the direct (baseline) copy of each frame to the simulator:
+    /// halves the console's and simulator's work at very high rates, at the
+    /// price of the in-run baseline and the console-side kinematics.
+    #[arg(long)]
+    pub no_direct: bool,
 }

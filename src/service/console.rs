@@ -50,7 +50,7 @@ pub struct ConsoleReport {
 /// Where frames come from: each call gives the frame's planned offset from
 /// the stream's start and its wire bytes.
 enum Script {
-    Synthetic { motion: MotionGenerator, period_ns: f64 },
+    Synthetic { motion: Box<MotionGenerator>, period_ns: f64 },
     Replay { records: Vec<(u64, [u8; ITP_FRAME_LEN])>, period_ns: Option<f64> },
 }
 
@@ -107,7 +107,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             let rate = args.rate_hz.unwrap_or(1000.0);
             anyhow::ensure!(rate.is_finite() && rate > 0.0, "--rate-hz must be a positive number, got {rate}");
             let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
-            Script::Synthetic { motion, period_ns: 1e9 / rate }
+            Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
         }
     };
     if let Some(r) = args.rate_hz {
@@ -121,9 +121,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
     signals::install();
-    if let Some(core) = args.core {
-        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: core }), "could not pin the console to core {core}");
-    }
+    crate::service::place("console", args.core, args.avoid_core)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     let deadline = now_ns() + (args.wait_for_peer_s * 1e9) as u64;
     while port.peers_connected() == 0 {

@@ -41,6 +41,8 @@ pub struct EmulatorConfig {
     pub expected_frames: u64,
     /// Where the trace, histograms and report go.
     pub out_dir: PathBuf,
+    /// Run the loop at this SCHED_FIFO priority (needs root or CAP_SYS_NICE).
+    pub rt_priority: Option<i32>,
 }
 
 /// A change in a peer's presence, seen by the emulator.
@@ -73,6 +75,8 @@ pub struct EmulatorReport {
     pub scenario: String,
     pub seed: u64,
     pub core: Option<usize>,
+    /// SCHED_FIFO priority the loop ran at, if any.
+    pub realtime_priority: Option<i32>,
     pub queue_order: String,
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
@@ -81,6 +85,9 @@ pub struct EmulatorReport {
     pub stages: Vec<StageReport>,
     /// Injected delay of delivered frames.
     pub injected_delay_ns: Summary,
+    /// Console send → frame taken off the console port (the first hop plus
+    /// any time the frame waited in the port for the emulator).
+    pub ingress_wait_ns: Summary,
     /// Frame taken off the console port → fate decided.
     pub decision_ns: Summary,
     /// Actual − scheduled release.
@@ -104,7 +111,13 @@ pub struct EmulatorReport {
 /// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
 /// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
 /// `emulator.json` into `out_dir`, and returns the report.
-pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, sink: &mut K) -> anyhow::Result<EmulatorReport> {
+/// `stop_requested` is polled off the hot path (every 4096 iterations).
+pub fn run<S: FrameSource, K: FrameSink>(
+    cfg: &EmulatorConfig,
+    source: &mut S,
+    sink: &mut K,
+    mut stop_requested: impl FnMut() -> bool,
+) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
@@ -115,7 +128,18 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
     }
+    let realtime_priority = match cfg.rt_priority {
+        Some(p) => match crate::service::set_realtime(p) {
+            Ok(()) => Some(p),
+            Err(e) => {
+                eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
+                None
+            }
+        },
+        None => None,
+    };
     let mut decision = LatencyHistogram::new();
+    let mut ingress_wait = LatencyHistogram::new();
     let mut lateness = LatencyHistogram::new();
     let mut injected = LatencyHistogram::new();
     let mut batches = BatchMeans::new(cfg.expected_frames.max(1));
@@ -169,6 +193,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
                 };
                 let t_decided = now_ns();
                 decision.record(t_decided - t_take);
+                ingress_wait.record(t_take.saturating_sub(sample.send_ns));
                 let (dropped, release_sched_ns) = match entered.fate {
                     Fate::Scheduled { release_ns, .. } => (None, release_ns),
                     Fate::Dropped(c) => {
@@ -196,7 +221,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         // 3. Housekeeping, off the per-frame path.
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
-            if signals::stop_requested() {
+            if stop_requested() {
                 break "signal";
             }
             if sent_by_console.is_some() && inj.held() == 0 {
@@ -241,6 +266,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         scenario: inj.scenario().name().to_string(),
         seed: cfg.seed,
         core: cfg.core,
+        realtime_priority,
         queue_order: format!("{:?}", inj.queue_order()).to_lowercase(),
         queue_capacity: inj.queue_capacity(),
         frames: EmulatorFrames {
@@ -255,6 +281,7 @@ pub fn run<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, source: &mut S, s
         loss_rate_ci95,
         stages,
         injected_delay_ns: injected.summary(),
+        ingress_wait_ns: ingress_wait.summary(),
         decision_ns: decision.summary(),
         release_lateness_ns: lateness.summary(),
         peer_events,
@@ -295,12 +322,18 @@ fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (In
     Ok((seq, bad))
 }
 
-/// Wires the emulator: arguments → scenario → iceoryx2 ports → [`run`].
+/// Wires the emulator: arguments → scenario → ports → [`run`]. The ports
+/// are iceoryx2's unless `--ingress` or `--egress` names a UDP endpoint
+/// (then [`crate::service::udp::main`] wires them).
 pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     let spec = crate::scenario::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::run::fresh_seed);
-    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(crate::service::run::DEFAULT_QUEUE_CAPACITY);
+    let default_capacity = match args.payload {
+        crate::service::udp::Payload::Raw => crate::service::udp::RAW_DEFAULT_QUEUE_CAPACITY,
+        crate::service::udp::Payload::Itp => crate::service::run::DEFAULT_QUEUE_CAPACITY,
+    };
+    let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(default_capacity);
     anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
     let core = if args.no_pin {
         None
@@ -308,13 +341,6 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id)))
     };
     crate::service::write_pid(&args.out, "emulator")?;
-    let node = crate::service::ipc::open_node(&args.run_id, crate::transport::Role::Emulator)?;
-    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
-    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
-    signals::install();
-    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", spec.name);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     let cfg = EmulatorConfig {
         scenario: spec,
         seed,
@@ -323,6 +349,18 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         drop_bad_checksum: args.drop_bad_checksum,
         expected_frames: args.expected_frames,
         out_dir: args.out.clone(),
+        rt_priority: args.rt_priority,
     };
-    run(&cfg, &mut source, &mut sink)
+    if args.ingress.is_udp() || args.egress.is_udp() {
+        return crate::service::udp::main(args, cfg);
+    }
+    let run_id = args.run_id.as_deref().context("--run-id is required with the iceoryx2 ingress and egress")?;
+    let node = crate::service::ipc::open_node(run_id, crate::transport::Role::Emulator)?;
+    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
+    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
+    signals::install();
+    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", cfg.scenario.name);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
+    run(&cfg, &mut source, &mut sink, || signals::stop_requested() || node.termination_requested())
 }

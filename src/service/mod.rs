@@ -12,6 +12,7 @@ pub mod report;
 pub mod run;
 pub mod signals;
 pub mod simulator;
+pub mod udp;
 
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
 pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
@@ -19,4 +20,43 @@ pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join(format!("{role}.pid"));
     std::fs::write(&path, std::process::id().to_string()).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Where a service runs: pinned to `core`, or anywhere but `avoid` (the
+/// emulator's busy core), or wherever the scheduler likes.
+pub fn place(role: &str, core: Option<usize>, avoid: Option<usize>) -> anyhow::Result<()> {
+    if let Some(c) = core {
+        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: c }), "could not pin the {role} to core {c}");
+    } else if let Some(a) = avoid {
+        let cores = core_affinity::get_core_ids().unwrap_or_default();
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET and
+        // sched_setaffinity only read and write that set.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            let mut any = false;
+            for c in cores.iter().filter(|c| c.id != a) {
+                libc::CPU_SET(c.id, &mut set);
+                any = true;
+            }
+            if any && libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                anyhow::bail!("could not keep the {role} off core {a}: {}", std::io::Error::last_os_error());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Moves the calling thread to SCHED_FIFO at `priority` (1–99), so ordinary
+/// processes on its core cannot preempt it. Needs root or CAP_SYS_NICE. The
+/// kernel's real-time throttling (by default 95% of each second) still
+/// leaves the core's other work 5% of its time.
+pub fn set_realtime(priority: i32) -> std::io::Result<()> {
+    let param = libc::sched_param { sched_priority: priority };
+    // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
 }

@@ -52,6 +52,8 @@ impl From<Summary> for Percentiles {
 /// What the injector itself adds, in ns.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Overhead {
+    /// Console send → taken off the console port by the emulator.
+    pub ingress_wait: Option<Percentiles>,
     /// Frame taken off the console port → fate decided.
     pub decision: Option<Percentiles>,
     /// Actual − scheduled release.
@@ -95,6 +97,33 @@ pub struct Files {
     pub report_json: PathBuf,
 }
 
+/// One quantile of the delay law: as the model gives it, as the emulator
+/// drew it, and as the simulator saw it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DelayQuantile {
+    pub q: f64,
+    /// The analytic quantile, when the scenario is one delay stage.
+    pub model_ms: Option<f64>,
+    /// Where the empirical quantile of a correct sampler lies with 95%
+    /// confidence (DKW band mapped through the analytic law).
+    pub model_band_ms: Option<[f64; 2]>,
+    pub injected_ms: f64,
+    pub seen_ms: f64,
+    /// What the transport and the emulator's timing added at this quantile.
+    pub seen_minus_injected_us: f64,
+}
+
+/// The delays the robot saw against the model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DelayCheck {
+    pub frames: u64,
+    pub dkw_epsilon: f64,
+    pub quantiles: Vec<DelayQuantile>,
+    pub max_abs_seen_minus_injected_us: f64,
+    /// Every drawn quantile inside the model's 95% band.
+    pub injected_within_model_band: Option<bool>,
+}
+
 /// The report of one `netfi run`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {
@@ -109,6 +138,8 @@ pub struct RunReport {
     /// Injected delay of delivered frames (ns).
     pub injected_delay_ns: Option<Percentiles>,
     pub overhead_ns: Overhead,
+    /// Delays seen vs drawn vs the analytic law (scenarios that delay).
+    pub delay_check: Option<DelayCheck>,
     pub kinematics: Option<serde_json::Value>,
     pub processes: Vec<ProcessEnd>,
     /// What went wrong: dead processes, frames lost between processes.
@@ -202,6 +233,7 @@ impl RunReport {
             s += &format!("delay      injected mean {:.3} ms; {}\n", d.mean / 1e6, line(&self.injected_delay_ns));
         }
         s += "overhead (what netfi itself adds)\n";
+        s += &format!("  ingress wait      {}\n", line(&self.overhead_ns.ingress_wait));
         s += &format!("  decision          {}\n", line(&self.overhead_ns.decision));
         s += &format!("  release lateness  {}\n", line(&self.overhead_ns.release_lateness));
         s += &format!("  end-to-end extra  {}\n", line(&self.overhead_ns.end_to_end_extra));
@@ -209,8 +241,18 @@ impl RunReport {
         if let Some(a) = &self.overhead_ns.added_over_direct {
             s += &format!("  added over direct p50 {} ns  p99 {} ns  p99.9 {} ns\n", a["p50"], a["p99"], a["p999"]);
         }
+        if let Some(dc) = &self.delay_check {
+            s += &format!("delay law  {} frames; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames);
+            for q in &dc.quantiles {
+                let model = match (q.model_ms, q.model_band_ms) {
+                    (Some(m), Some([lo, hi])) => format!("{m:9.3} [{lo:.3}, {hi:.3}]"),
+                    _ => "-".into(),
+                };
+                s += &format!("  q{:<5} {model}  {:9.3} ms  {:9.3} ms  {:+8.1} µs\n", q.q, q.injected_ms, q.seen_ms, q.seen_minus_injected_us);
+            }
+        }
         if let Some(k) = &self.kinematics {
-            s += &format!("kinematics {}\n", k);
+            s += &kinematics_text(k);
         }
         s += &format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
         for p in &self.processes {
@@ -232,4 +274,30 @@ impl RunReport {
         s += &format!("  report    {}\n", self.files.report_json.display());
         s
     }
+}
+
+/// The kinematics as lines: per arm, the motion length on each side and the
+/// divergence; clutch activations; stalls at the robot.
+fn kinematics_text(k: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut s = String::new();
+    for arm in 0..2 {
+        s += &format!(
+            "kinematics arm {arm}: motion console {:.1} mm, robot {:.1} mm; divergence final {:.2} mm, max {:.2} mm\n",
+            f(&k["console"]["length_mm"][arm]),
+            f(&k["robot"]["length_mm"][arm]),
+            f(&k["divergence"][arm]["final_mm"]),
+            f(&k["divergence"][arm]["max_mm"]),
+        );
+    }
+    let st = &k["robot"]["stalls"];
+    s += &format!(
+        "           clutch activations console {} robot {}; robot stalls {} (longest {:.1} ms, total {:.1} ms)\n",
+        k["console"]["clutch_activations"],
+        k["robot"]["clutch_activations"],
+        st["count"],
+        f(&st["longest_ns"]) / 1e6,
+        f(&st["total_ns"]) / 1e6,
+    );
+    s
 }

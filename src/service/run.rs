@@ -13,7 +13,7 @@ use crate::scenario::{self, Scenario};
 use crate::service::args::RunArgs;
 use crate::service::console::ConsoleReport;
 use crate::service::emulator::EmulatorReport;
-use crate::service::report::{self, Files, Overhead, Percentiles, ProcessEnd, RunReport, Steal};
+use crate::service::report::{self, DelayCheck, DelayQuantile, Files, Overhead, Percentiles, ProcessEnd, RunReport, Steal};
 use crate::service::signals;
 use crate::service::simulator::SimulatorReport;
 use anyhow::{bail, Context, Result};
@@ -165,20 +165,31 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         (Some(_), None, None) => (60.0, (60.0 * rate_hz) as u64),
         (None, None, None) => (10.0, (10.0 * rate_hz) as u64),
     };
-    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-    let emulator_core = args.emulator_core.or((cores >= 2).then(|| cores - 1));
+    // Placement: the emulator busy-waits on a core of its own (the last). With
+    // four cores or more the console and the simulator get one each too;
+    // with fewer they share the rest, and are kept off the emulator's core.
+    let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+    let emulator_core = args.emulator_core.or((cores.len() >= 2).then(|| cores[cores.len() - 1]));
+    let (console_core, simulator_core) = match (args.console_core, args.simulator_core) {
+        (None, None) if cores.len() >= 4 && args.emulator_core.is_none() => (Some(cores[cores.len() - 3]), Some(cores[cores.len() - 2])),
+        given => given,
+    };
     eprintln!(
-        "netfi run {run_id}: scenario {} seed {seed}; emulator on core {}; output {}",
+        "netfi run {run_id}: scenario {} seed {seed}; cores: emulator {}, console {}, simulator {}; output {}",
         spec.name,
         emulator_core.map_or("(not pinned)".into(), |c| c.to_string()),
+        console_core.map_or("(shared)".into(), |c| c.to_string()),
+        simulator_core.map_or("(shared)".into(), |c| c.to_string()),
         out.display()
     );
 
     let s = |x: &dyn ToString| x.to_string();
     let out_s = out.display().to_string();
     let mut sim_args = vec![s(&"--run-id"), run_id.clone(), s(&"--out"), out_s.clone()];
-    if let Some(c) = args.simulator_core {
-        sim_args.extend([s(&"--core"), c.to_string(), s(&"--spin")]);
+    match (simulator_core, emulator_core) {
+        (Some(c), _) => sim_args.extend([s(&"--core"), c.to_string(), s(&"--spin")]),
+        (None, Some(e)) => sim_args.extend([s(&"--avoid-core"), e.to_string()]),
+        (None, None) => {}
     }
     if args.drop_bad_checksum {
         sim_args.push(s(&"--drop-bad-checksum"));
@@ -202,6 +213,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(q) = args.queue_capacity {
         emu_args.extend([s(&"--queue-capacity"), q.to_string()]);
     }
+    if let Some(p) = args.rt_priority {
+        emu_args.extend([s(&"--rt-priority"), p.to_string()]);
+    }
     if args.drop_bad_checksum {
         emu_args.push(s(&"--drop-bad-checksum"));
     }
@@ -218,13 +232,18 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(c) = &args.capture {
         con_args.extend([s(&"--capture"), c.display().to_string()]);
     }
-    if let Some(c) = args.console_core {
-        con_args.extend([s(&"--core"), c.to_string()]);
+    if args.no_direct {
+        con_args.push(s(&"--no-direct"));
+    }
+    match (console_core, emulator_core) {
+        (Some(c), _) => con_args.extend([s(&"--core"), c.to_string()]),
+        (None, Some(e)) => con_args.extend([s(&"--avoid-core"), e.to_string()]),
+        (None, None) => {}
     }
 
     let steal0 = CpuTimes::read();
     let t0 = now_ns();
-    let mut sim = spawn("simulator", sim_args, args.simulator_core, &out)?;
+    let mut sim = spawn("simulator", sim_args, simulator_core, &out)?;
     wait_ready(&mut sim, &out, Duration::from_secs(30))?;
     let mut emu = match spawn("emulator", emu_args, emulator_core, &out) {
         Ok(p) => p,
@@ -237,7 +256,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         sim.terminate();
         return Err(e);
     }
-    let mut con = match spawn("console", con_args, args.console_core, &out) {
+    let mut con = match spawn("console", con_args, console_core, &out) {
         Ok(p) => p,
         Err(e) => {
             emu.terminate();
@@ -255,10 +274,25 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let hard_deadline = planned + drain_grace + Duration::from_secs(60);
     let mut interrupted = false;
     let mut console_done_at: Option<Instant> = None;
+    // The runner reaps the run's dead processes, off the emulator's core, so
+    // the survivors see their peer counts drop and a restarted peer can take
+    // over its port.
+    let ipc = crate::transport::RunId::new(&run_id).ok().map(crate::transport::IpcConfig::new);
+    let mut last_reap = Instant::now();
     let mut emulator_done_at: Option<Instant> = None;
     loop {
         std::thread::sleep(Duration::from_millis(5));
         let (c, e, m) = (con.poll(), emu.poll(), sim.poll());
+        if last_reap.elapsed() > Duration::from_millis(200) {
+            last_reap = Instant::now();
+            if let Some(cfg) = &ipc {
+                if let Ok(r) = crate::transport::cleanup_dead_nodes(cfg) {
+                    for dead in r.dead() {
+                        eprintln!("reaped a dead peer: {dead}");
+                    }
+                }
+            }
+        }
         if signals::stop_requested() && !interrupted {
             interrupted = true;
             eprintln!("stopping: console, then emulator, then simulator");
@@ -331,7 +365,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     }
 
     // The trace: the emulator's rows joined with the simulator's receive times.
-    let trace = match merge_trace(&out) {
+    let mut delays = Delays::default();
+    let trace = match merge_trace(&out, &mut delays) {
         Ok(p) => p,
         Err(e) => {
             faults.push(format!("trace not written: {e:#}"));
@@ -339,13 +374,16 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         }
     };
 
+    let ingress_wait = emulator.as_ref().map(|e| Percentiles::from(e.ingress_wait_ns));
     let decision = emulator.as_ref().map(|e| Percentiles::from(e.decision_ns));
     let release_lateness = emulator.as_ref().map(|e| Percentiles::from(e.release_lateness_ns));
     let end_to_end_extra = simulator.as_ref().map(|s| Percentiles::from(s.end_to_end_extra_ns)).filter(|p| p.count > 0);
     let direct_hop = simulator.as_ref().map(|s| Percentiles::from(s.direct_hop_ns)).filter(|p| p.count > 0);
     let added_over_direct = end_to_end_extra.as_ref().zip(direct_hop.as_ref()).map(|(a, b)| report::difference(a, b));
+    let delay_check = delay_check(&spec, seed, delays);
     let report_json = out.join("report.json");
     let report = RunReport {
+        delay_check,
         run_id: run_id.clone(),
         scenario: spec.name.clone(),
         seed,
@@ -355,7 +393,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         loss_rate_ci95: emulator.as_ref().map(|e| e.loss_rate_ci95),
         stages: emulator.as_ref().map(|e| e.stages.clone()).unwrap_or_default(),
         injected_delay_ns: emulator.as_ref().map(|e| Percentiles::from(e.injected_delay_ns)),
-        overhead_ns: Overhead { decision, release_lateness, end_to_end_extra, direct_hop, added_over_direct },
+        overhead_ns: Overhead { ingress_wait, decision, release_lateness, end_to_end_extra, direct_hop, added_over_direct },
         kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
         processes: [&con, &emu, &sim]
             .iter()
@@ -385,8 +423,17 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     Ok(report)
 }
 
-/// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`.
-fn merge_trace(out: &Path) -> Result<Option<PathBuf>> {
+/// Per delivered and received frame: the injected delay and the delay the
+/// simulator saw (receive − console send), in ns.
+#[derive(Debug, Default)]
+struct Delays {
+    injected: Vec<u64>,
+    seen: Vec<u64>,
+}
+
+/// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`, and
+/// collects the delays of the frames that made it through.
+fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
     let emu = out.join("trace_emulator.csv");
     if !emu.exists() {
         return Ok(None);
@@ -412,13 +459,62 @@ fn merge_trace(out: &Path) -> Result<Option<PathBuf>> {
             writeln!(w, "{line}")?;
             continue;
         }
-        let index: usize = line.split(',').next().and_then(|x| x.parse().ok()).unwrap_or(usize::MAX);
+        let cols: Vec<&str> = line.split(',').collect();
+        let index: usize = cols[0].parse().unwrap_or(usize::MAX);
         match recv.get(index).filter(|t| **t != 0) {
-            Some(t) => writeln!(w, "{line}{t}")?,
+            Some(t) => {
+                writeln!(w, "{line}{t}")?;
+                // Columns: 3 send_ns, 9 delay_ns (see `trace`).
+                if let (Some(Ok(send)), Some(Ok(delay))) = (cols.get(3).map(|x| x.parse::<u64>()), cols.get(9).map(|x| x.parse::<u64>())) {
+                    delays.injected.push(delay);
+                    delays.seen.push(t.saturating_sub(send));
+                }
+            }
             None => writeln!(w, "{line}")?,
         }
     }
     w.flush()?;
     std::fs::remove_file(&emu)?;
     Ok(Some(path))
+}
+
+/// Quantiles of the delays the simulator saw against the delays the
+/// emulator drew and, when the scenario is a single `reorder` delay stage
+/// (possibly behind loss stages), against the model's analytic law.
+fn delay_check(spec: &scenario::ScenarioSpec, seed: u64, mut d: Delays) -> Option<DelayCheck> {
+    let n = d.seen.len();
+    if n < 100 || d.injected.iter().all(|x| *x == 0) {
+        return None;
+    }
+    d.injected.sort_unstable();
+    d.seen.sort_unstable();
+    let model = Scenario::new(spec, seed).ok().and_then(|sc| {
+        let [phase] = sc.phases() else { return None };
+        let delays: Vec<_> = phase.stages().iter().filter_map(|s| match s.model() {
+            crate::model::AnyModel::Delay(m) => Some(m.clone()),
+            _ => None,
+        }).collect();
+        match delays.as_slice() {
+            [one] if one.may_reorder() || one.cdf_ms(one.mean_ms_exact()) >= 0.0 => Some(one.clone()),
+            _ => None,
+        }
+    });
+    // Dvoretzky–Kiefer–Wolfowitz: with 95% confidence the empirical
+    // distribution is within ε of the true one everywhere.
+    let eps = ((2.0f64 / 0.05).ln() / (2.0 * n as f64)).sqrt();
+    let pick = |v: &[u64], q: f64| v[((q * n as f64) as usize).min(n - 1)] as f64 / 1e6;
+    let quantiles: Vec<DelayQuantile> = [0.01, 0.1, 0.25, 0.5, 0.75, 0.9, 0.99]
+        .into_iter()
+        .map(|q| {
+            let (injected_ms, seen_ms) = (pick(&d.injected, q), pick(&d.seen, q));
+            let model_ms = model.as_ref().map(|m| m.quantile_ms(q));
+            let model_band_ms = model.as_ref().map(|m| [m.quantile_ms((q - eps).max(1e-9)), m.quantile_ms((q + eps).min(1.0 - 1e-9))]);
+            DelayQuantile { q, model_ms, model_band_ms, injected_ms, seen_ms, seen_minus_injected_us: (seen_ms - injected_ms) * 1e3 }
+        })
+        .collect();
+    let worst = quantiles.iter().map(|x| x.seen_minus_injected_us.abs()).fold(0.0, f64::max);
+    let injected_within_model_band = model.as_ref().map(|_| {
+        quantiles.iter().all(|x| x.model_band_ms.is_some_and(|[lo, hi]| lo <= x.injected_ms && x.injected_ms <= hi))
+    });
+    Some(DelayCheck { frames: n as u64, dkw_epsilon: eps, quantiles, max_abs_seen_minus_injected_us: worst, injected_within_model_band })
 }

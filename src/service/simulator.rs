@@ -63,9 +63,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
     signals::install();
-    if let Some(core) = args.core {
-        anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: core }), "could not pin the simulator to core {core}");
-    }
+    crate::service::place("simulator", args.core, args.avoid_core)?;
     let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
     let stall_ns = (args.stall_ms * 1e6) as u64;
     let checksum_policy = if args.drop_bad_checksum { ChecksumPolicy::Discard } else { ChecksumPolicy::Apply };

@@ -1,7 +1,8 @@
 //! The only door to the outside world: moving frames between processes.
 //!
-//! Everything that touches iceoryx2 lives under [`ipc`]; no other module of
-//! the crate names an iceoryx2 type, and the services only wire the types
+//! Everything that touches iceoryx2 lives under [`ipc`], everything that
+//! touches a socket under [`udp`]; no other module of the crate names an
+//! iceoryx2 type or opens a socket, and the services only wire the types
 //! exported here. The sans-IO core never depends on this module.
 //!
 //! # Contract
@@ -23,12 +24,15 @@
 //! - Ctrl-C / SIGTERM are latched by the transport and read with
 //!   [`IpcNode::termination_requested`]; the services decide how to stop.
 
+#![warn(missing_docs)]
+
 pub mod ipc;
+pub mod udp;
 
 pub use ipc::{
-    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport, DeadPeer,
-    FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber, IpcConfig,
-    IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role, RunId,
-    RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
+    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,
+    DeadPeer, FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber,
+    IpcConfig, IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role,
+    RunId, RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
     MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };

@@ -13,8 +13,9 @@ use std::time::{Duration, Instant};
 
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::{
-    cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode, PublisherOpenError, Role,
-    RunId, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
+    cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode,
+    PublisherOpenError, Role, RunId, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL,
+    SUBSCRIBER_BUFFER_FRAMES,
 };
 
 /// Environment variable that turns this binary into a child process; its
@@ -26,11 +27,42 @@ const CHILD_FRAMES: u64 = 10;
 /// hung test, it asserts nothing about speed.
 const WATCHDOG: Duration = Duration::from_secs(60);
 
-fn unique_config(tag: &str) -> IpcConfig {
+/// The configuration of a run private to one test. Declare it before the
+/// test's nodes and children, so that it is dropped after them.
+fn unique_config(tag: &str) -> TestRun {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let run = format!("t{}-{tag}-{n}", std::process::id());
-    IpcConfig::new(RunId::new(&run).expect("test run ids are valid"))
+    TestRun(IpcConfig::new(
+        RunId::new(&run).expect("test run ids are valid"),
+    ))
+}
+
+/// A test's run; removes the run's last iceoryx2 file when the test ends.
+struct TestRun(IpcConfig);
+
+impl std::ops::Deref for TestRun {
+    type Target = IpcConfig;
+
+    fn deref(&self) -> &IpcConfig {
+        &self.0
+    }
+}
+
+impl Drop for TestRun {
+    /// iceoryx2 keeps one small shared-memory segment per file prefix (a
+    /// node counter) that no node removes; with a run id per test, they would
+    /// pile up in /dev/shm.
+    fn drop(&mut self) {
+        // SAFETY: the run id is this test's alone, and every node of the run
+        // has been dropped or belonged to a child that has exited or been
+        // killed, so no process uses the segment any more.
+        let _ = unsafe {
+            iceoryx2::testing::remove_global_mgmt_segment::<iceoryx2::prelude::ipc::Service>(
+                self.0.iceoryx2(),
+            )
+        };
+    }
 }
 
 /// A frame whose every field and wire byte depends on `i`.
@@ -267,6 +299,40 @@ fn port_limits_are_enforced_with_clear_errors() {
 }
 
 #[test]
+fn a_channel_of_another_sample_type_is_refused() {
+    use iceoryx2::prelude::{ipc, NodeBuilder, ServiceName};
+
+    let config = unique_config("compat");
+    // A process built with another payload type got there first.
+    let other = NodeBuilder::new()
+        .config(config.iceoryx2())
+        .create::<ipc::Service>()
+        .unwrap();
+    let _service = other
+        .service_builder(&ServiceName::new(&config.service_name(Channel::Console)).unwrap())
+        .publish_subscribe::<u64>()
+        .create()
+        .unwrap();
+
+    let node = IpcNode::open(&config, Role::Console).unwrap();
+    let err = node.publisher(Channel::Console).unwrap_err();
+    assert!(
+        matches!(err, PublisherOpenError::Incompatible { .. }),
+        "{err:?}"
+    );
+    assert!(err
+        .to_string()
+        .contains(&config.service_name(Channel::Console)));
+    let err = node.subscriber(Channel::Console).unwrap_err();
+    assert!(
+        matches!(err, SubscriberOpenError::Incompatible { .. }),
+        "{err:?}"
+    );
+    // The other channel is unaffected.
+    node.publisher(Channel::Emulator).unwrap();
+}
+
+#[test]
 fn gracefully_restarted_publisher_reconnects() {
     let config = unique_config("restart");
     let consumer = IpcNode::open(&config, Role::Emulator).unwrap();
@@ -285,7 +351,10 @@ fn gracefully_restarted_publisher_reconnects() {
         assert_eq!(sub.peers_connected(), 0);
         // Frames sent before the publisher left are still delivered.
         let got: Vec<u64> = drain(&mut sub).iter().map(|f| f.console_index).collect();
-        assert_eq!(got, (generation * 100..generation * 100 + 10).collect::<Vec<_>>());
+        assert_eq!(
+            got,
+            (generation * 100..generation * 100 + 10).collect::<Vec<_>>()
+        );
     }
 }
 
@@ -297,6 +366,8 @@ fn gracefully_restarted_publisher_reconnects() {
 ///
 /// - `publish:<run>`: open a console node and publisher, send
 ///   [`CHILD_FRAMES`] frames, print `READY`, then wait to be killed.
+/// - `subscribe:<run>`: open a simulator node and a subscriber of the
+///   emulator channel, print `READY`, then wait to be killed without reading.
 /// - `until_signal:<run>`: open a console node, print `READY`, poll
 ///   [`IpcNode::termination_requested`], print `STOPPING` and return.
 #[test]
@@ -306,8 +377,20 @@ fn child_process_entry() {
     };
     let (mode, run) = spec.split_once(':').expect("<mode>:<run>");
     let config = IpcConfig::new(RunId::new(run).unwrap());
-    let node = IpcNode::open(&config, Role::Console).unwrap();
+    let role = if mode == "subscribe" {
+        Role::Simulator
+    } else {
+        Role::Console
+    };
+    let node = IpcNode::open(&config, role).unwrap();
     match mode {
+        "subscribe" => {
+            let _sub = node.subscriber(Channel::Emulator).unwrap();
+            println!("READY");
+            loop {
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        }
         "publish" => {
             let mut publisher = node.publisher(Channel::Console).unwrap();
             for i in 0..CHILD_FRAMES {
@@ -341,7 +424,12 @@ impl ChildPeer {
     fn spawn(mode: &str, config: &IpcConfig) -> Self {
         let exe = std::env::current_exe().unwrap();
         let mut child = Command::new(exe)
-            .args(["child_process_entry", "--exact", "--nocapture", "--test-threads=1"])
+            .args([
+                "child_process_entry",
+                "--exact",
+                "--nocapture",
+                "--test-threads=1",
+            ])
             .env(CHILD_ENV, format!("{mode}:{}", config.run_id()))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -364,7 +452,9 @@ impl ChildPeer {
         let (done_tx, done_rx) = mpsc::channel::<()>();
         let watchdog = std::thread::spawn(move || {
             if done_rx.recv_timeout(WATCHDOG).is_err() {
-                let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+                let _ = Command::new("kill")
+                    .args(["-KILL", &pid.to_string()])
+                    .status();
             }
         });
         let mut buf = String::new();
@@ -446,6 +536,42 @@ fn killed_publisher_is_reaped_and_can_be_replaced() {
 }
 
 #[test]
+fn killed_subscriber_is_reported_then_reaped() {
+    let config = unique_config("killsub");
+    let node = IpcNode::open(&config, Role::Emulator).unwrap();
+    let mut publisher = node.publisher(Channel::Emulator).unwrap();
+    let child = ChildPeer::spawn("subscribe", &config);
+    let child_pid = child.pid();
+    assert_eq!(publisher.peers_connected(), 1);
+    child.kill_9();
+
+    // Until it is reaped the dead simulator's queue still takes frames; once
+    // full, every frame is reported as refused rather than vanishing.
+    for i in 0..SUBSCRIBER_BUFFER_FRAMES as u64 {
+        assert_eq!(publisher.send(&frame(i)).unwrap(), 1, "frame {i}");
+    }
+    assert!(matches!(
+        publisher.send(&frame(0)),
+        Err(FrameSendError::QueueFull { .. })
+    ));
+    assert_eq!(publisher.stats().queue_full, 1);
+
+    let report = node.reap_dead_peers().unwrap();
+    assert_eq!(report.removed.len(), 1, "{report:?}");
+    assert_eq!(report.removed[0].role, Some(Role::Simulator));
+    assert_eq!(report.removed[0].pid, Some(child_pid));
+    assert_eq!(publisher.peers_connected(), 0);
+    assert_eq!(publisher.send(&frame(1)).unwrap(), 0);
+
+    // A restarted simulator receives from the next frame on.
+    let simulator = IpcNode::open(&config, Role::Simulator).unwrap();
+    let mut sub = simulator.subscriber(Channel::Emulator).unwrap();
+    assert_eq!(publisher.send(&frame(2)).unwrap(), 1);
+    assert_eq!(sub.try_recv().unwrap(), Some(frame(2)));
+    assert_eq!(sub.try_recv().unwrap(), None);
+}
+
+#[test]
 fn leftovers_of_a_killed_run_are_removed_at_start_up() {
     let config = unique_config("leftover");
     ChildPeer::spawn("publish", &config).kill_9();
@@ -458,7 +584,11 @@ fn leftovers_of_a_killed_run_are_removed_at_start_up() {
 
     // Opening a node scans again; nothing is left, and the channel opens.
     let node = IpcNode::open(&config, Role::Console).unwrap();
-    assert!(node.startup_cleanup().is_clean(), "{:?}", node.startup_cleanup());
+    assert!(
+        node.startup_cleanup().is_clean(),
+        "{:?}",
+        node.startup_cleanup()
+    );
     let _publisher = node.publisher(Channel::Console).unwrap();
 }
 
@@ -514,8 +644,16 @@ fn sigint_is_latched_as_a_termination_request() {
     let mut child = ChildPeer::spawn("until_signal", &config);
     // The handlers are installed when the node opens, before READY.
     let caught = caught_signals(child.pid());
-    assert_ne!(caught & (1 << (SIGINT - 1)), 0, "SIGINT not caught: {caught:x}");
-    assert_ne!(caught & (1 << (SIGTERM - 1)), 0, "SIGTERM not caught: {caught:x}");
+    assert_ne!(
+        caught & (1 << (SIGINT - 1)),
+        0,
+        "SIGINT not caught: {caught:x}"
+    );
+    assert_ne!(
+        caught & (1 << (SIGTERM - 1)),
+        0,
+        "SIGTERM not caught: {caught:x}"
+    );
 
     let status = Command::new("kill")
         .args(["-INT", &child.pid().to_string()])
@@ -547,6 +685,14 @@ fn cpu_steal_and_total() -> (u64, u64) {
     (fields[7], total)
 }
 
+/// Nanoseconds the calling thread has spent on a CPU and waiting on a run
+/// queue, from `/proc/thread-self/schedstat`.
+fn thread_schedstat() -> (u64, u64) {
+    let stat = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
+    let mut fields = stat.split_whitespace().map(|v| v.parse::<u64>().unwrap());
+    (fields.next().unwrap(), fields.next().unwrap())
+}
+
 /// One-way latency of one publisher → subscriber hop between two threads of
 /// one process, at a paced 100 kHz, with a busy-polling receiver. Both ends
 /// read `std::time::Instant` (CLOCK_MONOTONIC on Linux) relative to one
@@ -572,6 +718,7 @@ fn latency_one_hop_between_threads() {
         let node = IpcNode::open(&receiver_config, Role::Simulator).unwrap();
         let mut sub = node.subscriber(Channel::Console).unwrap();
         ready_tx.send(()).unwrap();
+        let sched_before = thread_schedstat();
         let mut histogram = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).unwrap();
         let mut expected = 0u64;
         while expected < WARMUP + SAMPLES {
@@ -588,13 +735,20 @@ fn latency_one_hop_between_threads() {
                 std::hint::spin_loop();
             }
         }
-        histogram
+        let sched_after = thread_schedstat();
+        (
+            histogram,
+            sched_after.0 - sched_before.0,
+            sched_after.1 - sched_before.1,
+        )
     });
     ready_rx.recv().unwrap();
 
     let node = IpcNode::open(&config, Role::Console).unwrap();
     let mut publisher = node.publisher(Channel::Console).unwrap();
-    wait_until("the receiver to connect", || publisher.peers_connected() == 1);
+    wait_until("the receiver to connect", || {
+        publisher.peers_connected() == 1
+    });
 
     let (steal_before, total_before) = cpu_steal_and_total();
     let mut next_ns = now_ns();
@@ -610,7 +764,7 @@ fn latency_one_hop_between_threads() {
             .unwrap();
         next_ns += PERIOD_NS;
     }
-    let histogram = receiver.join().unwrap();
+    let (histogram, on_cpu_ns, waiting_ns) = receiver.join().unwrap();
     let (steal_after, total_after) = cpu_steal_and_total();
     let steal = steal_after - steal_before;
     let total = total_after - total_before;
@@ -628,5 +782,35 @@ fn latency_one_hop_between_threads() {
     println!(
         "steal during the measurement: {steal} of {total} jiffies ({:.2} %)",
         100.0 * steal as f64 / total.max(1) as f64
+    );
+    println!(
+        "receiver thread: {} ms on a CPU, {} ms runnable but waiting for one ({:.0} % of its time)",
+        on_cpu_ns / 1_000_000,
+        waiting_ns / 1_000_000,
+        100.0 * waiting_ns as f64 / (on_cpu_ns + waiting_ns).max(1) as f64
+    );
+
+    // The transport's own cost, free of scheduling: one frame sent and
+    // received back to back on one thread.
+    let mut local_pub = node.publisher(Channel::Emulator).unwrap();
+    let mut local_sub = node.subscriber(Channel::Emulator).unwrap();
+    let mut cost = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).unwrap();
+    for i in 0..WARMUP + SAMPLES {
+        let start = Instant::now();
+        local_pub.send_with(|s| s.console_index = i).unwrap();
+        let got = local_sub.recv_with(|s| s.console_index).unwrap();
+        let elapsed_ns = start.elapsed().as_nanos() as u64;
+        assert_eq!(got, Some(i));
+        if i >= WARMUP {
+            cost.record(elapsed_ns.max(1)).unwrap();
+        }
+    }
+    println!(
+        "send + receive on one thread, {} samples: p50 {} ns, p99 {} ns, p99.9 {} ns, max {} ns",
+        cost.len(),
+        cost.value_at_quantile(0.50),
+        cost.value_at_quantile(0.99),
+        cost.value_at_quantile(0.999),
+        cost.max(),
     );
 }

@@ -7,10 +7,16 @@
 //! which is what lets a restarted console or simulator open its port again
 //! and what makes the survivors' `peers_connected` drop.
 
+use core::time::Duration;
+
 use iceoryx2::node::{NodeCleanupFailure, NodeListFailure, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
 
 use super::{init_log_level, Ipc, IpcConfig, Role, RunId, FILE_PREFIX};
+
+/// Longest wait for another process, or thread, that is removing a dead node
+/// at the same time; only spent when that happens.
+const CONCURRENT_CLEANUP_WAIT: Duration = Duration::from_millis(100);
 
 /// A node of the run whose process is gone.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -52,12 +58,12 @@ pub struct FailedCleanup {
 /// What one scan of a run found.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct CleanupReport {
-    /// Dead nodes whose resources this call removed.
+    /// Dead nodes whose resources are gone after this call, removed by it or
+    /// by another process scanning at the same time: processes that reap
+    /// concurrently may each report the same dead peer.
     pub removed: Vec<DeadPeer>,
-    /// Dead nodes that another process was removing, or had just removed,
-    /// at the same time.
-    pub removed_elsewhere: Vec<DeadPeer>,
-    /// Dead nodes whose resources could not be removed.
+    /// Dead nodes whose resources could not be removed; the next scan
+    /// tries again.
     pub failed: Vec<FailedCleanup>,
     /// Live nodes of the run, the caller's own included.
     pub alive: usize,
@@ -67,11 +73,10 @@ pub struct CleanupReport {
 }
 
 impl CleanupReport {
-    /// All dead nodes found, however they ended.
+    /// All dead nodes found, removed or not.
     pub fn dead(&self) -> impl Iterator<Item = &DeadPeer> {
         self.removed
             .iter()
-            .chain(&self.removed_elsewhere)
             .chain(self.failed.iter().map(|f| &f.peer))
     }
 
@@ -148,12 +153,11 @@ pub fn cleanup_dead_nodes(config: &IpcConfig) -> Result<CleanupReport, CleanupEr
             });
             continue;
         }
-        match view.try_remove_stale_resources() {
+        // Waits while another process, or another thread of this one (iceoryx2
+        // removes one node at a time per process), is removing a dead node;
+        // returns at once when it is already gone.
+        match view.blocking_remove_stale_resources(CONCURRENT_CLEANUP_WAIT) {
             Ok(()) => report.removed.push(peer),
-            Err(
-                NodeCleanupFailure::ResourcesAlreadyCleanedUp
-                | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
-            ) => report.removed_elsewhere.push(peer),
             Err(e) => report.failed.push(FailedCleanup {
                 peer,
                 reason: cleanup_failure_reason(e).to_owned(),
@@ -261,9 +265,9 @@ fn cleanup_failure_reason(e: NodeCleanupFailure) -> &'static str {
         NodeCleanupFailure::VersionMismatch => {
             "it was created by another iceoryx2 version; remove its files by hand"
         }
-        NodeCleanupFailure::ResourcesAlreadyCleanedUp
-        | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode => {
-            "another process is removing it"
+        NodeCleanupFailure::ResourcesAlreadyCleanedUp => "another process removed it",
+        NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode => {
+            "another process is still removing it"
         }
     }
 }

@@ -24,8 +24,10 @@
 //!
 //! The publisher's shared-memory pool holds
 //! `MAX_SUBSCRIBERS_PER_CHANNEL × (SUBSCRIBER_BUFFER_FRAMES + 1) + 1` samples
-//! (about 8 MiB); a frame lost because of a full queue is the only loss the
-//! transport can cause.
+//! (about 8 MiB). A frame refused by a full queue is reported to the
+//! publisher; the one unreported loss is a publisher that exits before its
+//! subscriber has polled once since it appeared: the frames it left unread go
+//! with it. Subscribers that poll continuously never meet that case.
 //!
 //! # Configuration
 //!
@@ -39,15 +41,20 @@
 //!
 //! # Signals
 //!
-//! iceoryx2 installs its own handlers for SIGINT, SIGTERM and other
-//! non-fatal signals the first time it zeroes shared memory or is asked for
-//! a termination request, whatever the node's `SignalHandlingMode`; from then
-//! on these signals only set a flag. Disabling its signal handling would
-//! therefore make Ctrl-C silently do nothing. Nodes are created with
+//! iceoryx2 installs its own handlers for SIGINT, SIGTERM and the other
+//! signals it deems non-fatal (SIGQUIT, SIGTSTP, SIGCONT, SIGTTIN, SIGTTOU,
+//! SIGUSR1, SIGPROF, SIGURG, SIGVTALRM) the first time it zeroes shared
+//! memory or is asked for a termination request, whatever the node's
+//! `SignalHandlingMode`; from then on these signals only record themselves
+//! (so Ctrl-Z and Ctrl-\ no longer stop or quit the process). Disabling its
+//! signal handling would therefore make Ctrl-C silently do nothing. Nodes are created with
 //! `SignalHandlingMode::HandleTerminationRequests`, the handlers are installed
 //! deterministically when the [`IpcNode`] is opened, and
 //! [`IpcNode::termination_requested`] latches the request so that the
-//! service loop can stop cleanly (and let the ports deregister).
+//! service loop can stop cleanly (and let the ports deregister). iceoryx2
+//! keeps only the last signal received, so another of the signals above
+//! arriving between a Ctrl-C and the next poll hides it: poll often (every
+//! loop iteration, or at least every millisecond).
 //!
 //! # Logging
 //!
@@ -69,7 +76,9 @@ use std::sync::Arc;
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
 
-pub use liveness::{cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup};
+pub use liveness::{
+    cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup,
+};
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
 pub use subscriber::{FrameRecvError, FrameSubscriber, SubscriberOpenError, SubscriberStats};
@@ -421,7 +430,12 @@ mod tests {
             RunId::new(&"x".repeat(RunId::MAX_LEN + 1)),
             Err(RunIdError::TooLong { len: 49, .. })
         ));
-        for (bad, ch, index) in [("a/b", '/', 1), ("a b", ' ', 1), (".", '.', 0), ("é", 'é', 0)] {
+        for (bad, ch, index) in [
+            ("a/b", '/', 1),
+            ("a b", ' ', 1),
+            (".", '.', 0),
+            ("é", 'é', 0),
+        ] {
             assert_eq!(
                 RunId::new(bad),
                 Err(RunIdError::InvalidCharacter {

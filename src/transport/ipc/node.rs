@@ -29,15 +29,6 @@ pub struct IpcNode {
 /// Why [`IpcNode::open`] failed.
 #[derive(Debug, thiserror::Error)]
 pub enum NodeOpenError {
-    /// The node name `netfi/<run>/<role>` was rejected by iceoryx2; cannot
-    /// happen for a validated run id and is kept for completeness.
-    #[error("node name `{name}` of run `{run}` is not accepted by iceoryx2")]
-    InvalidName {
-        /// The rejected node name.
-        name: String,
-        /// The run.
-        run: String,
-    },
     /// Scanning the run for nodes left by killed processes failed.
     #[error("cannot open the {role} node of run `{run}`: {source}")]
     Cleanup {
@@ -80,11 +71,10 @@ impl IpcNode {
                 source,
             })?;
 
-        let name = config.node_name(role);
-        let node_name = NodeName::new(&name).map_err(|_| NodeOpenError::InvalidName {
-            name: name.clone(),
-            run: run.clone(),
-        })?;
+        // At most 6 + 48 + 1 + 9 bytes of [A-Za-z0-9_/-]: always a valid
+        // node name.
+        let node_name = NodeName::new(&config.node_name(role))
+            .expect("a validated run id always forms a valid node name");
         let node = NodeBuilder::new()
             .name(&node_name)
             .config(config.iceoryx2())
@@ -141,8 +131,8 @@ impl IpcNode {
     /// filling a killed subscriber's queue until [`FrameSendError::QueueFull`].
     /// It lists the run's node directory and checks one lock per node:
     /// call it a few times per second from the service loop, never per frame.
-    /// Any process of the run may reap; concurrent reapers are reported as
-    /// [`CleanupReport::removed_elsewhere`].
+    /// Any process of the run may reap; each of several concurrent reapers
+    /// reports the dead peer, and one may wait up to 100 ms for another.
     ///
     /// [`FrameSendError::QueueFull`]: super::FrameSendError::QueueFull
     pub fn reap_dead_peers(&self) -> Result<CleanupReport, CleanupError> {

@@ -86,7 +86,9 @@ pub enum PublisherOpenError {
     },
     /// The publisher port could not be created (its shared-memory pool, for
     /// instance, when `/dev/shm` is full).
-    #[error("cannot create the publisher of service `{service}` of run `{run}` (iceoryx2: {source})")]
+    #[error(
+        "cannot create the publisher of service `{service}` of run `{run}` (iceoryx2: {source})"
+    )]
     Port {
         /// The service name.
         service: String,
@@ -101,13 +103,14 @@ pub enum PublisherOpenError {
 /// Why a frame was not sent to every subscriber.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FrameSendError {
-    /// A registered subscriber did not receive the frame because its queue
-    /// was full (it was delivered to the other subscribers, if any): the
-    /// subscriber is stalled, dead and not yet reaped, or has not polled since
-    /// this publisher appeared. Recoverable: frames are delivered again once
-    /// it has caught up or has been reaped. Counted in
-    /// [`PublisherStats::queue_full`]. A subscriber that deregisters during
-    /// the send is reported the same way.
+    /// A registered subscriber did not receive the frame (it was delivered
+    /// to the other subscribers, if any), because its queue was full: the
+    /// subscriber is stalled, dead and not yet reaped, or has not polled
+    /// since this publisher appeared. Also reported, less precisely, when a
+    /// subscriber deregisters during the send, or when iceoryx2 could not
+    /// connect to a new subscriber (it then logs a warning). Recoverable:
+    /// frames are delivered again once the subscriber has caught up or has
+    /// been reaped. Counted in [`PublisherStats::queue_full`].
     #[error(
         "frame not delivered on `netfi/{run}/{channel}`: a subscriber's queue of {capacity} frames is full (stalled or dead {consumer})"
     )]
@@ -134,8 +137,8 @@ pub enum FrameSendError {
         #[source]
         source: LoanError,
     },
-    /// Delivery failed for another reason (a corrupted connection, a
-    /// subscriber that could not be connected).
+    /// Delivery failed for another reason: a corrupted connection, or the
+    /// connections to new subscribers could not be updated.
     #[error("cannot deliver a frame on `netfi/{run}/{channel}` (iceoryx2: {source})")]
     Delivery {
         /// The run.

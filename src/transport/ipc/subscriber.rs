@@ -9,7 +9,9 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use super::service::{is_incompatible, open_service};
-use super::{Channel, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES};
+use super::{
+    Channel, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
+};
 use crate::sample::FrameSample;
 
 /// The subscribing end of a channel. Not `Send`: create it on the thread
@@ -77,7 +79,9 @@ pub enum SubscriberOpenError {
     },
     /// The publisher already on the channel could not be attached (its
     /// shared memory could not be mapped).
-    #[error("cannot attach to the publisher of service `{service}` of run `{run}` (iceoryx2: {source})")]
+    #[error(
+        "cannot attach to the publisher of service `{service}` of run `{run}` (iceoryx2: {source})"
+    )]
     Connect {
         /// The service name.
         service: String,
@@ -88,7 +92,9 @@ pub enum SubscriberOpenError {
         source: ConnectionFailure,
     },
     /// The subscriber port could not be created.
-    #[error("cannot create a subscriber of service `{service}` of run `{run}` (iceoryx2: {source})")]
+    #[error(
+        "cannot create a subscriber of service `{service}` of run `{run}` (iceoryx2: {source})"
+    )]
     Port {
         /// The service name.
         service: String,

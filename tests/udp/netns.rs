@@ -1,0 +1,207 @@
+//! Two hosts on one machine (`docs/udp.md`): the console and the robot in
+//! network namespaces of their own, joined only through a third namespace
+//! where the emulator runs, by two veth pairs. The console has no route to
+//! the robot: everything it sends reaches the robot through the emulator, and
+//! every reply comes back through it.
+//!
+//! Needs root (or CAP_SYS_ADMIN and CAP_NET_ADMIN) and `ip` (iproute2);
+//! skips, saying why, where the machine does not allow it. The addresses are
+//! documentation ranges (192.0.2.0/24, 198.51.100.0/24) that exist only
+//! inside these namespaces, which the test removes again.
+
+use crate::bridge::{itp, u, Emulator};
+use crate::ONE_RUN_AT_A_TIME;
+use netfi::frame::ItpView;
+use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
+use std::net::SocketAddr;
+use std::os::fd::AsRawFd;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// Runs `ip ARGS`; `Err` with its message if it fails.
+fn ip(args: &[&str]) -> Result<(), String> {
+    let o = Command::new("ip").args(args).output().map_err(|e| format!("cannot run `ip`: {e}"))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!("`ip {}` failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim()))
+    }
+}
+
+/// The three namespaces and their links; removed when dropped.
+struct Hosts {
+    console: String,
+    emu: String,
+    robot: String,
+}
+
+impl Hosts {
+    /// Builds the topology of `docs/udp.md`; `Err` says why it could not.
+    fn build() -> Result<Hosts, String> {
+        let id = std::process::id() % 100_000;
+        let h = Hosts {
+            console: format!("netfi-con-{id}"),
+            emu: format!("netfi-emu-{id}"),
+            robot: format!("netfi-rob-{id}"),
+        };
+        ip(&["netns", "add", &h.console])?;
+        // From here on, `h` removes whatever was made if a step fails.
+        ip(&["netns", "add", &h.emu])?;
+        ip(&["netns", "add", &h.robot])?;
+        let (c0, c1, r0, r1) = (format!("nfc0-{id}"), format!("nfc1-{id}"), format!("nfr0-{id}"), format!("nfr1-{id}"));
+        // Console side: c0 (console) ↔ c1 (emulator).
+        ip(&["link", "add", &c0, "netns", &h.console, "type", "veth", "peer", "name", &c1, "netns", &h.emu])?;
+        // Robot side: r1 (emulator) ↔ r0 (robot).
+        ip(&["link", "add", &r0, "netns", &h.robot, "type", "veth", "peer", "name", &r1, "netns", &h.emu])?;
+        for (ns, dev, addr) in [
+            (&h.console, &c0, "192.0.2.1/24"),
+            (&h.emu, &c1, "192.0.2.2/24"),
+            (&h.emu, &r1, "198.51.100.1/24"),
+            (&h.robot, &r0, "198.51.100.2/24"),
+        ] {
+            ip(&["-n", ns, "addr", "add", addr, "dev", dev])?;
+            ip(&["-n", ns, "link", "set", dev, "up"])?;
+        }
+        for ns in [&h.console, &h.emu, &h.robot] {
+            ip(&["-n", ns, "link", "set", "lo", "up"])?;
+        }
+        Ok(h)
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        // Deleting a namespace deletes the veth ends in it (and so the pairs).
+        for ns in [&self.console, &self.emu, &self.robot] {
+            let _ = ip(&["netns", "del", ns]);
+        }
+    }
+}
+
+/// Opens a UDP socket bound to `addr` inside network namespace `ns`: a
+/// thread enters the namespace (a thread's own network namespace is what new
+/// sockets are created in) and the socket stays there when used elsewhere.
+fn socket_in(ns: &str, addr: &str) -> Result<UdpPort, String> {
+    let path = format!("/var/run/netns/{ns}");
+    let addr: SocketAddr = addr.parse().unwrap();
+    std::thread::spawn(move || {
+        let f = std::fs::File::open(&path).map_err(|e| format!("{path}: {e}"))?;
+        // SAFETY: setns on a namespace file this thread opened; it changes
+        // only this short-lived thread's network namespace.
+        if unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
+            return Err(format!("setns({path}): {}", std::io::Error::last_os_error()));
+        }
+        UdpPort::bind(addr, &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) })
+            .map_err(|e| e.to_string())
+    })
+    .join()
+    .unwrap()
+}
+
+fn recv_until(port: &UdpPort, want: usize, timeout: Duration) -> Vec<Vec<u8>> {
+    let mut got = Vec::new();
+    let mut buf = vec![0u8; 1 << 16];
+    let t0 = Instant::now();
+    while got.len() < want && t0.elapsed() < timeout {
+        match port.recv_from(&mut buf).unwrap() {
+            Some(d) => got.push(buf[..d.len].to_vec()),
+            None => std::thread::sleep(Duration::from_micros(100)),
+        }
+    }
+    got
+}
+
+#[test]
+fn console_and_robot_in_two_namespaces_talk_only_through_the_emulator() {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let hosts = match Hosts::build() {
+        Ok(h) => h,
+        Err(why) => {
+            eprintln!("skipping: this machine does not allow network namespaces joined by veth pairs: {why}");
+            return;
+        }
+    };
+    let console = socket_in(&hosts.console, "192.0.2.1:0").unwrap();
+    let robot = socket_in(&hosts.robot, "198.51.100.2:36000").unwrap();
+
+    // No route from the console to the robot: only the emulator joins them.
+    let direct = console.send_to(b"direct", &PeerAddr::new("198.51.100.2:36000".parse().unwrap()));
+    assert!(direct.is_err(), "the console must not reach the robot directly");
+
+    let out = std::env::temp_dir().join(format!("netfi-netns-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    let mut cmd = Command::new("ip");
+    cmd.args(["netns", "exec", &hosts.emu, env!("CARGO_BIN_EXE_netfi"), "emulator"]);
+    let emu = Emulator::start_command(
+        cmd,
+        &out,
+        &[
+            "--scenario",
+            "PLM-1",
+            "--seed",
+            "5",
+            "--ingress",
+            "udp://192.0.2.2:36000",
+            "--egress",
+            "udp://198.51.100.2:36000",
+            "--idle-end-ms",
+            "1000",
+        ],
+    );
+    assert_eq!(emu.ingress(), "192.0.2.2:36000".parse::<SocketAddr>().unwrap());
+
+    // The robot answers every command with a 52-byte feedback frame.
+    let robot_thread = std::thread::spawn(move || {
+        let mut buf = vec![0u8; 1 << 16];
+        let mut commands = Vec::new();
+        let mut peers = std::collections::BTreeSet::new();
+        let t0 = Instant::now();
+        let mut last = Instant::now();
+        while t0.elapsed() < Duration::from_secs(30) && last.elapsed() < Duration::from_millis(1500) {
+            match robot.recv_from(&mut buf).unwrap() {
+                Some(d) => {
+                    commands.push(buf[..d.len].to_vec());
+                    peers.insert(d.from.ip());
+                    robot.send_to(&[0x52; 52], &PeerAddr::new(d.from)).unwrap();
+                    last = Instant::now();
+                }
+                None => std::thread::sleep(Duration::from_micros(100)),
+            }
+        }
+        (commands, peers)
+    });
+    let to = PeerAddr::new("192.0.2.2:36000".parse().unwrap());
+    let n = 1000u32;
+    for i in 0..n {
+        console.send_to(&itp(i), &to).unwrap();
+        if i % 10 == 9 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    let (e, udp) = emu.finish(Duration::from_secs(30));
+    let (commands, peers) = robot_thread.join().unwrap();
+    let replies = recv_until(&console, commands.len(), Duration::from_secs(2));
+
+    let f = &e["frames"];
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["entered"]) + u(&udp["ingress_kernel_drops"]), u64::from(n), "{udp}");
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert!(dropped > 0, "PLM-1 drops some of 1000 frames");
+    assert_eq!(commands.len() as u64, u(&f["delivered"]), "the robot got what the emulator released");
+    assert!(commands.iter().all(|c| c.len() == 124 && ItpView::new_unchecked(&c[..]).verify_checksum()));
+    // The robot saw only the emulator's address; the console got every
+    // reply through the return path.
+    assert_eq!(peers.into_iter().collect::<Vec<_>>(), ["198.51.100.1".parse::<std::net::IpAddr>().unwrap()]);
+    assert_eq!(udp["console"].as_str().unwrap(), console.local_addr().to_string());
+    let r = &udp["return_path"];
+    assert_eq!(u(&r["received"]), commands.len() as u64, "{r}");
+    assert_eq!(u(&r["delivered"]), commands.len() as u64, "{r}");
+    assert_eq!(replies.len(), commands.len());
+    assert!(replies.iter().all(|r| r.len() == 52));
+}
