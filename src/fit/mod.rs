@@ -458,9 +458,9 @@ fn unreachable_hint(req: &FitRequest) -> String {
     }
 }
 
-/// `v` with 6 significant digits, for messages.
+/// `v` with at most 7 significant digits, for messages.
 pub fn fmt_sig(v: f64) -> String {
-    format!("{}", family::round_sig(v)).chars().take(12).collect()
+    format!("{}", family::round_sig(v))
 }
 
 /// Builds the result from a search and a finished confirmation.
