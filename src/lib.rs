@@ -1,14 +1,16 @@
 //! netfi: a network fault injector for teleoperation.
 //!
 //! The sans-IO core (`frame`, `model`, `scenario`, `scheduler`, `injector`,
-//! `check`, `stats`, `motion`, `kinematics`) never reads a clock or touches a
-//! socket, file or thread: time is passed in as nanoseconds, so the same code
-//! runs in simulated time (tests, Monte Carlo) and in the real-time emulator.
+//! `check`, `stats`, `motion`, `kinematics`, and `fit` but for its thin
+//! threading layer `fit::run`) never reads a clock or touches a socket, file
+//! or thread: time is passed in as nanoseconds, so the same code runs in
+//! simulated time (tests, Monte Carlo) and in the real-time emulator.
 //! `transport` is the only module that touches iceoryx2; `service` holds the
 //! real-time loops that wire the core to it.
 
 pub mod capture;
 pub mod check;
+pub mod fit;
 pub mod frame;
 pub mod injector;
 pub mod kinematics;

@@ -267,12 +267,23 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
         }
         (Some(_), Some(_)) => Err(ctx.err(header_line, Some(loc), Some("preset"), "give `model` or `preset`, not both")),
         (None, None) => {
+            // A target (`loss = "30%"`, `delay_ms_mean = 250`, `outage = "10%"`)
+            // takes its model from the fault parameter database.
+            if let Some(found) = crate::fit::db::target_stage(&t) {
+                let (label, model) = found
+                    .map_err(|e| ctx.err(ctx.key_line(span.clone(), &e.field).or(header_line), Some(loc), Some(&e.field), e.problem))?;
+                return Ok(vec![StageSpec { name, preset: Some(label), model }]);
+            }
             let names: Vec<_> = ModelKind::ALL.iter().map(|k| k.name()).collect();
             Err(ctx.err(
                 header_line,
                 Some(loc),
                 None,
-                format!("a stage needs `model` (one of {}) or `preset` (one of {})", names.join(", "), PRESET_NAMES.join(", ")),
+                format!(
+                    "a stage needs `model` (one of {}), `preset` (one of {}) or a target (`loss`, `delay_ms_mean` or `outage`)",
+                    names.join(", "),
+                    PRESET_NAMES.join(", ")
+                ),
             ))
         }
     }

@@ -9,9 +9,12 @@ use crate::model::{
     DelayDist, DelayParams, GeLomaxParams, Millis, Order, OutageParams, OutageUnit, Probability,
 };
 
-/// The preset names, in the order the study lists them.
-pub const PRESET_NAMES: [&str; 10] = [
-    "Normal", "PLM-1", "PLM-2", "PLM-3", "DLM-1", "DLM-2", "DLM-3", "CLM-1", "CLM-2", "CLM-3",
+/// The preset names: the study's, in the order it lists them, then their
+/// calibrated variants (`-cal`), which keep each preset's shape and scale one
+/// parameter so that the preset realizes its label (see [`preset_stages`]).
+pub const PRESET_NAMES: [&str; 19] = [
+    "Normal", "PLM-1", "PLM-2", "PLM-3", "DLM-1", "DLM-2", "DLM-3", "CLM-1", "CLM-2", "CLM-3", "PLM-1-cal", "PLM-2-cal",
+    "PLM-3-cal", "DLM-1-cal", "DLM-2-cal", "DLM-3-cal", "CLM-1-cal", "CLM-2-cal", "CLM-3-cal",
 ];
 
 /// What each preset is labelled in the study (the target, not necessarily
@@ -29,6 +32,15 @@ pub fn preset_label(name: &str) -> Option<&'static str> {
         "CLM-1" => "10% communication loss",
         "CLM-2" => "30% communication loss",
         "CLM-3" => "50% communication loss",
+        "PLM-1-cal" => "10% packet loss, calibrated",
+        "PLM-2-cal" => "30% packet loss, calibrated",
+        "PLM-3-cal" => "50% packet loss, calibrated",
+        "DLM-1-cal" => "100 ms delay, calibrated",
+        "DLM-2-cal" => "300 ms delay, calibrated",
+        "DLM-3-cal" => "500 ms delay, calibrated",
+        "CLM-1-cal" => "10% communication loss, calibrated",
+        "CLM-2-cal" => "30% communication loss, calibrated",
+        "CLM-3-cal" => "50% communication loss, calibrated",
         _ => unreachable!("canonical_name returns only listed names"),
     })
 }
@@ -89,6 +101,20 @@ pub fn preset_stages(name: &str) -> Option<Vec<StageSpec>> {
         "CLM-1" => clm(3000.0, 8500.0),
         "CLM-2" => clm(1000.0, 1000.0),
         "CLM-3" => clm(2000.0, 1000.0),
+        // Calibrated variants: the preset's shape with one scale fitted so
+        // that the exact long-run value is the label, at 1 kHz for CLM
+        // (`netfi fit loss 10% --like PLM-1`, …, `netfi fit outage 50% --like
+        // CLM-3`; parameters to 7 significant digits). PLM: both λ scaled;
+        // DLM: both rates scaled; CLM: the cooldown.
+        "PLM-1-cal" => plm([4.428, 4.966], [1.659083, 0.2744881]),
+        "PLM-2-cal" => plm([4.604, 3.901], [3.506295, 1.447136]),
+        "PLM-3-cal" => plm([3.859, 3.797], [3.284075, 5.976345]),
+        "DLM-1-cal" => dlm(70.0, [0.72645, 0.27355], [0.02711332, 0.08530046]),
+        "DLM-2-cal" => dlm(210.0, [0.89258, 0.10742], [0.01071203, 0.01609282]),
+        "DLM-3-cal" => dlm(406.0, [0.89574, 0.10426], [0.01026215, 0.01552838]),
+        "CLM-1-cal" => clm(3000.0, 13504.5),
+        "CLM-2-cal" => clm(1000.0, 1167.833),
+        "CLM-3-cal" => clm(2000.0, 1000.5),
         _ => unreachable!("canonical_name returns only listed names"),
     };
     Some(vec![StageSpec { name: None, preset: Some(canonical.to_string()), model }])

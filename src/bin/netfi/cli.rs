@@ -25,6 +25,12 @@ pub enum Command {
     Emulator(netfi::service::args::EmulatorArgs),
     /// The simulator service alone (receives and measures).
     Simulator(netfi::service::args::SimulatorArgs),
+    /// Fit a model's parameters to a target; build or verify the fault parameter database.
+    #[command(subcommand)]
+    Fit(FitCmd),
+    /// Export a scenario to another tool's configuration.
+    #[command(subcommand)]
+    Export(ExportCmd),
 }
 
 #[derive(Debug, Subcommand)]
@@ -62,4 +68,115 @@ pub struct CheckArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum FitCmd {
+    /// Packet loss: a two-state `ge_lomax` with the study's transition matrix.
+    Loss {
+        /// Target loss rate: 0.3 or 30%.
+        target: String,
+        /// Also aim at this mean loss-run length, in frames (frees the Lomax shape).
+        #[arg(long)]
+        run_length: Option<f64>,
+        #[command(flatten)]
+        common: FitCommon,
+    },
+    /// Delay: a minimum plus a two-component hyperexponential, reorder.
+    Delay {
+        /// Target mean delay in ms: 250 or 250ms.
+        target: String,
+        /// Also aim at this 99th percentile, in ms.
+        #[arg(long, conflicts_with = "std_ms")]
+        p99_ms: Option<f64>,
+        /// Also aim at this standard deviation, in ms.
+        #[arg(long)]
+        std_ms: Option<f64>,
+        /// The minimum delay in ms (default: 0.7 × the target mean).
+        #[arg(long)]
+        min_ms: Option<f64>,
+        #[command(flatten)]
+        common: FitCommon,
+    },
+    /// Communication loss: outage windows with a cooldown, in time units.
+    Outage {
+        /// Target lost fraction: 0.1 or 10%.
+        target: String,
+        /// Also aim at this mean outage (window) length, in ms.
+        #[arg(long)]
+        outage_ms: Option<f64>,
+        /// Frame rate the lost fraction is measured at.
+        #[arg(long, default_value_t = 1000.0)]
+        rate_hz: f64,
+        #[command(flatten)]
+        common: FitCommon,
+    },
+    /// Build the fault parameter database (every target of its grid), or verify one.
+    Db(FitDbArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct FitCommon {
+    /// Seed of the search and the confirmation (default: random; always printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Keep a study preset's shape and scale one parameter (PLM-*, DLM-*, CLM-*).
+    #[arg(long)]
+    pub like: Option<String>,
+    /// How the search computes a candidate's metrics.
+    #[arg(long, value_enum, default_value_t = ObjectiveArg::Exact)]
+    pub objective: ObjectiveArg,
+    /// Threads (default: the available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObjectiveArg {
+    /// Closed forms (exact for every metric fitted here).
+    Exact,
+    /// Monte Carlo estimates with common random numbers (the study's method).
+    MonteCarlo,
+}
+
+#[derive(Debug, Args)]
+pub struct FitDbArgs {
+    /// Write the database here (default: standard output).
+    #[arg(long, conflicts_with = "verify")]
+    pub out: Option<PathBuf>,
+    /// Master seed of the entries' seeds (default: the shipped database's, 2026).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Instead of building, check every entry of this database file: its
+    /// closed form, an exact re-simulation with its seed, and an independent
+    /// re-simulation with another seed.
+    #[arg(long, value_name = "PATH")]
+    pub verify: Option<PathBuf>,
+    /// Threads (default: the available cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExportCmd {
+    /// The `tc qdisc … netem …` commands for a scenario, with what is approximated.
+    Netem(ExportNetemArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ExportNetemArgs {
+    /// A scenario file (TOML) or a preset name.
+    pub scenario: String,
+    /// Network interface the qdisc goes on.
+    #[arg(long, default_value = "eth0")]
+    pub dev: String,
+    /// Frame rate the queue limit is sized for, in Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    pub rate_hz: f64,
+    /// Directory where tc looks for distribution tables.
+    #[arg(long, default_value = "/usr/lib/tc")]
+    pub table_dir: PathBuf,
 }

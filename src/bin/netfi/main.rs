@@ -1,6 +1,8 @@
 //! The `netfi` command line: a thin wrapper over the library.
 
 mod cli;
+mod export;
+mod fit;
 mod scenario;
 
 use clap::Parser;
@@ -13,6 +15,8 @@ fn main() -> std::process::ExitCode {
         cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()),
         cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|_| ()),
         cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
+        cli::Command::Fit(cmd) => fit::run(cmd),
+        cli::Command::Export(cmd) => export::run(cmd),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

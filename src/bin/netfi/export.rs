@@ -1,0 +1,377 @@
+//! `netfi export netem`: a shell script with the `tc qdisc … netem …` command
+//! that stands for a scenario, saying what is approximated and refusing what
+//! netem cannot express.
+//!
+//! Mapping (one netem qdisc takes one loss model and one delay):
+//! - `bernoulli` → `loss random P` (exact);
+//! - `markov4` → `loss state p13 p31 p32 p23 p14` (exact: SPEC §3.3 is netem's);
+//! - `gilbert_elliott` → `loss gemodel p r 1-h 1-k` (exact);
+//! - `ge_lomax` → `loss gemodel p r 100% 0%`, the simple Gilbert model with
+//!   the same loss rate and mean loss-run length: runs become geometric, the
+//!   Lomax tail is lost;
+//! - `delay` constant → `delay D` (exact); uniform → `delay (min + J/2)
+//!   J/2`, netem's default uniform jitter (exact); hyperexponential → a
+//!   custom distribution table of 4096 quantiles. netem computes a delay as
+//!   `mu + sigma · t / 8192` with `t` a signed 16-bit table entry, so a table
+//!   spans ±4 `sigma`: `mu` is the mean and `sigma` the larger of the
+//!   standard deviation and a quarter of the table's farthest quantile from
+//!   the mean, so nothing is clipped; the tail beyond the 99.988th
+//!   percentile (the last table point) is lost. `fifo` order is not
+//!   reproduced: netem releases each packet at its own time.
+//! - The queue: netem holds delayed packets in a queue of `limit` packets
+//!   (1000 by default) and drops what does not fit; `limit` is raised to
+//!   hold the stream for the longest delay in the table, with 25% spare.
+//! - `outage` windows and timelines of several phases have no netem
+//!   equivalent: they are refused.
+
+use crate::cli::{ExportCmd, ExportNetemArgs};
+use anyhow::{bail, Result};
+use netfi::fit::family::{mean_loss_run_exact, Hyperexp};
+use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Model, Order, Verdict};
+use netfi::scenario::{self, ModelSpec, StageSpec};
+use rand::SeedableRng;
+use std::fmt::Write;
+
+/// Entries of a generated distribution table (as iproute2's own tables).
+const TABLE_SIZE: usize = 4096;
+/// netem's fixed-point scale of table entries.
+const NETEM_DIST_SCALE: f64 = 8192.0;
+/// netem's default queue limit, in packets.
+const NETEM_DEFAULT_LIMIT: u64 = 1000;
+
+pub fn run(cmd: ExportCmd) -> Result<()> {
+    match cmd {
+        ExportCmd::Netem(args) => {
+            print!("{}", netem(&args)?);
+            Ok(())
+        }
+    }
+}
+
+fn netem(args: &ExportNetemArgs) -> Result<String> {
+    let spec = scenario::resolve(&args.scenario)?;
+    if spec.phases.len() > 1 {
+        bail!(
+            "scenario {} is a timeline of {} phases: netem has no timeline; export each phase as its own scenario and switch them with `tc qdisc change` on your own schedule",
+            spec.name,
+            spec.phases.len()
+        );
+    }
+    if !(args.rate_hz.is_finite() && args.rate_hz > 0.0) {
+        bail!("--rate-hz must be a positive frame rate, got {}", args.rate_hz);
+    }
+    let stages = &spec.phases[0].stages;
+    let mut notes = Vec::new();
+    let mut loss: Option<(usize, String)> = None;
+    let mut delay: Option<(usize, String)> = None;
+    let mut table: Option<(String, String)> = None;
+    let mut longest_delay_ms = 0.0f64;
+    for (i, st) in stages.iter().enumerate() {
+        let label = stage_label(i, st);
+        let model = st.model.kind().name();
+        let slot = match &st.model {
+            ModelSpec::Delay(_) => &mut delay,
+            ModelSpec::Outage(_) => bail!(
+                "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
+            ),
+            _ => &mut loss,
+        };
+        if let Some((j, _)) = slot {
+            bail!(
+                "{label}: netem takes one {} per qdisc and stage {} already uses it",
+                if model == "delay" { "delay" } else { "loss model" },
+                *j + 1
+            );
+        }
+        let text = match &st.model {
+            ModelSpec::Bernoulli(p) => {
+                notes.push(format!("{label}: exact (loss random)"));
+                format!("loss random {}", pct(p.p.get()))
+            }
+            ModelSpec::Markov4(p) => {
+                notes.push(format!("{label}: exact (loss state)"));
+                let g = |v: Option<netfi::model::Probability>, d: f64| pct(v.map_or(d, |x| x.get()));
+                format!(
+                    "loss state {} {} {} {} {}",
+                    pct(p.p13.get()),
+                    g(p.p31, 1.0 - p.p13.get()),
+                    g(p.p32, 0.0),
+                    g(p.p23, 1.0),
+                    g(p.p14, 0.0)
+                )
+            }
+            ModelSpec::GilbertElliott(p) => {
+                notes.push(format!("{label}: exact (loss gemodel)"));
+                let pv = p.p.get();
+                format!(
+                    "loss gemodel {} {} {} {}",
+                    pct(pv),
+                    pct(p.r.map_or(1.0 - pv, |x| x.get())),
+                    pct(p.loss_bad.map_or(1.0, |x| x.get())),
+                    pct(p.loss_good.map_or(0.0, |x| x.get()))
+                )
+            }
+            ModelSpec::GeLomax(p) => {
+                let (text, note) = ge_lomax_as_gilbert(p)?;
+                notes.push(format!("{label}: approximated: {note}"));
+                text
+            }
+            ModelSpec::Delay(p) => {
+                let (text, note, longest, dist) = delay_as_netem(p, &label)?;
+                notes.push(format!("{label}: {note}"));
+                longest_delay_ms = longest_delay_ms.max(longest);
+                table = dist;
+                text
+            }
+            ModelSpec::Outage(_) => unreachable!("refused above"),
+        };
+        *slot = Some((i, text));
+    }
+
+    let needed = (args.rate_hz * longest_delay_ms / 1e3 * 1.25).ceil() as u64 + 1;
+    let limit = needed.max(NETEM_DEFAULT_LIMIT);
+    if needed > NETEM_DEFAULT_LIMIT {
+        notes.push(format!(
+            "queue: at {} Hz a delay of up to {longest_delay_ms:.1} ms holds about {} packets, more than netem's default limit of {NETEM_DEFAULT_LIMIT}; limit raised to {limit} (packets beyond the limit are dropped)",
+            args.rate_hz,
+            (args.rate_hz * longest_delay_ms / 1e3).ceil()
+        ));
+    }
+    if stages.is_empty() {
+        notes.push("nothing to inject: the qdisc passes every packet".into());
+    }
+
+    let mut out = String::new();
+    writeln!(out, "#!/bin/sh").unwrap();
+    writeln!(out, "# netem equivalent of netfi scenario \"{}\" (netfi {}).", spec.name, netfi::fit::TOOL_VERSION)
+        .unwrap();
+    for n in &notes {
+        writeln!(out, "# - {n}").unwrap();
+    }
+    writeln!(out, "# Randomness differs: netem draws from the kernel's generator, not netfi's seeded streams.")
+        .unwrap();
+    writeln!(out, "set -e").unwrap();
+    if let Some((name, body)) = &table {
+        let dir = args.table_dir.display();
+        writeln!(out, "TC_LIB_DIR=\"${{TC_LIB_DIR:-{dir}}}\"").unwrap();
+        writeln!(out, "export TC_LIB_DIR").unwrap();
+        writeln!(out, "cat > \"$TC_LIB_DIR/{name}.dist\" <<'NETFI_TABLE'").unwrap();
+        out.push_str(body);
+        writeln!(out, "NETFI_TABLE").unwrap();
+    }
+    let mut cmd = format!("tc qdisc replace dev {} root netem limit {limit}", args.dev);
+    for (_, text) in [&loss, &delay].into_iter().flatten() {
+        cmd.push(' ');
+        cmd.push_str(text);
+    }
+    writeln!(out, "{cmd}").unwrap();
+    Ok(out)
+}
+
+fn stage_label(i: usize, st: &StageSpec) -> String {
+    let mut s = format!("stage {} ({}", i + 1, st.model.kind().name());
+    if let Some(p) = &st.preset {
+        s.push_str(&format!(", {p}"));
+    }
+    s.push(')');
+    s
+}
+
+/// A probability as a tc percentage (tc keeps it to 1/2^32).
+fn pct(p: f64) -> String {
+    format!("{}%", netfi::fit::family::round_sig(p * 100.0))
+}
+
+/// A duration for tc, in microseconds (tc keeps nanoseconds).
+fn time_us(ms: f64) -> String {
+    format!("{}us", (ms * 1e3).round() as u64)
+}
+
+/// The simple Gilbert model (`loss gemodel p r 100% 0%`) with the loss rate
+/// and mean loss run of a `ge_lomax` stage: runs of Bad are geometric with
+/// mean `1/r`, and the loss is `p/(p + r)`, so `r = 1/R` and
+/// `p = r·L/(1 − L)`.
+fn ge_lomax_as_gilbert(p: &GeLomaxParams) -> Result<(String, String)> {
+    let model = GeLomax::new(p)?;
+    let loss = model.loss_rate_exact();
+    if loss >= 1.0 {
+        return Ok(("loss random 100%".into(), "every frame is lost in the long run: loss random 100%".into()));
+    }
+    let (run, how) = match p.transition.len() {
+        1 => (model.mean_burst(0) / model.burst_survival(0, 1), "exact"),
+        2 => match mean_loss_run_exact(p) {
+            Some(r) => (r, "exact"),
+            None => (simulated_mean_run(&model), "simulated over 10^7 frames"),
+        },
+        _ => (simulated_mean_run(&model), "simulated over 10^7 frames"),
+    };
+    if loss <= 0.0 || !run.is_finite() {
+        return Ok(("loss random 0%".into(), "no frame is lost in the long run: loss random 0%".into()));
+    }
+    let r = 1.0 / run;
+    let pp = (r * loss / (1.0 - loss)).min(1.0);
+    let note = format!(
+        "Lomax bursts become geometric (netem loss gemodel, simple Gilbert) with the same loss rate {:.6} and mean loss run {:.4} frames ({how}); the heavy tail of long runs is lost",
+        loss, run
+    );
+    Ok((format!("loss gemodel {} {} 100% 0%", pct(pp), pct(r)), note))
+}
+
+fn simulated_mean_run(model: &GeLomax) -> f64 {
+    let mut m = model.clone();
+    let mut rng = netfi::model::StageRng::seed_from_u64(1);
+    let (mut drops, mut runs, mut prev) = (0u64, 0u64, false);
+    for _ in 0..10_000_000u64 {
+        let d = m.decide(0, &mut rng) == Verdict::Drop;
+        drops += u64::from(d);
+        runs += u64::from(d && !prev);
+        prev = d;
+    }
+    if runs == 0 {
+        f64::INFINITY
+    } else {
+        drops as f64 / runs as f64
+    }
+}
+
+/// The netem delay clause, the note, the longest delay netem will give (ms),
+/// and the distribution table (name, file body) if one is needed.
+#[allow(clippy::type_complexity)]
+fn delay_as_netem(p: &DelayParams, label: &str) -> Result<(String, String, f64, Option<(String, String)>)> {
+    let min = p.min_ms.get();
+    let fifo = if p.order == Order::Fifo {
+        "; order = \"fifo\" is not reproduced (netem releases each packet at its own time, so jitter reorders)"
+    } else {
+        ""
+    };
+    match p.dist {
+        DelayDist::None => Ok((format!("delay {}", time_us(min)), "exact (constant delay)".into(), min, None)),
+        DelayDist::Uniform => {
+            let j = p.jitter_ms.map_or(0.0, |j| j.get());
+            Ok((
+                format!("delay {} {}", time_us(min + j / 2.0), time_us(j / 2.0)),
+                format!("exact up to microseconds (netem's default uniform jitter, mean ± half-width){fifo}"),
+                min + j,
+                None,
+            ))
+        }
+        DelayDist::Hyperexp => {
+            let h = Hyperexp {
+                weights: p.weights.clone().unwrap_or_default(),
+                rates: p.rates_per_ms.clone().unwrap_or_default(),
+            };
+            if h.weights.is_empty() || h.weights.len() != h.rates.len() {
+                bail!("{label}: a hyperexponential delay needs weights and rates");
+            }
+            let mean = min + h.mean_ms();
+            let std = h.std_ms();
+            let quantiles: Vec<f64> =
+                (0..TABLE_SIZE).map(|i| min + h.quantile_ms((i as f64 + 0.5) / TABLE_SIZE as f64)).collect();
+            let top = quantiles[TABLE_SIZE - 1];
+            let scale = std.max((top - mean) / 3.999).max((mean - min) / 3.999);
+            let entries: Vec<i64> = quantiles
+                .iter()
+                .map(|q| (((q - mean) / scale) * NETEM_DIST_SCALE).round().clamp(-32768.0, 32767.0) as i64)
+                .collect();
+            // What netem will realize (its arithmetic, at the microsecond times tc passes).
+            let mu_us = (mean * 1e3).round();
+            let sigma_us = (scale * 1e3).round();
+            let realized: Vec<f64> =
+                entries.iter().map(|t| (mu_us + sigma_us * *t as f64 / NETEM_DIST_SCALE) / 1e3).collect();
+            let realized_mean = realized.iter().sum::<f64>() / TABLE_SIZE as f64;
+            let mut sorted = realized.clone();
+            sorted.sort_by(f64::total_cmp);
+            let realized_p99 = sorted[(0.99 * TABLE_SIZE as f64) as usize];
+            let name = format!("netfi-h2-{:08x}", fnv(&format!("{p:?}")) as u32);
+            let mut body = format!(
+                "# netfi {}: {} ms + hyperexponential (weights {:?}, rates {:?} per ms), {TABLE_SIZE} quantiles\n# in units of {} ms / {NETEM_DIST_SCALE} around {} ms\n",
+                netfi::fit::TOOL_VERSION,
+                min,
+                h.weights,
+                h.rates,
+                sigma_us / 1e3,
+                mu_us / 1e3
+            );
+            for chunk in entries.chunks(8) {
+                let line: Vec<String> = chunk.iter().map(|v| v.to_string()).collect();
+                body.push_str(&line.join(" "));
+                body.push('\n');
+            }
+            let note = format!(
+                "approximated by the distribution table {name} ({TABLE_SIZE} equiprobable quantiles; netem reads mu + sigma·t/8192 with |t| ≤ 4·8192, so sigma is {:.3} ms rather than the standard deviation {:.3} ms, to keep the whole table inside netem's ±4 sigma without clipping): mean {:.3} ms (exact {:.3}), p99 {:.3} ms (exact {:.3}); the tail beyond the 99.988th percentile ({:.1} ms) is lost{fifo}",
+                scale,
+                std,
+                realized_mean,
+                mean,
+                realized_p99,
+                min + h.quantile_ms(0.99),
+                top
+            );
+            let longest = realized.iter().copied().fold(0.0, f64::max);
+            Ok((
+                format!("delay {} {} distribution {name}", time_us(mean), time_us(scale)),
+                note,
+                longest,
+                Some((name, body)),
+            ))
+        }
+    }
+}
+
+fn fnv(s: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in s.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use netfi::model::Millis;
+
+    #[test]
+    fn gilbert_keeps_loss_and_mean_run() {
+        let p = GeLomaxParams {
+            transition: vec![vec![0.95, 0.05], vec![0.10, 0.90]],
+            alpha: vec![4.604, 3.901],
+            lambda: vec![3.552, 1.466],
+        };
+        let (text, note) = ge_lomax_as_gilbert(&p).unwrap();
+        assert!(text.starts_with("loss gemodel "), "{text}");
+        let nums: Vec<f64> =
+            text.split_whitespace().skip(2).map(|s| s.trim_end_matches('%').parse::<f64>().unwrap() / 100.0).collect();
+        let loss = GeLomax::new(&p).unwrap().loss_rate_exact();
+        let run = mean_loss_run_exact(&p).unwrap();
+        assert!((nums[0] / (nums[0] + nums[1]) - loss).abs() < 1e-6, "{nums:?}");
+        assert!((1.0 / nums[1] - run).abs() < 1e-5 * run, "{nums:?}");
+        assert!(note.contains("geometric"), "{note}");
+    }
+
+    #[test]
+    fn hyperexp_table_keeps_the_mean_and_stays_in_range() {
+        let p = DelayParams {
+            min_ms: Millis::new(210.0).unwrap(),
+            dist: DelayDist::Hyperexp,
+            weights: Some(vec![0.89258, 0.10742]),
+            rates_per_ms: Some(vec![0.01081, 0.01624]),
+            jitter_ms: None,
+            order: Order::Reorder,
+        };
+        let (text, note, longest, table) = delay_as_netem(&p, "s").unwrap();
+        let (_, body) = table.unwrap();
+        let entries: Vec<i64> = body
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .flat_map(|l| l.split_whitespace().map(|v| v.parse::<i64>().unwrap()))
+            .collect();
+        assert_eq!(entries.len(), TABLE_SIZE);
+        assert!(entries.iter().all(|t| (-32768..=32767).contains(t)));
+        assert!(entries.windows(2).all(|w| w[0] <= w[1]));
+        assert!(text.contains("distribution netfi-h2-"), "{text}");
+        assert!(note.contains("mean 299.1"), "{note}");
+        assert!(longest > 1000.0 && longest < 1500.0, "{longest}");
+    }
+}

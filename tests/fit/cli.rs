@@ -1,0 +1,82 @@
+//! `netfi fit` and `netfi export netem` as a user runs them.
+
+use std::process::Command;
+
+fn netfi(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
+}
+
+#[test]
+fn fit_json_has_the_documented_fields_and_reproduces() {
+    let out = netfi(&["fit", "loss", "30%", "--seed", "3", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "model",
+        "params",
+        "target",
+        "realized",
+        "realized_ci95",
+        "exact",
+        "seed",
+        "confirm_seed",
+        "frames",
+        "tool_version",
+    ] {
+        assert!(v.get(key).is_some(), "missing `{key}` in {v}");
+    }
+    assert_eq!(v["model"], "ge_lomax");
+    assert_eq!(v["seed"], 3);
+    assert_eq!(v["target"]["loss_rate"], 0.3);
+    let realized = v["realized"]["loss_rate"].as_f64().unwrap();
+    let ci = v["realized_ci95"]["loss_rate"].as_array().unwrap();
+    assert!(ci[0].as_f64().unwrap() <= realized && realized <= ci[1].as_f64().unwrap());
+    assert!((realized - 0.3).abs() <= 0.005 * 0.3);
+    assert_eq!(v["params"]["alpha"].as_array().unwrap().len(), 2);
+    let again = netfi(&["fit", "loss", "0.3", "--seed", "3", "--json", "--threads", "1"]);
+    assert_eq!(out.stdout, again.stdout);
+}
+
+#[test]
+fn fit_prints_its_seed_and_a_stage() {
+    let out = netfi(&["fit", "delay", "250ms", "--p99-ms", "900"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains(" seed "), "{stderr}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("[[stage]]\nmodel = \"delay\""), "{stdout}");
+    assert!(stdout.contains("delay_ms_p99"), "{stdout}");
+    let bad = netfi(&["fit", "outage", "120%"]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("not a probability"));
+}
+
+#[test]
+fn export_maps_loss_and_delay_and_says_what_is_approximated() {
+    let out = netfi(&["export", "netem", "config/scenarios/plm2_dlm2.toml", "--dev", "veth0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = String::from_utf8_lossy(&out.stdout);
+    let cmd = script.lines().find(|l| l.starts_with("tc qdisc replace dev veth0 root netem")).unwrap();
+    assert!(cmd.contains(" loss gemodel ") && cmd.contains(" 100% 0%"), "{cmd}");
+    assert!(cmd.contains(" distribution netfi-h2-"), "{cmd}");
+    // 300 ms of delay at 1 kHz holds more than netem's default 1000 packets.
+    let limit: u64 = cmd.split_whitespace().skip_while(|w| *w != "limit").nth(1).unwrap().parse().unwrap();
+    assert!(limit > 1000, "{cmd}");
+    assert!(script.contains("geometric") && script.contains("limit raised"), "{script}");
+    assert!(script.contains("<<'NETFI_TABLE'"), "{script}");
+
+    let out = netfi(&["export", "netem", "config/scenarios/netem_markov4.toml"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = String::from_utf8_lossy(&out.stdout);
+    assert!(script.contains(" loss state ") && script.contains("exact"), "{script}");
+}
+
+#[test]
+fn export_refuses_what_netem_cannot_express() {
+    for (scenario, says) in [("CLM-1", "outage windows"), ("config/scenarios/outage_timeline.toml", "timeline")] {
+        let out = netfi(&["export", "netem", scenario]);
+        assert!(!out.status.success(), "{scenario}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(says), "{scenario}: {stderr}");
+    }
+}
