@@ -3,7 +3,7 @@
 //! Run with `cargo bench --bench check`.
 
 use netfi::check::{self, Arrivals};
-use netfi::host::CpuTimes;
+use netfi::host::StealTimer;
 use netfi::scenario::{self, Scenario};
 use std::time::Instant;
 
@@ -13,7 +13,7 @@ fn main() {
     }
     let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n", "bench", "bench").unwrap();
     let arrivals = Arrivals::Rate { frames: 10_000_000, rate_hz: 1000.0 };
-    let steal0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     let mut secs: Vec<f64> = (0..3)
         .map(|seed| {
             let t = Instant::now();
@@ -24,10 +24,8 @@ fn main() {
         })
         .collect();
     secs.sort_by(f64::total_cmp);
-    let steal = match (steal0, CpuTimes::read()) {
-        (Some(a), Some(b)) => format!("{} ms ({:.2}%)", b.steal_since(&a).ms, b.steal_since(&a).fraction * 100.0),
-        _ => "unavailable".into(),
-    };
+    let s = steal_timer.stop();
+    let steal = format!("{} ms ({:.2}%)", s.ms, s.fraction * 100.0);
     println!(
         "scenario check PLM-2 → DLM-2, 10^7 frames: median {:.3} s (min {:.3}, max {:.3}; {:.0} ns/frame); steal {steal}",
         secs[1], secs[0], secs[2], secs[1] * 1e9 / 1e7

@@ -37,9 +37,27 @@ impl CpuTimes {
     }
 }
 
+/// Measures steal time from its start to [`StealTimer::stop`].
+#[derive(Debug, Clone, Copy)]
+pub struct StealTimer(Option<CpuTimes>);
+
+impl StealTimer {
+    pub fn start() -> Self {
+        StealTimer(CpuTimes::read())
+    }
+
+    /// Steal since the start (zero where `/proc/stat` is unreadable).
+    pub fn stop(&self) -> Steal {
+        match (self.0, CpuTimes::read()) {
+            (Some(a), Some(b)) => b.steal_since(&a),
+            _ => Steal::default(),
+        }
+    }
+}
+
 /// Steal time over an interval: milliseconds summed over all CPUs, and as a
 /// fraction of all CPU time in the interval.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Steal {
     pub ms: u64,
     pub fraction: f64,

@@ -5,29 +5,10 @@
 use netfi::injector::Injector;
 use netfi::sample::FrameSample;
 use netfi::scenario::{self, Scenario};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::{allocations, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -41,7 +22,7 @@ fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) 
     let mut sample = FrameSample::ZERO;
     for i in 0..frames {
         if i == frames - measured {
-            before = ALLOCATIONS.load(Ordering::Relaxed);
+            before = allocations();
         }
         let now = i * 1_000_000;
         while let Some(r) = inj.pop_due(now) {
@@ -50,7 +31,7 @@ fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) 
         sample.console_index = i;
         std::hint::black_box(inj.ingress(now, sample));
     }
-    ALLOCATIONS.load(Ordering::Relaxed) - before
+    allocations() - before
 }
 
 #[test]

@@ -10,32 +10,13 @@ use netfi::scenario::{self, Scenario};
 use netfi::service::ports::{FrameSink, FrameSource};
 use netfi::service::udp::{Arena, ReturnPath, UdpSink, UdpSource};
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::RefCell;
 use std::rc::Rc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::{allocations, Counting};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -89,7 +70,7 @@ fn allocations_in_steady_state(
     let mut replies = 0;
     for i in 0..datagrams {
         if i == datagrams - measured {
-            before = ALLOCATIONS.load(Ordering::Relaxed);
+            before = allocations();
         }
         console.send_to(&payload, &to_bridge).unwrap();
         until(|| source.try_recv(&mut sample).unwrap().then_some(()));
@@ -113,7 +94,7 @@ fn allocations_in_steady_state(
             }
         }
     }
-    (ALLOCATIONS.load(Ordering::Relaxed) - before, replies)
+    (allocations() - before, replies)
 }
 
 #[test]

@@ -12,7 +12,7 @@
 
 use crate::capture;
 use crate::clock::{now_ns, wait_until_ns, Wait};
-use crate::host::CpuTimes;
+use crate::host::StealTimer;
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::motion::{MotionGenerator, MotionParams};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
@@ -147,7 +147,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else { 200_000 };
     let mut lateness = LatencyHistogram::new();
     let (mut send_errors, mut sent_unsubscribed, mut direct_sent, mut sent) = (0u64, 0u64, 0u64, 0u64);
-    let steal0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     let t_start = now_ns() + 1_000_000;
     let mut ended_by = "done";
     let mut sample = FrameSample::ZERO;
@@ -192,10 +192,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     if let Some(d) = direct.as_mut() {
         let _ = FrameSink::send_with(d, &end, |_| {});
     }
-    let steal = match (steal0, CpuTimes::read()) {
-        (Some(a), Some(b)) => b.steal_since(&a),
-        _ => Default::default(),
-    };
+    let steal = steal_timer.stop();
     let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
     let report = ConsoleReport {
         frames_sent: sent,

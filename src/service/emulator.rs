@@ -13,7 +13,7 @@
 use crate::check::{stage_reports, StageReport};
 use crate::clock::now_ns;
 use crate::frame::ItpView;
-use crate::host::CpuTimes;
+use crate::host::StealTimer;
 use crate::injector::{Fate, Injector, Invalid};
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
@@ -150,7 +150,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let mut sent_by_console = None;
     let mut peer_events = Vec::new();
     let mut peers = (source.peers(), sink.peers());
-    let steal0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     let t_start = now_ns();
     let mut sample = FrameSample::ZERO;
     let mut iter: u64 = 0;
@@ -255,10 +255,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let lateness_hlog = cfg.out_dir.join("lateness.hlog");
     decision.write_log(&decision_hlog, "decision", 0.0, duration_s)?;
     lateness.write_log(&lateness_hlog, "release_lateness", 0.0, duration_s)?;
-    let steal = match (steal0, CpuTimes::read()) {
-        (Some(a), Some(b)) => b.steal_since(&a),
-        _ => Default::default(),
-    };
+    let steal = steal_timer.stop();
     let (loss_rate, loss_rate_ci95) = batches.rate_ci95();
     let interval_ns = if counts.entered > 1 { (t_end - t_start) as f64 / counts.entered as f64 } else { 0.0 };
     let (stages, _) = stage_reports(inj.scenario(), interval_ns);

@@ -2,6 +2,7 @@
 //! of every frame, with the overhead histograms and the host's steal time.
 
 use crate::check::StageReport;
+use crate::host::Steal;
 use crate::metrics::{fmt_ns, Summary};
 use crate::service::console::ConsoleReport;
 use crate::service::emulator::{EmulatorReport, PeerEvent};
@@ -30,39 +31,20 @@ pub struct FrameAccount {
     pub balanced: bool,
 }
 
-/// Percentiles in ns as the JSON report carries them.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Percentiles {
-    pub p50: u64,
-    pub p90: u64,
-    pub p99: u64,
-    pub p999: u64,
-    pub p9999: u64,
-    pub max: u64,
-    pub mean: f64,
-    pub count: u64,
-}
-
-impl From<Summary> for Percentiles {
-    fn from(s: Summary) -> Self {
-        Percentiles { p50: s.p50, p90: s.p90, p99: s.p99, p999: s.p999, p9999: s.p9999, max: s.max, mean: s.mean, count: s.count }
-    }
-}
-
 /// What the injector itself adds, in ns.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Overhead {
     /// Console send → taken off the console port by the emulator.
-    pub ingress_wait: Option<Percentiles>,
+    pub ingress_wait: Option<Summary>,
     /// Frame taken off the console port → fate decided.
-    pub decision: Option<Percentiles>,
+    pub decision: Option<Summary>,
     /// Actual − scheduled release.
-    pub release_lateness: Option<Percentiles>,
+    pub release_lateness: Option<Summary>,
     /// Simulator receive − console send − injected delay, through the emulator.
-    pub end_to_end_extra: Option<Percentiles>,
+    pub end_to_end_extra: Option<Summary>,
     /// Simulator receive − console send of the same frames sent directly
     /// (the physical floor of one hop, measured in the same run).
-    pub direct_hop: Option<Percentiles>,
+    pub direct_hop: Option<Summary>,
     /// `end_to_end_extra − direct_hop`, percentile by percentile: what the
     /// emulator adds over a direct console → simulator hop.
     pub added_over_direct: Option<BTreeMap<String, i64>>,
@@ -78,12 +60,6 @@ pub struct ProcessEnd {
     /// runner gave up on it).
     pub status: String,
     pub log: PathBuf,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Steal {
-    pub ms: u64,
-    pub fraction: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -136,7 +112,7 @@ pub struct RunReport {
     pub loss_rate_ci95: Option<[f64; 2]>,
     pub stages: Vec<StageReport>,
     /// Injected delay of delivered frames (ns).
-    pub injected_delay_ns: Option<Percentiles>,
+    pub injected_delay_ns: Option<Summary>,
     pub overhead_ns: Overhead,
     /// Delays seen vs drawn vs the analytic law (scenarios that delay).
     pub delay_check: Option<DelayCheck>,
@@ -171,14 +147,14 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport
 }
 
 /// `a − b` for the main percentiles.
-pub fn difference(a: &Percentiles, b: &Percentiles) -> BTreeMap<String, i64> {
+pub fn difference(a: &Summary, b: &Summary) -> BTreeMap<String, i64> {
     [("p50", a.p50, b.p50), ("p90", a.p90, b.p90), ("p99", a.p99, b.p99), ("p999", a.p999, b.p999)]
         .into_iter()
         .map(|(k, x, y)| (k.to_string(), x as i64 - y as i64))
         .collect()
 }
 
-fn line(p: &Option<Percentiles>) -> String {
+fn line(p: &Option<Summary>) -> String {
     match p {
         Some(p) => format!(
             "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",

@@ -8,12 +8,12 @@
 //! as a fault; the others keep going until the planned end.
 
 use crate::clock::now_ns;
-use crate::host::CpuTimes;
+use crate::host::StealTimer;
 use crate::scenario::{self, Scenario};
 use crate::service::args::RunArgs;
 use crate::service::console::ConsoleReport;
 use crate::service::emulator::EmulatorReport;
-use crate::service::report::{self, DelayCheck, DelayQuantile, Files, Overhead, Percentiles, ProcessEnd, RunReport, Steal};
+use crate::service::report::{self, DelayCheck, DelayQuantile, Files, Overhead, ProcessEnd, RunReport};
 use crate::service::signals;
 use crate::service::simulator::SimulatorReport;
 use anyhow::{bail, Context, Result};
@@ -241,7 +241,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         (None, None) => {}
     }
 
-    let steal0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     let t0 = now_ns();
     let mut sim = spawn("simulator", sim_args, simulator_core, &out)?;
     wait_ready(&mut sim, &out, Duration::from_secs(30))?;
@@ -339,10 +339,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         }
     }
     let duration_s = (now_ns() - t0) as f64 / 1e9;
-    let steal = match (steal0, CpuTimes::read()) {
-        (Some(a), Some(b)) => b.steal_since(&a),
-        _ => Default::default(),
-    };
+    let steal = steal_timer.stop();
 
     let console: Option<ConsoleReport> = read_json(&out.join("console.json"));
     let emulator: Option<EmulatorReport> = read_json(&out.join("emulator.json"));
@@ -374,11 +371,11 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         }
     };
 
-    let ingress_wait = emulator.as_ref().map(|e| Percentiles::from(e.ingress_wait_ns));
-    let decision = emulator.as_ref().map(|e| Percentiles::from(e.decision_ns));
-    let release_lateness = emulator.as_ref().map(|e| Percentiles::from(e.release_lateness_ns));
-    let end_to_end_extra = simulator.as_ref().map(|s| Percentiles::from(s.end_to_end_extra_ns)).filter(|p| p.count > 0);
-    let direct_hop = simulator.as_ref().map(|s| Percentiles::from(s.direct_hop_ns)).filter(|p| p.count > 0);
+    let ingress_wait = emulator.as_ref().map(|e| e.ingress_wait_ns);
+    let decision = emulator.as_ref().map(|e| e.decision_ns);
+    let release_lateness = emulator.as_ref().map(|e| e.release_lateness_ns);
+    let end_to_end_extra = simulator.as_ref().map(|s| s.end_to_end_extra_ns).filter(|p| p.count > 0);
+    let direct_hop = simulator.as_ref().map(|s| s.direct_hop_ns).filter(|p| p.count > 0);
     let added_over_direct = end_to_end_extra.as_ref().zip(direct_hop.as_ref()).map(|(a, b)| report::difference(a, b));
     let delay_check = delay_check(&spec, seed, delays);
     let report_json = out.join("report.json");
@@ -392,7 +389,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         loss_rate: emulator.as_ref().map(|e| e.loss_rate),
         loss_rate_ci95: emulator.as_ref().map(|e| e.loss_rate_ci95),
         stages: emulator.as_ref().map(|e| e.stages.clone()).unwrap_or_default(),
-        injected_delay_ns: emulator.as_ref().map(|e| Percentiles::from(e.injected_delay_ns)),
+        injected_delay_ns: emulator.as_ref().map(|e| e.injected_delay_ns),
         overhead_ns: Overhead { ingress_wait, decision, release_lateness, end_to_end_extra, direct_hop, added_over_direct },
         kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
         processes: [&con, &emu, &sim]
@@ -401,7 +398,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
             .collect(),
         faults,
         peer_events: emulator.as_ref().map(|e| e.peer_events.clone()).unwrap_or_default(),
-        steal: Steal { ms: steal.ms, fraction: steal.fraction },
+        steal,
         files: Files {
             out_dir: out.clone(),
             scenario: scenario_path,

@@ -12,7 +12,7 @@
 
 use crate::clock::{now_ns, Wait};
 use crate::frame::ItpView;
-use crate::host::CpuTimes;
+use crate::host::StealTimer;
 use crate::frame::ItpFrame;
 use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
 use crate::metrics::{LatencyHistogram, Summary};
@@ -76,7 +76,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let (mut received, mut received_direct, mut wrong_size, mut bad_checksum, mut receive_errors) = (0u64, 0u64, 0u64, 0u64, 0u64);
     let mut released_by_emulator = None;
     let mut direct_ended = false;
-    let steal0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     std::fs::write(args.out.join("simulator.ready"), b"").context("writing simulator.ready")?;
     let t_start = now_ns();
     let mut s = FrameSample::ZERO;
@@ -161,10 +161,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let e2e_hlog = args.out.join("end_to_end.hlog");
     e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s)?;
     hop.write_log(&args.out.join("direct_hop.hlog"), "direct_hop", 0.0, duration_s)?;
-    let steal = match (steal0, CpuTimes::read()) {
-        (Some(a), Some(b)) => b.steal_since(&a),
-        _ => Default::default(),
-    };
+    let steal = steal_timer.stop();
     kin.close(t_end);
     let kinematics = serde_json::to_value(kin.report()).ok();
     let report = SimulatorReport {
