@@ -8,17 +8,12 @@
 
 use netfi::fit::db::{self, Database};
 use netfi::fit::{run, FitRequest, Kind, Metric, Objective};
-use netfi::host::CpuTimes;
+use netfi::host::StealTimer;
 use std::time::Instant;
 
-fn steal_since(a: Option<CpuTimes>) -> String {
-    match (a, CpuTimes::read()) {
-        (Some(a), Some(b)) => {
-            let s = b.steal_since(&a);
-            format!("steal {} ms ({:.1}%)", s.ms, s.fraction * 100.0)
-        }
-        _ => "steal unavailable".into(),
-    }
+fn steal(timer: StealTimer) -> String {
+    let s = timer.stop();
+    format!("steal {} ms ({:.1}%)", s.ms, s.fraction * 100.0)
 }
 
 fn load() -> String {
@@ -33,7 +28,7 @@ fn main() {
     println!("{threads} threads; load average {}", load());
 
     let single = |label: &str, make: &dyn Fn(u64) -> FitRequest| {
-        let cpu = CpuTimes::read();
+        let timer = StealTimer::start();
         let mut secs: Vec<f64> = (1..=3)
             .map(|seed| {
                 let req = make(seed);
@@ -49,7 +44,7 @@ fn main() {
             secs[1],
             secs[0],
             secs[2],
-            steal_since(cpu)
+            steal(timer)
         );
     };
     single("loss 1% (the slowest entry)", &|s| FitRequest::new(Kind::Loss, 0.01, s));
@@ -69,7 +64,7 @@ fn main() {
     });
 
     let plan = db::plan(db::DEFAULT_SEED);
-    let cpu = CpuTimes::read();
+    let timer = StealTimer::start();
     let t = Instant::now();
     let fits: Vec<_> =
         run::fit_many(&plan, threads, &|_, _| {}).into_iter().map(|r| r.expect("every entry fits")).collect();
@@ -79,7 +74,7 @@ fn main() {
     println!(
         "database: {} entries in {secs:.1} s on {threads} threads ({frames} frames confirmed); {}; load average {}",
         fits.len(),
-        steal_since(cpu),
+        steal(timer),
         load()
     );
     let shipped = db::embedded().expect("the shipped database parses");

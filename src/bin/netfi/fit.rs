@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use netfi::fit::db::{self, Database, Grid};
 use netfi::fit::run::{self, Progress};
 use netfi::fit::{FitRequest, FitResult, Kind, Metric, Objective, TOLERANCE_REL};
-use netfi::host::CpuTimes;
+use netfi::host::StealTimer;
 use netfi::model::Probability;
 use netfi::service::run::fresh_seed;
 use std::path::Path;
@@ -150,7 +150,7 @@ fn generate(args: &FitDbArgs) -> Result<()> {
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} entries ({elapsed}, eta {eta})")
             .expect("static template"),
     );
-    let cpu0 = CpuTimes::read();
+    let steal_timer = StealTimer::start();
     let started = Instant::now();
     let results = run::fit_many(&plan, threads, &|_, _| bar.inc(1));
     bar.finish_and_clear();
@@ -161,10 +161,7 @@ fn generate(args: &FitDbArgs) -> Result<()> {
     }
     let database = Database::from_results(seed, &fits)?;
     let frames: u64 = fits.iter().map(|f| f.frames).sum();
-    let steal = match (cpu0, CpuTimes::read()) {
-        (Some(a), Some(b)) => format!("{:.1}%", b.steal_since(&a).fraction * 100.0),
-        _ => "unavailable".into(),
-    };
+    let steal = format!("{:.1}%", steal_timer.stop().fraction * 100.0);
     eprintln!("{} entries in {secs:.1} s on {threads} threads ({frames} frames confirmed); steal {steal}", fits.len());
     match &args.out {
         Some(path) => {
