@@ -145,7 +145,7 @@ pub struct SimulatorArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct RunArgs {
-    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3).
+    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3, their calibrated -cal variants; see `netfi scenario list`).
     pub scenario: String,
     /// Seconds to stream (default 10; with --capture, the whole capture).
     #[arg(long)]

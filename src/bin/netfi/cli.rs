@@ -48,7 +48,7 @@ pub enum ScenarioCmd {
 
 #[derive(Debug, Args)]
 pub struct CheckArgs {
-    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3).
+    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3, their calibrated -cal variants; see `netfi scenario list`).
     pub scenario: String,
     /// Frames to simulate at the fixed rate.
     #[arg(long, default_value_t = 1_000_000)]

@@ -8,6 +8,12 @@ mod scenario;
 use clap::Parser;
 
 fn main() -> std::process::ExitCode {
+    // Output piped into `head` and closed early ends the program quietly, as
+    // command-line tools do, instead of a panic on the broken pipe.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let args = cli::Cli::parse();
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),

@@ -12,7 +12,7 @@ pub fn run(cmd: ScenarioCmd) -> Result<()> {
         ScenarioCmd::Check(args) => check_cmd(args),
         ScenarioCmd::List => {
             for name in PRESET_NAMES {
-                println!("{name:8} {}", scenario::preset_label(name).unwrap_or(""));
+                println!("{name:10} {}", scenario::preset_label(name).unwrap_or(""));
             }
             Ok(())
         }
