@@ -33,7 +33,11 @@ impl Default for LatencyHistogram {
 
 impl LatencyHistogram {
     pub fn new() -> Self {
-        LatencyHistogram { h: Histogram::new_with_bounds(1, MAX_NS, 3).expect("static bounds are valid"), clamped: 0, negative: 0 }
+        let mut h = Histogram::new_with_bounds(1, MAX_NS, 3).expect("static bounds are valid");
+        // Writing every counter once makes the counts resident now rather
+        // than page by page on the hot path, as values reach new buckets.
+        h.clear();
+        LatencyHistogram { h, clamped: 0, negative: 0 }
     }
 
     #[inline]

@@ -99,7 +99,13 @@ pub const RING_CAPACITY: usize = 1 << 18;
 /// Starts the writer thread (call before pinning the hot thread, so the
 /// writer is not confined to its core) and returns the hot path's sink.
 pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
-    let (tx, mut rx) = rtrb::RingBuffer::<TraceEvent>::new(RING_CAPACITY);
+    let (mut tx, mut rx) = rtrb::RingBuffer::<TraceEvent>::new(RING_CAPACITY);
+    // Write every slot once before the hot path starts, so the ring's pages
+    // are resident: otherwise a fresh page is faulted in every few dozen
+    // frames, on the hot thread, for the first pass through the ring.
+    let blank = TraceEvent::Release { ingress_index: 0, release_ns: 0 };
+    while tx.push(blank).is_ok() {}
+    while rx.pop().is_ok() {}
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let thread = std::thread::Builder::new()
@@ -138,6 +144,28 @@ fn apply(rows: &mut Vec<Row>, ev: TraceEvent) {
 }
 
 impl TraceWriter {
+    /// Keeps the writer thread off `core`: a busy-polling loop pinned there
+    /// would otherwise be preempted whenever the writer wakes on it (every
+    /// few milliseconds) and its releases would be late by as much. Nothing
+    /// changes where `core` is the only core the thread may use.
+    pub fn keep_off_core(&self, core: usize) {
+        use std::os::unix::thread::JoinHandleExt;
+        let cores = core_affinity::get_core_ids().unwrap_or_default();
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes
+        // only into it, and the pthread is alive (joined only in `finish`).
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            let mut any = false;
+            for c in cores.iter().filter(|c| c.id != core) {
+                libc::CPU_SET(c.id, &mut set);
+                any = true;
+            }
+            if any {
+                libc::pthread_setaffinity_np(self.thread.as_pthread_t(), std::mem::size_of::<libc::cpu_set_t>(), &set);
+            }
+        }
+    }
+
     /// Stops the writer after it has drained everything pushed so far and
     /// returns the table. Call after the hot loop has ended.
     pub fn finish(self) -> Vec<Row> {

@@ -122,11 +122,13 @@ pub fn run<S: FrameSource, K: FrameSink>(
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
     let mut inj: Injector<FrameSample> = Injector::new(scenario, cfg.queue_capacity);
-    // The writer thread starts before pinning so it is free to run elsewhere.
+    // The writer thread starts before pinning, and is then kept off the
+    // loop's core, so it runs elsewhere and never preempts the loop.
     let (mut tsink, twriter) = trace::start(cfg.expected_frames.min(50_000_000) as usize);
     if let Some(core) = cfg.core {
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
+        twriter.keep_off_core(core);
     }
     let realtime_priority = match cfg.rt_priority {
         Some(p) => match crate::service::set_realtime(p) {
