@@ -1330,7 +1330,7 @@ fn run(args: &[String]) -> Result<()> {
             let r = netfi_run(&dir, "Normal", 1000.0, s.interval_s, &[])?;
             let host = host.stop();
             let o = &r.overhead_ns;
-            let p = |x: &Option<netfi::service::report::Percentiles>| x.map(|p| json!({"p50": p.p50, "p90": p.p90, "p99": p.p99, "p999": p.p999, "p9999": p.p9999, "max": p.max}));
+            let p = |x: &Option<netfi::metrics::Summary>| x.map(|p| json!({"p50": p.p50, "p90": p.p90, "p99": p.p99, "p999": p.p999, "p9999": p.p9999, "max": p.max}));
             println!(
                 "  rep {rep} netfi run Normal 1k: end-to-end extra p50 {} p99 {}; direct hop p50 {} p99 {}; balanced {}",
                 o.end_to_end_extra.map_or("?".into(), |x| fmt_ns(x.p50)),
