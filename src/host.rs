@@ -2,6 +2,21 @@
 //! time (time the hypervisor ran someone else while this VM wanted to run).
 //! Not part of the sans-IO core: it reads `/proc/stat`.
 
+/// The set of this machine's cores without `core`, for keeping threads off
+/// a busy-polling loop's core; `None` where no other core exists.
+pub fn cores_except(core: usize) -> Option<libc::cpu_set_t> {
+    let cores = core_affinity::get_core_ids().unwrap_or_default();
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET only writes into it.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    let mut any = false;
+    for c in cores.iter().filter(|c| c.id != core) {
+        // SAFETY: as above; c.id is a core index the kernel reported.
+        unsafe { libc::CPU_SET(c.id, &mut set) };
+        any = true;
+    }
+    any.then_some(set)
+}
+
 /// Cumulative CPU times from `/proc/stat`, in clock ticks (USER_HZ, 100/s on
 /// Linux).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -150,17 +150,10 @@ impl TraceWriter {
     /// changes where `core` is the only core the thread may use.
     pub fn keep_off_core(&self, core: usize) {
         use std::os::unix::thread::JoinHandleExt;
-        let cores = core_affinity::get_core_ids().unwrap_or_default();
-        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes
-        // only into it, and the pthread is alive (joined only in `finish`).
-        unsafe {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            let mut any = false;
-            for c in cores.iter().filter(|c| c.id != core) {
-                libc::CPU_SET(c.id, &mut set);
-                any = true;
-            }
-            if any {
+        if let Some(set) = crate::host::cores_except(core) {
+            // SAFETY: `set` is a valid cpu_set_t and the pthread is alive
+            // (it is joined only in `finish`, which consumes `self`).
+            unsafe {
                 libc::pthread_setaffinity_np(self.thread.as_pthread_t(), std::mem::size_of::<libc::cpu_set_t>(), &set);
             }
         }

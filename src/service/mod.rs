@@ -27,20 +27,10 @@ pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
 pub fn place(role: &str, core: Option<usize>, avoid: Option<usize>) -> anyhow::Result<()> {
     if let Some(c) = core {
         anyhow::ensure!(core_affinity::set_for_current(core_affinity::CoreId { id: c }), "could not pin the {role} to core {c}");
-    } else if let Some(a) = avoid {
-        let cores = core_affinity::get_core_ids().unwrap_or_default();
-        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET and
-        // sched_setaffinity only read and write that set.
-        unsafe {
-            let mut set: libc::cpu_set_t = std::mem::zeroed();
-            let mut any = false;
-            for c in cores.iter().filter(|c| c.id != a) {
-                libc::CPU_SET(c.id, &mut set);
-                any = true;
-            }
-            if any && libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
-                anyhow::bail!("could not keep the {role} off core {a}: {}", std::io::Error::last_os_error());
-            }
+    } else if let Some(set) = avoid.and_then(crate::host::cores_except) {
+        // SAFETY: `set` is a valid cpu_set_t; pid 0 is the calling thread.
+        if unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) } != 0 {
+            anyhow::bail!("could not keep the {role} off core {}: {}", avoid.unwrap_or_default(), std::io::Error::last_os_error());
         }
     }
     Ok(())
