@@ -150,17 +150,16 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let steal_timer = StealTimer::start();
     let t_start = now_ns() + 1_000_000;
     let mut ended_by = "done";
+    let mut stop = signals::StopCheck::new(64, || node.termination_requested());
     let mut sample = FrameSample::ZERO;
     sample.len = ITP_FRAME_LEN as u32;
     for i in 0..n {
         let (offset_ns, wire) = script.frame(i);
         let target = t_start + offset_ns;
-        if target > now_ns() + slack_ns {
-            // Only a sleeping console checks for a stop: cheap, and often enough.
-            if signals::stop_requested() || node.termination_requested() {
-                ended_by = "signal";
-                break;
-            }
+        if target > now_ns() + slack_ns && stop.requested() {
+            // Only a console about to sleep checks for a stop: often enough.
+            ended_by = "signal";
+            break;
         }
         wait_until_ns(target, slack_ns, Wait::SpinYield);
         sample.wire = wire;
@@ -181,7 +180,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
                 direct_sent += 1;
             }
         }
-        if i % 1024 == 1023 && (signals::stop_requested() || node.termination_requested()) {
+        if i % 1024 == 1023 && stop.requested() {
             ended_by = "signal";
             break;
         }

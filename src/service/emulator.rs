@@ -361,5 +361,7 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
     eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", cfg.scenario.name);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
-    run(&cfg, &mut source, &mut sink, || signals::stop_requested() || node.termination_requested())
+    // Polled every 4096 iterations; iceoryx2's own latch every 256th time.
+    let mut stop = signals::StopCheck::new(256, || node.termination_requested());
+    run(&cfg, &mut source, &mut sink, || stop.requested())
 }

@@ -34,3 +34,32 @@ pub fn stop_requested() -> bool {
 pub fn request_stop() {
     STOP.store(true, Ordering::Relaxed);
 }
+
+/// A stop check for a busy loop: this process's own flag on every call, and
+/// a second, costlier source (iceoryx2's latched termination request, which
+/// costs a `nanosleep(0)` system call — a trip through the scheduler) only
+/// on every `every`-th call, so that the loop's core is not handed away.
+pub struct StopCheck<F: FnMut() -> bool> {
+    costly: F,
+    every: u32,
+    calls: u32,
+}
+
+impl<F: FnMut() -> bool> StopCheck<F> {
+    pub fn new(every: u32, costly: F) -> Self {
+        StopCheck { costly, every: every.max(1), calls: 0 }
+    }
+
+    #[inline]
+    pub fn requested(&mut self) -> bool {
+        if stop_requested() {
+            return true;
+        }
+        self.calls += 1;
+        if self.calls >= self.every {
+            self.calls = 0;
+            return (self.costly)();
+        }
+        false
+    }
+}

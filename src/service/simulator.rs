@@ -83,6 +83,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut d = FrameSample::ZERO;
     let mut iter = 0u64;
     let mut stop_at: Option<u64> = None;
+    let mut stop = signals::StopCheck::new(64, || node.termination_requested());
     let mut last_frame_ns = now_ns();
     let ended_by = loop {
         let mut idle = true;
@@ -137,7 +138,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
             if released_by_emulator.is_some() && (direct_ended || direct.peers_connected() == 0) {
                 break "end_marker";
             }
-            if stop_at.is_none() && (signals::stop_requested() || node.termination_requested()) {
+            if stop_at.is_none() && stop.requested() {
                 stop_at = Some(now_ns());
             }
             if let Some(_t) = stop_at {

@@ -866,7 +866,8 @@ pub fn main(args: &EmulatorArgs, cfg: EmulatorConfig) -> anyhow::Result<Emulator
     };
 
     // iceoryx2, once a node is open, may take SIGINT/SIGTERM for itself.
-    let stop = || signals::stop_requested() || node.as_ref().is_some_and(|n| n.termination_requested());
+    let mut check = signals::StopCheck::new(256, || node.as_ref().is_some_and(|n| n.termination_requested()));
+    let stop = move || check.requested();
     let mut source = source;
     let report = match (&mut source, &mut sink, &node) {
         (Some(src), Some(snk), _) => {
