@@ -44,11 +44,13 @@
 //! |---|---|---|
 //! | `NETFI_BENCH_FULL` | unset | `1`: 60 s intervals, 5 repetitions |
 //! | `NETFI_BENCH_SECONDS` | 10 (60 full) | length of each chain interval (floor intervals: half) |
-//! | `NETFI_BENCH_REPS` | 1 (5 full) | repetitions of the latency intervals |
+//! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency intervals |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
 //! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput` |
 //! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput trial |
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator at this SCHED_FIFO priority |
+//! | `NETFI_BENCH_QUIET_CORES` | unset | before each interval, wait until other processes keep at most this many cores busy |
+//! | `NETFI_BENCH_QUIET_WAIT_S` | 600 | ... but for at most this long |
 //! | `NETFI_BENCH_OUT` | `target/netfi-bench` | where results go |
 //!
 //! Arguments after `--` that are part names select parts too:
@@ -120,6 +122,9 @@ struct Settings {
     parts: Vec<String>,
     throughput_trial_s: f64,
     rt_priority: Option<i32>,
+    /// Wait before each interval until other processes keep at most this
+    /// many cores busy, for at most this many seconds.
+    quiet: Option<(f64, f64)>,
     out_dir: PathBuf,
     emulator_core: Option<usize>,
     driver_core: Option<usize>,
@@ -138,7 +143,7 @@ impl Settings {
             }
         };
         let interval_s = num("NETFI_BENCH_SECONDS", if full { 60.0 } else { 10.0 })?;
-        let repetitions = num("NETFI_BENCH_REPS", if full { 5.0 } else { 1.0 })? as usize;
+        let repetitions = num("NETFI_BENCH_REPS", if full { 5.0 } else { 3.0 })? as usize;
         let throughput_trial_s = num("NETFI_BENCH_THROUGHPUT_S", 10.0)?;
         anyhow::ensure!(interval_s > 0.0 && repetitions >= 1 && throughput_trial_s > 0.0, "intervals and repetitions must be positive");
         let rates_hz = match var("NETFI_BENCH_RATES") {
@@ -162,6 +167,13 @@ impl Settings {
             Some(v) => Some(v.trim().parse::<i32>().with_context(|| format!("NETFI_BENCH_RT_PRIORITY={v}"))?),
             None => None,
         };
+        let quiet = match var("NETFI_BENCH_QUIET_CORES") {
+            Some(v) => Some((
+                v.trim().parse::<f64>().with_context(|| format!("NETFI_BENCH_QUIET_CORES={v}: expected a number of cores"))?,
+                num("NETFI_BENCH_QUIET_WAIT_S", 600.0)?,
+            )),
+            None => None,
+        };
         let out_dir = match var("NETFI_BENCH_OUT") {
             Some(v) => PathBuf::from(v),
             None => Path::new(env!("CARGO_TARGET_TMPDIR")).parent().context("locating the target directory")?.join("netfi-bench"),
@@ -182,6 +194,7 @@ impl Settings {
             parts,
             throughput_trial_s,
             rt_priority,
+            quiet,
             out_dir,
             emulator_core,
             driver_core,
@@ -209,18 +222,43 @@ struct HostWindow {
     /// Cores kept busy by other processes over the half second before the
     /// interval, while this benchmark was idle: the background load.
     background_busy_cores: f64,
+    /// Cores kept busy by other processes during the interval: all busy
+    /// CPU time less this benchmark's and its children's, over the
+    /// interval's length (10 ms resolution).
+    others_busy_cores: f64,
+    /// Seconds spent waiting for a quiet host before the interval.
+    waited_for_quiet_s: f64,
 }
 
 struct HostTimer {
     cpu: Option<CpuTimes>,
     load: f64,
     background: f64,
+    waited_s: f64,
+    busy: Option<(u64, u64)>,
+    own_s: f64,
+    t0: Instant,
 }
 
 impl HostTimer {
-    fn start() -> HostTimer {
-        let background = busy_cores(Duration::from_millis(500));
-        HostTimer { cpu: CpuTimes::read(), load: load_average(), background }
+    /// Starts an interval: first waits (up to the configured time) for the
+    /// background load to fall to the configured level, if one is set.
+    fn start(quiet: Option<(f64, f64)>) -> HostTimer {
+        let t_wait = Instant::now();
+        let mut background = busy_cores(Duration::from_millis(500));
+        if let Some((cores, max_wait_s)) = quiet {
+            let mut said = false;
+            while background > cores && t_wait.elapsed().as_secs_f64() < max_wait_s {
+                if !said {
+                    println!("  (waiting for a quiet host: other processes keep {background:.2} cores busy, more than {cores})");
+                    said = true;
+                }
+                std::thread::sleep(Duration::from_secs(5));
+                background = busy_cores(Duration::from_millis(500));
+            }
+        }
+        let waited_s = t_wait.elapsed().as_secs_f64() - 0.5;
+        HostTimer { cpu: CpuTimes::read(), load: load_average(), background, waited_s, busy: cpu_ticks(), own_s: own_cpu_s(), t0: Instant::now() }
     }
 
     fn stop(&self) -> HostWindow {
@@ -228,24 +266,62 @@ impl HostTimer {
             (Some(a), Some(b)) => b.steal_since(&a),
             _ => Default::default(),
         };
+        let elapsed = self.t0.elapsed().as_secs_f64();
+        let others = match (self.busy, cpu_ticks()) {
+            (Some((b0, _)), Some((b1, _))) if elapsed > 0.0 => {
+                let busy_s = (b1 - b0) as f64 / ticks_per_s();
+                ((busy_s - (own_cpu_s() - self.own_s)) / elapsed).max(0.0)
+            }
+            _ => f64::NAN,
+        };
         HostWindow {
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
             load_start: self.load,
             load_end: load_average(),
             background_busy_cores: self.background,
+            others_busy_cores: others,
+            waited_for_quiet_s: self.waited_s.max(0.0),
         }
     }
 }
 
-/// Busy and total ticks of all CPUs from `/proc/stat` (idle and iowait are
-/// not busy).
+fn ticks_per_s() -> f64 {
+    // SAFETY: sysconf only reads a configuration value.
+    let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if t > 0 {
+        t as f64
+    } else {
+        100.0
+    }
+}
+
+/// CPU seconds used by this process and by its children that have been
+/// waited for (the emulator, `netfi run` and its services).
+fn own_cpu_s() -> f64 {
+    let secs = |who: libc::c_int| {
+        // SAFETY: a zeroed rusage is a valid output buffer for getrusage.
+        let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: `u` is a valid, writable rusage.
+        if unsafe { libc::getrusage(who, &mut u) } != 0 {
+            return 0.0;
+        }
+        let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
+        tv(u.ru_utime) + tv(u.ru_stime)
+    };
+    secs(libc::RUSAGE_SELF) + secs(libc::RUSAGE_CHILDREN)
+}
+
+/// Busy and total ticks of all CPUs from `/proc/stat`. Busy is time spent
+/// running tasks (user, nice, system): interrupt and softirq time is left
+/// out, as the kernel bills it to no process (UDP loopback delivery runs
+/// there), and steal is reported on its own.
 fn cpu_ticks() -> Option<(u64, u64)> {
     let text = std::fs::read_to_string("/proc/stat").ok()?;
     let v: Vec<u64> = text.lines().next()?.split_whitespace().skip(1).filter_map(|x| x.parse().ok()).collect();
     let total: u64 = v.iter().take(8).sum();
-    let idle = v.get(3)? + v.get(4).copied().unwrap_or(0);
-    Some((total - idle, total))
+    let busy = v.get(0)? + v.get(1)? + v.get(2)?;
+    Some((busy, total))
 }
 
 /// Cores busy on average over `window` (NaN where `/proc/stat` is unreadable).
@@ -414,7 +490,10 @@ impl UdpEnds {
         let tx = UdpPort::bind(loopback, &opts)?;
         let rx_direct = UdpPort::bind(loopback, &opts)?;
         let direct_to = PeerAddr::new(rx_direct.local_addr());
-        Ok(UdpEnds { tx, emulator_in: PeerAddr::new(emulator_in), direct_to, rx_chain, rx_direct, sent_ns: vec![0; slots as usize], buf: [0; 256] })
+        // Written once here (not zero-allocated), so the table's pages are
+        // resident and no page fault lands between a stamp and its send.
+        let sent_ns = vec![u64::MAX; slots as usize];
+        Ok(UdpEnds { tx, emulator_in: PeerAddr::new(emulator_in), direct_to, rx_chain, rx_direct, sent_ns, buf: [0; 256] })
     }
 }
 
@@ -441,7 +520,7 @@ impl Ends for UdpEnds {
             return None;
         }
         let slot = u64::from(u32::from_le_bytes([self.buf[0], self.buf[1], self.buf[2], self.buf[3]]));
-        let send_ns = *self.sent_ns.get(slot as usize)?;
+        let send_ns = *self.sent_ns.get(slot as usize).filter(|t| **t != u64::MAX)?;
         Some(Arrival { slot, recv_ns, send_ns, ingress_ns: 0, release_ns: 0, injected_delay_ns: 0 })
     }
 
@@ -802,7 +881,7 @@ fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_l
     let delayed = scenario_label != "normal";
     // Frames still held by a delay scenario when the last one is sent.
     let drain_ns: u64 = if delayed { 5_000_000_000 } else { 200_000_000 };
-    let host = HostTimer::start();
+    let host = HostTimer::start(s.quiet);
     let (drive, report) = match transport {
         Transport::Iceoryx2 => {
             let run_id = fresh_run_id();
@@ -905,7 +984,7 @@ fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64
     let frames = warm + (rate_hz * seconds).round() as u64;
     let period_ns = 1e9 / rate_hz;
     let done = Arc::new(AtomicBool::new(false));
-    let host = HostTimer::start();
+    let host = HostTimer::start(s.quiet);
     let (tx_core, rx_core, rt) = (s.driver_core, s.emulator_core, s.rt_priority);
     let (sent, hist, received, secs) = match transport {
         Transport::Iceoryx2 => {
@@ -1092,7 +1171,7 @@ struct Trial {
     ingress_wait_p99_ns: Option<u64>,
     release_lateness_p99_ns: Option<u64>,
     steal_fraction: f64,
-    load: HostWindow,
+    host: HostWindow,
     out_dir: PathBuf,
 }
 
@@ -1104,9 +1183,9 @@ fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Tria
     // The release queue holds one second of frames, so a delay scenario
     // tests the emulator's speed rather than the queue's size.
     let queue = (rate_hz as u64).max(1 << 16).to_string();
-    let host = HostTimer::start();
+    let host = HostTimer::start(s.quiet);
     let r = netfi_run(&dir, scenario, rate_hz, s.throughput_trial_s, &["--no-direct", "--queue-capacity", &queue])?;
-    let load = host.stop();
+    let host = host.stop();
     let f = &r.frames;
     let console_rate = r.console.as_ref().map(|c| c.rate_hz);
     let console_errors = r.console.as_ref().map(|c| c.send_errors);
@@ -1140,7 +1219,7 @@ fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Tria
         ingress_wait_p99_ns: r.overhead_ns.ingress_wait.map(|p| p.p99),
         release_lateness_p99_ns: r.overhead_ns.release_lateness.map(|p| p.p99),
         steal_fraction: r.steal.fraction,
-        load,
+        host,
         out_dir: dir,
     })
 }
@@ -1151,12 +1230,12 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
     let run = |rate: f64, trials: &mut Vec<Trial>| -> Result<bool> {
         let t = trial(s, label, scenario, rate)?;
         println!(
-            "  throughput {label} {:>9.0} frames/s: {} (console {:.0}/s, steal {:.2}%, background {:.2} cores)",
+            "  throughput {label} {:>9.0} frames/s: {} (console {:.0}/s, steal {:.2}%, others {:.2} cores)",
             rate,
             t.verdict,
             t.console_rate_hz.unwrap_or(0.0),
             t.steal_fraction * 100.0,
-            t.load.background_busy_cores
+            t.host.others_busy_cores
         );
         let ok = t.sustained;
         trials.push(t);
@@ -1256,7 +1335,7 @@ fn run(args: &[String]) -> Result<()> {
     let _ = std::fs::remove_dir_all(s.out_dir.join("hlog"));
     let _ = netfi::service::ipc::cleanup_stale();
     let started = Instant::now();
-    let bench_host = HostTimer::start();
+    let bench_host = HostTimer::start(None);
     println!(
         "netfi overhead benchmark: {} s intervals, {} repetition(s), rates {:?} Hz, parts {}; emulator core {:?}, driving core {:?}; results in {}",
         s.interval_s,
@@ -1282,22 +1361,22 @@ fn run(args: &[String]) -> Result<()> {
                     // Floor and chain back to back: the same moment of the host.
                     let f = floor_interval(&s, t, rate, s.floor_s, rep)?;
                     println!(
-                        "  rep {rep} {:<8} {:>6}  floor (one cross-core hop)     {}  steal {:.2}%  background {:.2} cores",
+                        "  rep {rep} {:<8} {:>6}  floor (one cross-core hop)     {}  steal {:.2}%  others {:.2} cores",
                         t.name(),
                         rate_label(rate),
                         f.hop_ns.line(),
                         f.host.steal_fraction * 100.0,
-                        f.host.background_busy_cores
+                        f.host.others_busy_cores
                     );
                     floors.push(f);
                     let c = chain_interval(&s, t, "Normal", "normal", rate, s.interval_s, rep)?;
                     println!(
-                        "  rep {rep} {:<8} {:>6}  chain                          {}  steal {:.2}%  background {:.2} cores",
+                        "  rep {rep} {:<8} {:>6}  chain                          {}  steal {:.2}%  others {:.2} cores",
                         t.name(),
                         rate_label(rate),
                         c.chain_ns.line(),
                         c.host.steal_fraction * 100.0,
-                        c.host.background_busy_cores
+                        c.host.others_busy_cores
                     );
                     println!("  rep {rep} {:<8} {:>6}  direct (same run, alternating) {}", t.name(), rate_label(rate), c.direct_ns.line());
                     println!(
@@ -1326,7 +1405,7 @@ fn run(args: &[String]) -> Result<()> {
         }
         if s.wants("product") {
             let dir = s.out_dir.join("runs").join(format!("product-normal-1k-r{rep}"));
-            let host = HostTimer::start();
+            let host = HostTimer::start(s.quiet);
             let r = netfi_run(&dir, "Normal", 1000.0, s.interval_s, &[])?;
             let host = host.stop();
             let o = &r.overhead_ns;
@@ -1400,10 +1479,10 @@ fn run(args: &[String]) -> Result<()> {
             floor_fig.entry(t.name().into()).or_default().insert(key.clone(), json!(fl));
             lateness_fig.entry(t.name().into()).or_default().insert(key.clone(), json!({"median": la, "spread": la_spread}));
             let steal_max = cs.iter().map(|c| c.host.steal_fraction).chain(fs.iter().map(|f| f.host.steal_fraction)).fold(0.0, f64::max);
-            let bg_max = cs.iter().map(|c| c.host.background_busy_cores).chain(fs.iter().map(|f| f.host.background_busy_cores)).fold(0.0, f64::max);
+            let bg_max = cs.iter().map(|c| c.host.others_busy_cores).chain(fs.iter().map(|f| f.host.others_busy_cores)).fold(0.0, f64::max);
             let _ = writeln!(
                 md_latency,
-                "\n**{} at {} frames/s** ({} repetition(s); steal up to {:.2}%; other processes kept up to {:.2} cores busy just before an interval)\n",
+                "\n**{} at {} frames/s** ({} repetition(s); steal up to {:.2}%; other processes kept up to {:.2} cores busy during an interval)\n",
                 t.name(),
                 rate_label(rate),
                 cs.len(),
@@ -1445,10 +1524,10 @@ fn run(args: &[String]) -> Result<()> {
         let (de, _) = combine(&delays.iter().map(|c| summary_map(&c.emulator.decision_ns)).collect::<Vec<_>>());
         lateness_fig.entry("iceoryx2 PLM-2 + DLM-2".into()).or_default().insert("1000".into(), json!({"median": la, "spread": la_spread}));
         let steal_max = delays.iter().map(|c| c.host.steal_fraction).fold(0.0, f64::max);
-        let bg_max = delays.iter().map(|c| c.host.background_busy_cores).fold(0.0, f64::max);
+        let bg_max = delays.iter().map(|c| c.host.others_busy_cores).fold(0.0, f64::max);
         let _ = writeln!(
             md_delay,
-            "\n**iceoryx2, PLM-2 then DLM-2, 1 k frames/s** ({} repetition(s); steal up to {:.2}%; other processes kept up to {:.2} cores busy just before an interval)\n",
+            "\n**iceoryx2, PLM-2 then DLM-2, 1 k frames/s** ({} repetition(s); steal up to {:.2}%; other processes kept up to {:.2} cores busy during an interval)\n",
             delays.len(),
             steal_max * 100.0,
             bg_max
@@ -1533,12 +1612,15 @@ fn run(args: &[String]) -> Result<()> {
     }
     if !products.is_empty() {
         let _ = writeln!(md, "\n## `netfi run Normal` as shipped (console and simulator share a core on 2 cores)\n");
-        let _ = writeln!(md, "| repetition | end-to-end extra p50 / p99 | direct hop p50 / p99 | added over direct p50 / p99 | release lateness p99 | steal |\n|---|---|---|---|---|---|");
+        let _ = writeln!(
+            md,
+            "| repetition | end-to-end extra p50 / p99 | direct hop p50 / p99 | added over direct p50 / p99 | release lateness p99 | steal | other processes |\n|---|---|---|---|---|---|---|"
+        );
         for p in &products {
             let g = |k: &str, q: &str| p[k][q].as_i64().map_or("?".into(), ns);
             let _ = writeln!(
                 md,
-                "| {} | {} / {} | {} / {} | {} / {} | {} | {:.2}% |",
+                "| {} | {} / {} | {} / {} | {} / {} | {} | {:.2}% | {:.2} cores |",
                 p["repetition"],
                 g("end_to_end_extra_ns", "p50"),
                 g("end_to_end_extra_ns", "p99"),
@@ -1547,7 +1629,8 @@ fn run(args: &[String]) -> Result<()> {
                 g("added_over_direct_ns", "p50"),
                 g("added_over_direct_ns", "p99"),
                 g("release_lateness_ns", "p99"),
-                p["steal_fraction"].as_f64().unwrap_or(0.0) * 100.0
+                p["steal_fraction"].as_f64().unwrap_or(0.0) * 100.0,
+                p["host"]["others_busy_cores"].as_f64().unwrap_or(f64::NAN)
             );
         }
     }
@@ -1555,7 +1638,7 @@ fn run(args: &[String]) -> Result<()> {
         let _ = writeln!(md, "\n## Throughput ({} s per trial, `netfi run --no-direct`)\n", s.throughput_trial_s);
         let _ = writeln!(md, "| scenario | sustained, frames/s | first rate not sustained, and why |\n|---|---|---|");
         for (k, v) in &throughput {
-            let _ = writeln!(md, "| {k} | {} | {} |", v["best_fps"], v["first_failure"].as_str().unwrap_or("none up to the search's limit"));
+            let _ = writeln!(md, "| {k} | {:.0} | {} |", v["best_fps"].as_f64().unwrap_or(0.0), v["first_failure"].as_str().unwrap_or("none up to the search's limit"));
         }
     }
     if !bars.is_empty() {
