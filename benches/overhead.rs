@@ -1103,6 +1103,93 @@ fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64
     Ok(FloorResult { name, repetition: rep, transport, rate_hz, seconds: secs, host, hop_ns: hist.summary(), sent, received, hlog })
 }
 
+/// What a thread spinning on one core (with nothing else to do) loses to
+/// the machine: the gaps between consecutive clock reads.
+#[derive(Debug, Clone, Serialize)]
+struct ProbeResult {
+    repetition: usize,
+    core: Option<usize>,
+    seconds: f64,
+    host: HostWindow,
+    /// Lengths of the gaps longer than 2 µs.
+    gaps_ns: Summary,
+    /// Gaps longer than 10 µs, 100 µs and 1 ms, per second.
+    gaps_over_10us_per_s: f64,
+    gaps_over_100us_per_s: f64,
+    gaps_over_1ms_per_s: f64,
+    /// Share of the time spent in gaps longer than 10 µs.
+    lost_fraction: f64,
+    hlog: PathBuf,
+}
+
+/// Spins one thread on the emulator's core and one on the driving core
+/// for `seconds`, each reading the clock, and records every gap between
+/// two reads longer than 2 µs: the interruptions (interrupts, the
+/// hypervisor, other tasks) that any busy loop there suffers, the
+/// emulator's and the benchmark's included.
+fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<ProbeResult>> {
+    let host = HostTimer::start(s.quiet);
+    let rt = s.rt_priority;
+    let mut cores = vec![s.emulator_core];
+    if s.driver_core != s.emulator_core {
+        cores.push(s.driver_core);
+    }
+    let threads: Vec<_> = cores
+        .iter()
+        .map(|&core| {
+            std::thread::spawn(move || {
+                pin(core, rt);
+                let mut h = LatencyHistogram::new();
+                let (mut lost_ns, mut over) = (0u64, [0u64; 3]);
+                let t0 = now_ns();
+                let end = t0 + (seconds * 1e9) as u64;
+                let mut prev = t0;
+                loop {
+                    let t = now_ns();
+                    let gap = t - prev;
+                    prev = t;
+                    if gap > 2_000 {
+                        h.record(gap);
+                        if gap > 10_000 {
+                            lost_ns += gap;
+                            over[0] += 1;
+                        }
+                        over[1] += u64::from(gap > 100_000);
+                        over[2] += u64::from(gap > 1_000_000);
+                    }
+                    if t >= end {
+                        break;
+                    }
+                }
+                (core, h, lost_ns, over)
+            })
+        })
+        .collect();
+    let mut done = Vec::new();
+    for t in threads {
+        done.push(t.join().map_err(|_| anyhow::anyhow!("a probe thread panicked"))?);
+    }
+    let host = host.stop();
+    let mut out = Vec::new();
+    for (core, h, lost_ns, over) in done {
+        let name = format!("probe-core{}-r{rep}", core.map_or("-".into(), |c| c.to_string()));
+        let hlog = write_hlog(&h, &s.out_dir.join("hlog"), &name, "gap", seconds)?;
+        out.push(ProbeResult {
+            repetition: rep,
+            core,
+            seconds,
+            host,
+            gaps_ns: h.summary(),
+            gaps_over_10us_per_s: over[0] as f64 / seconds,
+            gaps_over_100us_per_s: over[1] as f64 / seconds,
+            gaps_over_1ms_per_s: over[2] as f64 / seconds,
+            lost_fraction: lost_ns as f64 / (seconds * 1e9),
+            hlog,
+        });
+    }
+    Ok(out)
+}
+
 /// Calls `send(i)` for `i` in `0..frames` at `period_ns` apart, sleeping
 /// until shortly before each when there is time; returns the frames the
 /// transport took and the seconds after the warm-up.
@@ -1353,6 +1440,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut chains: Vec<ChainResult> = Vec::new();
     let mut floors: Vec<FloorResult> = Vec::new();
     let mut products: Vec<Value> = Vec::new();
+    let mut probes: Vec<ProbeResult> = Vec::new();
     let transports = [Transport::Iceoryx2, Transport::Udp];
     for rep in 0..s.repetitions {
         if s.wants("latency") {
@@ -1392,6 +1480,21 @@ fn run(args: &[String]) -> Result<()> {
                     );
                     chains.push(c);
                 }
+            }
+        }
+        if s.wants("delay") || s.wants("latency") {
+            for p in probe_interval(&s, s.floor_s, rep)? {
+                println!(
+                    "  rep {rep} probe on core {:?}: {:.1} gaps/s over 10 µs, {:.2}/s over 100 µs, {:.2}/s over 1 ms; {:.3}% of the time lost in gaps over 10 µs; steal {:.2}%  others {:.2} cores",
+                    p.core,
+                    p.gaps_over_10us_per_s,
+                    p.gaps_over_100us_per_s,
+                    p.gaps_over_1ms_per_s,
+                    p.lost_fraction * 100.0,
+                    p.host.steal_fraction * 100.0,
+                    p.host.others_busy_cores
+                );
+                probes.push(p);
             }
         }
         if s.wants("delay") {
@@ -1580,6 +1683,7 @@ fn run(args: &[String]) -> Result<()> {
         "throughput_fps": throughput_fps,
         "throughput": throughput,
         "product_run": products,
+        "probe_intervals": probes,
         "bars": bars,
         "chain_intervals": chains,
         "floor_intervals": floors,
@@ -1609,6 +1713,25 @@ fn run(args: &[String]) -> Result<()> {
     }
     if !md_delay.is_empty() {
         let _ = writeln!(md, "\n## Under delay\n{md_delay}");
+    }
+    if !probes.is_empty() {
+        let _ = writeln!(md, "\n## What the machine takes from a busy loop on each core\n");
+        let _ = writeln!(md, "| repetition | core | gaps over 10 µs /s | over 100 µs /s | over 1 ms /s | time lost in gaps over 10 µs | longest gap | steal | other processes |\n|---|---|---|---|---|---|---|---|---|");
+        for p in &probes {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {:.1} | {:.2} | {:.2} | {:.3}% | {} | {:.2}% | {:.2} cores |",
+                p.repetition,
+                p.core.map_or("-".to_string(), |c| c.to_string()),
+                p.gaps_over_10us_per_s,
+                p.gaps_over_100us_per_s,
+                p.gaps_over_1ms_per_s,
+                p.lost_fraction * 100.0,
+                fmt_ns(p.gaps_ns.max),
+                p.host.steal_fraction * 100.0,
+                p.host.others_busy_cores
+            );
+        }
     }
     if !products.is_empty() {
         let _ = writeln!(md, "\n## `netfi run Normal` as shipped (console and simulator share a core on 2 cores)\n");
