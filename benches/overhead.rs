@@ -3,8 +3,8 @@
 //! kernel UDP, its release lateness, and the highest frame rate it sustains
 //! with no unintended loss.
 //!
-//! `cargo bench --bench overhead` runs everything with short intervals
-//! (about ten minutes on 2 cores); `NETFI_BENCH_FULL=1` runs the long
+//! `cargo bench --bench overhead` runs everything with 10 s intervals, three
+//! times (10 to 15 minutes on 2 cores); `NETFI_BENCH_FULL=1` runs the long
 //! version (60 s intervals, 5 repetitions). Results go to
 //! `target/netfi-bench/`: `overhead.json`, `overhead.md`, HdrHistogram logs
 //! under `hlog/`, and each run's own files under `runs/`. The method is in
@@ -25,6 +25,9 @@
 //! - **Floor intervals.** No emulator: a sender thread on the first core and
 //!   a receiver thread spinning on the emulator's core exchange frames over
 //!   the same transport: the physical cost of one cross-core hop.
+//! - **Probe.** A thread spinning on each core records the gaps between its
+//!   clock reads: what interrupts, the hypervisor and other tasks take from
+//!   any busy loop there, the emulator's included.
 //! - **Delay interval.** The iceoryx2 chain through PLM-2 then DLM-2: release
 //!   lateness while hundreds of frames wait for their times, and the
 //!   end-to-end latency beyond the injected delay.
@@ -34,7 +37,8 @@
 //!   bisection) for 10 s each; a rate is sustained when every frame is
 //!   delivered or dropped by the scenario, nothing else.
 //!
-//! Each interval records the host's steal time and load average. Nothing
+//! Each interval records the host's steal time, its load average and the
+//! CPU that other processes used during it. Nothing
 //! here asserts a time: the figures are printed and written beside the bars
 //! of `docs/performance.md`, reported as met or not met.
 //!
@@ -44,11 +48,11 @@
 //! |---|---|---|
 //! | `NETFI_BENCH_FULL` | unset | `1`: 60 s intervals, 5 repetitions |
 //! | `NETFI_BENCH_SECONDS` | 10 (60 full) | length of each chain interval (floor intervals: half) |
-//! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency intervals |
+//! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
 //! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput` |
 //! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput trial |
-//! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator at this SCHED_FIFO priority |
+//! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator and this benchmark's threads at this SCHED_FIFO priority |
 //! | `NETFI_BENCH_QUIET_CORES` | unset | before each interval, wait until other processes keep at most this many cores busy |
 //! | `NETFI_BENCH_QUIET_WAIT_S` | 600 | ... but for at most this long |
 //! | `NETFI_BENCH_OUT` | `target/netfi-bench` | where results go |
@@ -320,7 +324,7 @@ fn cpu_ticks() -> Option<(u64, u64)> {
     let text = std::fs::read_to_string("/proc/stat").ok()?;
     let v: Vec<u64> = text.lines().next()?.split_whitespace().skip(1).filter_map(|x| x.parse().ok()).collect();
     let total: u64 = v.iter().take(8).sum();
-    let busy = v.get(0)? + v.get(1)? + v.get(2)?;
+    let busy = v.first()? + v.get(1)? + v.get(2)?;
     Some((busy, total))
 }
 

@@ -174,6 +174,12 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         (None, None) if cores.len() >= 4 && args.emulator_core.is_none() => (Some(cores[cores.len() - 3]), Some(cores[cores.len() - 2])),
         given => given,
     };
+    // The runner itself wakes every few milliseconds to supervise and reaps
+    // dead peers every 200 ms; on the emulator's core each wake-up would
+    // preempt the emulator's loop. The services set their own placement.
+    if let Some(e) = emulator_core {
+        crate::service::place("runner", None, Some(e))?;
+    }
     eprintln!(
         "netfi run {run_id}: scenario {} seed {seed}; cores: emulator {}, console {}, simulator {}; output {}",
         spec.name,
