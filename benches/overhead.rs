@@ -68,6 +68,7 @@ use netfi::metrics::{fmt_ns, LatencyHistogram, Summary};
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::service::emulator::EmulatorReport;
 use netfi::service::report::RunReport;
+use netfi::service::signals::stop_requested;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
 use netfi::transport::{Channel, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
 use serde::Serialize;
@@ -132,6 +133,9 @@ struct Settings {
     out_dir: PathBuf,
     emulator_core: Option<usize>,
     driver_core: Option<usize>,
+    /// Clear the emulator's core of every other thread and interrupt that
+    /// may run elsewhere, for the whole benchmark (`netfi::host::isolate`).
+    isolate: bool,
 }
 
 const PARTS: [&str; 4] = ["latency", "delay", "product", "throughput"];
@@ -189,7 +193,9 @@ impl Settings {
             [first, .., last] => (Some(*last), Some(*first)),
             _ => (None, None),
         };
+        let isolate = var("NETFI_BENCH_ISOLATE").is_none_or(|v| v != "0");
         Ok(Settings {
+            isolate,
             full,
             interval_s,
             floor_s: interval_s / 2.0,
@@ -252,7 +258,7 @@ impl HostTimer {
         let mut background = busy_cores(Duration::from_millis(500));
         if let Some((cores, max_wait_s)) = quiet {
             let mut said = false;
-            while background > cores && t_wait.elapsed().as_secs_f64() < max_wait_s {
+            while background > cores && t_wait.elapsed().as_secs_f64() < max_wait_s && !stop_requested() {
                 if !said {
                     println!("  (waiting for a quiet host: other processes keep {background:.2} cores busy, more than {cores})");
                     said = true;
@@ -579,6 +585,9 @@ fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, may_sl
     let mut drain_until = u64::MAX;
     loop {
         let now = now_ns();
+        if stop_requested() {
+            break;
+        }
         if slot < slots {
             let target = t0 + (slot as f64 * half_period_ns) as u64;
             if now >= target {
@@ -877,6 +886,7 @@ fn write_hlog(h: &LatencyHistogram, dir: &Path, name: &str, tag: &str, seconds: 
 /// A chain interval: the emulator between the benchmark's two ends over
 /// `transport`, at `rate_hz` per route, for `seconds`.
 fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_label: &str, rate_hz: f64, seconds: f64, rep: usize) -> Result<ChainResult> {
+    check_interrupted()?;
     let name = format!("chain-{}-{}-{}-r{rep}", transport.name(), scenario_label, rate_label(rate_hz));
     let dir = s.out_dir.join("runs").join(&name);
     let _ = std::fs::remove_dir_all(&dir);
@@ -903,6 +913,7 @@ fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_l
                 Ok(d)
             });
             let d = handle.join().map_err(|_| anyhow::anyhow!("the driving thread panicked"))?;
+            check_interrupted()?;
             let d = match d {
                 Ok(d) => d,
                 Err(e) => {
@@ -937,6 +948,7 @@ fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_l
                 Ok(drive(&mut ends, rate_hz, seconds, drain_ns, !delayed))
             });
             let d = handle.join().map_err(|_| anyhow::anyhow!("the driving thread panicked"))??;
+            check_interrupted()?;
             (d, emu.finish(Duration::from_secs(10))?)
         }
     };
@@ -983,6 +995,7 @@ fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_l
 /// A floor interval: a sender on the driving core, a receiver spinning on
 /// the emulator's core, one hop of `transport`, no emulator.
 fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64, rep: usize) -> Result<FloorResult> {
+    check_interrupted()?;
     let name = format!("floor-{}-{}-r{rep}", transport.name(), rate_label(rate_hz));
     let warm = (rate_hz * WARMUP_S).ceil() as u64;
     let frames = warm + (rate_hz * seconds).round() as u64;
@@ -1052,6 +1065,7 @@ fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64
             let (sent, secs) = sender.join().map_err(|_| anyhow::anyhow!("the floor sender panicked"))??;
             done.store(true, Ordering::Release);
             let (h, n) = receiver.join().map_err(|_| anyhow::anyhow!("the floor receiver panicked"))??;
+            check_interrupted()?;
             (sent, h, n, secs)
         }
         Transport::Udp => {
@@ -1099,6 +1113,7 @@ fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64
             std::thread::sleep(Duration::from_millis(50));
             done.store(true, Ordering::Release);
             let (h, n) = receiver.join().map_err(|_| anyhow::anyhow!("the floor receiver panicked"))?;
+            check_interrupted()?;
             (sent, h, n, secs)
         }
     };
@@ -1132,6 +1147,7 @@ struct ProbeResult {
 /// hypervisor, other tasks) that any busy loop there suffers, the
 /// emulator's and the benchmark's included.
 fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<ProbeResult>> {
+    check_interrupted()?;
     let host = HostTimer::start(s.quiet);
     let rt = s.rt_priority;
     let mut cores = vec![s.emulator_core];
@@ -1161,7 +1177,7 @@ fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<ProbeRes
                         over[1] += u64::from(gap > 100_000);
                         over[2] += u64::from(gap > 1_000_000);
                     }
-                    if t >= end {
+                    if t >= end || (gap > 2_000 && stop_requested()) {
                         break;
                     }
                 }
@@ -1173,6 +1189,7 @@ fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<ProbeRes
     for t in threads {
         done.push(t.join().map_err(|_| anyhow::anyhow!("a probe thread panicked"))?);
     }
+    check_interrupted()?;
     let host = host.stop();
     let mut out = Vec::new();
     for (core, h, lost_ns, over) in done {
@@ -1202,6 +1219,9 @@ fn pace(frames: u64, period_ns: f64, warm: u64, mut send: impl FnMut(u64) -> boo
     let mut sent = 0;
     let mut t_record = t0;
     for i in 0..frames {
+        if stop_requested() {
+            break;
+        }
         let target = t0 + (i as f64 * period_ns) as u64;
         if target > now_ns() + 2 * SLEEP_SLACK_NS {
             sleep_until_ns(target - SLEEP_SLACK_NS);
@@ -1226,15 +1246,32 @@ fn netfi_run(dir: &Path, scenario: &str, rate_hz: f64, seconds: f64, extra: &[&s
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir)?;
     let log = std::fs::File::create(dir.join("run.log"))?;
-    let status = Command::new(NETFI)
+    let mut child = Command::new(NETFI)
         .args(["run", scenario, "--rate-hz", &rate_hz.to_string(), "--duration-s", &seconds.to_string(), "--seed", "1", "--out"])
         .arg(dir)
         .args(extra)
         .stdin(Stdio::null())
         .stdout(log.try_clone()?)
         .stderr(log)
-        .status()
+        .spawn()
         .with_context(|| format!("running {NETFI} run"))?;
+    // Polled rather than waited for, so that a stop of the benchmark alone
+    // (SIGTERM, or Ctrl-C outside a terminal) reaches the run too.
+    let mut signalled = false;
+    let status = loop {
+        if let Some(status) = child.try_wait()? {
+            break status;
+        }
+        if stop_requested() && !signalled {
+            signalled = true;
+            // SAFETY: signalling our own child by its pid.
+            unsafe {
+                libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    check_interrupted()?;
     let path = dir.join("report.json");
     let report: RunReport = serde_json::from_slice(&std::fs::read(&path).with_context(|| format!("reading {} (netfi run: {status})", path.display()))?)
         .with_context(|| format!("parsing {}", path.display()))?;
@@ -1270,6 +1307,7 @@ struct Trial {
 /// rate, the run balanced (every frame delivered or dropped by the scenario)
 /// and nothing was refused or dropped for want of room.
 fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Trial> {
+    check_interrupted()?;
     let dir = s.out_dir.join("runs").join(format!("throughput-{label}-{}", rate_hz as u64));
     // The release queue holds one second of frames, so a delay scenario
     // tests the emulator's speed rather than the queue's size.
@@ -1420,9 +1458,21 @@ fn row(label: &str, m: &BTreeMap<String, i64>) -> String {
     format!("| {label} | {} | {} | {} | {} | {} | {} |", cell("p50"), cell("p90"), cell("p99"), cell("p999"), cell("p9999"), cell("max"))
 }
 
+/// Fails with "interrupted" once Ctrl-C or SIGTERM has been received.
+fn check_interrupted() -> Result<()> {
+    if stop_requested() {
+        bail!("interrupted (Ctrl-C / SIGTERM): the emulators stopped, the core restored, no results written");
+    }
+    Ok(())
+}
+
 fn run(args: &[String]) -> Result<()> {
     let s = Settings::from_env(args)?;
     std::fs::create_dir_all(&s.out_dir).with_context(|| format!("creating {}", s.out_dir.display()))?;
+    // Ctrl-C and SIGTERM set a flag that every loop below polls: the
+    // benchmark then stops its emulators and runs, restores the core it
+    // cleared, and exits without writing half a result.
+    netfi::service::signals::install();
     let _ = std::fs::remove_dir_all(s.out_dir.join("hlog"));
     let _ = netfi::service::ipc::cleanup_stale();
     let started = Instant::now();
@@ -1440,6 +1490,32 @@ fn run(args: &[String]) -> Result<()> {
     if s.emulator_core.is_none() {
         println!("  (fewer than 2 cores: nothing is pinned, and the figures mean little)");
     }
+    let isolation_file = s.out_dir.join("isolation.json");
+    if let Some(n) = netfi::host::isolate::restore_from_file(&isolation_file) {
+        println!("  (restored {n} placement(s) left moved by an interrupted earlier benchmark)");
+    }
+    let mut isolation = match (s.isolate, s.emulator_core) {
+        (true, Some(core)) => match netfi::host::isolate::isolate(core, Some(&isolation_file)) {
+            Ok(iso) => {
+                let i = iso.summary();
+                println!(
+                    "  core {core} cleared for the benchmark: {} threads moved (kernel: {}), {} bound to it, {} refused; {} interrupts moved, {} refused",
+                    i.threads_moved,
+                    if i.kernel_threads_moved.is_empty() { "none".to_string() } else { i.kernel_threads_moved.join(" ") },
+                    i.threads_bound_to_core,
+                    i.threads_refused,
+                    i.irqs_moved,
+                    i.irqs_refused
+                );
+                Some(iso)
+            }
+            Err(e) => {
+                println!("  (could not clear core {core}: {e}; measuring without)");
+                None
+            }
+        },
+        _ => None,
+    };
 
     let mut chains: Vec<ChainResult> = Vec::new();
     let mut floors: Vec<FloorResult> = Vec::new();
@@ -1671,11 +1747,14 @@ fn run(args: &[String]) -> Result<()> {
             bars.push(json!({"bar": format!("chain p50, UDP over iceoryx2, at {} frames/s", rate_label(rate)), "value_ratio": ratio, "limit_ratio": 20, "met": ratio >= 20.0}));
         }
     }
+    check_interrupted()?;
     let host = bench_host.stop();
+    let isolation = isolation.as_mut().map(|i| i.restore());
     let doc = json!({
         "schema": "netfi-bench/overhead/1",
         "host": host_facts(&s),
         "settings": s,
+        "isolation": isolation,
         "host_over_the_benchmark": host,
         "minutes": started.elapsed().as_secs_f64() / 60.0,
         "added_latency_ns": added,
@@ -1712,6 +1791,24 @@ fn run(args: &[String]) -> Result<()> {
         started.elapsed().as_secs_f64() / 60.0,
         host.steal_fraction * 100.0
     );
+    match &isolation {
+        Some(i) => {
+            let _ = writeln!(
+                md,
+                "\nThe emulator's core {} was cleared for the benchmark (`NETFI_BENCH_ISOLATE`, default on): {} threads of other processes moved off it (kernel threads: {}), {} bound to it left, {} refused; {} device interrupts moved, {} refused; all put back at the end.",
+                i.core,
+                i.threads_moved,
+                if i.kernel_threads_moved.is_empty() { "none".to_string() } else { i.kernel_threads_moved.join(", ") },
+                i.threads_bound_to_core,
+                i.threads_refused,
+                i.irqs_moved,
+                i.irqs_refused
+            );
+        }
+        None => {
+            let _ = writeln!(md, "\nThe emulator's core was not cleared (`NETFI_BENCH_ISOLATE=0`, or not permitted): other threads could run on it.");
+        }
+    }
     if !md_latency.is_empty() {
         let _ = writeln!(md, "\n## One-way latency, Normal scenario (nothing injected)\n{md_latency}");
     }

@@ -2,6 +2,8 @@
 //! time (time the hypervisor ran someone else while this VM wanted to run).
 //! Not part of the sans-IO core: it reads `/proc/stat`.
 
+pub mod isolate;
+
 /// The set of this machine's cores without `core`, for keeping threads off
 /// a busy-polling loop's core; `None` where no other core exists.
 pub fn cores_except(core: usize) -> Option<libc::cpu_set_t> {

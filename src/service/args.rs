@@ -69,6 +69,11 @@ pub struct EmulatorArgs {
     /// or CAP_SYS_NICE), so no ordinary process on its core preempts it.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     pub rt_priority: Option<i32>,
+    /// Clear the emulator's core for the run: move other processes'
+    /// threads, movable kernel threads and device interrupts off it, and
+    /// put them back at the end (root or CAP_SYS_NICE for others' threads).
+    #[arg(long)]
+    pub isolate: bool,
     /// Drop frames with a wrong ITP checksum (default: count and pass them).
     #[arg(long)]
     pub drop_bad_checksum: bool,
@@ -169,6 +174,12 @@ pub struct RunArgs {
     /// CAP_SYS_NICE): ordinary processes on its core cannot preempt it.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     pub rt_priority: Option<i32>,
+    /// Clear the emulator's core for the run: move other processes'
+    /// threads, movable kernel threads (e.g. a VM's memory monitor) and
+    /// device interrupts off it, and put them back at the end (root or
+    /// CAP_SYS_NICE for other users' threads).
+    #[arg(long)]
+    pub isolate: bool,
     /// Core for the console (default: not pinned).
     #[arg(long)]
     pub console_core: Option<usize>,

@@ -13,6 +13,7 @@
 use crate::check::{stage_reports, StageReport};
 use crate::clock::now_ns;
 use crate::frame::ItpView;
+use crate::host::isolate::IsolationSummary;
 use crate::host::StealTimer;
 use crate::injector::{Fate, Injector, Invalid};
 use crate::metrics::{LatencyHistogram, Summary};
@@ -43,6 +44,9 @@ pub struct EmulatorConfig {
     pub out_dir: PathBuf,
     /// Run the loop at this SCHED_FIFO priority (needs root or CAP_SYS_NICE).
     pub rt_priority: Option<i32>,
+    /// Clear the loop's core of other processes' threads, movable kernel
+    /// threads and device interrupts for the run ([`crate::host::isolate`]).
+    pub isolate: bool,
 }
 
 /// A change in a peer's presence, seen by the emulator.
@@ -77,6 +81,10 @@ pub struct EmulatorReport {
     pub core: Option<usize>,
     /// SCHED_FIFO priority the loop ran at, if any.
     pub realtime_priority: Option<i32>,
+    /// What was moved off the loop's core for the run (`--isolate`), and
+    /// put back after.
+    #[serde(default)]
+    pub isolation: Option<IsolationSummary>,
     pub queue_order: String,
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
@@ -107,6 +115,11 @@ pub struct EmulatorReport {
     pub lateness_hlog: Option<PathBuf>,
 }
 
+/// Where an isolating emulator keeps what it moved until it has put it
+/// back, in its output directory; the runner restores from it when the
+/// emulator died first.
+pub const ISOLATION_STATE_FILE: &str = "isolation.json";
+
 /// Runs the emulator until the console's end marker has been seen and every
 /// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
 /// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
@@ -130,6 +143,34 @@ pub fn run<S: FrameSource, K: FrameSink>(
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
         twriter.keep_off_core(core);
     }
+    // After pinning: the loop's own threads are placed; everything else that
+    // may run elsewhere leaves the core until the run ends.
+    let mut isolation = match (cfg.isolate, cfg.core) {
+        (true, Some(core)) => match crate::host::isolate::isolate(core, Some(&cfg.out_dir.join(ISOLATION_STATE_FILE))) {
+            Ok(iso) => {
+                let s = iso.summary();
+                eprintln!(
+                    "emulator: core {core} cleared: {} threads moved (kernel: {}), {} bound to it, {} refused; {} interrupts moved, {} refused",
+                    s.threads_moved,
+                    if s.kernel_threads_moved.is_empty() { "none".to_string() } else { s.kernel_threads_moved.join(" ") },
+                    s.threads_bound_to_core,
+                    s.threads_refused,
+                    s.irqs_moved,
+                    s.irqs_refused
+                );
+                Some(iso)
+            }
+            Err(e) => {
+                eprintln!("emulator: could not clear core {core}: {e}");
+                None
+            }
+        },
+        (true, None) => {
+            eprintln!("emulator: --isolate needs a pinned core; nothing cleared");
+            None
+        }
+        _ => None,
+    };
     let realtime_priority = match cfg.rt_priority {
         Some(p) => match crate::service::set_realtime(p) {
             Ok(()) => Some(p),
@@ -243,6 +284,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
         }
     };
     let t_end = now_ns();
+    let isolation = isolation.as_mut().map(|iso| iso.restore());
     // Tell the simulator the stream ended (best effort: it may be gone).
     let counts = inj.counts();
     let _ = sink.send_with(&FrameSample::end_marker(counts.released), |_| {});
@@ -266,6 +308,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
         seed: cfg.seed,
         core: cfg.core,
         realtime_priority,
+        isolation,
         queue_order: format!("{:?}", inj.queue_order()).to_lowercase(),
         queue_capacity: inj.queue_capacity(),
         frames: EmulatorFrames {
@@ -349,6 +392,7 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         expected_frames: args.expected_frames,
         out_dir: args.out.clone(),
         rt_priority: args.rt_priority,
+        isolate: args.isolate,
     };
     if args.ingress.is_udp() || args.egress.is_udp() {
         return crate::service::udp::main(args, cfg);

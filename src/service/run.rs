@@ -147,6 +147,11 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     ] {
         let _ = std::fs::remove_file(out.join(stale));
     }
+    // A runner killed while its emulator had cleared a core leaves what was
+    // moved on record here: put it back before anything else.
+    if let Some(n) = crate::host::isolate::restore_from_file(&out.join(crate::service::emulator::ISOLATION_STATE_FILE)) {
+        eprintln!("restored {n} thread/interrupt placement(s) left moved by an earlier run in {}", out.display());
+    }
     let scenario_path = out.join("scenario.toml");
     std::fs::write(&scenario_path, spec.to_toml()).with_context(|| format!("writing {}", scenario_path.display()))?;
     let cleaned = crate::service::ipc::cleanup_stale()?;
@@ -221,6 +226,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     }
     if let Some(p) = args.rt_priority {
         emu_args.extend([s(&"--rt-priority"), p.to_string()]);
+    }
+    if args.isolate {
+        emu_args.push(s(&"--isolate"));
     }
     if args.drop_bad_checksum {
         emu_args.push(s(&"--drop-bad-checksum"));
@@ -346,6 +354,11 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     }
     let duration_s = (now_ns() - t0) as f64 / 1e9;
     let steal = steal_timer.stop();
+    // An emulator that died while its core was cleared could not put back
+    // what it moved; its saved state lets the runner do it.
+    if let Some(n) = crate::host::isolate::restore_from_file(&out.join(crate::service::emulator::ISOLATION_STATE_FILE)) {
+        eprintln!("the emulator ended without restoring its core's placements; restored {n}");
+    }
 
     let console: Option<ConsoleReport> = read_json(&out.join("console.json"));
     let emulator: Option<EmulatorReport> = read_json(&out.join("emulator.json"));
