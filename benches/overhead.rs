@@ -138,7 +138,7 @@ struct Settings {
     isolate: bool,
 }
 
-const PARTS: [&str; 4] = ["latency", "delay", "product", "throughput"];
+const PARTS: [&str; 5] = ["latency", "delay", "product", "throughput", "sockperf"];
 
 impl Settings {
     fn from_env(args: &[String]) -> Result<Settings> {
@@ -695,13 +695,8 @@ impl Emulator {
             let _ = std::fs::remove_file(dir.join(stale));
         }
         let log = std::fs::File::create(dir.join("emulator.log"))?;
-        let child = Command::new(NETFI)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(log.try_clone()?)
-            .stderr(log)
-            .spawn()
-            .with_context(|| format!("starting {NETFI}"))?;
+        let child =
+            Command::new(NETFI).args(args).stdin(Stdio::null()).stdout(log.try_clone()?).stderr(log).spawn().with_context(|| format!("starting {NETFI}"))?;
         let mut e = Emulator { child, dir: dir.to_path_buf() };
         let t0 = Instant::now();
         while !dir.join("emulator.ready").exists() {
@@ -1319,7 +1314,8 @@ fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Tria
     let console_rate = r.console.as_ref().map(|c| c.rate_hz);
     let console_errors = r.console.as_ref().map(|c| c.send_errors);
     let emu_errors = r.emulator.as_ref().map(|e| e.send_errors);
-    let unintended: Vec<String> = f.dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect();
+    let unintended: Vec<String> =
+        f.dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect();
     let verdict = if !r.faults.is_empty() && !f.balanced {
         format!("lost frames: {}", r.faults.join("; "))
     } else if !r.faults.is_empty() {
@@ -1410,6 +1406,161 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
         }
     }
     Ok((lo.unwrap_or(0.0), trials))
+}
+
+// ---------------------------------------------------------------------------
+// sockperf ping-pong through the UDP bridge, against a direct run.
+
+const HALT_POLL_NS: &str = "/sys/module/haltpoll/parameters/guest_halt_poll_ns";
+/// Guest halt polling for the second sockperf variant: 200 µs, the
+/// kernel's documented default where the cpuidle-haltpoll driver polls.
+const SOCKPERF_HALT_POLL_NS: u64 = 200_000;
+
+/// sockperf's latency percentiles of one ping-pong run, in ns. sockperf
+/// reports half the round trip (its "latency"); the round trip is twice it.
+fn parse_sockperf(text: &str) -> Option<BTreeMap<String, i64>> {
+    let mut m = BTreeMap::new();
+    for line in text.lines() {
+        let value = |l: &str| l.rsplit('=').next()?.trim().parse::<f64>().ok();
+        if let Some(rest) = line.split("percentile ").nth(1) {
+            let q = rest.split_whitespace().next()?;
+            let key = match q {
+                "50.000" => "p50",
+                "90.000" => "p90",
+                "99.000" => "p99",
+                "99.900" => "p999",
+                "99.990" => "p9999",
+                _ => continue,
+            };
+            m.insert(key.to_string(), (value(line)? * 1000.0).round() as i64);
+        } else if line.contains("<MAX> observation") {
+            m.insert("max".to_string(), (value(line)? * 1000.0).round() as i64);
+        }
+    }
+    m.contains_key("p50").then_some(m)
+}
+
+/// A free UDP port on loopback (bound and released: a small race only).
+fn free_udp_port() -> Result<u16> {
+    Ok(std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// Runs `sockperf` with `args` on `core` (the child inherits the spawning
+/// thread's placement), returning its output.
+fn sockperf_on(core: Option<usize>, args: Vec<String>) -> Result<(Child, PathBuf)> {
+    let log = std::env::temp_dir().join(format!("netfi-sockperf-{}-{}.log", std::process::id(), RUN_COUNTER.fetch_add(1, Ordering::Relaxed)));
+    let file = std::fs::File::create(&log)?;
+    let child = std::thread::scope(|sc| {
+        sc.spawn(|| {
+            pin(core, None);
+            Command::new("sockperf").args(&args).stdin(Stdio::null()).stdout(file.try_clone()?).stderr(file).spawn()
+        })
+        .join()
+        .map_err(|_| anyhow::anyhow!("the spawning thread panicked"))
+    })??;
+    Ok((child, log))
+}
+
+fn ping_pong(core: Option<usize>, port: u16, seconds: f64) -> Result<BTreeMap<String, i64>> {
+    let secs = (seconds.round() as u64).max(1).to_string();
+    let (mut child, log) = sockperf_on(
+        core,
+        vec!["ping-pong".into(), "-i".into(), "127.0.0.1".into(), "-p".into(), port.to_string(), "-t".into(), secs, "-m".into(), "64".into()],
+    )?;
+    loop {
+        if child.try_wait()?.is_some() {
+            break;
+        }
+        if stop_requested() {
+            let _ = child.kill();
+            let _ = child.wait();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    check_interrupted()?;
+    let text = std::fs::read_to_string(&log)?;
+    let _ = std::fs::remove_file(&log);
+    parse_sockperf(&text).with_context(|| format!("no percentiles in sockperf's output:\n{text}"))
+}
+
+/// sockperf ping-pong (64-byte messages) between a client and a server on
+/// the benchmark's core: directly, then through `netfi emulator --payload
+/// raw` on its own core, the replies coming back through the return path.
+///
+/// With `halt_poll_ns`, the guest's halt polling is set to it for the
+/// interval and put back after: on a VM where it is off, every message a
+/// relay on another core hands to a sleeping end wakes a halted vCPU,
+/// which costs more than the relay itself.
+fn sockperf_interval(s: &Settings, seconds: f64, rep: usize, halt_poll_ns: Option<u64>) -> Result<Value> {
+    check_interrupted()?;
+    if Command::new("sockperf").arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_err() {
+        return Ok(json!({"skipped": "sockperf is not installed (Debian: apt install sockperf)"}));
+    }
+    let before = std::fs::read_to_string(HALT_POLL_NS).ok();
+    if let Some(ns) = halt_poll_ns {
+        std::fs::write(HALT_POLL_NS, ns.to_string()).with_context(|| format!("setting {HALT_POLL_NS}"))?;
+    }
+    let v = sockperf_measure(s, seconds, rep);
+    if let (Some(_), Some(b)) = (halt_poll_ns, before) {
+        let _ = std::fs::write(HALT_POLL_NS, b.trim());
+    }
+    v
+}
+
+/// The guest's halt polling now, and whether this process may change it.
+fn halt_polling() -> (Option<u64>, bool) {
+    let now = std::fs::read_to_string(HALT_POLL_NS).ok().and_then(|t| t.trim().parse().ok());
+    let writable = now.is_some() && std::fs::OpenOptions::new().write(true).open(HALT_POLL_NS).is_ok();
+    (now, writable)
+}
+
+fn sockperf_measure(s: &Settings, seconds: f64, rep: usize) -> Result<Value> {
+    let halt_poll_ns: Option<u64> = std::fs::read_to_string(HALT_POLL_NS).ok().and_then(|t| t.trim().parse().ok());
+    let host = HostTimer::start(s.quiet);
+    let server_port = free_udp_port()?;
+    let (mut server, server_log) = sockperf_on(s.driver_core, vec!["server".into(), "-i".into(), "127.0.0.1".into(), "-p".into(), server_port.to_string()])?;
+    std::thread::sleep(Duration::from_millis(300));
+    let result = (|| -> Result<Value> {
+        let direct = ping_pong(s.driver_core, server_port, seconds)?;
+        let dir = s.out_dir.join("runs").join(format!("sockperf-r{rep}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut args = emulator_common(s, "Normal", &dir, (seconds * 200_000.0) as u64);
+        args.extend([
+            "--payload".into(),
+            "raw".into(),
+            "--ingress".into(),
+            "udp://127.0.0.1:0".into(),
+            "--egress".into(),
+            format!("udp://127.0.0.1:{server_port}"),
+        ]);
+        let emu = Emulator::spawn(&dir, &args)?;
+        let endpoints: Value = serde_json::from_slice(&std::fs::read(dir.join("udp_endpoints.json"))?)?;
+        let ingress: SocketAddr = endpoints["ingress"].as_str().context("udp_endpoints.json: no ingress")?.parse()?;
+        let via = ping_pong(s.driver_core, ingress.port(), seconds)?;
+        let report = emu.finish(Duration::ZERO)?;
+        let udp: Value = serde_json::from_slice(&std::fs::read(dir.join("udp.json")).unwrap_or_default()).unwrap_or(Value::Null);
+        let added: BTreeMap<String, i64> = via.iter().filter_map(|(k, v)| Some((k.clone(), v - direct.get(k)?))).collect();
+        Ok(json!({
+            "repetition": rep,
+            "seconds": seconds,
+            "message_bytes": 64,
+            "what": "sockperf ping-pong latency (half the round trip), client and server on the benchmark's core, ns",
+            "direct_ns": direct,
+            "through_netfi_ns": via,
+            "added_ns": added,
+            "emulator_frames": report.frames,
+            "emulator_release_lateness_ns": report.release_lateness_ns,
+            "return_path": udp.get("return_path").cloned().unwrap_or(Value::Null),
+            "guest_halt_poll_ns": halt_poll_ns,
+        }))
+    })();
+    let _ = server.kill();
+    let _ = server.wait();
+    let _ = std::fs::remove_file(&server_log);
+    let mut v = result?;
+    v["host"] = json!(host.stop());
+    Ok(v)
 }
 
 // ---------------------------------------------------------------------------
@@ -1521,6 +1672,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut floors: Vec<FloorResult> = Vec::new();
     let mut products: Vec<Value> = Vec::new();
     let mut probes: Vec<ProbeResult> = Vec::new();
+    let mut sockperfs: Vec<Value> = Vec::new();
     let transports = [Transport::Iceoryx2, Transport::Udp];
     for rep in 0..s.repetitions {
         if s.wants("latency") {
@@ -1577,6 +1729,33 @@ fn run(args: &[String]) -> Result<()> {
                 probes.push(p);
             }
         }
+        if s.wants("sockperf") {
+            // As the machine is set up; and, where guest halt polling is off
+            // and may be changed, once more with it on (put back after).
+            let (now, writable) = halt_polling();
+            let variants: Vec<Option<u64>> = if now == Some(0) && writable { vec![None, Some(SOCKPERF_HALT_POLL_NS)] } else { vec![None] };
+            for variant in variants {
+                let mut v = sockperf_interval(&s, s.floor_s.max(5.0), rep, variant)?;
+                v["variant"] = json!(if variant.is_some() { "halt_polling_on" } else { "as_configured" });
+                match v.get("skipped").and_then(Value::as_str) {
+                    Some(why) => println!("  rep {rep} sockperf: skipped: {why}"),
+                    None => {
+                        let g = |k: &str, q: &str| v[k][q].as_i64().map_or("–".to_string(), ns);
+                        println!(
+                        "  rep {rep} sockperf ping-pong (half round trip): direct p50 {} p99 {}; through netfi p50 {} p99 {}; added p50 {} p99 {} (guest halt polling {} ns)",
+                        g("direct_ns", "p50"),
+                        g("direct_ns", "p99"),
+                        g("through_netfi_ns", "p50"),
+                        g("through_netfi_ns", "p99"),
+                        g("added_ns", "p50"),
+                        g("added_ns", "p99"),
+                        v["guest_halt_poll_ns"].as_u64().map_or("unknown".to_string(), |n| n.to_string())
+                    );
+                    }
+                }
+                sockperfs.push(v);
+            }
+        }
         if s.wants("delay") {
             let c = chain_interval(&s, Transport::Iceoryx2, PLM2_DLM2, "plm2_dlm2", 1000.0, s.interval_s, rep)?;
             println!(
@@ -1592,7 +1771,9 @@ fn run(args: &[String]) -> Result<()> {
             let r = netfi_run(&dir, "Normal", 1000.0, s.interval_s, &[])?;
             let host = host.stop();
             let o = &r.overhead_ns;
-            let p = |x: &Option<netfi::metrics::Summary>| x.map(|p| json!({"p50": p.p50, "p90": p.p90, "p99": p.p99, "p999": p.p999, "p9999": p.p9999, "max": p.max}));
+            let p = |x: &Option<netfi::metrics::Summary>| {
+                x.map(|p| json!({"p50": p.p50, "p90": p.p90, "p99": p.p99, "p999": p.p999, "p9999": p.p9999, "max": p.max}))
+            };
             println!(
                 "  rep {rep} netfi run Normal 1k: end-to-end extra p50 {} p99 {}; direct hop p50 {} p99 {}; balanced {}",
                 o.end_to_end_extra.map_or("?".into(), |x| fmt_ns(x.p50)),
@@ -1723,7 +1904,9 @@ fn run(args: &[String]) -> Result<()> {
 
     // The bars of docs/performance.md, reported (never asserted).
     let mut bars = Vec::new();
-    let get = |m: &BTreeMap<String, BTreeMap<String, Value>>, t: &str, r: &str, k: &str| m.get(t).and_then(|x| x.get(r)).and_then(|v| v.get(k)).and_then(Value::as_i64);
+    let get = |m: &BTreeMap<String, BTreeMap<String, Value>>, t: &str, r: &str, k: &str| {
+        m.get(t).and_then(|x| x.get(r)).and_then(|v| v.get(k)).and_then(Value::as_i64)
+    };
     if let Some(v) = get(&added, "iceoryx2", "1000", "p50") {
         bars.push(json!({"bar": "added latency p50 at 1 kHz (iceoryx2)", "value_ns": v, "limit_ns": 1000, "met": v <= 1000}));
     }
@@ -1747,6 +1930,30 @@ fn run(args: &[String]) -> Result<()> {
             bars.push(json!({"bar": format!("chain p50, UDP over iceoryx2, at {} frames/s", rate_label(rate)), "value_ratio": ratio, "limit_ratio": 20, "met": ratio >= 20.0}));
         }
     }
+    // sockperf: the median over repetitions of each percentile.
+    let mut sockperf_figs: BTreeMap<String, Value> = BTreeMap::new();
+    for variant in ["as_configured", "halt_polling_on"] {
+        let measured: Vec<&Value> = sockperfs.iter().filter(|v| v.get("skipped").is_none() && v["variant"] == variant).collect();
+        let sockperf_fig = (!measured.is_empty()).then(|| {
+        let fig = |k: &str| {
+            let maps: Vec<BTreeMap<String, i64>> = measured.iter().filter_map(|v| serde_json::from_value(v[k].clone()).ok()).collect();
+            combine(&maps)
+        };
+        let (d, d_spread) = fig("direct_ns");
+        let (t, t_spread) = fig("through_netfi_ns");
+        let (a, a_spread) = fig("added_ns");
+        json!({"direct_ns": {"median": d, "spread": d_spread}, "through_netfi_ns": {"median": t, "spread": t_spread}, "added_ns": {"median": a, "spread": a_spread}})
+    });
+        if let Some(v) = sockperf_fig.as_ref().and_then(|f| f["added_ns"]["median"]["p50"].as_i64()) {
+            let halt = measured.first().and_then(|v| v["guest_halt_poll_ns"].as_u64()).map_or("unknown".to_string(), |n| format!("{n} ns"));
+            bars.push(json!({"bar": format!("sockperf ping-pong through the UDP bridge, added latency p50 (raw, Normal; guest halt polling {halt})"), "value_ns": v, "limit_ns": 10_000, "met": v <= 10_000}));
+        }
+        if let Some(mut f) = sockperf_fig {
+            f["guest_halt_poll_ns"] = measured.first().map_or(Value::Null, |v| v["guest_halt_poll_ns"].clone());
+            f["repetitions"] = json!(measured.len());
+            sockperf_figs.insert(variant.to_string(), f);
+        }
+    }
     check_interrupted()?;
     let host = bench_host.stop();
     let isolation = isolation.as_mut().map(|i| i.restore());
@@ -1767,6 +1974,8 @@ fn run(args: &[String]) -> Result<()> {
         "throughput": throughput,
         "product_run": products,
         "probe_intervals": probes,
+        "sockperf": sockperf_figs,
+        "sockperf_intervals": sockperfs,
         "bars": bars,
         "chain_intervals": chains,
         "floor_intervals": floors,
@@ -1815,6 +2024,22 @@ fn run(args: &[String]) -> Result<()> {
     if !md_delay.is_empty() {
         let _ = writeln!(md, "\n## Under delay\n{md_delay}");
     }
+    for f in sockperf_figs.values() {
+        let m = |k: &str| serde_json::from_value::<BTreeMap<String, i64>>(f[k]["median"].clone()).unwrap_or_default();
+        let halt = f["guest_halt_poll_ns"].as_u64();
+        let _ = writeln!(
+            md,
+            "\n## sockperf ping-pong through the UDP bridge (guest halt polling {})\n\n64-byte messages, client and server on core {:?}, `netfi emulator --payload raw` (Normal) on core {:?}; sockperf's latency (half the round trip; the round trip is twice it); {} repetition(s).\n",
+            halt.map_or("not available".to_string(), |n| format!("{n} ns")),
+            s.driver_core,
+            s.emulator_core,
+            f["repetitions"],
+        );
+        let _ = writeln!(md, "| sockperf latency | p50 | p90 | p99 | p99.9 | p99.99 | max |\n|---|---|---|---|---|---|---|");
+        let _ = writeln!(md, "{}", row("direct (client → server)", &m("direct_ns")));
+        let _ = writeln!(md, "{}", row("through netfi (client → emulator → server, and back)", &m("through_netfi_ns")));
+        let _ = writeln!(md, "{}", row("**added**", &m("added_ns")));
+    }
     if !probes.is_empty() {
         let _ = writeln!(md, "\n## What the machine takes from a busy loop on each core\n");
         let _ = writeln!(md, "| repetition | core | gaps over 10 µs /s | over 100 µs /s | over 1 ms /s | time lost in gaps over 10 µs | longest gap | steal | other processes |\n|---|---|---|---|---|---|---|---|---|");
@@ -1862,7 +2087,12 @@ fn run(args: &[String]) -> Result<()> {
         let _ = writeln!(md, "\n## Throughput ({} s per trial, `netfi run --no-direct`)\n", s.throughput_trial_s);
         let _ = writeln!(md, "| scenario | sustained, frames/s | first rate not sustained, and why |\n|---|---|---|");
         for (k, v) in &throughput {
-            let _ = writeln!(md, "| {k} | {:.0} | {} |", v["best_fps"].as_f64().unwrap_or(0.0), v["first_failure"].as_str().unwrap_or("none up to the search's limit"));
+            let _ = writeln!(
+                md,
+                "| {k} | {:.0} | {} |",
+                v["best_fps"].as_f64().unwrap_or(0.0),
+                v["first_failure"].as_str().unwrap_or("none up to the search's limit")
+            );
         }
     }
     if !bars.is_empty() {
@@ -1875,7 +2105,12 @@ fn run(args: &[String]) -> Result<()> {
             } else {
                 (format!("{:.1}×", b["value_ratio"].as_f64().unwrap_or(0.0)), format!("{}×", b["limit_ratio"]))
             };
-            let _ = writeln!(md, "| {} | {value} | {limit} | {} |", b["bar"].as_str().unwrap_or("?"), if b["met"].as_bool() == Some(true) { "yes" } else { "**no**" });
+            let _ = writeln!(
+                md,
+                "| {} | {value} | {limit} | {} |",
+                b["bar"].as_str().unwrap_or("?"),
+                if b["met"].as_bool() == Some(true) { "yes" } else { "**no**" }
+            );
         }
     }
     let _ = writeln!(md, "\nHdrHistogram logs: `hlog/`; each run's files: `runs/`. Method: `docs/performance.md`.");
