@@ -106,8 +106,9 @@ impl Drop for Isolation {
 
 /// Clears `core` of everything that may run elsewhere, except the threads
 /// of the calling process (it places its own). When `state_file` is given,
-/// what was changed is written there first, so [`restore_from_file`] can
-/// undo it should the caller die without restoring.
+/// every change is put on record there *before* it is made (and the record
+/// narrowed to what was made afterwards), so [`restore_from_file`] can undo
+/// it should the caller die at any point without restoring.
 pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolation> {
     let online = online_cpus();
     if !online.contains(&core) {
@@ -117,10 +118,12 @@ pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolat
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "only one core is online: nowhere to move anything to"));
     }
     let own = std::process::id() as i32;
-    let mut state = IsolationState { core, ..Default::default() };
     let mut summary = IsolationSummary { core, ..Default::default() };
-    let mut kernel_names = BTreeSet::new();
-    let mut refused_names = BTreeSet::new();
+
+    // 1. The plan: every thread, the workqueue mask and every interrupt
+    // that may run on `core` and elsewhere.
+    let mut plan = IsolationState { core, ..Default::default() };
+    let mut kernel_tids = BTreeSet::new();
     for pid in numeric_entries(Path::new("/proc")) {
         if pid as i32 == own {
             continue;
@@ -137,54 +140,85 @@ pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolat
                 summary.threads_bound_to_core += 1;
                 continue;
             }
-            match set_affinity(tid, &after) {
-                Ok(()) => {
-                    summary.threads_moved += 1;
-                    if kernel {
-                        kernel_names.insert(comm(tid));
-                    }
-                    state.threads.push((tid, before.into_iter().collect(), after.into_iter().collect()));
+            if kernel {
+                kernel_tids.insert(tid);
+            }
+            plan.threads.push((tid, before.into_iter().collect(), after.into_iter().collect()));
+        }
+    }
+    let mut workqueue_narrowed = None;
+    if let Ok(text) = std::fs::read_to_string(WORKQUEUE_MASK) {
+        if let Some(mask) = parse_mask(text.trim()) {
+            let narrowed: BTreeSet<usize> = mask.iter().copied().filter(|&c| c != core).collect();
+            if mask.contains(&core) && !narrowed.is_empty() {
+                plan.workqueue = Some(text.trim().to_string());
+                workqueue_narrowed = Some(format_mask(&narrowed));
+            }
+        }
+    }
+    let mut irq_narrowed = Vec::new();
+    for irq in numeric_entries(Path::new("/proc/irq")) {
+        let Ok(text) = std::fs::read_to_string(irq_list_path(irq as u32)) else { continue };
+        let Some(cpus) = parse_list(text.trim()) else { continue };
+        let narrowed: BTreeSet<usize> = cpus.iter().copied().filter(|&c| c != core && online.contains(&c)).collect();
+        if cpus.contains(&core) && !narrowed.is_empty() {
+            plan.irqs.push((irq as u32, text.trim().to_string()));
+            irq_narrowed.push(format_list(&narrowed));
+        }
+    }
+    // 2. On record before anything moves: restoring a change that was
+    // never made is harmless (a thread is put back only while its mask is
+    // still the planned one; an interrupt or the workqueues get their own
+    // value again).
+    let save = |state: &IsolationState| -> std::io::Result<()> {
+        match state_file {
+            Some(f) => std::fs::write(f, serde_json::to_vec(state).map_err(std::io::Error::other)?),
+            None => Ok(()),
+        }
+    };
+    save(&plan)?;
+
+    // 3. The moves.
+    let mut state = IsolationState { core, ..Default::default() };
+    let mut kernel_names = BTreeSet::new();
+    let mut refused_names = BTreeSet::new();
+    for (tid, before, after) in plan.threads {
+        match set_affinity(tid, &after.iter().copied().collect()) {
+            Ok(()) => {
+                summary.threads_moved += 1;
+                if kernel_tids.contains(&tid) {
+                    kernel_names.insert(comm(tid));
                 }
-                Err(e) if e.raw_os_error() == Some(libc::ESRCH) => {}
-                Err(_) => {
-                    summary.threads_refused += 1;
-                    if refused_names.len() < 8 {
-                        refused_names.insert(comm(tid));
-                    }
+                state.threads.push((tid, before, after));
+            }
+            Err(e) if e.raw_os_error() == Some(libc::ESRCH) => {}
+            Err(_) => {
+                summary.threads_refused += 1;
+                if refused_names.len() < 8 {
+                    refused_names.insert(comm(tid));
                 }
             }
         }
     }
     // Unbound workqueue workers cannot be moved one by one; their mask can.
-    if let Ok(text) = std::fs::read_to_string(WORKQUEUE_MASK) {
-        if let Some(mask) = parse_mask(text.trim()) {
-            let narrowed: BTreeSet<usize> = mask.iter().copied().filter(|&c| c != core).collect();
-            if mask.contains(&core) && !narrowed.is_empty() && std::fs::write(WORKQUEUE_MASK, format_mask(&narrowed)).is_ok() {
-                state.workqueue = Some(text.trim().to_string());
-                summary.workqueues_moved = true;
-            }
+    if let (Some(before), Some(narrowed)) = (plan.workqueue, workqueue_narrowed) {
+        if std::fs::write(WORKQUEUE_MASK, narrowed).is_ok() {
+            state.workqueue = Some(before);
+            summary.workqueues_moved = true;
         }
     }
-    for irq in numeric_entries(Path::new("/proc/irq")) {
-        let path = irq_list_path(irq as u32);
-        let Ok(text) = std::fs::read_to_string(&path) else { continue };
-        let Some(cpus) = parse_list(text.trim()) else { continue };
-        let narrowed: BTreeSet<usize> = cpus.iter().copied().filter(|&c| c != core && online.contains(&c)).collect();
-        if !cpus.contains(&core) || narrowed.is_empty() {
-            continue;
-        }
-        if std::fs::write(&path, format_list(&narrowed)).is_ok() {
+    for ((irq, before), narrowed) in plan.irqs.into_iter().zip(irq_narrowed) {
+        if std::fs::write(irq_list_path(irq), narrowed).is_ok() {
             summary.irqs_moved += 1;
-            state.irqs.push((irq as u32, text.trim().to_string()));
+            state.irqs.push((irq, before));
         } else {
             summary.irqs_refused += 1;
         }
     }
     summary.kernel_threads_moved = kernel_names.into_iter().collect();
     summary.refused_examples = refused_names.into_iter().collect();
-    if let Some(f) = state_file {
-        std::fs::write(f, serde_json::to_vec(&state).map_err(std::io::Error::other)?)?;
-    }
+    // The planned record, a superset, stays if this fails.
+    let _ = save(&state);
     Ok(Isolation { state, summary, state_file: state_file.map(Path::to_path_buf), restored: false })
 }
 

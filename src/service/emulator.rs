@@ -173,7 +173,16 @@ pub fn run<S: FrameSource, K: FrameSink>(
     };
     let realtime_priority = match cfg.rt_priority {
         Some(p) => match crate::service::set_realtime(p) {
-            Ok(()) => Some(p),
+            Ok(()) => {
+                if let Some((runtime, period)) = crate::service::rt_throttling() {
+                    eprintln!(
+                        "emulator: WARNING: real-time throttling is on (kernel.sched_rt_runtime_us = {runtime} of {period}): this busy loop at SCHED_FIFO will be stopped for {} ms of every {} ms; set it to -1, or use --isolate without --rt-priority",
+                        (period - runtime) / 1000,
+                        period / 1000
+                    );
+                }
+                Some(p)
+            }
             Err(e) => {
                 eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
                 None

@@ -37,9 +37,10 @@ pub fn place(role: &str, core: Option<usize>, avoid: Option<usize>) -> anyhow::R
 }
 
 /// Moves the calling thread to SCHED_FIFO at `priority` (1–99), so ordinary
-/// processes on its core cannot preempt it. Needs root or CAP_SYS_NICE. The
-/// kernel's real-time throttling (by default 95% of each second) still
-/// leaves the core's other work 5% of its time.
+/// processes on its core cannot preempt it. Needs root or CAP_SYS_NICE.
+/// Under the kernel's real-time throttling ([`rt_throttling`]) a thread
+/// that never sleeps is stopped for the rest of each period once it has
+/// used its share: 50 ms of every second by default.
 pub fn set_realtime(priority: i32) -> std::io::Result<()> {
     let param = libc::sched_param { sched_priority: priority };
     // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
@@ -49,4 +50,14 @@ pub fn set_realtime(priority: i32) -> std::io::Result<()> {
     } else {
         Err(std::io::Error::last_os_error())
     }
+}
+
+/// The kernel's real-time throttling, `(runtime_us, period_us)`, when it is
+/// on (`kernel.sched_rt_runtime_us` is not -1): a SCHED_FIFO busy loop is
+/// then stopped for `period − runtime` of every period.
+pub fn rt_throttling() -> Option<(i64, i64)> {
+    let read = |name: &str| std::fs::read_to_string(format!("/proc/sys/kernel/{name}")).ok()?.trim().parse::<i64>().ok();
+    let runtime = read("sched_rt_runtime_us")?;
+    let period = read("sched_rt_period_us")?;
+    (runtime >= 0 && runtime < period).then_some((runtime, period))
 }

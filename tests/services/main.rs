@@ -265,3 +265,69 @@ fn a_restarted_console_reconnects() {
 fn core_affinity_count() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
+
+/// The CPUs a process may run on, from `/proc/<pid>/status`.
+fn allowed_cpus(pid: u32) -> String {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    status.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).unwrap().trim().to_string()
+}
+
+/// `--isolate` moves other processes off the emulator's core for the run
+/// and puts them back: at the end of a normal run, and, through the
+/// runner, when the emulator was killed. A child of this test (our own
+/// process: no privilege needed) is the witness.
+#[test]
+fn isolate_clears_the_emulators_core_and_puts_everything_back() {
+    let cores = core_affinity_count();
+    if cores < 2 {
+        eprintln!("skipped: one core only");
+        return;
+    }
+    let core = (cores - 1).to_string();
+    let mut witness = Command::new("sleep").arg("60").spawn().unwrap();
+    let before = allowed_cpus(witness.id());
+    if !netfi::host::isolate::parse_list(&before).unwrap().contains(&(cores - 1)) {
+        let _ = witness.kill();
+        eprintln!("skipped: this test may not run on core {core}");
+        return;
+    }
+
+    // A whole run: cleared while it runs, restored at its end.
+    let (r, ok, _) = run("isolate", &["Normal", "--duration-s", "1", "--seed", "3", "--isolate", "--emulator-core", &core]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let iso = &r["emulator"]["isolation"];
+    assert_eq!(u(&iso["core"]), (cores - 1) as u64, "{iso}");
+    assert!(u(&iso["threads_moved"]) >= 1, "the witness at least must have moved: {iso}");
+    assert!(u(&iso["restored"]) >= 1, "{iso}");
+    assert_eq!(allowed_cpus(witness.id()), before, "the witness was not put back");
+
+    // The emulator killed while the core is cleared: the runner restores.
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("isolate-kill");
+    let child = netfi()
+        .args(["run", "Normal", "--duration-s", "3", "--seed", "3", "--isolate", "--emulator-core", &core, "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = wait_pid(&out, "emulator");
+    let t0 = Instant::now();
+    while allowed_cpus(witness.id()) == before {
+        assert!(t0.elapsed() < Duration::from_secs(30), "the emulator never cleared core {core}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(out.join("isolation.json").exists(), "what was moved is not on record");
+    std::thread::sleep(Duration::from_millis(300));
+    // SAFETY: signalling a process this test started (through the runner).
+    unsafe { libc::kill(pid, libc::SIGKILL) };
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success(), "a run with a killed emulator must fail");
+    assert_eq!(allowed_cpus(witness.id()), before, "the runner did not put the witness back");
+    assert!(!out.join("isolation.json").exists(), "the record of what was moved was left behind");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("ended without restoring"), "{stderr}");
+    let _ = witness.kill();
+    let _ = witness.wait();
+}
