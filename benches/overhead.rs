@@ -1648,16 +1648,7 @@ fn run(args: &[String]) -> Result<()> {
     let mut isolation = match (s.isolate, s.emulator_core) {
         (true, Some(core)) => match netfi::host::isolate::isolate(core, Some(&isolation_file)) {
             Ok(iso) => {
-                let i = iso.summary();
-                println!(
-                    "  core {core} cleared for the benchmark: {} threads moved (kernel: {}), {} bound to it, {} refused; {} interrupts moved, {} refused",
-                    i.threads_moved,
-                    if i.kernel_threads_moved.is_empty() { "none".to_string() } else { i.kernel_threads_moved.join(" ") },
-                    i.threads_bound_to_core,
-                    i.threads_refused,
-                    i.irqs_moved,
-                    i.irqs_refused
-                );
+                println!("  {} (for the benchmark)", iso.summary());
                 Some(iso)
             }
             Err(e) => {

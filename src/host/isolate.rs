@@ -56,6 +56,23 @@ pub struct IsolationSummary {
     pub restored: Option<usize>,
 }
 
+impl std::fmt::Display for IsolationSummary {
+    /// One line: `core 1 cleared: 39 threads moved (kernel: kdamond.0 …), 9
+    /// bound to it, 22 refused; 18 interrupts moved, 1 refused[; 58 restored]`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kernel = if self.kernel_threads_moved.is_empty() { "none".to_string() } else { self.kernel_threads_moved.join(" ") };
+        write!(
+            f,
+            "core {} cleared: {} threads moved (kernel: {kernel}), {} bound to it, {} refused; {} interrupts moved, {} refused",
+            self.core, self.threads_moved, self.threads_bound_to_core, self.threads_refused, self.irqs_moved, self.irqs_refused
+        )?;
+        match self.restored {
+            Some(n) => write!(f, "; {n} restored"),
+            None => Ok(()),
+        }
+    }
+}
+
 /// What was changed, so it can be undone, also by another process (the
 /// runner, when the emulator that isolated its core was killed).
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]

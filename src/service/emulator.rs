@@ -148,16 +148,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let mut isolation = match (cfg.isolate, cfg.core) {
         (true, Some(core)) => match crate::host::isolate::isolate(core, Some(&cfg.out_dir.join(ISOLATION_STATE_FILE))) {
             Ok(iso) => {
-                let s = iso.summary();
-                eprintln!(
-                    "emulator: core {core} cleared: {} threads moved (kernel: {}), {} bound to it, {} refused; {} interrupts moved, {} refused",
-                    s.threads_moved,
-                    if s.kernel_threads_moved.is_empty() { "none".to_string() } else { s.kernel_threads_moved.join(" ") },
-                    s.threads_bound_to_core,
-                    s.threads_refused,
-                    s.irqs_moved,
-                    s.irqs_refused
-                );
+                eprintln!("emulator: {}", iso.summary());
                 Some(iso)
             }
             Err(e) => {

@@ -235,17 +235,8 @@ impl RunReport {
             s += &format!("process    {:<9} pid {:<7} core {:<5} {}\n", p.role, p.pid, p.core.map_or("-".into(), |c| c.to_string()), p.status);
         }
         if let Some(i) = self.emulator.as_ref().and_then(|e| e.isolation.as_ref()) {
-            s += &format!(
-                "isolation  core {} cleared for the run: {} threads moved (kernel: {}), {} bound to it, {} refused; {} interrupts moved, {} refused; {} restored\n",
-                i.core,
-                i.threads_moved,
-                if i.kernel_threads_moved.is_empty() { "none".to_string() } else { i.kernel_threads_moved.join(" ") },
-                i.threads_bound_to_core,
-                i.threads_refused,
-                i.irqs_moved,
-                i.irqs_refused,
-                i.restored.unwrap_or(0)
-            );
+            s += &format!("isolation  {i}
+");
         }
         for e in &self.peer_events {
             s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, e.peer, e.connected);
