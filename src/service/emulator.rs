@@ -105,6 +105,12 @@ pub struct EmulatorReport {
     /// frame was released) or `signal`.
     pub ended_by: String,
     pub duration_s: f64,
+    /// Turns of the busy loop, and the mean time of one: how often it looked
+    /// for due releases and for a new frame.
+    #[serde(default)]
+    pub loop_iterations: u64,
+    #[serde(default)]
+    pub loop_iteration_ns_mean: f64,
     pub receive_errors: u64,
     pub send_errors: u64,
     pub trace_overflowed: u64,
@@ -329,6 +335,8 @@ pub fn run<S: FrameSource, K: FrameSink>(
         peer_events,
         ended_by: ended_by.to_string(),
         duration_s,
+        loop_iterations: iter,
+        loop_iteration_ns_mean: if iter > 0 { (t_end - t_start) as f64 / iter as f64 } else { 0.0 },
         receive_errors,
         send_errors,
         trace_overflowed: tsink.overflowed(),

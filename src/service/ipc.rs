@@ -41,10 +41,7 @@ impl FrameSource for FrameSubscriber {
 impl FrameSink for FramePublisher {
     #[inline]
     fn send_with(&mut self, sample: &FrameSample, stamp: impl FnOnce(&mut FrameSample)) -> Result<Option<usize>, PortError> {
-        FramePublisher::send_with(self, |s| {
-            *s = *sample;
-            stamp(s);
-        })
+        FramePublisher::send_from(self, sample, stamp)
         .map(Some)
         .map_err(|e: FrameSendError| PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() })
     }

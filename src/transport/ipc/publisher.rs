@@ -3,6 +3,8 @@
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, LoanError, SendError};
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
+use std::mem::MaybeUninit;
 use iceoryx2::prelude::{BackpressureStrategy, PortFactory as _};
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
@@ -16,14 +18,29 @@ use crate::sample::FrameSample;
 
 /// The publishing end of a channel. Not `Send`: create it on the thread that
 /// sends.
-#[derive(Debug)]
 pub struct FramePublisher {
+    /// The sample the next send fills: loaned right after each send, so the
+    /// loan (reclaiming what subscribers returned, across cores) is not on
+    /// the path of a frame due for release. Declared first: dropped (the
+    /// loan returned) before the port.
+    ready: Option<SampleMutUninit<Ipc, MaybeUninit<FrameSample>, ()>>,
     // Declared before `service` so that the port is dropped first.
     port: Publisher<Ipc, FrameSample, ()>,
     service: PortFactory<Ipc, FrameSample, ()>,
     run: RunId,
     channel: Channel,
     stats: PublisherStats,
+}
+
+impl std::fmt::Debug for FramePublisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FramePublisher")
+            .field("run", &self.run)
+            .field("channel", &self.channel)
+            .field("stats", &self.stats)
+            .field("sample_ready", &self.ready.is_some())
+            .finish_non_exhaustive()
+    }
 }
 
 /// Counters of one publisher since it was opened.
@@ -199,7 +216,9 @@ impl FramePublisher {
                     source,
                 },
             })?;
+        let ready = port.loan_uninit().ok();
         Ok(Self {
+            ready,
             port,
             service,
             run: run.clone(),
@@ -220,21 +239,35 @@ impl FramePublisher {
         &mut self,
         fill: F,
     ) -> Result<usize, FrameSendError> {
-        let mut sample = self
-            .port
-            .loan_uninit()
-            .map_err(|source| FrameSendError::Loan {
+        self.send_from(&FrameSample::ZERO, fill)
+    }
+
+    /// Sends a copy of `frame` that `stamp` may still change: the sample is
+    /// written once, from `frame`, and `stamp` runs immediately before the
+    /// send; see [`FramePublisher::send_with`].
+    pub fn send_from<F: FnOnce(&mut FrameSample)>(
+        &mut self,
+        frame: &FrameSample,
+        stamp: F,
+    ) -> Result<usize, FrameSendError> {
+        let uninit = match self.ready.take() {
+            Some(s) => s,
+            None => self.port.loan_uninit().map_err(|source| FrameSendError::Loan {
                 run: self.run.clone(),
                 channel: self.channel,
                 source,
-            })?
-            .write_payload(FrameSample::ZERO);
+            })?,
+        };
+        let mut sample = uninit.write_payload(*frame);
         // Counted before sending: a subscriber that registers during the send
         // may get the frame without being expected, never the reverse.
         let subscribers = self.peers_connected();
-        fill(sample.payload_mut());
+        stamp(sample.payload_mut());
         let result = sample.send();
         self.stats.sent += 1;
+        // The next frame's sample, now, while nothing is due (a failure is
+        // retried, and reported, by the next send).
+        self.ready = self.port.loan_uninit().ok();
         match result {
             Ok(0) if subscribers == 0 => {
                 self.stats.unsubscribed += 1;
@@ -265,7 +298,7 @@ impl FramePublisher {
 
     /// Sends a copy of `frame`; see [`FramePublisher::send_with`].
     pub fn send(&mut self, frame: &FrameSample) -> Result<usize, FrameSendError> {
-        self.send_with(|sample| *sample = *frame)
+        self.send_from(frame, |_| {})
     }
 
     /// Subscribers registered on the channel. A killed subscriber stays
