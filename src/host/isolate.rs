@@ -402,6 +402,16 @@ pub fn format_mask(cpus: &BTreeSet<usize>) -> String {
 mod tests {
     use super::*;
 
+    /// A child process, killed and reaped however the test ends.
+    struct Witness(std::process::Child);
+
+    impl Drop for Witness {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+
     fn set(v: &[usize]) -> BTreeSet<usize> {
         v.iter().copied().collect()
     }
@@ -437,11 +447,10 @@ mod tests {
             return;
         }
         let core = *cores.iter().next_back().unwrap();
-        let mut child = std::process::Command::new("sleep").arg("30").spawn().expect("sleep");
-        let pid = child.id() as i32;
+        let child = Witness(std::process::Command::new("sleep").arg("30").spawn().expect("sleep"));
+        let pid = child.0.id() as i32;
         let all = get_affinity(pid).unwrap();
         if !all.contains(&core) {
-            let _ = child.kill();
             eprintln!("skipped: this process may not run on core {core}");
             return;
         }
@@ -465,8 +474,7 @@ mod tests {
         assert!(restore_from_file(&file).unwrap() >= 1);
         assert_eq!(get_affinity(pid).unwrap(), all);
         assert_eq!(restore_from_file(&file), None);
-        let _ = child.kill();
-        let _ = child.wait();
+        drop(child);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -284,10 +284,9 @@ fn isolate_clears_the_emulators_core_and_puts_everything_back() {
         return;
     }
     let core = (cores - 1).to_string();
-    let mut witness = Command::new("sleep").arg("60").spawn().unwrap();
+    let witness = Witness(Command::new("sleep").arg("60").spawn().unwrap());
     let before = allowed_cpus(witness.id());
     if !netfi::host::isolate::parse_list(&before).unwrap().contains(&(cores - 1)) {
-        let _ = witness.kill();
         eprintln!("skipped: this test may not run on core {core}");
         return;
     }
@@ -328,6 +327,20 @@ fn isolate_clears_the_emulators_core_and_puts_everything_back() {
     assert!(!out.join("isolation.json").exists(), "the record of what was moved was left behind");
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("ended without restoring"), "{stderr}");
-    let _ = witness.kill();
-    let _ = witness.wait();
+}
+
+/// A child process, killed and reaped however the test ends.
+struct Witness(std::process::Child);
+
+impl Witness {
+    fn id(&self) -> u32 {
+        self.0.id()
+    }
+}
+
+impl Drop for Witness {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
