@@ -174,12 +174,16 @@ pub struct RunArgs {
     /// CAP_SYS_NICE): ordinary processes on its core cannot preempt it.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     pub rt_priority: Option<i32>,
-    /// Clear the emulator's core for the run: move other processes'
-    /// threads, movable kernel threads (e.g. a VM's memory monitor) and
-    /// device interrupts off it, and put them back at the end (root or
-    /// CAP_SYS_NICE for other users' threads).
-    #[arg(long)]
+    /// Clear the emulator's core for the run (the default): move other
+    /// processes' threads, movable kernel threads (e.g. a VM's memory
+    /// monitor) and device interrupts off it, and put them back at the end
+    /// (root or CAP_SYS_NICE for other users' threads).
+    #[arg(long, overrides_with = "no_isolate")]
     pub isolate: bool,
+    /// Leave the emulator's core as it is: other threads may then preempt
+    /// the emulator's loop.
+    #[arg(long)]
+    pub no_isolate: bool,
     /// Core for the console (default: not pinned).
     #[arg(long)]
     pub console_core: Option<usize>,

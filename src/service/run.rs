@@ -227,7 +227,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     if let Some(p) = args.rt_priority {
         emu_args.extend([s(&"--rt-priority"), p.to_string()]);
     }
-    if args.isolate {
+    // The emulator's core is cleared unless asked not to (`isolate` only
+    // restates the default).
+    if !args.no_isolate && emulator_core.is_some() {
         emu_args.push(s(&"--isolate"));
     }
     if args.drop_bad_checksum {
