@@ -1993,17 +1993,7 @@ fn run(args: &[String]) -> Result<()> {
     );
     match &isolation {
         Some(i) => {
-            let _ = writeln!(
-                md,
-                "\nThe emulator's core {} was cleared for the benchmark (`NETFI_BENCH_ISOLATE`, default on): {} threads of other processes moved off it (kernel threads: {}), {} bound to it left, {} refused; {} device interrupts moved, {} refused; all put back at the end.",
-                i.core,
-                i.threads_moved,
-                if i.kernel_threads_moved.is_empty() { "none".to_string() } else { i.kernel_threads_moved.join(", ") },
-                i.threads_bound_to_core,
-                i.threads_refused,
-                i.irqs_moved,
-                i.irqs_refused
-            );
+            let _ = writeln!(md, "\nThe emulator's core was cleared for the benchmark (`NETFI_BENCH_ISOLATE`, default on), and all put back at the end: {i}.");
         }
         None => {
             let _ = writeln!(md, "\nThe emulator's core was not cleared (`NETFI_BENCH_ISOLATE=0`, or not permitted): other threads could run on it.");

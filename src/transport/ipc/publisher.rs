@@ -3,11 +3,11 @@
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, LoanError, SendError};
-use iceoryx2::sample_mut_uninit::SampleMutUninit;
-use std::mem::MaybeUninit;
 use iceoryx2::prelude::{BackpressureStrategy, PortFactory as _};
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+use std::mem::MaybeUninit;
 
 use super::service::{is_incompatible, open_service};
 use super::{
@@ -252,11 +252,14 @@ impl FramePublisher {
     ) -> Result<usize, FrameSendError> {
         let uninit = match self.ready.take() {
             Some(s) => s,
-            None => self.port.loan_uninit().map_err(|source| FrameSendError::Loan {
-                run: self.run.clone(),
-                channel: self.channel,
-                source,
-            })?,
+            None => self
+                .port
+                .loan_uninit()
+                .map_err(|source| FrameSendError::Loan {
+                    run: self.run.clone(),
+                    channel: self.channel,
+                    source,
+                })?,
         };
         let mut sample = uninit.write_payload(*frame);
         // Counted before sending: a subscriber that registers during the send
