@@ -16,9 +16,11 @@
 //!
 //! Arrays indexed by arm hold arm 0 then arm 1, as on the wire.
 
-use crate::sample::{FrameSample, ITP_FRAME_LEN};
+/// Length of an ITP master-to-slave frame on the wire, in bytes.
+pub const ITP_FRAME_LEN: usize = 124;
 
-/// Length of an ITP frame on the wire, in bytes.
+/// Length of an ITP frame on the wire, in bytes (the same as
+/// [`ITP_FRAME_LEN`], under the codec's own name).
 pub const FRAME_LEN: usize = ITP_FRAME_LEN;
 
 /// Number of arms an ITP frame commands.
@@ -539,25 +541,6 @@ impl ItpFrame {
     pub fn rotation(&self, arm: usize) -> [f64; 4] {
         [self.qx[arm], self.qy[arm], self.qz[arm], self.qw[arm]]
     }
-
-    /// Writes the frame into a shared-memory sample's wire bytes and sets its
-    /// length; the sample's metadata is left alone.
-    pub fn write_to_sample(&self, sample: &mut FrameSample) {
-        self.emit(&mut ItpView::new_unchecked(&mut sample.wire[..]));
-        sample.len = FRAME_LEN as u32;
-    }
-
-    /// Parses the frame a shared-memory sample carries, verifying its length
-    /// and checksum.
-    pub fn from_sample(sample: &FrameSample) -> Result<ItpFrame, FrameError> {
-        ItpFrame::parse(&sample_view(sample)?)
-    }
-}
-
-/// A checked view of the frame a shared-memory sample carries; fails if the
-/// sample's `len` is not one frame.
-pub fn sample_view(sample: &FrameSample) -> Result<ItpView<&[u8]>, FrameError> {
-    ItpView::new_checked(sample.payload())
 }
 
 #[cfg(test)]
@@ -766,18 +749,4 @@ mod tests {
         assert_eq!(view.checksum(), f.checksum());
     }
 
-    #[test]
-    fn sample_round_trip() {
-        let f = sample_frame();
-        let mut s = FrameSample { send_ns: 42, ..FrameSample::ZERO };
-        f.write_to_sample(&mut s);
-        assert_eq!(s.len, 124);
-        assert_eq!(s.send_ns, 42);
-        assert_eq!(ItpFrame::from_sample(&s), Ok(f));
-        s.len = 100;
-        assert_eq!(
-            ItpFrame::from_sample(&s),
-            Err(FrameError::WrongLength { expected: 124, found: 100 })
-        );
-    }
 }

@@ -6,7 +6,9 @@
 //! or thread: time is passed in as nanoseconds, so the same code runs in
 //! simulated time (tests, Monte Carlo) and in the real-time emulator.
 //! `transport` is the only module that touches iceoryx2; `service` holds the
-//! real-time loops that wire the core to it.
+//! real-time loops that wire the core to it; `load` reads scenario files for
+//! the core's parser. `tests/purity.rs` checks that the core names no clock,
+//! file, thread, socket or iceoryx2.
 
 pub mod capture;
 pub mod check;
@@ -23,6 +25,7 @@ pub mod stats;
 
 pub mod clock;
 pub mod host;
+pub mod load;
 pub mod metrics;
 pub mod service;
 pub mod trace;

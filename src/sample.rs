@@ -1,15 +1,16 @@
 //! The fixed-size shared-memory sample that carries one ITP frame between the
-//! console, the emulator and the simulator on one host (SPEC §2).
+//! console, the emulator and the simulator on one host (docs/spec.md §2),
+//! and the bridge between it and the ITP codec of [`crate::frame`], which
+//! knows nothing of shared memory.
 //!
 //! Layout is `#[repr(C)]`, pinned by a compile-time size assertion, and
 //! published under a stable iceoryx2 type name: bump the `.vN` suffix of
 //! [`FrameSample::TYPE_NAME`] whenever the layout changes, so processes built
 //! from different layouts refuse to connect instead of misreading each other.
 
+use crate::frame::{FrameError, ItpFrame, ItpView};
+pub use crate::frame::ITP_FRAME_LEN;
 use iceoryx2::prelude::ZeroCopySend;
-
-/// Length of an ITP master-to-slave frame on the wire.
-pub const ITP_FRAME_LEN: usize = 124;
 
 /// One frame in shared memory: the 124 wire bytes plus the metadata the
 /// injector and the simulator need. All times are CLOCK_MONOTONIC ns.
@@ -93,6 +94,27 @@ impl FrameSample {
     }
 }
 
+impl ItpFrame {
+    /// Writes the frame into a shared-memory sample's wire bytes and sets its
+    /// length; the sample's metadata is left alone.
+    pub fn write_to_sample(&self, sample: &mut FrameSample) {
+        self.emit(&mut ItpView::new_unchecked(&mut sample.wire[..]));
+        sample.len = ITP_FRAME_LEN as u32;
+    }
+
+    /// Parses the frame a shared-memory sample carries, verifying its length
+    /// and checksum.
+    pub fn from_sample(sample: &FrameSample) -> Result<ItpFrame, FrameError> {
+        ItpFrame::parse(&sample_view(sample)?)
+    }
+}
+
+/// A checked view of the frame a shared-memory sample carries; fails if the
+/// sample's `len` is not one frame.
+pub fn sample_view(sample: &FrameSample) -> Result<ItpView<&[u8]>, FrameError> {
+    ItpView::new_checked(sample.payload())
+}
+
 impl Default for FrameSample {
     fn default() -> Self {
         FrameSample::ZERO
@@ -108,6 +130,18 @@ mod tests {
     fn type_name_is_stable() {
         // SAFETY: type_name only returns the attribute's string.
         assert_eq!(unsafe { FrameSample::type_name() }, FrameSample::TYPE_NAME);
+    }
+
+    #[test]
+    fn sample_round_trip() {
+        let f = ItpFrame { sequence: 20468, delx: [-39, 13], surgeon_mode: 1, ..ItpFrame::default() }.with_checksum();
+        let mut s = FrameSample { send_ns: 42, ..FrameSample::ZERO };
+        f.write_to_sample(&mut s);
+        assert_eq!(s.len, 124);
+        assert_eq!(s.send_ns, 42);
+        assert_eq!(ItpFrame::from_sample(&s), Ok(f));
+        s.len = 100;
+        assert_eq!(ItpFrame::from_sample(&s), Err(FrameError::WrongLength { expected: 124, found: 100 }));
     }
 
     #[test]

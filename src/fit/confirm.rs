@@ -36,7 +36,7 @@
 use super::{FitError, Metric};
 use crate::model::units::ms_to_ns;
 use crate::model::{AnyModel, Millis, OutageParams, OutageUnit, StageRng, Verdict};
-use crate::scenario::{stream_seed, ModelSpec};
+use crate::model::{stream_seed, ModelSpec};
 use hdrhistogram::Histogram;
 use rand::{RngExt, SeedableRng};
 
@@ -494,7 +494,7 @@ mod tests {
 
     #[test]
     fn same_seed_same_confirmation() {
-        let spec = crate::scenario::preset_stages("PLM-2").unwrap().remove(0).model;
+        let spec = crate::model::presets::preset_models("PLM-2").unwrap().remove(0);
         let run = |seed| {
             let mut c = Confirmation::new(&spec, &[Metric::LossRate, Metric::LossRunMean], seed, 1_000_000).unwrap();
             c.replicas_mut().iter_mut().for_each(Replica::run_round);

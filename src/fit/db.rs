@@ -15,7 +15,7 @@
 
 use super::{FitError, FitRequest, FitResult, Kind, TOOL_VERSION};
 use crate::model::{DelayParams, GeLomaxParams, Order, OutageParams, Probability};
-use crate::scenario::{stream_seed, ModelSpec};
+use crate::model::{stream_seed, ModelSpec};
 use serde::{Deserialize, Serialize};
 use std::sync::OnceLock;
 

@@ -33,11 +33,11 @@ use super::{FitError, Goal, Kind, Metric};
 use crate::model::{
     DelayDist, DelayParams, GeLomax, GeLomaxParams, Millis, Order, OutageParams, OutageUnit, Probability, StageRng,
 };
-use crate::scenario::ModelSpec;
+use crate::model::ModelSpec;
 use rand::{RngExt, SeedableRng};
 
 /// The study's two-state transition matrix (PLM-1..3).
-pub const STUDY_TRANSITION: [[f64; 2]; 2] = [[0.95, 0.05], [0.10, 0.90]];
+pub use crate::model::presets::STUDY_TRANSITION;
 /// The shared Lomax shape of one-target loss fits: the mean of the six
 /// shapes of PLM-1..3 (4.259), rounded.
 pub const ALPHA_DEFAULT: f64 = 4.26;
@@ -144,10 +144,10 @@ impl Family {
         let like_spec = match like {
             None => None,
             Some(name) => {
-                let canonical = crate::scenario::canonical_name(name)
+                let canonical = crate::model::presets::canonical_name(name)
                     .ok_or_else(|| FitError::BadRequest { problem: format!("`{name}` is not a study preset") })?;
-                let stages = crate::scenario::preset_stages(canonical).expect("canonical names are presets");
-                let model = stages.into_iter().next().map(|s| s.model);
+                let models = crate::model::presets::preset_models(canonical).expect("canonical names are presets");
+                let model = models.into_iter().next();
                 Some((canonical, model))
             }
         };

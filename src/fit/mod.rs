@@ -37,7 +37,7 @@ pub use confirm::{Confirmation, Estimate};
 pub use family::{Family, Objective};
 
 use crate::model::{DelayParams, GeLomaxParams, OutageParams};
-use crate::scenario::{stream_seed, ModelSpec};
+use crate::model::{stream_seed, ModelSpec};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -336,8 +336,8 @@ impl FitResult {
 
     /// The fitted model as a scenario stage (`[[stage]]` table).
     pub fn stage_toml(&self) -> String {
-        let stage = crate::scenario::StageSpec { name: None, preset: None, model: self.spec.clone() };
-        let mut table = toml::to_string(&stage).expect("a stage serializes");
+        // A stage without a name is its model: `model = "…"` and the parameters.
+        let mut table = toml::to_string(&self.spec).expect("a stage serializes");
         table.insert_str(0, "[[stage]]\n");
         table
     }

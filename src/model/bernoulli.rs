@@ -12,6 +12,13 @@ pub struct BernoulliParams {
     pub p: Probability,
 }
 
+impl BernoulliParams {
+    /// Drops each frame with probability `p`.
+    pub fn new(p: f64) -> Result<Self, ParamError> {
+        Ok(BernoulliParams { p: super::units::probability("p", p)? })
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Bernoulli {
     dist: rand::distr::Bernoulli,

@@ -76,6 +76,45 @@ pub struct DelayParams {
     pub order: Order,
 }
 
+impl DelayParams {
+    /// A constant delay of `min_ms`.
+    pub fn constant(min_ms: f64) -> Result<Self, ParamError> {
+        Ok(DelayParams {
+            min_ms: super::units::millis("min_ms", min_ms)?,
+            dist: DelayDist::None,
+            weights: None,
+            rates_per_ms: None,
+            jitter_ms: None,
+            order: Order::Reorder,
+        })
+    }
+
+    /// `min_ms + Exp(rates_per_ms[i])` with probability `weights[i]`
+    /// (the lists are checked by [`Delay::new`]), in `reorder` order.
+    pub fn hyperexp(min_ms: f64, weights: &[f64], rates_per_ms: &[f64]) -> Result<Self, ParamError> {
+        Ok(DelayParams {
+            dist: DelayDist::Hyperexp,
+            weights: Some(weights.to_vec()),
+            rates_per_ms: Some(rates_per_ms.to_vec()),
+            ..DelayParams::constant(min_ms)?
+        })
+    }
+
+    /// `min_ms + U[0, jitter_ms)`, in `reorder` order.
+    pub fn uniform(min_ms: f64, jitter_ms: f64) -> Result<Self, ParamError> {
+        Ok(DelayParams {
+            dist: DelayDist::Uniform,
+            jitter_ms: Some(super::units::millis("jitter_ms", jitter_ms)?),
+            ..DelayParams::constant(min_ms)?
+        })
+    }
+
+    /// The same delay released in `order`.
+    pub fn with_order(self, order: Order) -> Self {
+        DelayParams { order, ..self }
+    }
+}
+
 /// The random part `X`, pre-transformed for sampling.
 #[derive(Debug, Clone)]
 enum Jitter {

@@ -61,6 +61,24 @@ pub struct GeLomaxParams {
     pub lambda: Vec<f64>,
 }
 
+impl GeLomaxParams {
+    /// A chain of `transition.len()` states with a Lomax `(alpha[s],
+    /// lambda[s])` burst law per state. Checked by [`GeLomax::new`]; this only
+    /// assembles the lists.
+    pub fn new(transition: &[&[f64]], alpha: &[f64], lambda: &[f64]) -> Self {
+        GeLomaxParams {
+            transition: transition.iter().map(|r| r.to_vec()).collect(),
+            alpha: alpha.to_vec(),
+            lambda: lambda.to_vec(),
+        }
+    }
+
+    /// The two-state chain (Good, Bad) of the study's PLM presets.
+    pub fn two_state(transition: [[f64; 2]; 2], alpha: [f64; 2], lambda: [f64; 2]) -> Self {
+        GeLomaxParams::new(&[&transition[0], &transition[1]], &alpha, &lambda)
+    }
+}
+
 /// A validated `ge_lomax` stage and its state (current chain state and the
 /// pending burst).
 #[derive(Debug, Clone)]

@@ -28,6 +28,26 @@ pub struct GilbertElliottParams {
     pub loss_bad: Option<Probability>,
 }
 
+impl GilbertElliottParams {
+    /// netem's `loss gemodel p r 1-h 1-k`, every parameter given: Good → Bad
+    /// `p`, Bad → Good `r`, loss `loss_good` in Good and `loss_bad` in Bad.
+    pub fn new(p: f64, r: f64, loss_good: f64, loss_bad: f64) -> Result<Self, ParamError> {
+        use super::units::probability;
+        Ok(GilbertElliottParams {
+            p: probability("p", p)?,
+            r: Some(probability("r", r)?),
+            loss_good: Some(probability("loss_good", loss_good)?),
+            loss_bad: Some(probability("loss_bad", loss_bad)?),
+        })
+    }
+
+    /// The simple Gilbert model with netem's defaults: Good → Bad `p`,
+    /// Bad → Good `1 − p`, every frame in Bad lost, none in Good.
+    pub fn gilbert(p: f64) -> Result<Self, ParamError> {
+        Ok(GilbertElliottParams { p: super::units::probability("p", p)?, r: None, loss_good: None, loss_bad: None })
+    }
+}
+
 /// A validated `gilbert_elliott` stage and its state.
 #[derive(Debug, Clone)]
 pub struct GilbertElliott {

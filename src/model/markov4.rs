@@ -39,6 +39,20 @@ pub struct Markov4Params {
     pub p14: Option<Probability>,
 }
 
+impl Markov4Params {
+    /// netem's `loss state p13 p31 p32 p23 p14`, every parameter given.
+    pub fn new(p13: f64, p31: f64, p32: f64, p23: f64, p14: f64) -> Result<Self, ParamError> {
+        use super::units::probability;
+        Ok(Markov4Params {
+            p13: probability("p13", p13)?,
+            p31: Some(probability("p31", p31)?),
+            p32: Some(probability("p32", p32)?),
+            p23: Some(probability("p23", p23)?),
+            p14: Some(probability("p14", p14)?),
+        })
+    }
+}
+
 /// State indices (0-based) of the four netem states.
 const GAP_DELIVERED: u8 = 0;
 const BURST_DELIVERED: u8 = 1;

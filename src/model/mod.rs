@@ -15,6 +15,8 @@ pub mod ge_lomax;
 pub mod gilbert_elliott;
 pub mod markov4;
 pub mod outage;
+pub mod presets;
+mod spec;
 pub mod units;
 
 pub use bernoulli::{Bernoulli, BernoulliParams};
@@ -23,6 +25,7 @@ pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
 pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
+pub use spec::ModelSpec;
 pub use units::{Millis, Probability};
 
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -30,6 +33,25 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 /// The random generator of every stage: portable and seedable, so the same
 /// seed gives the same fates on every platform.
 pub type StageRng = Xoshiro256PlusPlus;
+
+/// The stream seed of one stage: SplitMix64 mixing of the scenario seed, the
+/// phase index and the FNV-1a hash of the stage label.
+pub fn stream_seed(seed: u64, phase: usize, label: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in label.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    splitmix64(splitmix64(seed ^ splitmix64(phase as u64)) ^ h)
+}
+
+/// One step of SplitMix64 (Steele, Lea, Flood 2014) as a mixing function.
+pub fn splitmix64(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
 
 /// What one stage decides for one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -82,6 +82,39 @@ pub struct OutageParams {
     pub cooldown_frames: Option<u64>,
 }
 
+impl OutageParams {
+    /// Windows in time: `L ~ U(min_ms, max_ms)`, then `cooldown_ms` in which
+    /// none opens; a window opens with `p_start` at each eligible frame.
+    pub fn time(p_start: f64, min_ms: f64, max_ms: f64, cooldown_ms: f64) -> Result<Self, ParamError> {
+        use super::units::millis;
+        Ok(OutageParams {
+            p_start: super::units::probability("p_start", p_start)?,
+            unit: OutageUnit::Time,
+            min_ms: Some(millis("min_ms", min_ms)?),
+            max_ms: Some(millis("max_ms", max_ms)?),
+            cooldown_ms: Some(millis("cooldown_ms", cooldown_ms)?),
+            min_frames: None,
+            max_frames: None,
+            cooldown_frames: None,
+        })
+    }
+
+    /// Windows counted in frames: `L` uniform in `[min_frames, max_frames]`,
+    /// then `cooldown_frames` frames in which none opens.
+    pub fn frames(p_start: f64, min_frames: u64, max_frames: u64, cooldown_frames: u64) -> Result<Self, ParamError> {
+        Ok(OutageParams {
+            p_start: super::units::probability("p_start", p_start)?,
+            unit: OutageUnit::Frames,
+            min_ms: None,
+            max_ms: None,
+            cooldown_ms: None,
+            min_frames: Some(min_frames),
+            max_frames: Some(max_frames),
+            cooldown_frames: Some(cooldown_frames),
+        })
+    }
+}
+
 /// Windows opened so far and the sum of their drawn lengths: `total_ns` in
 /// `unit = "time"`, `total_frames` in `unit = "frames"` (the other is 0).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -114,6 +114,16 @@ impl<'de> Deserialize<'de> for Millis {
     }
 }
 
+/// `ms` as a [`Millis`] for `field`, or the error naming it.
+pub(crate) fn millis(field: &str, ms: f64) -> Result<Millis, super::ParamError> {
+    Millis::new(ms).map_err(|e| super::ParamError::new(field, e))
+}
+
+/// `p` as a [`Probability`] for `field`, or the error naming it.
+pub(crate) fn probability(field: &str, p: f64) -> Result<Probability, super::ParamError> {
+    Probability::new(p).map_err(|e| super::ParamError::new(field, e))
+}
+
 /// Milliseconds (f64) to nanoseconds, rounded to the nearest; saturates.
 #[inline]
 pub fn ms_to_ns(ms: f64) -> u64 {

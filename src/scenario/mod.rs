@@ -13,9 +13,16 @@ mod parse;
 mod presets;
 mod spec;
 
-pub use parse::{parse_file, parse_str, resolve, ScenarioError};
-pub use presets::{canonical_name, preset_label, preset_stages, PRESET_NAMES};
-pub use spec::{ModelSpec, PhaseSpec, ScenarioSpec, StageSpec};
+pub use parse::{parse_str, preset, ScenarioError};
+pub use presets::preset_stages;
+pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
+// Names that live in `model` (which `fit` uses without depending on
+// `scenario`), re-exported where scenario code has always found them.
+pub use crate::model::presets::{canonical_name, preset_label, PRESET_NAMES};
+pub use crate::model::{splitmix64, stream_seed, ModelSpec};
+/// Resolving a command-line argument reads files, so it lives in the shell
+/// ([`crate::load::resolve`]); the name is kept here for its callers.
+pub use crate::load::resolve;
 
 use crate::model::{AnyModel, ModelKind, StageRng, Verdict};
 use rand::SeedableRng;
@@ -90,25 +97,6 @@ pub struct Scenario {
     seed: u64,
     phases: Vec<Phase>,
     current: usize,
-}
-
-/// The stream seed of one stage: SplitMix64 mixing of the scenario seed, the
-/// phase index and the FNV-1a hash of the stage label.
-pub fn stream_seed(seed: u64, phase: usize, label: &str) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in label.bytes() {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    splitmix64(splitmix64(seed ^ splitmix64(phase as u64)) ^ h)
-}
-
-/// One step of SplitMix64 (Steele, Lea, Flood 2014) as a mixing function.
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 impl Scenario {

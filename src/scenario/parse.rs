@@ -1,5 +1,9 @@
-//! TOML scenario files → validated [`ScenarioSpec`]s, with errors that name
-//! the file, the line, the field, and what would be accepted.
+//! Scenario TOML → validated [`ScenarioSpec`]s, with errors that name the
+//! file, the line, the field, and what would be accepted.
+//!
+//! Pure: the text comes in as a `&str` with the name of its source for
+//! errors; reading files and telling a preset name from a path is the
+//! shell's ([`crate::load`]).
 //!
 //! The file format (see `config/scenarios/*.toml` and the README):
 //!
@@ -23,13 +27,14 @@
 //! `preset = "..."` or `[[phase.stage]]` tables) instead of top-level stages.
 //! A whole-file `preset = "..."` is also accepted.
 
-use super::presets::{canonical_name, preset_stages, PRESET_NAMES};
-use super::spec::{ModelSpec, PhaseSpec, ScenarioSpec, StageSpec};
+use super::presets::preset_stages;
+use crate::model::presets::{canonical_name, PRESET_NAMES};
+use super::spec::{PhaseSpec, ScenarioSpec, StageSpec};
+use crate::model::ModelSpec;
 use crate::model::ModelKind;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::fmt;
-use std::path::Path;
 use toml::Spanned;
 
 /// A scenario that could not be read, with where and why.
@@ -86,20 +91,6 @@ struct RawPhase {
     start_ms: Option<f64>,
     preset: Option<String>,
     stage: Option<Vec<Spanned<toml::Table>>>,
-}
-
-/// Reads and validates a scenario file.
-pub fn parse_file(path: &Path) -> Result<ScenarioSpec, ScenarioError> {
-    let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ScenarioError {
-        origin: origin.clone(),
-        line: None,
-        location: None,
-        field: None,
-        problem: format!("cannot read the scenario file: {e}"),
-    })?;
-    let default_name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    parse_str(&text, &origin, &default_name)
 }
 
 /// Parses scenario TOML. `origin` names the source in errors; `default_name`
@@ -390,23 +381,12 @@ impl Ctx<'_> {
     }
 }
 
-/// Resolves a command-line scenario argument: a preset name, or a file.
-pub fn resolve(arg: &str) -> Result<ScenarioSpec, ScenarioError> {
-    if let Some(name) = canonical_name(arg) {
-        let stages = preset_stages(name).expect("canonical names are presets");
-        return Ok(ScenarioSpec::single(name, stages));
-    }
-    let path = Path::new(arg);
-    if path.exists() {
-        return parse_file(path);
-    }
-    Err(ScenarioError {
-        origin: arg.to_string(),
-        line: None,
-        location: None,
-        field: None,
-        problem: format!("neither a scenario file nor a preset (presets: {})", PRESET_NAMES.join(", ")),
-    })
+/// The scenario of a preset given by name (any spelling [`canonical_name`]
+/// accepts), or `None` if `name` is not one.
+pub fn preset(name: &str) -> Option<ScenarioSpec> {
+    let canonical = canonical_name(name)?;
+    let stages = preset_stages(canonical).expect("canonical names are presets");
+    Some(ScenarioSpec::single(canonical, stages))
 }
 
 #[cfg(test)]

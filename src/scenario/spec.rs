@@ -3,49 +3,8 @@
 //! A [`ScenarioSpec`] is plain data (it can be printed back as TOML); a
 //! [`super::Scenario`] is the runnable form with models and random streams.
 
-use crate::model::{
-    AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams,
-    GilbertElliott, GilbertElliottParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams,
-    ParamError,
-};
+use crate::model::{ModelKind, ModelSpec};
 use serde::Serialize;
-
-/// One model with its parameters.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "model", rename_all = "snake_case")]
-pub enum ModelSpec {
-    Bernoulli(BernoulliParams),
-    GeLomax(GeLomaxParams),
-    Markov4(Markov4Params),
-    GilbertElliott(GilbertElliottParams),
-    Delay(DelayParams),
-    Outage(OutageParams),
-}
-
-impl ModelSpec {
-    pub fn kind(&self) -> ModelKind {
-        match self {
-            ModelSpec::Bernoulli(_) => ModelKind::Bernoulli,
-            ModelSpec::GeLomax(_) => ModelKind::GeLomax,
-            ModelSpec::Markov4(_) => ModelKind::Markov4,
-            ModelSpec::GilbertElliott(_) => ModelKind::GilbertElliott,
-            ModelSpec::Delay(_) => ModelKind::Delay,
-            ModelSpec::Outage(_) => ModelKind::Outage,
-        }
-    }
-
-    /// Validates the parameters and builds the model.
-    pub fn build(&self) -> Result<AnyModel, ParamError> {
-        Ok(match self {
-            ModelSpec::Bernoulli(p) => AnyModel::Bernoulli(Bernoulli::new(p)?),
-            ModelSpec::GeLomax(p) => AnyModel::GeLomax(GeLomax::new(p)?),
-            ModelSpec::Markov4(p) => AnyModel::Markov4(Markov4::new(p)?),
-            ModelSpec::GilbertElliott(p) => AnyModel::GilbertElliott(GilbertElliott::new(p)?),
-            ModelSpec::Delay(p) => AnyModel::Delay(Delay::new(p)?),
-            ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
-        })
-    }
-}
 
 /// One stage of a pipeline.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -124,7 +124,7 @@ fn calibrated_presets_hit_their_labels() {
 #[test]
 fn calibrated_presets_resolve_by_name() {
     for name in ["PLM-1-cal", "plm1cal", "clm_3_cal", "DLM-2-CAL"] {
-        let s = scenario::resolve(name).unwrap();
+        let s = netfi::load::resolve(name).unwrap();
         assert_eq!(s.phases[0].stages.len(), 1, "{name}");
     }
     let s = parse("[[stage]]\npreset = \"CLM-1-cal\"\n").unwrap();

@@ -178,7 +178,7 @@ fn shipped_scenarios_parse_build_and_run() {
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
-            let s = scenario::parse_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            let s = netfi::load::parse_file(&path).unwrap_or_else(|e| panic!("{e}"));
             let sc = Scenario::new(&s, s.seed.unwrap_or(1)).unwrap_or_else(|e| panic!("{e}"));
             let r = check::run(sc, &Arrivals::Rate { frames: 50_000, rate_hz: 1000.0 }, 1 << 16, |_| {});
             assert_eq!(r.frames, r.delivered + r.dropped.values().sum::<u64>(), "{}", path.display());
@@ -198,10 +198,10 @@ fn shipped_scenarios_parse_build_and_run() {
 #[test]
 fn every_preset_resolves_by_name() {
     for name in scenario::PRESET_NAMES {
-        let s = scenario::resolve(name).unwrap();
+        let s = netfi::load::resolve(name).unwrap();
         assert_eq!(s.phases[0].stages.len(), usize::from(name != "Normal"));
-        assert_eq!(scenario::resolve(&name.to_lowercase().replace('-', "")).unwrap(), s);
+        assert_eq!(netfi::load::resolve(&name.to_lowercase().replace('-', "")).unwrap(), s);
     }
-    let e = scenario::resolve("PLM-7").unwrap_err();
+    let e = netfi::load::resolve("PLM-7").unwrap_err();
     assert!(e.problem.contains("neither a scenario file nor a preset"), "{e}");
 }

@@ -3,12 +3,12 @@
 //! long-run value.
 
 use netfi::check::{self, Arrivals};
-use netfi::scenario::{self, Scenario};
+use netfi::scenario::Scenario;
 
 const FRAMES: u64 = 10_000_000;
 
 fn check_preset(name: &str, seed: u64) -> check::CheckReport {
-    let spec = scenario::resolve(name).unwrap();
+    let spec = netfi::load::resolve(name).unwrap();
     check::run(Scenario::new(&spec, seed).unwrap(), &Arrivals::Rate { frames: FRAMES, rate_hz: 1000.0 }, 1 << 20, |_| {})
 }
 
@@ -64,7 +64,7 @@ fn delay_presets_realize_their_mean() {
         println!("{name}: mean {:.3} ms, exact {exact:.3} ms, rel err {rel:.2e}", r.delay_ms.mean);
         assert!(rel < 0.005, "{name}: mean {} vs {exact}", r.delay_ms.mean);
         assert_eq!(r.delivered, FRAMES);
-        let spec = scenario::resolve(name).unwrap();
+        let spec = netfi::load::resolve(name).unwrap();
         let netfi::model::AnyModel::Delay(d) = spec.phases[0].stages[0].model.build().unwrap() else { unreachable!() };
         let expected = reordered_fraction_exact(&d);
         println!("{name}: reordered {:.4}, expected {expected:.4}", r.reordered_fraction);

@@ -3,6 +3,7 @@
 use crate::cli::{CheckArgs, ScenarioCmd};
 use anyhow::{bail, Context, Result};
 use netfi::check::{self, Arrivals, CheckReport};
+use netfi::load;
 use netfi::scenario::{self, Scenario, PRESET_NAMES};
 
 use netfi::service::run::{fresh_seed, DEFAULT_QUEUE_CAPACITY};
@@ -17,7 +18,7 @@ pub fn run(cmd: ScenarioCmd) -> Result<()> {
             Ok(())
         }
         ScenarioCmd::Show { scenario } => {
-            let spec = scenario::resolve(&scenario)?;
+            let spec = load::resolve(&scenario)?;
             print!("{}", spec.to_toml());
             Ok(())
         }
@@ -26,7 +27,7 @@ pub fn run(cmd: ScenarioCmd) -> Result<()> {
 
 
 fn check_cmd(args: CheckArgs) -> Result<()> {
-    let spec = scenario::resolve(&args.scenario)?;
+    let spec = load::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(fresh_seed);
     let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
     if queue_capacity == 0 {

@@ -1,0 +1,46 @@
+//! [`ModelSpec`]: a model's kind and its parameters as a scenario stage
+//! writes them, before validation. [`ModelSpec::build`] validates them into
+//! an [`AnyModel`].
+
+use super::{
+    AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
+    GilbertElliottParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
+};
+use serde::Serialize;
+
+/// One model with its parameters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "model", rename_all = "snake_case")]
+pub enum ModelSpec {
+    Bernoulli(BernoulliParams),
+    GeLomax(GeLomaxParams),
+    Markov4(Markov4Params),
+    GilbertElliott(GilbertElliottParams),
+    Delay(DelayParams),
+    Outage(OutageParams),
+}
+
+impl ModelSpec {
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            ModelSpec::Bernoulli(_) => ModelKind::Bernoulli,
+            ModelSpec::GeLomax(_) => ModelKind::GeLomax,
+            ModelSpec::Markov4(_) => ModelKind::Markov4,
+            ModelSpec::GilbertElliott(_) => ModelKind::GilbertElliott,
+            ModelSpec::Delay(_) => ModelKind::Delay,
+            ModelSpec::Outage(_) => ModelKind::Outage,
+        }
+    }
+
+    /// Validates the parameters and builds the model.
+    pub fn build(&self) -> Result<AnyModel, ParamError> {
+        Ok(match self {
+            ModelSpec::Bernoulli(p) => AnyModel::Bernoulli(Bernoulli::new(p)?),
+            ModelSpec::GeLomax(p) => AnyModel::GeLomax(GeLomax::new(p)?),
+            ModelSpec::Markov4(p) => AnyModel::Markov4(Markov4::new(p)?),
+            ModelSpec::GilbertElliott(p) => AnyModel::GilbertElliott(GilbertElliott::new(p)?),
+            ModelSpec::Delay(p) => AnyModel::Delay(Delay::new(p)?),
+            ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
+        })
+    }
+}
