@@ -1,4 +1,4 @@
-//! ITP master-to-slave frame codec (SPEC §2).
+//! ITP master-to-slave frame codec (docs/spec.md §2).
 //!
 //! Two layers, as in a network stack's wire module:
 //!
@@ -34,7 +34,7 @@ pub const SURGEON_ENGAGED: i32 = 1;
 pub const SURGEON_DISENGAGED: i32 = 0;
 
 mod field {
-    //! Byte ranges of every field (SPEC §2). Arrays of two are arm 0 then arm 1.
+    //! Byte ranges of every field (docs/spec.md §2). Arrays of two are arm 0 then arm 1.
 
     pub type Field = core::ops::Range<usize>;
 
@@ -71,7 +71,7 @@ pub enum FrameError {
         /// Length of the buffer that was offered.
         found: usize,
     },
-    /// The `checksum` field disagrees with the sum SPEC §2 defines over the
+    /// The `checksum` field disagrees with the sum docs/spec.md §2 defines over the
     /// other fields: the frame was corrupted or built without sealing it.
     #[error("ITP checksum mismatch: computed {expected} from the fields, frame carries {found}")]
     ChecksumMismatch {
@@ -82,7 +82,7 @@ pub enum FrameError {
     },
 }
 
-/// The checksum rule of SPEC §2: the wrapping 32-bit sum of `surgeon_mode`,
+/// The checksum rule of docs/spec.md §2: the wrapping 32-bit sum of `surgeon_mode`,
 /// both arms' position increments, both `buttonstate`s and `sequence` (as
 /// `i32`). `grasp`, the rotations, `pactyp` and `version` are not included.
 #[inline]
@@ -487,7 +487,7 @@ impl ItpFrame {
         bytes
     }
 
-    /// The checksum SPEC §2 defines over this frame's fields (not the carried
+    /// The checksum docs/spec.md §2 defines over this frame's fields (not the carried
     /// `checksum` field).
     #[inline]
     pub fn checksum(&self) -> i32 {
@@ -748,5 +748,4 @@ mod tests {
         assert!(view.verify_checksum());
         assert_eq!(view.checksum(), f.checksum());
     }
-
 }

@@ -1,4 +1,4 @@
-//! Integrating ITP commands into poses, as the simulator does (SPEC §2, §6).
+//! Integrating ITP commands into poses, as the simulator does (docs/spec.md §2, §6).
 //!
 //! Contract:
 //!

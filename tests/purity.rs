@@ -97,16 +97,31 @@ fn strip_comments(src: &str) -> String {
     out
 }
 
+/// Whitespace runs become one space, and none is left next to `::`, `{`,
+/// `}` or `,`, so `std :: {\n fs }` reads `std::{fs}` while `use std` keeps
+/// its words apart.
+fn squeeze(code: &str) -> String {
+    let mut words = code.split_whitespace().collect::<Vec<_>>().join(" ");
+    for sep in ["::", "{", "}", ","] {
+        loop {
+            let next = words.replace(&format!(" {sep}"), sep).replace(&format!("{sep} "), sep);
+            if next == words {
+                break;
+            }
+            words = next;
+        }
+    }
+    words
+}
+
 fn is_ident(c: char) -> bool {
     c.is_alphanumeric() || c == '_'
 }
 
 /// Every forbidden name in `src`, as found.
 fn violations(src: &str) -> Vec<String> {
-    let code: String = strip_comments(src).chars().filter(|c| !c.is_whitespace()).collect();
+    let text = squeeze(&strip_comments(src));
     let mut found = Vec::new();
-    let chars: Vec<char> = code.chars().collect();
-    let text: String = chars.iter().collect();
     // The word `iceoryx2`, in any position.
     let mut from = 0;
     while let Some(at) = text[from..].find("iceoryx2") {
@@ -171,7 +186,7 @@ fn top_level_items(group: &str) -> Vec<&str> {
 #[test]
 fn the_core_names_no_clock_file_thread_socket_or_iceoryx2() {
     let files = core_files();
-    assert!(files.len() >= 30, "the core should be found: {files:?}");
+    assert!(files.len() >= 25, "the core should be found: {files:?}");
     let mut bad = Vec::new();
     for f in &files {
         let src = std::fs::read_to_string(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));

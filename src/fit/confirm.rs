@@ -430,19 +430,10 @@ fn mean_ci(xs: &[f64]) -> (f64, [f64; 2]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Model, Outage, Probability};
+    use crate::model::{Model, Outage};
 
     fn outage(min_ms: f64, max_ms: f64, cooldown_ms: f64) -> OutageParams {
-        OutageParams {
-            p_start: Probability::new(1.0).unwrap(),
-            unit: OutageUnit::Time,
-            min_ms: Some(Millis::new(min_ms).unwrap()),
-            max_ms: Some(Millis::new(max_ms).unwrap()),
-            cooldown_ms: Some(Millis::new(cooldown_ms).unwrap()),
-            min_frames: None,
-            max_frames: None,
-            cooldown_frames: None,
-        }
+        OutageParams::time(1.0, min_ms, max_ms, cooldown_ms).unwrap()
     }
 
     /// Window by window gives the same fates as the model frame by frame,

@@ -1,4 +1,4 @@
-//! The fault parameter database (SPEC §5): fitted parameters for a grid of
+//! The fault parameter database (docs/spec.md §5): fitted parameters for a grid of
 //! targets, from ideal to worst case, and the lookup that target-based
 //! scenario stages use.
 //!

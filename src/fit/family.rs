@@ -31,7 +31,7 @@
 
 use super::{FitError, Goal, Kind, Metric};
 use crate::model::{
-    DelayDist, DelayParams, GeLomax, GeLomaxParams, Millis, Order, OutageParams, OutageUnit, Probability, StageRng,
+    DelayDist, DelayParams, GeLomax, GeLomaxParams, Millis, OutageParams, OutageUnit, StageRng,
 };
 use crate::model::ModelSpec;
 use rand::{RngExt, SeedableRng};
@@ -311,37 +311,26 @@ impl Family {
                 } else {
                     s.alpha
                 };
-                ModelSpec::GeLomax(GeLomaxParams {
-                    transition: s.transition.iter().map(|row| row.to_vec()).collect(),
-                    alpha: alpha.to_vec(),
-                    lambda: vec![r(scale * s.lambda_ratio[0]), r(scale * s.lambda_ratio[1])],
-                })
+                ModelSpec::GeLomax(GeLomaxParams::two_state(
+                    s.transition,
+                    alpha,
+                    [r(scale * s.lambda_ratio[0]), r(scale * s.lambda_ratio[1])],
+                ))
             }
             Family::Delay(s) => {
                 let rate1 = x[0].exp();
                 let rate2 = if s.free_ratio { rate1 * (-x[1]).exp() } else { rate1 * s.rate_ratio };
-                ModelSpec::Delay(DelayParams {
-                    min_ms: Millis::new(s.min_ms).expect("validated in Family::new"),
-                    dist: DelayDist::Hyperexp,
-                    weights: Some(s.weights.to_vec()),
-                    rates_per_ms: Some(vec![r(rate1), r(rate2)]),
-                    jitter_ms: None,
-                    order: Order::Reorder,
-                })
+                ModelSpec::Delay(
+                    DelayParams::hyperexp(s.min_ms, &s.weights, &[r(rate1), r(rate2)])
+                        .expect("min_ms validated in Family::new"),
+                )
             }
             Family::Outage(s) => {
                 let cooldown = r(x[0].exp());
                 let max_ms = if s.free_max { r(x[1].exp()).max(s.min_ms) } else { s.max_ms };
-                ModelSpec::Outage(OutageParams {
-                    p_start: Probability::new(1.0).expect("constant"),
-                    unit: OutageUnit::Time,
-                    min_ms: Some(Millis::new(s.min_ms).expect("validated")),
-                    max_ms: Some(Millis::new(max_ms).expect("finite and ≥ 0")),
-                    cooldown_ms: Some(Millis::new(cooldown).expect("finite and ≥ 0")),
-                    min_frames: None,
-                    max_frames: None,
-                    cooldown_frames: None,
-                })
+                ModelSpec::Outage(
+                    OutageParams::time(1.0, s.min_ms, max_ms, cooldown).expect("finite and ≥ 0 by construction"),
+                )
             }
         }
     }
@@ -502,7 +491,7 @@ impl Hyperexp {
 ///   next draw happens `b_k + 1` moves later, so `s_(k+1)` is drawn from row
 ///   `s_k` of `P^(b_k + 1)` with a second uniform (closed form for two
 ///   states). The first draw's state is drawn from row 0 of `P`. Exactly the
-///   law of SPEC §3.2, sampled per burst rather than per frame.
+///   law of docs/spec.md §3.2, sampled per burst rather than per frame.
 /// - `delay`: one uniform picks the component, one gives `−ln(1 − V)/λ_i`.
 /// - `outage` (`p_start = 1`, time units): window cycles at the fixed frame
 ///   interval, as in [`super::confirm`].
@@ -641,11 +630,7 @@ mod tests {
 
     #[test]
     fn exact_mean_run_matches_the_monte_carlo_estimate() {
-        let p = GeLomaxParams {
-            transition: vec![vec![0.95, 0.05], vec![0.10, 0.90]],
-            alpha: vec![4.604, 3.901],
-            lambda: vec![3.552, 1.466],
-        };
+        let p = GeLomaxParams::two_state(STUDY_TRANSITION, [4.604, 3.901], [3.552, 1.466]);
         let exact = mean_loss_run_exact(&p).unwrap();
         let spec = ModelSpec::GeLomax(p.clone());
         let mc = metrics_monte_carlo(&spec, &[Metric::LossRate, Metric::LossRunMean], 9, 1_000_000).unwrap();

@@ -1,4 +1,4 @@
-//! Fitting model parameters to targets (SPEC §5), and the fault parameter
+//! Fitting model parameters to targets (docs/spec.md §5), and the fault parameter
 //! database built from such fits.
 //!
 //! A fit takes a kind of fault (`loss` → `ge_lomax`, `delay`, `outage`), a
@@ -46,7 +46,7 @@ use std::collections::BTreeMap;
 pub const TOLERANCE_REL: f64 = 0.005;
 
 /// The frame rate fits assume unless told otherwise: the paper's 1 kHz
-/// (SPEC §1). It matters only to `outage`, whose windows are in time.
+/// (docs/spec.md §1). It matters only to `outage`, whose windows are in time.
 pub const DEFAULT_FRAME_RATE_HZ: f64 = 1000.0;
 
 /// The tool version recorded with every fit.

@@ -1,4 +1,4 @@
-//! `bernoulli` (SPEC §3.1): each frame is dropped independently with
+//! `bernoulli` (docs/spec.md §3.1): each frame is dropped independently with
 //! probability `p`.
 
 use super::{Model, ParamError, Probability, StageRng, Verdict};

@@ -1,4 +1,4 @@
-//! `delay` (SPEC §3.4): a minimum plus a random part (none, hyperexponential,
+//! `delay` (docs/spec.md §3.4): a minimum plus a random part (none, hyperexponential,
 //! or uniform jitter), released in `reorder` or `fifo` order.
 //!
 //! `D = min_ms + X`, with `X` nothing, `Exp(rates_per_ms[i])` for a component
@@ -9,18 +9,28 @@
 //! so a frame is never released before the one that reached this stage
 //! before it; equal release times keep arrival order downstream).
 //!
+//! Ranges: `min_ms` and `jitter_ms` are at most one hour ([`super::units`])
+//! and each component's mean `1/rate` at most [`MIN_RATE_PER_MS`]`^-1` =
+//! 10^10 ms, so `D` stays far inside the clock.
+//!
 //! Draws per frame: hyperexponential, one to pick the component (none with a
 //! single component) and the exponential's (ziggurat); uniform, one; none,
 //! none.
 
 use super::draw::{threshold, u53, ALWAYS};
-use super::units::ms_to_ns;
+use super::units::{at_most_ms, ms_to_ns, MAX_DURATION_MS};
 use super::{Millis, Model, ParamError, StageRng, Verdict};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 /// The most hyperexponential components a delay may have.
 pub const MAX_COMPONENTS: usize = 8;
+
+/// The slowest component rate: a mean `1/rate` of 10^10 ms (about 116
+/// days). Far beyond any lab's delay, it still keeps every draw inside the
+/// nanosecond clock, and it is the edge of the fits' search box (rates down
+/// to 10^-6 per ms, spread up to 10^4), which must stay valid.
+pub const MIN_RATE_PER_MS: f64 = 1e-10;
 
 /// How far the weights may be from summing to 1.
 const WEIGHT_SUM_TOLERANCE: f64 = 1e-9;
@@ -149,6 +159,10 @@ impl Delay {
             ParamError::new(field, format!("does not apply to dist = \"{}\"; remove it or change `dist`", dist.name()))
         };
         let min_ms = params.min_ms.get();
+        at_most_ms("min_ms", min_ms, MAX_DURATION_MS, "one hour")?;
+        if let Some(j) = params.jitter_ms {
+            at_most_ms("jitter_ms", j.get(), MAX_DURATION_MS, "one hour")?;
+        }
         let (jitter, mean_x_ms) = match dist {
             DelayDist::None => {
                 if params.weights.is_some() {
@@ -303,10 +317,12 @@ fn hyperexp(weights: Option<&[f64]>, rates: Option<&[f64]>) -> Result<(Jitter, f
         return Err(ParamError::new("weights", format!("sum to {sum}: expected 1 (within {WEIGHT_SUM_TOLERANCE:e})")));
     }
     for (i, &rate) in rates.iter().enumerate() {
-        if !(rate.is_finite() && rate > 0.0) {
+        if !(rate.is_finite() && rate >= MIN_RATE_PER_MS) {
             return Err(ParamError::new(
                 format!("rates_per_ms[{i}]"),
-                format!("{rate}: expected a finite rate > 0 per ms (the component's mean is 1/rate ms)"),
+                format!(
+                    "{rate}: expected a finite rate ≥ {MIN_RATE_PER_MS:e} per ms (the component's mean, 1/rate ms, is at most 1e10 ms, about 116 days)"
+                ),
             ));
         }
     }
@@ -341,15 +357,7 @@ mod quantile_tests {
     use super::*;
 
     fn dlm2() -> Delay {
-        Delay::new(&DelayParams {
-            min_ms: Millis::new(210.0).unwrap(),
-            dist: DelayDist::Hyperexp,
-            weights: Some(vec![0.89258, 0.10742]),
-            rates_per_ms: Some(vec![0.01081, 0.01624]),
-            jitter_ms: None,
-            order: Order::Reorder,
-        })
-        .unwrap()
+        Delay::new(&DelayParams::hyperexp(210.0, &[0.89258, 0.10742], &[0.01081, 0.01624]).unwrap()).unwrap()
     }
 
     #[test]
@@ -368,17 +376,9 @@ mod quantile_tests {
 
     #[test]
     fn uniform_and_constant_quantiles() {
-        let u = Delay::new(&DelayParams {
-            min_ms: Millis::new(5.0).unwrap(),
-            dist: DelayDist::Uniform,
-            weights: None,
-            rates_per_ms: None,
-            jitter_ms: Some(Millis::new(10.0).unwrap()),
-            order: Order::Reorder,
-        })
-        .unwrap();
+        let u = Delay::new(&DelayParams::uniform(5.0, 10.0).unwrap()).unwrap();
         assert!((u.quantile_ms(0.25) - 7.5).abs() < 1e-5);
-        let c = Delay::new(&DelayParams { min_ms: Millis::new(20.0).unwrap(), dist: DelayDist::None, weights: None, rates_per_ms: None, jitter_ms: None, order: Order::Fifo }).unwrap();
+        let c = Delay::new(&DelayParams::constant(20.0).unwrap().with_order(Order::Fifo)).unwrap();
         assert!((c.quantile_ms(0.5) - 20.0).abs() < 1e-5);
     }
 }
@@ -393,36 +393,15 @@ mod tests {
     }
 
     fn constant(min_ms: f64) -> DelayParams {
-        DelayParams {
-            min_ms: ms(min_ms),
-            dist: DelayDist::None,
-            weights: None,
-            rates_per_ms: None,
-            jitter_ms: None,
-            order: Order::Reorder,
-        }
+        DelayParams::constant(min_ms).unwrap()
     }
 
     fn hyper(min_ms: f64, weights: &[f64], rates: &[f64], order: Order) -> DelayParams {
-        DelayParams {
-            min_ms: ms(min_ms),
-            dist: DelayDist::Hyperexp,
-            weights: Some(weights.to_vec()),
-            rates_per_ms: Some(rates.to_vec()),
-            jitter_ms: None,
-            order,
-        }
+        DelayParams::hyperexp(min_ms, weights, rates).unwrap().with_order(order)
     }
 
     fn uniform(min_ms: f64, jitter_ms: f64, order: Order) -> DelayParams {
-        DelayParams {
-            min_ms: ms(min_ms),
-            dist: DelayDist::Uniform,
-            weights: None,
-            rates_per_ms: None,
-            jitter_ms: Some(ms(jitter_ms)),
-            order,
-        }
+        DelayParams::uniform(min_ms, jitter_ms).unwrap().with_order(order)
     }
 
     fn dlm1() -> DelayParams {

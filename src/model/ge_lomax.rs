@@ -1,4 +1,4 @@
-//! `ge_lomax` (SPEC §3.2): NetFI's bursty loss model. A Markov chain of 1–4
+//! `ge_lomax` (docs/spec.md §3.2): NetFI's bursty loss model. A Markov chain of 1–4
 //! states with a Lomax burst-length law per state.
 //!
 //! Per frame, in this order: the state moves (one draw from its row of `P`);
@@ -7,6 +7,9 @@
 //! drops left, and the first frame after them is delivered and ends the burst.
 //! Every burst of `b ≥ 0` drops is therefore followed by exactly one delivered
 //! frame, and the state keeps moving during a burst.
+//!
+//! Ranges: `alpha` > 0 and `lambda` in (0, [`MAX_FRAMES`]] (one hour of
+//! frames at 1 MHz), both finite.
 //!
 //! Burst law. With `U` uniform, `P(b ≥ k) = (1 + k/λ)^(−α)` for every integer
 //! `k ≥ 0`: the floored Lomax. Its mean is `E[b] = Σ_{k≥1} (1 + k/λ)^(−α)`
@@ -36,6 +39,7 @@
 //! which leaves an error near 2e-7 for that example with `α = 1.5`.
 
 use super::draw::{threshold, u53, ALWAYS};
+use super::units::MAX_FRAMES;
 use super::{Model, ParamError, StageRng, Verdict};
 use serde::{Deserialize, Serialize};
 
@@ -148,6 +152,14 @@ impl GeLomax {
         }
         let alpha = per_state(&params.alpha, "alpha", n)?;
         let lambda = per_state(&params.lambda, "lambda", n)?;
+        for (i, &l) in lambda.iter().take(n).enumerate() {
+            if l > MAX_FRAMES as f64 {
+                return Err(ParamError::new(
+                    format!("lambda[{i}]"),
+                    format!("{l} frames is out of range: expected a scale > 0 and at most {MAX_FRAMES} frames (one hour at 1 MHz)"),
+                ));
+            }
+        }
         let mut neg_inv_alpha = [0.0; MAX_STATES];
         let mut burst_thresholds = [[ALWAYS; BURST_TABLE]; MAX_STATES];
         for s in 0..n {
@@ -548,7 +560,7 @@ mod tests {
     }
 
     fn plm(alpha: [f64; 2], lambda: [f64; 2]) -> GeLomaxParams {
-        params(vec![vec![0.95, 0.05], vec![0.10, 0.90]], alpha.to_vec(), lambda.to_vec())
+        GeLomaxParams::two_state(crate::model::presets::STUDY_TRANSITION, alpha, lambda)
     }
 
     fn plm1() -> GeLomaxParams {
@@ -620,7 +632,7 @@ mod tests {
     const PINNED_FATES: &str = "..............................x.........................x.......";
     const PINNED_BURSTS: [u64; 16] = [0, 1, 10, 3, 64, 4, 10, 2, 109, 0, 0, 1, 11, 0, 4, 0];
 
-    /// SPEC §3.2 written out step by step, with floating-point draws: the
+    /// docs/spec.md §3.2 written out step by step, with floating-point draws: the
     /// model must give the same fates, and they must be bursts of `b` drops
     /// each followed by exactly one delivery.
     #[test]

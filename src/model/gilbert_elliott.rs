@@ -1,4 +1,4 @@
-//! `gilbert_elliott` (SPEC §3.3): netem's `loss gemodel p r 1-h 1-k`.
+//! `gilbert_elliott` (docs/spec.md §3.3): netem's `loss gemodel p r 1-h 1-k`.
 //!
 //! Two states, Good and Bad, starting in Good. Per frame, as netem does, one
 //! draw moves the chain (Good → Bad with `p`, Bad → Good with `r`) and a

@@ -1,4 +1,4 @@
-//! `markov4` (SPEC §3.3): netem's 4-state loss model (`loss state ...`).
+//! `markov4` (docs/spec.md §3.3): netem's 4-state loss model (`loss state ...`).
 //!
 //! States: 1 = delivered in a gap, 2 = delivered in a burst, 3 = lost in a
 //! burst, 4 = isolated loss; start in 1. Transitions: 1→4 `p14`, 1→3 `p13`

@@ -1,7 +1,7 @@
 //! Degradation models: one file per model, and [`AnyModel`], which holds any
 //! one of them.
 //!
-//! Contract (SPEC §3): a model validates its parameters once, in `new`, and
+//! Contract (docs/spec.md §3): a model validates its parameters once, in `new`, and
 //! returns a [`ParamError`] naming the offending field; afterwards
 //! [`Model::decide`] cannot fail. A model never reads a clock: the frame's time
 //! at the stage (`t_ns`, CLOCK_MONOTONIC-like nanoseconds) is passed in, and so
@@ -196,7 +196,7 @@ impl AnyModel {
     }
 
     /// The exact mean delay this model adds to a frame it passes, in ms
-    /// (`E[D]`, SPEC §3.4); 0 for models that add no delay. For `fifo` order
+    /// (`E[D]`, docs/spec.md §3.4); 0 for models that add no delay. For `fifo` order
     /// this is the drawn delay; holding a frame behind its predecessor adds
     /// to it.
     pub fn mean_delay_ms_exact(&self) -> f64 {

@@ -1,4 +1,4 @@
-//! `outage` (SPEC §3.5): communication-loss windows with a cooldown.
+//! `outage` (docs/spec.md §3.5): communication-loss windows with a cooldown.
 //!
 //! Per frame at its stage time `t`: inside a window (`t < window_end`) it is
 //! dropped; else inside the cooldown after a window
@@ -7,6 +7,10 @@
 //! frame is dropped, otherwise delivered. In `unit = "frames"` the window is
 //! `L` frames (a uniform integer in `[min_frames, max_frames]`, at least 1,
 //! the opening frame included) and the cooldown `cooldown_frames` frames.
+//!
+//! Ranges ([`super::units`]): a window is at most one hour (`max_ms`) or
+//! [`super::units::MAX_FRAMES`] frames, a cooldown at most one week or as
+//! many frames.
 //!
 //! Draws per frame: one (`p_start`; none when it is 1) at an eligible frame,
 //! plus one for `L` when a window opens (none if `L` cannot vary); none
@@ -30,10 +34,10 @@
 //! changes the result by about 1 ns over the window-length range). In frames
 //! the cycle is `L + C + G` frames with `L` dropped:
 //! `E[L] / (E[L] + C + (1 − p)/p)`. For `p_start = 0` no window ever opens
-//! and the loss is 0. For small `Δ` this tends to SPEC §3.5's
+//! and the loss is 0. For small `Δ` this tends to docs/spec.md §3.5's
 //! `E[L] / (E[L] + cooldown)` (`p_start = 1`).
 
-use super::units::ms_to_ns;
+use super::units::{at_most_frames, at_most_ms, ms_to_ns, MAX_COOLDOWN_MS, MAX_DURATION_MS};
 use super::{Millis, Model, ParamError, Probability, StageRng, Verdict};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
@@ -181,6 +185,7 @@ impl Outage {
                     .ok_or_else(|| ParamError::new("max_ms", "missing: the longest window in ms (unit = \"time\")"))?
                     .get();
                 let min_ms = params.min_ms.map_or(0.0, Millis::get);
+                at_most_ms("max_ms", max_ms, MAX_DURATION_MS, "one hour")?;
                 if min_ms > max_ms {
                     return Err(ParamError::new(
                         "min_ms",
@@ -196,6 +201,7 @@ impl Outage {
                         )
                     })?
                     .get();
+                at_most_ms("cooldown_ms", cooldown_ms, MAX_COOLDOWN_MS, "one week")?;
                 let (min_ns, max_ns) = (ms_to_ns(min_ms), ms_to_ns(max_ms));
                 Clock::Time {
                     length_min_ns: min_ns,
@@ -218,6 +224,7 @@ impl Outage {
                 let max = params.max_frames.ok_or_else(|| {
                     ParamError::new("max_frames", "missing: the longest window in frames (unit = \"frames\")")
                 })?;
+                at_most_frames("max_frames", max)?;
                 let min = params.min_frames.unwrap_or(1);
                 if min == 0 {
                     return Err(ParamError::new(
@@ -237,6 +244,7 @@ impl Outage {
                         "missing: the frames after a window in which none opens (0 for none)",
                     )
                 })?;
+                at_most_frames("cooldown_frames", cooldown)?;
                 Clock::Frames { length_min: min, length_max: max, cooldown, drops_left: 0, quiet_left: 0 }
             }
         };
@@ -352,29 +360,11 @@ mod tests {
     }
 
     fn time(p_start: f64, min_ms: f64, max_ms: f64, cooldown_ms: f64) -> OutageParams {
-        OutageParams {
-            p_start: Probability::new(p_start).unwrap(),
-            unit: OutageUnit::Time,
-            min_ms: Some(ms(min_ms)),
-            max_ms: Some(ms(max_ms)),
-            cooldown_ms: Some(ms(cooldown_ms)),
-            min_frames: None,
-            max_frames: None,
-            cooldown_frames: None,
-        }
+        OutageParams::time(p_start, min_ms, max_ms, cooldown_ms).unwrap()
     }
 
     fn frames(p_start: f64, min: u64, max: u64, cooldown: u64) -> OutageParams {
-        OutageParams {
-            p_start: Probability::new(p_start).unwrap(),
-            unit: OutageUnit::Frames,
-            min_ms: None,
-            max_ms: None,
-            cooldown_ms: None,
-            min_frames: Some(min),
-            max_frames: Some(max),
-            cooldown_frames: Some(cooldown),
-        }
+        OutageParams::frames(p_start, min, max, cooldown).unwrap()
     }
 
     fn field(p: OutageParams) -> String {
@@ -531,7 +521,7 @@ mod tests {
 
     #[test]
     fn clm_presets_at_1_khz() {
-        // SPEC §4: CLM-1 and CLM-2 give about 15% and 33% by E[L]/(E[L] + C).
+        // docs/spec.md §4: CLM-1 and CLM-2 give about 15% and 33% by E[L]/(E[L] + C).
         // On a 1 ms grid with L ~ U(0, N ms), a window drops (N + 1)/2 frames
         // on average and, with the cooldown, spans C/Δ + (N + 1)/2 frames.
         for (p, approx, exact) in [

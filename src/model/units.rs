@@ -1,5 +1,18 @@
 //! Units as written in scenario files: probabilities (`0.3` or `"30%"`) and
 //! milliseconds (decimals allowed), validated at parse time.
+//!
+//! Physical ranges (docs/spec.md §1). A [`Millis`] is any finite duration
+//! ≥ 0; each model then bounds its own durations to what a lab could mean,
+//! far beyond any experiment and far inside the `u64` nanosecond clock
+//! (which lasts 584 years), so that no sum of them can saturate:
+//!
+//! | quantity | accepted |
+//! |---|---|
+//! | a delay's `min_ms` and `jitter_ms`, an outage window (`min_ms`, `max_ms`) | 0 to [`MAX_DURATION_MS`] (one hour) |
+//! | a delay component's mean `1/rate` | up to 10^10 ms ([`super::delay::MIN_RATE_PER_MS`]) |
+//! | an outage cooldown (`cooldown_ms`) | 0 to [`MAX_COOLDOWN_MS`] (one week) |
+//! | a count of frames (`max_frames`, `cooldown_frames`), a Lomax scale (`lambda`) | up to [`MAX_FRAMES`] (one hour at 1 MHz) |
+//! | a phase start (`start_s`, `start_ms`) | 0 to [`MAX_PHASE_START_MS`] (one year) |
 
 use serde::{Deserialize, Deserializer};
 use std::fmt;
@@ -111,6 +124,42 @@ impl<'de> Deserialize<'de> for Millis {
             }
         }
         d.deserialize_any(V)
+    }
+}
+
+/// The longest delay or outage window: one hour, in ms.
+pub const MAX_DURATION_MS: f64 = 3_600_000.0;
+
+/// The longest outage cooldown: one week, in ms. Longer than any run, so
+/// it reads "one window, then none"; the fits search cooldowns up to 1e8 ms.
+pub const MAX_COOLDOWN_MS: f64 = 604_800_000.0;
+
+/// The most frames a window, cooldown or Lomax scale may count: one hour at
+/// 1 MHz.
+pub const MAX_FRAMES: u64 = 3_600_000_000;
+
+/// The latest phase start: one year (365.25 days), in ms.
+pub const MAX_PHASE_START_MS: f64 = 31_557_600_000.0;
+
+/// Checks that the duration `ms` of `field` is at most `max_ms`; the error
+/// states the range and what the limit is (`what`, e.g. "one hour").
+pub(crate) fn at_most_ms(field: &str, ms: f64, max_ms: f64, what: &str) -> Result<(), super::ParamError> {
+    if ms <= max_ms {
+        Ok(())
+    } else {
+        Err(super::ParamError::new(field, format!("{ms} ms is out of range: expected 0 to {max_ms} ms ({what})")))
+    }
+}
+
+/// Checks that the count `n` of `field` is at most [`MAX_FRAMES`].
+pub(crate) fn at_most_frames(field: &str, n: u64) -> Result<(), super::ParamError> {
+    if n <= MAX_FRAMES {
+        Ok(())
+    } else {
+        Err(super::ParamError::new(
+            field,
+            format!("{n} frames is out of range: expected at most {MAX_FRAMES} (one hour at 1 MHz)"),
+        ))
     }
 }
 

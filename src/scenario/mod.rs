@@ -1,4 +1,4 @@
-//! Scenarios (SPEC §3, §3.6, §4): pipelines of stages, optionally a timeline
+//! Scenarios (docs/spec.md §3, §3.6, §4): pipelines of stages, optionally a timeline
 //! of phases, built from TOML files or the study's presets.
 //!
 //! Random streams: every stage draws from its own [`StageRng`], seeded from
@@ -119,8 +119,13 @@ impl Scenario {
         let mut prev_start = None;
         for (pi, ps) in spec.phases.iter().enumerate() {
             let loc = format!("phase {}", pi + 1);
-            if !ps.start_ms.is_finite() || ps.start_ms < 0.0 || (pi == 0 && ps.start_ms != 0.0) {
-                return Err(err(loc, Some("start_ms".into()), "the first phase starts at 0; others at a finite time ≥ 0".into()));
+            let max = crate::model::units::MAX_PHASE_START_MS;
+            if !ps.start_ms.is_finite() || ps.start_ms < 0.0 || ps.start_ms > max || (pi == 0 && ps.start_ms != 0.0) {
+                return Err(err(
+                    loc,
+                    Some("start_ms".into()),
+                    format!("the first phase starts at 0; others at a finite time from 0 to {max} ms (one year)"),
+                ));
             }
             let start_offset_ns = crate::model::units::ms_to_ns(ps.start_ms);
             if let Some(prev) = prev_start {

@@ -25,10 +25,13 @@
 //!
 //! A timeline uses `[[phase]]` tables (`start_s` or `start_ms`, and either
 //! `preset = "..."` or `[[phase.stage]]` tables) instead of top-level stages.
-//! A whole-file `preset = "..."` is also accepted.
+//! A whole-file `preset = "..."` is also accepted. A phase starts at most one
+//! year after the first ([`MAX_PHASE_START_MS`]); the models bound their own
+//! durations ([`crate::model::units`]).
 
 use super::presets::preset_stages;
 use crate::model::presets::{canonical_name, PRESET_NAMES};
+use crate::model::units::MAX_PHASE_START_MS;
 use super::spec::{PhaseSpec, ScenarioSpec, StageSpec};
 use crate::model::ModelSpec;
 use crate::model::ModelKind;
@@ -141,8 +144,18 @@ fn parse_phases(ctx: &Ctx, raw_phases: Vec<Spanned<RawPhase>>) -> Result<Vec<Pha
             (Some(_), Some(_)) => return Err(ctx.err(line, Some(&loc), Some("start_ms"), "give `start_s` or `start_ms`, not both")),
         };
         let field = if rp.start_s.is_some() { "start_s" } else { "start_ms" };
-        if !start_ms.is_finite() || start_ms < 0.0 {
-            return Err(ctx.err(ctx.key_line(span.clone(), field), Some(&loc), Some(field), "must be a finite time ≥ 0"));
+        if !start_ms.is_finite() || start_ms < 0.0 || start_ms > MAX_PHASE_START_MS {
+            let range = if field == "start_s" {
+                format!("0 to {} s", MAX_PHASE_START_MS / 1e3)
+            } else {
+                format!("0 to {MAX_PHASE_START_MS} ms")
+            };
+            return Err(ctx.err(
+                ctx.key_line(span.clone(), field),
+                Some(&loc),
+                Some(field),
+                format!("must be a finite time from {range} (one year)"),
+            ));
         }
         if i == 0 && start_ms != 0.0 {
             return Err(ctx.err(ctx.key_line(span.clone(), field), Some(&loc), Some(field), "the first phase must start at 0"));
@@ -492,5 +505,59 @@ mod tests {
     fn display_reads_like_a_compiler_message() {
         let e = err("[[stage]]\nmodel = \"bernoulli\"\np = 2\n");
         assert_eq!(e.to_string(), format!("s.toml:3: stage 1 (bernoulli): `p`: {}", e.problem));
+    }
+
+    #[test]
+    fn values_beyond_the_physical_ranges_are_rejected_with_the_range() {
+        let delay = "[[stage]]\nmodel = \"delay\"\n";
+        let hyper = "dist = \"hyperexp\"\nweights = [1.0]\n";
+        let outage_t = "[[stage]]\nmodel = \"outage\"\np_start = 1\n";
+        let outage_f = "[[stage]]\nmodel = \"outage\"\np_start = 1\nunit = \"frames\"\n";
+        let lomax = "[[stage]]\nmodel = \"ge_lomax\"\ntransition = [[1.0]]\nalpha = [2.0]\n";
+        // (file, line of the bad value, field, a piece of the stated range)
+        let cases: [(String, usize, &str, &str); 10] = [
+            (format!("{delay}min_ms = 1e15\n"), 3, "min_ms", "3600000 ms (one hour)"),
+            (format!("{delay}min_ms = 1\ndist = \"uniform\"\njitter_ms = 3600001\n"), 5, "jitter_ms", "one hour"),
+            (format!("{delay}min_ms = 1\n{hyper}rates_per_ms = [1e-300]\n"), 6, "rates_per_ms[0]", "at most 1e10 ms"),
+            (format!("{outage_t}max_ms = 1e300\ncooldown_ms = 1\n"), 4, "max_ms", "one hour"),
+            (format!("{outage_t}max_ms = 10\ncooldown_ms = 1e12\n"), 5, "cooldown_ms", "604800000 ms (one week)"),
+            (format!("{outage_f}max_frames = 9000000000000000000\ncooldown_frames = 1\n"), 5, "max_frames", "3600000000"),
+            (format!("{outage_f}max_frames = 2\ncooldown_frames = 4000000000\n"), 6, "cooldown_frames", "one hour at 1 MHz"),
+            (format!("{lomax}lambda = [1e300]\n"), 5, "lambda[0]", "3600000000 frames"),
+            (
+                "[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 1e300\npreset = \"PLM-2\"\n".to_string(),
+                4,
+                "start_s",
+                "0 to 31557600 s (one year)",
+            ),
+            (
+                "[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_ms = 3.2e10\npreset = \"PLM-2\"\n".to_string(),
+                4,
+                "start_ms",
+                "31557600000 ms (one year)",
+            ),
+        ];
+        for (text, line, field, range) in cases {
+            let e = err(&text);
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{text}");
+            assert!(e.problem.contains(range), "{e}");
+        }
+        // The limits themselves are accepted.
+        let ok = parse_str(
+            &format!("{delay}min_ms = 3600000\n{hyper}rates_per_ms = [{}]\n", crate::model::delay::MIN_RATE_PER_MS),
+            "s.toml",
+            "s",
+        );
+        assert!(ok.is_ok(), "{ok:?}");
+        assert!(parse_str("[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 31557600\n", "s.toml", "s").is_ok());
+    }
+
+    #[test]
+    fn a_built_timeline_checks_its_phase_starts_too() {
+        let mut spec = preset("Normal").unwrap();
+        spec.phases.push(PhaseSpec { name: None, start_ms: 1e300, stages: Vec::new() });
+        let e = crate::scenario::Scenario::new(&spec, 1).expect_err("must be rejected");
+        assert_eq!((e.location.as_deref(), e.field.as_deref()), (Some("phase 2"), Some("start_ms")), "{e}");
+        assert!(e.problem.contains("one year"), "{e}");
     }
 }

@@ -1,4 +1,4 @@
-//! Degradation models against their analytic laws (SPEC §3, §4).
+//! Degradation models against their analytic laws (docs/spec.md §3, §4).
 //!
 //! Every check has a fixed seed and a stated significance level. Unless said
 //! otherwise the level is α = 0.001 (two-sided where it is a difference), so a
@@ -9,9 +9,8 @@
 //! those, never from an assumed independence of frames.
 
 use netfi::model::{
-    Bernoulli, BernoulliParams, Delay, DelayDist, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Markov4, Markov4Params, Millis, Model, Order, Outage, OutageParams, OutageUnit, Probability,
-    StageRng, Verdict,
+    Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott, GilbertElliottParams,
+    Markov4, Markov4Params, Model, Order, Outage, OutageParams, Probability, StageRng, Verdict,
 };
 use rand::SeedableRng;
 
@@ -32,10 +31,6 @@ const KS_C_0_001: f64 = 1.949_5;
 
 fn prob(p: f64) -> Probability {
     Probability::new(p).unwrap()
-}
-
-fn ms(v: f64) -> Millis {
-    Millis::new(v).unwrap()
 }
 
 // ---------------------------------------------------------------- statistics
@@ -119,17 +114,10 @@ fn chi_square(counts: &[u64], n: u64, pmf: impl Fn(u64) -> f64) -> (f64, usize) 
 // --------------------------------------------------------------------- delay
 
 fn hyperexp(min_ms: f64, weights: [f64; 2], rates: [f64; 2]) -> DelayParams {
-    DelayParams {
-        min_ms: ms(min_ms),
-        dist: DelayDist::Hyperexp,
-        weights: Some(weights.to_vec()),
-        rates_per_ms: Some(rates.to_vec()),
-        jitter_ms: None,
-        order: Order::Reorder,
-    }
+    DelayParams::hyperexp(min_ms, &weights, &rates).unwrap()
 }
 
-/// SPEC §4's delay presets.
+/// docs/spec.md §4's delay presets.
 fn dlm_presets() -> [(&'static str, f64, [f64; 2], [f64; 2]); 3] {
     [
         ("DLM-1", 70.0, [0.72645, 0.27355], [0.02711, 0.08529]),
@@ -176,14 +164,7 @@ fn delay_uniform_matches_its_cdf() {
     let n = 1_000_000;
     let critical = KS_C_0_001 / (n as f64).sqrt();
     for (seed, order) in [(7, Order::Reorder), (8, Order::Fifo)] {
-        let params = DelayParams {
-            min_ms: ms(2.5),
-            dist: DelayDist::Uniform,
-            weights: None,
-            rates_per_ms: None,
-            jitter_ms: Some(ms(0.75)),
-            order,
-        };
+        let params = DelayParams::uniform(2.5, 0.75).unwrap().with_order(order);
         let xs = delays_ms(&params, seed, n);
         assert!(xs.iter().all(|&d| (2.5..=3.25).contains(&d)));
         let distance = ks_distance(xs, |d| ((d - 2.5) / 0.75).clamp(0.0, 1.0));
@@ -191,7 +172,7 @@ fn delay_uniform_matches_its_cdf() {
     }
 }
 
-/// SPEC §4: DLM sample means within 0.5% of `min + Σ w/λ` (10^6 frames), and
+/// docs/spec.md §4: DLM sample means within 0.5% of `min + Σ w/λ` (10^6 frames), and
 /// within 3.29 standard errors (α = 0.001), the stronger of the two here.
 #[test]
 fn dlm_means_match_the_presets() {
@@ -213,14 +194,10 @@ fn dlm_means_match_the_presets() {
 // ------------------------------------------------------------------ ge_lomax
 
 fn plm(alpha: [f64; 2], lambda: [f64; 2]) -> GeLomaxParams {
-    GeLomaxParams {
-        transition: vec![vec![0.95, 0.05], vec![0.10, 0.90]],
-        alpha: alpha.to_vec(),
-        lambda: lambda.to_vec(),
-    }
+    GeLomaxParams::two_state(netfi::model::presets::STUDY_TRANSITION, alpha, lambda)
 }
 
-/// SPEC §4's packet-loss presets.
+/// docs/spec.md §4's packet-loss presets.
 fn plm_presets() -> [(&'static str, GeLomaxParams, f64); 3] {
     [
         ("PLM-1", plm([4.428, 4.966], [1.638, 0.271]), 0.10),
@@ -288,7 +265,7 @@ fn ge_lomax_drop_runs_follow_the_floored_lomax() {
     assert!(statistic < critical, "χ² = {statistic} with {df} df ≥ {critical} (α = 0.001)");
 }
 
-/// SPEC §4: the PLM presets' simulated loss (10^7 frames, 100 batches) has
+/// docs/spec.md §4: the PLM presets' simulated loss (10^7 frames, 100 batches) has
 /// `loss_rate_exact` inside its 95% batch-means interval. The labels are
 /// targets that the presets miss by design; the exact values are printed.
 #[test]
@@ -422,16 +399,7 @@ fn bernoulli_loss_matches_p() {
 // -------------------------------------------------------------------- outage
 
 fn outage_time(p_start: f64, min_ms: f64, max_ms: f64, cooldown_ms: f64) -> OutageParams {
-    OutageParams {
-        p_start: prob(p_start),
-        unit: OutageUnit::Time,
-        min_ms: Some(ms(min_ms)),
-        max_ms: Some(ms(max_ms)),
-        cooldown_ms: Some(ms(cooldown_ms)),
-        min_frames: None,
-        max_frames: None,
-        cooldown_frames: None,
-    }
+    OutageParams::time(p_start, min_ms, max_ms, cooldown_ms).unwrap()
 }
 
 /// The lost fraction over renewal cycles (window opening to window opening,
@@ -491,16 +459,7 @@ fn outage_lost_fraction_matches_formula() {
 
 #[test]
 fn outage_frames_lost_fraction_matches_formula() {
-    let params = OutageParams {
-        p_start: prob(0.02),
-        unit: OutageUnit::Frames,
-        min_ms: None,
-        max_ms: None,
-        cooldown_ms: None,
-        min_frames: Some(1),
-        max_frames: Some(30),
-        cooldown_frames: Some(50),
-    };
+    let params = OutageParams::frames(0.02, 1, 30, 50).unwrap();
     let exact = Outage::new(&params).unwrap().loss_rate_approx(FRAME_NS).unwrap();
     assert!((exact - 15.5 / (15.5 + 50.0 + 49.0)).abs() < 1e-15);
     let (ratio, se, cycles) = outage_cycles(&params, 1100, 10_000_000, FRAME_NS);
