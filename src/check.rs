@@ -30,7 +30,34 @@ pub enum Arrivals {
     Times(Vec<u64>),
 }
 
+/// The slowest command rate simulated arrivals accept, in Hz.
+pub const MIN_RATE_HZ: f64 = 0.1;
+/// The fastest command rate simulated arrivals accept, in Hz: a frame every
+/// microsecond.
+pub const MAX_RATE_HZ: f64 = 1e6;
+/// The longest span of simulated arrivals: one year, in seconds (as a phase
+/// start, docs/spec.md §1).
+pub const MAX_SPAN_S: f64 = crate::model::units::MAX_PHASE_START_MS / 1e3;
+
 impl Arrivals {
+    /// `frames` frames at `rate_hz`, checked against the physical range: a
+    /// rate from [`MIN_RATE_HZ`] to [`MAX_RATE_HZ`], and at most
+    /// [`MAX_SPAN_S`] from the first frame to the last.
+    pub fn at_rate(frames: u64, rate_hz: f64) -> Result<Arrivals, String> {
+        if !(rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz)) {
+            return Err(format!(
+                "{rate_hz} Hz is out of range: expected a command rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} frames per second"
+            ));
+        }
+        let span_s = frames.saturating_sub(1) as f64 / rate_hz;
+        if span_s > MAX_SPAN_S {
+            return Err(format!(
+                "{frames} frames at {rate_hz} Hz span {span_s:.0} s: expected at most {MAX_SPAN_S} s (one year)"
+            ));
+        }
+        Ok(Arrivals::Rate { frames, rate_hz })
+    }
+
     pub fn len(&self) -> u64 {
         match self {
             Arrivals::Rate { frames, .. } => *frames,

@@ -51,3 +51,24 @@ fn a_bad_scenario_file_is_a_clear_error() {
     assert!(stderr.contains("bad.toml:3: stage 1 (ge_lomax): `transition[0]`"), "{stderr}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn values_beyond_their_physical_range_are_refused_with_the_range() {
+    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "1000", "--rate-hz", "1e-300"]).output().unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("--rate-hz") && stderr.contains("from 0.1 to 1000000 frames per second"), "{stderr}");
+    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "100000000000000", "--rate-hz", "1"]).output().unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("one year"), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let dir = std::env::temp_dir().join(format!("netfi-cli-range-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("far.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"delay\"\nmin_ms = 1e15\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("far.toml:3: stage 1 (delay): `min_ms`: 1000000000000000 ms is out of range: expected 0 to 3600000 ms (one hour)"), "{stderr}");
+}

@@ -45,10 +45,7 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
             Arrivals::Times(times)
         }
         None => {
-            if !(args.rate_hz.is_finite() && args.rate_hz > 0.0) {
-                bail!("--rate-hz must be a positive number of frames per second, got {}", args.rate_hz);
-            }
-            Arrivals::Rate { frames: args.frames, rate_hz: args.rate_hz }
+            Arrivals::at_rate(args.frames, args.rate_hz).map_err(|e| anyhow::anyhow!("--rate-hz, --frames: {e}"))?
         }
     };
     if arrivals.is_empty() {
