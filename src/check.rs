@@ -46,13 +46,16 @@ impl Arrivals {
     pub fn at_rate(frames: u64, rate_hz: f64) -> Result<Arrivals, String> {
         if !(rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz)) {
             return Err(format!(
-                "{rate_hz} Hz is out of range: expected a command rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} frames per second"
+                "{} Hz is out of range: expected a command rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} frames per second",
+                crate::model::units::show(rate_hz)
             ));
         }
         let span_s = frames.saturating_sub(1) as f64 / rate_hz;
         if span_s > MAX_SPAN_S {
             return Err(format!(
-                "{frames} frames at {rate_hz} Hz span {span_s:.0} s: expected at most {MAX_SPAN_S} s (one year)"
+                "{frames} frames at {} Hz span {} s: expected at most {MAX_SPAN_S} s (one year)",
+                crate::model::units::show(rate_hz),
+                crate::model::units::show(span_s.round())
             ));
         }
         Ok(Arrivals::Rate { frames, rate_hz })

@@ -321,7 +321,8 @@ fn hyperexp(weights: Option<&[f64]>, rates: Option<&[f64]>) -> Result<(Jitter, f
             return Err(ParamError::new(
                 format!("rates_per_ms[{i}]"),
                 format!(
-                    "{rate}: expected a finite rate ≥ {MIN_RATE_PER_MS:e} per ms (the component's mean, 1/rate ms, is at most 1e10 ms, about 116 days)"
+                    "{}: expected a finite rate ≥ {MIN_RATE_PER_MS:e} per ms (the component's mean, 1/rate ms, is at most 1e10 ms, about 116 days)",
+                    super::units::show(rate)
                 ),
             ));
         }

@@ -156,7 +156,7 @@ impl GeLomax {
             if l > MAX_FRAMES as f64 {
                 return Err(ParamError::new(
                     format!("lambda[{i}]"),
-                    format!("{l} frames is out of range: expected a scale > 0 and at most {MAX_FRAMES} frames (one hour at 1 MHz)"),
+                    format!("{} frames is out of range: expected a scale > 0 and at most {MAX_FRAMES} frames (one hour at 1 MHz)", super::units::show(l)),
                 ));
             }
         }

@@ -141,13 +141,23 @@ pub const MAX_FRAMES: u64 = 3_600_000_000;
 /// The latest phase start: one year (365.25 days), in ms.
 pub const MAX_PHASE_START_MS: f64 = 31_557_600_000.0;
 
+/// A number as an error message shows it: plainly in the everyday range,
+/// in scientific notation beyond it (`1e300`, not three hundred zeros).
+pub fn show(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e16).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// Checks that the duration `ms` of `field` is at most `max_ms`; the error
 /// states the range and what the limit is (`what`, e.g. "one hour").
 pub(crate) fn at_most_ms(field: &str, ms: f64, max_ms: f64, what: &str) -> Result<(), super::ParamError> {
     if ms <= max_ms {
         Ok(())
     } else {
-        Err(super::ParamError::new(field, format!("{ms} ms is out of range: expected 0 to {max_ms} ms ({what})")))
+        Err(super::ParamError::new(field, format!("{} ms is out of range: expected 0 to {max_ms} ms ({what})", show(ms))))
     }
 }
 

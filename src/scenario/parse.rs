@@ -519,7 +519,7 @@ mod tests {
             (format!("{delay}min_ms = 1e15\n"), 3, "min_ms", "3600000 ms (one hour)"),
             (format!("{delay}min_ms = 1\ndist = \"uniform\"\njitter_ms = 3600001\n"), 5, "jitter_ms", "one hour"),
             (format!("{delay}min_ms = 1\n{hyper}rates_per_ms = [1e-300]\n"), 6, "rates_per_ms[0]", "at most 1e10 ms"),
-            (format!("{outage_t}max_ms = 1e300\ncooldown_ms = 1\n"), 4, "max_ms", "one hour"),
+            (format!("{outage_t}max_ms = 1e300\ncooldown_ms = 1\n"), 4, "max_ms", "1e300 ms is out of range"),
             (format!("{outage_t}max_ms = 10\ncooldown_ms = 1e12\n"), 5, "cooldown_ms", "604800000 ms (one week)"),
             (format!("{outage_f}max_frames = 9000000000000000000\ncooldown_frames = 1\n"), 5, "max_frames", "3600000000"),
             (format!("{outage_f}max_frames = 2\ncooldown_frames = 4000000000\n"), 6, "cooldown_frames", "one hour at 1 MHz"),
