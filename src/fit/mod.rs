@@ -18,6 +18,10 @@
 //!    from the search's ([`confirm`]), reporting each metric with its 95%
 //!    interval.
 //!
+//! `fit` builds on [`crate::model`] alone (parameters, presets, stream
+//! seeds); `scenario` reads the database ([`db`]) for its target stages, so
+//! the dependency between the two goes one way.
+//!
 //! Contract: everything here except [`run`] is sans-IO and single-threaded —
 //! no clock, file or thread — and a pure function of the request and its
 //! seed. [`run`] is the thin layer that spreads independent work (a

@@ -1,7 +1,12 @@
 //! Degradation models: one file per model, and [`AnyModel`], which holds any
-//! one of them.
+//! one of them; [`ModelSpec`], a model's parameters before validation, with
+//! typed constructors per model (`DelayParams::hyperexp`,
+//! `OutageParams::time`, …); the study's presets ([`presets`]); the stage
+//! stream seeds ([`stream_seed`]). This is the bottom of the core: `fit` and
+//! `scenario` both build on it, and `fit` needs nothing else of the core.
 //!
-//! Contract (docs/spec.md §3): a model validates its parameters once, in `new`, and
+//! Contract (docs/spec.md §3): a model validates its parameters once, in
+//! `new`, against their physical ranges ([`units`]), and
 //! returns a [`ParamError`] naming the offending field; afterwards
 //! [`Model::decide`] cannot fail. A model never reads a clock: the frame's time
 //! at the stage (`t_ns`, CLOCK_MONOTONIC-like nanoseconds) is passed in, and so

@@ -1,5 +1,9 @@
-//! Scenarios (docs/spec.md §3, §3.6, §4): pipelines of stages, optionally a timeline
-//! of phases, built from TOML files or the study's presets.
+//! Scenarios (docs/spec.md §3, §3.6, §4): pipelines of stages, optionally a
+//! timeline of phases, built from TOML text or the study's presets.
+//!
+//! Dependencies go one way: `scenario` uses `model` and, for target stages
+//! (`loss = "30%"`), the fault parameter database in [`crate::fit::db`];
+//! `fit` uses only `model`. Reading files is [`crate::load`]'s.
 //!
 //! Random streams: every stage draws from its own [`StageRng`], seeded from
 //! the scenario seed, the phase index and the stage's *label* (its `name`, or
