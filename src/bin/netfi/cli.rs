@@ -176,7 +176,9 @@ pub struct ExportNetemArgs {
     /// Frame rate the queue limit is sized for, in Hz.
     #[arg(long, default_value_t = 1000.0)]
     pub rate_hz: f64,
-    /// Directory where tc looks for distribution tables.
-    #[arg(long, default_value = "/usr/lib/tc")]
-    pub table_dir: PathBuf,
+    /// Directory where tc looks for distribution tables (default: the
+    /// script looks for it where it runs: the distribution's usual places,
+    /// those found on this machine first; `TC_LIB_DIR` wins when set).
+    #[arg(long)]
+    pub table_dir: Option<PathBuf>,
 }
