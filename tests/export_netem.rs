@@ -64,7 +64,7 @@ fn hostile_interface_names_reach_tc_as_one_word_and_run_nothing() {
     let d = scratch("dev");
     // Legal for the kernel (no `/`, `:`, white space; at most 15 bytes)
     // and each a command for an unquoting shell.
-    for dev in ["e;touch PWNED1", "$(touch PWNED2)", "`touch PWNED3`", "x'&&touch PWNED", "a\"b$c", "-;>PWNED4"] {
+    for dev in ["e;>PWNED1", "$(>PWNED2)", "`>PWNED3`", "x'&&>PWNED5", "a\"b$c", "-;>PWNED4", "e;touch PWNED"] {
         if dev.contains(' ') {
             // White space is not an interface name: refused outright.
             let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
@@ -72,7 +72,7 @@ fn hostile_interface_names_reach_tc_as_one_word_and_run_nothing() {
             assert!(String::from_utf8_lossy(&out.stderr).contains("interface name"), "{dev:?}");
             continue;
         }
-        let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
+        let out = netfi(&["export", "netem", "PLM-1", &format!("--dev={dev}")]);
         assert!(out.status.success(), "{dev:?}: {}", String::from_utf8_lossy(&out.stderr));
         let args = run_script(&d.0, &out.stdout, None);
         assert_eq!(args[..5], ["qdisc", "replace", "dev", dev, "root"], "{dev:?}");

@@ -31,6 +31,18 @@ pub enum Command {
     /// Export a scenario to another tool's configuration.
     #[command(subcommand)]
     Export(ExportCmd),
+    /// Put back what killed runs left on this host: cleared cores (thread
+    /// masks, interrupt affinities, the workqueue mask) and iceoryx2
+    /// resources of dead processes. Every `netfi run` does this first.
+    Restore(RestoreArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RestoreArgs {
+    /// Act as the guardian of this record: wait until its owners have all
+    /// ended, then restore from it (started by the clearing process).
+    #[arg(long, hide = true, value_name = "RECORD")]
+    pub guard: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
