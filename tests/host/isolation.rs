@@ -110,10 +110,11 @@ fn kill_matrix_case(kill: Kill) {
     let before = snapshot();
     let own_mask = allowed("/proc/self/status").unwrap();
     let out = out_dir(&format!("kill-{kill:?}"));
+    let run_id = format!("kill{kill:?}{}", std::process::id());
     std::fs::create_dir_all(&out).unwrap();
     let runner = Reaped(
         netfi()
-            .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--out"])
+            .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
             .arg(&out)
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
@@ -139,6 +140,9 @@ fn kill_matrix_case(kill: Kill) {
     });
     let guardian = guardian.unwrap();
     std::thread::sleep(Duration::from_millis(500));
+    // The run did change the host (else the comparison below proves nothing).
+    let during = snapshot();
+    assert!(!differences(&before, &during).is_empty(), "the run changed nothing: is the core cleared?");
     // Started while the core is cleared: it inherits this process's
     // narrowed mask.
     let mid_run = Reaped(Command::new("sleep").arg("120").spawn().unwrap());
@@ -184,6 +188,10 @@ fn kill_matrix_case(kill: Kill) {
     std::thread::sleep(Duration::from_millis(200));
     restore();
 
+    let shm: Vec<String> = std::fs::read_dir("/dev/shm")
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.contains(&run_id)).collect())
+        .unwrap_or_default();
+    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm after `netfi restore`: {shm:?}");
     let after = snapshot();
     let d = differences(&before, &after);
     let stderr = std::fs::read_to_string(out.join("runner.stderr")).unwrap_or_default();

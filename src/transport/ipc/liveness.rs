@@ -207,7 +207,13 @@ pub fn cleanup_dead_runs(
     runs.into_values()
         .filter(|run| select(run))
         .map(|run| {
-            let report = cleanup_dead_nodes(&IpcConfig::new(run.clone()))?;
+            let config = IpcConfig::new(run.clone());
+            let report = cleanup_dead_nodes(&config)?;
+            // A run whose processes were all killed: its management segment
+            // goes with its last node.
+            if report.alive == 0 && report.undetermined == 0 {
+                remove_mgmt_segment_if_unused(&config);
+            }
             Ok((run, report))
         })
         .collect()
@@ -263,11 +269,23 @@ fn remove_stale_mgmt_segments() {
                         let run_prefix = &name[..mine.len() + rest.find('_').map_or(rest.len(), |i| i + 1)];
                         !live.iter().any(|f| f.starts_with(run_prefix))
                     }
-                    None => !name.starts_with("netfi_u"),
+                    None => !name.starts_with("netfi_u") && !legacy_run_alive(name),
                 }
         },
         Some(std::time::Duration::from_secs(60)),
     );
+}
+
+/// Whether an earlier version's run (files `netfi_<run>_…` under iceoryx2's
+/// shared `/tmp/iceoryx2/`) named by the segment `name` still has node
+/// files.
+fn legacy_run_alive(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix(FILE_PREFIX) else { return false };
+    let run_prefix = &name[..FILE_PREFIX.len() + rest.find('_').map_or(rest.len(), |i| i + 1)];
+    let legacy = iceoryx2::config::Config::default().global.node_dir();
+    std::fs::read_dir(legacy.as_str())
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).any(|f| f.starts_with(run_prefix)))
+        .unwrap_or(false)
 }
 
 /// Removes this user's files in `/dev/shm` whose names `select` picks,
