@@ -351,13 +351,25 @@ pub(crate) fn restore_state(state: &IsolationState) -> usize {
             undone += 1;
         }
     }
+    // Interrupts and the workqueues likewise: put back only while they
+    // still have the narrowed value this clearing wrote (a change not yet
+    // made, or made since by someone else, stands). Two runs clearing
+    // cores at once thus never restore each other's narrowed values.
+    let online = online_cpus();
+    let narrowed = |before: Option<BTreeSet<usize>>| -> Option<BTreeSet<usize>> {
+        Some(before?.into_iter().filter(|&c| c != state.core && online.contains(&c)).collect())
+    };
     for (irq, before) in &state.irqs {
-        if std::fs::write(irq_list_path(*irq), before).is_ok() {
+        let now = std::fs::read_to_string(irq_list_path(*irq)).ok().and_then(|t| parse_list(t.trim()));
+        if now.is_some() && now == narrowed(parse_list(before)) && std::fs::write(irq_list_path(*irq), before).is_ok() {
             undone += 1;
         }
     }
     if let Some(before) = &state.workqueue {
-        if std::fs::write(WORKQUEUE_MASK, before).is_ok() {
+        let now = std::fs::read_to_string(WORKQUEUE_MASK).ok().and_then(|t| parse_mask(t.trim()));
+        // Narrowed as `isolate` did: the core taken out, nothing else.
+        let ours = parse_mask(before).map(|m| m.into_iter().filter(|&c| c != state.core).collect::<BTreeSet<usize>>());
+        if now.is_some() && now == ours && std::fs::write(WORKQUEUE_MASK, before).is_ok() {
             undone += 1;
         }
     }
