@@ -14,9 +14,40 @@
 //! ends inside a record.
 //!
 //! [`CaptureReader`] streams records from any [`Read`] without allocating per
-//! record; [`CaptureWriter`] writes the same format; [`load`] reads a whole file
-//! and derives [`CaptureStats`]. This is I/O code: the sans-IO core never calls
-//! it, only the services and tools do.
+//! record; [`CaptureWriter`] writes the same format, with the LZ4 frame's
+//! content checksum (xxHash32 of everything decompressed), so damage to a
+//! file written here is always found; [`load`] reads a whole file and derives
+//! [`CaptureStats`]. This is I/O code: the sans-IO core never calls it, only
+//! the services and tools do.
+//!
+//! # What is refused, what is only counted
+//!
+//! A capture is replayed as the traffic of a real console, so a damaged one
+//! must not pass for one. [`load`] (and [`parse`]) refuse, with an error that
+//! says what was found:
+//!
+//! - anything that is not exactly one well-formed LZ4 frame of whole records:
+//!   not LZ4, a corrupt block, a content checksum that does not match, a
+//!   frame without its end mark, a record cut short or of a length other
+//!   than one ITP frame, no records;
+//! - bytes after the LZ4 frame ([`CaptureError::TrailingBytes`]): garbage
+//!   appended, or a second capture concatenated to the first (the decoder
+//!   would otherwise stop at the first frame's end and drop the rest
+//!   unseen);
+//! - a time step backwards of more than [`MAX_STEP_BACKWARD_NS`] (1 s) or a
+//!   gap forwards of more than [`MAX_GAP_NS`] (60 s) between two records: a
+//!   wall clock steps back by milliseconds, not seconds, and a recording
+//!   paused for more than a minute is two recordings; either is far more
+//!   likely a flipped bit in a time stamp or two files joined;
+//! - a frame whose ITP checksum is wrong, *unless* the file carries an LZ4
+//!   content checksum: without one the file's integrity is unknown and a
+//!   wrong frame checksum is read as damage to the file; with one the file
+//!   is known to be as written, so the frame was recorded that way (a
+//!   corrupted datagram) and is only counted.
+//!
+//! Only counted, in [`CaptureStats`] (callers may print them): frames with a
+//! wrong checksum in a checksummed file, steps backwards up to 1 s, the
+//! longest gap, frames flagged dropped.
 
 use crate::frame::{FrameError, ItpFrame, ItpView, FRAME_LEN, SURGEON_ENGAGED};
 use lz4_flex::frame::{FrameDecoder, FrameEncoder};
@@ -30,6 +61,20 @@ pub const RECORD_HEADER_LEN: usize = 11;
 
 /// Bytes in a record that carries one ITP frame.
 pub const RECORD_LEN: usize = RECORD_HEADER_LEN + FRAME_LEN;
+
+/// Longest step backwards in time between consecutive records that [`load`]
+/// accepts (and counts): 1 s.
+pub const MAX_STEP_BACKWARD_NS: u64 = 1_000_000_000;
+
+/// Longest gap forwards in time between consecutive records that [`load`]
+/// accepts: 60 s.
+pub const MAX_GAP_NS: u64 = 60_000_000_000;
+
+/// The LZ4 frame format's magic number, little-endian on the wire.
+const LZ4_MAGIC: [u8; 4] = [0x04, 0x22, 0x4d, 0x18];
+/// Bit of the frame descriptor's FLG byte (the fifth byte of a frame) that
+/// announces a content checksum.
+const LZ4_FLG_CONTENT_CHECKSUM: u8 = 0x04;
 
 /// Where a capture came from, for error messages.
 struct Origin<'a>(&'a Option<PathBuf>);
@@ -104,6 +149,34 @@ pub enum CaptureError {
     /// The file holds no records at all.
     #[error("{}: contains no records", Origin(.path))]
     Empty { path: Option<PathBuf> },
+    /// The LZ4 frame ends without its end mark (and content checksum): the
+    /// file was cut short at a block boundary.
+    #[error("{}: the LZ4 frame ends after record {record} without its end mark: the file was cut short", Origin(.path))]
+    Unterminated { path: Option<PathBuf>, record: u64 },
+    /// Bytes follow the end of the LZ4 frame: garbage appended, or (when
+    /// they start with the LZ4 magic number) another capture concatenated.
+    #[error("{}: {bytes} byte(s) after the end of the capture's LZ4 frame, after record {record}{}; \
+             a capture is exactly one LZ4 frame",
+            Origin(.path), if *.lz4_frame { " (another LZ4 frame: two captures concatenated?)" } else { "" })]
+    TrailingBytes {
+        path: Option<PathBuf>,
+        /// Records read before the end of the frame.
+        record: u64,
+        /// Bytes after the frame.
+        bytes: u64,
+        /// Whether they begin with the LZ4 magic number.
+        lz4_frame: bool,
+    },
+    /// The records are well formed but what they hold shows damage, by the
+    /// rule in the module docs; `stats` has every count.
+    #[error("{}: refused: {why}", Origin(.path))]
+    Damaged {
+        path: Option<PathBuf>,
+        /// What was found, in words.
+        why: String,
+        /// The counts over the whole capture.
+        stats: Box<CaptureStats>,
+    },
     /// A payload handed to the writer is longer than the `u16` length field
     /// can describe.
     #[error("{}: record {record}: payload of {length} bytes does not fit the u16 length field",
@@ -172,11 +245,38 @@ fn read_full<R: Read>(reader: &mut R, buf: &mut [u8]) -> io::Result<usize> {
     Ok(filled)
 }
 
+/// The compressed stream under the decoder: remembers the frame
+/// descriptor's FLG byte as it goes by.
+struct Tap<R> {
+    inner: R,
+    consumed: u64,
+    flg: Option<u8>,
+    /// The decoder met the end of the stream. It treats that as the end of
+    /// the frame even without the frame's end mark (a file cut at a block
+    /// boundary), so the reader checks it.
+    eof: bool,
+}
+
+impl<R: Read> Read for Tap<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.eof |= n == 0 && !buf.is_empty();
+        // Byte 4 of the stream is the first frame's FLG byte.
+        if self.consumed <= 4 && self.consumed + n as u64 > 4 && self.flg.is_none() {
+            self.flg = Some(buf[(4 - self.consumed) as usize]);
+        }
+        self.consumed += n as u64;
+        Ok(n)
+    }
+}
+
 /// Streams the records of a capture. Yields `Err` once and then ends if the
 /// content is malformed, except for a record of the wrong length, which is
-/// skipped (its length field says how far) so reading can go on.
+/// skipped (its length field says how far) so reading can go on. Bytes after
+/// the LZ4 frame are an error ([`CaptureError::TrailingBytes`]) after the
+/// last record.
 pub struct CaptureReader<R: Read> {
-    decoder: FrameDecoder<R>,
+    decoder: FrameDecoder<Tap<R>>,
     path: Option<PathBuf>,
     record: u64,
     offset: u64,
@@ -196,7 +296,8 @@ impl CaptureReader<BufReader<File>> {
 impl<R: Read> CaptureReader<R> {
     /// Reads a capture from an LZ4-compressed stream.
     pub fn new(reader: R) -> Self {
-        CaptureReader { decoder: FrameDecoder::new(reader), path: None, record: 0, offset: 0, done: false }
+        let tap = Tap { inner: reader, consumed: 0, flg: None, eof: false };
+        CaptureReader { decoder: FrameDecoder::new(tap), path: None, record: 0, offset: 0, done: false }
     }
 
     /// Names the stream's file in error messages.
@@ -213,6 +314,35 @@ impl<R: Read> CaptureReader<R> {
     /// Decompressed bytes consumed so far (also the offset of the next record).
     pub fn offset(&self) -> u64 {
         self.offset
+    }
+
+    /// Whether the LZ4 frame announces a content checksum (known once the
+    /// first record has been read). The decoder verifies it at the frame's
+    /// end: a capture read to its end without error matched it.
+    pub fn has_content_checksum(&self) -> bool {
+        self.decoder.get_ref().flg.is_some_and(|f| f & LZ4_FLG_CONTENT_CHECKSUM != 0)
+    }
+
+    /// At the end of the LZ4 frame: anything left in the stream is an error.
+    fn check_trailing(&mut self) -> Result<(), CaptureError> {
+        let tap = self.decoder.get_ref();
+        if tap.eof && tap.consumed > 0 {
+            return Err(CaptureError::Unterminated { path: self.path.clone(), record: self.record });
+        }
+        let tap = self.decoder.get_mut();
+        let mut head = [0u8; 4];
+        let got = read_full(&mut tap.inner, &mut head).map_err(|e| self.read_error(e))?;
+        if got == 0 {
+            return Ok(());
+        }
+        let tap = self.decoder.get_mut();
+        let rest = io::copy(&mut tap.inner, &mut io::sink()).map_err(|e| self.read_error(e))?;
+        Err(CaptureError::TrailingBytes {
+            path: self.path.clone(),
+            record: self.record,
+            bytes: got as u64 + rest,
+            lz4_frame: got == 4 && head == LZ4_MAGIC,
+        })
     }
 
     fn read_error(&self, e: io::Error) -> CaptureError {
@@ -232,6 +362,7 @@ impl<R: Read> CaptureReader<R> {
         let mut header = [0u8; RECORD_HEADER_LEN];
         let got = read_full(&mut self.decoder, &mut header).map_err(|e| self.read_error(e))?;
         if got == 0 {
+            self.check_trailing()?;
             return Ok(None);
         }
         if got < RECORD_HEADER_LEN {
@@ -312,9 +443,10 @@ impl CaptureWriter<BufWriter<File>> {
 }
 
 impl<W: Write> CaptureWriter<W> {
-    /// Writes a capture into a stream.
+    /// Writes a capture into a stream, with the LZ4 content checksum.
     pub fn new(writer: W) -> Self {
-        CaptureWriter { encoder: FrameEncoder::new(writer), path: None, record: 0 }
+        let info = lz4_flex::frame::FrameInfo::new().content_checksum(true);
+        CaptureWriter { encoder: FrameEncoder::with_frame_info(info, writer), path: None, record: 0 }
     }
 
     /// Names the stream's file in error messages.
@@ -402,6 +534,19 @@ pub struct CaptureStats {
     pub clutch_released_frames: u64,
     /// Records whose dropped flag is set.
     pub dropped_flagged: u64,
+    /// Longest step backwards in time, ns.
+    #[serde(default)]
+    pub step_backward_ns_max: u64,
+    /// Steps backwards longer than [`MAX_STEP_BACKWARD_NS`].
+    #[serde(default)]
+    pub steps_backward_over_limit: u64,
+    /// Gaps forwards longer than [`MAX_GAP_NS`].
+    #[serde(default)]
+    pub gaps_over_limit: u64,
+    /// Whether the file carries an LZ4 content checksum (set by [`load`]
+    /// and [`parse`]; a loaded capture matched it).
+    #[serde(default)]
+    pub content_checksum: bool,
 }
 
 impl CaptureStats {
@@ -410,9 +555,14 @@ impl CaptureStats {
         if self.frames == 0 {
             self.first_ns = record.time_ns;
         } else if record.time_ns < self.last_ns {
+            let back = self.last_ns - record.time_ns;
             self.time_steps_backward += 1;
+            self.step_backward_ns_max = self.step_backward_ns_max.max(back);
+            self.steps_backward_over_limit += u64::from(back > MAX_STEP_BACKWARD_NS);
         } else {
-            self.gap_ns_max = self.gap_ns_max.max(record.time_ns - self.last_ns);
+            let gap = record.time_ns - self.last_ns;
+            self.gap_ns_max = self.gap_ns_max.max(gap);
+            self.gaps_over_limit += u64::from(gap > MAX_GAP_NS);
         }
         self.last_ns = record.time_ns;
         self.frames += 1;
@@ -433,6 +583,51 @@ impl CaptureStats {
         let mut stats = CaptureStats::default();
         records.iter().for_each(|r| stats.push(r));
         stats
+    }
+
+    /// Why a capture with these counts is refused, by the rule in the
+    /// module docs; `None` when it is accepted.
+    pub fn refusal(&self) -> Option<String> {
+        let mut why = Vec::new();
+        if self.checksum_failures > 0 && !self.content_checksum {
+            why.push(format!(
+                "{} of {} frames have a wrong ITP checksum and the file has no LZ4 content checksum to show it is intact",
+                self.checksum_failures, self.frames
+            ));
+        }
+        if self.steps_backward_over_limit > 0 {
+            why.push(format!(
+                "{} time step(s) backwards of more than {} s (longest {:.3} s)",
+                self.steps_backward_over_limit,
+                MAX_STEP_BACKWARD_NS / 1_000_000_000,
+                self.step_backward_ns_max as f64 * 1e-9
+            ));
+        }
+        if self.gaps_over_limit > 0 {
+            why.push(format!(
+                "{} gap(s) of more than {} s between records (longest {:.3} s)",
+                self.gaps_over_limit,
+                MAX_GAP_NS / 1_000_000_000,
+                self.gap_ns_max as f64 * 1e-9
+            ));
+        }
+        (!why.is_empty()).then(|| why.join("; "))
+    }
+
+    /// What is accepted but worth saying, one line each.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if self.checksum_failures > 0 && self.content_checksum {
+            w.push(format!("{} frames were recorded with a wrong ITP checksum", self.checksum_failures));
+        }
+        if self.time_steps_backward > 0 && self.steps_backward_over_limit == 0 {
+            w.push(format!(
+                "{} time step(s) backwards (longest {:.6} s); replayed as no wait",
+                self.time_steps_backward,
+                self.step_backward_ns_max as f64 * 1e-9
+            ));
+        }
+        w
     }
 
     /// Time from the first record to the last, ns.
@@ -467,21 +662,35 @@ pub struct Capture {
     pub stats: CaptureStats,
 }
 
-/// Reads a whole capture file. Any malformed record is an error; so is a file
-/// without records.
+/// Reads a whole capture file and checks it by the rule in the module docs:
+/// any malformed record, bytes after the LZ4 frame, a file without records,
+/// or damage ([`CaptureStats::refusal`]) is an error.
 pub fn load(path: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     let path = path.as_ref();
+    read_checked(CaptureReader::open(path)?, Some(path))
+}
+
+/// [`load`] for a capture already in memory.
+pub fn parse(bytes: &[u8]) -> Result<Capture, CaptureError> {
+    read_checked(CaptureReader::new(bytes), None)
+}
+
+fn read_checked<R: Read>(mut reader: CaptureReader<R>, path: Option<&Path>) -> Result<Capture, CaptureError> {
     let mut records = Vec::new();
     let mut stats = CaptureStats::default();
-    for record in CaptureReader::open(path)? {
+    for record in reader.by_ref() {
         let record = record?;
         stats.push(&record);
         records.push(record);
     }
     if records.is_empty() {
-        return Err(CaptureError::Empty { path: Some(path.to_path_buf()) });
+        return Err(CaptureError::Empty { path: path.map(Path::to_path_buf) });
     }
-    Ok(Capture { path: path.to_path_buf(), records, stats })
+    stats.content_checksum = reader.has_content_checksum();
+    if let Some(why) = stats.refusal() {
+        return Err(CaptureError::Damaged { path: path.map(Path::to_path_buf), why, stats: Box::new(stats) });
+    }
+    Ok(Capture { path: path.map(Path::to_path_buf).unwrap_or_default(), records, stats })
 }
 
 #[cfg(test)]

@@ -3,6 +3,7 @@
 //! Not part of the sans-IO core: it reads `/proc/stat`.
 
 pub mod isolate;
+pub mod record;
 
 /// The set of this machine's cores without `core`, for keeping threads off
 /// a busy-polling loop's core; `None` where no other core exists.

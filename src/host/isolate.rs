@@ -15,9 +15,15 @@
 //! something else changed it meanwhile. Threads bound to that core alone
 //! (per-CPU kernel threads, the timer interrupt) stay: nothing can move
 //! them. Threads created while isolated inherit their parent's narrowed
-//! mask and keep it. This is what `tuna --isolate` or a `cpuset` partition
-//! does, for one run, without a reboot (`isolcpus=` and `nohz_full=` do it
-//! for good, and better).
+//! mask; restoring widens them again (see [`super::record`]). This is what
+//! `tuna --isolate` or a `cpuset` partition does, for one run, without a
+//! reboot (`isolcpus=` and `nohz_full=` do it for good, and better).
+//!
+//! Nothing of it outlives the run, whatever is killed: every change is in a
+//! host-wide record before it is made, a guardian process restores when
+//! the record's owners all die, and `netfi restore` (run first by every
+//! `netfi run`) restores any record whose owners and guardian were all
+//! killed ([`super::record`]).
 //!
 //! Moving other users' threads and interrupts needs root or CAP_SYS_NICE;
 //! without it only the caller's own processes move, and the summary says
@@ -54,22 +60,59 @@ pub struct IsolationSummary {
     /// Set by [`Isolation::restore`]: how many changes were undone.
     #[serde(default)]
     pub restored: Option<usize>,
+    /// Set by [`Isolation::restore`]: threads started during the run that
+    /// had inherited a narrowed mask, widened again.
+    #[serde(default)]
+    pub threads_widened: Option<usize>,
+    /// Whether the core was cleared at all (false: see `warnings`).
+    #[serde(default = "yes")]
+    pub cleared: bool,
+    /// What the user must know: a pin that could not be honoured, no
+    /// guardian, a record that could not be kept.
+    #[serde(default)]
+    pub warnings: Vec<String>,
+    /// The host-wide record of the changes while they last.
+    #[serde(default)]
+    pub record: Option<PathBuf>,
+    /// The guardian process watching the record.
+    #[serde(default)]
+    pub guardian_pid: Option<u32>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl IsolationSummary {
+    /// A core that was not cleared, and why.
+    pub fn not_cleared(core: usize, warning: String) -> IsolationSummary {
+        IsolationSummary { core, cleared: false, warnings: vec![warning], ..Default::default() }
+    }
 }
 
 impl std::fmt::Display for IsolationSummary {
     /// One line: `core 1 cleared: 39 threads moved (kernel: kdamond.0 …), 9
     /// bound to it, 22 refused; 18 interrupts moved, 1 refused[; 58 restored]`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if !self.cleared {
+            return write!(f, "nothing cleared: WARNING: {}", self.warnings.join("; WARNING: "));
+        }
         let kernel = if self.kernel_threads_moved.is_empty() { "none".to_string() } else { self.kernel_threads_moved.join(" ") };
         write!(
             f,
             "core {} cleared: {} threads moved (kernel: {kernel}), {} bound to it, {} refused; {} interrupts moved, {} refused",
             self.core, self.threads_moved, self.threads_bound_to_core, self.threads_refused, self.irqs_moved, self.irqs_refused
         )?;
-        match self.restored {
-            Some(n) => write!(f, "; {n} restored"),
-            None => Ok(()),
+        if let Some(n) = self.restored {
+            write!(f, "; {n} restored")?;
         }
+        if let Some(n) = self.threads_widened.filter(|n| *n > 0) {
+            write!(f, ", {n} threads started during the run widened")?;
+        }
+        for w in &self.warnings {
+            write!(f, "; WARNING: {w}")?;
+        }
+        Ok(())
     }
 }
 
@@ -89,14 +132,18 @@ pub struct IsolationState {
 /// A cleared core; restores on drop.
 #[derive(Debug)]
 pub struct Isolation {
-    state: IsolationState,
     summary: IsolationSummary,
-    /// Where the state is saved while isolated (removed after restoring).
-    state_file: Option<PathBuf>,
+    /// The host-wide record of what was changed (removed after restoring).
+    record: Option<PathBuf>,
     restored: bool,
 }
 
 impl Isolation {
+    /// A core that was not cleared, for the report: `warning` says why.
+    pub fn not_cleared(core: usize, warning: String) -> Isolation {
+        Isolation { summary: IsolationSummary::not_cleared(core, warning), record: None, restored: true }
+    }
+
     pub fn summary(&self) -> &IsolationSummary {
         &self.summary
     }
@@ -104,11 +151,17 @@ impl Isolation {
     /// Puts back every thread, interrupt and workqueue mask changed, and
     /// returns the summary with `restored` set.
     pub fn restore(&mut self) -> IsolationSummary {
-        if !self.restored {
+        if let (false, Some(record)) = (self.restored, &self.record) {
             self.restored = true;
-            self.summary.restored = Some(restore_state(&self.state));
-            if let Some(f) = &self.state_file {
-                let _ = std::fs::remove_file(f);
+            match super::record::restore(record, false, None) {
+                Ok(Some(r)) => {
+                    self.summary.restored = Some(r.undone);
+                    self.summary.threads_widened = Some(r.widened);
+                }
+                // The guardian or `netfi restore` got there first (this
+                // process was taken for dead, or the record was removed).
+                Ok(None) => self.summary.restored = Some(0),
+                Err(e) => self.summary.warnings.push(format!("restoring from {} failed: {e}; run `netfi restore`", record.display())),
             }
         }
         self.summary.clone()
@@ -121,12 +174,20 @@ impl Drop for Isolation {
     }
 }
 
+/// The environment variable through which `netfi run` names itself to the
+/// processes it starts, so that an emulator's record counts the runner
+/// among its owners.
+pub const RUNNER_PID_ENV: &str = "NETFI_RUNNER_PID";
+
 /// Clears `core` of everything that may run elsewhere, except the threads
-/// of the calling process (it places its own). When `state_file` is given,
-/// every change is put on record there *before* it is made (and the record
-/// narrowed to what was made afterwards), so [`restore_from_file`] can undo
-/// it should the caller die at any point without restoring.
-pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolation> {
+/// of the calling process (it places its own). Every change is put on the
+/// host-wide record ([`super::record`]) *before* it is made (and the record
+/// narrowed to what was made afterwards), and a guardian is started, so the
+/// changes are undone should the caller (and the runner that started it,
+/// named by [`RUNNER_PID_ENV`]) die at any point without restoring.
+/// `_state_file` is no longer used (the record is host-wide), and kept for
+/// callers of the earlier interface.
+pub fn isolate(core: usize, _state_file: Option<&Path>) -> std::io::Result<Isolation> {
     let online = online_cpus();
     if !online.contains(&core) {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("core {core} is not online (online: {})", format_list(&online))));
@@ -135,7 +196,17 @@ pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolat
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "only one core is online: nowhere to move anything to"));
     }
     let own = std::process::id() as i32;
-    let mut summary = IsolationSummary { core, ..Default::default() };
+    let mut summary = IsolationSummary { core, cleared: true, ..Default::default() };
+    let dir = super::record::state_dir()?;
+    let me = super::record::Owner::of(own).ok_or_else(|| std::io::Error::other("cannot read this process's start time"))?;
+    let mut owners = vec![me];
+    // SAFETY: getppid has no preconditions.
+    let parent = unsafe { libc::getppid() };
+    if std::env::var(RUNNER_PID_ENV).ok().and_then(|v| v.parse::<i32>().ok()) == Some(parent) {
+        owners.extend(super::record::Owner::of(parent));
+    }
+    let record_path = dir.join(format!("isolation-{own}-{}.json", me.start_ticks));
+    let started_ticks = super::record::now_ticks();
 
     // 1. The plan: every thread, the workqueue mask and every interrupt
     // that may run on `core` and elsewhere.
@@ -186,14 +257,20 @@ pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolat
     // 2. On record before anything moves: restoring a change that was
     // never made is harmless (a thread is put back only while its mask is
     // still the planned one; an interrupt or the workqueues get their own
-    // value again).
+    // value again). The guardian watches the record from now on.
+    let online_list: Vec<usize> = online.iter().copied().collect();
     let save = |state: &IsolationState| -> std::io::Result<()> {
-        match state_file {
-            Some(f) => std::fs::write(f, serde_json::to_vec(state).map_err(std::io::Error::other)?),
-            None => Ok(()),
-        }
+        let record = super::record::Record { owners: owners.clone(), started_ticks, online: online_list.clone(), state: state.clone() };
+        super::record::write(&record_path, &record)
     };
     save(&plan)?;
+    summary.record = Some(record_path.clone());
+    match super::record::spawn_guardian(&record_path) {
+        Ok(pid) => summary.guardian_pid = Some(pid),
+        Err(e) => summary.warnings.push(format!(
+            "no guardian ({e}): if this process and its runner are both killed, the core stays cleared until `netfi restore`"
+        )),
+    }
 
     // 3. The moves.
     let mut state = IsolationState { core, ..Default::default() };
@@ -236,7 +313,22 @@ pub fn isolate(core: usize, state_file: Option<&Path>) -> std::io::Result<Isolat
     summary.refused_examples = refused_names.into_iter().collect();
     // The planned record, a superset, stays if this fails.
     let _ = save(&state);
-    Ok(Isolation { state, summary, state_file: state_file.map(Path::to_path_buf), restored: false })
+    Ok(Isolation { summary, record: Some(record_path), restored: false })
+}
+
+/// Why a process cannot have a core of its own here: it may run on fewer
+/// than two of the online CPUs (it inherited a narrow mask: started under
+/// `taskset`, or by a process that was). `None` when it can.
+pub fn pin_problem() -> Option<String> {
+    let online = online_cpus();
+    let allowed = get_affinity(0).unwrap_or_default();
+    (online.len() >= 2 && allowed.len() < 2).then(|| {
+        format!(
+            "the emulator is not pinned and its core not cleared: this process may run on CPU {} only of {} online (it inherited a narrow CPU mask: started under `taskset`, or left narrowed by a killed run — see `netfi restore`); the emulator's release lateness will suffer; start it with the full mask or pass a core it may use",
+            format_list(&allowed),
+            format_list(&online)
+        )
+    })
 }
 
 /// Undoes what an [`isolate`] that saved its state to `path` changed, when
@@ -249,7 +341,7 @@ pub fn restore_from_file(path: &Path) -> Option<usize> {
     Some(restore_state(&state))
 }
 
-fn restore_state(state: &IsolationState) -> usize {
+pub(crate) fn restore_state(state: &IsolationState) -> usize {
     let mut undone = 0;
     for (tid, before, after) in &state.threads {
         // Only where the mask is still ours: a later change by someone else stands.
@@ -259,13 +351,25 @@ fn restore_state(state: &IsolationState) -> usize {
             undone += 1;
         }
     }
+    // Interrupts and the workqueues likewise: put back only while they
+    // still have the narrowed value this clearing wrote (a change not yet
+    // made, or made since by someone else, stands). Two runs clearing
+    // cores at once thus never restore each other's narrowed values.
+    let online = online_cpus();
+    let narrowed = |before: Option<BTreeSet<usize>>| -> Option<BTreeSet<usize>> {
+        Some(before?.into_iter().filter(|&c| c != state.core && online.contains(&c)).collect())
+    };
     for (irq, before) in &state.irqs {
-        if std::fs::write(irq_list_path(*irq), before).is_ok() {
+        let now = std::fs::read_to_string(irq_list_path(*irq)).ok().and_then(|t| parse_list(t.trim()));
+        if now.is_some() && now == narrowed(parse_list(before)) && std::fs::write(irq_list_path(*irq), before).is_ok() {
             undone += 1;
         }
     }
     if let Some(before) = &state.workqueue {
-        if std::fs::write(WORKQUEUE_MASK, before).is_ok() {
+        let now = std::fs::read_to_string(WORKQUEUE_MASK).ok().and_then(|t| parse_mask(t.trim()));
+        // Narrowed as `isolate` did: the core taken out, nothing else.
+        let ours = parse_mask(before).map(|m| m.into_iter().filter(|&c| c != state.core).collect::<BTreeSet<usize>>());
+        if now.is_some() && now == ours && std::fs::write(WORKQUEUE_MASK, before).is_ok() {
             undone += 1;
         }
     }
@@ -276,7 +380,7 @@ fn irq_list_path(irq: u32) -> PathBuf {
     PathBuf::from(format!("/proc/irq/{irq}/smp_affinity_list"))
 }
 
-fn numeric_entries(dir: &Path) -> Vec<u64> {
+pub(crate) fn numeric_entries(dir: &Path) -> Vec<u64> {
     let Ok(rd) = std::fs::read_dir(dir) else { return Vec::new() };
     rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok()).collect()
 }
@@ -296,14 +400,17 @@ fn comm(tid: i32) -> String {
     std::fs::read_to_string(format!("/proc/{tid}/comm")).map(|s| s.trim().to_string()).unwrap_or_else(|_| format!("tid {tid}"))
 }
 
-fn online_cpus() -> BTreeSet<usize> {
+/// The CPUs online (`/sys/devices/system/cpu/online`), whatever this
+/// process's own mask.
+pub fn online_cpus() -> BTreeSet<usize> {
     std::fs::read_to_string("/sys/devices/system/cpu/online")
         .ok()
         .and_then(|t| parse_list(t.trim()))
         .unwrap_or_else(|| core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect())
 }
 
-fn get_affinity(tid: i32) -> Option<BTreeSet<usize>> {
+/// The CPUs thread `tid` (0: the caller) may run on.
+pub fn get_affinity(tid: i32) -> Option<BTreeSet<usize>> {
     // SAFETY: a zeroed cpu_set_t is a valid empty set, filled by the kernel.
     let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
     // SAFETY: `set` is valid for writes of its size.
@@ -314,7 +421,7 @@ fn get_affinity(tid: i32) -> Option<BTreeSet<usize>> {
     Some((0..libc::CPU_SETSIZE as usize).filter(|&c| unsafe { libc::CPU_ISSET(c, &set) }).collect())
 }
 
-fn set_affinity(tid: i32, cpus: &BTreeSet<usize>) -> std::io::Result<()> {
+pub(crate) fn set_affinity(tid: i32, cpus: &BTreeSet<usize>) -> std::io::Result<()> {
     // SAFETY: as in `get_affinity`; CPU_SET writes within the set's size.
     let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
     for &c in cpus.iter().filter(|&&c| c < libc::CPU_SETSIZE as usize) {
@@ -454,27 +561,28 @@ mod tests {
             eprintln!("skipped: this process may not run on core {core}");
             return;
         }
-        let dir = std::env::temp_dir().join(format!("netfi-isolate-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let file = dir.join("isolation.json");
-        let mut iso = isolate(core, Some(&file)).expect("isolate");
+        let mut iso = isolate(core, None).expect("isolate");
+        let record = iso.summary().record.clone().expect("a record");
         let moved = get_affinity(pid).unwrap();
         assert!(!moved.contains(&core), "child still allowed on core {core}: {moved:?}");
         assert_eq!(moved.len(), all.len() - 1);
         assert!(iso.summary().threads_moved >= 1);
-        assert!(file.exists());
+        assert!(record.exists());
         let s = iso.restore();
         assert!(s.restored.unwrap() >= 1);
         assert_eq!(get_affinity(pid).unwrap(), all);
-        assert!(!file.exists(), "state file left after restoring");
-        // Restoring from a saved state, as the runner does for a killed emulator.
-        let iso2 = isolate(core, Some(&file)).expect("isolate");
+        assert!(!record.exists(), "record left after restoring");
+        // Restoring from the record, as the guardian or `netfi restore` do.
+        let iso2 = isolate(core, None).expect("isolate");
+        let record = iso2.summary().record.clone().unwrap();
         assert!(!get_affinity(pid).unwrap().contains(&core));
         std::mem::forget(iso2);
-        assert!(restore_from_file(&file).unwrap() >= 1);
+        // Its owner (this process) lives: not an orphan.
+        assert_eq!(super::super::record::restore(&record, true, None).unwrap(), None);
+        let r = super::super::record::restore(&record, true, Some(std::process::id() as i32)).unwrap().unwrap();
+        assert!(r.undone >= 1);
         assert_eq!(get_affinity(pid).unwrap(), all);
-        assert_eq!(restore_from_file(&file), None);
+        assert!(!record.exists());
         drop(child);
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

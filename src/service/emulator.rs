@@ -158,13 +158,14 @@ pub fn run<S: FrameSource, K: FrameSink>(
                 Some(iso)
             }
             Err(e) => {
-                eprintln!("emulator: could not clear core {core}: {e}");
-                None
+                eprintln!("emulator: WARNING: could not clear core {core}: {e}");
+                Some(crate::host::isolate::Isolation::not_cleared(core, format!("could not clear core {core}: {e}")))
             }
         },
         (true, None) => {
-            eprintln!("emulator: --isolate needs a pinned core; nothing cleared");
-            None
+            let why = crate::host::isolate::pin_problem().unwrap_or_else(|| "--isolate needs a pinned core; nothing cleared".into());
+            eprintln!("emulator: WARNING: {why}");
+            Some(crate::host::isolate::Isolation::not_cleared(0, why))
         }
         _ => None,
     };

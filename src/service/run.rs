@@ -96,6 +96,7 @@ fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path)
         .stdout(file.try_clone()?)
         .stderr(file)
         .process_group(0)
+        .env(crate::host::isolate::RUNNER_PID_ENV, std::process::id().to_string())
         .spawn()
         .with_context(|| format!("starting the {role} ({})", exe.display()))?;
     Ok(Proc { role, child, core, log, status: None })
@@ -147,11 +148,9 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     ] {
         let _ = std::fs::remove_file(out.join(stale));
     }
-    // A runner killed while its emulator had cleared a core leaves what was
-    // moved on record here: put it back before anything else.
-    if let Some(n) = crate::host::isolate::restore_from_file(&out.join(crate::service::emulator::ISOLATION_STATE_FILE)) {
-        eprintln!("restored {n} thread/interrupt placement(s) left moved by an earlier run in {}", out.display());
-    }
+    // What killed runs left cleared (their owners and guardian all dead)
+    // is put back before anything else, as `netfi restore` does.
+    restore_orphans(None);
     let scenario_path = out.join("scenario.toml");
     std::fs::write(&scenario_path, spec.to_toml()).with_context(|| format!("writing {}", scenario_path.display()))?;
     let cleaned = crate::service::ipc::cleanup_stale()?;
@@ -174,6 +173,14 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     // four cores or more the console and the simulator get one each too;
     // with fewer they share the rest, and are kept off the emulator's core.
     let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+    // A pin that cannot be honoured is an error when asked for, and a loud
+    // warning (also in the report's isolation line) otherwise.
+    if let Some(c) = args.emulator_core.filter(|c| !cores.contains(c)) {
+        bail!("--emulator-core {c}: this process may only run on CPU(s) {:?} (an inherited CPU mask: `taskset`?)", cores);
+    }
+    if let (None, Some(w)) = (args.emulator_core, crate::host::isolate::pin_problem()) {
+        eprintln!("WARNING: {w}");
+    }
     let emulator_core = args.emulator_core.or((cores.len() >= 2).then(|| cores[cores.len() - 1]));
     let (console_core, simulator_core) = match (args.console_core, args.simulator_core) {
         (None, None) if cores.len() >= 4 && args.emulator_core.is_none() => (Some(cores[cores.len() - 3]), Some(cores[cores.len() - 2])),
@@ -229,7 +236,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     }
     // The emulator's core is cleared unless asked not to (`isolate` only
     // restates the default).
-    if !args.no_isolate && emulator_core.is_some() {
+    if !args.no_isolate {
         emu_args.push(s(&"--isolate"));
     }
     if args.drop_bad_checksum {
@@ -357,10 +364,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let duration_s = (now_ns() - t0) as f64 / 1e9;
     let steal = steal_timer.stop();
     // An emulator that died while its core was cleared could not put back
-    // what it moved; its saved state lets the runner do it.
-    if let Some(n) = crate::host::isolate::restore_from_file(&out.join(crate::service::emulator::ISOLATION_STATE_FILE)) {
-        eprintln!("the emulator ended without restoring its core's placements; restored {n}");
-    }
+    // what it moved; its record lets the runner do it.
+    restore_orphans(Some(std::process::id() as i32));
 
     let console: Option<ConsoleReport> = read_json(&out.join("console.json"));
     let emulator: Option<EmulatorReport> = read_json(&out.join("emulator.json"));
@@ -439,6 +444,19 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
         std::fs::write(extra, &json).with_context(|| format!("writing {}", extra.display()))?;
     }
     Ok(report)
+}
+
+/// Restores the host-wide records of cleared cores whose owners (but
+/// `except`) are all gone, saying what was done.
+fn restore_orphans(except: Option<i32>) {
+    match crate::host::record::restore_orphans(except) {
+        Ok(done) => {
+            for (path, r) in done {
+                eprintln!("restored {} placement(s) a killed process left moved ({} threads widened), from {}", r.undone, r.widened, path.display());
+            }
+        }
+        Err(e) => eprintln!("WARNING: could not look for cleared cores left by killed runs: {e}"),
+    }
 }
 
 /// Per delivered and received frame: the injected delay and the delay the

@@ -31,6 +31,18 @@ pub enum Command {
     /// Export a scenario to another tool's configuration.
     #[command(subcommand)]
     Export(ExportCmd),
+    /// Put back what killed runs left on this host: cleared cores (thread
+    /// masks, interrupt affinities, the workqueue mask) and iceoryx2
+    /// resources of dead processes. Every `netfi run` does this first.
+    Restore(RestoreArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RestoreArgs {
+    /// Act as the guardian of this record: wait until its owners have all
+    /// ended, then restore from it (started by the clearing process).
+    #[arg(long, hide = true, value_name = "RECORD")]
+    pub guard: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -176,7 +188,9 @@ pub struct ExportNetemArgs {
     /// Frame rate the queue limit is sized for, in Hz.
     #[arg(long, default_value_t = 1000.0)]
     pub rate_hz: f64,
-    /// Directory where tc looks for distribution tables.
-    #[arg(long, default_value = "/usr/lib/tc")]
-    pub table_dir: PathBuf,
+    /// Directory where tc looks for distribution tables (default: the
+    /// script looks for it where it runs: the distribution's usual places,
+    /// those found on this machine first; `TC_LIB_DIR` wins when set).
+    #[arg(long)]
+    pub table_dir: Option<PathBuf>,
 }

@@ -3,6 +3,7 @@
 mod cli;
 mod export;
 mod fit;
+mod restore;
 mod scenario;
 
 use clap::Parser;
@@ -23,6 +24,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
+        cli::Command::Restore(a) => restore::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

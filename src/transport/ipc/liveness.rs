@@ -12,7 +12,7 @@ use core::time::Duration;
 use iceoryx2::node::{NodeCleanupFailure, NodeListFailure, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Node, NodeState};
 
-use super::{init_log_level, Ipc, IpcConfig, Role, RunId, FILE_PREFIX};
+use super::{init_log_level, user_prefix, Ipc, IpcConfig, Role, RunId, FILE_PREFIX};
 
 /// Longest wait for another process, or thread, that is removing a dead node
 /// at the same time; only spent when that happens.
@@ -180,9 +180,13 @@ pub fn cleanup_dead_runs(
     mut select: impl FnMut(&RunId) -> bool,
 ) -> Result<Vec<(RunId, CleanupReport)>, CleanupError> {
     init_log_level();
-    let defaults = iceoryx2::config::Config::default();
-    let node_dir = defaults.global.node_dir();
-    let monitor_suffix = defaults.global.node.monitor_suffix;
+    let any = IpcConfig::new(RunId::new("any").expect("a valid run id"));
+    let node_dir = any.iceoryx2().global.node_dir();
+    let monitor_suffix = any.iceoryx2().global.node.monitor_suffix;
+    // Management segments of runs with no node left (killed runs, or
+    // earlier versions of netfi), older than a minute so that a run just
+    // starting is not touched.
+    remove_stale_mgmt_segments();
     let entries = match std::fs::read_dir(node_dir.as_str()) {
         Ok(entries) => entries,
         // No node was ever created on this host.
@@ -203,7 +207,13 @@ pub fn cleanup_dead_runs(
     runs.into_values()
         .filter(|run| select(run))
         .map(|run| {
-            let report = cleanup_dead_nodes(&IpcConfig::new(run.clone()))?;
+            let config = IpcConfig::new(run.clone());
+            let report = cleanup_dead_nodes(&config)?;
+            // A run whose processes were all killed: its management segment
+            // goes with its last node.
+            if report.alive == 0 && report.undetermined == 0 {
+                remove_mgmt_segment_if_unused(&config);
+            }
             Ok((run, report))
         })
         .collect()
@@ -212,12 +222,90 @@ pub fn cleanup_dead_runs(
 /// The run id in a node monitor file name
 /// `netfi_<run>_<node id><suffix>`, if it is one.
 fn run_of_monitor_file(file_name: &str, suffix: &str) -> Option<RunId> {
-    let middle = file_name.strip_prefix(FILE_PREFIX)?.strip_suffix(suffix)?;
+    let middle = file_name.strip_prefix(&user_prefix())?.strip_suffix(suffix)?;
     let (run, node_id) = middle.rsplit_once('_')?;
     if node_id.is_empty() || !node_id.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
     RunId::new(run).ok()
+}
+
+/// The suffix iceoryx2 gives its per-prefix management segment.
+const MGMT_SUFFIX: &str = ".global_mgmt";
+
+/// Removes the management segment of the run of `config` when no node of
+/// the run is left (alive or undetermined).
+pub(super) fn remove_mgmt_segment_if_unused(config: &IpcConfig) {
+    let mut in_use = 0usize;
+    let listed = Node::<Ipc>::list(config.iceoryx2(), |state| {
+        if !matches!(state, NodeState::Dead(_)) {
+            in_use += 1;
+        }
+        CallbackProgression::Continue
+    });
+    if listed.is_err() || in_use > 0 {
+        return;
+    }
+    remove_shm(|name| name.starts_with(config.prefix()) && name.ends_with(MGMT_SUFFIX), None);
+}
+
+/// Removes this user's management segments of netfi runs that have no node
+/// files, modified more than a minute ago.
+fn remove_stale_mgmt_segments() {
+    let any = IpcConfig::new(RunId::new("any").expect("a valid run id"));
+    let node_dir = any.iceoryx2().global.node_dir();
+    let live: Vec<String> = std::fs::read_dir(node_dir.as_str())
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).collect())
+        .unwrap_or_default();
+    let mine = user_prefix();
+    remove_shm(
+        |name| {
+            name.starts_with(FILE_PREFIX)
+                && name.ends_with(MGMT_SUFFIX)
+                // This user's runs whose nodes are all gone, or the
+                // unnamed-per-user files of earlier versions.
+                && match name.strip_prefix(&mine) {
+                    Some(rest) => {
+                        let run_prefix = &name[..mine.len() + rest.find('_').map_or(rest.len(), |i| i + 1)];
+                        !live.iter().any(|f| f.starts_with(run_prefix))
+                    }
+                    None => !name.starts_with("netfi_u") && !legacy_run_alive(name),
+                }
+        },
+        Some(std::time::Duration::from_secs(60)),
+    );
+}
+
+/// Whether an earlier version's run (files `netfi_<run>_…` under iceoryx2's
+/// shared `/tmp/iceoryx2/`) named by the segment `name` still has node
+/// files.
+fn legacy_run_alive(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix(FILE_PREFIX) else { return false };
+    let run_prefix = &name[..FILE_PREFIX.len() + rest.find('_').map_or(rest.len(), |i| i + 1)];
+    let legacy = iceoryx2::config::Config::default().global.node_dir();
+    std::fs::read_dir(legacy.as_str())
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).any(|f| f.starts_with(run_prefix)))
+        .unwrap_or(false)
+}
+
+/// Removes this user's files in `/dev/shm` whose names `select` picks,
+/// modified at least `older_than` ago when given.
+fn remove_shm(select: impl Fn(&str) -> bool, older_than: Option<std::time::Duration>) {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    let Ok(rd) = std::fs::read_dir(super::node::SHM_DIR) else { return };
+    for e in rd.filter_map(|e| e.ok()) {
+        let Some(name) = e.file_name().to_str().map(str::to_owned) else { continue };
+        if !select(&name) {
+            continue;
+        }
+        let Ok(meta) = std::fs::symlink_metadata(e.path()) else { continue };
+        let old_enough = older_than.is_none_or(|d| meta.modified().ok().and_then(|m| m.elapsed().ok()).is_some_and(|age| age >= d));
+        if meta.is_file() && meta.uid() == uid && old_enough {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
 }
 
 fn list_error(run: &str, e: &std::io::Error) -> CleanupError {
@@ -279,13 +367,16 @@ mod tests {
     #[test]
     fn monitor_file_names_yield_their_run() {
         let suffix = ".node_monitor";
-        let run = |n: &str| run_of_monitor_file(n, suffix).map(|r| r.as_str().to_owned());
+        let p = user_prefix();
+        let run = |n: &str| run_of_monitor_file(&n.replacen("netfi_", &p, 1), suffix).map(|r| r.as_str().to_owned());
         assert_eq!(run("netfi_r1_123.node_monitor").as_deref(), Some("r1"));
         assert_eq!(run("netfi_a_b-c_9.node_monitor").as_deref(), Some("a_b-c"));
         assert_eq!(run("netfi__9.node_monitor"), None);
         assert_eq!(run("netfi_r1_12x.node_monitor"), None);
         assert_eq!(run("netfi_r1_.node_monitor"), None);
         assert_eq!(run("iox2_123.node_monitor"), None);
+        // Another user's files are not this user's runs.
+        assert_eq!(run_of_monitor_file("netfi_u4294967294_r1_1.node_monitor", suffix), None);
         assert_eq!(run("netfi_r1_123.details"), None);
     }
 }

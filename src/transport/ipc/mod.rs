@@ -34,7 +34,16 @@
 //! [`IpcConfig`] builds an `iceoryx2::config::Config` from its defaults in
 //! code, never from a file (iceoryx2 would otherwise look for
 //! `./config/iceoryx2.toml`, a user and a system file), with the file prefix
-//! `netfi_<run>_`. The automatic dead-node clean-ups of iceoryx2 are switched
+//! `netfi_u<uid>_<run>_` and a root directory of the user's own,
+//! `/tmp/netfi-iceoryx2-<uid>/` (mode 0700, checked to be the user's and
+//! closed to others before use), instead of iceoryx2's shared
+//! `/tmp/iceoryx2/`: several users of one machine run side by side, none
+//! can write into another's files, and a file another user planted under
+//! this user's names is refused at once rather than waited on
+//! ([`NodeOpenError::Foreign`]). The shared-memory segments in `/dev/shm`
+//! are made private to the user (iceoryx2 creates its global management
+//! segment world-writable), and the last node of a run to close removes
+//! the run's management segment, so a run leaves nothing in `/dev/shm`. The automatic dead-node clean-ups of iceoryx2 are switched
 //! off: they fall back to the file-based global configuration for nodes whose
 //! details are unreadable. Clean-up is explicit instead
 //! ([`cleanup_dead_nodes`], [`IpcNode::reap_dead_peers`]) and reported.
@@ -103,8 +112,48 @@ const SUBSCRIBER_MAX_BORROWED_SAMPLES: usize = 1;
 /// Frames replayed to a late subscriber: none, commands are never replayed.
 const HISTORY_FRAMES: usize = 0;
 
-/// Prefix of every iceoryx2 file of netfi; the run id and `_` follow.
+/// Prefix of every iceoryx2 file of netfi; `u<uid>_`, the run id and `_`
+/// follow.
 const FILE_PREFIX: &str = "netfi_";
+
+/// This user's file prefix: `netfi_u<uid>_`.
+fn user_prefix() -> String {
+    // SAFETY: geteuid has no preconditions.
+    format!("{FILE_PREFIX}u{}_", unsafe { libc::geteuid() })
+}
+
+/// This user's iceoryx2 root directory: `/tmp/netfi-iceoryx2-<uid>/`.
+pub fn user_root_dir() -> std::path::PathBuf {
+    // SAFETY: geteuid has no preconditions.
+    std::path::PathBuf::from(format!("/tmp/netfi-iceoryx2-{}/", unsafe { libc::geteuid() }))
+}
+
+/// Creates this user's root directory (0700) if missing and checks that it
+/// is a real directory of this user that nobody else may enter.
+fn ensure_user_root_dir() -> std::io::Result<std::path::PathBuf> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    let dir = user_root_dir();
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(e),
+    }
+    let meta = std::fs::symlink_metadata(&dir)?;
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o077 != 0 {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::PermissionDenied,
+            format!(
+                "{} is not a private directory of uid {uid} (owner {}, mode {:o}); remove it",
+                dir.display(),
+                meta.uid(),
+                meta.mode() & 0o7777
+            ),
+        ));
+    }
+    Ok(dir)
+}
 
 /// Identifier of one run: 1 to [`RunId::MAX_LEN`] ASCII letters, digits,
 /// `_` or `-`. It names every iceoryx2 resource of the run, so runs with
@@ -285,11 +334,16 @@ impl IpcConfig {
     /// defaults; no configuration file is read.
     pub fn new(run: RunId) -> Self {
         let mut config = Config::default();
-        let prefix = format!("{FILE_PREFIX}{run}_");
+        let prefix = format!("{}{run}_", user_prefix());
         // A validated run id is at most 48 bytes of [A-Za-z0-9_-], which is
         // always a valid file name.
         config.global.prefix = FileName::new(prefix.as_bytes())
             .expect("a validated run id always forms a valid iceoryx2 file prefix");
+        let root = user_root_dir();
+        config.global.set_root_path(
+            &iceoryx2::prelude::Path::new(root.to_string_lossy().as_bytes())
+                .expect("/tmp/netfi-iceoryx2-<uid>/ is always a valid path"),
+        );
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
         config.global.service.cleanup_dead_nodes_on_open = false;
@@ -319,7 +373,8 @@ impl IpcConfig {
         &self.run
     }
 
-    /// The file prefix of every iceoryx2 resource of the run (`netfi_<run>_`).
+    /// The file prefix of every iceoryx2 resource of the run
+    /// (`netfi_u<uid>_<run>_`).
     pub fn prefix(&self) -> &str {
         self.iceoryx2.global.prefix.as_str()
     }
@@ -450,7 +505,12 @@ mod tests {
     #[test]
     fn config_is_explicit_and_prefixed_per_run() {
         let config = IpcConfig::new(RunId::new("r1").unwrap());
-        assert_eq!(config.prefix(), "netfi_r1_");
+        let uid = unsafe { libc::geteuid() };
+        assert_eq!(config.prefix(), format!("netfi_u{uid}_r1_"));
+        assert_eq!(
+            config.iceoryx2().global.root_path().to_string(),
+            format!("/tmp/netfi-iceoryx2-{uid}/")
+        );
         assert_eq!(config.service_name(Channel::Console), "netfi/r1/console");
         assert_eq!(config.node_name(Role::Simulator), "netfi/r1/simulator");
         assert_eq!(

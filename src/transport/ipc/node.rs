@@ -2,6 +2,8 @@
 //! endpoints, and its view of signals.
 
 use core::time::Duration;
+use std::mem::ManuallyDrop;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use iceoryx2::node::{Node, NodeCreationFailure, NodeWaitFailure};
@@ -20,7 +22,9 @@ static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
 /// endpoints from it.
 #[derive(Debug)]
 pub struct IpcNode {
-    node: Node<Ipc>,
+    /// Dropped by hand first in `Drop`, so the run's last node can then
+    /// remove the run's management segment.
+    node: ManuallyDrop<Node<Ipc>>,
     config: IpcConfig,
     role: Role,
     startup_cleanup: CleanupReport,
@@ -40,8 +44,34 @@ pub enum NodeOpenError {
         #[source]
         source: CleanupError,
     },
+    /// This user's iceoryx2 root directory (`/tmp/netfi-iceoryx2-<uid>/`)
+    /// cannot be created, or is not a private directory of this user.
+    #[error("cannot open the {role} node of run `{run}`: {source}")]
+    RootDir {
+        /// The role of the node being opened.
+        role: Role,
+        /// The run.
+        run: String,
+        /// What is wrong with the directory.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A shared-memory file with this run's names belongs to another user
+    /// (planted, or left by a version that did not name files per user):
+    /// iceoryx2 would wait on it, or share it; refused at once.
+    #[error("cannot open the {role} node of run `{run}`: {} belongs to uid {uid}, not to this user; remove it or use another run id", path.display())]
+    Foreign {
+        /// The role of the node being opened.
+        role: Role,
+        /// The run.
+        run: String,
+        /// The file.
+        path: PathBuf,
+        /// Its owner.
+        uid: u32,
+    },
     /// iceoryx2 could not create the node (permissions on its directories
-    /// under `/tmp/iceoryx2`, or a corrupted system).
+    /// under `/tmp/netfi-iceoryx2-<uid>`, or a corrupted system).
     #[error("cannot create the {role} node of run `{run}` (iceoryx2: {source})")]
     Create {
         /// The role of the node being opened.
@@ -64,6 +94,10 @@ impl IpcNode {
     pub fn open(config: &IpcConfig, role: Role) -> Result<Self, NodeOpenError> {
         init_log_level();
         let run = config.run_id().to_string();
+        super::ensure_user_root_dir().map_err(|source| NodeOpenError::RootDir { role, run: run.clone(), source })?;
+        if let Some((path, uid)) = foreign_shm(config.prefix()) {
+            return Err(NodeOpenError::Foreign { role, run, path, uid });
+        }
         let startup_cleanup =
             cleanup_dead_nodes(config).map_err(|source| NodeOpenError::Cleanup {
                 role,
@@ -83,7 +117,7 @@ impl IpcNode {
             .map_err(|source| NodeOpenError::Create { role, run, source })?;
 
         let this = Self {
-            node,
+            node: ManuallyDrop::new(node),
             config: config.clone(),
             role,
             startup_cleanup,
@@ -92,6 +126,7 @@ impl IpcNode {
         // first shared-memory allocation, so that Ctrl-C behaves the same
         // in every process from here on.
         this.termination_requested();
+        make_private(config.prefix());
         Ok(this)
     }
 
@@ -113,13 +148,17 @@ impl IpcNode {
     /// Opens the publishing end of `channel`, creating the channel if this
     /// process is the first to use it.
     pub fn publisher(&self, channel: Channel) -> Result<FramePublisher, PublisherOpenError> {
-        FramePublisher::open(&self.node, &self.config, channel)
+        let p = FramePublisher::open(&self.node, &self.config, channel);
+        make_private(self.config.prefix());
+        p
     }
 
     /// Opens a subscribing end of `channel`, creating the channel if this
     /// process is the first to use it.
     pub fn subscriber(&self, channel: Channel) -> Result<FrameSubscriber, SubscriberOpenError> {
-        FrameSubscriber::open(&self.node, &self.config, channel)
+        let s = FrameSubscriber::open(&self.node, &self.config, channel);
+        make_private(self.config.prefix());
+        s
     }
 
     /// Finds the nodes of this run whose process died without cleaning up
@@ -155,6 +194,53 @@ impl IpcNode {
                 true
             }
             Ok(()) | Err(NodeWaitFailure::Interrupt) => false,
+        }
+    }
+}
+
+impl Drop for IpcNode {
+    fn drop(&mut self) {
+        // SAFETY: the node is dropped exactly once, here, and not used after.
+        unsafe { ManuallyDrop::drop(&mut self.node) };
+        // The last node of the run removes the run's management segment,
+        // which iceoryx2 keeps for good (one file per run otherwise).
+        super::liveness::remove_mgmt_segment_if_unused(&self.config);
+    }
+}
+
+/// Where POSIX shared memory lives on Linux.
+pub(super) const SHM_DIR: &str = "/dev/shm";
+
+/// A file in `/dev/shm` with `prefix` that another user owns.
+fn foreign_shm(prefix: &str) -> Option<(PathBuf, u32)> {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    std::fs::read_dir(SHM_DIR).ok()?.filter_map(|e| e.ok()).find_map(|e| {
+        let name = e.file_name();
+        if !name.to_str().is_some_and(|n| n.starts_with(prefix)) {
+            return None;
+        }
+        let meta = std::fs::symlink_metadata(e.path()).ok()?;
+        (meta.uid() != uid).then(|| (e.path(), meta.uid()))
+    })
+}
+
+/// Takes group and other permissions off this user's shared-memory files
+/// with `prefix` (iceoryx2 creates the management segment 0666): the
+/// processes of a run are all this user's.
+fn make_private(prefix: &str) {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    let Ok(rd) = std::fs::read_dir(SHM_DIR) else { return };
+    for e in rd.filter_map(|e| e.ok()) {
+        if !e.file_name().to_str().is_some_and(|n| n.starts_with(prefix)) {
+            continue;
+        }
+        let Ok(meta) = std::fs::symlink_metadata(e.path()) else { continue };
+        if meta.is_file() && meta.uid() == uid && meta.mode() & 0o077 != 0 {
+            let _ = std::fs::set_permissions(e.path(), std::fs::Permissions::from_mode(meta.mode() & 0o700));
         }
     }
 }

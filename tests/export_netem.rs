@@ -1,0 +1,155 @@
+//! `netfi export netem` with hostile input: the script it writes is meant to
+//! run as root, so nothing taken from the command line or a scenario file
+//! may run as a command. Each script is run by `sh` with a stand-in `tc`
+//! that records its arguments.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn netfi(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
+}
+
+struct Dir(PathBuf);
+
+impl Drop for Dir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn scratch(name: &str) -> Dir {
+    let d = std::env::temp_dir().join(format!("netfi-export-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(d.join("bin")).unwrap();
+    std::fs::create_dir_all(d.join("tables")).unwrap();
+    // A `tc` that writes each argument on a line of its own.
+    let tc = d.join("bin/tc");
+    std::fs::write(&tc, "#!/bin/sh\nfor a in \"$@\"; do printf '%s\\n' \"$a\"; done > \"$NETFI_TC_ARGS\"\n").unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&tc, std::fs::Permissions::from_mode(0o755)).unwrap();
+    Dir(d)
+}
+
+/// Runs `script` in `dir` (its working directory, where an injected
+/// command would leave its mark) and returns tc's arguments.
+fn run_script(dir: &Path, script: &[u8], table_dir: Option<&Path>) -> Vec<String> {
+    let path = dir.join("netem.sh");
+    std::fs::write(&path, script).unwrap();
+    let mut cmd = Command::new("sh");
+    cmd.arg(&path)
+        .current_dir(dir)
+        .env("PATH", format!("{}:{}", dir.join("bin").display(), std::env::var("PATH").unwrap_or_default()))
+        .env("NETFI_TC_ARGS", dir.join("tc.args"))
+        .env_remove("TC_LIB_DIR");
+    if let Some(t) = table_dir {
+        cmd.env("TC_LIB_DIR", t);
+    }
+    let out = cmd.output().unwrap();
+    assert!(out.status.success(), "script failed: {}\n{}", String::from_utf8_lossy(&out.stderr), String::from_utf8_lossy(script));
+    let args = std::fs::read_to_string(dir.join("tc.args")).unwrap();
+    args.lines().map(str::to_owned).collect()
+}
+
+fn marks(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with("PWNED"))
+        .collect()
+}
+
+#[test]
+fn hostile_interface_names_reach_tc_as_one_word_and_run_nothing() {
+    let d = scratch("dev");
+    // Legal for the kernel (no `/`, `:`, white space; at most 15 bytes)
+    // and each a command for an unquoting shell.
+    for dev in ["e;>PWNED1", "$(>PWNED2)", "`>PWNED3`", "x'&&>PWNED5", "a\"b$c", "-;>PWNED4", "e;touch PWNED"] {
+        if dev.contains(' ') {
+            // White space is not an interface name: refused outright.
+            let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
+            assert!(!out.status.success(), "{dev:?} accepted");
+            assert!(String::from_utf8_lossy(&out.stderr).contains("interface name"), "{dev:?}");
+            continue;
+        }
+        let out = netfi(&["export", "netem", "PLM-1", &format!("--dev={dev}")]);
+        assert!(out.status.success(), "{dev:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let args = run_script(&d.0, &out.stdout, None);
+        assert_eq!(args[..5], ["qdisc", "replace", "dev", dev, "root"], "{dev:?}");
+        assert!(marks(&d.0).is_empty(), "{dev:?} ran a command: {:?}", marks(&d.0));
+    }
+}
+
+#[test]
+fn interface_names_follow_the_kernels_grammar() {
+    for (dev, says) in [
+        ("", "1 to 15 bytes"),
+        ("sixteen-bytes-xx", "1 to 15 bytes"),
+        ("a/b", "'/'"),
+        ("a:1", "':'"),
+        ("a\tb", "'\\t'"),
+        ("a\nb", "'\\n'"),
+        ("..", "not interface names"),
+    ] {
+        let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
+        assert!(!out.status.success(), "{dev:?} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{dev:?}: {err}");
+    }
+    let out = netfi(&["export", "netem", "PLM-1", "--dev", "fifteen-bytes-x"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn a_hostile_scenario_name_stays_in_its_comment() {
+    let d = scratch("name");
+    let file = d.0.join("s.toml");
+    std::fs::write(&file, "name = \"x\\ntouch PWNED5\\r\\ntouch PWNED6 #\"\n[[stage]]\nmodel = \"bernoulli\"\np = 0.1\n").unwrap();
+    let out = netfi(&["export", "netem", file.to_str().unwrap(), "--dev", "veth0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = String::from_utf8(out.stdout.clone()).unwrap();
+    assert!(!script.lines().any(|l| l.starts_with("touch")), "{script}");
+    let args = run_script(&d.0, &out.stdout, None);
+    assert_eq!(args[..4], ["qdisc", "replace", "dev", "veth0"]);
+    assert!(marks(&d.0).is_empty(), "{:?}", marks(&d.0));
+}
+
+#[test]
+fn a_hostile_table_dir_is_one_word_and_the_table_lands_in_it() {
+    let d = scratch("table");
+    let hostile = d.0.join("tables/t'; touch PWNED7; '$(touch PWNED8)");
+    std::fs::create_dir_all(&hostile).unwrap();
+    let out = netfi(&["export", "netem", "DLM-2", "--dev", "veth0", "--table-dir", hostile.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let args = run_script(&d.0, &out.stdout, None);
+    let dist = args.iter().skip_while(|a| *a != "distribution").nth(1).unwrap().clone();
+    assert!(hostile.join(format!("{dist}.dist")).is_file(), "table not written into {}", hostile.display());
+    assert!(marks(&d.0).is_empty(), "{:?}", marks(&d.0));
+    let script = String::from_utf8_lossy(&out.stdout);
+    assert!(script.contains("# To remove it: tc qdisc del dev veth0 root"), "{script}");
+}
+
+#[test]
+fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
+    let d = scratch("find");
+    let out = netfi(&["export", "netem", "DLM-2", "--dev", "veth0"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = String::from_utf8_lossy(&out.stdout);
+    assert!(script.contains("/usr/lib/x86_64-linux-gnu/tc") && script.contains("/usr/lib/tc"), "{script}");
+    // TC_LIB_DIR, when set, wins over the search.
+    let tables = d.0.join("tables");
+    run_script(&d.0, &out.stdout, Some(&tables));
+    assert_eq!(std::fs::read_dir(&tables).unwrap().count(), 1);
+    // Where no directory of the list has tc's tables, the script stops
+    // before tc runs, naming where it looked.
+    if !["/usr/lib/x86_64-linux-gnu/tc", "/usr/lib/aarch64-linux-gnu/tc", "/usr/lib64/tc", "/usr/lib/tc"]
+        .iter()
+        .any(|p| Path::new(p).join("normal.dist").is_file())
+    {
+        let path = d.0.join("netem.sh");
+        std::fs::write(&path, &out.stdout).unwrap();
+        let o = Command::new("sh").arg(&path).env_remove("TC_LIB_DIR").env("PATH", d.0.join("bin")).output().unwrap();
+        assert!(!o.status.success());
+        assert!(String::from_utf8_lossy(&o.stderr).contains("looked in"));
+    }
+}

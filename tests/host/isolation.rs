@@ -1,0 +1,298 @@
+//! The kill -9 matrix of a run that clears the emulator's core.
+
+use super::*;
+use std::collections::BTreeMap;
+use std::process::{Child, Stdio};
+
+/// What a run may change on the host and must put back.
+#[derive(Debug, PartialEq)]
+struct HostState {
+    /// IRQ → `smp_affinity_list`.
+    irqs: BTreeMap<u32, String>,
+    /// `/sys/devices/virtual/workqueue/cpumask`.
+    workqueue: Option<String>,
+    /// Kernel thread pid → (name, CPUs allowed).
+    kthreads: BTreeMap<i32, (String, String)>,
+}
+
+fn numeric(dir: &str) -> Vec<i32> {
+    std::fs::read_dir(dir)
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok()).collect())
+        .unwrap_or_default()
+}
+
+fn allowed(path: &str) -> Option<String> {
+    let status = std::fs::read_to_string(path).ok()?;
+    status.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).map(|s| s.trim().to_string())
+}
+
+fn snapshot() -> HostState {
+    let irqs = numeric("/proc/irq")
+        .into_iter()
+        .filter_map(|i| Some((i as u32, std::fs::read_to_string(format!("/proc/irq/{i}/smp_affinity_list")).ok()?.trim().to_string())))
+        .collect();
+    let workqueue = std::fs::read_to_string("/sys/devices/virtual/workqueue/cpumask").ok().map(|s| s.trim().to_string());
+    let mut kthreads = BTreeMap::new();
+    for pid in numeric("/proc") {
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { continue };
+        let ppid = stat.rsplit_once(')').and_then(|(_, r)| r.split_whitespace().nth(1)?.parse::<i32>().ok());
+        if pid != 2 && ppid != Some(2) {
+            continue;
+        }
+        let name = std::fs::read_to_string(format!("/proc/{pid}/comm")).unwrap_or_default().trim().to_string();
+        if let Some(a) = allowed(&format!("/proc/{pid}/status")) {
+            kthreads.insert(pid, (name, a));
+        }
+    }
+    HostState { irqs, workqueue, kthreads }
+}
+
+/// What differs between two snapshots (kernel threads present in both).
+fn differences(before: &HostState, after: &HostState) -> Vec<String> {
+    let mut d = Vec::new();
+    for (irq, a) in &before.irqs {
+        if let Some(b) = after.irqs.get(irq).filter(|b| *b != a) {
+            d.push(format!("irq {irq}: {a} → {b}"));
+        }
+    }
+    if before.workqueue != after.workqueue {
+        d.push(format!("workqueue cpumask: {:?} → {:?}", before.workqueue, after.workqueue));
+    }
+    for (pid, (name, a)) in &before.kthreads {
+        if let Some((_, b)) = after.kthreads.get(pid).filter(|(n, b)| n == name && b != a) {
+            d.push(format!("kernel thread {pid} {name}: {a} → {b}"));
+        }
+    }
+    d
+}
+
+fn last_core() -> usize {
+    *netfi::host::isolate::online_cpus().iter().next_back().unwrap()
+}
+
+/// The record of the clearing done by the emulator `pid`, if any.
+fn record_of(pid: i32) -> Option<PathBuf> {
+    let dir = netfi::host::record::state_dir().ok()?;
+    netfi::host::record::list(&dir).into_iter().find(|p| p.to_string_lossy().contains(&format!("isolation-{pid}-")))
+}
+
+/// The guardian of `record`: the process whose command line names it.
+fn guardian_of(record: &Path) -> Option<i32> {
+    let want = format!("restore\0--guard\0{}", record.display());
+    numeric("/proc").into_iter().find(|pid| {
+        std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| String::from_utf8_lossy(&c).contains(&want))
+    })
+}
+
+/// A child process, killed and reaped however the test ends.
+struct Reaped(Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Kill {
+    Emulator,
+    Runner,
+    RunnerAndEmulator,
+    Guardian,
+    /// Runner, emulator and guardian: only `netfi restore` can put it back.
+    All,
+}
+
+fn kill_matrix_case(kill: Kill) {
+    let _guard = lock();
+    let core = last_core();
+    let before = snapshot();
+    let own_mask = allowed("/proc/self/status").unwrap();
+    let out = out_dir(&format!("kill-{kill:?}"));
+    let run_id = format!("kill{kill:?}{}", std::process::id());
+    std::fs::create_dir_all(&out).unwrap();
+    let runner = Reaped(
+        netfi()
+            .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let mut emulator = None;
+    wait_for("the emulator's pid", Duration::from_secs(60), || {
+        emulator = read_pid(&out, "emulator");
+        emulator.is_some()
+    });
+    let emulator = emulator.unwrap();
+    let mut record = None;
+    wait_for("the record of the cleared core", Duration::from_secs(60), || {
+        record = record_of(emulator);
+        record.is_some()
+    });
+    let record = record.unwrap();
+    let mut guardian = None;
+    wait_for("the guardian", Duration::from_secs(10), || {
+        guardian = guardian_of(&record);
+        guardian.is_some()
+    });
+    let guardian = guardian.unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    // The run did change the host (else the comparison below proves nothing).
+    let during = snapshot();
+    assert!(!differences(&before, &during).is_empty(), "the run changed nothing: is the core cleared?");
+    // Started while the core is cleared: it inherits this process's
+    // narrowed mask.
+    let mid_run = Reaped(Command::new("sleep").arg("120").spawn().unwrap());
+    let mid_pid = mid_run.0.id() as i32;
+    let narrowed = allowed(&format!("/proc/{mid_pid}/status")).unwrap();
+    assert!(!netfi::host::isolate::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
+
+    let runner_pid = runner.0.id() as i32;
+    match kill {
+        Kill::Emulator => sigkill(emulator),
+        Kill::Runner => sigkill(runner_pid),
+        Kill::RunnerAndEmulator => {
+            sigkill(runner_pid);
+            sigkill(emulator);
+        }
+        Kill::Guardian => sigkill(guardian),
+        Kill::All => {
+            sigkill(guardian);
+            sigkill(runner_pid);
+            sigkill(emulator);
+        }
+    }
+    if let Kill::All = kill {
+        wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(emulator));
+        std::thread::sleep(Duration::from_millis(500));
+        assert!(record.exists(), "with every owner and the guardian killed, nothing should have restored yet");
+        let said = restore();
+        assert!(said.contains("restored"), "{said}");
+    }
+    // The guardian (owners all dead), the runner (emulator dead), or the
+    // emulator (runner or guardian dead) puts everything back.
+    wait_for(&format!("{kill:?}: the record to be restored and removed"), Duration::from_secs(60), || !record.exists());
+    wait_for("the guardian to end", Duration::from_secs(10), || !alive(guardian));
+
+    // Whatever of the run is left is stopped; `netfi restore` removes the
+    // iceoryx2 resources of the killed processes.
+    for role in ["console", "emulator", "simulator"] {
+        if let Some(pid) = read_pid(&out, role).filter(|p| alive(*p)) {
+            sigkill(pid);
+        }
+    }
+    drop(runner);
+    std::thread::sleep(Duration::from_millis(200));
+    restore();
+
+    let shm: Vec<String> = std::fs::read_dir("/dev/shm")
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.contains(&run_id)).collect())
+        .unwrap_or_default();
+    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm after `netfi restore`: {shm:?}");
+    let after = snapshot();
+    let d = differences(&before, &after);
+    let stderr = std::fs::read_to_string(out.join("runner.stderr")).unwrap_or_default();
+    assert!(d.is_empty(), "{kill:?}: the host was left changed:\n{}\nrunner:\n{stderr}", d.join("\n"));
+    assert_eq!(allowed("/proc/self/status").unwrap(), own_mask, "{kill:?}: this process's mask");
+    let widened = allowed(&format!("/proc/{mid_pid}/status")).unwrap();
+    assert_eq!(widened, own_mask, "{kill:?}: a process started mid-run kept the narrowed mask {narrowed}");
+    drop(mid_run);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+fn skip() -> bool {
+    if !is_root() {
+        eprintln!("skipped: moving other processes' threads, interrupts and the workqueue mask needs root");
+        return true;
+    }
+    if netfi::host::isolate::online_cpus().len() < 2 {
+        eprintln!("skipped: one core only");
+        return true;
+    }
+    false
+}
+
+#[test]
+fn kill_9_of_the_emulator_leaves_the_host_as_it_was() {
+    if !skip() {
+        kill_matrix_case(Kill::Emulator);
+    }
+}
+
+#[test]
+fn kill_9_of_the_runner_leaves_the_host_as_it_was() {
+    if !skip() {
+        kill_matrix_case(Kill::Runner);
+    }
+}
+
+#[test]
+fn kill_9_of_runner_and_emulator_leaves_the_host_as_it_was() {
+    if !skip() {
+        kill_matrix_case(Kill::RunnerAndEmulator);
+    }
+}
+
+#[test]
+fn kill_9_of_the_guardian_leaves_the_host_as_it_was() {
+    if !skip() {
+        kill_matrix_case(Kill::Guardian);
+    }
+}
+
+#[test]
+fn kill_9_of_everything_is_undone_by_netfi_restore() {
+    if !skip() {
+        kill_matrix_case(Kill::All);
+    }
+}
+
+/// A runner started with one CPU allowed (`taskset -c 0`): a requested
+/// emulator core outside it is an error; by default the run goes on
+/// unpinned with a warning in the report's isolation line.
+#[test]
+fn a_pin_that_cannot_be_honoured_is_an_error_or_a_warning_in_the_report() {
+    if netfi::host::isolate::online_cpus().len() < 2 {
+        eprintln!("skipped: one core only");
+        return;
+    }
+    let _guard = lock();
+    let first = *netfi::host::isolate::online_cpus().iter().next().unwrap();
+    let other = last_core();
+    let on_one_core = |args: &[&str], out: &Path| {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = netfi();
+        cmd.arg("run").args(args).arg("--out").arg(out);
+        // SAFETY: sched_setaffinity is async-signal-safe; it narrows the
+        // child's own mask, as `taskset -c FIRST` would.
+        unsafe {
+            cmd.pre_exec(move || {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                libc::CPU_SET(first, &mut set);
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set);
+                Ok(())
+            });
+        }
+        cmd.output().unwrap()
+    };
+    let out = out_dir("pin-requested");
+    let o = on_one_core(&["Normal", "--duration-s", "1", "--emulator-core", &other.to_string()], &out);
+    assert!(!o.status.success(), "an explicit pin outside the allowed CPUs was accepted");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--emulator-core"), "{err}");
+
+    let out = out_dir("pin-default");
+    let o = on_one_core(&["Normal", "--duration-s", "1", "--seed", "2", "--json"], &out);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("WARNING") && err.contains("not pinned"), "{err}");
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("no report ({e}): {err}"));
+    let iso = &report["emulator"]["isolation"];
+    assert_eq!(iso["cleared"], false, "{iso}");
+    assert!(iso["warnings"][0].as_str().is_some_and(|w| w.contains("not pinned")), "{iso}");
+    let text = netfi::service::report::RunReport::to_text(&serde_json::from_value(report.clone()).unwrap());
+    assert!(text.contains("WARNING"), "{text}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -1,0 +1,116 @@
+//! iceoryx2's files: nothing left in `/dev/shm` after a run, nothing
+//! another user can write, several users side by side.
+
+use super::*;
+use std::os::unix::fs::MetadataExt;
+
+const NOBODY: u32 = 65534;
+
+fn shm_with(needle: &str) -> Vec<String> {
+    std::fs::read_dir("/dev/shm")
+        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.contains(needle)).collect())
+        .unwrap_or_default()
+}
+
+/// `netfi …` as the user nobody.
+fn as_nobody(args: &[&str]) -> Command {
+    let mut c = Command::new("setpriv");
+    c.args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", netfi_exe()])
+        .args(args)
+        .current_dir("/tmp")
+        .env_remove("XDG_RUNTIME_DIR");
+    c
+}
+
+fn have_setpriv() -> bool {
+    Command::new("setpriv").arg("--version").output().is_ok_and(|o| o.status.success())
+}
+
+#[test]
+fn a_run_leaves_nothing_in_dev_shm_and_another_user_runs_after_root() {
+    let _guard = lock();
+    let run_id = format!("hostshm{}", std::process::id());
+    let out = out_dir("shm");
+    let o = netfi().args(["run", "Normal", "--duration-s", "1", "--seed", "4", "--no-isolate", "--run-id", &run_id, "--out"]).arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let left = shm_with(&run_id);
+    assert!(left.is_empty(), "the run left {left:?} in /dev/shm");
+    // This user's iceoryx2 directory is private.
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    let root = std::fs::metadata(format!("/tmp/netfi-iceoryx2-{uid}")).unwrap();
+    assert_eq!(root.mode() & 0o077, 0, "mode {:o}", root.mode());
+    let _ = std::fs::remove_dir_all(&out);
+
+    if !is_root() || !have_setpriv() {
+        eprintln!("skipped the second user: needs root and setpriv");
+        return;
+    }
+    // Another user, after root.
+    let out = out_dir("nobody");
+    std::fs::create_dir_all(&out).unwrap();
+    std::os::unix::fs::chown(&out, Some(NOBODY), Some(NOBODY)).unwrap();
+    let nobody_run = format!("nobody{}", std::process::id());
+    let o = as_nobody(&["run", "Normal", "--duration-s", "1", "--seed", "4", "--run-id", &nobody_run, "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    let left = shm_with(&nobody_run);
+    // What the second user's run created is its own: clean up as root.
+    let _ = std::fs::remove_dir_all(format!("/tmp/netfi-iceoryx2-{NOBODY}"));
+    let _ = std::fs::remove_dir_all(format!("/tmp/netfi-{NOBODY}"));
+    let _ = std::fs::remove_dir_all(&out);
+    assert!(o.status.success(), "a second user could not run after root:\n{stderr}");
+    assert!(left.is_empty(), "the second user's run left {left:?} in /dev/shm");
+}
+
+#[test]
+fn a_file_planted_by_another_user_is_refused_at_once() {
+    if !is_root() || !have_setpriv() {
+        eprintln!("skipped: needs root and setpriv to act as another user");
+        return;
+    }
+    let _guard = lock();
+    let run_id = format!("planted{}", std::process::id());
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    let planted = format!("/dev/shm/netfi_u{uid}_{run_id}_node.global_mgmt");
+    let o = Command::new("setpriv")
+        .args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", "touch", &planted])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = out_dir("planted");
+    let mut child = netfi()
+        .args(["run", "Normal", "--duration-s", "1", "--no-isolate", "--run-id", &run_id, "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A guard against a hang, not a timing assertion.
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break Some(s);
+        }
+        if t0.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let o = child.wait_with_output().unwrap();
+    let _ = std::fs::remove_file(&planted);
+    for role in ["console", "emulator", "simulator"] {
+        if let Some(pid) = read_pid(&out, role).filter(|p| alive(*p)) {
+            sigkill(pid);
+        }
+    }
+    restore();
+    let _ = std::fs::remove_dir_all(&out);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let status = status.unwrap_or_else(|| panic!("the run hung on a planted file:\n{stderr}"));
+    assert!(!status.success(), "a planted file was used");
+    assert!(stderr.contains(&format!("belongs to uid {NOBODY}")), "{stderr}");
+}
