@@ -148,9 +148,16 @@ fn slot_start_ns(cursor_ns: u64, level: usize, slot: usize) -> u64 {
     above | ((slot as u64) << shift)
 }
 
-/// The reorder queue: a hierarchical timing wheel over a slab.
+/// The most frames the early list holds before it is merged into the wheel
+/// (see [`Wheel::push`]): it bounds a sorted insertion's walk.
+const EARLY_MAX: u32 = 32;
+
+/// The reorder queue: a hierarchical timing wheel over a slab, and a short
+/// sorted list of frames earlier than the wheel's cursor.
 ///
-/// Invariants: every frame held is due at or after `cursor_ns`; a frame at
+/// Invariants: every frame in the early list is due before `cursor_ns`,
+/// and the list is in `(release_ns, ingress_index)` order; every frame in
+/// the wheel is due at or after `cursor_ns`; a frame at
 /// level `L` agrees with the cursor in every digit above `L` and its digit
 /// `L` is its slot, later than the cursor's (at level 0, not earlier); each
 /// level-0 slot is in ingress order; level 0 is non-empty whenever a frame
@@ -162,7 +169,11 @@ struct Wheel<T> {
     nodes: Vec<Node>,
     items: Vec<T>,
     free: u32,
+    /// Frames held, in the wheel and in the early list.
     len: usize,
+    early_head: u32,
+    early_tail: u32,
+    early_len: u32,
 }
 
 impl<T: Copy + Default> Wheel<T> {
@@ -173,11 +184,14 @@ impl<T: Copy + Default> Wheel<T> {
         let nodes = (0..capacity)
             .map(|i| Node { release_ns: 0, ingress_index: 0, next: if i + 1 < capacity { i as u32 + 1 } else { NIL } })
             .collect();
-        Wheel { levels: [Level::EMPTY; LEVELS], cursor_ns: 0, nodes, items: vec![T::default(); capacity], free: 0, len: 0 }
+        Wheel { levels: [Level::EMPTY; LEVELS], cursor_ns: 0, nodes, items: vec![T::default(); capacity], free: 0, len: 0, early_head: NIL, early_tail: NIL, early_len: 0 }
     }
 
     #[inline]
     fn next_release_ns(&self) -> Option<u64> {
+        if self.early_head != NIL {
+            return Some(self.nodes[self.early_head as usize].release_ns);
+        }
         (self.len > 0).then(|| (self.cursor_ns & !SLOT_MASK) | self.levels[0].occupied.trailing_zeros() as u64)
     }
 
@@ -191,13 +205,23 @@ impl<T: Copy + Default> Wheel<T> {
         self.free = node.next;
         *node = Node { release_ns, ingress_index, next: NIL };
         self.items[n as usize] = item;
-        if self.len == 0 {
+        self.len += 1;
+        if self.len == 1 {
             self.cursor_ns = release_ns;
         } else if release_ns < self.cursor_ns {
-            self.rewind(release_ns);
+            // Earlier than every frame in the wheel: a new earliest frame.
+            // Moving the cursor back would undo the cascading of the frames
+            // near it (a deep queue whose pushes often become the earliest
+            // would move its frames up and down again and again), so such
+            // frames wait in a short sorted list; only when it is full is
+            // it merged into the wheel, once per `EARLY_MAX` frames.
+            self.early_insert(n);
+            if self.early_len == EARLY_MAX {
+                self.merge_early();
+            }
+            return Ok(release_ns);
         }
         self.place(n);
-        self.len += 1;
         Ok(release_ns)
     }
 
@@ -205,6 +229,19 @@ impl<T: Copy + Default> Wheel<T> {
     fn pop(&mut self) -> Option<Released<T>> {
         if self.len == 0 {
             return None;
+        }
+        if self.early_head != NIL {
+            let n = self.early_head;
+            let node = self.nodes[n as usize];
+            self.early_head = node.next;
+            if node.next == NIL {
+                self.early_tail = NIL;
+            }
+            self.early_len -= 1;
+            self.nodes[n as usize].next = self.free;
+            self.free = n;
+            self.len -= 1;
+            return Some(Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items[n as usize] });
         }
         let level0 = &mut self.levels[0];
         let slot = level0.occupied.trailing_zeros() as usize;
@@ -221,6 +258,7 @@ impl<T: Copy + Default> Wheel<T> {
         // Every frame left is due at or after this one.
         self.cursor_ns = node.release_ns;
         if self.levels[0].occupied == 0 && self.len > 0 {
+            debug_assert_eq!(self.early_len, 0);
             self.refill();
         }
         Some(Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items[n as usize] })
@@ -282,15 +320,64 @@ impl<T: Copy + Default> Wheel<T> {
             let lv = &mut self.levels[level];
             let slot = lv.occupied.trailing_zeros() as usize;
             let mut n = lv.head[slot];
+            let single = n == lv.tail[slot];
             lv.head[slot] = NIL;
             lv.tail[slot] = NIL;
             lv.occupied &= !(1 << slot);
-            self.cursor_ns = slot_start_ns(self.cursor_ns, level, slot);
+            // A lone frame is the earliest one: the cursor goes straight to
+            // it, and it to level 0, rather than down one level at a time.
+            self.cursor_ns = if single { self.nodes[n as usize].release_ns } else { slot_start_ns(self.cursor_ns, level, slot) };
             while n != NIL {
                 let next = self.nodes[n as usize].next;
                 self.place(n);
                 n = next;
             }
+        }
+    }
+
+    /// Puts node `n` into the early list, in `(release_ns, ingress_index)`
+    /// order: appended or prepended when it belongs at an end (the usual
+    /// case), else after a walk of at most `EARLY_MAX` frames.
+    fn early_insert(&mut self, n: u32) {
+        let key = |q: &Self, m: u32| (q.nodes[m as usize].release_ns, q.nodes[m as usize].ingress_index);
+        let k = key(self, n);
+        self.early_len += 1;
+        if self.early_head == NIL {
+            self.nodes[n as usize].next = NIL;
+            self.early_head = n;
+            self.early_tail = n;
+        } else if key(self, self.early_tail) <= k {
+            self.nodes[n as usize].next = NIL;
+            self.nodes[self.early_tail as usize].next = n;
+            self.early_tail = n;
+        } else if k < key(self, self.early_head) {
+            self.nodes[n as usize].next = self.early_head;
+            self.early_head = n;
+        } else {
+            let mut prev = self.early_head;
+            loop {
+                let next = self.nodes[prev as usize].next;
+                if key(self, next) > k {
+                    self.nodes[n as usize].next = next;
+                    self.nodes[prev as usize].next = n;
+                    break;
+                }
+                prev = next;
+            }
+        }
+    }
+
+    /// Moves the early list into the wheel: the cursor goes back to its
+    /// first frame, and every frame is placed relative to it.
+    #[cold]
+    fn merge_early(&mut self) {
+        let mut n = self.early_head;
+        self.rewind(self.nodes[n as usize].release_ns);
+        (self.early_head, self.early_tail, self.early_len) = (NIL, NIL, 0);
+        while n != NIL {
+            let next = self.nodes[n as usize].next;
+            self.place(n);
+            n = next;
         }
     }
 
