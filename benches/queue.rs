@@ -66,6 +66,38 @@ fn uniform(depth: usize) -> Releases {
     Releases { spacing_ns: 1_000, delays_ns: std::sync::Arc::new(delays) }
 }
 
+/// The wheel, then the heap, at a constant `depth`.
+fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, name: &str, depth: usize, releases: &Releases, item: I) {
+    let mut q = ReleaseQueue::<I>::new(QueueOrder::Reorder, depth + 1);
+    let mut i = 0u64;
+    while q.len() < depth {
+        q.push(releases.at(i), i, item).unwrap();
+        i += 1;
+    }
+    g.bench_function(format!("wheel {name}"), |b| {
+        b.iter(|| {
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            black_box(q.pop())
+        })
+    });
+    assert_eq!(q.len(), depth, "the depth stays constant");
+    let mut q = HeapQueue::<I>::new(depth + 1);
+    let mut i = 0u64;
+    while q.len() < depth {
+        q.push(releases.at(i), i, item).unwrap();
+        i += 1;
+    }
+    g.bench_function(format!("heap {name}"), |b| {
+        b.iter(|| {
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            black_box(q.pop())
+        })
+    });
+    assert_eq!(q.len(), depth, "the depth stays constant");
+}
+
 fn queue_depths(c: &mut Criterion) {
     let dlm2 = std::sync::Arc::new(dlm2_delays_ns());
     let mut g = c.benchmark_group("reorder push+pop");
@@ -76,40 +108,13 @@ fn queue_depths(c: &mut Criterion) {
             ("uniform", uniform(depth)),
         ];
         for (dist, releases) in cases {
-            {
-                let mut q = ReleaseQueue::<Item>::new(QueueOrder::Reorder, depth + 1);
-                let mut i = 0u64;
-                while q.len() < depth {
-                    q.push(releases.at(i), i, Item::ZERO).unwrap();
-                    i += 1;
-                }
-                let r = releases.clone();
-                g.bench_function(format!("wheel {dist} depth {depth}"), |b| {
-                    b.iter(|| {
-                        q.push(r.at(i), i, Item::ZERO).unwrap();
-                        i += 1;
-                        black_box(q.pop())
-                    })
-                });
-                assert_eq!(q.len(), depth, "the depth stays constant");
-            }
-            {
-                let mut q = HeapQueue::<Item>::new(depth + 1);
-                let mut i = 0u64;
-                while q.len() < depth {
-                    q.push(releases.at(i), i, Item::ZERO).unwrap();
-                    i += 1;
-                }
-                let r = releases.clone();
-                g.bench_function(format!("heap {dist} depth {depth}"), |b| {
-                    b.iter(|| {
-                        q.push(r.at(i), i, Item::ZERO).unwrap();
-                        i += 1;
-                        black_box(q.pop())
-                    })
-                });
-                assert_eq!(q.len(), depth, "the depth stays constant");
-            }
+            pair(&mut g, &format!("{dist} depth {depth}"), depth, &releases, Item::ZERO);
+        }
+        // The same with an 8-byte item: what the 192-byte sample's own
+        // cache misses (written at push, read at pop) add at depth.
+        if depth >= 100_000 {
+            let releases = Releases { spacing_ns: 3_333, delays_ns: dlm2.clone() };
+            pair(&mut g, &format!("dlm2-300kHz depth {depth} u64 item"), depth, &releases, 0u64);
         }
     }
     g.finish();
