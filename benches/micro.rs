@@ -81,7 +81,7 @@ fn queue_depths(c: &mut Criterion) {
     // iteration pushes one frame and takes the earliest one out, so the depth
     // stays constant. Release times advance by 1 µs per frame plus a jitter
     // spread over twice the depth (as a delay stage produces), so a push
-    // lands anywhere in the heap and the reorder queue really reorders.
+    // lands anywhere in the queue and the reorder queue really reorders.
     let mut g = c.benchmark_group("release queue push+pop");
     for order in [QueueOrder::Fifo, QueueOrder::Reorder] {
         for depth in [1usize, 1_000, 100_000] {

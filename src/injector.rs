@@ -14,7 +14,7 @@
 
 use crate::model::ModelKind;
 use crate::scenario::{Decision, Scenario};
-use crate::scheduler::{QueueOrder, ReleaseQueue, Released};
+use crate::scheduler::{CapacityError, QueueOrder, ReleaseQueue, Released};
 
 /// Why an entering frame could not be decided at all.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -32,6 +32,15 @@ impl Invalid {
             Invalid::BadChecksum => "bad_checksum",
         }
     }
+}
+
+/// Why an injector could not be built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum BuildError {
+    /// The release queue's capacity is out of range; the message names the
+    /// field and the memory it would need.
+    #[error(transparent)]
+    QueueCapacity(#[from] CapacityError),
 }
 
 /// Why a frame was dropped.
@@ -106,11 +115,20 @@ pub struct Injector<T> {
 }
 
 impl<T: Copy + Default> Injector<T> {
-    /// The queue is a FIFO ring when no stage can reorder, else a heap; it
-    /// holds at most `queue_capacity` frames.
-    pub fn new(scenario: Scenario, queue_capacity: usize) -> Self {
+    /// The queue is a FIFO ring when no stage can reorder, else a timing
+    /// wheel; it holds at most `queue_capacity` frames
+    /// (1..=[`crate::scheduler::MAX_CAPACITY`]), all allocated here.
+    pub fn try_new(scenario: Scenario, queue_capacity: usize) -> Result<Self, BuildError> {
         let order = if scenario.may_reorder() { QueueOrder::Reorder } else { QueueOrder::Fifo };
-        Injector { scenario, queue: ReleaseQueue::new(order, queue_capacity), start_ns: None, counts: Counts::default() }
+        let queue = ReleaseQueue::try_new(order, queue_capacity)?;
+        Ok(Injector { scenario, queue, start_ns: None, counts: Counts::default() })
+    }
+
+    /// [`Injector::try_new`] for a capacity already validated (a constant,
+    /// or checked at start-up): an invalid one panics with the error's
+    /// message. Input from a user goes through `try_new`.
+    pub fn new(scenario: Scenario, queue_capacity: usize) -> Self {
+        Self::try_new(scenario, queue_capacity).unwrap_or_else(|e| panic!("{e}"))
     }
 
     pub fn scenario(&self) -> &Scenario {

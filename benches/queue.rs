@@ -1,0 +1,160 @@
+//! The reorder queue's push + pop cost against its depth: the timing wheel
+//! (`ReleaseQueue` with `QueueOrder::Reorder`) beside the binary heap it
+//! replaced, in the same run. Each case fills the queue to a depth once,
+//! then every iteration pushes one frame and takes the earliest out, so the
+//! depth stays constant.
+//!
+//! Release times: `dlm2-1kHz` and `dlm2-300kHz` are arrivals every 1 ms or
+//! 3.33 µs plus delays drawn from the DLM-2 preset (210 ms + a two-phase
+//! hyperexponential); `uniform` is arrivals every 1 µs plus a delay uniform
+//! over twice the depth in microseconds. At a depth beyond what the arrival
+//! rate and delay hold in flight, the frame taken out is simply the earliest
+//! held: the queue is measured, not the stream.
+//!
+//! `cargo bench --bench queue` (about a minute); `-- wheel` or `-- heap`
+//! narrows it. Load and host steal are printed beside the results.
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use netfi::host::CpuTimes;
+use netfi::model::{StageRng, Verdict};
+use netfi::scenario::{self, ModelSpec};
+use netfi::scheduler::{QueueOrder, ReleaseQueue};
+use rand::SeedableRng;
+use std::hint::black_box;
+
+#[path = "../tests/common/heap_queue.rs"]
+mod heap_queue;
+use heap_queue::HeapQueue;
+
+/// The emulator's item: a 192-byte shared-memory sample.
+type Item = netfi::sample::FrameSample;
+
+/// Delays are drawn once (2^20 of them, cycled) so the model's cost is not
+/// in the measurement.
+const DELAYS: usize = 1 << 20;
+
+fn dlm2_delays_ns() -> Vec<u64> {
+    let spec = scenario::parse_str("[[stage]]\npreset = \"DLM-2\"\n", "bench", "bench").unwrap();
+    let m: &ModelSpec = &spec.phases[0].stages[0].model;
+    let mut model = m.build().unwrap();
+    let mut rng = StageRng::seed_from_u64(7);
+    (0..DELAYS as u64)
+        .map(|i| match model.decide(i * 1_000_000, &mut rng) {
+            Verdict::Pass { delay_ns } => delay_ns,
+            Verdict::Drop => unreachable!("a delay stage does not drop"),
+        })
+        .collect()
+}
+
+/// Release times of frame `i`: arrival + delay.
+#[derive(Clone)]
+struct Releases {
+    spacing_ns: u64,
+    delays_ns: std::sync::Arc<Vec<u64>>,
+}
+
+impl Releases {
+    #[inline]
+    fn at(&self, i: u64) -> u64 {
+        i * self.spacing_ns + self.delays_ns[i as usize & (DELAYS - 1)]
+    }
+}
+
+fn uniform(depth: usize) -> Releases {
+    let spread_ns = 2 * depth as u64 * 1_000;
+    let delays = (0..DELAYS as u64).map(|i| netfi::scenario::splitmix64(i) % spread_ns.max(1)).collect();
+    Releases { spacing_ns: 1_000, delays_ns: std::sync::Arc::new(delays) }
+}
+
+/// The wheel, then the heap, at a constant `depth`.
+fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, name: &str, depth: usize, releases: &Releases, item: I) {
+    let mut q = ReleaseQueue::<I>::new(QueueOrder::Reorder, depth + 1);
+    let mut i = 0u64;
+    while q.len() < depth {
+        q.push(releases.at(i), i, item).unwrap();
+        i += 1;
+    }
+    g.bench_function(format!("wheel {name}"), |b| {
+        b.iter(|| {
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            black_box(q.pop())
+        })
+    });
+    assert_eq!(q.len(), depth, "the depth stays constant");
+    let mut q = HeapQueue::<I>::new(depth + 1);
+    let mut i = 0u64;
+    while q.len() < depth {
+        q.push(releases.at(i), i, item).unwrap();
+        i += 1;
+    }
+    g.bench_function(format!("heap {name}"), |b| {
+        b.iter(|| {
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            black_box(q.pop())
+        })
+    });
+    assert_eq!(q.len(), depth, "the depth stays constant");
+}
+
+fn queue_depths(c: &mut Criterion) {
+    let dlm2 = std::sync::Arc::new(dlm2_delays_ns());
+    let mut g = c.benchmark_group("reorder push+pop");
+    for depth in [1usize, 1_000, 100_000, 1_000_000] {
+        let cases = [
+            ("dlm2-1kHz", Releases { spacing_ns: 1_000_000, delays_ns: dlm2.clone() }),
+            ("dlm2-300kHz", Releases { spacing_ns: 3_333, delays_ns: dlm2.clone() }),
+            ("uniform", uniform(depth)),
+        ];
+        for (dist, releases) in cases {
+            pair(&mut g, &format!("{dist} depth {depth}"), depth, &releases, Item::ZERO);
+        }
+        // The same with an 8-byte item: what the 192-byte sample's own
+        // cache misses (written at push, read at pop) add at depth.
+        if depth >= 100_000 {
+            let releases = Releases { spacing_ns: 3_333, delays_ns: dlm2.clone() };
+            pair(&mut g, &format!("dlm2-300kHz depth {depth} u64 item"), depth, &releases, 0u64);
+        }
+    }
+    g.finish();
+    // Construction (allocating and touching every slot) is start-up cost;
+    // shown once so a capacity's price is visible.
+    let mut g = c.benchmark_group("reorder construction");
+    g.sample_size(10);
+    g.bench_function("wheel capacity 1048576", |b| {
+        b.iter_batched(|| (), |_| ReleaseQueue::<Item>::new(QueueOrder::Reorder, 1 << 20), BatchSize::PerIteration)
+    });
+    g.finish();
+}
+
+fn report_host(_c: &mut Criterion) {
+    if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
+        let s = now.steal_since(start);
+        println!("host steal during the benchmarks: {} ms ({:.3}% of CPU time)", s.ms, s.fraction * 100.0);
+    }
+    if let Ok(load) = std::fs::read_to_string("/proc/loadavg") {
+        println!("load average at the end: {}", load.trim());
+    }
+}
+
+static START: std::sync::OnceLock<CpuTimes> = std::sync::OnceLock::new();
+
+fn start(_c: &mut Criterion) {
+    if let Some(t) = CpuTimes::read() {
+        let _ = START.set(t);
+    }
+    if let Ok(load) = std::fs::read_to_string("/proc/loadavg") {
+        println!("load average at the start: {}", load.trim());
+    }
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default()
+        .warm_up_time(std::time::Duration::from_millis(300))
+        .measurement_time(std::time::Duration::from_secs(1))
+        .sample_size(20);
+    targets = start, queue_depths, report_host
+}
+criterion_main!(benches);
