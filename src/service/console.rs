@@ -17,8 +17,8 @@ use crate::metrics::{LatencyHistogram, Summary};
 use crate::motion::{MotionGenerator, MotionParams};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::args::ConsoleArgs;
-use crate::service::ipc::open_node;
-use crate::service::ports::FrameSink;
+use crate::transport::open_node;
+use crate::transport::FrameSink;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
 use anyhow::{bail, Context, Result};
@@ -86,7 +86,7 @@ impl Script {
 
 /// Runs the console with `args`; returns its report (also `console.json`).
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
-    let seed = args.seed.unwrap_or_else(crate::service::run::fresh_seed);
+    let seed = args.seed.unwrap_or_else(crate::service::plan::fresh_seed);
     let mut script = match &args.capture {
         Some(path) => {
             let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
@@ -104,17 +104,12 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             Script::Replay { records, period_ns: args.rate_hz.map(|r| 1e9 / r) }
         }
         None => {
-            let rate = args.rate_hz.unwrap_or(1000.0);
-            anyhow::ensure!(rate.is_finite() && rate > 0.0, "--rate-hz must be a positive number, got {rate}");
+            // `--rate-hz` is checked where it is parsed (`args::parse_rate_hz`).
+            let rate = args.rate_hz.unwrap_or(crate::service::plan::DEFAULT_RATE_HZ);
             let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
             Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
         }
     };
-    if let Some(r) = args.rate_hz {
-        if !(r.is_finite() && r > 0.0) {
-            bail!("--rate-hz must be a positive number, got {r}");
-        }
-    }
     let n = script.len(args.frames, args.duration_s);
     crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
