@@ -1625,7 +1625,7 @@ fn run(args: &[String]) -> Result<()> {
     // cleared, and exits without writing half a result.
     netfi::service::signals::install();
     let _ = std::fs::remove_dir_all(s.out_dir.join("hlog"));
-    let _ = netfi::service::ipc::cleanup_stale();
+    let _ = netfi::transport::cleanup_stale();
     let started = Instant::now();
     let bench_host = HostTimer::start(None);
     println!(
