@@ -154,7 +154,7 @@ impl<T: Carried> Link<T> {
 
     #[inline]
     fn record(&mut self, now: u64, entered: Entered, a: Arrival) {
-        self.decision.record(now_ns() - now);
+        self.decision.record(now_ns().saturating_sub(now));
         self.ingress_wait.record(now.saturating_sub(a.send_ns));
         let (dropped, release_sched_ns) = match entered.fate {
             Fate::Scheduled { release_ns, .. } => (None, release_ns),
