@@ -77,21 +77,21 @@ pub struct EmulatorFrames {
     pub bad_checksum_passed: u64,
 }
 
-/// The emulator's own report, written as `emulator.json`.
+/// The emulator's own report, written as `emulator.json`: one flat JSON
+/// object of two parts. What the run report shows at its top level (the
+/// shaping) is kept apart from the rest (the process), so that the run
+/// report carries each field once.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmulatorReport {
-    pub scenario: String,
-    pub seed: u64,
-    pub core: Option<usize>,
-    /// SCHED_FIFO priority the loop ran at, if any.
-    pub realtime_priority: Option<i32>,
-    /// What was moved off the loop's core for the run (`--isolate`), and
-    /// put back after.
-    #[serde(default)]
-    pub isolation: Option<IsolationSummary>,
-    pub queue_order: String,
-    pub queue_capacity: usize,
-    pub frames: EmulatorFrames,
+    #[serde(flatten)]
+    pub shaping: Shaping,
+    #[serde(flatten)]
+    pub process: EmulatorProcess,
+}
+
+/// What the link did to the stream, and where its files are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Shaping {
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
     pub stages: Vec<StageReport>,
@@ -105,6 +105,27 @@ pub struct EmulatorReport {
     /// Actual − scheduled release.
     pub release_lateness_ns: Summary,
     pub peer_events: Vec<PeerEvent>,
+    pub trace_path: Option<PathBuf>,
+    pub decision_hlog: Option<PathBuf>,
+    pub lateness_hlog: Option<PathBuf>,
+}
+
+/// The emulator as a process: its set-up, its own frame account, how its
+/// loop ran and ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EmulatorProcess {
+    pub scenario: String,
+    pub seed: u64,
+    pub core: Option<usize>,
+    /// SCHED_FIFO priority the loop ran at, if any.
+    pub realtime_priority: Option<i32>,
+    /// What was moved off the loop's core for the run (`--isolate`), and
+    /// put back after.
+    #[serde(default)]
+    pub isolation: Option<IsolationSummary>,
+    pub queue_order: String,
+    pub queue_capacity: usize,
+    pub frames: EmulatorFrames,
     /// Why the loop ended: `end_marker` (the console finished and every held
     /// frame was released) or `signal`.
     pub ended_by: String,
@@ -120,9 +141,6 @@ pub struct EmulatorReport {
     pub trace_overflowed: u64,
     pub steal_ms: u64,
     pub steal_fraction: f64,
-    pub trace_path: Option<PathBuf>,
-    pub decision_hlog: Option<PathBuf>,
-    pub lateness_hlog: Option<PathBuf>,
 }
 
 /// Where an isolating emulator keeps what it moved until it has put it
@@ -387,7 +405,20 @@ impl EmulatorReport {
             eprintln!("emulator: last transport error: {e}");
         }
         let iter = end.iterations;
-        Ok(EmulatorReport {
+        let shaping = Shaping {
+            loss_rate: l.loss_rate,
+            loss_rate_ci95: l.loss_rate_ci95,
+            stages: l.stages,
+            injected_delay_ns: l.injected_delay_ns,
+            ingress_wait_ns: l.ingress_wait_ns,
+            decision_ns: l.decision_ns,
+            release_lateness_ns: l.release_lateness_ns,
+            peer_events: end.peer_events,
+            trace_path: Some(l.trace_path),
+            decision_hlog: Some(decision_hlog),
+            lateness_hlog: Some(lateness_hlog),
+        };
+        let process = EmulatorProcess {
             scenario: l.scenario,
             seed: cfg.seed,
             core: cfg.core,
@@ -403,14 +434,6 @@ impl EmulatorReport {
                 sent_by_console,
                 bad_checksum_passed,
             },
-            loss_rate: l.loss_rate,
-            loss_rate_ci95: l.loss_rate_ci95,
-            stages: l.stages,
-            injected_delay_ns: l.injected_delay_ns,
-            ingress_wait_ns: l.ingress_wait_ns,
-            decision_ns: l.decision_ns,
-            release_lateness_ns: l.release_lateness_ns,
-            peer_events: end.peer_events,
             ended_by: end.ended_by.to_string(),
             duration_s,
             loop_iterations: iter,
@@ -420,10 +443,8 @@ impl EmulatorReport {
             trace_overflowed: l.trace_overflowed,
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
-            trace_path: Some(l.trace_path),
-            decision_hlog: Some(decision_hlog),
-            lateness_hlog: Some(lateness_hlog),
-        })
+        };
+        Ok(EmulatorReport { shaping, process })
     }
 }
 
@@ -508,7 +529,7 @@ fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
 /// One line for the log: what came in, what went out, what the kernel and
 /// the return path did.
 fn summary_line(r: &EmulatorReport, u: &udp::UdpReport) -> String {
-    let f = &r.frames;
+    let (f, r) = (&r.process.frames, &r.process);
     let dropped: u64 = f.dropped.values().sum();
     let mut s = format!(
         "emulator: {} entered, {} delivered, {} dropped {:?}, {} held at end; ended by {}",

@@ -6,7 +6,7 @@ use crate::host::Steal;
 use crate::metrics::{fmt_ns, Summary};
 use crate::scenario::{self, Scenario};
 use crate::service::console::ConsoleReport;
-use crate::service::emulator::{EmulatorReport, PeerEvent};
+use crate::service::emulator::{EmulatorProcess, EmulatorReport, PeerEvent};
 use crate::service::plan::Plan;
 use crate::service::simulator::SimulatorReport;
 use anyhow::Result;
@@ -128,12 +128,14 @@ pub struct RunReport {
     pub steal: Steal,
     pub files: Files,
     pub console: Option<ConsoleReport>,
-    pub emulator: Option<EmulatorReport>,
+    /// The emulator's report less what stands above (its shaping: loss,
+    /// stages, delays, overhead, peer events, files).
+    pub emulator: Option<EmulatorProcess>,
     pub simulator: Option<SimulatorReport>,
 }
 
 /// Joins the services' reports.
-pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport>, simulator: Option<&SimulatorReport>) -> FrameAccount {
+pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>, simulator: Option<&SimulatorReport>) -> FrameAccount {
     let sent = console.map(|c| c.frames_sent).or_else(|| emulator.and_then(|e| e.frames.sent_by_console));
     let entered = emulator.map(|e| e.frames.entered);
     let delivered = emulator.map(|e| e.frames.delivered);
@@ -152,10 +154,7 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport
 
 /// `a − b` for the main percentiles.
 pub fn difference(a: &Summary, b: &Summary) -> BTreeMap<String, i64> {
-    [("p50", a.p50, b.p50), ("p90", a.p90, b.p90), ("p99", a.p99, b.p99), ("p999", a.p999, b.p999)]
-        .into_iter()
-        .map(|(k, x, y)| (k.to_string(), x as i64 - y as i64))
-        .collect()
+    crate::metrics::difference(a, b, &["p50", "p90", "p99", "p999"])
 }
 
 fn line(p: &Option<Summary>) -> String {
@@ -306,6 +305,10 @@ impl RunReport {
                 faults.push(format!("no report from the {role}"));
             }
         }
+        let (shaping, emulator) = match emulator {
+            Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
+            None => (None, None),
+        };
         let frames = account(console.as_ref(), emulator.as_ref(), simulator.as_ref());
         if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
             faults.push(format!("{n} frames sent by the console never entered the emulator"));
@@ -322,7 +325,7 @@ impl RunReport {
             faults.push(format!("trace not written: {e:#}"));
             None
         });
-        let e = emulator.as_ref();
+        let e = shaping.as_ref();
         let end_to_end_extra = simulator.as_ref().map(|s| s.end_to_end_extra_ns).filter(|p| p.count > 0);
         let direct_hop = simulator.as_ref().map(|s| s.direct_hop_ns).filter(|p| p.count > 0);
         let overhead_ns = Overhead {
