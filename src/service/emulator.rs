@@ -13,17 +13,15 @@
 //! clock is the vDSO's); the per-frame trace goes through a wait-free ring to
 //! a writer thread.
 
-use crate::check::StageReport;
 use crate::clock::now_ns;
 use crate::frame::ItpView;
 use crate::host::isolate::IsolationSummary;
 use crate::host::StealTimer;
 use crate::injector::{Fate, Invalid};
-use crate::metrics::Summary;
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::scenario::{Scenario, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
-use crate::service::link::{Arrival, Link};
+use crate::service::link::{Arrival, Link, LinkMeasures};
 use crate::service::udp::{self, ReturnPath};
 use crate::service::signals;
 use crate::transport::{FrameSink, FrameSource, PortError};
@@ -92,18 +90,8 @@ pub struct EmulatorReport {
 /// What the link did to the stream, and where its files are.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Shaping {
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub stages: Vec<StageReport>,
-    /// Injected delay of delivered frames.
-    pub injected_delay_ns: Summary,
-    /// Console send → frame taken off the console port (the first hop plus
-    /// any time the frame waited in the port for the emulator).
-    pub ingress_wait_ns: Summary,
-    /// Frame taken off the console port → fate decided.
-    pub decision_ns: Summary,
-    /// Actual − scheduled release.
-    pub release_lateness_ns: Summary,
+    #[serde(flatten)]
+    pub link: LinkMeasures,
     pub peer_events: Vec<PeerEvent>,
     pub trace_path: Option<PathBuf>,
     pub decision_hlog: Option<PathBuf>,
@@ -406,13 +394,7 @@ impl EmulatorReport {
         }
         let iter = end.iterations;
         let shaping = Shaping {
-            loss_rate: l.loss_rate,
-            loss_rate_ci95: l.loss_rate_ci95,
-            stages: l.stages,
-            injected_delay_ns: l.injected_delay_ns,
-            ingress_wait_ns: l.ingress_wait_ns,
-            decision_ns: l.decision_ns,
-            release_lateness_ns: l.release_lateness_ns,
+            link: l.measures,
             peer_events: end.peer_events,
             trace_path: Some(l.trace_path),
             decision_hlog: Some(decision_hlog),

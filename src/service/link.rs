@@ -22,6 +22,7 @@ use crate::stats::BatchMeans;
 use crate::trace::{self, TraceEvent, TraceSink, TraceWriter};
 use crate::transport::{FrameSink, PortError};
 use anyhow::Context;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -224,19 +225,39 @@ impl<T: Carried> Link<T> {
             delivered: counts.released,
             dropped: self.inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
             held_at_end: counts.held,
-            loss_rate,
-            loss_rate_ci95,
-            stages,
-            injected_delay_ns: self.injected.summary(),
-            ingress_wait_ns: self.ingress_wait.summary(),
-            decision_ns: self.decision.summary(),
-            release_lateness_ns: self.lateness.summary(),
+            measures: LinkMeasures {
+                loss_rate,
+                loss_rate_ci95,
+                stages,
+                injected_delay_ns: self.injected.summary(),
+                ingress_wait_ns: self.ingress_wait.summary(),
+                decision_ns: self.decision.summary(),
+                release_lateness_ns: self.lateness.summary(),
+            },
             send_errors: self.send_errors,
             last_error: self.last_error,
             trace_overflowed: self.trace.overflowed(),
             trace_path: trace_path.to_path_buf(),
         })
     }
+}
+
+/// What a link measured: the loss it realized and the delays it injected,
+/// and what it cost. The emulator's report carries it as it is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinkMeasures {
+    pub loss_rate: f64,
+    pub loss_rate_ci95: [f64; 2],
+    pub stages: Vec<StageReport>,
+    /// Injected delay of released frames.
+    pub injected_delay_ns: Summary,
+    /// Sender's send → frame taken in (the first hop plus any time the
+    /// frame waited in the port for the emulator).
+    pub ingress_wait_ns: Summary,
+    /// Frame taken in → fate decided.
+    pub decision_ns: Summary,
+    /// Actual − scheduled release.
+    pub release_lateness_ns: Summary,
 }
 
 /// What a link did: `entered = delivered + dropped + held_at_end`.
@@ -250,17 +271,7 @@ pub struct LinkReport {
     pub delivered: u64,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub stages: Vec<StageReport>,
-    /// Injected delay of released items.
-    pub injected_delay_ns: Summary,
-    /// Sender's send → taken in.
-    pub ingress_wait_ns: Summary,
-    /// Taken in → fate decided.
-    pub decision_ns: Summary,
-    /// Actual − scheduled release.
-    pub release_lateness_ns: Summary,
+    pub measures: LinkMeasures,
     pub send_errors: u64,
     /// The last send error, for the log.
     pub last_error: Option<PortError>,

@@ -329,9 +329,9 @@ impl RunReport {
         let end_to_end_extra = simulator.as_ref().map(|s| s.end_to_end_extra_ns).filter(|p| p.count > 0);
         let direct_hop = simulator.as_ref().map(|s| s.direct_hop_ns).filter(|p| p.count > 0);
         let overhead_ns = Overhead {
-            ingress_wait: e.map(|e| e.ingress_wait_ns),
-            decision: e.map(|e| e.decision_ns),
-            release_lateness: e.map(|e| e.release_lateness_ns),
+            ingress_wait: e.map(|e| e.link.ingress_wait_ns),
+            decision: e.map(|e| e.link.decision_ns),
+            release_lateness: e.map(|e| e.link.release_lateness_ns),
             added_over_direct: end_to_end_extra.as_ref().zip(direct_hop.as_ref()).map(|(a, b)| difference(a, b)),
             end_to_end_extra,
             direct_hop,
@@ -343,10 +343,10 @@ impl RunReport {
             seed: plan.seed,
             duration_s,
             frames,
-            loss_rate: e.map(|e| e.loss_rate),
-            loss_rate_ci95: e.map(|e| e.loss_rate_ci95),
-            stages: e.map(|e| e.stages.clone()).unwrap_or_default(),
-            injected_delay_ns: e.map(|e| e.injected_delay_ns),
+            loss_rate: e.map(|e| e.link.loss_rate),
+            loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
+            stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),
+            injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
             overhead_ns,
             kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
             processes,

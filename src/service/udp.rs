@@ -288,11 +288,11 @@ impl ReturnPath {
             dropped: l.dropped,
             held_at_end: l.held_at_end,
             send_errors: l.send_errors,
-            loss_rate: Some(l.loss_rate),
-            loss_rate_ci95: Some(l.loss_rate_ci95),
-            injected_delay_ns: Some(l.injected_delay_ns),
-            decision_ns: Some(l.decision_ns),
-            release_lateness_ns: Some(l.release_lateness_ns),
+            loss_rate: Some(l.measures.loss_rate),
+            loss_rate_ci95: Some(l.measures.loss_rate_ci95),
+            injected_delay_ns: Some(l.measures.injected_delay_ns),
+            decision_ns: Some(l.measures.decision_ns),
+            release_lateness_ns: Some(l.measures.release_lateness_ns),
             trace_path: Some(l.trace_path),
             ..untouched
         })
