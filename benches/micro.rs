@@ -44,7 +44,7 @@ fn decisions(c: &mut Criterion) {
 
 fn injector_step(c: &mut Criterion) {
     // Nothing injected: the path every frame takes through `netfi run Normal`.
-    let normal = scenario::resolve("Normal").unwrap();
+    let normal = netfi::load::resolve("Normal").unwrap();
     let mut inj: Injector<FrameSample> = Injector::new(Scenario::new(&normal, 1).unwrap(), 1 << 16);
     let mut now = 0u64;
     c.bench_function("injector step Normal (ingress + release, nothing injected)", |b| {

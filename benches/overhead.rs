@@ -327,11 +327,7 @@ fn own_cpu_s() -> f64 {
 /// out, as the kernel bills it to no process (UDP loopback delivery runs
 /// there), and steal is reported on its own.
 fn cpu_ticks() -> Option<(u64, u64)> {
-    let text = std::fs::read_to_string("/proc/stat").ok()?;
-    let v: Vec<u64> = text.lines().next()?.split_whitespace().skip(1).filter_map(|x| x.parse().ok()).collect();
-    let total: u64 = v.iter().take(8).sum();
-    let busy = v.first()? + v.get(1)? + v.get(2)?;
-    Some((busy, total))
+    CpuTimes::read().map(|c| (c.busy, c.total))
 }
 
 /// Cores busy on average over `window` (NaN where `/proc/stat` is unreadable).
@@ -826,15 +822,15 @@ struct EmulatorFigures {
 impl EmulatorFigures {
     fn from(r: &EmulatorReport, dir: &Path) -> EmulatorFigures {
         EmulatorFigures {
-            entered: r.frames.entered,
-            delivered: r.frames.delivered,
-            dropped: r.frames.dropped.clone(),
-            held_at_end: r.frames.held_at_end,
-            decision_ns: r.decision_ns,
-            release_lateness_ns: r.release_lateness_ns,
-            ingress_wait_ns: r.ingress_wait_ns,
-            steal_fraction: r.steal_fraction,
-            realtime_priority: r.realtime_priority,
+            entered: r.process.frames.entered,
+            delivered: r.process.frames.delivered,
+            dropped: r.process.frames.dropped.clone(),
+            held_at_end: r.process.frames.held_at_end,
+            decision_ns: r.shaping.link.decision_ns,
+            release_lateness_ns: r.shaping.link.release_lateness_ns,
+            ingress_wait_ns: r.shaping.link.ingress_wait_ns,
+            steal_fraction: r.process.steal_fraction,
+            realtime_priority: r.process.realtime_priority,
             out_dir: dir.to_path_buf(),
         }
     }
@@ -857,10 +853,7 @@ struct FloorResult {
 
 /// `a − b` for every percentile and the maximum.
 fn difference(a: &Summary, b: &Summary) -> BTreeMap<String, i64> {
-    [("p50", a.p50, b.p50), ("p90", a.p90, b.p90), ("p99", a.p99, b.p99), ("p999", a.p999, b.p999), ("p9999", a.p9999, b.p9999), ("max", a.max, b.max)]
-        .into_iter()
-        .map(|(k, x, y)| (k.to_string(), x as i64 - y as i64))
-        .collect()
+    netfi::metrics::difference(a, b, &KEYS)
 }
 
 fn rate_label(rate_hz: f64) -> String {
@@ -966,7 +959,7 @@ fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_l
         name,
         repetition: rep,
         transport,
-        scenario: report.scenario.clone(),
+        scenario: report.process.scenario.clone(),
         rate_hz,
         seconds: drive.seconds,
         host,
@@ -1549,8 +1542,8 @@ fn sockperf_measure(s: &Settings, seconds: f64, rep: usize) -> Result<Value> {
             "direct_ns": direct,
             "through_netfi_ns": via,
             "added_ns": added,
-            "emulator_frames": report.frames,
-            "emulator_release_lateness_ns": report.release_lateness_ns,
+            "emulator_frames": report.process.frames,
+            "emulator_release_lateness_ns": report.shaping.link.release_lateness_ns,
             "return_path": udp.get("return_path").cloned().unwrap_or(Value::Null),
             "guest_halt_poll_ns": halt_poll_ns,
         }))
@@ -1625,7 +1618,7 @@ fn run(args: &[String]) -> Result<()> {
     // cleared, and exits without writing half a result.
     netfi::service::signals::install();
     let _ = std::fs::remove_dir_all(s.out_dir.join("hlog"));
-    let _ = netfi::service::ipc::cleanup_stale();
+    let _ = netfi::transport::cleanup_stale();
     let started = Instant::now();
     let bench_host = HostTimer::start(None);
     println!(
@@ -1641,12 +1634,14 @@ fn run(args: &[String]) -> Result<()> {
     if s.emulator_core.is_none() {
         println!("  (fewer than 2 cores: nothing is pinned, and the figures mean little)");
     }
-    let isolation_file = s.out_dir.join("isolation.json");
-    if let Some(n) = netfi::host::isolate::restore_from_file(&isolation_file) {
-        println!("  (restored {n} placement(s) left moved by an interrupted earlier benchmark)");
+    // What an interrupted earlier run left moved is put back first.
+    if let Ok(done) = netfi::host::record::restore_orphans(None) {
+        for (path, r) in done {
+            println!("  (restored {} placement(s) left moved by an interrupted earlier run, from {})", r.undone, path.display());
+        }
     }
     let mut isolation = match (s.isolate, s.emulator_core) {
-        (true, Some(core)) => match netfi::host::isolate::isolate(core, Some(&isolation_file)) {
+        (true, Some(core)) => match netfi::host::isolate::isolate(core) {
             Ok(iso) => {
                 println!("  {} (for the benchmark)", iso.summary());
                 Some(iso)

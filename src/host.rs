@@ -28,6 +28,9 @@ pub struct CpuTimes {
     pub total: u64,
     /// All CPUs: the `steal` column.
     pub steal: u64,
+    /// All CPUs: time running tasks (user, nice, system). Interrupt and
+    /// softirq time is left out, as the kernel bills it to no process.
+    pub busy: u64,
 }
 
 impl CpuTimes {
@@ -44,7 +47,8 @@ impl CpuTimes {
         // user nice system idle iowait irq softirq steal guest guest_nice;
         // guest time is already counted in user, so it is not added again.
         let total = v.iter().take(8).sum();
-        Some(CpuTimes { total, steal: *v.get(7)? })
+        let busy = v.first()? + v.get(1)? + v.get(2)?;
+        Some(CpuTimes { total, steal: *v.get(7)?, busy })
     }
 
     /// Steal over the interval from `earlier` to `self`.
@@ -88,7 +92,7 @@ mod tests {
     #[test]
     fn parses_the_aggregate_line() {
         let a = CpuTimes::parse("cpu  100 0 50 800 10 0 5 35 0 0\ncpu0 1 2 3\n").unwrap();
-        assert_eq!(a, CpuTimes { total: 1000, steal: 35 });
+        assert_eq!(a, CpuTimes { total: 1000, steal: 35, busy: 150 });
         let b = CpuTimes::parse("cpu  200 0 100 1600 20 0 10 70 0 0\n").unwrap();
         let s = b.steal_since(&a);
         assert_eq!(s.ms, 350);

@@ -137,6 +137,20 @@ pub struct Summary {
 }
 
 impl Summary {
+    /// The percentile or maximum named `key`: `p50`, `p90`, `p99`, `p999`,
+    /// `p9999` or `max`.
+    pub fn get(&self, key: &str) -> Option<u64> {
+        Some(match key {
+            "p50" => self.p50,
+            "p90" => self.p90,
+            "p99" => self.p99,
+            "p999" => self.p999,
+            "p9999" => self.p9999,
+            "max" => self.max,
+            _ => return None,
+        })
+    }
+
     /// One line: `p50 1.2 µs  p90 …  max …` in readable units.
     pub fn line(&self) -> String {
         format!(
@@ -160,6 +174,14 @@ pub fn fmt_ns(ns: u64) -> String {
         1_000_000..=999_999_999 => format!("{:.3} ms", ns as f64 / 1e6),
         _ => format!("{:.3} s", ns as f64 / 1e9),
     }
+}
+
+/// `a − b` at each of `keys` (see [`Summary::get`]; an unknown key is left
+/// out).
+pub fn difference(a: &Summary, b: &Summary, keys: &[&str]) -> std::collections::BTreeMap<String, i64> {
+    keys.iter()
+        .filter_map(|k| Some((k.to_string(), a.get(k)? as i64 - b.get(k)? as i64)))
+        .collect()
 }
 
 #[cfg(test)]

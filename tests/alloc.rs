@@ -1,10 +1,13 @@
 //! Zero allocations per frame in steady state: a counting global allocator
-//! watches the injector (decide, queue, release) over many frames after a
-//! warm-up. Its own binary, because the allocator is process-wide.
+//! watches the emulator's forward link (decide, queue, release, with its
+//! histograms and trace) over many frames after a warm-up, driven through
+//! in-memory ports. Its own binary, because the allocator is process-wide.
 
-use netfi::injector::Injector;
 use netfi::sample::FrameSample;
 use netfi::scenario::{self, Scenario};
+use netfi::service::emulator::Forward;
+use netfi::service::link::Link;
+use netfi::transport::MemoryPort;
 
 #[path = "common/counting_alloc.rs"]
 mod counting_alloc;
@@ -13,29 +16,39 @@ use counting_alloc::{allocations, Counting};
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// Runs `frames` frames at 1 kHz through the injector and returns the
-/// allocations made during the last `measured` of them.
-fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) -> u64 {
+/// Runs `frames` frames at 1 kHz (simulated time) through the emulator's
+/// link and returns the allocations made during the last `measured` of them,
+/// and the frames released.
+fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) -> (u64, u64) {
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
-    let mut inj: Injector<FrameSample> = Injector::new(Scenario::new(&spec, 3).unwrap(), 1 << 16);
+    let link = Link::new(Scenario::new(&spec, 3).unwrap(), 1 << 16, frames).unwrap();
+    let mut fwd = Forward::new(link, false);
+    let mut console = MemoryPort::with_capacity(4);
+    let mut simulator = MemoryPort::with_capacity(1 << 17);
+    let mut template = FrameSample::ZERO;
+    netfi::frame::ItpFrame::default().write_to_sample(&mut template);
     let mut before = 0;
-    let mut sample = FrameSample::ZERO;
+    let mut released = 0;
+    let t0 = netfi::clock::now_ns();
     for i in 0..frames {
         if i == frames - measured {
             before = allocations();
         }
-        let now = i * 1_000_000;
-        while let Some(r) = inj.pop_due(now) {
-            std::hint::black_box(r);
-        }
+        let now = t0 + i * 1_000_000;
+        fwd.link.release_due(now, &mut simulator);
+        released += simulator.queue.len() as u64;
+        simulator.queue.clear();
+        let mut sample = template;
         sample.console_index = i;
-        std::hint::black_box(inj.ingress(now, sample));
+        sample.send_ns = now;
+        console.queue.push_back(sample);
+        fwd.take(&mut console, || now);
     }
-    allocations() - before
+    (allocations() - before, released)
 }
 
 #[test]
-fn the_injector_does_not_allocate_per_frame() {
+fn the_emulator_link_does_not_allocate_per_frame() {
     let pipelines = [
         ("PLM-2 → DLM-2", "[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n"),
         ("every model", "[[stage]]\nmodel = \"bernoulli\"\np = 0.01\n[[stage]]\nmodel = \"markov4\"\np13 = 0.01\np31 = 0.3\n[[stage]]\nmodel = \"gilbert_elliott\"\np = 0.01\n[[stage]]\npreset = \"CLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 10\ndist = \"uniform\"\njitter_ms = 5\norder = \"fifo\"\n"),
@@ -43,7 +56,8 @@ fn the_injector_does_not_allocate_per_frame() {
     ];
     for (name, text) in pipelines {
         // 300 s of frames; the last 200 s measured, well past the queue's fill-up.
-        let n = allocations_in_steady_state(text, 300_000, 200_000);
+        let (n, released) = allocations_in_steady_state(text, 300_000, 200_000);
         assert_eq!(n, 0, "{name}: {n} allocations in 200000 frames");
+        assert!(released > 100_000, "{name}: only {released} frames released");
     }
 }

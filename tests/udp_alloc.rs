@@ -1,15 +1,15 @@
 //! Zero allocations per datagram on the UDP bridge's hot path: a counting
-//! global allocator watches the UDP source (raw mode, into the arena), the
-//! injector, the UDP sink and the return path (untouched, and through a
-//! scenario of its own) over many datagrams after a warm-up. Its own binary,
-//! because the allocator is process-wide; everything runs on one thread.
+//! global allocator watches the emulator's loop turns — the UDP source (raw
+//! mode, into the arena), the forward link with its histograms and trace,
+//! the UDP sink, and the return path (untouched, and through a link of its
+//! own) — over many datagrams after a warm-up. Its own binary, because the
+//! allocator is process-wide; everything runs on one thread.
 
-use netfi::injector::{Fate, Injector};
-use netfi::sample::FrameSample;
 use netfi::scenario::{self, Scenario};
-use netfi::service::ports::{FrameSink, FrameSource};
-use netfi::service::udp::{Arena, ReturnPath, UdpSink, UdpSource};
-use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
+use netfi::service::emulator::Forward;
+use netfi::service::link::Link;
+use netfi::service::udp::ReturnPath;
+use netfi::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Instant;
@@ -39,8 +39,8 @@ fn until<T>(mut f: impl FnMut() -> Option<T>) -> T {
 
 /// Sends `datagrams` console → bridge → robot → bridge → console, one at a
 /// time, through `scenario` forward and `return_scenario` (or untouched)
-/// back; returns the allocations made during the last `measured`, and the
-/// replies the console got.
+/// back, turning the emulator's loop; returns the allocations made during
+/// the last `measured`, and the replies the console got.
 fn allocations_in_steady_state(
     scenario_text: &str,
     return_scenario: Option<&str>,
@@ -49,23 +49,22 @@ fn allocations_in_steady_state(
 ) -> (u64, u64) {
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
     let capacity = 256;
-    let mut inj: Injector<FrameSample> = Injector::new(Scenario::new(&spec, 3).unwrap(), capacity);
+    let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 3).unwrap(), capacity, datagrams).unwrap(), false);
     let arena = Rc::new(RefCell::new(Arena::new(capacity + 1)));
     let (console, robot, egress) = (bind(), bind(), bind());
-    let ret_port = egress.try_clone().unwrap();
-    let ret = match return_scenario {
-        None => ReturnPath::untouched(ret_port, None),
+    let mut source = UdpSource::new(bind(), Some(arena.clone()));
+    let (from_robot, to_console) = (egress.try_clone().unwrap(), source.port().try_clone().unwrap());
+    let mut ret = match return_scenario {
+        None => ReturnPath::untouched(from_robot, to_console, None),
         Some(text) => {
             let spec = scenario::parse_str(text, "return.toml", "return").unwrap();
-            ReturnPath::shaped(ret_port, None, Scenario::new(&spec, 4).unwrap(), 4, capacity, datagrams)
+            ReturnPath::shaped(from_robot, to_console, None, Scenario::new(&spec, 4).unwrap(), 4, capacity, datagrams).unwrap()
         }
     };
-    let mut source = UdpSource::new(bind(), Some(arena.clone())).with_return_path(ret);
     let mut sink = UdpSink::new(egress, robot.local_addr(), Some(arena));
     let to_bridge = PeerAddr::new(source.local_addr());
     let payload = [0x5au8; 300];
     let mut buf = vec![0u8; 1 << 16];
-    let mut sample = FrameSample::ZERO;
     let mut before = 0;
     let mut replies = 0;
     for i in 0..datagrams {
@@ -73,24 +72,24 @@ fn allocations_in_steady_state(
             before = allocations();
         }
         console.send_to(&payload, &to_bridge).unwrap();
-        until(|| source.try_recv(&mut sample).unwrap().then_some(()));
-        let now = netfi::clock::now_ns();
-        match inj.ingress(now, sample).fate {
-            Fate::Dropped(_) => source.dropped(&sample),
-            Fate::Scheduled { .. } => {
-                let r = until(|| inj.pop_due(netfi::clock::now_ns()));
-                sink.send_with(&r.item, |s| s.release_ns = netfi::clock::now_ns()).unwrap();
-                let d = until(|| robot.recv_from(&mut buf).unwrap());
-                robot.send_to(&buf[..52], &PeerAddr::new(d.from)).unwrap();
-                // The reply goes back (or is dropped, or held) inside the
-                // source's polls; drain what reaches the console.
-                for _ in 0..64 {
-                    std::hint::black_box(source.try_recv(&mut sample).unwrap());
-                    if console.recv_from(&mut buf).unwrap().is_some() {
-                        replies += 1;
-                        break;
-                    }
-                }
+        let (entered, released) = (fwd.link.next_ingress_index(), fwd.link.released());
+        // In, then out (PLM-2 delays nothing): released, or dropped.
+        until(|| {
+            fwd.turn(&mut source, &mut sink, Some(&mut ret));
+            (fwd.link.next_ingress_index() > entered && fwd.link.held() == 0).then_some(())
+        });
+        if fwd.link.released() == released {
+            continue;
+        }
+        let d = until(|| robot.recv_from(&mut buf).unwrap());
+        robot.send_to(&buf[..52], &PeerAddr::new(d.from)).unwrap();
+        // The reply goes back (or is dropped, or held) in the loop's turns;
+        // drain what reaches the console.
+        for _ in 0..64 {
+            fwd.turn(&mut source, &mut sink, Some(&mut ret));
+            if console.recv_from(&mut buf).unwrap().is_some() {
+                replies += 1;
+                break;
             }
         }
     }

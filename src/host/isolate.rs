@@ -187,7 +187,7 @@ pub const RUNNER_PID_ENV: &str = "NETFI_RUNNER_PID";
 /// named by [`RUNNER_PID_ENV`]) die at any point without restoring.
 /// `_state_file` is no longer used (the record is host-wide), and kept for
 /// callers of the earlier interface.
-pub fn isolate(core: usize, _state_file: Option<&Path>) -> std::io::Result<Isolation> {
+pub fn isolate(core: usize) -> std::io::Result<Isolation> {
     let online = online_cpus();
     if !online.contains(&core) {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("core {core} is not online (online: {})", format_list(&online))));
@@ -329,16 +329,6 @@ pub fn pin_problem() -> Option<String> {
             format_list(&online)
         )
     })
-}
-
-/// Undoes what an [`isolate`] that saved its state to `path` changed, when
-/// the file is still there (its owner died before restoring), and removes
-/// the file. Returns how many changes were undone, `None` without a file.
-pub fn restore_from_file(path: &Path) -> Option<usize> {
-    let text = std::fs::read(path).ok()?;
-    let _ = std::fs::remove_file(path);
-    let state: IsolationState = serde_json::from_slice(&text).ok()?;
-    Some(restore_state(&state))
 }
 
 pub(crate) fn restore_state(state: &IsolationState) -> usize {
@@ -561,7 +551,7 @@ mod tests {
             eprintln!("skipped: this process may not run on core {core}");
             return;
         }
-        let mut iso = isolate(core, None).expect("isolate");
+        let mut iso = isolate(core).expect("isolate");
         let record = iso.summary().record.clone().expect("a record");
         let moved = get_affinity(pid).unwrap();
         assert!(!moved.contains(&core), "child still allowed on core {core}: {moved:?}");
@@ -573,7 +563,7 @@ mod tests {
         assert_eq!(get_affinity(pid).unwrap(), all);
         assert!(!record.exists(), "record left after restoring");
         // Restoring from the record, as the guardian or `netfi restore` do.
-        let iso2 = isolate(core, None).expect("isolate");
+        let iso2 = isolate(core).expect("isolate");
         let record = iso2.summary().record.clone().unwrap();
         assert!(!get_affinity(pid).unwrap().contains(&core));
         std::mem::forget(iso2);

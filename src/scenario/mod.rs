@@ -24,9 +24,6 @@ pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
 // `scenario`), re-exported where scenario code has always found them.
 pub use crate::model::presets::{canonical_name, preset_label, PRESET_NAMES};
 pub use crate::model::{splitmix64, stream_seed, ModelSpec};
-/// Resolving a command-line argument reads files, so it lives in the shell
-/// ([`crate::load::resolve`]); the name is kept here for its callers.
-pub use crate::load::resolve;
 
 use crate::model::{AnyModel, ModelKind, StageRng, Verdict};
 use rand::SeedableRng;

@@ -1,10 +1,54 @@
 //! Command-line arguments of the services, shared by `netfi <service>` and
 //! the stand-alone `netfi-console`, `netfi-emulator`, `netfi-simulator`.
+//! Each service's arguments also render themselves as the argv `netfi run`
+//! starts the service with ([`ConsoleArgs::to_argv`], …), so a flag is
+//! named in one file.
 
-use crate::service::udp::{Endpoint, Payload};
+use crate::transport::udp::{UdpOptions, DEFAULT_UDP_BUFFER_BYTES};
+use crate::transport::{Endpoint, Payload, Wiring};
+use anyhow::bail;
 use clap::Args;
+use std::fmt::Display;
 use std::net::SocketAddr;
 use std::path::PathBuf;
+
+/// The frame rates a run accepts, Hz: 0.001 Hz to 10 MHz.
+pub const RATE_HZ_RANGE: std::ops::RangeInclusive<f64> = 0.001..=10e6;
+
+/// Parses `--rate-hz`: a finite rate in [`RATE_HZ_RANGE`].
+pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
+    let r: f64 = text.trim().parse().map_err(|_| format!("--rate-hz takes a number of Hz, got `{text}`"))?;
+    if r.is_finite() && RATE_HZ_RANGE.contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!("--rate-hz must be between 0.001 Hz and 10 MHz (10000000 Hz), got {r}"))
+    }
+}
+
+/// An argv under construction: flags with values, and switches.
+#[derive(Debug, Default)]
+struct Argv(Vec<String>);
+
+impl Argv {
+    fn val(mut self, flag: &str, v: impl Display) -> Self {
+        self.0.extend([flag.to_string(), v.to_string()]);
+        self
+    }
+
+    fn opt(self, flag: &str, v: Option<impl Display>) -> Self {
+        match v {
+            Some(v) => self.val(flag, v),
+            None => self,
+        }
+    }
+
+    fn switch(mut self, flag: &str, on: bool) -> Self {
+        if on {
+            self.0.push(flag.to_string());
+        }
+        self
+    }
+}
 
 #[derive(Debug, Clone, Args)]
 pub struct ConsoleArgs {
@@ -12,7 +56,7 @@ pub struct ConsoleArgs {
     #[arg(long)]
     pub run_id: String,
     /// Frame rate in Hz (synthetic motion, or a capture replayed at a fixed rate).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_rate_hz)]
     pub rate_hz: Option<f64>,
     /// Frames to send (default: --duration-s worth).
     #[arg(long, conflicts_with = "duration_s")]
@@ -120,7 +164,7 @@ pub struct EmulatorArgs {
     #[arg(long, value_name = "MS")]
     pub idle_end_ms: Option<f64>,
     /// Requested kernel receive/send buffer of each UDP socket, bytes.
-    #[arg(long, default_value_t = crate::service::udp::DEFAULT_UDP_BUFFER_BYTES)]
+    #[arg(long, default_value_t = DEFAULT_UDP_BUFFER_BYTES)]
     pub udp_buffer_bytes: usize,
 }
 
@@ -158,8 +202,8 @@ pub struct RunArgs {
     /// Frames to stream instead of a duration.
     #[arg(long, conflicts_with = "duration_s")]
     pub frames: Option<u64>,
-    /// Frame rate in Hz (default 1000; with --capture, replays at this fixed rate).
-    #[arg(long)]
+    /// Frame rate in Hz, 0.001 to 10e6 (default 1000; with --capture, replays at this fixed rate).
+    #[arg(long, value_parser = parse_rate_hz)]
     pub rate_hz: Option<f64>,
     /// Seed of the scenario and the synthetic motion (default: random, printed).
     #[arg(long)]
@@ -213,4 +257,114 @@ pub struct RunArgs {
     /// price of the in-run baseline and the console-side kinematics.
     #[arg(long)]
     pub no_direct: bool,
+}
+
+impl ConsoleArgs {
+    /// The argv that starts a console with these arguments.
+    pub fn to_argv(&self) -> Vec<String> {
+        let a = Argv::default().val("--run-id", &self.run_id).val("--out", self.out.display()).opt("--seed", self.seed);
+        a.opt("--rate-hz", self.rate_hz)
+            .opt("--frames", self.frames)
+            .opt("--duration-s", self.duration_s)
+            .opt("--capture", self.capture.as_ref().map(|c| c.display()))
+            .switch("--no-direct", self.no_direct)
+            .opt("--core", self.core)
+            .opt("--avoid-core", self.avoid_core)
+            .val("--wait-for-peer-s", self.wait_for_peer_s)
+            .0
+    }
+}
+
+impl EmulatorArgs {
+    /// The argv that starts an emulator with these arguments (iceoryx2 on
+    /// both sides: what `netfi run` starts).
+    pub fn to_argv(&self) -> Vec<String> {
+        let a = Argv::default().opt("--run-id", self.run_id.as_ref()).val("--scenario", &self.scenario).opt("--seed", self.seed);
+        let a = a.val("--out", self.out.display()).val("--expected-frames", self.expected_frames);
+        a.opt("--core", self.core)
+            .switch("--no-pin", self.no_pin)
+            .opt("--queue-capacity", self.queue_capacity)
+            .opt("--rt-priority", self.rt_priority)
+            .switch("--isolate", self.isolate)
+            .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .0
+    }
+
+    /// Checks that the options fit the endpoints, with errors that say what
+    /// would be accepted.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
+        if !(i || e) {
+            if self.run_id.is_none() {
+                bail!("--run-id is required with the iceoryx2 ingress and egress");
+            }
+            return Ok(());
+        }
+        if self.payload == Payload::Raw && !(i && e) {
+            bail!("--payload raw needs UDP on both sides (--ingress udp://… --egress udp://…): an iceoryx2 port carries ITP frames only");
+        }
+        let return_opts = self.return_scenario.is_some() || self.return_to.is_some() || self.return_seed.is_some();
+        if return_opts && !(i && e) {
+            bail!("--return-scenario, --return-to and --return-seed apply to the return path, which needs UDP on both sides");
+        }
+        if self.no_return && return_opts {
+            bail!("--no-return cannot be combined with --return-scenario, --return-to or --return-seed");
+        }
+        if self.idle_end_ms.is_some() && !i {
+            bail!("--idle-end-ms applies to a UDP ingress; an iceoryx2 console ends its stream itself");
+        }
+        if let Some(ms) = self.idle_end_ms {
+            if !(ms.is_finite() && ms > 0.0) {
+                bail!("--idle-end-ms must be a positive number of milliseconds, got {ms}");
+            }
+        }
+        if self.egress_bind.is_some() && !e {
+            bail!("--egress-bind applies to a UDP egress");
+        }
+        if let Some(a) = self.egress.udp() {
+            if a.port() == 0 || a.ip().is_unspecified() {
+                bail!("--egress {}: the robot's address needs a specific address and a port other than 0", self.egress);
+            }
+        }
+        if !(i && e) && self.run_id.is_none() {
+            bail!("--run-id is needed for the iceoryx2 side (ingress {}, egress {})", self.ingress, self.egress);
+        }
+        Ok(())
+    }
+
+    /// How to open the transports, for a release queue of `queue_capacity`.
+    pub fn wiring(&self, queue_capacity: usize) -> Wiring {
+        Wiring {
+            run_id: self.run_id.clone(),
+            payload: self.payload,
+            udp: UdpOptions { reuse_address: true, buffer_bytes: Some(self.udp_buffer_bytes) },
+            egress_bind: self.egress_bind,
+            queue_capacity,
+            idle_end_ns: self.idle_end_ms.map(|ms| (ms * 1e6) as u64),
+        }
+    }
+}
+
+impl SimulatorArgs {
+    /// The argv that starts a simulator with these arguments.
+    pub fn to_argv(&self) -> Vec<String> {
+        Argv::default()
+            .val("--run-id", &self.run_id)
+            .val("--out", self.out.display())
+            .opt("--core", self.core)
+            .switch("--spin", self.spin)
+            .opt("--avoid-core", self.avoid_core)
+            .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .val("--stall-ms", self.stall_ms)
+            .0
+    }
+}
+
+impl RunArgs {
+    /// Whether the emulator's core is to be cleared: the default, and what
+    /// `--isolate` restates; `--no-isolate` turns it off (the later of the
+    /// two wins).
+    pub fn clears_core(&self) -> bool {
+        self.isolate || !self.no_isolate
+    }
 }

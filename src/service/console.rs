@@ -17,8 +17,8 @@ use crate::metrics::{LatencyHistogram, Summary};
 use crate::motion::{MotionGenerator, MotionParams};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::args::ConsoleArgs;
-use crate::service::ipc::open_node;
-use crate::service::ports::FrameSink;
+use crate::transport::open_node;
+use crate::transport::FrameSink;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
 use anyhow::{bail, Context, Result};
@@ -84,45 +84,37 @@ impl Script {
     }
 }
 
-/// Runs the console with `args`; returns its report (also `console.json`).
-pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
-    let seed = args.seed.unwrap_or_else(crate::service::run::fresh_seed);
-    let mut script = match &args.capture {
-        Some(path) => {
-            let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
-            let t0 = cap.records.first().map_or(0, |r| r.time_ns);
-            let mut last = 0;
-            let records = cap
-                .records
-                .iter()
-                .map(|r| {
-                    // Wall-clock captures can step backwards; a schedule cannot.
-                    last = r.time_ns.saturating_sub(t0).max(last);
-                    (last, r.payload)
-                })
-                .collect();
-            Script::Replay { records, period_ns: args.rate_hz.map(|r| 1e9 / r) }
-        }
-        None => {
-            let rate = args.rate_hz.unwrap_or(1000.0);
-            anyhow::ensure!(rate.is_finite() && rate > 0.0, "--rate-hz must be a positive number, got {rate}");
-            let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
-            Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
-        }
-    };
-    if let Some(r) = args.rate_hz {
-        if !(r.is_finite() && r > 0.0) {
-            bail!("--rate-hz must be a positive number, got {r}");
-        }
+impl Script {
+    /// The capture given, or synthetic motion at the given rate.
+    fn from_args(args: &ConsoleArgs, seed: u64) -> Result<Script> {
+        Ok(match &args.capture {
+            Some(path) => {
+                let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+                let t0 = cap.records.first().map_or(0, |r| r.time_ns);
+                let mut last = 0;
+                let records = cap
+                    .records
+                    .iter()
+                    .map(|r| {
+                        // Wall-clock captures can step backwards; a schedule cannot.
+                        last = r.time_ns.saturating_sub(t0).max(last);
+                        (last, r.payload)
+                    })
+                    .collect();
+                Script::Replay { records, period_ns: args.rate_hz.map(|r| 1e9 / r) }
+            }
+            None => {
+                // `--rate-hz` is checked where it is parsed (`args::parse_rate_hz`).
+                let rate = args.rate_hz.unwrap_or(crate::service::plan::DEFAULT_RATE_HZ);
+                let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
+                Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
+            }
+        })
     }
-    let n = script.len(args.frames, args.duration_s);
-    crate::service::write_pid(&args.out, "console")?;
-    let node = open_node(&args.run_id, Role::Console)?;
-    let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
-    let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
-    signals::install();
-    crate::service::place("console", args.core, args.avoid_core)?;
-    // Wait for the emulator to subscribe, so the first frames are not lost.
+}
+
+/// Waits for the emulator to subscribe to the console port.
+fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::transport::IpcNode, args: &ConsoleArgs) -> Result<()> {
     let deadline = now_ns() + (args.wait_for_peer_s * 1e9) as u64;
     while port.peers_connected() == 0 {
         if now_ns() > deadline {
@@ -133,6 +125,22 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         }
         std::thread::sleep(std::time::Duration::from_millis(1));
     }
+    Ok(())
+}
+
+/// Runs the console with `args`; returns its report (also `console.json`).
+pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
+    let seed = args.seed.unwrap_or_else(crate::service::plan::fresh_seed);
+    let mut script = Script::from_args(args, seed)?;
+    let n = script.len(args.frames, args.duration_s);
+    crate::service::write_pid(&args.out, "console")?;
+    let node = open_node(&args.run_id, Role::Console)?;
+    let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
+    let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
+    signals::install();
+    crate::service::place("console", args.core, args.avoid_core)?;
+    // Wait for the emulator to subscribe, so the first frames are not lost.
+    wait_for_emulator(&port, &node, args)?;
     let source = match &args.capture {
         Some(p) => format!("capture:{}", p.display()),
         None => "synthetic".into(),

@@ -1,28 +1,30 @@
-//! The emulator service: takes frames off the console port, decides each
-//! one's fate with the sans-IO [`Injector`], holds survivors in its
-//! preallocated release queue, and busy-waits to release each at its
-//! scheduled time onto the simulator port.
+//! The emulator service: takes frames off its ingress, decides each one's
+//! fate in the [`Link`] (the sans-IO injector with its measurements and
+//! trace), holds survivors in its preallocated release queue, and
+//! busy-waits to release each at its scheduled time onto its egress.
+//! Ingress and egress are transport values ([`crate::transport::open`]):
+//! iceoryx2, UDP, or any combination.
 //!
-//! The loop, pinned to one core, does per iteration: release every frame
-//! that is due; take at most one frame from the console port and decide it;
-//! every 4096 iterations, look at the stop flag and the peers. Nothing in it
+//! The loop, pinned to one core, does per turn ([`Forward::turn`]): release
+//! every frame that is due; poll the UDP return path, if there is one; take
+//! at most one frame from the ingress and decide it. Every 4096 turns it
+//! looks at the stop flag and the peers. Nothing in it
 //! allocates, locks or makes a system call beyond the transport's own (the
 //! clock is the vDSO's); the per-frame trace goes through a wait-free ring to
 //! a writer thread.
 
-use crate::check::{stage_reports, StageReport};
 use crate::clock::now_ns;
 use crate::frame::ItpView;
 use crate::host::isolate::IsolationSummary;
 use crate::host::StealTimer;
-use crate::injector::{Fate, Injector, Invalid};
-use crate::metrics::{LatencyHistogram, Summary};
+use crate::injector::{Fate, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::scenario::{Scenario, ScenarioSpec};
-use crate::service::ports::{FrameSink, FrameSource, PortError};
+use crate::service::args::EmulatorArgs;
+use crate::service::link::{Arrival, Link, LinkMeasures};
+use crate::service::udp::{self, ReturnPath};
 use crate::service::signals;
-use crate::stats::BatchMeans;
-use crate::trace::{self, TraceEvent};
+use crate::transport::{FrameSink, FrameSource, PortError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -73,9 +75,33 @@ pub struct EmulatorFrames {
     pub bad_checksum_passed: u64,
 }
 
-/// The emulator's own report, written as `emulator.json`.
+/// The emulator's own report, written as `emulator.json`: one flat JSON
+/// object of two parts. What the run report shows at its top level (the
+/// shaping) is kept apart from the rest (the process), so that the run
+/// report carries each field once.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmulatorReport {
+    #[serde(flatten)]
+    pub shaping: Shaping,
+    #[serde(flatten)]
+    pub process: EmulatorProcess,
+}
+
+/// What the link did to the stream, and where its files are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Shaping {
+    #[serde(flatten)]
+    pub link: LinkMeasures,
+    pub peer_events: Vec<PeerEvent>,
+    pub trace_path: Option<PathBuf>,
+    pub decision_hlog: Option<PathBuf>,
+    pub lateness_hlog: Option<PathBuf>,
+}
+
+/// The emulator as a process: its set-up, its own frame account, how its
+/// loop ran and ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EmulatorProcess {
     pub scenario: String,
     pub seed: u64,
     pub core: Option<usize>,
@@ -88,19 +114,6 @@ pub struct EmulatorReport {
     pub queue_order: String,
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub stages: Vec<StageReport>,
-    /// Injected delay of delivered frames.
-    pub injected_delay_ns: Summary,
-    /// Console send → frame taken off the console port (the first hop plus
-    /// any time the frame waited in the port for the emulator).
-    pub ingress_wait_ns: Summary,
-    /// Frame taken off the console port → fate decided.
-    pub decision_ns: Summary,
-    /// Actual − scheduled release.
-    pub release_lateness_ns: Summary,
-    pub peer_events: Vec<PeerEvent>,
     /// Why the loop ended: `end_marker` (the console finished and every held
     /// frame was released) or `signal`.
     pub ended_by: String,
@@ -116,241 +129,83 @@ pub struct EmulatorReport {
     pub trace_overflowed: u64,
     pub steal_ms: u64,
     pub steal_fraction: f64,
-    pub trace_path: Option<PathBuf>,
-    pub decision_hlog: Option<PathBuf>,
-    pub lateness_hlog: Option<PathBuf>,
 }
 
-/// Where an isolating emulator keeps what it moved until it has put it
-/// back, in its output directory; the runner restores from it when the
-/// emulator died first.
-pub const ISOLATION_STATE_FILE: &str = "isolation.json";
+/// The forward direction's loop state: the link, and what the loop counts
+/// around it.
+pub struct Forward {
+    /// The link every frame goes through.
+    pub link: Link<FrameSample>,
+    drop_bad_checksum: bool,
+    sample: FrameSample,
+    bad_checksum_passed: u64,
+    receive_errors: u64,
+    last_error: Option<PortError>,
+    sent_by_console: Option<u64>,
+}
 
-/// Runs the emulator until the console's end marker has been seen and every
-/// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
-/// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
-/// `emulator.json` into `out_dir`, and returns the report.
-/// `stop_requested` is polled off the hot path (every 4096 iterations).
-pub fn run<S: FrameSource, K: FrameSink>(
-    cfg: &EmulatorConfig,
-    source: &mut S,
-    sink: &mut K,
-    mut stop_requested: impl FnMut() -> bool,
-) -> anyhow::Result<EmulatorReport> {
-    use anyhow::Context;
-    std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
-    let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
-    let mut inj: Injector<FrameSample> = Injector::new(scenario, cfg.queue_capacity);
-    // The writer thread starts before pinning, and is then kept off the
-    // loop's core, so it runs elsewhere and never preempts the loop.
-    let (mut tsink, twriter) = trace::start(cfg.expected_frames.min(50_000_000) as usize);
-    if let Some(core) = cfg.core {
-        let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
-        anyhow::ensure!(ok, "could not pin the emulator to core {core}");
-        twriter.keep_off_core(core);
+impl Forward {
+    /// The loop around `link`; frames with a wrong ITP checksum are dropped
+    /// when `drop_bad_checksum`, else counted and passed.
+    pub fn new(link: Link<FrameSample>, drop_bad_checksum: bool) -> Forward {
+        Forward {
+            link,
+            drop_bad_checksum,
+            sample: FrameSample::ZERO,
+            bad_checksum_passed: 0,
+            receive_errors: 0,
+            last_error: None,
+            sent_by_console: None,
+        }
     }
-    // After pinning: the loop's own threads are placed; everything else that
-    // may run elsewhere leaves the core until the run ends.
-    let mut isolation = match (cfg.isolate, cfg.core) {
-        (true, Some(core)) => match crate::host::isolate::isolate(core, Some(&cfg.out_dir.join(ISOLATION_STATE_FILE))) {
-            Ok(iso) => {
-                eprintln!("emulator: {}", iso.summary());
-                Some(iso)
-            }
-            Err(e) => {
-                eprintln!("emulator: WARNING: could not clear core {core}: {e}");
-                Some(crate::host::isolate::Isolation::not_cleared(core, format!("could not clear core {core}: {e}")))
-            }
-        },
-        (true, None) => {
-            let why = crate::host::isolate::pin_problem().unwrap_or_else(|| "--isolate needs a pinned core; nothing cleared".into());
-            eprintln!("emulator: WARNING: {why}");
-            Some(crate::host::isolate::Isolation::not_cleared(0, why))
+
+    /// One turn of the loop: every release that is due, oldest first; the
+    /// return path; at most one frame in.
+    #[inline]
+    pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
+        self.link.release_due(now_ns(), sink);
+        if let Some(r) = ret {
+            r.poll(source.sender());
         }
-        _ => None,
-    };
-    let realtime_priority = match cfg.rt_priority {
-        Some(p) => match crate::service::set_realtime(p) {
-            Ok(()) => {
-                if let Some((runtime, period)) = crate::service::rt_throttling() {
-                    eprintln!(
-                        "emulator: WARNING: real-time throttling is on (kernel.sched_rt_runtime_us = {runtime} of {period}): this busy loop at SCHED_FIFO will be stopped for {} ms of every {} ms; set it to -1, or use --isolate without --rt-priority",
-                        (period - runtime) / 1000,
-                        period / 1000
-                    );
-                }
-                Some(p)
-            }
-            Err(e) => {
-                eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
-                None
-            }
-        },
-        None => None,
-    };
-    let mut decision = LatencyHistogram::new();
-    let mut ingress_wait = LatencyHistogram::new();
-    let mut lateness = LatencyHistogram::new();
-    let mut injected = LatencyHistogram::new();
-    let mut batches = BatchMeans::new(cfg.expected_frames.max(1));
-    let mut bad_checksum_passed = 0u64;
-    let mut receive_errors = 0u64;
-    let mut send_errors = 0u64;
-    let mut last_error: Option<PortError> = None;
-    let mut sent_by_console = None;
-    let mut peer_events = Vec::new();
-    let mut peers = (source.peers(), sink.peers());
-    let steal_timer = StealTimer::start();
-    let t_start = now_ns();
-    let mut sample = FrameSample::ZERO;
-    let mut iter: u64 = 0;
-    let ended_by = loop {
-        // 1. Every release that is due, oldest first.
-        let now = now_ns();
-        while let Some(r) = inj.pop_due(now) {
-            let mut release_ns = 0;
-            let sent = sink.send_with(&r.item, |s| {
-                s.release_sched_ns = r.release_ns;
-                s.injected_delay_ns = r.release_ns - s.ingress_ns;
-                release_ns = now_ns();
-                s.release_ns = release_ns;
-            });
-            if let Err(e) = sent {
-                send_errors += 1;
-                last_error = Some(e);
-                release_ns = now_ns();
-            }
-            lateness.record(release_ns.saturating_sub(r.release_ns));
-            injected.record(r.release_ns - r.item.ingress_ns);
-            tsink.push(TraceEvent::Release { ingress_index: r.ingress_index, release_ns });
-        }
-        // 2. At most one frame in.
-        match source.try_recv(&mut sample) {
-            Ok(true) if sample.is_end() => sent_by_console = Some(sample.console_index),
+        self.take(source, now_ns);
+    }
+
+    /// Takes at most one frame from `source`, stamps it taken at `clock()`
+    /// (read only when a frame came) and decides it.
+    #[inline]
+    pub fn take<S: FrameSource>(&mut self, source: &mut S, clock: impl FnOnce() -> u64) {
+        let sample = &mut self.sample;
+        match source.try_recv(sample) {
+            Ok(true) if sample.is_end() => self.sent_by_console = Some(sample.console_index),
             Ok(true) => {
-                let t_take = now_ns();
-                let index = inj.next_ingress_index();
-                sample.ingress_index = index;
+                let t_take = clock();
+                sample.ingress_index = self.link.next_ingress_index();
                 sample.ingress_ns = t_take;
-                let (entered, sequence) = match classify(&sample, cfg.drop_bad_checksum) {
-                    Ok(seq) => {
-                        if seq.1 {
-                            bad_checksum_passed += 1;
-                        }
-                        (inj.ingress(t_take, sample), Some(seq.0))
+                let arrival = |sequence| Arrival { sequence, console_index: sample.console_index, send_ns: sample.send_ns };
+                let entered = match classify(sample, self.drop_bad_checksum) {
+                    Ok((seq, bad)) => {
+                        self.bad_checksum_passed += u64::from(bad);
+                        self.link.ingress(t_take, *sample, arrival(Some(seq)))
                     }
-                    Err((why, seq)) => (inj.reject(t_take, why), seq),
+                    Err((why, seq)) => self.link.reject(t_take, why, arrival(seq)),
                 };
-                let t_decided = now_ns();
-                decision.record(t_decided - t_take);
-                ingress_wait.record(t_take.saturating_sub(sample.send_ns));
-                let (dropped, release_sched_ns) = match entered.fate {
-                    Fate::Scheduled { release_ns, .. } => (None, release_ns),
-                    Fate::Dropped(c) => {
-                        source.dropped(&sample);
-                        (Some(c), 0)
-                    }
-                };
-                batches.record(dropped.is_some());
-                tsink.push(TraceEvent::Ingress {
-                    ingress_index: index,
-                    sequence,
-                    console_index: sample.console_index,
-                    send_ns: sample.send_ns,
-                    ingress_ns: t_take,
-                    dropped,
-                    release_sched_ns,
-                });
+                if let Fate::Dropped(_) = entered.fate {
+                    source.dropped(sample);
+                }
             }
             Ok(false) => {}
             Err(e) => {
-                receive_errors += 1;
-                last_error = Some(e);
+                self.receive_errors += 1;
+                self.last_error = Some(e);
             }
         }
-        // 3. Housekeeping, off the per-frame path.
-        iter = iter.wrapping_add(1);
-        if iter % 4096 == 0 {
-            if stop_requested() {
-                break "signal";
-            }
-            if sent_by_console.is_some() && inj.held() == 0 {
-                break "end_marker";
-            }
-            if iter % (1 << 16) == 0 {
-                let now_peers = (source.peers(), sink.peers());
-                let t_s = (now_ns() - t_start) as f64 / 1e9;
-                if now_peers.0 != peers.0 {
-                    peer_events.push(PeerEvent { t_s, peer: "console".into(), connected: now_peers.0.unwrap_or(0) });
-                }
-                if now_peers.1 != peers.1 {
-                    peer_events.push(PeerEvent { t_s, peer: "simulator".into(), connected: now_peers.1.unwrap_or(0) });
-                }
-                peers = now_peers;
-            }
-        }
-    };
-    let t_end = now_ns();
-    let isolation = isolation.as_mut().map(|iso| iso.restore());
-    // Tell the simulator the stream ended (best effort: it may be gone).
-    let counts = inj.counts();
-    let _ = sink.send_with(&FrameSample::end_marker(counts.released), |_| {});
-    if let Some(e) = &last_error {
-        eprintln!("emulator: last transport error: {e}");
     }
-    let rows = twriter.finish();
-    let trace_path = cfg.out_dir.join("trace_emulator.csv");
-    trace::write_csv(&trace_path, &rows, &[]).with_context(|| format!("writing {}", trace_path.display()))?;
-    let duration_s = (t_end - t_start) as f64 / 1e9;
-    let decision_hlog = cfg.out_dir.join("decision.hlog");
-    let lateness_hlog = cfg.out_dir.join("lateness.hlog");
-    decision.write_log(&decision_hlog, "decision", 0.0, duration_s)?;
-    lateness.write_log(&lateness_hlog, "release_lateness", 0.0, duration_s)?;
-    let steal = steal_timer.stop();
-    let (loss_rate, loss_rate_ci95) = batches.rate_ci95();
-    let interval_ns = if counts.entered > 1 { (t_end - t_start) as f64 / counts.entered as f64 } else { 0.0 };
-    let (stages, _) = stage_reports(inj.scenario(), interval_ns);
-    let report = EmulatorReport {
-        scenario: inj.scenario().name().to_string(),
-        seed: cfg.seed,
-        core: cfg.core,
-        realtime_priority,
-        isolation,
-        queue_order: format!("{:?}", inj.queue_order()).to_lowercase(),
-        queue_capacity: inj.queue_capacity(),
-        frames: EmulatorFrames {
-            entered: counts.entered,
-            delivered: counts.released,
-            dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
-            held_at_end: counts.held,
-            sent_by_console,
-            bad_checksum_passed,
-        },
-        loss_rate,
-        loss_rate_ci95,
-        stages,
-        injected_delay_ns: injected.summary(),
-        ingress_wait_ns: ingress_wait.summary(),
-        decision_ns: decision.summary(),
-        release_lateness_ns: lateness.summary(),
-        peer_events,
-        ended_by: ended_by.to_string(),
-        duration_s,
-        loop_iterations: iter,
-        loop_iteration_ns_mean: if iter > 0 { (t_end - t_start) as f64 / iter as f64 } else { 0.0 },
-        receive_errors,
-        send_errors,
-        trace_overflowed: tsink.overflowed(),
-        steal_ms: steal.ms,
-        steal_fraction: steal.fraction,
-        trace_path: Some(trace_path),
-        decision_hlog: Some(decision_hlog),
-        lateness_hlog: Some(lateness_hlog),
-    };
-    assert!(counts.balanced(), "frame accounting broken: {counts:?}");
-    let json = cfg.out_dir.join("emulator.json");
-    std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
-    Ok(report)
+
+    /// The console has ended its stream and every held frame is released.
+    #[inline]
+    pub fn drained(&self) -> bool {
+        self.sent_by_console.is_some() && self.link.held() == 0
+    }
 }
 
 /// Checks size and checksum. `Ok((sequence, checksum_bad))` for a frame to
@@ -373,16 +228,261 @@ fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (In
     Ok((seq, bad))
 }
 
-/// Wires the emulator: arguments → scenario → ports → [`run`]. The ports
-/// are iceoryx2's unless `--ingress` or `--egress` names a UDP endpoint
-/// (then [`crate::service::udp::main`] wires them).
-pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<EmulatorReport> {
+/// How the loop's thread was placed.
+struct Placement {
+    isolation: Option<crate::host::isolate::Isolation>,
+    realtime_priority: Option<i32>,
+}
+
+/// Pins the loop's thread (keeping the trace writers off its core), clears
+/// the core if asked, and raises the thread's priority if asked.
+fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
+    if let Some(core) = cfg.core {
+        let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
+        anyhow::ensure!(ok, "could not pin the emulator to core {core}");
+        link.keep_trace_off_core(core);
+        if let Some(r) = ret {
+            r.keep_trace_off_core(core);
+        }
+    }
+    // After pinning: the loop's own threads are placed; everything else that
+    // may run elsewhere leaves the core until the run ends.
+    let isolation = match (cfg.isolate, cfg.core) {
+        (true, Some(core)) => match crate::host::isolate::isolate(core) {
+            Ok(iso) => {
+                eprintln!("emulator: {}", iso.summary());
+                Some(iso)
+            }
+            Err(e) => {
+                eprintln!("emulator: WARNING: could not clear core {core}: {e}");
+                Some(crate::host::isolate::Isolation::not_cleared(core, format!("could not clear core {core}: {e}")))
+            }
+        },
+        (true, None) => {
+            let why = crate::host::isolate::pin_problem().unwrap_or_else(|| "--isolate needs a pinned core; nothing cleared".into());
+            eprintln!("emulator: WARNING: {why}");
+            Some(crate::host::isolate::Isolation::not_cleared(0, why))
+        }
+        _ => None,
+    };
+    let realtime_priority = cfg.rt_priority.and_then(realtime);
+    Ok(Placement { isolation, realtime_priority })
+}
+
+/// Moves the loop to SCHED_FIFO `p`, warning of real-time throttling; the
+/// priority it got, if any.
+fn realtime(p: i32) -> Option<i32> {
+    match crate::service::set_realtime(p) {
+        Ok(()) => {
+            if let Some((runtime, period)) = crate::service::rt_throttling() {
+                eprintln!(
+                    "emulator: WARNING: real-time throttling is on (kernel.sched_rt_runtime_us = {runtime} of {period}): this busy loop at SCHED_FIFO will be stopped for {} ms of every {} ms; set it to -1, or use --isolate without --rt-priority",
+                    (period - runtime) / 1000,
+                    period / 1000
+                );
+            }
+            Some(p)
+        }
+        Err(e) => {
+            eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
+            None
+        }
+    }
+}
+
+/// How the loop ended.
+struct LoopEnd {
+    ended_by: &'static str,
+    iterations: u64,
+    t_start: u64,
+    t_end: u64,
+    peer_events: Vec<PeerEvent>,
+}
+
+/// Turns the loop until the stream has ended and drained, or a stop is
+/// requested. Everything but the turn itself happens every 4096 turns.
+fn spin<S: FrameSource, K: FrameSink>(
+    fwd: &mut Forward,
+    source: &mut S,
+    sink: &mut K,
+    mut ret: Option<&mut ReturnPath>,
+    mut stop_requested: impl FnMut() -> bool,
+) -> LoopEnd {
+    let mut peer_events = Vec::new();
+    let mut peers = (source.peers(), sink.peers());
+    let t_start = now_ns();
+    let mut iter: u64 = 0;
+    let ended_by = loop {
+        fwd.turn(source, sink, ret.as_deref_mut());
+        iter = iter.wrapping_add(1);
+        if iter % 4096 == 0 {
+            if stop_requested() {
+                break "signal";
+            }
+            if fwd.drained() {
+                break "end_marker";
+            }
+            if iter % (1 << 16) == 0 {
+                let now_peers = (source.peers(), sink.peers());
+                let t_s = (now_ns() - t_start) as f64 / 1e9;
+                if now_peers.0 != peers.0 {
+                    peer_events.push(PeerEvent { t_s, peer: "console".into(), connected: now_peers.0.unwrap_or(0) });
+                }
+                if now_peers.1 != peers.1 {
+                    peer_events.push(PeerEvent { t_s, peer: "simulator".into(), connected: now_peers.1.unwrap_or(0) });
+                }
+                peers = now_peers;
+            }
+        }
+    };
+    LoopEnd { ended_by, iterations: iter, t_start, t_end: now_ns(), peer_events }
+}
+
+/// Runs the emulator until the console's end marker has been seen and every
+/// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
+/// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
+/// `emulator.json` into `out_dir`, and returns the report. `ret`, the UDP
+/// return path, is polled once per turn. `stop_requested` is polled off the
+/// hot path (every 4096 iterations).
+pub fn run<S: FrameSource, K: FrameSink>(
+    cfg: &EmulatorConfig,
+    source: &mut S,
+    sink: &mut K,
+    ret: Option<&mut ReturnPath>,
+    stop_requested: impl FnMut() -> bool,
+) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
-    let spec = crate::scenario::resolve(&args.scenario)?;
-    let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::run::fresh_seed);
+    std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
+    let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
+    // The trace's writer thread starts before pinning, and is then kept off
+    // the loop's core, so it runs elsewhere and never preempts the loop.
+    let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
+    let mut placement = place(cfg, &fwd.link, ret.as_deref())?;
+    let steal_timer = StealTimer::start();
+    let end = spin(&mut fwd, source, sink, ret, stop_requested);
+    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
+    // Tell the simulator the stream ended (best effort: it may be gone).
+    let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
+    let steal = steal_timer.stop();
+    let report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    let json = cfg.out_dir.join("emulator.json");
+    std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
+    Ok(report)
+}
+
+impl EmulatorReport {
+    /// The report of a loop that has ended: writes the trace and the
+    /// histograms.
+    fn assemble(
+        cfg: &EmulatorConfig,
+        fwd: Forward,
+        end: LoopEnd,
+        isolation: Option<IsolationSummary>,
+        realtime_priority: Option<i32>,
+        steal: crate::host::Steal,
+    ) -> anyhow::Result<EmulatorReport> {
+        let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
+        let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, .. } = fwd;
+        let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
+        if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
+            eprintln!("emulator: last transport error: {e}");
+        }
+        let iter = end.iterations;
+        let shaping = Shaping {
+            link: l.measures,
+            peer_events: end.peer_events,
+            trace_path: Some(l.trace_path),
+            decision_hlog: Some(decision_hlog),
+            lateness_hlog: Some(lateness_hlog),
+        };
+        let process = EmulatorProcess {
+            scenario: l.scenario,
+            seed: cfg.seed,
+            core: cfg.core,
+            realtime_priority,
+            isolation,
+            queue_order: l.queue_order,
+            queue_capacity: l.queue_capacity,
+            frames: EmulatorFrames {
+                entered: l.entered,
+                delivered: l.delivered,
+                dropped: l.dropped,
+                held_at_end: l.held_at_end,
+                sent_by_console,
+                bad_checksum_passed,
+            },
+            ended_by: end.ended_by.to_string(),
+            duration_s,
+            loop_iterations: iter,
+            loop_iteration_ns_mean: if iter > 0 { (end.t_end - end.t_start) as f64 / iter as f64 } else { 0.0 },
+            receive_errors,
+            send_errors: l.send_errors,
+            trace_overflowed: l.trace_overflowed,
+            steal_ms: steal.ms,
+            steal_fraction: steal.fraction,
+        };
+        Ok(EmulatorReport { shaping, process })
+    }
+}
+
+/// Wires the emulator: arguments → scenario → transports → [`run`], with
+/// the UDP return path when both sides are UDP; then `udp.json` when a side
+/// is UDP.
+pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
+    use anyhow::Context;
+    args.validate()?;
+    let cfg = config(args)?;
+    crate::service::write_pid(&args.out, "emulator")?;
+    let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
+    let mut ret = udp::return_path(args, &t, cfg.seed, cfg.expected_frames)?;
+    let bound = udp::BoundEndpoints::of(&t, args);
+    let any_udp = args.ingress.is_udp() || args.egress.is_udp();
+    if any_udp {
+        eprintln!(
+            "emulator: scenario {} seed {}, queue {}, core {:?}; ingress {}{}, egress {}{}, payload {:?}",
+            cfg.scenario.name,
+            cfg.seed,
+            cfg.queue_capacity,
+            cfg.core,
+            args.ingress,
+            bound.ingress.map_or(String::new(), |a| format!(" (bound {a})")),
+            args.egress,
+            bound.egress_local.map_or(String::new(), |a| format!(" (from {a})")),
+            args.payload,
+        );
+    } else {
+        eprintln!("emulator: scenario {} seed {}, queue {}, core {:?}", cfg.scenario.name, cfg.seed, cfg.queue_capacity, cfg.core);
+    }
+    signals::install();
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    if any_udp {
+        let p = args.out.join("udp_endpoints.json");
+        std::fs::write(&p, serde_json::to_vec_pretty(&bound)?).with_context(|| format!("writing {}", p.display()))?;
+    }
+    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
+    // Polled every 4096 iterations; iceoryx2's own latch (once a node is
+    // open, it may take SIGINT/SIGTERM for itself) every 256th time.
+    let mut stop = signals::StopCheck::new(256, || t.node.as_ref().is_some_and(|n| n.termination_requested()));
+    let report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), || stop.requested())?;
+    if any_udp {
+        let return_path = ret.map(|r| r.finish(&cfg.out_dir)).transpose()?;
+        let u = udp::UdpReport::new(args, &t, &bound, return_path);
+        let path = cfg.out_dir.join("udp.json");
+        std::fs::write(&path, serde_json::to_vec_pretty(&u)?).with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("{}", summary_line(&report, &u));
+    }
+    Ok(report)
+}
+
+/// The emulator's set-up from its arguments: the scenario resolved, the
+/// seed, queue capacity and core chosen.
+fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
+    let spec = crate::load::resolve(&args.scenario)?;
+    let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::plan::fresh_seed);
     let default_capacity = match args.payload {
-        crate::service::udp::Payload::Raw => crate::service::udp::RAW_DEFAULT_QUEUE_CAPACITY,
-        crate::service::udp::Payload::Itp => crate::service::run::DEFAULT_QUEUE_CAPACITY,
+        crate::transport::Payload::Raw => udp::RAW_DEFAULT_QUEUE_CAPACITY,
+        crate::transport::Payload::Itp => crate::service::plan::DEFAULT_QUEUE_CAPACITY,
     };
     let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(default_capacity);
     anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
@@ -391,8 +491,7 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
     } else {
         args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id)))
     };
-    crate::service::write_pid(&args.out, "emulator")?;
-    let cfg = EmulatorConfig {
+    Ok(EmulatorConfig {
         scenario: spec,
         seed,
         queue_capacity,
@@ -402,19 +501,27 @@ pub fn main(args: &crate::service::args::EmulatorArgs) -> anyhow::Result<Emulato
         out_dir: args.out.clone(),
         rt_priority: args.rt_priority,
         isolate: args.isolate,
-    };
-    if args.ingress.is_udp() || args.egress.is_udp() {
-        return crate::service::udp::main(args, cfg);
+    })
+}
+
+/// One line for the log: what came in, what went out, what the kernel and
+/// the return path did.
+fn summary_line(r: &EmulatorReport, u: &udp::UdpReport) -> String {
+    let (f, r) = (&r.process.frames, &r.process);
+    let dropped: u64 = f.dropped.values().sum();
+    let mut s = format!(
+        "emulator: {} entered, {} delivered, {} dropped {:?}, {} held at end; ended by {}",
+        f.entered, f.delivered, dropped, f.dropped, f.held_at_end, r.ended_by
+    );
+    if let Some(k) = u.ingress_kernel_drops.filter(|k| *k > 0) {
+        s += &format!("; {k} datagrams dropped by the kernel before ingress");
     }
-    let run_id = args.run_id.as_deref().context("--run-id is required with the iceoryx2 ingress and egress")?;
-    let node = crate::service::ipc::open_node(run_id, crate::transport::Role::Emulator)?;
-    let mut source = node.subscriber(crate::transport::Channel::Console).context("opening the console → emulator port")?;
-    let mut sink = node.publisher(crate::transport::Channel::Emulator).context("opening the emulator → simulator port")?;
-    signals::install();
-    eprintln!("emulator: scenario {} seed {seed}, queue {queue_capacity}, core {core:?}", cfg.scenario.name);
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
-    // Polled every 4096 iterations; iceoryx2's own latch every 256th time.
-    let mut stop = signals::StopCheck::new(256, || node.termination_requested());
-    run(&cfg, &mut source, &mut sink, || stop.requested())
+    if let Some(rp) = &u.return_path {
+        let rd: u64 = rp.dropped.values().sum();
+        s += &format!(
+            "; return path ({}): {} received, {} delivered, {} dropped, {} held, {} unroutable",
+            rp.mode, rp.received, rp.delivered, rd, rp.held_at_end, rp.unroutable
+        );
+    }
+    s
 }

@@ -1,17 +1,29 @@
 //! The real-time services: console, emulator and simulator loops, and the
 //! runner that starts all three. Unlike the sans-IO core these read the
-//! clock, pin cores and talk to transports — through the [`ports`] traits,
-//! so the loops do not depend on which transport carries the frames.
+//! clock, pin cores and talk to transports — through the
+//! [`FrameSource`](crate::transport::FrameSource) and
+//! [`FrameSink`](crate::transport::FrameSink) traits, so the loops do not
+//! depend on which transport carries the frames.
+//!
+//! | file | what |
+//! |---|---|
+//! | `args` | the services' command-line arguments, and the argv each renders |
+//! | `link` | one direction of the emulator: injector, histograms, trace |
+//! | `emulator` | the forward loop around a link, and its wiring |
+//! | `udp` | the UDP return path (a link of its own) and `udp.json` |
+//! | `console`, `simulator` | the two ends of a local run |
+//! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
 pub mod console;
 pub mod emulator;
-pub mod ipc;
-pub mod ports;
+pub mod link;
+pub mod plan;
 pub mod report;
 pub mod run;
 pub mod signals;
 pub mod simulator;
+pub mod supervise;
 pub mod udp;
 
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.

@@ -4,12 +4,16 @@
 use crate::check::StageReport;
 use crate::host::Steal;
 use crate::metrics::{fmt_ns, Summary};
+use crate::scenario::{self, Scenario};
 use crate::service::console::ConsoleReport;
-use crate::service::emulator::{EmulatorReport, PeerEvent};
+use crate::service::emulator::{EmulatorProcess, EmulatorReport, PeerEvent};
+use crate::service::plan::Plan;
 use crate::service::simulator::SimulatorReport;
+use anyhow::Result;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
 
 /// Every frame, from the console's send to the simulator's receive.
 ///
@@ -124,12 +128,14 @@ pub struct RunReport {
     pub steal: Steal,
     pub files: Files,
     pub console: Option<ConsoleReport>,
-    pub emulator: Option<EmulatorReport>,
+    /// The emulator's report less what stands above (its shaping: loss,
+    /// stages, delays, overhead, peer events, files).
+    pub emulator: Option<EmulatorProcess>,
     pub simulator: Option<SimulatorReport>,
 }
 
 /// Joins the services' reports.
-pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport>, simulator: Option<&SimulatorReport>) -> FrameAccount {
+pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>, simulator: Option<&SimulatorReport>) -> FrameAccount {
     let sent = console.map(|c| c.frames_sent).or_else(|| emulator.and_then(|e| e.frames.sent_by_console));
     let entered = emulator.map(|e| e.frames.entered);
     let delivered = emulator.map(|e| e.frames.delivered);
@@ -148,10 +154,7 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorReport
 
 /// `a − b` for the main percentiles.
 pub fn difference(a: &Summary, b: &Summary) -> BTreeMap<String, i64> {
-    [("p50", a.p50, b.p50), ("p90", a.p90, b.p90), ("p99", a.p99, b.p99), ("p999", a.p999, b.p999)]
-        .into_iter()
-        .map(|(k, x, y)| (k.to_string(), x as i64 - y as i64))
-        .collect()
+    crate::metrics::difference(a, b, &["p50", "p90", "p99", "p999"])
 }
 
 fn line(p: &Option<Summary>) -> String {
@@ -280,4 +283,184 @@ fn kinematics_text(k: &serde_json::Value) -> String {
         f(&st["total_ns"]) / 1e6,
     );
     s
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
+    let bytes = std::fs::read(path).ok()?;
+    serde_json::from_slice(&bytes).ok()
+}
+
+impl RunReport {
+    /// Joins what the services left in the run's output directory into the
+    /// run's report. `faults` holds what the runner saw go wrong (dead
+    /// processes); the report adds missing reports, lost frames, an
+    /// interruption and a trace that could not be joined.
+    pub fn assemble(plan: &Plan, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, mut faults: Vec<String>, interrupted: bool) -> RunReport {
+        let out = &plan.out;
+        let console: Option<ConsoleReport> = read_json(&out.join("console.json"));
+        let emulator: Option<EmulatorReport> = read_json(&out.join("emulator.json"));
+        let simulator: Option<SimulatorReport> = read_json(&out.join("simulator.json"));
+        for (role, missing) in [("console", console.is_none()), ("emulator", emulator.is_none()), ("simulator", simulator.is_none())] {
+            if missing {
+                faults.push(format!("no report from the {role}"));
+            }
+        }
+        let (shaping, emulator) = match emulator {
+            Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
+            None => (None, None),
+        };
+        let frames = account(console.as_ref(), emulator.as_ref(), simulator.as_ref());
+        if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
+            faults.push(format!("{n} frames sent by the console never entered the emulator"));
+        }
+        if let Some(n) = frames.lost_after_emulator.filter(|n| *n > 0) {
+            faults.push(format!("{n} frames released by the emulator never reached the simulator"));
+        }
+        if interrupted {
+            faults.push("interrupted (Ctrl-C / SIGTERM)".into());
+        }
+        // The trace: the emulator's rows joined with the simulator's receive times.
+        let mut delays = Delays::default();
+        let trace = merge_trace(out, &mut delays).unwrap_or_else(|e| {
+            faults.push(format!("trace not written: {e:#}"));
+            None
+        });
+        let e = shaping.as_ref();
+        let end_to_end_extra = simulator.as_ref().map(|s| s.end_to_end_extra_ns).filter(|p| p.count > 0);
+        let direct_hop = simulator.as_ref().map(|s| s.direct_hop_ns).filter(|p| p.count > 0);
+        let overhead_ns = Overhead {
+            ingress_wait: e.map(|e| e.link.ingress_wait_ns),
+            decision: e.map(|e| e.link.decision_ns),
+            release_lateness: e.map(|e| e.link.release_lateness_ns),
+            added_over_direct: end_to_end_extra.as_ref().zip(direct_hop.as_ref()).map(|(a, b)| difference(a, b)),
+            end_to_end_extra,
+            direct_hop,
+        };
+        RunReport {
+            delay_check: delay_check(&plan.spec, plan.seed, delays),
+            run_id: plan.run_id.clone(),
+            scenario: plan.spec.name.clone(),
+            seed: plan.seed,
+            duration_s,
+            frames,
+            loss_rate: e.map(|e| e.link.loss_rate),
+            loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
+            stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),
+            injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
+            overhead_ns,
+            kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
+            processes,
+            faults,
+            peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),
+            steal,
+            files: Files {
+                out_dir: out.clone(),
+                scenario: plan.scenario_path.clone(),
+                trace,
+                decision_hlog: e.and_then(|e| e.decision_hlog.clone()),
+                lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
+                end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
+                report_json: out.join("report.json"),
+            },
+            console,
+            emulator,
+            simulator,
+        }
+    }
+}
+
+/// Per delivered and received frame: the injected delay and the delay the
+/// simulator saw (receive − console send), in ns.
+#[derive(Debug, Default)]
+struct Delays {
+    injected: Vec<u64>,
+    seen: Vec<u64>,
+}
+
+/// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`, and
+/// collects the delays of the frames that made it through.
+fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
+    let emu = out.join("trace_emulator.csv");
+    if !emu.exists() {
+        return Ok(None);
+    }
+    let mut recv: Vec<u64> = Vec::new();
+    if let Ok(f) = std::fs::File::open(out.join("received.csv")) {
+        for line in std::io::BufReader::new(f).lines().skip(1) {
+            let line = line?;
+            let mut it = line.split(',');
+            if let (Some(Ok(i)), Some(Ok(t))) = (it.next().map(str::parse::<usize>), it.next().map(str::parse::<u64>)) {
+                if recv.len() <= i {
+                    recv.resize(i + 1, 0);
+                }
+                recv[i] = t;
+            }
+        }
+    }
+    let path = out.join("trace.csv");
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&path)?);
+    for (n, line) in std::io::BufReader::new(std::fs::File::open(&emu)?).lines().enumerate() {
+        let line = line?;
+        if n == 0 {
+            writeln!(w, "{line}")?;
+            continue;
+        }
+        let cols: Vec<&str> = line.split(',').collect();
+        let index: usize = cols[0].parse().unwrap_or(usize::MAX);
+        match recv.get(index).filter(|t| **t != 0) {
+            Some(t) => {
+                writeln!(w, "{line}{t}")?;
+                // Columns: 3 send_ns, 9 delay_ns (see `trace`).
+                if let (Some(Ok(send)), Some(Ok(delay))) = (cols.get(3).map(|x| x.parse::<u64>()), cols.get(9).map(|x| x.parse::<u64>())) {
+                    delays.injected.push(delay);
+                    delays.seen.push(t.saturating_sub(send));
+                }
+            }
+            None => writeln!(w, "{line}")?,
+        }
+    }
+    w.flush()?;
+    std::fs::remove_file(&emu)?;
+    Ok(Some(path))
+}
+
+/// Quantiles of the delays the simulator saw against the delays the
+/// emulator drew and, when the scenario is a single `reorder` delay stage
+/// (possibly behind loss stages), against the model's analytic law.
+fn delay_check(spec: &scenario::ScenarioSpec, seed: u64, mut d: Delays) -> Option<DelayCheck> {
+    let n = d.seen.len();
+    if n < 100 || d.injected.iter().all(|x| *x == 0) {
+        return None;
+    }
+    d.injected.sort_unstable();
+    d.seen.sort_unstable();
+    let model = Scenario::new(spec, seed).ok().and_then(|sc| {
+        let [phase] = sc.phases() else { return None };
+        let delays: Vec<_> = phase.stages().iter().filter_map(|s| match s.model() {
+            crate::model::AnyModel::Delay(m) => Some(m.clone()),
+            _ => None,
+        }).collect();
+        match delays.as_slice() {
+            [one] if one.may_reorder() || one.cdf_ms(one.mean_ms_exact()) >= 0.0 => Some(one.clone()),
+            _ => None,
+        }
+    });
+    // Dvoretzky–Kiefer–Wolfowitz: with 95% confidence the empirical
+    // distribution is within ε of the true one everywhere.
+    let eps = ((2.0f64 / 0.05).ln() / (2.0 * n as f64)).sqrt();
+    let pick = |v: &[u64], q: f64| v[((q * n as f64) as usize).min(n - 1)] as f64 / 1e6;
+    let quantiles: Vec<DelayQuantile> = [0.01, 0.1, 0.25, 0.5, 0.75, 0.9, 0.99]
+        .into_iter()
+        .map(|q| {
+            let (injected_ms, seen_ms) = (pick(&d.injected, q), pick(&d.seen, q));
+            let model_ms = model.as_ref().map(|m| m.quantile_ms(q));
+            let model_band_ms = model.as_ref().map(|m| [m.quantile_ms((q - eps).max(1e-9)), m.quantile_ms((q + eps).min(1.0 - 1e-9))]);
+            DelayQuantile { q, model_ms, model_band_ms, injected_ms, seen_ms, seen_minus_injected_us: (seen_ms - injected_ms) * 1e3 }
+        })
+        .collect();
+    let worst = quantiles.iter().map(|x| x.seen_minus_injected_us.abs()).fold(0.0, f64::max);
+    let injected_within_model_band = model.as_ref().map(|_| {
+        quantiles.iter().all(|x| x.model_band_ms.is_some_and(|[lo, hi]| lo <= x.injected_ms && x.injected_ms <= hi))
+    });
+    Some(DelayCheck { frames: n as u64, dkw_epsilon: eps, quantiles, max_abs_seen_minus_injected_us: worst, injected_within_model_band })
 }

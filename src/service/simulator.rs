@@ -18,8 +18,8 @@ use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
-use crate::service::ipc::open_node;
-use crate::service::ports::FrameSource;
+use crate::transport::open_node;
+use crate::transport::FrameSource;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
 use anyhow::{Context, Result};
@@ -54,6 +54,29 @@ pub struct SimulatorReport {
     pub steal_fraction: f64,
     pub received_csv: Option<PathBuf>,
     pub end_to_end_hlog: Option<PathBuf>,
+}
+
+/// The ITP frame a sample from the emulator carries, and whether its
+/// checksum holds; `Err` if its length is not an ITP frame's.
+#[inline]
+fn robot_frame(s: &FrameSample) -> Result<(ItpFrame, bool), ()> {
+    if s.len as usize != ITP_FRAME_LEN {
+        return Err(());
+    }
+    let view = ItpView::new_unchecked(&s.wire[..]);
+    Ok((ItpFrame::parse_unverified(&view), view.verify_checksum()))
+}
+
+/// Writes `received.csv`: the ingress index and receive time of each frame
+/// that came through the emulator.
+fn write_received(path: &std::path::Path, log: &[(u64, u64)]) -> Result<()> {
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?);
+    writeln!(w, "ingress_index,recv_ns")?;
+    for (i, t) in log {
+        writeln!(w, "{i},{t}")?;
+    }
+    w.flush()?;
+    Ok(())
 }
 
 /// Runs the simulator; returns its report (also `simulator.json`).
@@ -99,14 +122,12 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                     received_log.push((s.ingress_index, t));
                     e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
                     seen.record(t.saturating_sub(s.send_ns));
-                    if s.len as usize != ITP_FRAME_LEN {
-                        wrong_size += 1;
-                    } else {
-                        let view = ItpView::new_unchecked(&s.wire[..]);
-                        if !view.verify_checksum() {
-                            bad_checksum += 1;
+                    match robot_frame(&s) {
+                        Err(()) => wrong_size += 1,
+                        Ok((frame, checksum_ok)) => {
+                            bad_checksum += u64::from(!checksum_ok);
+                            kin.robot(t, &frame);
                         }
-                        kin.robot(t, &ItpFrame::parse_unverified(&view));
                     }
                 }
             }
@@ -150,14 +171,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     };
     let t_end = now_ns();
     let received_csv = args.out.join("received.csv");
-    {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(&received_csv).with_context(|| format!("creating {}", received_csv.display()))?);
-        writeln!(w, "ingress_index,recv_ns")?;
-        for (i, t) in &received_log {
-            writeln!(w, "{i},{t}")?;
-        }
-        w.flush()?;
-    }
+    write_received(&received_csv, &received_log)?;
     let duration_s = (t_end - t_start) as f64 / 1e9;
     let e2e_hlog = args.out.join("end_to_end.hlog");
     e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s)?;

@@ -5,6 +5,11 @@
 //! iceoryx2 type or opens a socket, and the services only wire the types
 //! exported here. The sans-IO core never depends on this module.
 //!
+//! A service sees a transport through two traits, [`FrameSource`] and
+//! [`FrameSink`] ([`ports`]). The emulator's two sides are values:
+//! [`Ingress`] and [`Egress`] are enums over iceoryx2, UDP and an in-memory
+//! queue, and [`open`] opens both from two [`Endpoint`]s.
+//!
 //! # Contract
 //!
 //! - One run (one console, one emulator, one simulator) is identified by a
@@ -12,9 +17,10 @@
 //!   file prefix `netfi_<run>_`, taken from an explicit configuration
 //!   ([`IpcConfig`]); no iceoryx2 configuration file is ever read, so two runs
 //!   on one host (or two tests in one process) never see each other.
-//! - Two channels per run, each one publish/subscribe service carrying
+//! - Three channels per run, each one publish/subscribe service carrying
 //!   [`FrameSample`](crate::sample::FrameSample): [`Channel::Console`]
-//!   (console → emulator) and [`Channel::Emulator`] (emulator → simulator).
+//!   (console → emulator), [`Channel::Emulator`] (emulator → simulator) and
+//!   [`Channel::Direct`] (console → simulator, the baseline hop).
 //! - Sending and receiving a frame allocate nothing and never block: a full
 //!   subscriber queue is reported to the publisher as
 //!   [`FrameSendError::QueueFull`] and counted, never overwritten silently.
@@ -26,8 +32,15 @@
 
 #![warn(missing_docs)]
 
+pub mod endpoint;
 pub mod ipc;
+pub mod open;
+pub mod ports;
 pub mod udp;
+
+pub use endpoint::{Endpoint, EndpointError, Payload};
+pub use open::{cleanup_stale, open, open_node, Egress, Ingress, Transports, Wiring};
+pub use ports::{FrameSink, FrameSource, MemoryPort, PortError};
 
 pub use ipc::{
     cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,

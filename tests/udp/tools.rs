@@ -310,7 +310,7 @@ fn iperf3_udp_loss_matches_netfi_under_plm2() {
         return;
     }
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let seed = seed_passing_the_first_datagram(&netfi::scenario::resolve("PLM-2").unwrap());
+    let seed = seed_passing_the_first_datagram(&netfi::load::resolve("PLM-2").unwrap());
     let n = 5000;
     let (client, e, udp, out) = iperf3_through("iperf3-plm2", "PLM-2", seed, n);
     check_iperf3_loss("PLM-2", &client, &e, &udp, &out, n);

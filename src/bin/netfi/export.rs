@@ -28,7 +28,7 @@ use crate::cli::{ExportCmd, ExportNetemArgs};
 use anyhow::{bail, Result};
 use netfi::fit::family::{mean_loss_run_exact, Hyperexp};
 use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Model, Order, Verdict};
-use netfi::scenario::{self, ModelSpec, StageSpec};
+use netfi::scenario::{ModelSpec, StageSpec};
 use rand::SeedableRng;
 use std::fmt::Write;
 
@@ -49,7 +49,7 @@ pub fn run(cmd: ExportCmd) -> Result<()> {
 }
 
 fn netem(args: &ExportNetemArgs) -> Result<String> {
-    let spec = scenario::resolve(&args.scenario)?;
+    let spec = netfi::load::resolve(&args.scenario)?;
     if spec.phases.len() > 1 {
         bail!(
             "scenario {} is a timeline of {} phases: netem has no timeline; export each phase as its own scenario and switch them with `tc qdisc change` on your own schedule",

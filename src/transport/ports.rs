@@ -1,14 +1,19 @@
 //! What a service needs from a transport: a non-blocking source of frames
-//! and a sink. iceoryx2 ports and (later) UDP sockets implement these, so the
-//! service loops are written once.
+//! and a sink. The iceoryx2 ports (here), the UDP source and sink
+//! ([`super::udp::frames`]) and the in-memory [`MemoryPort`] implement
+//! them, so the service loops are written once.
 
 use crate::sample::FrameSample;
+use crate::transport::udp::PeerAddr;
+use crate::transport::{FramePublisher, FrameSendError, FrameSubscriber};
 
 /// A transport failure while receiving or sending, as text naming the port.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{port}: {message}")]
 pub struct PortError {
+    /// The port, as a person names it (`udp://…`, `netfi/<run>/<channel>`).
     pub port: String,
+    /// What went wrong.
     pub message: String,
 }
 
@@ -27,6 +32,13 @@ pub trait FrameSource {
     /// a source that keeps payloads outside the sample frees them here.
     #[inline]
     fn dropped(&mut self, _sample: &FrameSample) {}
+
+    /// The address the latest frame came from, where the transport has
+    /// addresses: where a reply to the sender goes.
+    #[inline]
+    fn sender(&self) -> Option<&PeerAddr> {
+        None
+    }
 }
 
 /// A frame sink.
@@ -42,10 +54,20 @@ pub trait FrameSink {
     }
 }
 
-/// An in-memory port pair for tests: a bounded queue.
+/// An in-memory port for tests: a queue that is a source at its front and
+/// a sink at its back. Reserve its capacity up front and it allocates
+/// nothing per frame.
 #[derive(Debug, Default)]
 pub struct MemoryPort {
+    /// The frames waiting, oldest first.
     pub queue: std::collections::VecDeque<FrameSample>,
+}
+
+impl MemoryPort {
+    /// An empty port with room for `frames` without growing.
+    pub fn with_capacity(frames: usize) -> MemoryPort {
+        MemoryPort { queue: std::collections::VecDeque::with_capacity(frames) }
+    }
 }
 
 impl FrameSource for MemoryPort {
@@ -66,5 +88,36 @@ impl FrameSink for MemoryPort {
         stamp(&mut s);
         self.queue.push_back(s);
         Ok(Some(1))
+    }
+}
+
+impl FrameSource for FrameSubscriber {
+    #[inline]
+    fn try_recv(&mut self, out: &mut FrameSample) -> Result<bool, PortError> {
+        match FrameSubscriber::try_recv(self) {
+            Ok(Some(s)) => {
+                *out = s;
+                Ok(true)
+            }
+            Ok(None) => Ok(false),
+            Err(e) => Err(PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() }),
+        }
+    }
+
+    fn peers(&mut self) -> Option<usize> {
+        Some(self.peers_connected())
+    }
+}
+
+impl FrameSink for FramePublisher {
+    #[inline]
+    fn send_with(&mut self, sample: &FrameSample, stamp: impl FnOnce(&mut FrameSample)) -> Result<Option<usize>, PortError> {
+        FramePublisher::send_from(self, sample, stamp)
+            .map(Some)
+            .map_err(|e: FrameSendError| PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() })
+    }
+
+    fn peers(&mut self) -> Option<usize> {
+        Some(self.peers_connected())
     }
 }

@@ -18,8 +18,12 @@
 //!   not lost from view: [`UdpPort::kernel_drops`] reads the socket's drop
 //!   counter (`/proc/net/udp`, `/proc/net/udp6`), off the hot path.
 //!
-//! Nothing here knows about frames, scenarios or the emulator; the wiring to
-//! the service loops is `service::udp`.
+//! Sockets here know nothing about frames, scenarios or the emulator; the
+//! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
+//! raw-mode [`Arena`]) are in [`frames`].
+
+pub mod frames;
+pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
 
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
 use std::io;
@@ -29,6 +33,11 @@ use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 /// Size of a buffer that holds any UDP payload: 64 KiB. The largest payload
 /// is 65,507 bytes over IPv4 and 65,527 over IPv6 (without jumbograms).
 pub const MAX_DATAGRAM_BYTES: usize = 1 << 16;
+
+/// Default requested kernel buffer size of each UDP socket: 4 MiB, a
+/// quarter of a second of 124-byte frames at 100 kHz (the kernel caps it at
+/// `net.core.rmem_max`).
+pub const DEFAULT_UDP_BUFFER_BYTES: usize = 4 << 20;
 
 /// Options applied before the socket is bound.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -1,0 +1,283 @@
+//! The link: one direction of the emulator, written once. It owns the
+//! sans-IO [`Injector`] that decides each frame's fate, the histograms of
+//! what the link costs (decision time, release lateness) and what it does
+//! (injected delay), the loss interval's batch means, and the per-frame
+//! trace. The forward path (console → simulator, [`super::emulator`]) and
+//! the UDP return path (robot → console, [`super::udp`]) are each one link.
+//!
+//! A link never touches a transport itself: frames come in through
+//! [`Link::ingress`] (or [`Link::reject`]) with the time they were taken,
+//! and leave through [`Link::release_due`] into a [`Release`], which a
+//! [`FrameSink`] is for the samples of the forward path. Nothing on that
+//! path allocates, locks or makes a system call: the queue is fixed at
+//! start-up and the trace goes through a wait-free ring to a writer thread.
+
+use crate::check::{stage_reports, StageReport};
+use crate::clock::now_ns;
+use crate::injector::{BuildError, Entered, Fate, Injector, Invalid};
+use crate::metrics::{LatencyHistogram, Summary};
+use crate::sample::FrameSample;
+use crate::scenario::Scenario;
+use crate::stats::BatchMeans;
+use crate::trace::{self, TraceEvent, TraceSink, TraceWriter};
+use crate::transport::{FrameSink, PortError};
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What a link holds in its queue: anything that remembers when it entered.
+pub trait Carried: Copy + Default {
+    /// The time the item was taken in, ns.
+    fn ingress_ns(&self) -> u64;
+}
+
+impl Carried for FrameSample {
+    #[inline]
+    fn ingress_ns(&self) -> u64 {
+        self.ingress_ns
+    }
+}
+
+/// Where a link's released items go.
+pub trait Release<T> {
+    /// Sends `item`, due at `scheduled_ns`. Returns the time it went out
+    /// (taken as late as possible), or that time and the error.
+    fn release(&mut self, item: &T, scheduled_ns: u64) -> Result<u64, (u64, PortError)>;
+}
+
+/// A frame sink releases samples stamped with their scheduled and actual
+/// release times and their injected delay.
+impl<K: FrameSink> Release<FrameSample> for K {
+    #[inline]
+    fn release(&mut self, item: &FrameSample, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
+        let mut release_ns = 0;
+        let sent = self.send_with(item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = now_ns();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((now_ns(), e)),
+        }
+    }
+}
+
+/// What the trace keeps of a frame's arrival, besides the link's own times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Arrival {
+    /// The frame's protocol sequence number, when it has one.
+    pub sequence: Option<u32>,
+    /// The sender's count of the frame.
+    pub console_index: u64,
+    /// When the sender sent it (or, where the sender does not say, when it
+    /// was received), ns.
+    pub send_ns: u64,
+}
+
+/// One direction of the emulator: scenario, queue, measurements, trace.
+pub struct Link<T> {
+    inj: Injector<T>,
+    trace: TraceSink,
+    writer: TraceWriter,
+    decision: LatencyHistogram,
+    ingress_wait: LatencyHistogram,
+    lateness: LatencyHistogram,
+    injected: LatencyHistogram,
+    batches: BatchMeans,
+    send_errors: u64,
+    last_error: Option<PortError>,
+}
+
+impl<T: Carried> Link<T> {
+    /// A link through `scenario` holding at most `queue_capacity` items;
+    /// `expected_frames` sizes the trace table and the loss interval's
+    /// batches (a guess is fine). Starts the trace's writer thread: create
+    /// the link before pinning the loop's core, then
+    /// [`keep_trace_off_core`](Self::keep_trace_off_core).
+    /// A capacity out of range is an error that names the field and the
+    /// memory it would need.
+    pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> Result<Link<T>, BuildError> {
+        let inj = Injector::try_new(scenario, queue_capacity)?;
+        let (trace, writer) = trace::start(expected_frames.min(50_000_000) as usize);
+        Ok(Link {
+            inj,
+            trace,
+            writer,
+            decision: LatencyHistogram::new(),
+            ingress_wait: LatencyHistogram::new(),
+            lateness: LatencyHistogram::new(),
+            injected: LatencyHistogram::new(),
+            batches: BatchMeans::new(expected_frames.max(1)),
+            send_errors: 0,
+            last_error: None,
+        })
+    }
+
+    /// Keeps the trace's writer thread off `core` (the loop's).
+    pub fn keep_trace_off_core(&self, core: usize) {
+        self.writer.keep_off_core(core);
+    }
+
+    /// The ingress index the next frame will get.
+    #[inline]
+    pub fn next_ingress_index(&self) -> u64 {
+        self.inj.next_ingress_index()
+    }
+
+    /// Items scheduled and not yet released.
+    #[inline]
+    pub fn held(&self) -> usize {
+        self.inj.held()
+    }
+
+    /// The scenario, with its stages' counts.
+    pub fn scenario(&self) -> &Scenario {
+        self.inj.scenario()
+    }
+
+    /// An item taken in at `now`: its fate is decided and, if it survives,
+    /// it is queued. The caller frees whatever a dropped item holds.
+    #[inline]
+    pub fn ingress(&mut self, now: u64, item: T, arrival: Arrival) -> Entered {
+        let entered = self.inj.ingress(now, item);
+        self.record(now, entered, arrival);
+        entered
+    }
+
+    /// A frame taken in at `now` that is invalid: it enters and is dropped
+    /// for `why`.
+    #[inline]
+    pub fn reject(&mut self, now: u64, why: Invalid, arrival: Arrival) -> Entered {
+        let entered = self.inj.reject(now, why);
+        self.record(now, entered, arrival);
+        entered
+    }
+
+    #[inline]
+    fn record(&mut self, now: u64, entered: Entered, a: Arrival) {
+        self.decision.record(now_ns().saturating_sub(now));
+        self.ingress_wait.record(now.saturating_sub(a.send_ns));
+        let (dropped, release_sched_ns) = match entered.fate {
+            Fate::Scheduled { release_ns, .. } => (None, release_ns),
+            Fate::Dropped(cause) => (Some(cause), 0),
+        };
+        self.batches.record(dropped.is_some());
+        self.trace.push(TraceEvent::Ingress {
+            ingress_index: entered.ingress_index,
+            sequence: a.sequence,
+            console_index: a.console_index,
+            send_ns: a.send_ns,
+            ingress_ns: now,
+            dropped,
+            release_sched_ns,
+        });
+    }
+
+    /// Releases into `sink` every item due at `now`, oldest first.
+    #[inline]
+    pub fn release_due(&mut self, now: u64, sink: &mut impl Release<T>) {
+        while let Some(r) = self.inj.pop_due(now) {
+            let release_ns = match sink.release(&r.item, r.release_ns) {
+                Ok(t) => t,
+                Err((t, e)) => {
+                    self.send_errors += 1;
+                    self.last_error = Some(e);
+                    t
+                }
+            };
+            self.lateness.record(release_ns.saturating_sub(r.release_ns));
+            self.injected.record(r.release_ns - r.item.ingress_ns());
+            self.trace.push(TraceEvent::Release { ingress_index: r.ingress_index, release_ns });
+        }
+    }
+
+    /// Items released so far.
+    pub fn released(&self) -> u64 {
+        self.inj.counts().released
+    }
+
+    /// Writes the decision-time and release-lateness histograms as
+    /// `decision.hlog` and `lateness.hlog` into `out_dir`; returns their
+    /// paths.
+    pub fn write_histograms(&self, out_dir: &Path, duration_s: f64) -> std::io::Result<(PathBuf, PathBuf)> {
+        let (decision, lateness) = (out_dir.join("decision.hlog"), out_dir.join("lateness.hlog"));
+        self.decision.write_log(&decision, "decision", 0.0, duration_s)?;
+        self.lateness.write_log(&lateness, "release_lateness", 0.0, duration_s)?;
+        Ok((decision, lateness))
+    }
+
+    /// Stops the trace writer, writes the trace to `trace_path`, checks
+    /// that every item is accounted for, and reports. `duration_ns` is the
+    /// time the link ran (for the stages' model rates).
+    pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkReport> {
+        let counts = self.inj.counts();
+        assert!(counts.balanced(), "frame accounting broken: {counts:?}");
+        let rows = self.writer.finish();
+        trace::write_csv(trace_path, &rows, &[]).with_context(|| format!("writing {}", trace_path.display()))?;
+        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
+        let interval_ns = if counts.entered > 1 { duration_ns as f64 / counts.entered as f64 } else { 0.0 };
+        let (stages, _) = stage_reports(self.inj.scenario(), interval_ns);
+        Ok(LinkReport {
+            scenario: self.inj.scenario().name().to_string(),
+            queue_order: format!("{:?}", self.inj.queue_order()).to_lowercase(),
+            queue_capacity: self.inj.queue_capacity(),
+            entered: counts.entered,
+            delivered: counts.released,
+            dropped: self.inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+            held_at_end: counts.held,
+            measures: LinkMeasures {
+                loss_rate,
+                loss_rate_ci95,
+                stages,
+                injected_delay_ns: self.injected.summary(),
+                ingress_wait_ns: self.ingress_wait.summary(),
+                decision_ns: self.decision.summary(),
+                release_lateness_ns: self.lateness.summary(),
+            },
+            send_errors: self.send_errors,
+            last_error: self.last_error,
+            trace_overflowed: self.trace.overflowed(),
+            trace_path: trace_path.to_path_buf(),
+        })
+    }
+}
+
+/// What a link measured: the loss it realized and the delays it injected,
+/// and what it cost. The emulator's report carries it as it is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinkMeasures {
+    pub loss_rate: f64,
+    pub loss_rate_ci95: [f64; 2],
+    pub stages: Vec<StageReport>,
+    /// Injected delay of released frames.
+    pub injected_delay_ns: Summary,
+    /// Sender's send → frame taken in (the first hop plus any time the
+    /// frame waited in the port for the emulator).
+    pub ingress_wait_ns: Summary,
+    /// Frame taken in → fate decided.
+    pub decision_ns: Summary,
+    /// Actual − scheduled release.
+    pub release_lateness_ns: Summary,
+}
+
+/// What a link did: `entered = delivered + dropped + held_at_end`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkReport {
+    pub scenario: String,
+    pub queue_order: String,
+    pub queue_capacity: usize,
+    pub entered: u64,
+    /// Released (including those whose send failed).
+    pub delivered: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub held_at_end: u64,
+    pub measures: LinkMeasures,
+    pub send_errors: u64,
+    /// The last send error, for the log.
+    pub last_error: Option<PortError>,
+    pub trace_overflowed: u64,
+    pub trace_path: PathBuf,
+}

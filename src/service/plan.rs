@@ -1,0 +1,222 @@
+//! What `netfi run` will do, decided before anything starts: the seed, the
+//! frames, the cores, and the arguments of each of the three processes. A
+//! pure function of the run's arguments, the scenario and the host's
+//! cores, so it can be read and tested without starting anything.
+
+use crate::scenario::{self, ScenarioSpec};
+use crate::service::args::{ConsoleArgs, EmulatorArgs, RunArgs, SimulatorArgs};
+use crate::transport::udp::DEFAULT_UDP_BUFFER_BYTES;
+use crate::transport::{Endpoint, Payload};
+use std::path::PathBuf;
+
+/// Default release-queue capacity: 65,536 frames (65 s at 1 kHz).
+pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
+
+/// Default frame rate of a run, Hz.
+pub const DEFAULT_RATE_HZ: f64 = 1000.0;
+
+/// A seed for runs given none: from the time and the process id.
+pub fn fresh_seed() -> u64 {
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
+    scenario::splitmix64(t ^ (u64::from(std::process::id()) << 32))
+}
+
+/// A fresh run id: `r` + 10 hex digits.
+pub fn fresh_run_id() -> String {
+    format!("r{:010x}", fresh_seed() & 0xff_ffff_ffff)
+}
+
+/// Where each process runs: a core of its own, or (`None`) not pinned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cores {
+    pub emulator: Option<usize>,
+    pub console: Option<usize>,
+    pub simulator: Option<usize>,
+}
+
+/// Placement: the emulator busy-waits on a core of its own (the last). With
+/// four cores or more the console and the simulator get one each too; with
+/// fewer they share the rest, and are kept off the emulator's core.
+pub fn cores(args: &RunArgs, host: &[usize]) -> Cores {
+    let emulator = args.emulator_core.or((host.len() >= 2).then(|| host[host.len() - 1]));
+    let (console, simulator) = match (args.console_core, args.simulator_core) {
+        (None, None) if host.len() >= 4 && args.emulator_core.is_none() => (Some(host[host.len() - 3]), Some(host[host.len() - 2])),
+        given => given,
+    };
+    Cores { emulator, console, simulator }
+}
+
+/// How long the stream is planned to last (s), and the frames expected.
+pub fn frames(args: &RunArgs) -> (f64, u64) {
+    let rate_hz = args.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
+    match (&args.capture, args.frames, args.duration_s) {
+        (_, Some(n), _) => (n as f64 / rate_hz, n),
+        (_, None, Some(d)) => (d, (d * rate_hz).ceil() as u64),
+        (Some(_), None, None) if args.rate_hz.is_none() => (90.0, 50_000),
+        (Some(_), None, None) => (60.0, (60.0 * rate_hz) as u64),
+        (None, None, None) => (10.0, (10.0 * rate_hz) as u64),
+    }
+}
+
+/// One run, planned.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub run_id: String,
+    pub out: PathBuf,
+    pub spec: ScenarioSpec,
+    pub seed: u64,
+    /// Where the scenario is written for the emulator to read.
+    pub scenario_path: PathBuf,
+    pub planned_s: f64,
+    pub expected_frames: u64,
+    pub cores: Cores,
+    pub simulator: SimulatorArgs,
+    pub emulator: EmulatorArgs,
+    pub console: ConsoleArgs,
+}
+
+impl Plan {
+    /// The plan for `args`, with the scenario resolved and the seed and run
+    /// id chosen, on a host with `host_cores`.
+    pub fn new(args: &RunArgs, spec: ScenarioSpec, seed: u64, run_id: String, host_cores: &[usize]) -> Plan {
+        let out = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(&run_id));
+        let scenario_path = out.join("scenario.toml");
+        let (planned_s, expected_frames) = frames(args);
+        let cores = cores(args, host_cores);
+        // Kept off the emulator's core when not pinned themselves.
+        let avoid = |own: Option<usize>| if own.is_none() { cores.emulator } else { None };
+        let simulator = SimulatorArgs {
+            run_id: run_id.clone(),
+            core: cores.simulator,
+            avoid_core: avoid(cores.simulator),
+            stall_ms: 10.0,
+            drop_bad_checksum: args.drop_bad_checksum,
+            // A core of its own: it may busy-poll.
+            spin: cores.simulator.is_some(),
+            out: out.clone(),
+        };
+        let emulator = EmulatorArgs {
+            run_id: Some(run_id.clone()),
+            scenario: scenario_path.display().to_string(),
+            seed: Some(seed),
+            queue_capacity: args.queue_capacity,
+            core: cores.emulator,
+            no_pin: cores.emulator.is_none(),
+            rt_priority: args.rt_priority,
+            // Passed even when unpinned, so the emulator's report says why nothing
+            // was cleared.
+            isolate: args.clears_core(),
+            drop_bad_checksum: args.drop_bad_checksum,
+            expected_frames,
+            out: out.clone(),
+            ingress: Endpoint::Iceoryx2,
+            egress: Endpoint::Iceoryx2,
+            payload: Payload::Itp,
+            egress_bind: None,
+            return_scenario: None,
+            return_seed: None,
+            return_to: None,
+            no_return: false,
+            idle_end_ms: None,
+            udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
+        };
+        let console = ConsoleArgs {
+            run_id: run_id.clone(),
+            rate_hz: args.rate_hz,
+            frames: args.frames,
+            duration_s: args.duration_s,
+            capture: args.capture.clone(),
+            seed: Some(seed),
+            core: cores.console,
+            avoid_core: avoid(cores.console),
+            out: out.clone(),
+            no_direct: args.no_direct,
+            wait_for_peer_s: 10.0,
+        };
+        Plan { run_id, out, spec, seed, scenario_path, planned_s, expected_frames, cores, simulator, emulator, console }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: Cmd,
+    }
+
+    #[derive(clap::Subcommand)]
+    enum Cmd {
+        Run(RunArgs),
+        Console(ConsoleArgs),
+        Emulator(EmulatorArgs),
+        Simulator(SimulatorArgs),
+    }
+
+    fn run_args(argv: &[&str]) -> RunArgs {
+        match Cli::parse_from([&["netfi", "run"], argv].concat()).cmd {
+            Cmd::Run(a) => a,
+            _ => unreachable!(),
+        }
+    }
+
+    fn plan(argv: &[&str], host: &[usize]) -> Plan {
+        let spec = crate::load::resolve("Normal").unwrap();
+        Plan::new(&run_args(argv), spec, 7, "r1".into(), host)
+    }
+
+    #[test]
+    fn the_emulator_gets_the_last_core_and_with_four_the_others_get_one_each() {
+        assert_eq!(plan(&["Normal"], &[0, 1]).cores, Cores { emulator: Some(1), console: None, simulator: None });
+        assert_eq!(plan(&["Normal"], &[0, 1, 2, 3]).cores, Cores { emulator: Some(3), console: Some(1), simulator: Some(2) });
+        assert_eq!(plan(&["Normal"], &[0]).cores, Cores { emulator: None, console: None, simulator: None });
+        let p = plan(&["Normal", "--emulator-core", "0"], &[0, 1, 2, 3]);
+        assert_eq!(p.cores, Cores { emulator: Some(0), console: None, simulator: None });
+    }
+
+    #[test]
+    fn frames_follow_the_duration_the_count_or_the_default() {
+        assert_eq!(frames(&run_args(&["Normal", "--duration-s", "3"])), (3.0, 3000));
+        assert_eq!(frames(&run_args(&["Normal", "--frames", "500", "--rate-hz", "100"])), (5.0, 500));
+        assert_eq!(frames(&run_args(&["Normal"])), (10.0, 10_000));
+        assert_eq!(frames(&run_args(&["Normal", "--capture", "x.lz4"])), (90.0, 50_000));
+    }
+
+    #[test]
+    fn the_core_is_cleared_unless_asked_not_to_and_only_when_pinned() {
+        assert!(plan(&["Normal"], &[0, 1]).emulator.isolate);
+        assert!(plan(&["Normal", "--isolate"], &[0, 1]).emulator.isolate);
+        assert!(!plan(&["Normal", "--no-isolate"], &[0, 1]).emulator.isolate);
+        assert!(plan(&["Normal", "--no-isolate", "--isolate"], &[0, 1]).emulator.isolate, "the later flag wins");
+        assert!(plan(&["Normal"], &[0]).emulator.isolate, "no core of its own: passed on, so the report says why nothing was cleared");
+    }
+
+    #[test]
+    fn each_process_parses_back_what_the_plan_gave_it() {
+        let p = plan(&["Normal", "--duration-s", "2", "--rate-hz", "500", "--drop-bad-checksum", "--queue-capacity", "9"], &[0, 1]);
+        let parse = |role: &str, argv: Vec<String>| Cli::parse_from([vec!["netfi".to_string(), role.to_string()], argv].concat()).cmd;
+        let Cmd::Console(c) = parse("console", p.console.to_argv()) else { unreachable!() };
+        assert_eq!(c.to_argv(), p.console.to_argv());
+        assert_eq!((c.rate_hz, c.duration_s, c.seed, c.avoid_core, c.core), (Some(500.0), Some(2.0), Some(7), Some(1), None));
+        let Cmd::Emulator(e) = parse("emulator", p.emulator.to_argv()) else { unreachable!() };
+        assert_eq!(e.to_argv(), p.emulator.to_argv());
+        assert_eq!((e.core, e.queue_capacity, e.expected_frames, e.isolate, e.drop_bad_checksum), (Some(1), Some(9), 1000, true, true));
+        let Cmd::Simulator(s) = parse("simulator", p.simulator.to_argv()) else { unreachable!() };
+        assert_eq!(s.to_argv(), p.simulator.to_argv());
+        assert_eq!((s.avoid_core, s.spin, s.drop_bad_checksum), (Some(1), false, true));
+    }
+
+    #[test]
+    fn a_rate_outside_the_physical_range_is_refused_naming_the_flag() {
+        for bad in ["0", "-5", "NaN", "inf", "0.0001", "2e7", "fast"] {
+            let flag = format!("--rate-hz={bad}");
+            let e = Cli::try_parse_from(["netfi", "run", "Normal", &flag]).err().expect(bad).to_string();
+            assert!(e.contains("--rate-hz") && e.contains("0.001 Hz and 10 MHz") || bad == "fast", "{bad}: {e}");
+        }
+        assert_eq!(run_args(&["Normal", "--rate-hz", "0.001"]).rate_hz, Some(0.001));
+        assert_eq!(run_args(&["Normal", "--rate-hz", "10000000"]).rate_hz, Some(1e7));
+    }
+}

@@ -1,0 +1,197 @@
+//! A transport is a value: the emulator's ingress and egress are each one
+//! enum over the transports there are, opened by one [`open`] from two
+//! [`Endpoint`]s, so iceoryx2, UDP and any combination take one path
+//! through the emulator.
+
+use crate::sample::FrameSample;
+use crate::transport::endpoint::{Endpoint, Payload};
+use crate::transport::ports::{FrameSink, FrameSource, MemoryPort, PortError};
+use crate::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
+use crate::transport::{Channel, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
+use anyhow::{Context, Result};
+use std::cell::RefCell;
+use std::net::SocketAddr;
+use std::rc::Rc;
+
+/// Where the emulator takes frames from.
+pub enum Ingress {
+    /// The console's iceoryx2 port.
+    Iceoryx2(FrameSubscriber),
+    /// A UDP socket.
+    Udp(UdpSource),
+    /// A queue in memory (tests).
+    Memory(MemoryPort),
+}
+
+/// Where the emulator sends what it releases.
+pub enum Egress {
+    /// The simulator's iceoryx2 port.
+    Iceoryx2(FramePublisher),
+    /// A UDP socket, to the robot's address.
+    Udp(UdpSink),
+    /// A queue in memory (tests).
+    Memory(MemoryPort),
+}
+
+impl FrameSource for Ingress {
+    #[inline]
+    fn try_recv(&mut self, out: &mut FrameSample) -> Result<bool, PortError> {
+        match self {
+            Ingress::Iceoryx2(p) => FrameSource::try_recv(p, out),
+            Ingress::Udp(p) => p.try_recv(out),
+            Ingress::Memory(p) => p.try_recv(out),
+        }
+    }
+
+    fn peers(&mut self) -> Option<usize> {
+        match self {
+            Ingress::Iceoryx2(p) => FrameSource::peers(p),
+            Ingress::Udp(p) => p.peers(),
+            Ingress::Memory(p) => FrameSource::peers(p),
+        }
+    }
+
+    #[inline]
+    fn dropped(&mut self, sample: &FrameSample) {
+        match self {
+            Ingress::Iceoryx2(p) => p.dropped(sample),
+            Ingress::Udp(p) => p.dropped(sample),
+            Ingress::Memory(p) => p.dropped(sample),
+        }
+    }
+
+    #[inline]
+    fn sender(&self) -> Option<&PeerAddr> {
+        match self {
+            Ingress::Iceoryx2(p) => p.sender(),
+            Ingress::Udp(p) => p.sender(),
+            Ingress::Memory(p) => p.sender(),
+        }
+    }
+}
+
+impl FrameSink for Egress {
+    #[inline]
+    fn send_with(&mut self, sample: &FrameSample, stamp: impl FnOnce(&mut FrameSample)) -> Result<Option<usize>, PortError> {
+        match self {
+            Egress::Iceoryx2(p) => FrameSink::send_with(p, sample, stamp),
+            Egress::Udp(p) => p.send_with(sample, stamp),
+            Egress::Memory(p) => p.send_with(sample, stamp),
+        }
+    }
+
+    fn peers(&mut self) -> Option<usize> {
+        match self {
+            Egress::Iceoryx2(p) => FrameSink::peers(p),
+            Egress::Udp(p) => p.peers(),
+            Egress::Memory(p) => FrameSink::peers(p),
+        }
+    }
+}
+
+/// How to open the emulator's transports, besides the endpoints.
+#[derive(Debug, Clone)]
+pub struct Wiring {
+    /// The run, for an iceoryx2 side.
+    pub run_id: Option<String>,
+    /// What a UDP datagram carries.
+    pub payload: Payload,
+    /// Socket options of the UDP sides.
+    pub udp: UdpOptions,
+    /// Local address a UDP egress sends from (default: an ephemeral port).
+    pub egress_bind: Option<SocketAddr>,
+    /// Raw payload: datagrams the release queue may hold (the arena has
+    /// one slot more).
+    pub queue_capacity: usize,
+    /// A UDP ingress ends the stream after this long without a datagram.
+    pub idle_end_ns: Option<u64>,
+}
+
+/// The emulator's transports, open.
+pub struct Transports {
+    /// Where frames come from.
+    pub ingress: Ingress,
+    /// Where released frames go.
+    pub egress: Egress,
+    /// The iceoryx2 node, when a side is iceoryx2.
+    pub node: Option<IpcNode>,
+    /// Raw payload: the slots shared by the UDP source and sink.
+    pub arena: Option<Rc<RefCell<Arena>>>,
+}
+
+impl Transports {
+    /// The ingress socket, when the ingress is UDP.
+    pub fn udp_ingress(&self) -> Option<&UdpPort> {
+        match &self.ingress {
+            Ingress::Udp(s) => Some(s.port()),
+            _ => None,
+        }
+    }
+
+    /// The egress socket, when the egress is UDP.
+    pub fn udp_egress(&self) -> Option<&UdpPort> {
+        match &self.egress {
+            Egress::Udp(s) => Some(s.port()),
+            _ => None,
+        }
+    }
+}
+
+/// Opens `ingress` and `egress`: UDP sockets first, then the iceoryx2 node
+/// and ports if a side needs them.
+pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transports> {
+    let arena = (w.payload == Payload::Raw).then(|| Rc::new(RefCell::new(Arena::new(w.queue_capacity + 1))));
+    let sink = match egress.udp() {
+        Some(peer) => {
+            let opts = UdpOptions { reuse_address: false, ..w.udp };
+            let port = match w.egress_bind {
+                Some(local) => UdpPort::bind(local, &opts),
+                None => UdpPort::bind_towards(peer, &opts),
+            }
+            .context("opening the UDP egress socket")?;
+            Some(UdpSink::new(port, peer, arena.clone()))
+        }
+        None => None,
+    };
+    let source = match ingress.udp() {
+        Some(addr) => {
+            let port = UdpPort::bind(addr, &w.udp).context("opening the UDP ingress socket")?;
+            let s = UdpSource::new(port, arena.clone());
+            Some(match w.idle_end_ns {
+                Some(ns) => s.with_idle_end(ns),
+                None => s,
+            })
+        }
+        None => None,
+    };
+    let node = match (source.is_some() && sink.is_some(), &w.run_id) {
+        (true, _) => None,
+        (false, Some(run_id)) => Some(open_node(run_id, Role::Emulator)?),
+        (false, None) => anyhow::bail!("an iceoryx2 endpoint needs a run id (ingress {ingress}, egress {egress})"),
+    };
+    let ingress = match (source, &node) {
+        (Some(s), _) => Ingress::Udp(s),
+        (None, Some(n)) => Ingress::Iceoryx2(n.subscriber(Channel::Console).context("opening the console → emulator port")?),
+        (None, None) => unreachable!("a node is open when a side is iceoryx2"),
+    };
+    let egress = match (sink, &node) {
+        (Some(s), _) => Egress::Udp(s),
+        (None, Some(n)) => Egress::Iceoryx2(n.publisher(Channel::Emulator).context("opening the emulator → simulator port")?),
+        (None, None) => unreachable!("a node is open when a side is iceoryx2"),
+    };
+    Ok(Transports { ingress, egress, node, arena })
+}
+
+/// Opens this process's node in run `run_id`.
+pub fn open_node(run_id: &str, role: Role) -> Result<IpcNode> {
+    let run = RunId::new(run_id).with_context(|| format!("run id `{run_id}`"))?;
+    let node = IpcNode::open(&IpcConfig::new(run), role).with_context(|| format!("opening the {role} node of run `{run_id}`"))?;
+    Ok(node)
+}
+
+/// Removes what killed processes of earlier runs left on this host; returns
+/// how many dead nodes were removed.
+pub fn cleanup_stale() -> Result<usize> {
+    let reports = crate::transport::cleanup_dead_runs(|_| true).context("cleaning up after earlier runs")?;
+    Ok(reports.iter().map(|(_, r)| r.removed.len()).sum())
+}
