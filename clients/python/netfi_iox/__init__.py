@@ -6,6 +6,7 @@
 - :mod:`netfi_iox.capture`: reading netfi's LZ4 ITP captures.
 """
 
+from . import capture
 from .itp import SURGEON_DISENGAGED, SURGEON_ENGAGED, FrameError, ItpFrame, checksum
 from .payload import (
     FLAG_END, FLAG_RAW, INTERFACE_VERSION, ITP_FRAME_LEN, TYPE_NAME, FrameSample, end_marker, layout,
