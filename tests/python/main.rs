@@ -328,7 +328,7 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     let robot = run.python_robot();
     let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "20000"]);
     let console = python("examples/console.py", &run)
-        .args(["--run-id", &run.id, "--frames", "20000", "--rate-hz", "4000", "--out"])
+        .args(["--run-id", &run.id, "--frames", "20000", "--rate-hz", "2500", "--out"])
         .arg(run.out.join("console.json"))
         .output()
         .unwrap();

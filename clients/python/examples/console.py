@@ -37,7 +37,7 @@ def synthetic(rate_hz: float, n: int):
         inc = [[0, 0, 0], [0, 0, 0]]
         for arm in (0, 1):
             phase = t * 2 * math.pi * (0.25 + 0.1 * arm)
-            target = [3000 * math.cos(phase), 2000 * math.sin(phase), 500 * math.sin(2 * phase)]
+            target = [3000 * (math.cos(phase) - 1), 2000 * math.sin(phase), 500 * math.sin(2 * phase)]
             for ax in range(3):
                 pos[arm][ax] = target[ax]
                 want = round(pos[arm][ax]) - sent[arm][ax]
@@ -54,8 +54,7 @@ def synthetic(rate_hz: float, n: int):
         yield round(i * period_ns), f.encode()
 
 
-def replay(path: str, rate_hz, n):
-    records = netfi_iox.capture.load(path)
+def replay(records, rate_hz, n):
     for i, (offset_ns, wire) in enumerate(records[:n]):
         yield (round(i * 1e9 / rate_hz) if rate_hz else offset_ns), wire
 
@@ -86,12 +85,13 @@ def main() -> int:
         ap.error("--rate-hz must be a positive number")
 
     if a.capture:
-        count = len(netfi_iox.capture.load(a.capture, verify=False))
+        records = netfi_iox.capture.load(a.capture)
+        count = len(records)
         if a.frames is not None:
             count = min(count, a.frames)
         elif a.duration_s is not None:
             count = min(count, round(a.duration_s * (a.rate_hz or 517.0)))
-        script = replay(a.capture, a.rate_hz, count)
+        script = replay(records, a.rate_hz, count)
         source = f"capture:{a.capture}"
     else:
         rate = a.rate_hz or 1000.0
