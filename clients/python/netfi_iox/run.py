@@ -329,7 +329,7 @@ class Publisher:
 
     def peers_connected(self) -> int:
         """Subscribers of the channel now."""
-        return self.service.dynamic_config().number_of_subscribers()
+        return self.service.dynamic_config.number_of_subscribers
 
     def send(self, sample, stamp=None) -> int:
         """Loans a slot, copies ``sample`` in, calls ``stamp(payload)`` on the
@@ -368,7 +368,7 @@ class Subscriber:
 
     def peers_connected(self) -> int:
         """Publishers of the channel now."""
-        return self.service.dynamic_config().number_of_publishers()
+        return self.service.dynamic_config.number_of_publishers
 
     def receive_into(self, out) -> bool:
         """Copies the next sample into ``out`` and releases it; False when
