@@ -220,7 +220,7 @@ fn the_python_interface_is_the_rust_one() {
 import json, netfi_iox as n, netfi_iox.run as r
 root, prefix = n.location("{id}")
 print(json.dumps({{
-    "layout": n.layout(), "root": root, "prefix": prefix,
+    "layout": r.file_layout(), "root": root, "prefix": prefix,
     "services": [n.service_name("{id}", c) for c in ("console", "emulator", "direct")],
     "nodes": [n.node_name("{id}", x) for x in ("console", "emulator", "simulator", "tool")],
     "limits": [r.SUBSCRIBER_BUFFER_FRAMES, r.MAX_PUBLISHERS_PER_CHANNEL, r.MAX_SUBSCRIBERS_PER_CHANNEL, r.MAX_NODES_PER_CHANNEL, r.HISTORY_FRAMES],

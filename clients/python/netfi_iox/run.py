@@ -63,7 +63,7 @@ def check_run_id(run_id: str) -> str:
     return run_id
 
 
-def layout() -> str:
+def file_layout() -> str:
     """The layout in force: ``NETFI_IOX_LAYOUT`` or :data:`DEFAULT_LAYOUT`."""
     chosen = os.environ.get("NETFI_IOX_LAYOUT", DEFAULT_LAYOUT)
     if chosen not in LAYOUTS:
@@ -77,7 +77,7 @@ def location(run_id: str, which: Optional[str] = None) -> Tuple[str, str]:
     This is the one place that knows the convention; everything else asks it.
     """
     check_run_id(run_id)
-    which = which or layout()
+    which = which or file_layout()
     if which == "per-user":
         uid = os.geteuid()
         return f"/tmp/netfi-iceoryx2-{uid}/", f"netfi_u{uid}_{run_id}_"
@@ -154,7 +154,7 @@ class RunNode:
     def __init__(self, run_id: str, role: str, which: Optional[str] = None):
         self.run_id = check_run_id(run_id)
         self.role = role
-        self.layout = which or layout()
+        self.layout = which or file_layout()
         self.root, self.prefix = location(run_id, self.layout)
         if self.layout == "per-user":
             _ensure_private_dir(self.root)
