@@ -11,7 +11,7 @@ from typing import Optional, Tuple, Type
 
 import iceoryx2 as iox
 
-from .payload import TYPE_NAME, FrameSample
+from .payload import INTERFACE_VERSION, FrameSample
 
 #: The channels of a run: the last component of each service name.
 CHANNELS = ("console", "emulator", "direct")
@@ -223,11 +223,14 @@ class RunNode:
         if theirs is None:
             return InterfaceMismatch(f"cannot open {name} with payload {ours}: iceoryx2 refused ({error!r})")
         tname, size, align = theirs
+        if (tname, size, align) == _type_of(payload_type):
+            return InterfaceMismatch(
+                f"{name} carries {ours} like this client, but other attributes than interface "
+                f"v{INTERFACE_VERSION}: refused (iceoryx2: {error!r})"
+            )
         return InterfaceMismatch(
             f"{name} carries {tname} ({size} bytes, aligned to {align}), this client speaks {ours}: "
-            f"refused (iceoryx2: {error!r}); use the netfi_iox of interface {tname.rsplit('.', 1)[-1]}"
-            if (tname, size, align) != _type_of(payload_type)
-            else f"{name} carries {ours} like this client, but its attributes differ from interface v1: refused (iceoryx2: {error!r})"
+            f"refused (iceoryx2: {error!r}); use a client of the run's version ({tname.rsplit('.', 1)[-1]})"
         )
 
     def existing_payload(self, name: str) -> Optional[Tuple[str, int, int]]:
