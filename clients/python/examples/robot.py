@@ -1,0 +1,205 @@
+#!/usr/bin/env python3
+"""A Python robot for a netfi run over iceoryx2 (interface v1).
+
+Receives the frames the emulator releases (channel ``emulator``), applies ITP
+semantics to a pose per arm (commands apply only while the clutch is engaged;
+positions and rotations are incremental, the grasp absolute), and, unless
+``--no-direct``, integrates the console's direct copies (channel ``direct``)
+too, to report how far the robot diverged. Ends on the emulator's
+end-of-stream marker (or SIGINT/SIGTERM), then prints a JSON summary (also
+``--out FILE``).
+
+    python3 clients/python/examples/robot.py --run-id R --out robot.json
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from typing import List
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import netfi_iox  # noqa: E402
+from netfi_iox import FrameSample, ItpFrame, RunNode  # noqa: E402
+
+
+@dataclass
+class ArmPose:
+    """One arm's integrated pose, in ITP units (positions exact integers)."""
+
+    x: int = 0
+    y: int = 0
+    z: int = 0
+    rx: float = 0.0
+    ry: float = 0.0
+    rz: float = 0.0
+    grasp: int = 0
+
+
+@dataclass
+class Integrator:
+    """Follows one stream of frames (SPEC §2, as netfi's simulator does)."""
+
+    arms: List[ArmPose] = field(default_factory=lambda: [ArmPose(), ArmPose()])
+    frames: int = 0
+    applied: int = 0
+
+    def apply(self, f: ItpFrame) -> None:
+        self.frames += 1
+        if f.surgeon_mode != netfi_iox.SURGEON_ENGAGED:
+            return
+        self.applied += 1
+        for arm, p in enumerate(self.arms):
+            p.x += f.delx[arm]
+            p.y += f.dely[arm]
+            p.z += f.delz[arm]
+            p.rx += f.qx[arm]
+            p.ry += f.qy[arm]
+            p.rz += f.qz[arm]
+            p.grasp = f.grasp[arm]
+
+
+@dataclass
+class RobotState:
+    """What the robot knows after a command: the command it answers and its
+    pose then. This is the content of the robot's feedback to the console."""
+
+    console_index: int
+    sequence: int
+    send_ns: int
+    recv_ns: int
+    arms: List[ArmPose]
+
+
+def robot_state(robot: Integrator, sample: FrameSample, frame: ItpFrame, recv_ns: int) -> RobotState:
+    """The robot's state in answer to ``sample`` (received at ``recv_ns``)."""
+    return RobotState(
+        console_index=sample.console_index,
+        sequence=frame.sequence,
+        send_ns=sample.send_ns,
+        recv_ns=recv_ns,
+        arms=[ArmPose(**asdict(a)) for a in robot.arms],
+    )
+
+
+def quantiles_us(values: List[int]) -> dict:
+    if not values:
+        return {"count": 0}
+    v = sorted(values)
+    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e3  # noqa: E731
+    return {"count": len(v), "p50": q(0.5), "p99": q(0.99), "max": v[-1] / 1e3, "mean": sum(v) / len(v) / 1e3}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run-id", required=True)
+    ap.add_argument("--no-direct", action="store_true", help="do not follow the console's direct copies")
+    ap.add_argument("--ready", help="create this file once subscribed (for scripts that start the console next)")
+    ap.add_argument("--timeout-s", type=float, help="give up when no end marker came after this many seconds")
+    ap.add_argument("--out", help="also write the JSON summary here")
+    a = ap.parse_args()
+
+    robot, console = Integrator(), Integrator()
+    received = received_direct = bad_checksum = wrong_size = 0
+    released_by_emulator = sent_by_console = None
+    seen, extra = [], []
+    last_state = None
+    with RunNode(a.run_id, "simulator") as node:
+        port = node.subscriber("emulator")
+        direct = None if a.no_direct else node.subscriber("direct")
+        if a.ready:
+            open(a.ready, "w").close()
+        s, d = FrameSample(), FrameSample()
+        t_start = last_frame = time.monotonic_ns()
+        stop_at = None
+        ended_by = None
+        idle_turns = 0
+        while ended_by is None:
+            idle = True
+            while port.receive_into(s):
+                t = time.monotonic_ns()
+                idle, last_frame = False, t
+                if s.is_end():
+                    released_by_emulator = s.console_index
+                    continue
+                received += 1
+                seen.append(t - s.send_ns)
+                extra.append(t - s.send_ns - s.injected_delay_ns)
+                if s.len != netfi_iox.ITP_FRAME_LEN:
+                    wrong_size += 1
+                    continue
+                f = ItpFrame.decode(bytes(s.wire), verify=False)
+                if not f.checksum_ok():
+                    bad_checksum += 1
+                robot.apply(f)
+                last_state = robot_state(robot, s, f, t)
+            while direct is not None and direct.receive_into(d):
+                idle, last_frame = False, time.monotonic_ns()
+                if d.is_end():
+                    sent_by_console = d.console_index
+                    continue
+                received_direct += 1
+                if d.len == netfi_iox.ITP_FRAME_LEN:
+                    console.apply(ItpFrame.decode(bytes(d.wire), verify=False))
+            now = time.monotonic_ns()
+            if released_by_emulator is not None and (
+                direct is None or sent_by_console is not None or direct.peers_connected() == 0
+                or now - last_frame > 200_000_000
+            ):
+                ended_by = "end_marker"
+            elif stop_at is None and node.termination_requested():
+                stop_at = now
+            elif stop_at is not None and now - last_frame > 200_000_000:
+                ended_by = "signal"
+            elif a.timeout_s is not None and now - t_start > a.timeout_s * 1e9:
+                ended_by = "timeout"
+            if idle:
+                idle_turns += 1
+                time.sleep(0.0001 if idle_turns > 10 else 0)
+            else:
+                idle_turns = 0
+        t_end = time.monotonic_ns()
+
+    divergence = None
+    if direct is not None and received_direct:
+        divergence = [
+            {k: getattr(r, k) - getattr(c, k) for k in ("x", "y", "z", "rx", "ry", "rz", "grasp")}
+            for r, c in zip(robot.arms, console.arms)
+        ]
+    summary = {
+        "interface": netfi_iox.TYPE_NAME,
+        "run_id": a.run_id,
+        "received": received,
+        "released_by_emulator": released_by_emulator,
+        "balanced": released_by_emulator == received,
+        "received_direct": received_direct,
+        "sent_by_console": sent_by_console,
+        "wrong_size": wrong_size,
+        "bad_checksum": bad_checksum,
+        "applied": robot.applied,
+        "pose": [asdict(p) for p in robot.arms],
+        "console_pose": [asdict(p) for p in console.arms] if received_direct else None,
+        "divergence": divergence,
+        "last_state": asdict(last_state) if last_state else None,
+        "delay_seen_us": quantiles_us(seen),
+        "end_to_end_extra_us": quantiles_us(extra),
+        "ended_by": ended_by,
+        "duration_s": (t_end - t_start) / 1e9,
+    }
+    text = json.dumps(summary, indent=2)
+    print(text)
+    if a.out:
+        with open(a.out, "w") as f:
+            f.write(text + "\n")
+    return 0 if ended_by != "timeout" else 3
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except (netfi_iox.InterfaceMismatch, ValueError) as e:
+        print(f"robot: {e}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,117 @@
+"""The shared-memory sample of interface version 1: ``netfi::FrameSample.v1``.
+
+Mirrors ``src/sample.rs`` byte for byte (``#[repr(C)]``, 192 bytes, aligned
+to 8). The offsets below are the interface (docs/interface.md); the module
+checks at import that ctypes lays the structure out the same way, and the
+Rust test ``tests/python`` checks them against the Rust type.
+"""
+
+import ctypes
+
+#: The iceoryx2 type name of the payload. A layout or meaning change bumps
+#: the ``.vN`` suffix; iceoryx2 refuses to connect ports whose names differ.
+TYPE_NAME = "netfi::FrameSample.v1"
+
+#: Interface version (the suffix of :data:`TYPE_NAME`).
+INTERFACE_VERSION = 1
+
+#: Length of an ITP master-to-slave frame on the wire.
+ITP_FRAME_LEN = 124
+
+#: ``flags`` bit: the sample marks the end of a stream, it is not a frame.
+#: Its ``console_index`` carries the number of frames sent before it.
+FLAG_END = 1
+
+#: ``flags`` bit: the sample carries an opaque datagram (the UDP bridge's raw
+#: mode); no ITP validation applies. Never set by an iceoryx2 console.
+FLAG_RAW = 2
+
+
+class FrameSample(ctypes.Structure):
+    """One frame in shared memory: the 124 wire bytes plus metadata.
+
+    All times are CLOCK_MONOTONIC nanoseconds (``time.monotonic_ns()`` in
+    Python reads the same clock on Linux).
+    """
+
+    _fields_ = [
+        ("send_ns", ctypes.c_uint64),
+        ("console_index", ctypes.c_uint64),
+        ("ingress_index", ctypes.c_uint64),
+        ("ingress_ns", ctypes.c_uint64),
+        ("injected_delay_ns", ctypes.c_uint64),
+        ("release_sched_ns", ctypes.c_uint64),
+        ("release_ns", ctypes.c_uint64),
+        ("len", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
+        ("wire", ctypes.c_uint8 * ITP_FRAME_LEN),
+        ("_pad", ctypes.c_uint8 * 4),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name (read by ``iceoryx2.get_type_name``)."""
+        return TYPE_NAME
+
+    def is_end(self) -> bool:
+        """Whether this sample is an end-of-stream marker."""
+        return bool(self.flags & FLAG_END)
+
+    def payload(self) -> bytes:
+        """The valid wire bytes (``len`` of them, at most 124)."""
+        return bytes(self.wire)[: min(self.len, ITP_FRAME_LEN)]
+
+    def set_frame(self, wire: bytes) -> None:
+        """Puts one ITP frame's wire bytes in and sets ``len``."""
+        if len(wire) != ITP_FRAME_LEN:
+            raise ValueError(f"an ITP frame is {ITP_FRAME_LEN} bytes, got {len(wire)}")
+        ctypes.memmove(self.wire, wire, ITP_FRAME_LEN)
+        self.len = ITP_FRAME_LEN
+
+
+#: Byte offset of every field, as docs/interface.md states them.
+OFFSETS = {
+    "send_ns": 0,
+    "console_index": 8,
+    "ingress_index": 16,
+    "ingress_ns": 24,
+    "injected_delay_ns": 32,
+    "release_sched_ns": 40,
+    "release_ns": 48,
+    "len": 56,
+    "flags": 60,
+    "wire": 64,
+    "_pad": 188,
+}
+
+#: Size and alignment of the sample in bytes.
+SIZE = 192
+ALIGNMENT = 8
+
+
+def layout() -> dict:
+    """The layout ctypes actually gives :class:`FrameSample` (for checks)."""
+    return {
+        "type_name": TYPE_NAME,
+        "size": ctypes.sizeof(FrameSample),
+        "alignment": ctypes.alignment(FrameSample),
+        "offsets": {name: getattr(FrameSample, name).offset for name, _ in FrameSample._fields_},
+    }
+
+
+def _check_layout() -> None:
+    actual = layout()
+    expected = {"type_name": TYPE_NAME, "size": SIZE, "alignment": ALIGNMENT, "offsets": OFFSETS}
+    if actual != expected:
+        raise ImportError(f"FrameSample layout differs from the interface: {actual} != {expected}")
+
+
+_check_layout()
+
+
+def end_marker(frames_sent: int) -> FrameSample:
+    """An end-of-stream marker after ``frames_sent`` frames."""
+    s = FrameSample()
+    s.console_index = frames_sent
+    s.flags = FLAG_END
+    return s

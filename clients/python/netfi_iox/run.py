@@ -1,0 +1,390 @@
+"""Joining a netfi run over iceoryx2: the configuration, names and service
+attributes of interface version 1 (docs/interface.md), and a node that opens
+a run's ports with them."""
+
+import ctypes
+import gc
+import os
+import stat
+import time
+from typing import Optional, Tuple, Type
+
+import iceoryx2 as iox
+
+from .payload import INTERFACE_VERSION, FrameSample
+
+#: The channels of a run: the last component of each service name.
+CHANNELS = ("console", "emulator", "direct")
+#: The roles a node may take: the last component of its node name.
+ROLES = ("console", "emulator", "simulator", "tool")
+
+#: Every subscriber's queue, in frames; also the service's maximum.
+SUBSCRIBER_BUFFER_FRAMES = 16_384
+MAX_PUBLISHERS_PER_CHANNEL = 1
+MAX_SUBSCRIBERS_PER_CHANNEL = 2
+MAX_NODES_PER_CHANNEL = 8
+PUBLISHER_MAX_LOANED_SAMPLES = 1
+SUBSCRIBER_MAX_BORROWED_SAMPLES = 1
+HISTORY_FRAMES = 0
+
+#: Where a run's iceoryx2 files live, and under which names.
+#:
+#: ``shared``: prefix ``netfi_<run>_`` under iceoryx2's own ``/tmp/iceoryx2/``.
+#: ``per-user``: prefix ``netfi_u<uid>_<run>_`` under ``/tmp/netfi-iceoryx2-<uid>/``
+#: (a directory of the user's own, mode 0700).
+LAYOUTS = ("shared", "per-user")
+
+#: The layout of the netfi build this module ships with. The environment
+#: variable ``NETFI_IOX_LAYOUT`` overrides it; the Rust test ``tests/python``
+#: checks that the two agree.
+DEFAULT_LAYOUT = "shared"
+
+_RUN_ID_MAX_LEN = 48
+
+
+class InterfaceMismatch(RuntimeError):
+    """The run's service carries another payload type or attributes than
+    this client speaks: it was refused rather than misread."""
+
+
+class NoPeer(RuntimeError):
+    """The expected peer did not appear in time."""
+
+
+def check_run_id(run_id: str) -> str:
+    """Validates a run id: 1 to 48 ASCII letters, digits, ``_`` or ``-``."""
+    if not run_id:
+        raise ValueError("run id is empty; use 1 to 48 ASCII letters, digits, `_` or `-`")
+    if len(run_id) > _RUN_ID_MAX_LEN:
+        raise ValueError(f"run id `{run_id}` is {len(run_id)} bytes long; at most 48 are accepted")
+    for i, ch in enumerate(run_id):
+        if not (ch.isascii() and (ch.isalnum() or ch in "_-")):
+            raise ValueError(f"run id `{run_id}` contains {ch!r} at byte {i}; only ASCII letters, digits, `_` and `-` are accepted")
+    return run_id
+
+
+def file_layout() -> str:
+    """The layout in force: ``NETFI_IOX_LAYOUT`` or :data:`DEFAULT_LAYOUT`."""
+    chosen = os.environ.get("NETFI_IOX_LAYOUT", DEFAULT_LAYOUT)
+    if chosen not in LAYOUTS:
+        raise ValueError(f"NETFI_IOX_LAYOUT={chosen!r}; expected one of {', '.join(LAYOUTS)}")
+    return chosen
+
+
+def location(run_id: str, which: Optional[str] = None) -> Tuple[str, str]:
+    """The iceoryx2 root directory and file prefix of run ``run_id``.
+
+    This is the one place that knows the convention; everything else asks it.
+    """
+    check_run_id(run_id)
+    which = which or file_layout()
+    if which == "per-user":
+        uid = os.geteuid()
+        return f"/tmp/netfi-iceoryx2-{uid}/", f"netfi_u{uid}_{run_id}_"
+    return "/tmp/iceoryx2/", f"netfi_{run_id}_"
+
+
+def service_name(run_id: str, channel: str) -> str:
+    """``netfi/<run>/<channel>``."""
+    if channel not in CHANNELS:
+        raise ValueError(f"unknown channel {channel!r}; expected one of {', '.join(CHANNELS)}")
+    return f"netfi/{check_run_id(run_id)}/{channel}"
+
+
+def node_name(run_id: str, role: str) -> str:
+    """``netfi/<run>/<role>``."""
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
+    return f"netfi/{check_run_id(run_id)}/{role}"
+
+
+def _ensure_private_dir(path: str) -> None:
+    """Creates ``path`` 0700 if missing; refuses one that is not a private
+    directory of this user (as netfi itself does)."""
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass
+    st = os.lstat(path)
+    uid = os.geteuid()
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != uid or st.st_mode & 0o077:
+        raise PermissionError(
+            f"{path} is not a private directory of uid {uid} (owner {st.st_uid}, mode {st.st_mode & 0o7777:o}); remove it"
+        )
+
+
+def iceoryx2_config(run_id: str, which: Optional[str] = None) -> "iox.config.Config":
+    """The explicit iceoryx2 configuration of run ``run_id``: iceoryx2's
+    compiled-in defaults (no configuration file is read), the run's root and
+    prefix, automatic dead-node clean-ups off, and the publish/subscribe
+    defaults of the interface."""
+    root, prefix = location(run_id, which)
+    config = iox.config.default()
+    g = config.global_cfg  # a view: writes go through to config
+    g.prefix = iox.FileName.new(prefix)
+    g.root_path = iox.Path.new(root)
+    g.node.cleanup_dead_nodes_on_creation = False
+    g.node.cleanup_dead_nodes_on_destruction = False
+    g.service.cleanup_dead_nodes_on_open = False
+    ps = config.defaults.publish_subscribe
+    ps.max_publishers = MAX_PUBLISHERS_PER_CHANNEL
+    ps.max_subscribers = MAX_SUBSCRIBERS_PER_CHANNEL
+    ps.max_nodes = MAX_NODES_PER_CHANNEL
+    ps.subscriber_max_buffer_size = SUBSCRIBER_BUFFER_FRAMES
+    ps.subscriber_max_borrowed_samples = SUBSCRIBER_MAX_BORROWED_SAMPLES
+    ps.publisher_max_loaned_samples = PUBLISHER_MAX_LOANED_SAMPLES
+    ps.publisher_history_size = HISTORY_FRAMES
+    ps.enable_safe_overflow = False
+    ps.backpressure_strategy = iox.BackpressureStrategy.DiscardData
+    return config
+
+
+def _type_of(t) -> Tuple[str, int, int]:
+    return iox.get_type_name(t), ctypes.sizeof(t), ctypes.alignment(t)
+
+
+class RunNode:
+    """This process's node in a run, and the factory of its ports.
+
+    Use as a context manager, or call :meth:`close`: the node's files are
+    removed on close, and the last node of a run removes the run's
+    management segment from ``/dev/shm``.
+    """
+
+    def __init__(self, run_id: str, role: str, which: Optional[str] = None):
+        self.run_id = check_run_id(run_id)
+        self.role = role
+        self.layout = which or file_layout()
+        self.root, self.prefix = location(run_id, self.layout)
+        if self.layout == "per-user":
+            _ensure_private_dir(self.root)
+        self.config = iceoryx2_config(run_id, self.layout)
+        self._services = {}
+        self._ports = []
+        self._termination = False
+        self.node = (
+            iox.NodeBuilder.new()
+            .name(iox.NodeName.new(node_name(run_id, role)))
+            .config(self.config)
+            .signal_handling_mode(iox.SignalHandlingMode.HandleTerminationRequests)
+            .create(iox.ServiceType.Ipc)
+        )
+        # Installs iceoryx2's signal capture now: from here on SIGINT and
+        # SIGTERM are seen through termination_requested(), not as
+        # KeyboardInterrupt.
+        self.termination_requested()
+
+    def __enter__(self) -> "RunNode":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def termination_requested(self) -> bool:
+        """Whether SIGINT or SIGTERM has arrived (latched)."""
+        if not self._termination:
+            try:
+                self.node.wait(iox.Duration.from_nanos(0))
+            except iox.NodeWaitFailure as e:
+                if "Interrupt" not in str(e) and "Interrupt" not in repr(e):
+                    self._termination = True
+        return self._termination
+
+    def service(self, channel: str, payload_type: Type[ctypes.Structure] = FrameSample):
+        """Opens (or creates) the service of ``channel`` with every limit of
+        the interface stated, so that a service with another payload type or
+        other limits is refused instead of adopted."""
+        key = (channel, payload_type)
+        if key in self._services:
+            return self._services[key]
+        name = service_name(self.run_id, channel)
+        try:
+            svc = (
+                self.node.service_builder(iox.ServiceName.new(name))
+                .publish_subscribe(payload_type)
+                .max_publishers(MAX_PUBLISHERS_PER_CHANNEL)
+                .max_subscribers(MAX_SUBSCRIBERS_PER_CHANNEL)
+                .max_nodes(MAX_NODES_PER_CHANNEL)
+                .subscriber_max_buffer_size(SUBSCRIBER_BUFFER_FRAMES)
+                .subscriber_max_borrowed_samples(SUBSCRIBER_MAX_BORROWED_SAMPLES)
+                .history_size(HISTORY_FRAMES)
+                .enable_safe_overflow(False)
+                .open_or_create()
+            )
+        except iox.PublishSubscribeOpenOrCreateError as e:
+            raise self._explain(name, payload_type, e) from e
+        self._services[key] = svc
+        return svc
+
+    def _explain(self, name: str, payload_type, error) -> Exception:
+        """Turns iceoryx2's refusal into a message naming both sides' payloads."""
+        ours = "{} ({} bytes, aligned to {})".format(*_type_of(payload_type))
+        theirs = self.existing_payload(name)
+        if theirs is None:
+            return InterfaceMismatch(f"cannot open {name} with payload {ours}: iceoryx2 refused ({error!r})")
+        tname, size, align = theirs
+        if (tname, size, align) == _type_of(payload_type):
+            return InterfaceMismatch(
+                f"{name} carries {ours} like this client, but other attributes than interface "
+                f"v{INTERFACE_VERSION}: refused (iceoryx2: {error!r})"
+            )
+        return InterfaceMismatch(
+            f"{name} carries {tname} ({size} bytes, aligned to {align}), this client speaks {ours}: "
+            f"refused (iceoryx2: {error!r}); use a client of the run's version ({tname.rsplit('.', 1)[-1]})"
+        )
+
+    def existing_payload(self, name: str) -> Optional[Tuple[str, int, int]]:
+        """The payload type name, size and alignment of the existing service
+        ``name``, read from its static configuration file (the Python
+        bindings do not expose it)."""
+        attrs = self.existing_service(name)
+        if attrs is None:
+            return None
+        try:
+            payload = attrs["messaging_pattern"]["PublishSubscribe"]["message_type_details"]["payload"]
+            return str(payload["type_name"]), int(payload["size"]), int(payload["alignment"])
+        except (KeyError, TypeError, ValueError):
+            return None
+
+    def existing_service(self, name: str) -> Optional[dict]:
+        """The static configuration of the existing service ``name``, if any."""
+        import glob
+        import tomllib
+
+        pattern = os.path.join(self.root, "services", glob.escape(self.prefix) + "*.service")
+        for path in glob.glob(pattern):
+            try:
+                with open(path, "rb") as f:
+                    doc = tomllib.load(f)
+            except (OSError, ValueError):
+                continue
+            if doc.get("service_name") == name:
+                return doc
+        return None
+
+    def publisher(self, channel: str, payload_type: Type[ctypes.Structure] = FrameSample) -> "Publisher":
+        """The publishing end of ``channel``."""
+        svc = self.service(channel, payload_type)
+        port = (
+            svc.publisher_builder()
+            .max_loaned_samples(PUBLISHER_MAX_LOANED_SAMPLES)
+            .backpressure_strategy(iox.BackpressureStrategy.DiscardData)
+            .create()
+        )
+        p = Publisher(svc, port, payload_type)
+        self._ports.append(p)
+        return p
+
+    def subscriber(self, channel: str, payload_type: Type[ctypes.Structure] = FrameSample) -> "Subscriber":
+        """A subscribing end of ``channel``."""
+        svc = self.service(channel, payload_type)
+        port = svc.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER_FRAMES).create()
+        s = Subscriber(svc, port, payload_type)
+        self._ports.append(s)
+        return s
+
+    def close(self) -> None:
+        """Deregisters the ports and the node; the run's last node also
+        removes the run's management segment."""
+        for p in self._ports:
+            p.close()
+        self._ports.clear()
+        self._services.clear()
+        if self.node is not None:
+            # The bindings have no explicit delete for a node: dropping the
+            # last reference removes it.
+            self.node = None
+            gc.collect()
+            remove_mgmt_segment_if_unused(self.config, self.prefix)
+
+
+def remove_mgmt_segment_if_unused(config, prefix: str) -> None:
+    """Removes ``/dev/shm/<prefix>*.global_mgmt`` of this user when no node
+    of the run is left, as netfi's own processes do."""
+    try:
+        states = iox.Node.list(iox.ServiceType.Ipc, config)
+    except Exception:
+        return
+    if any(not isinstance(s, iox.NodeState.Dead) for s in states):
+        return
+    uid = os.geteuid()
+    try:
+        names = os.listdir("/dev/shm")
+    except OSError:
+        return
+    for n in names:
+        if n.startswith(prefix) and n.endswith(".global_mgmt"):
+            p = os.path.join("/dev/shm", n)
+            try:
+                if os.lstat(p).st_uid == uid:
+                    os.unlink(p)
+            except OSError:
+                pass
+
+
+class Publisher:
+    """A publisher of one channel; :meth:`send` copies a sample in."""
+
+    def __init__(self, service, port, payload_type):
+        self.service = service
+        self.port = port
+        self.payload_type = payload_type
+
+    def peers_connected(self) -> int:
+        """Subscribers of the channel now."""
+        return self.service.dynamic_config.number_of_subscribers
+
+    def send(self, sample, stamp=None) -> int:
+        """Loans a slot, copies ``sample`` in, calls ``stamp(payload)`` on the
+        shared-memory copy just before sending (e.g. to set ``send_ns``), and
+        sends. Returns the number of subscribers that received it."""
+        uninit = self.port.loan_uninit()
+        loaned = uninit.write_payload(sample)
+        if stamp is not None:
+            stamp(loaned.payload().contents)
+        return loaned.send()
+
+    def wait_for_subscriber(self, timeout_s: float, node: Optional[RunNode] = None) -> None:
+        """Waits until the channel has a subscriber (the next stage)."""
+        deadline = time.monotonic() + timeout_s
+        while self.peers_connected() == 0:
+            if time.monotonic() > deadline:
+                raise NoPeer(f"no subscriber on {self.service.name} within {timeout_s} s")
+            if node is not None and node.termination_requested():
+                raise NoPeer(f"stopped while waiting for a subscriber on {self.service.name}")
+            time.sleep(0.001)
+
+    def close(self) -> None:
+        if self.port is not None:
+            self.port.delete()
+            self.port = None
+        self.service = None
+
+
+class Subscriber:
+    """A subscriber of one channel; :meth:`receive_into` copies a sample out."""
+
+    def __init__(self, service, port, payload_type):
+        self.service = service
+        self.port = port
+        self.payload_type = payload_type
+
+    def peers_connected(self) -> int:
+        """Publishers of the channel now."""
+        return self.service.dynamic_config.number_of_publishers
+
+    def receive_into(self, out) -> bool:
+        """Copies the next sample into ``out`` and releases it; False when
+        none is waiting."""
+        sample = self.port.receive()
+        if sample is None:
+            return False
+        ctypes.memmove(ctypes.byref(out), sample.payload_ptr, ctypes.sizeof(out))
+        sample.delete()
+        return True
+
+    def close(self) -> None:
+        if self.port is not None:
+            self.port.delete()
+            self.port = None
+        self.service = None

@@ -1,0 +1,493 @@
+//! The Python clients (clients/python) against the real netfi processes,
+//! over iceoryx2's official Python bindings: the interface of
+//! docs/interface.md as both sides implement it, Python console → emulator →
+//! Python robot, the Rust console with the Python robot, the Python console
+//! with the Rust simulator, and a client of another payload version refused.
+//!
+//! Needs `python3` with the `iceoryx2` (0.10) and `lz4` packages; without
+//! them each test says so and passes, unless `NETFI_REQUIRE_PYTHON` is set
+//! (as `.ci/run` does), where their absence fails.
+//!
+//! The runs are serialized: each has a busy-waiting emulator pinned to a core.
+
+use netfi::sample::FrameSample;
+use netfi::transport::{Channel, IpcConfig, Role, RunId};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn netfi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_netfi"))
+}
+
+/// Whether python3 can import the bindings; prints why not when it cannot.
+fn python_ready() -> bool {
+    let o = Command::new("python3").args(["-c", "import iceoryx2, lz4"]).output();
+    let why = match o {
+        Ok(o) if o.status.success() => return true,
+        Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_string(),
+        Err(e) => format!("python3: {e}"),
+    };
+    assert!(
+        std::env::var_os("NETFI_REQUIRE_PYTHON").is_none(),
+        "NETFI_REQUIRE_PYTHON is set but the Python bindings are missing: {why}; pip install iceoryx2==0.10.0 lz4"
+    );
+    eprintln!("skipping: the Python bindings are not installed ({why}); pip install iceoryx2==0.10.0 lz4");
+    false
+}
+
+/// The layout the Rust side of this build uses, for `NETFI_IOX_LAYOUT`.
+fn rust_layout(config: &IpcConfig) -> &'static str {
+    if config.prefix().starts_with("netfi_u") {
+        "per-user"
+    } else {
+        "shared"
+    }
+}
+
+/// A Python program of the client tree, with the run's layout in its
+/// environment (so that a layout mismatch fails one test, the one that
+/// checks it, rather than all of them by timeout).
+fn python(script: &str, run: &Run) -> Command {
+    let mut c = Command::new("python3");
+    c.arg(root().join("clients/python").join(script))
+        .env("PYTHONPATH", root().join("clients/python"))
+        .env("NETFI_IOX_LAYOUT", rust_layout(&run.config));
+    c
+}
+
+/// One run: its id, output directory and iceoryx2 configuration. Removes
+/// what the run left in /dev/shm and under the iceoryx2 root when dropped.
+struct Run {
+    id: String,
+    out: PathBuf,
+    config: IpcConfig,
+}
+
+impl Run {
+    fn new(name: &str) -> Run {
+        let id = format!("py-{name}-{}", std::process::id());
+        let out = std::env::temp_dir().join(format!("netfi-py-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        std::fs::create_dir_all(&out).unwrap();
+        let config = IpcConfig::new(RunId::new(&id).unwrap());
+        Run { id, out, config }
+    }
+
+    fn json(&self, file: &str) -> Value {
+        let p = self.out.join(file);
+        let bytes = std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+    }
+
+    fn emulator(&self, scenario: &str, extra: &[&str]) -> Witness {
+        let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
+        let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+        let child = netfi()
+            .args(["emulator", "--run-id", &self.id, "--scenario", scenario, "--out"])
+            .arg(&self.out)
+            .args(&pin)
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        wait_file(&self.out.join("emulator.ready"));
+        Witness(Some(child))
+    }
+
+    fn python_robot(&self) -> Witness {
+        let ready = self.out.join("robot.ready");
+        let child = python("examples/robot.py", self)
+            .args(["--run-id", &self.id, "--timeout-s", "120", "--out"])
+            .arg(self.out.join("robot.json"))
+            .arg("--ready")
+            .arg(&ready)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        wait_file(&ready);
+        Witness(Some(child))
+    }
+}
+
+impl Drop for Run {
+    fn drop(&mut self) {
+        let prefix = self.config.prefix().to_string();
+        let root = root_path(&self.config);
+        for dir in [PathBuf::from("/dev/shm"), root.join("nodes"), root.join("services")] {
+            let Ok(rd) = std::fs::read_dir(&dir) else { continue };
+            for e in rd.filter_map(|e| e.ok()) {
+                if e.file_name().to_string_lossy().starts_with(&prefix) {
+                    let p = e.path();
+                    let _ = std::fs::remove_dir_all(&p).or_else(|_| std::fs::remove_file(&p));
+                }
+            }
+        }
+    }
+}
+
+fn root_path(config: &IpcConfig) -> PathBuf {
+    use iceoryx2::prelude::SemanticString;
+    PathBuf::from(String::from_utf8_lossy(config.iceoryx2().global.root_path().as_bytes()).into_owned())
+}
+
+/// A child process, killed and reaped however the test ends.
+struct Witness(Option<Child>);
+
+impl Witness {
+    /// Waits at most `limit` for the process to end on its own.
+    fn finish(mut self, what: &str, limit: Duration) -> Output {
+        let mut child = self.0.take().unwrap();
+        let t0 = Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed() > limit {
+                let _ = child.kill();
+                let o = child.wait_with_output().unwrap();
+                panic!("{what} did not end within {limit:?}; stderr:\n{}", String::from_utf8_lossy(&o.stderr));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{what} failed ({}); stderr:\n{}", o.status, String::from_utf8_lossy(&o.stderr));
+        o
+    }
+}
+
+impl Drop for Witness {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.0.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn wait_file(path: &Path) {
+    let t0 = Instant::now();
+    while !path.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(60), "{} never appeared", path.display());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+fn run_ok(mut c: Command, what: &str) -> Output {
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{what} failed ({}); stderr:\n{}", o.status, String::from_utf8_lossy(&o.stderr));
+    o
+}
+
+fn u(v: &Value) -> u64 {
+    v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
+}
+
+/// entered = delivered + dropped + held_at_end, and every frame the console
+/// sent entered.
+fn assert_emulator_balanced(emu: &Value, sent: u64) {
+    let f = &emu["frames"];
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["sent_by_console"]), sent, "{f}");
+    assert_eq!(u(&f["entered"]), sent, "{f}");
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert_eq!(u(&f["held_at_end"]), 0, "{f}");
+    assert_eq!(emu["ended_by"], "end_marker");
+    assert_eq!(u(&emu["send_errors"]), 0);
+}
+
+/// The Python module's interface (payload layout, type name, names,
+/// configuration, limits) is the Rust one.
+#[test]
+fn the_python_interface_is_the_rust_one() {
+    if !python_ready() {
+        return;
+    }
+    let run = Run::new("layout");
+    let o = run_ok(
+        {
+            // No NETFI_IOX_LAYOUT: the module's own default must be this build's.
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python")).env_remove("NETFI_IOX_LAYOUT").arg("-c").arg(format!(
+                r#"
+import json, netfi_iox as n, netfi_iox.run as r
+root, prefix = n.location("{id}")
+print(json.dumps({{
+    "layout": r.file_layout(), "root": root, "prefix": prefix,
+    "services": [n.service_name("{id}", c) for c in ("console", "emulator", "direct")],
+    "nodes": [n.node_name("{id}", x) for x in ("console", "emulator", "simulator", "tool")],
+    "limits": [r.SUBSCRIBER_BUFFER_FRAMES, r.MAX_PUBLISHERS_PER_CHANNEL, r.MAX_SUBSCRIBERS_PER_CHANNEL, r.MAX_NODES_PER_CHANNEL, r.HISTORY_FRAMES],
+    "end": n.FLAG_END, "raw": n.FLAG_RAW, "itp_len": n.ITP_FRAME_LEN,
+}}))
+"#,
+                id = run.id
+            ));
+            c
+        },
+        "python3 netfi_iox",
+    );
+    let py: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rust_root = root_path(&run.config);
+    assert_eq!(
+        (py["prefix"].as_str().unwrap(), Path::new(py["root"].as_str().unwrap())),
+        (run.config.prefix(), rust_root.as_path()),
+        "netfi_iox.run.DEFAULT_LAYOUT ({}) is not the layout of this netfi build ({}): set it to {:?}",
+        py["layout"],
+        rust_layout(&run.config),
+        rust_layout(&run.config)
+    );
+    let services: Vec<String> = Channel::ALL.iter().map(|c| run.config.service_name(*c)).collect();
+    assert_eq!(py["services"], serde_json::json!(services));
+    let nodes: Vec<String> = [Role::Console, Role::Emulator, Role::Simulator, Role::Tool].iter().map(|r| run.config.node_name(*r)).collect();
+    assert_eq!(py["nodes"], serde_json::json!(nodes));
+    use netfi::transport::{MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES};
+    assert_eq!(
+        py["limits"],
+        serde_json::json!([SUBSCRIBER_BUFFER_FRAMES, MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, MAX_NODES_PER_CHANNEL, 0])
+    );
+    let ps = &run.config.iceoryx2().defaults.publish_subscribe;
+    assert_eq!(ps.publisher_history_size, 0);
+    assert!(!ps.enable_safe_overflow);
+    assert_eq!((u(&py["end"]), u(&py["raw"])), (FrameSample::FLAG_END as u64, FrameSample::FLAG_RAW as u64));
+    assert_eq!(u(&py["itp_len"]), netfi::sample::ITP_FRAME_LEN as u64);
+
+    // The payload: the type name iceoryx2 sees, size, alignment, offsets.
+    let o = run_ok(
+        {
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python"))
+                .args(["-c", "import json, iceoryx2, netfi_iox as n; l = n.layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FrameSample); print(json.dumps(l))"]);
+            c
+        },
+        "python3 netfi_iox.layout",
+    );
+    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // SAFETY: type_name only returns the #[type_name] attribute's string.
+    let rust_name = unsafe { <FrameSample as iceoryx2::prelude::ZeroCopySend>::type_name() };
+    assert_eq!(l["iceoryx2_type_name"], rust_name);
+    assert_eq!(l["type_name"], FrameSample::TYPE_NAME);
+    assert_eq!(u(&l["size"]), core::mem::size_of::<FrameSample>() as u64);
+    assert_eq!(u(&l["alignment"]), core::mem::align_of::<FrameSample>() as u64);
+    let off = &l["offsets"];
+    macro_rules! same_offset {
+        ($($f:ident),*) => {$(
+            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(FrameSample, $f) as u64, stringify!($f));
+        )*};
+    }
+    same_offset!(send_ns, console_index, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns, len, flags, wire, _pad);
+    assert_eq!(off.as_object().unwrap().len(), 11, "a field the Rust type lacks: {off}");
+}
+
+/// The Python ITP encoder and decoder agree with the Rust codec, checksum
+/// included, on every frame of a synthetic stream and the real capture.
+#[test]
+fn python_itp_frames_are_rust_itp_frames() {
+    if !python_ready() {
+        return;
+    }
+    let run = Run::new("codec");
+    let o = run_ok(
+        {
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python")).args([
+                "-c",
+                "import sys, netfi_iox as n; f = n.ItpFrame(sequence=2**32-1, delx=(2**31-1, -5), dely=(7, 8), delz=(-9, 10), qx=(0.5, -0.25), buttonstate=(1, 2), grasp=(300, -4), surgeon_mode=1).seal(); sys.stdout.buffer.write(f.encode())",
+            ]);
+            c
+        },
+        "python3 ItpFrame.encode",
+    );
+    let wire = o.stdout;
+    assert_eq!(wire.len(), netfi::frame::FRAME_LEN);
+    let view = netfi::frame::ItpView::new_checked(&wire[..]).unwrap();
+    let f = netfi::frame::ItpFrame::parse(&view).expect("the Python frame's checksum is the Rust one");
+    assert_eq!(f.sequence, u32::MAX);
+    assert_eq!(f.delx, [i32::MAX, -5]);
+    assert_eq!(f.grasp, [300, -4]);
+    drop(run);
+}
+
+/// Python console → netfi emulator (PLM-2) → Python robot: every frame is
+/// accounted for, the robot receives exactly what the emulator released,
+/// and the loss realizes the model (the fates are those the scenario gives
+/// the same seed in simulated time).
+#[test]
+fn python_console_through_the_emulator_to_the_python_robot() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("py-py");
+    let robot = run.python_robot();
+    let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "20000"]);
+    let console = python("examples/console.py", &run)
+        .args(["--run-id", &run.id, "--frames", "20000", "--rate-hz", "2500", "--out"])
+        .arg(run.out.join("console.json"))
+        .output()
+        .unwrap();
+    assert!(console.status.success(), "console: {}", String::from_utf8_lossy(&console.stderr));
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    let (c, e, r) = (run.json("console.json"), run.json("emulator.json"), run.json("robot.json"));
+    assert_eq!(u(&c["frames_sent"]), 20000, "{c}");
+    assert_eq!((u(&c["send_errors"]), u(&c["sent_unsubscribed"])), (0, 0), "{c}");
+    assert_emulator_balanced(&e, 20000);
+    let delivered = u(&e["frames"]["delivered"]);
+    assert_eq!(u(&r["released_by_emulator"]), delivered, "{r}");
+    assert_eq!(u(&r["received"]), delivered, "{r}");
+    assert_eq!(r["balanced"], true);
+    assert_eq!((u(&r["bad_checksum"]), u(&r["wrong_size"])), (0, 0));
+    assert_eq!(r["ended_by"], "end_marker");
+    // The robot also followed the console's direct copies.
+    assert_eq!(u(&r["received_direct"]), 20000);
+    // Realized loss: the model's rate within the run's 95 % interval, and the
+    // very drops the scenario gives this seed in simulated time.
+    let exact = e["stages"][0]["loss_rate_model"].as_f64().unwrap();
+    let [lo, hi] = [e["loss_rate_ci95"][0].as_f64().unwrap(), e["loss_rate_ci95"][1].as_f64().unwrap()];
+    assert!(lo <= exact && exact <= hi, "model {exact} outside [{lo}, {hi}]");
+    let check = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "3", "--json"]).output().unwrap();
+    let check: Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(check["dropped"]["ge_lomax"], e["frames"]["dropped"]["ge_lomax"]);
+    assert!(u(&e["frames"]["dropped"]["ge_lomax"]) > 0);
+}
+
+/// netfi's own console → emulator → the Python robot: the robot decodes
+/// every frame the Rust console encoded, and with nothing lost its pose is
+/// the console's.
+#[test]
+fn rust_console_through_the_emulator_to_the_python_robot() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("rs-py");
+    let robot = run.python_robot();
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "3000"]);
+    let mut console = netfi();
+    console.args(["console", "--run-id", &run.id, "--frames", "3000", "--rate-hz", "1000", "--seed", "2", "--out"]).arg(&run.out);
+    run_ok(console, "netfi console");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    let (e, r) = (run.json("emulator.json"), run.json("robot.json"));
+    assert_emulator_balanced(&e, 3000);
+    assert_eq!(u(&e["frames"]["delivered"]), 3000);
+    assert_eq!(u(&r["received"]), 3000, "{r}");
+    assert_eq!(u(&r["released_by_emulator"]), 3000);
+    assert_eq!(u(&r["received_direct"]), 3000);
+    assert_eq!(u(&r["sent_by_console"]), 3000);
+    assert_eq!((u(&r["bad_checksum"]), u(&r["wrong_size"])), (0, 0));
+    assert!(u(&r["applied"]) > 0);
+    for arm in r["divergence"].as_array().unwrap() {
+        for (k, v) in arm.as_object().unwrap() {
+            assert!(v.as_f64().unwrap().abs() < 1e-9, "{k} diverged by {v} with nothing lost: {r}");
+        }
+    }
+}
+
+/// The Python console → emulator → netfi's own simulator: the simulator
+/// receives every frame the emulator released, finds every checksum the
+/// Python console computed right, and follows the direct copies.
+#[test]
+fn python_console_through_the_emulator_to_the_rust_simulator() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("py-rs");
+    let sim = netfi()
+        .args(["simulator", "--run-id", &run.id, "--out"])
+        .arg(&run.out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let sim = Witness(Some(sim));
+    wait_file(&run.out.join("simulator.ready"));
+    let emu = run.emulator("PLM-1", &["--seed", "5", "--expected-frames", "3000"]);
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "3000", "--rate-hz", "1000", "--out"]).arg(run.out.join("console.json"));
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    sim.finish("simulator", Duration::from_secs(60));
+    let (e, s) = (run.json("emulator.json"), run.json("simulator.json"));
+    assert_emulator_balanced(&e, 3000);
+    assert_eq!(e["frames"]["bad_checksum_passed"], 0);
+    let delivered = u(&e["frames"]["delivered"]);
+    assert_eq!(u(&s["received"]), delivered, "{s}");
+    assert_eq!(u(&s["released_by_emulator"]), delivered);
+    assert_eq!(u(&s["received_direct"]), 3000);
+    assert_eq!((u(&s["bad_checksum"]), u(&s["wrong_size"])), (0, 0));
+    assert_eq!(s["ended_by"], "end_marker");
+}
+
+/// The Python console replays the real capture: every record, in order,
+/// reaches the robot with its checksum intact.
+#[test]
+fn the_python_console_replays_the_real_capture() {
+    if !python_ready() {
+        return;
+    }
+    let cap = root().join("../shared/data/itp/dvtrainer_peg_transfer.bin");
+    if !cap.exists() {
+        eprintln!("skipping: {} is absent", cap.display());
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("replay");
+    let robot = run.python_robot();
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "1500"]);
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "1500", "--out"]).arg(run.out.join("console.json")).arg("--capture").arg(&cap);
+    run_ok(console, "python console --capture");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    let (c, e, r) = (run.json("console.json"), run.json("emulator.json"), run.json("robot.json"));
+    assert_eq!(u(&c["frames_sent"]), 1500);
+    // At its original timing: 1500 frames of a ~517 Hz recording take ~2.9 s.
+    let d = c["duration_s"].as_f64().unwrap();
+    assert!(d > 2.0, "replayed in {d} s, faster than recorded");
+    assert_emulator_balanced(&e, 1500);
+    assert_eq!(u(&r["received"]), 1500);
+    assert_eq!((u(&r["bad_checksum"]), u(&r["wrong_size"])), (0, 0));
+    // The capture's own frames: the robot's pose is the console's.
+    for arm in r["divergence"].as_array().unwrap() {
+        assert_eq!(arm["x"], 0, "{r}");
+    }
+}
+
+/// A client of another payload version (another type name, or the same
+/// name with another size) is refused when it opens the run's channel, with
+/// a message that names both.
+#[test]
+fn a_client_of_another_payload_version_is_refused() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("version");
+    let emu = run.emulator("Normal", &["--seed", "1"]);
+    let o = python("../../tests/python/other_version.py", &run).arg(&run.id).output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 2, "{stdout}");
+    // Another name.
+    assert!(lines[0].contains("netfi::FrameSample.v0") && lines[0].contains("netfi::FrameSample.v1"), "{}", lines[0]);
+    // The same name, another size.
+    assert!(lines[1].contains("200 bytes") && lines[1].contains("192 bytes"), "{}", lines[1]);
+    // The emulator was not disturbed: a v1 console still streams through it.
+    let robot = run.python_robot();
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "200", "--rate-hz", "1000", "--no-direct"]);
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    assert_eq!(u(&run.json("robot.json")["received"]), 200);
+}
