@@ -37,7 +37,7 @@ LAYOUTS = ("shared", "per-user")
 #: The layout of the netfi build this module ships with. The environment
 #: variable ``NETFI_IOX_LAYOUT`` overrides it; the Rust test ``tests/python``
 #: checks that the two agree.
-DEFAULT_LAYOUT = "shared"
+DEFAULT_LAYOUT = "per-user"
 
 _RUN_ID_MAX_LEN = 48
 
