@@ -50,15 +50,25 @@
 //! | `NETFI_BENCH_SECONDS` | 10 (60 full) | length of each chain interval (floor intervals: half) |
 //! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
-//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput` |
+//! | `NETFI_BENCH_QUICK` | unset | `1`: every part briefly (as `--quick`): 1 s intervals, 1 repetition, 1 s throughput trials |
+//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `sockperf` |
 //! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput trial |
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator and this benchmark's threads at this SCHED_FIFO priority |
 //! | `NETFI_BENCH_QUIET_CORES` | unset | before each interval, wait until other processes keep at most this many cores busy |
 //! | `NETFI_BENCH_QUIET_WAIT_S` | 600 | ... but for at most this long |
+//! | `NETFI_BENCH_ISOLATE` | 1 | `0`: leave the emulator's core as it is |
 //! | `NETFI_BENCH_OUT` | `target/netfi-bench` | where results go |
 //!
-//! Arguments after `--` that are part names select parts too:
-//! `cargo bench --bench overhead -- latency`.
+//! Arguments after `--` (see [`args::Args`], `-- --help`): part names
+//! select parts too (`cargo bench --bench overhead -- latency`), and
+//! `--quick` runs every part briefly, to check that the benchmark runs.
+//!
+//! The program follows the method: `args` (what to run), `host` (the host
+//! around each interval), `ends` and `drive` (the benchmark's ends and the
+//! loop that drives them), `emulator` (the process), `chain`, `floor`,
+//! `probe`, `sockperf`, `product` and `throughput` (the intervals and
+//! parts), `figures` (medians over repetitions, the bars) and `report`
+//! (`overhead.json`, `overhead.md`).
 
 
 mod args;
