@@ -9,7 +9,7 @@ pub const PARTS: [&str; 5] = ["latency", "delay", "product", "throughput", "sock
 
 /// The benchmark's command line, after `cargo bench --bench overhead --`.
 #[derive(Debug, clap::Parser)]
-#[command(name = "overhead", about = "What the emulator adds to a frame's one-way latency, its release lateness and throughput (docs/performance.md)")]
+#[command(name = "overhead", bin_name = "cargo bench --bench overhead --", about = "What the emulator adds to a frame's one-way latency, its release lateness and throughput (docs/performance.md)")]
 pub struct Args {
     /// Set by `cargo bench`; without it the benchmark only says how to run it.
     #[arg(long, hide = true)]
