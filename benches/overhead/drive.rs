@@ -1,0 +1,162 @@
+//! Driving an interval: every frame sent at its time, both routes
+//! busy-polled in between (chain intervals), or one route paced (floors).
+
+use crate::ends::{wire, Ends, Route};
+use netfi::clock::{now_ns, sleep_until_ns};
+use netfi::metrics::LatencyHistogram;
+use netfi::service::signals::stop_requested;
+
+/// Frames sent before recording starts, in seconds of the interval's rate:
+/// page faults of fresh shared memory, cold caches and the first
+/// connections stay out of the figures.
+pub const WARMUP_S: f64 = 0.5;
+
+/// Before a frame is due, the driving thread sleeps until this long before
+/// it (when nothing is in flight), then polls: other work on its core runs
+/// in the gaps instead of preempting it at random moments.
+const SLEEP_SLACK_NS: u64 = 100_000;
+
+/// What one chain interval measured on the benchmark's side.
+#[derive(Debug, Clone, Default)]
+pub struct Drive {
+    /// Receive − send − injected delay, through the emulator.
+    pub chain: LatencyHistogram,
+    /// Receive − send, straight.
+    pub direct: LatencyHistogram,
+    /// Chain split by the emulator's stamps (iceoryx2): send → taken off
+    /// its port; taken → released; released → received.
+    pub hop1: LatencyHistogram,
+    pub inside: LatencyHistogram,
+    pub hop2: LatencyHistogram,
+    /// Actual − planned send time.
+    pub send_lateness: LatencyHistogram,
+    pub chain_sent: u64,
+    pub chain_received: u64,
+    pub direct_sent: u64,
+    pub direct_received: u64,
+    pub refused: u64,
+    pub seconds: f64,
+}
+
+impl Drive {
+    fn in_flight(&self) -> bool {
+        self.chain_sent > self.chain_received || self.direct_sent > self.direct_received
+    }
+
+    /// Takes every waiting frame of both routes, recording those after the
+    /// warm-up (`warm` slots).
+    fn poll_routes(&mut self, ends: &mut impl Ends, warm: u64, stamped: bool) {
+        while let Some(a) = ends.poll(Route::Chain) {
+            self.chain_received += 1;
+            if a.slot >= warm {
+                self.chain.record_signed(a.recv_ns as i64 - a.send_ns as i64 - a.injected_delay_ns as i64);
+                if stamped {
+                    self.hop1.record_signed(a.ingress_ns as i64 - a.send_ns as i64);
+                    self.inside.record_signed(a.release_ns as i64 - a.ingress_ns as i64 - a.injected_delay_ns as i64);
+                    self.hop2.record_signed(a.recv_ns as i64 - a.release_ns as i64);
+                }
+            }
+        }
+        while let Some(a) = ends.poll(Route::Direct) {
+            self.direct_received += 1;
+            if a.slot >= warm {
+                self.direct.record_signed(a.recv_ns as i64 - a.send_ns as i64);
+            }
+        }
+    }
+
+    /// Sends slot `slot` on its route (chain on even slots, direct on odd).
+    fn send(&mut self, ends: &mut impl Ends, slot: u64) {
+        let route = if slot % 2 == 0 { Route::Chain } else { Route::Direct };
+        let ok = ends.send(route, slot, &wire(slot));
+        match (route, ok) {
+            (Route::Chain, true) => self.chain_sent += 1,
+            (Route::Direct, true) => self.direct_sent += 1,
+            (_, false) => self.refused += 1,
+        }
+    }
+}
+
+/// Slots of an interval: `warmup + frames` per route, alternating chain
+/// (even slots) and direct (odd slots), half a period apart.
+pub fn slots_for(rate_hz: f64, seconds: f64) -> (u64, u64) {
+    let warmup = (rate_hz * WARMUP_S).ceil() as u64;
+    let frames = (rate_hz * seconds).round() as u64;
+    (2 * warmup, 2 * (warmup + frames))
+}
+
+/// Sends every slot at its time and busy-polls both routes in between, in
+/// one thread; then waits up to `drain_ns` for the chain's last frames.
+pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, may_sleep: bool) -> Drive {
+    let (warm, slots) = slots_for(rate_hz, seconds);
+    let half_period_ns = 1e9 / rate_hz / 2.0;
+    let mut d = Drive::default();
+    let stamped = ends.stamped();
+    let t0 = now_ns() + 1_000_000;
+    let mut slot = 0u64;
+    let mut t_record = 0u64;
+    let mut drain_until = u64::MAX;
+    loop {
+        let now = now_ns();
+        if stop_requested() {
+            break;
+        }
+        if slot < slots {
+            let target = t0 + (slot as f64 * half_period_ns) as u64;
+            if now >= target {
+                d.send(ends, slot);
+                if slot >= warm {
+                    if slot == warm {
+                        t_record = now;
+                    }
+                    d.send_lateness.record(now - target);
+                }
+                slot += 1;
+                if slot == slots {
+                    drain_until = now_ns() + drain_ns;
+                }
+            }
+        }
+        d.poll_routes(ends, warm, stamped);
+        if slot == slots {
+            if !d.in_flight() || now_ns() > drain_until {
+                break;
+            }
+        } else if may_sleep && !d.in_flight() {
+            let target = t0 + (slot as f64 * half_period_ns) as u64;
+            if target > now_ns() + 2 * SLEEP_SLACK_NS {
+                sleep_until_ns(target - SLEEP_SLACK_NS);
+            }
+        }
+    }
+    d.seconds = (now_ns().saturating_sub(t_record)) as f64 / 1e9;
+    d
+}
+
+/// Calls `send(i)` for `i` in `0..frames` at `period_ns` apart, sleeping
+/// until shortly before each when there is time; returns the frames the
+/// transport took and the seconds after the warm-up.
+pub fn pace(frames: u64, period_ns: f64, warm: u64, mut send: impl FnMut(u64) -> bool) -> (u64, f64) {
+    let t0 = now_ns() + 1_000_000;
+    let mut sent = 0;
+    let mut t_record = t0;
+    for i in 0..frames {
+        if stop_requested() {
+            break;
+        }
+        let target = t0 + (i as f64 * period_ns) as u64;
+        if target > now_ns() + 2 * SLEEP_SLACK_NS {
+            sleep_until_ns(target - SLEEP_SLACK_NS);
+        }
+        while now_ns() < target {
+            std::hint::spin_loop();
+        }
+        if i == warm {
+            t_record = now_ns();
+        }
+        if send(i) {
+            sent += 1;
+        }
+    }
+    (sent, (now_ns() - t_record) as f64 / 1e9)
+}

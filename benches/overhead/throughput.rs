@@ -1,0 +1,164 @@
+//! The throughput search: `netfi run --no-direct` at rising rates
+//! (doubling, then bisection); a rate is sustained when every frame is
+//! delivered or dropped by the scenario, nothing else.
+
+use crate::args::Settings;
+use crate::host::{HostTimer, HostWindow};
+use crate::product::netfi_run;
+use crate::{check_interrupted, Results, PLM2_DLM2};
+use anyhow::Result;
+use netfi::service::report::RunReport;
+use serde::Serialize;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// One throughput trial.
+#[derive(Debug, Clone, Serialize)]
+pub struct Trial {
+    rate_hz: f64,
+    sustained: bool,
+    /// Why not, or what limited it.
+    verdict: String,
+    console_rate_hz: Option<f64>,
+    sent: Option<u64>,
+    entered: Option<u64>,
+    delivered: Option<u64>,
+    received: Option<u64>,
+    dropped: BTreeMap<String, u64>,
+    console_send_errors: Option<u64>,
+    emulator_send_errors: Option<u64>,
+    ingress_wait_p99_ns: Option<u64>,
+    release_lateness_p99_ns: Option<u64>,
+    steal_fraction: f64,
+    host: HostWindow,
+    out_dir: PathBuf,
+}
+
+/// Runs one trial and judges it: sustained when the console offered the
+/// rate, the run balanced (every frame delivered or dropped by the scenario)
+/// and nothing was refused or dropped for want of room.
+fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Trial> {
+    check_interrupted()?;
+    let dir = s.out_dir.join("runs").join(format!("throughput-{label}-{}", rate_hz as u64));
+    // The release queue holds one second of frames, so a delay scenario
+    // tests the emulator's speed rather than the queue's size.
+    let queue = (rate_hz as u64).max(1 << 16).to_string();
+    let host = HostTimer::start(s.quiet);
+    let r = netfi_run(&dir, scenario, rate_hz, s.throughput_trial_s, &["--no-direct", "--queue-capacity", &queue])?;
+    let host = host.stop();
+    let f = &r.frames;
+    let console_rate = r.console.as_ref().map(|c| c.rate_hz);
+    let verdict = verdict(&r, rate_hz);
+    Ok(Trial {
+        rate_hz,
+        sustained: verdict == "sustained",
+        verdict,
+        console_rate_hz: console_rate,
+        sent: f.sent,
+        entered: f.entered,
+        delivered: f.delivered,
+        received: f.received,
+        dropped: f.dropped.clone(),
+        console_send_errors: r.console.as_ref().map(|c| c.send_errors),
+        emulator_send_errors: r.emulator.as_ref().map(|e| e.send_errors),
+        ingress_wait_p99_ns: r.overhead_ns.ingress_wait.map(|p| p.p99),
+        release_lateness_p99_ns: r.overhead_ns.release_lateness.map(|p| p.p99),
+        steal_fraction: r.steal.fraction,
+        host,
+        out_dir: dir,
+    })
+}
+
+/// Why a trial at `rate_hz` was not sustained, or "sustained".
+fn verdict(r: &RunReport, rate_hz: f64) -> String {
+    let f = &r.frames;
+    let console_rate = r.console.as_ref().map(|c| c.rate_hz);
+    let unintended: Vec<String> =
+        f.dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect();
+    if !r.faults.is_empty() && !f.balanced {
+        format!("lost frames: {}", r.faults.join("; "))
+    } else if !r.faults.is_empty() {
+        format!("fault: {}", r.faults.join("; "))
+    } else if !unintended.is_empty() {
+        format!("dropped outside the scenario: {}", unintended.join(", "))
+    } else if !f.balanced {
+        "not balanced".to_string()
+    } else if console_rate.is_some_and(|c| c < 0.98 * rate_hz) {
+        format!("the console paced only {:.0} frames/s", console_rate.unwrap_or(0.0))
+    } else {
+        "sustained".to_string()
+    }
+}
+
+/// Doubling from `start_hz` until a rate fails, then bisection to 5%.
+fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64) -> Result<(f64, Vec<Trial>)> {
+    let mut trials = Vec::new();
+    let run = |rate: f64, trials: &mut Vec<Trial>| -> Result<bool> {
+        let t = trial(s, label, scenario, rate)?;
+        println!(
+            "  throughput {label} {:>9.0} frames/s: {} (console {:.0}/s, steal {:.2}%, others {:.2} cores)",
+            rate,
+            t.verdict,
+            t.console_rate_hz.unwrap_or(0.0),
+            t.steal_fraction * 100.0,
+            t.host.others_busy_cores
+        );
+        let ok = t.sustained;
+        trials.push(t);
+        Ok(ok)
+    };
+    let (mut lo, mut hi): (Option<f64>, Option<f64>) = (None, None);
+    let mut rate = start_hz;
+    loop {
+        if run(rate, &mut trials)? {
+            lo = Some(rate);
+            if rate >= max_hz {
+                break;
+            }
+            rate = (rate * 2.0).min(max_hz);
+        } else {
+            hi = Some(rate);
+            break;
+        }
+    }
+    if lo.is_none() {
+        let mut r = start_hz / 2.0;
+        while r >= 1000.0 {
+            if run(r, &mut trials)? {
+                lo = Some(r);
+                break;
+            }
+            hi = Some(r);
+            r /= 2.0;
+        }
+    }
+    while let (Some(l), Some(h)) = (lo, hi) {
+        if (h - l) / l <= 0.05 {
+            break;
+        }
+        let mid = ((l + h) / 2.0 / 1000.0).round() * 1000.0;
+        if mid <= l || mid >= h {
+            break;
+        }
+        if run(mid, &mut trials)? {
+            lo = Some(mid);
+        } else {
+            hi = Some(mid);
+        }
+    }
+    Ok((lo.unwrap_or(0.0), trials))
+}
+
+
+/// The throughput part: the search for Normal and for PLM-2 + DLM-2.
+pub fn throughput_part(s: &Settings, res: &mut Results) -> Result<()> {
+    for (label, key, scenario) in [("normal", "Normal", "Normal"), ("plm2_dlm2", "PLM-2 + DLM-2", PLM2_DLM2)] {
+        let (best, trials) = search(s, label, scenario, 50_000.0, 3_200_000.0)?;
+        println!("  throughput {key}: {best:.0} frames/s sustained for {} s", s.throughput_trial_s);
+        let first_fail = trials.iter().filter(|t| !t.sustained).min_by(|a, b| a.rate_hz.total_cmp(&b.rate_hz)).map(|t| t.verdict.clone());
+        res.throughput_fps.insert(key.to_string(), best);
+        res.throughput.insert(key.to_string(), json!({"best_fps": best, "first_failure": first_fail, "trials": trials}));
+    }
+    Ok(())
+}
