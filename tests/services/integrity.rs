@@ -1,0 +1,81 @@
+//! Run integrity: a run owns its output directory, and Ctrl-C to the
+//! terminal's process group ends a run cleanly.
+
+use super::{assert_conserved, netfi, out_dir, u, wait_pid, ONE_RUN_AT_A_TIME};
+use serde_json::Value;
+use std::os::unix::process::CommandExt;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// A second `netfi run` on a directory in use is refused, naming the
+/// directory and the first run's pid; the first run applies its own
+/// scenario to the end.
+#[test]
+fn two_runs_on_one_directory_the_second_is_refused() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("two-runs");
+    let first = netfi()
+        .args(["run", "Normal", "--duration-s", "3", "--seed", "1", "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first run is streaming.
+    wait_pid(&out, "console");
+    let second = netfi().args(["run", "PLM-2", "--duration-s", "3", "--seed", "2", "--json", "--out"]).arg(&out).output().unwrap();
+    assert!(!second.status.success(), "the second run must be refused");
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(err.contains("in use by another netfi run"), "{err}");
+    assert!(err.contains(&out.display().to_string()), "the directory is named: {err}");
+    assert!(err.contains(&format!("pid {}", first.id())), "the owner's pid is named: {err}");
+    let o = first.wait_with_output().unwrap();
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("no report ({e}): {}", String::from_utf8_lossy(&o.stderr)));
+    assert!(o.status.success(), "{r:#}");
+    assert_conserved(&r);
+    assert_eq!(r["scenario"], "Normal");
+    assert_eq!(r["frames"]["dropped"].as_object().map(|d| d.len()), Some(0), "Normal drops nothing: {:#}", r["frames"]);
+    assert_eq!(u(&r["frames"]["delivered"]), 3000, "{:#}", r["frames"]);
+    let kept = std::fs::read_to_string(out.join("scenario.toml")).unwrap();
+    assert!(kept.contains("Normal"), "{kept}");
+    // Once the first run has ended the directory is free again.
+    let third = netfi().args(["run", "Normal", "--frames", "200", "--seed", "3", "--json", "--out"]).arg(&out).output().unwrap();
+    assert!(third.status.success(), "{}", String::from_utf8_lossy(&third.stderr));
+}
+
+/// SIGINT to the whole process group, as a terminal's Ctrl-C sends it: the
+/// run ends within seconds, every frame is accounted for, and the report
+/// says it was interrupted.
+#[test]
+fn ctrl_c_to_the_process_group_ends_the_run() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    for attempt in 0..3 {
+        let out = out_dir(&format!("ctrl-c-{attempt}"));
+        let child = netfi()
+            .args(["run", "Normal", "--duration-s", "30", "--seed", "5", "--json", "--out"])
+            .arg(&out)
+            .process_group(0)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let pgid = child.id() as i32;
+        wait_pid(&out, "console");
+        std::thread::sleep(Duration::from_millis(500 + 400 * attempt));
+        // SAFETY: signalling the process group this test created.
+        unsafe { libc::kill(-pgid, libc::SIGINT) };
+        let t0 = Instant::now();
+        let o = child.wait_with_output().unwrap();
+        let took = t0.elapsed();
+        let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("no report ({e}): {}", String::from_utf8_lossy(&o.stderr)));
+        // A 30 s stream cut short: far less than the planned end (a bound
+        // on the stopping policy, not on the machine's latency).
+        assert!(took < Duration::from_secs(15), "attempt {attempt}: the run went on for {took:?} after Ctrl-C");
+        assert!(u(&r["frames"]["sent"]) < 25_000, "{:#}", r["frames"]);
+        assert_conserved(&r);
+        let faults = r["faults"].as_array().unwrap();
+        assert!(faults.iter().any(|f| f.as_str().is_some_and(|f| f.starts_with("interrupted"))), "the report says it was interrupted: {faults:?}");
+        assert_eq!(r["console"]["ended_by"], "signal", "{:#}", r["console"]);
+        assert!(!o.status.success(), "an interrupted run exits non-zero");
+    }
+}
