@@ -208,10 +208,12 @@ impl Forward {
     }
 }
 
-/// Checks size and checksum. `Ok((sequence, checksum_bad))` for a frame to
-/// decide; `Err` for one to reject, with its sequence if readable.
+/// The datagram classifier: checks size and checksum. `Ok((sequence,
+/// checksum_bad))` for a frame to decide; `Err` for one to reject, with
+/// its sequence if readable. Total over any sample (property-tested in
+/// `tests/input_prop.rs`).
 #[inline]
-fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+pub fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
     if s.is_raw() {
         // An opaque datagram: no protocol to check; its "sequence" is its console index.
         return Ok((s.console_index as u32, false));
