@@ -518,6 +518,10 @@ fn summary_line(r: &EmulatorReport, u: &udp::UdpReport) -> String {
     if let Some(k) = u.ingress_kernel_drops.filter(|k| *k > 0) {
         s += &format!("; {k} datagrams dropped by the kernel before ingress");
     }
+    if u.foreign_sender > 0 {
+        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
+        s += &format!("; {} datagrams from foreign senders dropped (foreign_sender): {}", u.foreign_sender, who.join(", "));
+    }
     if let Some(rp) = &u.return_path {
         let rd: u64 = rp.dropped.values().sum();
         s += &format!(

@@ -371,8 +371,18 @@ pub struct UdpReport {
     pub ingress_kernel_drops: Option<u64>,
     /// Receive buffer of the ingress socket as granted, bytes.
     pub ingress_buffer_bytes: Option<usize>,
-    /// The console's address (source of the latest ingress datagram).
+    /// The console's address: `--console-from`, or the first sender's.
     pub console: Option<SocketAddr>,
+    /// Ingress datagrams from other senders, dropped before they entered
+    /// the link (so not in its accounting).
+    #[serde(default)]
+    pub foreign_sender: u64,
+    /// Who they were: the first distinct senders, with their counts.
+    #[serde(default)]
+    pub foreign_senders: Vec<ForeignSender>,
+    /// Foreign datagrams from senders beyond those named.
+    #[serde(default)]
+    pub foreign_unnamed: u64,
     /// Raw mode: arena slots, and the most ever in use at once.
     pub arena_slots: Option<usize>,
     pub arena_high_water: Option<usize>,
@@ -399,6 +409,13 @@ impl BoundEndpoints {
     }
 }
 
+/// A sender other than the console, and how many datagrams it sent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ForeignSender {
+    pub addr: SocketAddr,
+    pub datagrams: u64,
+}
+
 impl UdpReport {
     /// The UDP side of a run that has ended.
     pub fn new(args: &EmulatorArgs, t: &Transports, bound: &BoundEndpoints, return_path: Option<ReturnReport>) -> UdpReport {
@@ -416,6 +433,11 @@ impl UdpReport {
             ingress_kernel_drops: source.and_then(|s| s.port().kernel_drops()),
             ingress_buffer_bytes: source.and_then(|s| s.port().buffer_bytes().0),
             console: source.and_then(|s| s.console()),
+            foreign_sender: source.map_or(0, |s| s.foreign().total),
+            foreign_senders: source
+                .map(|s| s.foreign().named().map(|(addr, datagrams)| ForeignSender { addr, datagrams }).collect())
+                .unwrap_or_default(),
+            foreign_unnamed: source.map_or(0, |s| s.foreign().unnamed),
             arena_slots: t.arena.as_ref().map(|a| a.borrow().slots()),
             arena_high_water: t.arena.as_ref().map(|a| a.borrow().high_water()),
             return_path,

@@ -9,6 +9,7 @@
 use std::sync::Mutex;
 
 mod bridge;
+mod foreign;
 mod netns;
 mod tools;
 
