@@ -83,7 +83,10 @@ impl Proc {
         if s.success() {
             None
         } else {
-            Some(format!("{} ended abnormally ({}); see {}", self.role, self.status_text(), self.log.display()))
+            // The process's own last words (e.g. which file it could not write).
+            let last = tail(&self.log, 1);
+            let why = if last.trim().is_empty() { String::new() } else { format!(": {}", last.trim()) };
+            Some(format!("{} ended abnormally ({}){why}; see {}", self.role, self.status_text(), self.log.display()))
         }
     }
 }
@@ -362,12 +365,16 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let _ = std::fs::remove_file(&plan.emulator.scenario);
     let faults = procs.iter().filter_map(Proc::died).collect();
     let processes = procs.iter().map(Proc::end).collect();
-    let report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    let mut report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    // A report that cannot be written (a full disk) is a fault of the run;
+    // the report is still returned, for stdout.
     let json = serde_json::to_vec_pretty(&report)?;
-    let path = &report.files.report_json;
-    std::fs::write(path, &json).with_context(|| format!("writing {}", path.display()))?;
-    if let Some(extra) = &args.report_json {
-        std::fs::write(extra, &json).with_context(|| format!("writing {}", extra.display()))?;
+    let mut paths = vec![report.files.report_json.clone()];
+    paths.extend(args.report_json.clone());
+    for path in paths {
+        if let Err(e) = std::fs::write(&path, &json) {
+            report.faults.push(format!("writing {}: {e}", path.display()));
+        }
     }
     Ok(report)
 }

@@ -79,3 +79,36 @@ fn ctrl_c_to_the_process_group_ends_the_run() {
         assert!(!o.status.success(), "an interrupted run exits non-zero");
     }
 }
+
+/// A full disk: the output directory on a 128 KiB tmpfs (mounting one
+/// needs root; elsewhere the test says so and passes). Every failed write is
+/// an error naming its file, the run exits non-zero, and the text report
+/// still prints to stdout. (A file size limit, RLIMIT_FSIZE, would also
+/// refuse iceoryx2's shared-memory segments, so it cannot stand in.)
+#[test]
+fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("full-disk");
+    std::fs::create_dir_all(&out).unwrap();
+    let mounted = std::process::Command::new("mount").args(["-t", "tmpfs", "-o", "size=128k", "tmpfs"]).arg(&out).status();
+    if !mounted.is_ok_and(|s| s.success()) {
+        eprintln!("note: cannot mount a small tmpfs here (not root?); full-disk test skipped");
+        return;
+    }
+    struct Unmount(std::path::PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(&self.0).status();
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _unmount = Unmount(out.clone());
+    // 4,000 frames: a trace of ≈ 240 KB, received.csv ≈ 72 KB.
+    let o = netfi().args(["run", "Normal", "--frames", "4000", "--rate-hz", "2000", "--seed", "1", "--out"]).arg(&out).output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{stdout}\n{stderr}");
+    assert!(!o.status.success(), "a run that could not write its files must fail:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("frames") && stdout.contains("sent"), "the text report prints:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("trace_emulator.csv") && stdout.contains("No space left on device"), "the trace is named as not written:\n{stdout}");
+}
