@@ -359,6 +359,8 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
+    // The trace and the histograms go to disk as the run goes.
+    fwd.link.stream_to(&cfg.out_dir.join("trace_emulator.csv"), Some(&cfg.out_dir))?;
     let mut placement = place(cfg, &fwd.link, ret.as_deref())?;
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, stop_requested);

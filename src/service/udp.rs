@@ -320,7 +320,11 @@ pub fn return_path(args: &EmulatorArgs, t: &Transports, seed: u64, expected: u64
     anyhow::ensure!(capacity >= 1, "the return scenario's queue_capacity must be at least 1");
     let scenario = Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
     eprintln!("emulator: return path through scenario {} seed {seed}, queue {capacity}", spec.name);
-    Ok(Some(ReturnPath::shaped(from_robot, to_console, to, scenario, seed, capacity, expected).context("--queue-capacity")?))
+    let mut ret = ReturnPath::shaped(from_robot, to_console, to, scenario, seed, capacity, expected).context("--queue-capacity")?;
+    if let Some(s) = ret.shaped.as_deref_mut() {
+        s.link.stream_to(&args.out.join("trace_return.csv"), None)?;
+    }
+    Ok(Some(ret))
 }
 
 /// The return path's report: `received = entered + unroutable` and

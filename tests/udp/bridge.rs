@@ -174,6 +174,11 @@ impl Emulator {
         e
     }
 
+    /// The emulator's pid.
+    pub(crate) fn pid(&self) -> u32 {
+        self.child.as_ref().unwrap().id()
+    }
+
     fn log(&self) -> String {
         std::fs::read_to_string(self.out.join("emulator.log")).unwrap_or_default()
     }

@@ -10,6 +10,7 @@ use std::sync::Mutex;
 
 mod bridge;
 mod foreign;
+mod memory;
 mod netns;
 mod tools;
 
