@@ -112,3 +112,33 @@ fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
     assert!(stdout.contains("frames") && stdout.contains("sent"), "the text report prints:\n{stdout}\n{stderr}");
     assert!(stdout.contains("trace_emulator.csv") && stdout.contains("No space left on device"), "the trace is named as not written:\n{stdout}");
 }
+
+/// kill -9 of the emulator mid-run: its trace and histogram logs are on
+/// disk up to its last second (the writer flushes every second).
+#[test]
+fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("kill-emulator-trace");
+    let child = netfi()
+        .args(["run", "Normal", "--duration-s", "6", "--seed", "9", "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = wait_pid(&out, "emulator");
+    wait_pid(&out, "console");
+    // At 1 kHz, 3 s of stream: at least the first 2 s are flushed.
+    std::thread::sleep(Duration::from_secs(3));
+    // SAFETY: signalling a process of the run this test started.
+    unsafe { libc::kill(pid, libc::SIGKILL) };
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success(), "a run with a killed emulator fails");
+    let trace = out.join("trace.csv");
+    let text = std::fs::read_to_string(&trace).unwrap_or_else(|e| panic!("{}: {e}\n{}", trace.display(), String::from_utf8_lossy(&o.stderr)));
+    let rows = text.lines().count() - 1;
+    assert!(rows >= 1500, "only {rows} rows of a 3 s stream at 1 kHz survived");
+    let log = std::fs::read_to_string(out.join("decision.hlog")).unwrap();
+    let intervals = log.lines().filter(|l| !l.starts_with('#') && !l.starts_with('"') && l.contains(',')).count();
+    assert!(intervals >= 2, "{intervals} intervals in decision.hlog:\n{log}");
+}
