@@ -156,7 +156,7 @@ pub struct EmulatorArgs {
     /// from --seed; printed).
     #[arg(long)]
     pub return_seed: Option<u64>,
-    /// Send return datagrams here instead of to the console's latest source
+    /// Send return datagrams here instead of to the console's
     /// address (`udp://ADDR:PORT`).
     #[arg(long, value_name = "ENDPOINT")]
     pub return_to: Option<Endpoint>,

@@ -39,8 +39,8 @@
 //!
 //! With UDP on both sides, what the robot sends back to the emulator's
 //! egress socket (a status or feedback frame, a ping-pong reply) is relayed
-//! from the ingress socket to the console: to the source address of the
-//! latest ingress datagram, or to `--return-to`. It goes untouched, or
+//! from the ingress socket to the console: to its address (`--console-from`,
+//! or the first sender's, locked; see [`crate::transport::udp::UdpSource`]), or to `--return-to`. It goes untouched, or
 //! through a scenario of its own (`--return-scenario`) with its own seed,
 //! queue, trace (`trace_return.csv`) and accounting. Return datagrams that
 //! arrive before any console has been heard from have nowhere to go and are
@@ -152,7 +152,7 @@ pub struct ReturnPath {
 
 impl ReturnPath {
     /// Relays untouched what arrives at `from_robot`, out of `to_console`,
-    /// to `to` or else to the console's latest address.
+    /// to `to` or else to the console's address.
     pub fn untouched(from_robot: UdpPort, to_console: UdpPort, to: Option<SocketAddr>) -> ReturnPath {
         ReturnPath {
             from_robot,
@@ -197,7 +197,7 @@ impl ReturnPath {
     }
 
     /// Releases what is due, then takes at most one datagram from the robot
-    /// side. `console` is the ingress's latest sender.
+    /// side. `console` is the ingress's console.
     #[inline]
     pub fn poll(&mut self, console: Option<&PeerAddr>) {
         let Some(s) = self.shaped.as_deref_mut() else { return self.relay_one(console) };
@@ -255,7 +255,7 @@ impl ReturnPath {
     pub fn finish(self, out_dir: &Path) -> anyhow::Result<ReturnReport> {
         let c = self.counts;
         let destination =
-            self.to.as_ref().map_or("the console's latest address".to_string(), |t| format!("udp://{}", t.addr()));
+            self.to.as_ref().map_or("the console's address".to_string(), |t| format!("udp://{}", t.addr()));
         let untouched = ReturnReport {
             mode: "untouched".into(),
             scenario: None,
