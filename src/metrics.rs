@@ -48,6 +48,13 @@ impl LatencyHistogram {
         self.h.saturating_record(ns);
     }
 
+    /// Empties the histogram (its counts stay allocated).
+    pub fn reset(&mut self) {
+        self.h.reset();
+        self.clamped = 0;
+        self.negative = 0;
+    }
+
     /// Records a signed value; negatives are recorded as 0 and counted.
     #[inline]
     pub fn record_signed(&mut self, ns: i64) {

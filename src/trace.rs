@@ -1,13 +1,28 @@
 //! The per-frame trace (SPEC §6): one row per frame that reached the
-//! emulator, written off the hot path.
+//! emulator, written to disk as the run goes, off the hot path.
 //!
 //! The emulator's loop pushes fixed-size [`TraceEvent`]s into a wait-free
 //! single-producer ring ([`TraceSink::push`]: no allocation, no lock, no
-//! system call); a writer thread drains the ring every few milliseconds into
-//! a table indexed by ingress index. If the ring is ever full the event is
-//! counted in [`TraceSink::overflowed`] and the frame's row stays
-//! incomplete — the run's counts are unaffected. At the end the table is
-//! joined with the simulator's receive times and written as CSV.
+//! system call); a writer thread drains the ring every few milliseconds.
+//! A frame's row is complete once its fate is final (dropped, or
+//! released); complete rows are appended to the CSV in ingress order
+//! (buffered, flushed at least once a second), so the writer holds only the
+//! rows of frames still queued (at most [`MAX_PENDING_ROWS`]: a row older
+//! than that is written as it stands). Memory stays flat however long the
+//! run, and a killed emulator leaves its trace up to its last second.
+//!
+//! When given a directory for them, the writer also keeps the decision
+//! time and the release lateness of the frames of each second and appends
+//! them as one interval each to `decision.hlog` and `lateness.hlog`
+//! (HdrHistogram interval logs, one interval per second): the loop records
+//! nothing for it, the rows carry the values. The run's totals stay in the
+//! link's own histograms.
+//!
+//! If the ring is ever full the event is counted in
+//! [`TraceSink::overflowed`] and the frame's row stays incomplete — the
+//! run's counts are unaffected. A write that fails (a full disk) is an
+//! error naming the file, returned by [`TraceWriter::finish`]; the writer
+//! keeps draining the ring so the loop is never held up.
 //!
 //! # `trace.csv`
 //! One header line, then one row per ingress index, in ingress order:
@@ -31,10 +46,16 @@
 //! `polars.read_csv` read it as it is.
 
 use crate::injector::DropCause;
+use crate::metrics::LatencyHistogram;
+use anyhow::Context;
+use hdrhistogram::serialization::interval_log::{IntervalLogWriter, IntervalLogWriterBuilder, Tag};
+use hdrhistogram::serialization::V2DeflateSerializer;
+use std::collections::VecDeque;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
 
 /// What the emulator reports about a frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -48,6 +69,8 @@ pub enum TraceEvent {
         /// `None` if scheduled.
         dropped: Option<DropCause>,
         release_sched_ns: u64,
+        /// Time taken to decide the frame's fate.
+        decision_ns: u64,
     },
     Release { ingress_index: u64, release_ns: u64 },
 }
@@ -63,6 +86,14 @@ pub struct Row {
     pub dropped: Option<DropCause>,
     pub release_sched_ns: u64,
     pub release_ns: Option<u64>,
+}
+
+impl Row {
+    /// Its fate is final: dropped or released (or its ingress event was
+    /// lost, and it will never be).
+    fn complete(&self) -> bool {
+        !self.present || self.dropped.is_some() || self.release_ns.is_some()
+    }
 }
 
 /// The hot path's end of the ring.
@@ -86,18 +117,52 @@ impl TraceSink {
     }
 }
 
+/// Where the writer writes: the CSV, and the histogram logs if asked.
+struct Output {
+    csv: std::fs::File,
+    csv_path: PathBuf,
+    hlogs: Option<[(std::fs::File, PathBuf); 2]>,
+}
+
+/// What the writer did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Written {
+    /// Rows written.
+    pub rows: u64,
+    /// Intervals appended to each histogram log.
+    pub intervals: u64,
+    /// Rows written before their frame was released (the writer held too
+    /// many).
+    pub forced: u64,
+}
+
 /// The writer thread's handle.
 pub struct TraceWriter {
     stop: Arc<AtomicBool>,
-    thread: std::thread::JoinHandle<Vec<Row>>,
+    output: Option<mpsc::Sender<Output>>,
+    thread: std::thread::JoinHandle<anyhow::Result<Written>>,
 }
 
 /// Ring capacity in events: at 100 kHz two events per frame, ~1.3 s of
 /// events before the writer must have drained.
 pub const RING_CAPACITY: usize = 1 << 18;
 
+/// Rows the writer holds at most while their frames are queued (≈ 64 B
+/// each: 16 MiB); a row older than that is written as it stands.
+pub const MAX_PENDING_ROWS: usize = 1 << 18;
+
+/// Rows the writer has room for at first when streaming.
+const PENDING_ROWS_START: usize = 4096;
+
+/// How often the CSV is flushed and a histogram interval is appended.
+pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
+
+/// The CSV's header line.
+pub const CSV_HEADER: &str = "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns";
+
 /// Starts the writer thread (call before pinning the hot thread, so the
 /// writer is not confined to its core) and returns the hot path's sink.
+/// Rows are kept in memory until [`TraceWriter::stream_to`] gives files.
 pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
     let (mut tx, mut rx) = rtrb::RingBuffer::<TraceEvent>::new(RING_CAPACITY);
     // Write every slot once before the hot path starts, so the ring's pages
@@ -108,38 +173,207 @@ pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
     while rx.pop().is_ok() {}
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
+    let (out_tx, out_rx) = mpsc::channel();
+    // Allocated here, not in the thread, so that nothing the writer holds
+    // is allocated while the loop runs. Room for every row while there is
+    // nowhere to write them (reserved, not touched: pages become resident
+    // only as rows are stored).
+    let table =
+        Table { base: 0, rows: VecDeque::with_capacity(expected_frames), decision: LatencyHistogram::new(), lateness: LatencyHistogram::new() };
     let thread = std::thread::Builder::new()
         .name("netfi-trace".into())
-        .spawn(move || {
-            let mut rows: Vec<Row> = Vec::with_capacity(expected_frames);
-            loop {
-                let stopping = stop2.load(Ordering::Acquire);
-                while let Ok(ev) = rx.pop() {
-                    apply(&mut rows, ev);
-                }
-                if stopping {
-                    return rows;
-                }
-                std::thread::sleep(std::time::Duration::from_millis(5));
-            }
-        })
+        .spawn(move || writer(rx, out_rx, stop2, table))
         .expect("spawning the trace writer thread");
-    (TraceSink { tx, overflowed: 0 }, TraceWriter { stop, thread })
+    (TraceSink { tx, overflowed: 0 }, TraceWriter { stop, output: Some(out_tx), thread })
 }
 
-fn apply(rows: &mut Vec<Row>, ev: TraceEvent) {
-    let idx = match ev {
-        TraceEvent::Ingress { ingress_index, .. } | TraceEvent::Release { ingress_index, .. } => ingress_index as usize,
-    };
-    if rows.len() <= idx {
-        rows.resize(idx + 1, Row::default());
-    }
-    let row = &mut rows[idx];
-    match ev {
-        TraceEvent::Ingress { sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, .. } => {
-            *row = Row { present: true, sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, release_ns: row.release_ns };
+/// The rows between the oldest incomplete one and the newest, and the
+/// histograms of the current interval.
+struct Table {
+    base: u64,
+    rows: VecDeque<Row>,
+    decision: LatencyHistogram,
+    lateness: LatencyHistogram,
+}
+
+impl Table {
+    fn apply(&mut self, ev: TraceEvent) {
+        match ev {
+            TraceEvent::Ingress { ingress_index, sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, decision_ns } => {
+                if ingress_index < self.base {
+                    return;
+                }
+                let at = (ingress_index - self.base) as usize;
+                if self.rows.len() <= at {
+                    self.rows.resize(at + 1, Row::default());
+                }
+                let release_ns = self.rows[at].release_ns;
+                self.rows[at] = Row { present: true, sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, release_ns };
+                self.decision.record(decision_ns);
+            }
+            TraceEvent::Release { ingress_index, release_ns } => {
+                let Some(row) = ingress_index.checked_sub(self.base).and_then(|at| self.rows.get_mut(at as usize)) else { return };
+                row.release_ns = Some(release_ns);
+                if row.present {
+                    self.lateness.record(release_ns.saturating_sub(row.release_sched_ns));
+                }
+            }
         }
-        TraceEvent::Release { release_ns, .. } => row.release_ns = Some(release_ns),
+    }
+
+    /// Takes the rows that are complete (or, past the bound, the oldest),
+    /// oldest first, into `f`; with `all`, every row.
+    fn drain(&mut self, all: bool, mut f: impl FnMut(u64, &Row, bool)) {
+        while let Some(front) = self.rows.front() {
+            let forced = self.rows.len() > MAX_PENDING_ROWS;
+            if !(all || forced || front.complete()) {
+                break;
+            }
+            let row = self.rows.pop_front().expect("a front row");
+            if row.present {
+                f(self.base, &row, forced && !row.complete());
+            }
+            self.base += 1;
+        }
+    }
+}
+
+/// Formats one row (`recv_ns` empty: the runner joins it later).
+pub fn format_row(w: &mut impl Write, i: u64, r: &Row, recv: Option<u64>) -> std::io::Result<()> {
+    let (fate, reason, phase, stage) = match r.dropped {
+        None if r.release_ns.is_some() => ("delivered", "", String::new(), String::new()),
+        None => ("held", "", String::new(), String::new()),
+        Some(c) => {
+            let (p, s) = match c {
+                DropCause::Stage { phase, stage, .. } => ((phase + 1).to_string(), (stage + 1).to_string()),
+                _ => (String::new(), String::new()),
+            };
+            ("dropped", c.reason(), p, s)
+        }
+    };
+    let opt = |v: Option<u64>| v.map(|x| x.to_string()).unwrap_or_default();
+    let scheduled = r.dropped.is_none();
+    writeln!(
+        w,
+        "{i},{},{},{},{},{fate},{reason},{phase},{stage},{},{},{},{}",
+        r.sequence.map(|s| s.to_string()).unwrap_or_default(),
+        r.console_index,
+        r.send_ns,
+        r.ingress_ns,
+        opt(scheduled.then(|| r.release_sched_ns - r.ingress_ns)),
+        opt(scheduled.then_some(r.release_sched_ns)),
+        opt(r.release_ns),
+        opt(recv),
+    )
+}
+
+/// The writer thread: until it has files, it keeps rows in memory; then it
+/// appends, flushing every second; at the stop, it writes what is left.
+fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, stop: Arc<AtomicBool>, mut table: Table) -> anyhow::Result<Written> {
+    let tick = Duration::from_millis(5);
+    // Until the files come: events applied, nothing written.
+    let out = loop {
+        let stopping = stop.load(Ordering::Acquire);
+        while let Ok(ev) = rx.pop() {
+            table.apply(ev);
+        }
+        match out_rx.try_recv() {
+            Ok(out) => break out,
+            // The handle was dropped without `finish`: nobody will ask.
+            Err(mpsc::TryRecvError::Disconnected) if !stopping => return Ok(Written::default()),
+            Err(_) => {}
+        }
+        if stopping {
+            // Nowhere to write: the rows are dropped with the thread.
+            return Ok(Written::default());
+        }
+        std::thread::sleep(tick);
+    };
+    let Output { csv, csv_path, hlogs } = out;
+    // From now on only the rows of frames in flight are held: a small
+    // ring, grown by doubling (off the hot path) when more are.
+    table.rows.shrink_to(PENDING_ROWS_START.max(table.rows.len()));
+    let t0 = Instant::now();
+    let mut written = Written::default();
+    // The first failed write, naming its file; later writes are skipped
+    // but the ring is still drained.
+    let mut failed: Option<anyhow::Error> = None;
+    let mut csv = std::io::BufWriter::with_capacity(1 << 20, csv);
+    if let Err(e) = writeln!(csv, "{CSV_HEADER}") {
+        failed = Some(anyhow::Error::new(e).context(format!("writing {}", csv_path.display())));
+    }
+    let (mut hfiles, hpaths) = match hlogs {
+        Some([(d, dp), (l, lp)]) => (Some((d, l)), Some((dp, lp))),
+        None => (None, None),
+    };
+    let mut ser = (V2DeflateSerializer::new(), V2DeflateSerializer::new());
+    let mut logs: Option<(IntervalLogWriter<'_, '_, std::fs::File, V2DeflateSerializer>, IntervalLogWriter<'_, '_, std::fs::File, V2DeflateSerializer>)> = None;
+    if let (Some((d, l)), Some((dp, lp))) = (hfiles.as_mut(), hpaths.as_ref()) {
+        let begin = |f, s, what: &str, p: &Path| {
+            IntervalLogWriterBuilder::new()
+                .add_comment(&format!("netfi {what} latency, ns; one interval per second"))
+                .with_start_time(std::time::SystemTime::now())
+                .with_max_value_divisor(1.0)
+                .begin_log_with(f, s)
+                .map_err(|e| anyhow::anyhow!("writing {}: {e:?}", p.display()))
+        };
+        let (sd, sl) = (&mut ser.0, &mut ser.1);
+        match (begin(d, sd, "decision", dp), begin(l, sl, "release lateness", lp)) {
+            (Ok(a), Ok(b)) => logs = Some((a, b)),
+            (Err(e), _) | (_, Err(e)) => failed = failed.or(Some(e)),
+        }
+    }
+    let mut interval_start = Duration::ZERO;
+    let mut last_flush = Instant::now();
+    loop {
+        let stopping = stop.load(Ordering::Acquire);
+        while let Ok(ev) = rx.pop() {
+            table.apply(ev);
+        }
+        let mut write_rows = |table: &mut Table, all: bool, failed: &mut Option<anyhow::Error>| {
+            table.drain(all, |i, row, forced| {
+                written.forced += u64::from(forced);
+                if failed.is_none() {
+                    match format_row(&mut csv, i, row, None) {
+                        Ok(()) => written.rows += 1,
+                        Err(e) => *failed = Some(anyhow::Error::new(e).context(format!("writing {}", csv_path.display()))),
+                    }
+                }
+            })
+        };
+        write_rows(&mut table, stopping, &mut failed);
+        if stopping || last_flush.elapsed() >= FLUSH_EVERY {
+            last_flush = Instant::now();
+            let now = t0.elapsed();
+            if failed.is_none() {
+                if let Err(e) = csv.flush() {
+                    failed = Some(anyhow::Error::new(e).context(format!("writing {}", csv_path.display())));
+                }
+            }
+            if let (Some((dl, ll)), Some((dp, lp))) = (logs.as_mut(), hpaths.as_ref()) {
+                if failed.is_none() {
+                    let span = now.saturating_sub(interval_start);
+                    let r1 = dl.write_histogram(table.decision.inner(), interval_start, span, Tag::new("decision"));
+                    let r2 = ll.write_histogram(table.lateness.inner(), interval_start, span, Tag::new("release_lateness"));
+                    match (r1, r2) {
+                        (Ok(()), Ok(())) => written.intervals += 1,
+                        (Err(e), _) => failed = Some(anyhow::anyhow!("writing {}: {e:?}", dp.display())),
+                        (_, Err(e)) => failed = Some(anyhow::anyhow!("writing {}: {e:?}", lp.display())),
+                    }
+                }
+                table.decision.reset();
+                table.lateness.reset();
+            }
+            interval_start = now;
+        }
+        if stopping {
+            break;
+        }
+        std::thread::sleep(tick);
+    }
+    match failed {
+        Some(e) => Err(e),
+        None => Ok(written),
     }
 }
 
@@ -159,49 +393,46 @@ impl TraceWriter {
         }
     }
 
-    /// Stops the writer after it has drained everything pushed so far and
-    /// returns the table. Call after the hot loop has ended.
-    pub fn finish(self) -> Vec<Row> {
+    /// Streams the trace to `csv_path` from now on (and the histogram logs
+    /// `decision.hlog` and `lateness.hlog` into `hlog_dir`, if given). The
+    /// files are created here, so that one that cannot be is an error at
+    /// once. Only the first call counts.
+    pub fn stream_to(&mut self, csv_path: &Path, hlog_dir: Option<&Path>) -> anyhow::Result<Option<[PathBuf; 2]>> {
+        let Some(tx) = self.output.take() else { return Ok(None) };
+        let create = |p: &Path| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
+        let csv = create(csv_path)?;
+        let hlogs = match hlog_dir {
+            Some(dir) => {
+                let (d, l) = (dir.join("decision.hlog"), dir.join("lateness.hlog"));
+                Some([(create(&d)?, d), (create(&l)?, l)])
+            }
+            None => None,
+        };
+        let paths = hlogs.as_ref().map(|[(_, d), (_, l)]| [d.clone(), l.clone()]);
+        // The thread is alive until `finish`; a send cannot fail before.
+        let _ = tx.send(Output { csv, csv_path: csv_path.to_path_buf(), hlogs });
+        Ok(paths)
+    }
+
+    /// Stops the writer after it has written everything pushed so far
+    /// (rows of frames still queued as `held`); call after the hot loop has
+    /// ended. A trace never given files is written to `csv_path`.
+    pub fn finish(mut self, csv_path: &Path) -> anyhow::Result<Written> {
+        self.stream_to(csv_path, None)?;
         self.stop.store(true, Ordering::Release);
         self.thread.join().expect("the trace writer thread panicked")
     }
 }
 
-/// Writes the table as CSV, joined with receive times (`recv_ns[i]` for
+/// Writes a table as CSV, joined with receive times (`recv_ns[i]` for
 /// ingress index i; 0 = not received).
 pub fn write_csv(path: &Path, rows: &[Row], recv_ns: &[u64]) -> std::io::Result<()> {
     let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
-    writeln!(w, "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns")?;
+    writeln!(w, "{CSV_HEADER}")?;
     for (i, r) in rows.iter().enumerate() {
-        if !r.present {
-            continue;
+        if r.present {
+            format_row(&mut w, i as u64, r, recv_ns.get(i).copied().filter(|t| *t != 0))?;
         }
-        let recv = recv_ns.get(i).copied().filter(|t| *t != 0);
-        let (fate, reason, phase, stage) = match r.dropped {
-            None if r.release_ns.is_some() => ("delivered", "", String::new(), String::new()),
-            None => ("held", "", String::new(), String::new()),
-            Some(c) => {
-                let (p, s) = match c {
-                    DropCause::Stage { phase, stage, .. } => ((phase + 1).to_string(), (stage + 1).to_string()),
-                    _ => (String::new(), String::new()),
-                };
-                ("dropped", c.reason(), p, s)
-            }
-        };
-        let opt = |v: Option<u64>| v.map(|x| x.to_string()).unwrap_or_default();
-        let scheduled = r.dropped.is_none();
-        writeln!(
-            w,
-            "{i},{},{},{},{},{fate},{reason},{phase},{stage},{},{},{},{}",
-            r.sequence.map(|s| s.to_string()).unwrap_or_default(),
-            r.console_index,
-            r.send_ns,
-            r.ingress_ns,
-            opt(scheduled.then(|| r.release_sched_ns - r.ingress_ns)),
-            opt(scheduled.then_some(r.release_sched_ns)),
-            opt(r.release_ns),
-            opt(recv),
-        )?;
     }
     w.flush()
 }
@@ -211,31 +442,61 @@ mod tests {
     use super::*;
     use crate::model::ModelKind;
 
+    fn ingress(i: u64, seq: Option<u32>, send: u64, at: u64, dropped: Option<DropCause>, sched: u64) -> TraceEvent {
+        TraceEvent::Ingress { ingress_index: i, sequence: seq, console_index: i, send_ns: send, ingress_ns: at, dropped, release_sched_ns: sched, decision_ns: 50 }
+    }
+
     #[test]
-    fn events_become_rows_and_csv() {
-        let (mut sink, writer) = start(4);
-        sink.push(TraceEvent::Ingress { ingress_index: 0, sequence: Some(7), console_index: 0, send_ns: 10, ingress_ns: 20, dropped: None, release_sched_ns: 120 });
-        sink.push(TraceEvent::Ingress {
-            ingress_index: 1,
-            sequence: Some(8),
-            console_index: 1,
-            send_ns: 30,
-            ingress_ns: 40,
-            dropped: Some(DropCause::Stage { phase: 0, stage: 1, kind: ModelKind::GeLomax }),
-            release_sched_ns: 0,
-        });
-        sink.push(TraceEvent::Release { ingress_index: 0, release_ns: 121 });
-        sink.push(TraceEvent::Ingress { ingress_index: 2, sequence: None, console_index: 2, send_ns: 50, ingress_ns: 60, dropped: None, release_sched_ns: 70 });
-        let rows = writer.finish();
-        assert_eq!(rows.len(), 3);
-        let path = std::env::temp_dir().join(format!("netfi-trace-{}.csv", std::process::id()));
-        write_csv(&path, &rows, &[125]).unwrap();
+    fn events_become_rows_in_ingress_order_as_they_complete() {
+        let dir = std::env::temp_dir().join(format!("netfi-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("trace.csv");
+        let (mut sink, mut writer) = start(4);
+        writer.stream_to(&path, Some(&dir)).unwrap();
+        sink.push(ingress(0, Some(7), 10, 20, None, 120));
+        let ge = DropCause::Stage { phase: 0, stage: 1, kind: ModelKind::GeLomax };
+        sink.push(ingress(1, Some(8), 30, 40, Some(ge), 0));
+        // Row 1 is complete but row 0 is not: nothing is written yet.
+        std::thread::sleep(std::time::Duration::from_millis(1200));
         let text = std::fs::read_to_string(&path).unwrap();
-        std::fs::remove_file(&path).ok();
+        assert_eq!(text.lines().count(), 1, "{text}");
+        sink.push(TraceEvent::Release { ingress_index: 0, release_ns: 121 });
+        // Within the flush period both are on disk, before the end.
+        std::thread::sleep(std::time::Duration::from_millis(1200));
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text.lines().count(), 3, "{text}");
+        sink.push(ingress(2, None, 50, 60, None, 70));
+        let w = writer.finish(&path).unwrap();
+        assert_eq!((w.rows, w.forced), (3, 0));
+        assert!(w.intervals >= 2);
+        let text = std::fs::read_to_string(&path).unwrap();
         let lines: Vec<_> = text.lines().collect();
-        assert_eq!(lines[1], "0,7,0,10,20,delivered,,,,100,120,121,125");
+        assert_eq!(lines[1], "0,7,0,10,20,delivered,,,,100,120,121,");
         assert_eq!(lines[2], "1,8,1,30,40,dropped,ge_lomax,1,2,,,,");
         assert_eq!(lines[3], "2,,2,50,60,held,,,,10,70,,");
         assert_eq!(sink.overflowed(), 0);
+        // One interval per flush in each histogram log, tagged.
+        for (file, tag) in [("decision.hlog", "decision"), ("lateness.hlog", "release_lateness")] {
+            let log = std::fs::read(dir.join(file)).unwrap();
+            let tags: Vec<String> = hdrhistogram::serialization::interval_log::IntervalLogIterator::new(&log)
+                .filter_map(|e| match e {
+                    Ok(hdrhistogram::serialization::interval_log::LogEntry::Interval(i)) => i.tag().map(|t| t.as_str().to_string()),
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(tags.len() as u64, w.intervals, "{file}");
+            assert!(tags.iter().all(|t| t == tag), "{tags:?}");
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn write_csv_joins_receive_times() {
+        let rows = [Row { present: true, sequence: Some(1), console_index: 0, send_ns: 1, ingress_ns: 2, dropped: None, release_sched_ns: 3, release_ns: Some(4) }];
+        let path = std::env::temp_dir().join(format!("netfi-trace-join-{}.csv", std::process::id()));
+        write_csv(&path, &rows, &[9]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        assert_eq!(text.lines().nth(1), Some("0,1,0,1,2,delivered,,,,1,3,4,9"));
     }
 }

@@ -143,6 +143,11 @@ pub struct EmulatorArgs {
     /// on loopback when the robot is on loopback).
     #[arg(long, value_name = "ADDR:PORT")]
     pub egress_bind: Option<SocketAddr>,
+    /// The console's address: a UDP ingress takes datagrams from it only
+    /// (default: the first sender, then locked). Others are counted and
+    /// dropped as `foreign_sender`.
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub console_from: Option<SocketAddr>,
     /// Pass datagrams coming back from the robot side through this scenario
     /// (file or preset) instead of relaying them untouched.
     #[arg(long, value_name = "SCENARIO")]
@@ -151,7 +156,7 @@ pub struct EmulatorArgs {
     /// from --seed; printed).
     #[arg(long)]
     pub return_seed: Option<u64>,
-    /// Send return datagrams here instead of to the console's latest source
+    /// Send return datagrams here instead of to the console's
     /// address (`udp://ADDR:PORT`).
     #[arg(long, value_name = "ENDPOINT")]
     pub return_to: Option<Endpoint>,
@@ -321,6 +326,9 @@ impl EmulatorArgs {
         if self.egress_bind.is_some() && !e {
             bail!("--egress-bind applies to a UDP egress");
         }
+        if self.console_from.is_some() && !i {
+            bail!("--console-from applies to a UDP ingress");
+        }
         if let Some(a) = self.egress.udp() {
             if a.port() == 0 || a.ip().is_unspecified() {
                 bail!("--egress {}: the robot's address needs a specific address and a port other than 0", self.egress);
@@ -339,6 +347,7 @@ impl EmulatorArgs {
             payload: self.payload,
             udp: UdpOptions { reuse_address: true, buffer_bytes: Some(self.udp_buffer_bytes) },
             egress_bind: self.egress_bind,
+            console_from: self.console_from,
             queue_capacity,
             idle_end_ns: self.idle_end_ms.map(|ms| (ms * 1e6) as u64),
         }

@@ -208,10 +208,12 @@ impl Forward {
     }
 }
 
-/// Checks size and checksum. `Ok((sequence, checksum_bad))` for a frame to
-/// decide; `Err` for one to reject, with its sequence if readable.
+/// The datagram classifier: checks size and checksum. `Ok((sequence,
+/// checksum_bad))` for a frame to decide; `Err` for one to reject, with
+/// its sequence if readable. Total over any sample (property-tested in
+/// `tests/input_prop.rs`).
 #[inline]
-fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+pub fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
     if s.is_raw() {
         // An opaque datagram: no protocol to check; its "sequence" is its console index.
         return Ok((s.console_index as u32, false));
@@ -357,6 +359,8 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
+    // The trace and the histograms go to disk as the run goes.
+    fwd.link.stream_to(&cfg.out_dir.join("trace_emulator.csv"), Some(&cfg.out_dir))?;
     let mut placement = place(cfg, &fwd.link, ret.as_deref())?;
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, stop_requested);
@@ -515,6 +519,10 @@ fn summary_line(r: &EmulatorReport, u: &udp::UdpReport) -> String {
     );
     if let Some(k) = u.ingress_kernel_drops.filter(|k| *k > 0) {
         s += &format!("; {k} datagrams dropped by the kernel before ingress");
+    }
+    if u.foreign_sender > 0 {
+        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
+        s += &format!("; {} datagrams from foreign senders dropped (foreign_sender): {}", u.foreign_sender, who.join(", "));
     }
     if let Some(rp) = &u.return_path {
         let rd: u64 = rp.dropped.values().sum();

@@ -10,7 +10,8 @@
 //! and leave through [`Link::release_due`] into a [`Release`], which a
 //! [`FrameSink`] is for the samples of the forward path. Nothing on that
 //! path allocates, locks or makes a system call: the queue is fixed at
-//! start-up and the trace goes through a wait-free ring to a writer thread.
+//! start-up and the trace goes through a wait-free ring to a writer thread,
+//! which streams it (and the histograms' interval logs) to disk.
 
 use crate::check::{stage_reports, StageReport};
 use crate::clock::now_ns;
@@ -89,6 +90,8 @@ pub struct Link<T> {
     batches: BatchMeans,
     send_errors: u64,
     last_error: Option<PortError>,
+    /// The histogram logs streamed by the trace writer.
+    hlogs: Option<[PathBuf; 2]>,
 }
 
 impl<T: Carried> Link<T> {
@@ -113,6 +116,7 @@ impl<T: Carried> Link<T> {
             batches: BatchMeans::new(expected_frames.max(1)),
             send_errors: 0,
             last_error: None,
+            hlogs: None,
         })
     }
 
@@ -158,7 +162,8 @@ impl<T: Carried> Link<T> {
 
     #[inline]
     fn record(&mut self, now: u64, entered: Entered, a: Arrival) {
-        self.decision.record(now_ns().saturating_sub(now));
+        let decision_ns = now_ns().saturating_sub(now);
+        self.decision.record(decision_ns);
         self.ingress_wait.record(now.saturating_sub(a.send_ns));
         let (dropped, release_sched_ns) = match entered.fate {
             Fate::Scheduled { release_ns, .. } => (None, release_ns),
@@ -173,6 +178,7 @@ impl<T: Carried> Link<T> {
             ingress_ns: now,
             dropped,
             release_sched_ns,
+            decision_ns,
         });
     }
 
@@ -199,13 +205,26 @@ impl<T: Carried> Link<T> {
         self.inj.counts().released
     }
 
-    /// Writes the decision-time and release-lateness histograms as
-    /// `decision.hlog` and `lateness.hlog` into `out_dir`; returns their
-    /// paths.
-    pub fn write_histograms(&self, out_dir: &Path, duration_s: f64) -> std::io::Result<(PathBuf, PathBuf)> {
+    /// Streams the trace to `trace_path` as the run goes, and, with
+    /// `hlog_dir`, the decision-time and release-lateness histograms as
+    /// interval logs `decision.hlog` and `lateness.hlog` there (one
+    /// interval per second). Call once, before the loop starts.
+    pub fn stream_to(&mut self, trace_path: &Path, hlog_dir: Option<&Path>) -> anyhow::Result<()> {
+        self.hlogs = self.writer.stream_to(trace_path, hlog_dir)?;
+        Ok(())
+    }
+
+    /// The decision-time and release-lateness histogram logs
+    /// `decision.hlog` and `lateness.hlog` in `out_dir`: the interval logs
+    /// streamed there, or else the run's totals written now as one
+    /// interval each. Returns their paths.
+    pub fn write_histograms(&self, out_dir: &Path, duration_s: f64) -> anyhow::Result<(PathBuf, PathBuf)> {
+        if let Some([d, l]) = &self.hlogs {
+            return Ok((d.clone(), l.clone()));
+        }
         let (decision, lateness) = (out_dir.join("decision.hlog"), out_dir.join("lateness.hlog"));
-        self.decision.write_log(&decision, "decision", 0.0, duration_s)?;
-        self.lateness.write_log(&lateness, "release_lateness", 0.0, duration_s)?;
+        self.decision.write_log(&decision, "decision", 0.0, duration_s).with_context(|| format!("writing {}", decision.display()))?;
+        self.lateness.write_log(&lateness, "release_lateness", 0.0, duration_s).with_context(|| format!("writing {}", lateness.display()))?;
         Ok((decision, lateness))
     }
 
@@ -215,8 +234,7 @@ impl<T: Carried> Link<T> {
     pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkReport> {
         let counts = self.inj.counts();
         assert!(counts.balanced(), "frame accounting broken: {counts:?}");
-        let rows = self.writer.finish();
-        trace::write_csv(trace_path, &rows, &[]).with_context(|| format!("writing {}", trace_path.display()))?;
+        self.writer.finish(trace_path)?;
         let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
         let interval_ns = if counts.entered > 1 { duration_ns as f64 / counts.entered as f64 } else { 0.0 };
         let (stages, _) = stage_reports(self.inj.scenario(), interval_ns);

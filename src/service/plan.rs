@@ -113,6 +113,7 @@ impl Plan {
             egress: Endpoint::Iceoryx2,
             payload: Payload::Itp,
             egress_bind: None,
+            console_from: None,
             return_scenario: None,
             return_seed: None,
             return_to: None,

@@ -9,7 +9,7 @@ use crate::service::console::ConsoleReport;
 use crate::service::emulator::{EmulatorProcess, EmulatorReport, PeerEvent};
 use crate::service::plan::Plan;
 use crate::service::simulator::SimulatorReport;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
@@ -398,29 +398,32 @@ fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
         }
     }
     let path = out.join("trace.csv");
-    let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&path)?);
-    for (n, line) in std::io::BufReader::new(std::fs::File::open(&emu)?).lines().enumerate() {
-        let line = line?;
+    let named = |p: &Path| format!("writing {}", p.display());
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&path).with_context(|| named(&path))?);
+    let reading = || format!("reading {}", emu.display());
+    for (n, line) in std::io::BufReader::new(std::fs::File::open(&emu).with_context(reading)?).lines().enumerate() {
+        let line = line.with_context(reading)?;
         if n == 0 {
-            writeln!(w, "{line}")?;
+            writeln!(w, "{line}").with_context(|| named(&path))?;
             continue;
         }
         let cols: Vec<&str> = line.split(',').collect();
         let index: usize = cols[0].parse().unwrap_or(usize::MAX);
         match recv.get(index).filter(|t| **t != 0) {
             Some(t) => {
-                writeln!(w, "{line}{t}")?;
+                writeln!(w, "{line}{t}").with_context(|| named(&path))?;
                 // Columns: 3 send_ns, 9 delay_ns (see `trace`).
                 if let (Some(Ok(send)), Some(Ok(delay))) = (cols.get(3).map(|x| x.parse::<u64>()), cols.get(9).map(|x| x.parse::<u64>())) {
                     delays.injected.push(delay);
                     delays.seen.push(t.saturating_sub(send));
                 }
             }
-            None => writeln!(w, "{line}")?,
+            None => writeln!(w, "{line}").with_context(|| named(&path))?,
         }
     }
-    w.flush()?;
-    std::fs::remove_file(&emu)?;
+    // A failed flush (a full disk) is an error too, not a cut file.
+    w.flush().with_context(|| named(&path))?;
+    std::fs::remove_file(&emu).with_context(|| format!("removing {}", emu.display()))?;
     Ok(Some(path))
 }
 

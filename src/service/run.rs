@@ -83,7 +83,10 @@ impl Proc {
         if s.success() {
             None
         } else {
-            Some(format!("{} ended abnormally ({}); see {}", self.role, self.status_text(), self.log.display()))
+            // The process's own last words (e.g. which file it could not write).
+            let last = tail(&self.log, 1);
+            let why = if last.trim().is_empty() { String::new() } else { format!(": {}", last.trim()) };
+            Some(format!("{} ended abnormally ({}){why}; see {}", self.role, self.status_text(), self.log.display()))
         }
     }
 }
@@ -128,11 +131,81 @@ fn tail(path: &Path, lines: usize) -> String {
     all[all.len().saturating_sub(lines)..].join("\n")
 }
 
+/// A run's exclusive claim on its output directory: an `flock` on
+/// `<out>/run.lock`, held for the runner's life (the kernel lets it go
+/// when the runner ends, however it ends). The file holds the owner's pid,
+/// so that a refused run can say whose the directory is.
+pub struct OutDirLock {
+    _file: std::fs::File,
+}
+
+/// The lock file in a run's output directory.
+pub const LOCK_FILE: &str = "run.lock";
+
+impl OutDirLock {
+    /// Takes the lock on `out` (which must exist) without waiting; a
+    /// directory another run holds is an error naming it and that run's pid.
+    pub fn take(out: &Path) -> Result<OutDirLock> {
+        use std::io::{Read, Seek, Write};
+        use std::os::fd::AsRawFd;
+        let path = out.join(LOCK_FILE);
+        // Not truncated on open: until the lock is ours the pid in it is
+        // the owner's.
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .with_context(|| format!("opening {}", path.display()))?;
+        // SAFETY: flock on a descriptor this function owns.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let err = std::io::Error::last_os_error();
+            if err.raw_os_error() == Some(libc::EWOULDBLOCK) {
+                let mut text = String::new();
+                let _ = file.read_to_string(&mut text);
+                let owner = text.trim().parse::<u32>().map_or("unknown".to_string(), |p| p.to_string());
+                bail!(
+                    "the output directory {} is in use by another netfi run (pid {owner}); wait for it to end or give another --out",
+                    out.display()
+                );
+            }
+            return Err(err).with_context(|| format!("locking {}", path.display()));
+        }
+        file.set_len(0).and_then(|_| file.rewind()).and_then(|_| writeln!(file, "{}", std::process::id()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(OutDirLock { _file: file })
+    }
+}
+
+/// Writes the scenario the emulator is to apply into a file of this run's
+/// own, created exclusively (`scenario.<run id>.toml`, read-only): no other
+/// run can have written or can overwrite it. `scenario.toml` beside it is
+/// the copy kept for people.
+fn write_run_scenario(plan: &Plan) -> Result<PathBuf> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let toml = plan.spec.to_toml();
+    let path = &plan.scenario_path;
+    std::fs::write(path, &toml).with_context(|| format!("writing {}", path.display()))?;
+    let own = plan.out.join(format!("scenario.{}.toml", plan.run_id));
+    // A file left by an earlier run with this run id (given with --run-id).
+    let _ = std::fs::remove_file(&own);
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o444)
+        .open(&own)
+        .with_context(|| format!("creating {}", own.display()))?;
+    f.write_all(toml.as_bytes()).and_then(|_| f.sync_all()).with_context(|| format!("writing {}", own.display()))?;
+    Ok(own)
+}
+
 /// Resolves the scenario and the seed, plans the run, and readies its
-/// output directory: stale files of an earlier run there removed, what an
-/// earlier emulator left moved put back, the scenario written, dead
-/// processes' iceoryx2 resources removed.
-fn prepare(args: &RunArgs) -> Result<Plan> {
+/// output directory: locked for this run, stale files of an earlier run
+/// there removed, what an earlier emulator left moved put back, the
+/// scenario written, dead processes' iceoryx2 resources removed.
+fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     let spec = crate::load::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(fresh_seed);
     // Validate the scenario here, so a bad one fails before any process starts.
@@ -147,9 +220,10 @@ fn prepare(args: &RunArgs) -> Result<Plan> {
     if let (None, Some(w)) = (args.emulator_core, crate::host::isolate::pin_problem()) {
         eprintln!("WARNING: {w}");
     }
-    let plan = Plan::new(args, spec, seed, run_id, &host_cores);
+    let mut plan = Plan::new(args, spec, seed, run_id, &host_cores);
     let out = &plan.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let lock = OutDirLock::take(out)?;
     for role in ["console", "emulator", "simulator"] {
         for ext in ["ready", "json", "pid"] {
             let _ = std::fs::remove_file(out.join(format!("{role}.{ext}")));
@@ -158,13 +232,12 @@ fn prepare(args: &RunArgs) -> Result<Plan> {
     // What killed runs left cleared (their owners and guardian all dead)
     // is put back before anything else, as `netfi restore` does.
     restore_orphans(None);
-    let path = &plan.scenario_path;
-    std::fs::write(path, plan.spec.to_toml()).with_context(|| format!("writing {}", path.display()))?;
+    plan.emulator.scenario = write_run_scenario(&plan)?.display().to_string();
     let cleaned = crate::transport::cleanup_stale()?;
     if cleaned > 0 {
         eprintln!("removed resources of {cleaned} dead process(es) of earlier runs");
     }
-    Ok(plan)
+    Ok((plan, lock))
 }
 
 /// Starts the simulator, the emulator and the console, each once the one
@@ -218,6 +291,9 @@ fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
                 }
             }
         }
+        if signals::ensure_installed() {
+            eprintln!("WARNING: the Ctrl-C handler had been replaced; put back");
+        }
         let [con, emu, sim] = procs;
         let seen = Seen {
             now: started.elapsed(),
@@ -258,7 +334,7 @@ fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
 /// for and which processes failed.
 pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
-    let plan = prepare(args)?;
+    let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps
     // dead peers every 200 ms; on the emulator's core each wake-up would
@@ -285,14 +361,20 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     // An emulator that died while its core was cleared could not put back
     // what it moved; its record lets the runner do it.
     restore_orphans(Some(std::process::id() as i32));
+    // The emulator read its own copy at its start; the one kept is scenario.toml.
+    let _ = std::fs::remove_file(&plan.emulator.scenario);
     let faults = procs.iter().filter_map(Proc::died).collect();
     let processes = procs.iter().map(Proc::end).collect();
-    let report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    let mut report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    // A report that cannot be written (a full disk) is a fault of the run;
+    // the report is still returned, for stdout.
     let json = serde_json::to_vec_pretty(&report)?;
-    let path = &report.files.report_json;
-    std::fs::write(path, &json).with_context(|| format!("writing {}", path.display()))?;
-    if let Some(extra) = &args.report_json {
-        std::fs::write(extra, &json).with_context(|| format!("writing {}", extra.display()))?;
+    let mut paths = vec![report.files.report_json.clone()];
+    paths.extend(args.report_json.clone());
+    for path in paths {
+        if let Err(e) = std::fs::write(&path, &json) {
+            report.faults.push(format!("writing {}: {e}", path.display()));
+        }
     }
     Ok(report)
 }

@@ -24,6 +24,30 @@ pub fn install() {
     }
 }
 
+/// Puts this module's handler back for SIGINT and SIGTERM where something
+/// else has since replaced it (iceoryx2 installs its own the first time a
+/// process uses some of its parts, which would leave the flag unset and
+/// Ctrl-C unseen). Returns whether it had been replaced. A process without
+/// an iceoryx2 node to ask (the runner) calls it as it polls the flag.
+pub fn ensure_installed() -> bool {
+    let mut replaced = false;
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: querying the current action into a zeroed struct.
+        let current = unsafe {
+            let mut old: libc::sigaction = std::mem::zeroed();
+            libc::sigaction(sig, std::ptr::null(), &mut old);
+            old.sa_sigaction
+        };
+        if current != on_signal as *const () as usize {
+            replaced = true;
+        }
+    }
+    if replaced {
+        install();
+    }
+    replaced
+}
+
 /// Whether a stop was requested.
 #[inline]
 pub fn stop_requested() -> bool {

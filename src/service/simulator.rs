@@ -70,13 +70,16 @@ fn robot_frame(s: &FrameSample) -> Result<(ItpFrame, bool), ()> {
 /// Writes `received.csv`: the ingress index and receive time of each frame
 /// that came through the emulator.
 fn write_received(path: &std::path::Path, log: &[(u64, u64)]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?);
-    writeln!(w, "ingress_index,recv_ns")?;
-    for (i, t) in log {
-        writeln!(w, "{i},{t}")?;
-    }
-    w.flush()?;
-    Ok(())
+    let write = || -> std::io::Result<()> {
+        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(w, "ingress_index,recv_ns")?;
+        for (i, t) in log {
+            writeln!(w, "{i},{t}")?;
+        }
+        // A failed flush is an error too (a full disk), not a cut file.
+        w.flush()
+    };
+    write().with_context(|| format!("writing {}", path.display()))
 }
 
 /// Runs the simulator; returns its report (also `simulator.json`).
@@ -174,8 +177,9 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     write_received(&received_csv, &received_log)?;
     let duration_s = (t_end - t_start) as f64 / 1e9;
     let e2e_hlog = args.out.join("end_to_end.hlog");
-    e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s)?;
-    hop.write_log(&args.out.join("direct_hop.hlog"), "direct_hop", 0.0, duration_s)?;
+    e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s).with_context(|| format!("writing {}", e2e_hlog.display()))?;
+    let hop_hlog = args.out.join("direct_hop.hlog");
+    hop.write_log(&hop_hlog, "direct_hop", 0.0, duration_s).with_context(|| format!("writing {}", hop_hlog.display()))?;
     let steal = steal_timer.stop();
     kin.close(t_end);
     let kinematics = serde_json::to_value(kin.report()).ok();

@@ -39,8 +39,8 @@
 //!
 //! With UDP on both sides, what the robot sends back to the emulator's
 //! egress socket (a status or feedback frame, a ping-pong reply) is relayed
-//! from the ingress socket to the console: to the source address of the
-//! latest ingress datagram, or to `--return-to`. It goes untouched, or
+//! from the ingress socket to the console: to its address (`--console-from`,
+//! or the first sender's, locked; see [`crate::transport::udp::UdpSource`]), or to `--return-to`. It goes untouched, or
 //! through a scenario of its own (`--return-scenario`) with its own seed,
 //! queue, trace (`trace_return.csv`) and accounting. Return datagrams that
 //! arrive before any console has been heard from have nowhere to go and are
@@ -152,7 +152,7 @@ pub struct ReturnPath {
 
 impl ReturnPath {
     /// Relays untouched what arrives at `from_robot`, out of `to_console`,
-    /// to `to` or else to the console's latest address.
+    /// to `to` or else to the console's address.
     pub fn untouched(from_robot: UdpPort, to_console: UdpPort, to: Option<SocketAddr>) -> ReturnPath {
         ReturnPath {
             from_robot,
@@ -197,7 +197,7 @@ impl ReturnPath {
     }
 
     /// Releases what is due, then takes at most one datagram from the robot
-    /// side. `console` is the ingress's latest sender.
+    /// side. `console` is the ingress's console.
     #[inline]
     pub fn poll(&mut self, console: Option<&PeerAddr>) {
         let Some(s) = self.shaped.as_deref_mut() else { return self.relay_one(console) };
@@ -255,7 +255,7 @@ impl ReturnPath {
     pub fn finish(self, out_dir: &Path) -> anyhow::Result<ReturnReport> {
         let c = self.counts;
         let destination =
-            self.to.as_ref().map_or("the console's latest address".to_string(), |t| format!("udp://{}", t.addr()));
+            self.to.as_ref().map_or("the console's address".to_string(), |t| format!("udp://{}", t.addr()));
         let untouched = ReturnReport {
             mode: "untouched".into(),
             scenario: None,
@@ -320,7 +320,11 @@ pub fn return_path(args: &EmulatorArgs, t: &Transports, seed: u64, expected: u64
     anyhow::ensure!(capacity >= 1, "the return scenario's queue_capacity must be at least 1");
     let scenario = Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
     eprintln!("emulator: return path through scenario {} seed {seed}, queue {capacity}", spec.name);
-    Ok(Some(ReturnPath::shaped(from_robot, to_console, to, scenario, seed, capacity, expected).context("--queue-capacity")?))
+    let mut ret = ReturnPath::shaped(from_robot, to_console, to, scenario, seed, capacity, expected).context("--queue-capacity")?;
+    if let Some(s) = ret.shaped.as_deref_mut() {
+        s.link.stream_to(&args.out.join("trace_return.csv"), None)?;
+    }
+    Ok(Some(ret))
 }
 
 /// The return path's report: `received = entered + unroutable` and
@@ -371,8 +375,18 @@ pub struct UdpReport {
     pub ingress_kernel_drops: Option<u64>,
     /// Receive buffer of the ingress socket as granted, bytes.
     pub ingress_buffer_bytes: Option<usize>,
-    /// The console's address (source of the latest ingress datagram).
+    /// The console's address: `--console-from`, or the first sender's.
     pub console: Option<SocketAddr>,
+    /// Ingress datagrams from other senders, dropped before they entered
+    /// the link (so not in its accounting).
+    #[serde(default)]
+    pub foreign_sender: u64,
+    /// Who they were: the first distinct senders, with their counts.
+    #[serde(default)]
+    pub foreign_senders: Vec<ForeignSender>,
+    /// Foreign datagrams from senders beyond those named.
+    #[serde(default)]
+    pub foreign_unnamed: u64,
     /// Raw mode: arena slots, and the most ever in use at once.
     pub arena_slots: Option<usize>,
     pub arena_high_water: Option<usize>,
@@ -399,6 +413,13 @@ impl BoundEndpoints {
     }
 }
 
+/// A sender other than the console, and how many datagrams it sent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ForeignSender {
+    pub addr: SocketAddr,
+    pub datagrams: u64,
+}
+
 impl UdpReport {
     /// The UDP side of a run that has ended.
     pub fn new(args: &EmulatorArgs, t: &Transports, bound: &BoundEndpoints, return_path: Option<ReturnReport>) -> UdpReport {
@@ -416,6 +437,11 @@ impl UdpReport {
             ingress_kernel_drops: source.and_then(|s| s.port().kernel_drops()),
             ingress_buffer_bytes: source.and_then(|s| s.port().buffer_bytes().0),
             console: source.and_then(|s| s.console()),
+            foreign_sender: source.map_or(0, |s| s.foreign().total),
+            foreign_senders: source
+                .map(|s| s.foreign().named().map(|(addr, datagrams)| ForeignSender { addr, datagrams }).collect())
+                .unwrap_or_default(),
+            foreign_unnamed: source.map_or(0, |s| s.foreign().unnamed),
             arena_slots: t.arena.as_ref().map(|a| a.borrow().slots()),
             arena_high_water: t.arena.as_ref().map(|a| a.borrow().high_water()),
             return_path,

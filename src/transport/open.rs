@@ -100,6 +100,9 @@ pub struct Wiring {
     pub udp: UdpOptions,
     /// Local address a UDP egress sends from (default: an ephemeral port).
     pub egress_bind: Option<SocketAddr>,
+    /// The only sender a UDP ingress takes datagrams from (default: the
+    /// first, then locked).
+    pub console_from: Option<SocketAddr>,
     /// Raw payload: datagrams the release queue may hold (the arena has
     /// one slot more).
     pub queue_capacity: usize,
@@ -157,6 +160,10 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
         Some(addr) => {
             let port = UdpPort::bind(addr, &w.udp).context("opening the UDP ingress socket")?;
             let s = UdpSource::new(port, arena.clone());
+            let s = match w.console_from {
+                Some(c) => s.only_from(c),
+                None => s,
+            };
             Some(match w.idle_end_ns {
                 Some(ns) => s.with_idle_end(ns),
                 None => s,

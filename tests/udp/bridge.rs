@@ -24,7 +24,7 @@ fn netfi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_netfi"))
 }
 
-fn out_dir(name: &str) -> PathBuf {
+pub(crate) fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-udp-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
@@ -62,14 +62,14 @@ pub(crate) fn free_udp_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-fn socket() -> UdpPort {
+pub(crate) fn socket() -> UdpPort {
     UdpPort::bind("127.0.0.1:0".parse().unwrap(), &UdpOptions { reuse_address: false, buffer_bytes: Some(4 << 20) })
         .unwrap()
 }
 
 /// Sends `datagrams`, pausing 1 ms every `burst` of them so the emulator
 /// (which may share its core) keeps up without the kernel dropping any.
-fn send_paced(from: &UdpPort, to: SocketAddr, datagrams: impl IntoIterator<Item = Vec<u8>>, burst: usize) -> u64 {
+pub(crate) fn send_paced(from: &UdpPort, to: SocketAddr, datagrams: impl IntoIterator<Item = Vec<u8>>, burst: usize) -> u64 {
     let to = PeerAddr::new(to);
     let mut n = 0u64;
     for d in datagrams {
@@ -94,7 +94,7 @@ fn send_paced(from: &UdpPort, to: SocketAddr, datagrams: impl IntoIterator<Item 
 /// A thread that receives on `port` until `stop` is set and nothing more
 /// arrives for 200 ms (at most 60 s), answering each datagram with `reply`
 /// (if given) to its source; returns what it received.
-fn receiver(port: UdpPort, stop: Arc<AtomicBool>, reply: Option<Vec<u8>>) -> JoinHandle<(Vec<Vec<u8>>, UdpPort)> {
+pub(crate) fn receiver(port: UdpPort, stop: Arc<AtomicBool>, reply: Option<Vec<u8>>) -> JoinHandle<(Vec<Vec<u8>>, UdpPort)> {
     std::thread::spawn(move || {
         let mut got = Vec::new();
         let mut buf = vec![0u8; 1 << 16];
@@ -172,6 +172,11 @@ impl Emulator {
             std::thread::sleep(Duration::from_millis(5));
         }
         e
+    }
+
+    /// The emulator's pid.
+    pub(crate) fn pid(&self) -> u32 {
+        self.child.as_ref().unwrap().id()
     }
 
     fn log(&self) -> String {

@@ -9,6 +9,8 @@
 use std::sync::Mutex;
 
 mod bridge;
+mod foreign;
+mod memory;
 mod netns;
 mod tools;
 

@@ -29,7 +29,9 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // Not `eprintln!`: on a full disk a log on it cannot take the
+            // message, and a panic would hide the failure behind exit 101.
+            let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("error: {e:#}\n"));
             std::process::ExitCode::FAILURE
         }
     }

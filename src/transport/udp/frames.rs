@@ -111,12 +111,62 @@ fn port_error(port: &UdpPort, e: impl fmt::Display) -> PortError {
     PortError { port: format!("udp://{}", port.local_addr()), message: e.to_string() }
 }
 
+/// How many distinct foreign senders a UDP source names in its report;
+/// datagrams from further ones are counted together.
+pub const FOREIGN_SENDERS_NAMED: usize = 16;
+
+/// Datagrams from senders other than the console: counted, never taken.
+/// A fixed table, so that a flood from many addresses costs no allocation.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ForeignSenders {
+    named: [Option<(SocketAddr, u64)>; FOREIGN_SENDERS_NAMED],
+    /// All foreign datagrams.
+    pub total: u64,
+    /// Those from senders beyond the first [`FOREIGN_SENDERS_NAMED`].
+    pub unnamed: u64,
+}
+
+impl ForeignSenders {
+    #[inline]
+    fn count(&mut self, from: SocketAddr) {
+        self.total += 1;
+        for slot in self.named.iter_mut() {
+            match slot {
+                Some((a, n)) if *a == from => {
+                    *n += 1;
+                    return;
+                }
+                Some(_) => {}
+                None => {
+                    *slot = Some((from, 1));
+                    return;
+                }
+            }
+        }
+        self.unnamed += 1;
+    }
+
+    /// The senders named, with their datagram counts, in the order first seen.
+    pub fn named(&self) -> impl Iterator<Item = (SocketAddr, u64)> + '_ {
+        self.named.iter().flatten().copied()
+    }
+}
+
 /// The emulator's source on a UDP socket.
+///
+/// It takes datagrams from one sender only, the console: the address given
+/// ([`UdpSource::only_from`]) or else the first sender's, locked from then
+/// on, so that no other socket can feed the robot or take over the return
+/// path. Datagrams from anyone else are dropped before they enter the link
+/// (they are not frames of the stream, so the link's accounting
+/// `entered = delivered + dropped + held` is about the console's frames
+/// only) and counted as `foreign_sender` in [`UdpSource::foreign`].
 pub struct UdpSource {
     port: UdpPort,
     arena: Option<Rc<RefCell<Arena>>>,
     taken: u64,
     console: Option<PeerAddr>,
+    foreign: ForeignSenders,
     idle_end_ns: Option<u64>,
     last_rx_ns: u64,
     ended: bool,
@@ -126,7 +176,18 @@ impl UdpSource {
     /// A source taking ITP frames (`arena: None`) or raw datagrams (into
     /// `arena`) off `port`.
     pub fn new(port: UdpPort, arena: Option<Rc<RefCell<Arena>>>) -> UdpSource {
-        UdpSource { port, arena, taken: 0, console: None, idle_end_ns: None, last_rx_ns: 0, ended: false }
+        UdpSource { port, arena, taken: 0, console: None, foreign: ForeignSenders::default(), idle_end_ns: None, last_rx_ns: 0, ended: false }
+    }
+
+    /// Takes datagrams from `console` only.
+    pub fn only_from(mut self, console: SocketAddr) -> UdpSource {
+        self.console = Some(PeerAddr::new(console));
+        self
+    }
+
+    /// The datagrams from other senders, dropped.
+    pub fn foreign(&self) -> &ForeignSenders {
+        &self.foreign
     }
 
     /// End the stream after `idle_ns` without a datagram (once one came).
@@ -145,7 +206,7 @@ impl UdpSource {
         self.taken
     }
 
-    /// The source address of the latest datagram.
+    /// The console's address: given, or the first sender's.
     pub fn console(&self) -> Option<SocketAddr> {
         self.console.as_ref().map(PeerAddr::addr)
     }
@@ -185,10 +246,17 @@ impl FrameSource for UdpSource {
             }
         };
         match got {
+            Ok(Some(d)) if self.console.as_ref().is_some_and(|c| c.addr() != d.from) => {
+                self.foreign.count(d.from);
+                if let (Some(arena), Some(slot)) = (&self.arena, slot) {
+                    arena.borrow_mut().free(slot);
+                }
+                Ok(false)
+            }
             Ok(Some(d)) => {
                 let now = now_ns();
                 self.last_rx_ns = now;
-                if self.console.as_ref().map(PeerAddr::addr) != Some(d.from) {
+                if self.console.is_none() {
                     self.console = Some(PeerAddr::new(d.from));
                 }
                 out.send_ns = now;

@@ -23,7 +23,7 @@
 //! raw-mode [`Arena`]) are in [`frames`].
 
 pub mod frames;
-pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
+pub use frames::{Arena, ForeignSenders, UdpSink, UdpSource, ARENA_SLOT_BYTES, FOREIGN_SENDERS_NAMED};
 
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
 use std::io;

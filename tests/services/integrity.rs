@@ -1,0 +1,144 @@
+//! Run integrity: a run owns its output directory, and Ctrl-C to the
+//! terminal's process group ends a run cleanly.
+
+use super::{assert_conserved, netfi, out_dir, u, wait_pid, ONE_RUN_AT_A_TIME};
+use serde_json::Value;
+use std::os::unix::process::CommandExt;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// A second `netfi run` on a directory in use is refused, naming the
+/// directory and the first run's pid; the first run applies its own
+/// scenario to the end.
+#[test]
+fn two_runs_on_one_directory_the_second_is_refused() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("two-runs");
+    let first = netfi()
+        .args(["run", "Normal", "--duration-s", "3", "--seed", "1", "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first run is streaming.
+    wait_pid(&out, "console");
+    let second = netfi().args(["run", "PLM-2", "--duration-s", "3", "--seed", "2", "--json", "--out"]).arg(&out).output().unwrap();
+    assert!(!second.status.success(), "the second run must be refused");
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert!(err.contains("in use by another netfi run"), "{err}");
+    assert!(err.contains(&out.display().to_string()), "the directory is named: {err}");
+    assert!(err.contains(&format!("pid {}", first.id())), "the owner's pid is named: {err}");
+    let o = first.wait_with_output().unwrap();
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("no report ({e}): {}", String::from_utf8_lossy(&o.stderr)));
+    assert!(o.status.success(), "{r:#}");
+    assert_conserved(&r);
+    assert_eq!(r["scenario"], "Normal");
+    assert_eq!(r["frames"]["dropped"].as_object().map(|d| d.len()), Some(0), "Normal drops nothing: {:#}", r["frames"]);
+    assert_eq!(u(&r["frames"]["delivered"]), 3000, "{:#}", r["frames"]);
+    let kept = std::fs::read_to_string(out.join("scenario.toml")).unwrap();
+    assert!(kept.contains("Normal"), "{kept}");
+    // Once the first run has ended the directory is free again.
+    let third = netfi().args(["run", "Normal", "--frames", "200", "--seed", "3", "--json", "--out"]).arg(&out).output().unwrap();
+    assert!(third.status.success(), "{}", String::from_utf8_lossy(&third.stderr));
+}
+
+/// SIGINT to the whole process group, as a terminal's Ctrl-C sends it: the
+/// run ends within seconds, every frame is accounted for, and the report
+/// says it was interrupted.
+#[test]
+fn ctrl_c_to_the_process_group_ends_the_run() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    for attempt in 0..3 {
+        let out = out_dir(&format!("ctrl-c-{attempt}"));
+        let child = netfi()
+            .args(["run", "Normal", "--duration-s", "30", "--seed", "5", "--json", "--out"])
+            .arg(&out)
+            .process_group(0)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let pgid = child.id() as i32;
+        wait_pid(&out, "console");
+        std::thread::sleep(Duration::from_millis(500 + 400 * attempt));
+        // SAFETY: signalling the process group this test created.
+        unsafe { libc::kill(-pgid, libc::SIGINT) };
+        let t0 = Instant::now();
+        let o = child.wait_with_output().unwrap();
+        let took = t0.elapsed();
+        let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("no report ({e}): {}", String::from_utf8_lossy(&o.stderr)));
+        // A 30 s stream cut short: far less than the planned end (a bound
+        // on the stopping policy, not on the machine's latency).
+        assert!(took < Duration::from_secs(15), "attempt {attempt}: the run went on for {took:?} after Ctrl-C");
+        assert!(u(&r["frames"]["sent"]) < 25_000, "{:#}", r["frames"]);
+        assert_conserved(&r);
+        let faults = r["faults"].as_array().unwrap();
+        assert!(faults.iter().any(|f| f.as_str().is_some_and(|f| f.starts_with("interrupted"))), "the report says it was interrupted: {faults:?}");
+        assert_eq!(r["console"]["ended_by"], "signal", "{:#}", r["console"]);
+        assert!(!o.status.success(), "an interrupted run exits non-zero");
+    }
+}
+
+/// A full disk: the output directory on a 128 KiB tmpfs (mounting one
+/// needs root; elsewhere the test says so and passes). Every failed write is
+/// an error naming its file, the run exits non-zero, and the text report
+/// still prints to stdout. (A file size limit, RLIMIT_FSIZE, would also
+/// refuse iceoryx2's shared-memory segments, so it cannot stand in.)
+#[test]
+fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("full-disk");
+    std::fs::create_dir_all(&out).unwrap();
+    let mounted = std::process::Command::new("mount").args(["-t", "tmpfs", "-o", "size=128k", "tmpfs"]).arg(&out).status();
+    if !mounted.is_ok_and(|s| s.success()) {
+        eprintln!("note: cannot mount a small tmpfs here (not root?); full-disk test skipped");
+        return;
+    }
+    struct Unmount(std::path::PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(&self.0).status();
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _unmount = Unmount(out.clone());
+    // 4,000 frames: a trace of ≈ 240 KB, received.csv ≈ 72 KB.
+    let o = netfi().args(["run", "Normal", "--frames", "4000", "--rate-hz", "2000", "--seed", "1", "--out"]).arg(&out).output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{stdout}\n{stderr}");
+    assert!(!o.status.success(), "a run that could not write its files must fail:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("frames") && stdout.contains("sent"), "the text report prints:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("trace_emulator.csv") && stdout.contains("No space left on device"), "the trace is named as not written:\n{stdout}");
+}
+
+/// kill -9 of the emulator mid-run: its trace and histogram logs are on
+/// disk up to its last second (the writer flushes every second).
+#[test]
+fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("kill-emulator-trace");
+    let child = netfi()
+        .args(["run", "Normal", "--duration-s", "6", "--seed", "9", "--json", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = wait_pid(&out, "emulator");
+    wait_pid(&out, "console");
+    // At 1 kHz, 3 s of stream: at least the first 2 s are flushed.
+    std::thread::sleep(Duration::from_secs(3));
+    // SAFETY: signalling a process of the run this test started.
+    unsafe { libc::kill(pid, libc::SIGKILL) };
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success(), "a run with a killed emulator fails");
+    let trace = out.join("trace.csv");
+    let text = std::fs::read_to_string(&trace).unwrap_or_else(|e| panic!("{}: {e}\n{}", trace.display(), String::from_utf8_lossy(&o.stderr)));
+    let rows = text.lines().count() - 1;
+    assert!(rows >= 1500, "only {rows} rows of a 3 s stream at 1 kHz survived");
+    let log = std::fs::read_to_string(out.join("decision.hlog")).unwrap();
+    let intervals = log.lines().filter(|l| !l.starts_with('#') && !l.starts_with('"') && l.contains(',')).count();
+    assert!(intervals >= 2, "{intervals} intervals in decision.hlog:\n{log}");
+}
