@@ -21,6 +21,7 @@ use crate::injector::{Fate, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::scenario::{Scenario, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
+use crate::service::feedback::{FeedbackPath, FeedbackReport};
 use crate::service::link::{Arrival, Link, LinkMeasures};
 use crate::service::udp::{self, ReturnPath};
 use crate::service::signals;
@@ -73,6 +74,11 @@ pub struct EmulatorFrames {
     pub sent_by_console: Option<u64>,
     /// Frames that passed with a wrong checksum (when not dropped for it).
     pub bad_checksum_passed: u64,
+    /// Of the delivered frames, those released while no robot was
+    /// subscribed: they went nowhere (a stand-alone emulator started before
+    /// its robot; see `--wait-for-peer-s`).
+    #[serde(default)]
+    pub delivered_unsubscribed: u64,
 }
 
 /// The emulator's own report, written as `emulator.json`: one flat JSON
@@ -129,6 +135,9 @@ pub struct EmulatorProcess {
     pub trace_overflowed: u64,
     pub steal_ms: u64,
     pub steal_fraction: f64,
+    /// The feedback path robot → console, when it was open.
+    #[serde(default)]
+    pub feedback: Option<FeedbackReport>,
 }
 
 /// The forward direction's loop state: the link, and what the loop counts
@@ -142,6 +151,10 @@ pub struct Forward {
     receive_errors: u64,
     last_error: Option<PortError>,
     sent_by_console: Option<u64>,
+    /// The feedback path, polled once per turn.
+    pub feedback: Option<Box<FeedbackPath>>,
+    /// When the forward stream ended and its end marker went to the robot.
+    forward_end_ns: Option<u64>,
 }
 
 impl Forward {
@@ -156,18 +169,51 @@ impl Forward {
             receive_errors: 0,
             last_error: None,
             sent_by_console: None,
+            feedback: None,
+            forward_end_ns: None,
         }
     }
 
+    /// The loop with the feedback path `fb` polled in each turn.
+    pub fn with_feedback(mut self, fb: FeedbackPath) -> Forward {
+        self.feedback = Some(Box::new(fb));
+        self
+    }
+
     /// One turn of the loop: every release that is due, oldest first; the
-    /// return path; at most one frame in.
+    /// return path (UDP) or the feedback path (iceoryx2); at most one frame in.
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
         self.link.release_due(now_ns(), sink);
         if let Some(r) = ret {
             r.poll(source.sender());
         }
+        if let Some(f) = self.feedback.as_deref_mut() {
+            f.poll();
+        }
         self.take(source, now_ns);
+    }
+
+    /// Off the hot path: once the stream has drained, sends the robot the
+    /// end marker (once); then whether the loop may end, i.e. the feedback
+    /// path, if any, has ended too.
+    pub fn finished<K: FrameSink>(&mut self, sink: &mut K) -> bool {
+        if !self.drained() {
+            return false;
+        }
+        let now = now_ns();
+        let end = match self.forward_end_ns {
+            Some(t) => t,
+            None => {
+                let _ = sink.send_with(&FrameSample::end_marker(self.link.released()), |_| {});
+                self.forward_end_ns = Some(now);
+                now
+            }
+        };
+        match self.feedback.as_deref_mut() {
+            Some(f) => f.finished(now, end),
+            None => true,
+        }
     }
 
     /// Takes at most one frame from `source`, stamps it taken at `clock()`
@@ -236,11 +282,14 @@ struct Placement {
 
 /// Pins the loop's thread (keeping the trace writers off its core), clears
 /// the core if asked, and raises the thread's priority if asked.
-fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
+fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&FeedbackPath>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
     if let Some(core) = cfg.core {
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
         link.keep_trace_off_core(core);
+        if let Some(f) = fb {
+            f.keep_trace_off_core(core);
+        }
         if let Some(r) = ret {
             r.keep_trace_off_core(core);
         }
@@ -319,7 +368,7 @@ fn spin<S: FrameSource, K: FrameSink>(
             if stop_requested() {
                 break "signal";
             }
-            if fwd.drained() {
+            if fwd.finished(sink) {
                 break "end_marker";
             }
             if iter % (1 << 16) == 0 {
@@ -349,6 +398,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     source: &mut S,
     sink: &mut K,
     ret: Option<&mut ReturnPath>,
+    feedback: Option<FeedbackPath>,
     stop_requested: impl FnMut() -> bool,
 ) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
@@ -357,14 +407,22 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
-    let mut placement = place(cfg, &fwd.link, ret.as_deref())?;
+    if let Some(f) = feedback {
+        fwd = fwd.with_feedback(f);
+    }
+    let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, stop_requested);
     let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
-    // Tell the simulator the stream ended (best effort: it may be gone).
-    let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
+    // Tell the simulator the stream ended (best effort: it may be gone),
+    // unless the loop already did.
+    if fwd.forward_end_ns.is_none() {
+        let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
+    }
+    let delivered_unsubscribed = sink.unsubscribed();
     let steal = steal_timer.stop();
-    let report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    report.process.frames.delivered_unsubscribed = delivered_unsubscribed;
     let json = cfg.out_dir.join("emulator.json");
     std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
     Ok(report)
@@ -383,8 +441,9 @@ impl EmulatorReport {
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
-        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, .. } = fwd;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
+        let feedback = feedback.map(|f| f.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
         if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
             eprintln!("emulator: last transport error: {e}");
         }
@@ -411,6 +470,7 @@ impl EmulatorReport {
                 held_at_end: l.held_at_end,
                 sent_by_console,
                 bad_checksum_passed,
+                delivered_unsubscribed: 0,
             },
             ended_by: end.ended_by.to_string(),
             duration_s,
@@ -421,6 +481,7 @@ impl EmulatorReport {
             trace_overflowed: l.trace_overflowed,
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
+            feedback,
         };
         Ok(EmulatorReport { shaping, process })
     }
@@ -436,6 +497,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     crate::service::write_pid(&args.out, "emulator")?;
     let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
     let mut ret = udp::return_path(args, &t, cfg.seed, cfg.expected_frames)?;
+    let fb = feedback_path(args, &t, cfg.seed, cfg.expected_frames)?;
     let bound = udp::BoundEndpoints::of(&t, args);
     let any_udp = args.ingress.is_udp() || args.egress.is_udp();
     if any_udp {
@@ -464,7 +526,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     // Polled every 4096 iterations; iceoryx2's own latch (once a node is
     // open, it may take SIGINT/SIGTERM for itself) every 256th time.
     let mut stop = signals::StopCheck::new(256, || t.node.as_ref().is_some_and(|n| n.termination_requested()));
-    let report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), || stop.requested())?;
+    let report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, || stop.requested())?;
     if any_udp {
         let return_path = ret.map(|r| r.finish(&cfg.out_dir)).transpose()?;
         let u = udp::UdpReport::new(args, &t, &bound, return_path);
@@ -473,6 +535,24 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         eprintln!("{}", summary_line(&report, &u));
     }
     Ok(report)
+}
+
+/// The feedback path the arguments ask for: with iceoryx2 on both sides and
+/// unless `--no-feedback`, through `--return-scenario` (default Normal).
+fn feedback_path(args: &EmulatorArgs, t: &crate::transport::Transports, seed: u64, expected: u64) -> anyhow::Result<Option<FeedbackPath>> {
+    use anyhow::Context;
+    let Some(node) = t.node.as_ref().filter(|_| !args.ingress.is_udp() && !args.egress.is_udp() && !args.no_feedback) else {
+        return Ok(None);
+    };
+    let name = args.return_scenario.as_deref().unwrap_or("Normal");
+    let spec = crate::load::resolve(name).with_context(|| format!("--return-scenario {name}"))?;
+    let seed = args.return_seed.or(spec.seed).unwrap_or_else(|| crate::scenario::splitmix64(seed ^ 0x6665_6564_6261_636b));
+    let capacity = spec.queue_capacity.unwrap_or(crate::service::plan::DEFAULT_QUEUE_CAPACITY);
+    anyhow::ensure!(capacity >= 1, "the return scenario's queue_capacity must be at least 1");
+    let scenario = Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
+    let (source, sink) = crate::transport::open_feedback(node)?;
+    eprintln!("emulator: feedback path through scenario {} seed {seed}, queue {capacity}", spec.name);
+    crate::service::feedback::path(scenario, seed, capacity, expected, source, sink).map(Some)
 }
 
 /// The emulator's set-up from its arguments: the scenario resolved, the

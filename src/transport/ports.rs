@@ -52,6 +52,12 @@ pub trait FrameSink {
     fn peers(&mut self) -> Option<usize> {
         None
     }
+
+    /// Samples sent while no receiver was connected (they went nowhere),
+    /// where the transport knows; 0 otherwise.
+    fn unsubscribed(&self) -> u64 {
+        0
+    }
 }
 
 /// An in-memory port for tests: a queue that is a source at its front and
@@ -119,5 +125,9 @@ impl FrameSink for FramePublisher {
 
     fn peers(&mut self) -> Option<usize> {
         Some(self.peers_connected())
+    }
+
+    fn unsubscribed(&self) -> u64 {
+        self.stats().unsubscribed
     }
 }
