@@ -221,7 +221,7 @@ import json, netfi_iox as n, netfi_iox.run as r
 root, prefix = n.location("{id}")
 print(json.dumps({{
     "layout": r.file_layout(), "root": root, "prefix": prefix,
-    "services": [n.service_name("{id}", c) for c in ("console", "emulator", "direct")],
+    "services": [n.service_name("{id}", c) for c in n.CHANNELS],
     "nodes": [n.node_name("{id}", x) for x in ("console", "emulator", "simulator", "tool")],
     "limits": [r.SUBSCRIBER_BUFFER_FRAMES, r.MAX_PUBLISHERS_PER_CHANNEL, r.MAX_SUBSCRIBERS_PER_CHANNEL, r.MAX_NODES_PER_CHANNEL, r.HISTORY_FRAMES],
     "end": n.FLAG_END, "raw": n.FLAG_RAW, "itp_len": n.ITP_FRAME_LEN,
@@ -283,6 +283,39 @@ print(json.dumps({{
     }
     same_offset!(send_ns, console_index, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns, len, flags, wire, _pad);
     assert_eq!(off.as_object().unwrap().len(), 11, "a field the Rust type lacks: {off}");
+
+    // The feedback payload, likewise.
+    use netfi::sample::FeedbackSample;
+    let o = run_ok(
+        {
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python")).args([
+                "-c",
+                "import json, iceoryx2, netfi_iox as n; l = n.feedback_layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FeedbackSample); print(json.dumps(l))",
+            ]);
+            c
+        },
+        "python3 netfi_iox.feedback_layout",
+    );
+    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // SAFETY: as above.
+    let rust_name = unsafe { <FeedbackSample as iceoryx2::prelude::ZeroCopySend>::type_name() };
+    assert_eq!(l["iceoryx2_type_name"], rust_name);
+    assert_eq!(l["type_name"], FeedbackSample::TYPE_NAME);
+    assert_eq!(u(&l["size"]), core::mem::size_of::<FeedbackSample>() as u64);
+    assert_eq!(u(&l["alignment"]), core::mem::align_of::<FeedbackSample>() as u64);
+    let off = &l["offsets"];
+    macro_rules! same_feedback_offset {
+        ($($f:ident),*) => {$(
+            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(FeedbackSample, $f) as u64, stringify!($f));
+        )*};
+    }
+    same_feedback_offset!(
+        send_ns, robot_index, console_index, command_send_ns, command_ingress_ns, command_release_ns,
+        command_injected_delay_ns, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns,
+        sequence, flags, position, rotation, grasp, commands
+    );
+    assert_eq!(off.as_object().unwrap().len(), 18, "a field the Rust type lacks: {off}");
 }
 
 /// The Python ITP encoder and decoder agree with the Rust codec, checksum
@@ -356,6 +389,32 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     let check: Value = serde_json::from_slice(&check.stdout).unwrap();
     assert_eq!(check["dropped"]["ge_lomax"], e["frames"]["dropped"]["ge_lomax"]);
     assert!(u(&e["frames"]["dropped"]["ge_lomax"]) > 0);
+    // The feedback loop, balanced the other way: one feedback per command
+    // the robot received, every one through the return scenario (Normal)
+    // and to the Python console.
+    assert_feedback_balanced(&e, &r, &c, delivered);
+}
+
+/// Robot → emulator → console: the robot sent one feedback per command it
+/// received, each entered the emulator's feedback path and, through a
+/// Normal return scenario, reached the console, which measured its round
+/// trip.
+fn assert_feedback_balanced(e: &Value, r: &Value, c: &Value, commands: u64) {
+    let fb = &e["feedback"];
+    assert_eq!(u(&r["feedback_sent"]), commands, "{r}");
+    assert_eq!(u(&fb["sent_by_robot"]), commands, "{fb}");
+    assert_eq!(u(&fb["entered"]), commands, "{fb}");
+    let dropped: u64 = fb["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&fb["entered"]), u(&fb["delivered"]) + dropped + u(&fb["held_at_end"]), "{fb}");
+    assert_eq!((dropped, u(&fb["held_at_end"])), (0, 0), "Normal drops nothing: {fb}");
+    assert_eq!(fb["balanced"], true, "{fb}");
+    assert_eq!(fb["scenario"], "Normal");
+    let cf = &c["feedback"];
+    assert_eq!(u(&cf["received"]), commands, "{cf}");
+    assert_eq!(u(&cf["sent_by_emulator"]), commands, "{cf}");
+    assert_eq!(u(&cf["unknown_command"]), 0, "{cf}");
+    assert_eq!(cf["ended_by"], "end_marker", "{cf}");
+    assert_eq!(u(&cf["round_trip_us"]["count"]), commands, "{cf}");
 }
 
 /// netfi's own console → emulator → the Python robot: the robot decodes
