@@ -44,7 +44,8 @@ pub struct ConsoleReport {
     /// Frames sent while no emulator was subscribed.
     pub sent_unsubscribed: u64,
     pub direct_sent: u64,
-    /// `done` or `signal`.
+    /// `done`, `signal`, or `emulator_ended` (the emulator ended the
+    /// feedback early: the robot died).
     pub ended_by: String,
     pub steal_ms: u64,
     pub steal_fraction: f64,
@@ -372,6 +373,12 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             if FrameSink::send_with(d, &sample, |s| s.send_ns = now_ns()).is_ok() {
                 direct_sent += 1;
             }
+        }
+        if fb.sent_by_emulator.is_some() {
+            // The emulator ended the feedback early: its robot is gone.
+            // Stop, so the stream ends with an end marker it will take.
+            ended_by = "emulator_ended";
+            break;
         }
         if i % 1024 == 1023 && stop.requested() {
             ended_by = "signal";

@@ -121,8 +121,11 @@ pub struct EmulatorProcess {
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
     /// Why the loop ended: `end_marker` (the console finished and every held
-    /// frame was released) or `signal`.
+    /// frame was released), `signal`, or `peer_died` (see `dead_peers`).
     pub ended_by: String,
+    /// Peers of the run found dead by the emulator (role, executable, pid).
+    #[serde(default)]
+    pub dead_peers: Vec<String>,
     pub duration_s: f64,
     /// Turns of the busy loop, and the mean time of one: how often it looked
     /// for due releases and for a new frame.
@@ -339,6 +342,21 @@ fn realtime(p: i32) -> Option<i32> {
     }
 }
 
+/// What the loop's look off the hot path (every 4096 turns) found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Look {
+    /// Nothing new: go on.
+    Go,
+    /// SIGINT/SIGTERM: stop now.
+    Stop,
+    /// The robot died: the console is told through the feedback loop (its
+    /// end marker comes early) and the stream drains as usual, so every
+    /// frame stays accounted for; without a feedback loop, stop now.
+    RobotDied,
+    /// The console died: no end marker will come; stop now.
+    ConsoleDied,
+}
+
 /// How the loop ended.
 struct LoopEnd {
     ended_by: &'static str,
@@ -355,8 +373,9 @@ fn spin<S: FrameSource, K: FrameSink>(
     source: &mut S,
     sink: &mut K,
     mut ret: Option<&mut ReturnPath>,
-    mut stop_requested: impl FnMut() -> bool,
+    mut look: impl FnMut() -> Look,
 ) -> LoopEnd {
+    let mut robot_died = false;
     let mut peer_events = Vec::new();
     let mut peers = (source.peers(), sink.peers());
     let t_start = now_ns();
@@ -365,11 +384,20 @@ fn spin<S: FrameSource, K: FrameSink>(
         fwd.turn(source, sink, ret.as_deref_mut());
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
-            if stop_requested() {
-                break "signal";
+            match look() {
+                Look::Go => {}
+                Look::Stop => break "signal",
+                Look::ConsoleDied => break "peer_died",
+                Look::RobotDied => match fwd.feedback.as_deref_mut() {
+                    Some(f) => {
+                        robot_died = true;
+                        f.forward_end();
+                    }
+                    None => break "peer_died",
+                },
             }
             if fwd.finished(sink) {
-                break "end_marker";
+                break if robot_died { "peer_died" } else { "end_marker" };
             }
             if iter % (1 << 16) == 0 {
                 let now_peers = (source.peers(), sink.peers());
@@ -399,7 +427,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     sink: &mut K,
     ret: Option<&mut ReturnPath>,
     feedback: Option<FeedbackPath>,
-    stop_requested: impl FnMut() -> bool,
+    look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
@@ -412,7 +440,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     }
     let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     let steal_timer = StealTimer::start();
-    let end = spin(&mut fwd, source, sink, ret, stop_requested);
+    let end = spin(&mut fwd, source, sink, ret, look);
     let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
     // Tell the simulator the stream ended (best effort: it may be gone),
     // unless the loop already did.
@@ -473,6 +501,7 @@ impl EmulatorReport {
                 delivered_unsubscribed: 0,
             },
             ended_by: end.ended_by.to_string(),
+            dead_peers: Vec::new(),
             duration_s,
             loop_iterations: iter,
             loop_iteration_ns_mean: if iter > 0 { (end.t_end - end.t_start) as f64 / iter as f64 } else { 0.0 },
@@ -524,9 +553,40 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     }
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     // Polled every 4096 iterations; iceoryx2's own latch (once a node is
-    // open, it may take SIGINT/SIGTERM for itself) every 256th time.
-    let mut stop = signals::StopCheck::new(256, || t.node.as_ref().is_some_and(|n| n.termination_requested()));
-    let report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, || stop.requested())?;
+    // open, it may take SIGINT/SIGTERM for itself) every 256th time; the
+    // run's dead peers every 200 ms (a stand-alone emulator has no runner to
+    // reap them).
+    let node = t.node.as_ref();
+    let mut stop = signals::StopCheck::new(256, || node.is_some_and(|n| n.termination_requested()));
+    let dead = std::cell::RefCell::new(Vec::<String>::new());
+    let mut next_reap = now_ns();
+    let look = || {
+        if stop.requested() {
+            return Look::Stop;
+        }
+        let now = now_ns();
+        let Some(n) = node.filter(|_| now >= next_reap) else { return Look::Go };
+        next_reap = now + 200_000_000;
+        let Ok(r) = n.reap_dead_peers() else { return Look::Go };
+        let mut found = Look::Go;
+        for p in r.dead() {
+            eprintln!("emulator: a peer died: {p}");
+            dead.borrow_mut().push(p.to_string());
+            found = match (p.role, found) {
+                (Some(crate::transport::Role::Console), _) | (_, Look::ConsoleDied) => Look::ConsoleDied,
+                (Some(crate::transport::Role::Simulator), _) => Look::RobotDied,
+                (_, f) => f,
+            };
+        }
+        found
+    };
+    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, look)?;
+    let dead = dead.into_inner();
+    if !dead.is_empty() {
+        report.process.dead_peers = dead;
+        let json = cfg.out_dir.join("emulator.json");
+        std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
+    }
     if any_udp {
         let return_path = ret.map(|r| r.finish(&cfg.out_dir)).transpose()?;
         let u = udp::UdpReport::new(args, &t, &bound, return_path);

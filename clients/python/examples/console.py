@@ -187,6 +187,12 @@ def main() -> int:
             lateness.append(time.monotonic_ns() - target)
             sent += 1
             fb.sent = sent
+            fb.poll()
+            if fb.sent_by_emulator is not None:
+                # The emulator ended the feedback early (its robot died):
+                # stop, so the stream ends with a marker it will take.
+                ended_by = "emulator_ended"
+                break
             if direct is not None:
                 try:
                     direct.send(sample, stamp)
