@@ -158,6 +158,8 @@ pub struct Forward {
     pub feedback: Option<Box<FeedbackPath>>,
     /// When the forward stream ended and its end marker went to the robot.
     forward_end_ns: Option<u64>,
+    /// Frames released to no robot, counted before the end marker.
+    delivered_unsubscribed: u64,
 }
 
 impl Forward {
@@ -174,6 +176,7 @@ impl Forward {
             sent_by_console: None,
             feedback: None,
             forward_end_ns: None,
+            delivered_unsubscribed: 0,
         }
     }
 
@@ -208,6 +211,7 @@ impl Forward {
         let end = match self.forward_end_ns {
             Some(t) => t,
             None => {
+                self.delivered_unsubscribed = sink.unsubscribed();
                 let _ = sink.send_with(&FrameSample::end_marker(self.link.released()), |_| {});
                 self.forward_end_ns = Some(now);
                 now
@@ -445,9 +449,10 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // Tell the simulator the stream ended (best effort: it may be gone),
     // unless the loop already did.
     if fwd.forward_end_ns.is_none() {
+        fwd.delivered_unsubscribed = sink.unsubscribed();
         let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
     }
-    let delivered_unsubscribed = sink.unsubscribed();
+    let delivered_unsubscribed = fwd.delivered_unsubscribed;
     let steal = steal_timer.stop();
     let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
     report.process.frames.delivered_unsubscribed = delivered_unsubscribed;

@@ -190,16 +190,22 @@ fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
 }
 
+/// entered = delivered + dropped + held_at_end, every frame the console
+/// sent entered, and the emulator ended on the console's end marker.
+fn assert_emulator_balanced(emu: &Value, sent: u64) {
+    assert_emulator_account(emu, sent);
+    assert_eq!(emu["ended_by"], "end_marker");
+}
+
 /// entered = delivered + dropped + held_at_end, and every frame the console
 /// sent entered.
-fn assert_emulator_balanced(emu: &Value, sent: u64) {
+fn assert_emulator_account(emu: &Value, sent: u64) {
     let f = &emu["frames"];
     let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
     assert_eq!(u(&f["sent_by_console"]), sent, "{f}");
     assert_eq!(u(&f["entered"]), sent, "{f}");
     assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
     assert_eq!(u(&f["held_at_end"]), 0, "{f}");
-    assert_eq!(emu["ended_by"], "end_marker");
     assert_eq!(u(&emu["send_errors"]), 0);
 }
 
@@ -549,4 +555,133 @@ fn a_client_of_another_payload_version_is_refused() {
     emu.finish("emulator", Duration::from_secs(60));
     robot.finish("robot", Duration::from_secs(60));
     assert_eq!(u(&run.json("robot.json")["received"]), 200);
+}
+
+/// Killing the Python robot mid-run: the emulator finds it dead, ends the
+/// feedback early, the console ends its stream on that, and the emulator
+/// drains it and ends, saying which peer died; every frame the console sent
+/// entered the emulator, and the emulator's account closes.
+#[test]
+fn killing_the_python_robot_ends_the_run_with_nothing_unaccounted() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("kill-robot");
+    let mut robot = run.python_robot();
+    let emu = run.emulator("PLM-1", &["--seed", "4", "--expected-frames", "60000"]);
+    let console = python("examples/console.py", &run)
+        .args(["--run-id", &run.id, "--frames", "60000", "--rate-hz", "1000", "--no-direct", "--out"])
+        .arg(run.out.join("console.json"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let console = Witness(Some(console));
+    std::thread::sleep(Duration::from_secs(3));
+    // SIGKILL: the robot leaves its node behind, as a crash does.
+    let mut child = robot.0.take().unwrap();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    console.finish("python console", Duration::from_secs(60));
+    emu.finish("emulator", Duration::from_secs(60));
+    let (c, e) = (run.json("console.json"), run.json("emulator.json"));
+    assert_eq!(e["ended_by"], "peer_died", "{e}");
+    let dead = e["dead_peers"].as_array().unwrap();
+    assert!(dead.iter().any(|d| d.as_str().unwrap().starts_with("simulator")), "{e}");
+    assert_eq!(c["ended_by"], "emulator_ended", "{c}");
+    let sent = u(&c["frames_sent"]);
+    assert!(sent > 1000 && sent < 60000, "the console stopped early: {sent}");
+    assert_eq!(u(&c["sent_unsubscribed"]), 0, "{c}");
+    assert_emulator_account(&e, sent);
+}
+
+/// A stand-alone emulator releases frames whether or not a robot is
+/// subscribed, and counts those that went nowhere apart; with
+/// `--wait-for-peer-s` it opens its input only once a robot is there.
+#[test]
+fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("no-robot");
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "300"]);
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "300", "--rate-hz", "1000", "--no-direct"]);
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    let e = run.json("emulator.json");
+    assert_emulator_balanced(&e, 300);
+    assert_eq!(u(&e["frames"]["delivered"]), 300);
+    assert_eq!(u(&e["frames"]["delivered_unsubscribed"]), 300, "{e}");
+
+    let run = Run::new("wait-robot");
+    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
+    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let emu = netfi()
+        .args(["emulator", "--run-id", &run.id, "--scenario", "Normal", "--seed", "1", "--wait-for-peer-s", "60", "--out"])
+        .arg(&run.out)
+        .args(&pin)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let emu = Witness(Some(emu));
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(!run.out.join("emulator.ready").exists(), "the emulator was ready without a robot");
+    let robot = run.python_robot();
+    wait_file(&run.out.join("emulator.ready"));
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "300", "--rate-hz", "1000", "--no-direct"]);
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    let (e, r) = (run.json("emulator.json"), run.json("robot.json"));
+    assert_emulator_balanced(&e, 300);
+    assert_eq!(u(&e["frames"]["delivered_unsubscribed"]), 0, "{e}");
+    assert_eq!(u(&r["received"]), 300, "{r}");
+}
+
+/// netfi's own processes, refused by a run whose channel carries another
+/// payload version, name both versions.
+#[test]
+fn the_rust_refusal_names_both_payload_versions() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("rust-refusal");
+    let holder = r#"
+import sys, netfi_iox as n
+class V0(n.FrameSample):
+    @staticmethod
+    def type_name():
+        return "netfi::FrameSample.v0"
+with n.RunNode(sys.argv[1], "tool") as node:
+    p = node.publisher("console", V0)
+    print("ready", flush=True)
+    sys.stdin.read()
+"#;
+    let mut c = Command::new("python3");
+    c.env("PYTHONPATH", root().join("clients/python"))
+        .env("NETFI_IOX_LAYOUT", rust_layout(&run.config))
+        .args(["-c", holder, &run.id])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut child = c.spawn().unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.as_mut().unwrap()), &mut line).unwrap();
+    assert_eq!(line.trim(), "ready");
+    let o = netfi()
+        .args(["emulator", "--run-id", &run.id, "--scenario", "Normal", "--no-pin", "--out"])
+        .arg(&run.out)
+        .output()
+        .unwrap();
+    drop(child.stdin.take());
+    let _ = child.wait();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "the emulator opened a v0 channel: {err}");
+    assert!(err.contains("netfi::FrameSample.v0") && err.contains("netfi::FrameSample.v1"), "{err}");
 }
