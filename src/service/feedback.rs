@@ -144,6 +144,11 @@ impl FeedbackPath {
         }
     }
 
+    /// The two ports (tests drive in-memory ones).
+    pub fn ports_mut(&mut self) -> (&mut FeedbackIngress, &mut FeedbackEgress) {
+        (&mut self.source, &mut self.sink)
+    }
+
     /// Keeps the trace's writer thread off `core`.
     pub fn keep_trace_off_core(&self, core: usize) {
         self.link.keep_trace_off_core(core);
