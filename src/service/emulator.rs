@@ -357,8 +357,6 @@ pub enum Look {
     /// end marker comes early) and the stream drains as usual, so every
     /// frame stays accounted for; without a feedback loop, stop now.
     RobotDied,
-    /// The console died: no end marker will come; stop now.
-    ConsoleDied,
 }
 
 /// How the loop ended.
@@ -391,7 +389,6 @@ fn spin<S: FrameSource, K: FrameSink>(
             match look() {
                 Look::Go => {}
                 Look::Stop => break "signal",
-                Look::ConsoleDied => break "peer_died",
                 Look::RobotDied => match fwd.feedback.as_deref_mut() {
                     Some(f) => {
                         robot_died = true;
@@ -559,10 +556,11 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     // Polled every 4096 iterations; iceoryx2's own latch (once a node is
     // open, it may take SIGINT/SIGTERM for itself) every 256th time; the
-    // run's dead peers every 200 ms (a stand-alone emulator has no runner to
-    // reap them).
-    let node = t.node.as_ref();
-    let mut stop = signals::StopCheck::new(256, || node.is_some_and(|n| n.termination_requested()));
+    // run's dead peers every 200 ms when stand-alone (under `netfi run` the
+    // runner reaps them, off this core; two reapers may wait on each other).
+    let node = t.node.as_ref().filter(|_| std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
+    let term = t.node.as_ref();
+    let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
     let dead = std::cell::RefCell::new(Vec::<String>::new());
     let mut next_reap = now_ns();
     let look = || {
@@ -577,11 +575,11 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         for p in r.dead() {
             eprintln!("emulator: a peer died: {p}");
             dead.borrow_mut().push(p.to_string());
-            found = match (p.role, found) {
-                (Some(crate::transport::Role::Console), _) | (_, Look::ConsoleDied) => Look::ConsoleDied,
-                (Some(crate::transport::Role::Simulator), _) => Look::RobotDied,
-                (_, f) => f,
-            };
+            // A dead console is reported, and the run goes on as before
+            // (until SIGINT/SIGTERM): a restarted console may take over.
+            if p.role == Some(crate::transport::Role::Simulator) {
+                found = Look::RobotDied;
+            }
         }
         found
     };
