@@ -50,6 +50,33 @@ pub struct EmulatorConfig {
     /// Clear the loop's core of other processes' threads, movable kernel
     /// threads and device interrupts for the run ([`crate::host::isolate`]).
     pub isolate: bool,
+    /// Samples may carry opaque datagrams (the UDP bridge's raw mode); on
+    /// any other ingress a sample flagged raw is bad input.
+    pub accept_raw: bool,
+}
+
+/// Bad input from the sender, by kind: each also a drop (`wrong_size` for
+/// the lengths, `bad_flags`), and who was sending when it came.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct BadInput {
+    /// `len` 0.
+    pub len_zero: u64,
+    /// `len` between 1 and 123: a payload shorter than an ITP frame.
+    pub len_short: u64,
+    /// `len` above 124: more than the sample can carry.
+    pub len_oversize: u64,
+    /// Control bits no sender may set (garbage), a raw flag on an ingress
+    /// without raw payloads, or a malformed end marker.
+    pub bad_flags: u64,
+    /// The senders on the ingress when bad input was seen (node, executable
+    /// and pid; or address).
+    pub from: Vec<String>,
+}
+
+impl BadInput {
+    fn total(&self) -> u64 {
+        self.len_zero + self.len_short + self.len_oversize + self.bad_flags
+    }
 }
 
 /// A change in a peer's presence, seen by the emulator.
@@ -74,6 +101,9 @@ pub struct EmulatorFrames {
     pub sent_by_console: Option<u64>,
     /// Frames that passed with a wrong checksum (when not dropped for it).
     pub bad_checksum_passed: u64,
+    /// Bad input, by kind, and who sent it.
+    #[serde(default)]
+    pub bad_input: BadInput,
     /// Of the delivered frames, those released while no robot was
     /// subscribed: they went nowhere (a stand-alone emulator started before
     /// its robot; see `--wait-for-peer-s`).
@@ -160,6 +190,10 @@ pub struct Forward {
     forward_end_ns: Option<u64>,
     /// Frames released to no robot, counted before the end marker.
     delivered_unsubscribed: u64,
+    /// Bad input by kind.
+    pub bad_input: BadInput,
+    /// Whether raw (opaque) samples are accepted.
+    pub accept_raw: bool,
 }
 
 impl Forward {
@@ -177,6 +211,8 @@ impl Forward {
             feedback: None,
             forward_end_ns: None,
             delivered_unsubscribed: 0,
+            bad_input: BadInput::default(),
+            accept_raw: true,
         }
     }
 
@@ -229,13 +265,14 @@ impl Forward {
     pub fn take<S: FrameSource>(&mut self, source: &mut S, clock: impl FnOnce() -> u64) {
         let sample = &mut self.sample;
         match source.try_recv(sample) {
-            Ok(true) if sample.is_end() => self.sent_by_console = Some(sample.console_index),
+            // An end marker is the flag alone, with no payload.
+            Ok(true) if sample.flags == FrameSample::FLAG_END && sample.len == 0 => self.sent_by_console = Some(sample.console_index),
             Ok(true) => {
                 let t_take = clock();
                 sample.ingress_index = self.link.next_ingress_index();
                 sample.ingress_ns = t_take;
                 let arrival = |sequence| Arrival { sequence, console_index: sample.console_index, send_ns: sample.send_ns };
-                let entered = match classify(sample, self.drop_bad_checksum) {
+                let entered = match classify(sample, self.drop_bad_checksum, self.accept_raw, &mut self.bad_input) {
                     Ok((seq, bad)) => {
                         self.bad_checksum_passed += u64::from(bad);
                         self.link.ingress(t_take, *sample, arrival(Some(seq)))
@@ -264,12 +301,24 @@ impl Forward {
 /// Checks size and checksum. `Ok((sequence, checksum_bad))` for a frame to
 /// decide; `Err` for one to reject, with its sequence if readable.
 #[inline]
-fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+fn classify(s: &FrameSample, drop_bad_checksum: bool, accept_raw: bool, bad: &mut BadInput) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+    const KNOWN: u32 = FrameSample::FLAG_END | FrameSample::FLAG_RAW;
+    if s.flags & !KNOWN != 0 || s.is_end() || (s.is_raw() && !accept_raw) {
+        // Garbage control bits, an end marker with a payload, or an opaque
+        // datagram where none may come.
+        bad.bad_flags += 1;
+        return Err((Invalid::BadFlags, None));
+    }
     if s.is_raw() {
         // An opaque datagram: no protocol to check; its "sequence" is its console index.
         return Ok((s.console_index as u32, false));
     }
     if s.len as usize != ITP_FRAME_LEN {
+        match s.len {
+            0 => bad.len_zero += 1,
+            n if (n as usize) < ITP_FRAME_LEN => bad.len_short += 1,
+            _ => bad.len_oversize += 1,
+        }
         return Err((Invalid::WrongSize, None));
     }
     let view = ItpView::new_unchecked(&s.wire[..]);
@@ -378,6 +427,7 @@ fn spin<S: FrameSource, K: FrameSink>(
     mut look: impl FnMut() -> Look,
 ) -> LoopEnd {
     let mut robot_died = false;
+    let mut bad_seen = 0u64;
     let mut peer_events = Vec::new();
     let mut peers = (source.peers(), sink.peers());
     let t_start = now_ns();
@@ -386,6 +436,15 @@ fn spin<S: FrameSource, K: FrameSink>(
         fwd.turn(source, sink, ret.as_deref_mut());
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
+            if fwd.bad_input.total() != bad_seen {
+                // Off the hot path: who is sending now.
+                bad_seen = fwd.bad_input.total();
+                for who in source.senders() {
+                    if !fwd.bad_input.from.contains(&who) {
+                        fwd.bad_input.from.push(who);
+                    }
+                }
+            }
             match look() {
                 Look::Go => {}
                 Look::Stop => break "signal",
@@ -436,6 +495,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
+    fwd.accept_raw = cfg.accept_raw;
     if let Some(f) = feedback {
         fwd = fwd.with_feedback(f);
     }
@@ -471,7 +531,7 @@ impl EmulatorReport {
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
-        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, .. } = fwd;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, bad_input, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
         let feedback = feedback.map(|f| f.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
         if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
@@ -500,6 +560,7 @@ impl EmulatorReport {
                 held_at_end: l.held_at_end,
                 sent_by_console,
                 bad_checksum_passed,
+                bad_input,
                 delivered_unsubscribed: 0,
             },
             ended_by: end.ended_by.to_string(),
@@ -644,6 +705,7 @@ fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
         out_dir: args.out.clone(),
         rt_priority: args.rt_priority,
         isolate: args.isolate,
+        accept_raw: args.payload == crate::transport::Payload::Raw,
     })
 }
 

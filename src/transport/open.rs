@@ -61,6 +61,14 @@ impl FrameSource for Ingress {
         }
     }
 
+    fn senders(&mut self) -> Vec<String> {
+        match self {
+            Ingress::Iceoryx2(p) => FrameSource::senders(p),
+            Ingress::Udp(p) => p.sender().map(|a| vec![format!("udp://{}", a.addr())]).unwrap_or_default(),
+            Ingress::Memory(_) => Vec::new(),
+        }
+    }
+
     #[inline]
     fn sender(&self) -> Option<&PeerAddr> {
         match self {

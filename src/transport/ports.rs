@@ -39,6 +39,12 @@ pub trait FrameSource {
     fn sender(&self) -> Option<&PeerAddr> {
         None
     }
+
+    /// Who sends on this source now, as people name them, where the
+    /// transport knows: for reports of bad input. Off the hot path.
+    fn senders(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// A frame sink.
@@ -98,6 +104,10 @@ impl FrameSink for MemoryPort {
 }
 
 impl FrameSource for FrameSubscriber {
+    fn senders(&mut self) -> Vec<String> {
+        self.publishers()
+    }
+
     #[inline]
     fn try_recv(&mut self, out: &mut FrameSample) -> Result<bool, PortError> {
         match FrameSubscriber::try_recv(self) {

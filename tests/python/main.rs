@@ -685,3 +685,38 @@ with n.RunNode(sys.argv[1], "tool") as node:
     assert!(!o.status.success(), "the emulator opened a v0 channel: {err}");
     assert!(err.contains("netfi::FrameSample.v0") && err.contains("netfi::FrameSample.v1"), "{err}");
 }
+
+/// A foreign publisher's bad input — a `len` of zero, shorter or longer
+/// than a frame, garbage control bits, a raw flag, garbage bytes, then a
+/// flood faster than the emulator takes it — is dropped by kind and
+/// counted, with the sender named; the emulator stays up and the account
+/// closes.
+#[test]
+fn bad_input_is_counted_by_kind_and_its_sender_named() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("bad-input");
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "40000"]);
+    let o = python("../../tests/python/bad_input.py", &run).args([&run.id, "30000"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sent: Value = serde_json::from_slice(&o.stdout).unwrap();
+    emu.finish("emulator", Duration::from_secs(60));
+    let e = run.json("emulator.json");
+    let f = &e["frames"];
+    // What the publisher was told its emulator's queue refused never entered.
+    let offered = u(&sent["sent"]);
+    let refused = u(&sent["refused"]);
+    assert_eq!(u(&f["entered"]), offered - refused, "{f}");
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert_eq!(u(&f["dropped"]["wrong_size"]), 3, "{f}");
+    assert_eq!(u(&f["dropped"]["bad_flags"]), 2, "{f}");
+    let b = &f["bad_input"];
+    assert_eq!((u(&b["len_zero"]), u(&b["len_short"]), u(&b["len_oversize"]), u(&b["bad_flags"])), (1, 1, 1, 2), "{b}");
+    assert_eq!(u(&f["bad_checksum_passed"]), 1, "{f}");
+    let from: Vec<&str> = b["from"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    assert!(from.iter().any(|w| w.starts_with("console") && w.contains("pid")), "{b}");
+    assert_eq!(e["ended_by"], "end_marker");
+}

@@ -25,6 +25,7 @@ pub struct FrameSubscriber<T: IpcPayload = FrameSample> {
     run: RunId,
     channel: Channel,
     stats: SubscriberStats,
+    config: IpcConfig,
 }
 
 /// Counters of one subscriber since it was opened.
@@ -186,6 +187,7 @@ impl<T: IpcPayload> FrameSubscriber<T> {
             run: run.clone(),
             channel,
             stats: SubscriberStats::default(),
+            config: config.clone(),
         })
     }
 
@@ -226,6 +228,29 @@ impl<T: IpcPayload> FrameSubscriber<T> {
     /// [`IpcNode::reap_dead_peers`]: super::IpcNode::reap_dead_peers
     pub fn peers_connected(&self) -> usize {
         self.service.dynamic_config().number_of_publishers()
+    }
+
+    /// Who publishes on the channel now: each publisher's node as
+    /// `role (executable, pid N)` or `node \`name\` (…)`. Lists the run's
+    /// nodes: for reports, never per frame.
+    pub fn publishers(&self) -> Vec<String> {
+        use iceoryx2::node::{NodeState, NodeView};
+        use iceoryx2::prelude::CallbackProgression;
+        let mut ids = Vec::new();
+        self.service.dynamic_config().list_publishers(|d| {
+            ids.push(d.node_id);
+            CallbackProgression::Continue
+        });
+        let mut out = Vec::new();
+        let _ = iceoryx2::node::Node::<Ipc>::list(self.config.iceoryx2(), |state| {
+            if let NodeState::Alive(v) = &state {
+                if ids.contains(v.id()) {
+                    out.push(super::liveness::describe(&self.config, v.details()).to_string());
+                }
+            }
+            CallbackProgression::Continue
+        });
+        out
     }
 
     /// Counters since the subscriber was opened.
