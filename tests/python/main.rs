@@ -449,6 +449,15 @@ fn rust_console_through_the_emulator_to_the_python_robot() {
     assert_eq!(u(&r["sent_by_console"]), 3000);
     assert_eq!((u(&r["bad_checksum"]), u(&r["wrong_size"])), (0, 0));
     assert!(u(&r["applied"]) > 0);
+    // The Python robot's feedback reached netfi's console, every piece.
+    let c = run.json("console.json");
+    assert_eq!(u(&e["feedback"]["entered"]), 3000, "{}", e["feedback"]);
+    assert_eq!(u(&c["feedback"]["received"]), 3000, "{}", c["feedback"]);
+    assert_eq!(u(&c["feedback"]["round_trip_ns"]["count"]), 3000, "{}", c["feedback"]);
+    assert_eq!(c["feedback"]["ended_by"], "end_marker");
+    for arm in 0..2 {
+        assert_eq!(c["feedback"]["divergence_max_mm"][arm].as_f64(), Some(0.0), "nothing lost, yet the robot diverged: {}", c["feedback"]);
+    }
     for arm in r["divergence"].as_array().unwrap() {
         for (k, v) in arm.as_object().unwrap() {
             assert!(v.as_f64().unwrap().abs() < 1e-9, "{k} diverged by {v} with nothing lost: {r}");
@@ -490,6 +499,12 @@ fn python_console_through_the_emulator_to_the_rust_simulator() {
     assert_eq!(u(&s["received_direct"]), 3000);
     assert_eq!((u(&s["bad_checksum"]), u(&s["wrong_size"])), (0, 0));
     assert_eq!(s["ended_by"], "end_marker");
+    // netfi's simulator's feedback reached the Python console, every piece.
+    let c = run.json("console.json");
+    assert_eq!(u(&s["feedback_sent"]), delivered, "{s}");
+    assert_eq!(u(&e["feedback"]["entered"]), delivered, "{}", e["feedback"]);
+    assert_eq!(u(&c["feedback"]["received"]), delivered, "{}", c["feedback"]);
+    assert_eq!(c["feedback"]["ended_by"], "end_marker");
 }
 
 /// The Python console replays the real capture: every record, in order,
