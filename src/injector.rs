@@ -23,6 +23,9 @@ pub enum Invalid {
     WrongSize,
     /// Its checksum does not match its contents (when such frames are dropped).
     BadChecksum,
+    /// Its control bits are none the sender may set (garbage, or a
+    /// malformed end marker).
+    BadFlags,
 }
 
 impl Invalid {
@@ -30,6 +33,7 @@ impl Invalid {
         match self {
             Invalid::WrongSize => "wrong_size",
             Invalid::BadChecksum => "bad_checksum",
+            Invalid::BadFlags => "bad_flags",
         }
     }
 }
@@ -90,12 +94,13 @@ pub struct Counts {
     pub dropped_queue_full: u64,
     pub dropped_wrong_size: u64,
     pub dropped_bad_checksum: u64,
+    pub dropped_bad_flags: u64,
     pub held: u64,
 }
 
 impl Counts {
     pub fn dropped(&self) -> u64 {
-        self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum
+        self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum + self.dropped_bad_flags
     }
 
     /// `entered = released + dropped + held`.
@@ -199,6 +204,7 @@ impl<T: Copy + Default> Injector<T> {
         match why {
             Invalid::WrongSize => self.counts.dropped_wrong_size += 1,
             Invalid::BadChecksum => self.counts.dropped_bad_checksum += 1,
+            Invalid::BadFlags => self.counts.dropped_bad_flags += 1,
         }
         Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)) }
     }
@@ -238,6 +244,7 @@ impl<T: Copy + Default> Injector<T> {
             ("queue_full", self.counts.dropped_queue_full),
             ("wrong_size", self.counts.dropped_wrong_size),
             ("bad_checksum", self.counts.dropped_bad_checksum),
+            ("bad_flags", self.counts.dropped_bad_flags),
         ] {
             if n > 0 {
                 out.push((name, n));

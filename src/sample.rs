@@ -94,6 +94,102 @@ impl FrameSample {
     }
 }
 
+/// The robot's feedback to the console, one per command it applied: its
+/// integrated pose then, which command that was, and the emulator's stamps
+/// of the way back (docs/interface.md). All times are CLOCK_MONOTONIC ns.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("netfi::FeedbackSample.v1")]
+#[repr(C)]
+pub struct FeedbackSample {
+    /// Robot send time, stamped just before publishing.
+    pub send_ns: u64,
+    /// The robot's own feedback counter (0, 1, 2, ...); in an end marker,
+    /// the number of feedback samples sent before it.
+    pub robot_index: u64,
+    /// `console_index` of the command this feedback answers (the last one
+    /// the robot received).
+    pub console_index: u64,
+    /// That command's console send time, echoed.
+    pub command_send_ns: u64,
+    /// That command's emulator stamps, echoed: taken in, released, and the
+    /// delay the forward scenario injected (zero when it came directly).
+    pub command_ingress_ns: u64,
+    pub command_release_ns: u64,
+    pub command_injected_delay_ns: u64,
+    /// Assigned by the emulator when the feedback enters it.
+    pub ingress_index: u64,
+    /// Time the emulator took the feedback off the robot's port.
+    pub ingress_ns: u64,
+    /// Delay the return scenario injected.
+    pub injected_delay_ns: u64,
+    /// Scheduled release time towards the console.
+    pub release_sched_ns: u64,
+    /// Actual release time, stamped just before publishing to the console.
+    pub release_ns: u64,
+    /// ITP `sequence` of the command this feedback answers.
+    pub sequence: u32,
+    /// Control bits: [`FeedbackSample::FLAG_END`]; zero for feedback.
+    pub flags: u32,
+    /// Integrated position per arm, x, y, z (ITP position units).
+    pub position: [[i64; 3]; 2],
+    /// Integrated rotation per arm, x, y, z (sum of the ITP rotation increments).
+    pub rotation: [[f64; 3]; 2],
+    /// Grasp per arm (absolute, the last command's).
+    pub grasp: [i32; 2],
+    /// Commands the robot has received so far (this one included).
+    pub commands: u64,
+}
+
+const _: () = assert!(core::mem::size_of::<FeedbackSample>() == 216);
+const _: () = assert!(core::mem::align_of::<FeedbackSample>() == 8);
+
+impl FeedbackSample {
+    /// The iceoryx2 type name; must match between all processes.
+    pub const TYPE_NAME: &'static str = "netfi::FeedbackSample.v1";
+
+    /// Control sample marking the end of the feedback stream. Its
+    /// `robot_index` carries the number of feedback samples sent before it.
+    pub const FLAG_END: u32 = 1;
+
+    /// An all-zero sample.
+    pub const ZERO: FeedbackSample = FeedbackSample {
+        send_ns: 0,
+        robot_index: 0,
+        console_index: 0,
+        command_send_ns: 0,
+        command_ingress_ns: 0,
+        command_release_ns: 0,
+        command_injected_delay_ns: 0,
+        ingress_index: 0,
+        ingress_ns: 0,
+        injected_delay_ns: 0,
+        release_sched_ns: 0,
+        release_ns: 0,
+        sequence: 0,
+        flags: 0,
+        position: [[0; 3]; 2],
+        rotation: [[0.0; 3]; 2],
+        grasp: [0; 2],
+        commands: 0,
+    };
+
+    /// An end-of-stream marker after `sent` feedback samples.
+    pub fn end_marker(sent: u64) -> FeedbackSample {
+        FeedbackSample { robot_index: sent, flags: FeedbackSample::FLAG_END, ..FeedbackSample::ZERO }
+    }
+
+    /// Whether this sample is an end-of-stream marker rather than feedback.
+    pub fn is_end(&self) -> bool {
+        self.flags & FeedbackSample::FLAG_END != 0
+    }
+}
+
+impl Default for FeedbackSample {
+    fn default() -> Self {
+        FeedbackSample::ZERO
+    }
+}
+
 impl ItpFrame {
     /// Writes the frame into a shared-memory sample's wire bytes and sets its
     /// length; the sample's metadata is left alone.
@@ -142,6 +238,20 @@ mod tests {
         assert_eq!(ItpFrame::from_sample(&s), Ok(f));
         s.len = 100;
         assert_eq!(ItpFrame::from_sample(&s), Err(FrameError::WrongLength { expected: 124, found: 100 }));
+    }
+
+    #[test]
+    fn feedback_type_name_and_offsets_are_pinned() {
+        // SAFETY: type_name only returns the attribute's string.
+        assert_eq!(unsafe { FeedbackSample::type_name() }, FeedbackSample::TYPE_NAME);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, command_injected_delay_ns), 48);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, ingress_index), 56);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, release_ns), 88);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, sequence), 96);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, position), 104);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, rotation), 152);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, grasp), 200);
+        assert_eq!(core::mem::offset_of!(FeedbackSample, commands), 208);
     }
 
     #[test]

@@ -61,3 +61,49 @@ fn the_emulator_link_does_not_allocate_per_frame() {
         assert!(released > 100_000, "{name}: only {released} frames released");
     }
 }
+
+/// The feedback path (robot → console) polled by the emulator's loop:
+/// zero allocations per feedback sample either, through a delaying return
+/// scenario.
+#[test]
+fn the_feedback_path_does_not_allocate_per_sample() {
+    use netfi::sample::FeedbackSample;
+    use netfi::transport::{FeedbackEgress, FeedbackIngress};
+    use std::collections::VecDeque;
+    let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
+    let frames = 200_000u64;
+    let link = Link::new(Scenario::new(&spec, 5).unwrap(), 1 << 16, frames).unwrap();
+    let path = netfi::service::feedback::FeedbackPath::new(
+        link,
+        5,
+        FeedbackIngress::Memory(VecDeque::with_capacity(4)),
+        FeedbackEgress::Memory(VecDeque::with_capacity(1 << 17)),
+    );
+    let mut fwd = Forward::new(Link::new(Scenario::new(&scenario::parse_str("", "n.toml", "n").unwrap(), 1).unwrap(), 16, 16).unwrap(), false)
+        .with_feedback(path);
+    let mut console = MemoryPort::with_capacity(4);
+    let mut simulator = MemoryPort::with_capacity(16);
+    let (mut before, mut released) = (0, 0u64);
+    for i in 0..frames {
+        if i == frames / 2 {
+            before = allocations();
+        }
+        let fb = fwd.feedback.as_deref_mut().unwrap();
+        let (inp, out) = fb.ports_mut();
+        if let FeedbackEgress::Memory(q) = out {
+            released += q.len() as u64;
+            q.clear();
+        }
+        if let FeedbackIngress::Memory(q) = inp {
+            q.push_back(FeedbackSample { robot_index: i, send_ns: netfi::clock::now_ns(), ..FeedbackSample::ZERO });
+        }
+        // Spaced like 200 kHz feedback: the 10–20 µs delays release in turn.
+        let t = netfi::clock::now_ns() + 5_000;
+        while netfi::clock::now_ns() < t {
+            fwd.turn(&mut console, &mut simulator, None);
+        }
+    }
+    let n = allocations() - before;
+    assert_eq!(n, 0, "{n} allocations in {} feedback samples", frames / 2);
+    assert!(released > frames / 2, "only {released} feedback samples released");
+}

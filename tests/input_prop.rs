@@ -17,7 +17,7 @@ use netfi::frame::ItpView;
 use netfi::injector::Invalid;
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::scenario::{parse_str, Scenario};
-use netfi::service::emulator::classify;
+use netfi::service::emulator::{classify, BadInput};
 use proptest::prelude::*;
 
 fn config() -> ProptestConfig {
@@ -182,7 +182,7 @@ proptest! {
             let f = netfi::frame::ItpFrame::parse_unverified(&ItpView::new_unchecked(&s.wire[..])).with_checksum();
             s.wire = f.to_bytes();
         }
-        let got = classify(&s, drop_bad);
+        let got = classify(&s, drop_bad, false, &mut BadInput::default());
         if bytes.len() != ITP_FRAME_LEN {
             prop_assert_eq!(got, Err((Invalid::WrongSize, None)));
         } else {
@@ -199,6 +199,6 @@ proptest! {
         s.flags = FrameSample::FLAG_RAW;
         s.len = len;
         s.console_index = console_index;
-        prop_assert_eq!(classify(&s, drop_bad), Ok((console_index as u32, false)));
+        prop_assert_eq!(classify(&s, drop_bad, true, &mut BadInput::default()), Ok((console_index as u32, false)));
     }
 }

@@ -32,6 +32,10 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         egress: Endpoint::Iceoryx2,
         payload: Payload::Itp,
         egress_bind: None,
+        console_from: None,
+        // The benchmark measures the forward path, as it always has.
+        no_feedback: true,
+        wait_for_peer_s: None,
         return_scenario: None,
         return_seed: None,
         return_to: None,

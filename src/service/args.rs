@@ -86,6 +86,13 @@ pub struct ConsoleArgs {
     /// Seconds to wait for the emulator to subscribe before streaming.
     #[arg(long, default_value_t = 10.0)]
     pub wait_for_peer_s: f64,
+    /// Seconds to wait, after the last frame, for the end of the robot's
+    /// feedback (while an emulator publishes it).
+    #[arg(long, default_value_t = 5.0)]
+    pub feedback_wait_s: f64,
+    /// Print the round trip and the robot's divergence once a second.
+    #[arg(long)]
+    pub live: bool,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -171,6 +178,15 @@ pub struct EmulatorArgs {
     /// Requested kernel receive/send buffer of each UDP socket, bytes.
     #[arg(long, default_value_t = DEFAULT_UDP_BUFFER_BYTES)]
     pub udp_buffer_bytes: usize,
+    /// Open the egress first and wait up to this many seconds for a robot
+    /// to subscribe to it before opening the ingress, so no frame is
+    /// released into nothing (a stand-alone emulator for foreign clients).
+    #[arg(long, value_name = "S")]
+    pub wait_for_peer_s: Option<f64>,
+    /// With iceoryx2 on both sides: do not open the feedback loop
+    /// (`feedback` → `feedback_out`).
+    #[arg(long)]
+    pub no_feedback: bool,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -257,6 +273,13 @@ pub struct RunArgs {
     /// Print the JSON report instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Pass the robot's feedback back to the console through this scenario
+    /// (file or preset; default Normal: nothing injected).
+    #[arg(long, value_name = "SCENARIO")]
+    pub return_scenario: Option<String>,
+    /// Seed of the return scenario (default: derived from the run's seed).
+    #[arg(long)]
+    pub return_seed: Option<u64>,
     /// Do not send the direct (baseline) copy of each frame to the simulator:
     /// halves the console's and simulator's work at very high rates, at the
     /// price of the in-run baseline and the console-side kinematics.
@@ -276,6 +299,8 @@ impl ConsoleArgs {
             .opt("--core", self.core)
             .opt("--avoid-core", self.avoid_core)
             .val("--wait-for-peer-s", self.wait_for_peer_s)
+            .val("--feedback-wait-s", self.feedback_wait_s)
+            .switch("--live", self.live)
             .0
     }
 }
@@ -292,6 +317,10 @@ impl EmulatorArgs {
             .opt("--rt-priority", self.rt_priority)
             .switch("--isolate", self.isolate)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .opt("--return-scenario", self.return_scenario.as_ref())
+            .opt("--return-seed", self.return_seed)
+            .opt("--wait-for-peer-s", self.wait_for_peer_s)
+            .switch("--no-feedback", self.no_feedback)
             .0
     }
 
@@ -299,18 +328,35 @@ impl EmulatorArgs {
     /// would be accepted.
     pub fn validate(&self) -> anyhow::Result<()> {
         let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
+        if let Some(s) = self.wait_for_peer_s {
+            if !(s.is_finite() && s >= 0.0) {
+                bail!("--wait-for-peer-s must be a non-negative number of seconds, got {s}");
+            }
+            if e {
+                bail!("--wait-for-peer-s waits for a robot on the iceoryx2 egress; a UDP robot does not subscribe");
+            }
+        }
         if !(i || e) {
             if self.run_id.is_none() {
                 bail!("--run-id is required with the iceoryx2 ingress and egress");
             }
+            if self.return_to.is_some() || self.no_return {
+                bail!("--return-to and --no-return apply to the UDP return path; with iceoryx2 on both sides the feedback goes to the console's `feedback_out` (--no-feedback turns it off)");
+            }
+            if self.no_feedback && (self.return_scenario.is_some() || self.return_seed.is_some()) {
+                bail!("--no-feedback cannot be combined with --return-scenario or --return-seed");
+            }
             return Ok(());
+        }
+        if self.no_feedback {
+            bail!("--no-feedback applies to the iceoryx2 feedback loop (iceoryx2 on both sides)");
         }
         if self.payload == Payload::Raw && !(i && e) {
             bail!("--payload raw needs UDP on both sides (--ingress udp://… --egress udp://…): an iceoryx2 port carries ITP frames only");
         }
         let return_opts = self.return_scenario.is_some() || self.return_to.is_some() || self.return_seed.is_some();
         if return_opts && !(i && e) {
-            bail!("--return-scenario, --return-to and --return-seed apply to the return path, which needs UDP on both sides");
+            bail!("--return-scenario, --return-to and --return-seed apply to the return path, which needs UDP on both sides (or iceoryx2 on both, for the feedback loop)");
         }
         if self.no_return && return_opts {
             bail!("--no-return cannot be combined with --return-scenario, --return-to or --return-seed");
@@ -350,6 +396,7 @@ impl EmulatorArgs {
             console_from: self.console_from,
             queue_capacity,
             idle_end_ns: self.idle_end_ms.map(|ms| (ms * 1e6) as u64),
+            wait_for_peer_ns: self.wait_for_peer_s.map(|s| (s * 1e9) as u64),
         }
     }
 }

@@ -15,7 +15,10 @@ use crate::clock::{now_ns, wait_until_ns, Wait};
 use crate::host::StealTimer;
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::motion::{MotionGenerator, MotionParams};
-use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::frame::{ItpFrame, ItpView};
+use crate::kinematics::{Integrator, KinematicsConfig};
+use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
+use crate::transport::FrameSubscriber;
 use crate::service::args::ConsoleArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSink;
@@ -41,10 +44,149 @@ pub struct ConsoleReport {
     /// Frames sent while no emulator was subscribed.
     pub sent_unsubscribed: u64,
     pub direct_sent: u64,
-    /// `done` or `signal`.
+    /// `done`, `signal`, or `emulator_ended` (the emulator ended the
+    /// feedback early: the robot died).
     pub ended_by: String,
     pub steal_ms: u64,
     pub steal_fraction: f64,
+    /// The robot's feedback as it came back through the emulator.
+    #[serde(default)]
+    pub feedback: Option<ConsoleFeedback>,
+}
+
+/// What the console saw of the robot's feedback.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsoleFeedback {
+    /// Feedback samples received on `feedback_out`.
+    pub received: u64,
+    /// Feedback the emulator said it released (from its end marker).
+    pub sent_by_emulator: Option<u64>,
+    /// Feedback naming a command this console never sent.
+    pub unknown_command: u64,
+    /// `end_marker`, `no_emulator` (nobody published feedback), `timeout`
+    /// or `signal`.
+    pub ended_by: String,
+    /// Command sent → the robot's feedback naming it received.
+    pub round_trip_ns: Summary,
+    /// The emulator's own share of each round trip: both directions'
+    /// release − take − injected delay.
+    pub emulator_share_ns: Summary,
+    /// Robot position (from its feedback) against the console's own pose
+    /// after the same command, per arm, mm.
+    pub divergence_final_mm: [f64; 2],
+    pub divergence_max_mm: [f64; 2],
+    pub round_trip_hlog: Option<std::path::PathBuf>,
+}
+
+/// Commands whose console-side pose is kept, to compare with the robot's
+/// feedback for them: 65,536 (65 s at 1 kHz).
+const POSE_RING: usize = 1 << 16;
+
+/// The console's end of the feedback loop: the port, the round trip, and
+/// the console's own pose per recent command.
+struct FeedbackIn {
+    port: FrameSubscriber<FeedbackSample>,
+    sample: FeedbackSample,
+    rtt: LatencyHistogram,
+    share: LatencyHistogram,
+    received: u64,
+    sent_by_emulator: Option<u64>,
+    unknown_command: u64,
+    own: Integrator,
+    poses: Vec<[[i64; 3]; 2]>,
+    unit_mm: f64,
+    div_final: [f64; 2],
+    div_max: [f64; 2],
+}
+
+impl FeedbackIn {
+    fn new(port: FrameSubscriber<FeedbackSample>) -> Result<FeedbackIn> {
+        let cfg = KinematicsConfig::default();
+        Ok(FeedbackIn {
+            port,
+            sample: FeedbackSample::ZERO,
+            rtt: LatencyHistogram::new(),
+            share: LatencyHistogram::new(),
+            received: 0,
+            sent_by_emulator: None,
+            unknown_command: 0,
+            own: Integrator::new(cfg).context("console kinematics")?,
+            poses: vec![[[0; 3]; 2]; POSE_RING],
+            unit_mm: cfg.unit_mm,
+            div_final: [0.0; 2],
+            div_max: [0.0; 2],
+        })
+    }
+
+    /// The console sent command `index` (`wire`) at `t`: its own pose after it.
+    fn sent(&mut self, index: u64, t: u64, wire: &[u8; ITP_FRAME_LEN]) {
+        self.own.push(t, &ItpFrame::parse_unverified(&ItpView::new_unchecked(&wire[..])));
+        self.poses[index as usize % POSE_RING] = [0, 1].map(|arm| self.own.pose(arm).position);
+    }
+
+    /// Takes every waiting feedback sample; `sent` commands have gone out.
+    fn poll(&mut self, sent: u64) {
+        loop {
+            let got = match self.port.try_recv() {
+                Ok(Some(s)) => s,
+                _ => return,
+            };
+            let t = now_ns();
+            self.sample = got;
+            let f = &self.sample;
+            if f.is_end() {
+                self.sent_by_emulator = Some(f.robot_index);
+                continue;
+            }
+            self.received += 1;
+            if f.console_index >= sent {
+                self.unknown_command += 1;
+                continue;
+            }
+            self.rtt.record(t.saturating_sub(f.command_send_ns));
+            let fwd = f.command_release_ns as i64 - f.command_ingress_ns as i64 - f.command_injected_delay_ns as i64;
+            let back = f.release_ns as i64 - f.ingress_ns as i64 - f.injected_delay_ns as i64;
+            if f.command_release_ns != 0 && f.release_ns != 0 {
+                self.share.record_signed(fwd + back);
+            }
+            if f.console_index + (POSE_RING as u64) >= sent {
+                let own = &self.poses[f.console_index as usize % POSE_RING];
+                for arm in 0..2 {
+                    let d: f64 = (0..3).map(|k| ((f.position[arm][k] - own[arm][k]) as f64).powi(2)).sum::<f64>().sqrt() * self.unit_mm;
+                    self.div_final[arm] = d;
+                    self.div_max[arm] = self.div_max[arm].max(d);
+                }
+            }
+        }
+    }
+
+    fn live_line(&self) -> String {
+        let r = self.rtt.summary();
+        format!(
+            "console: feedback {} received; round trip p50 {} p99 {}; divergence arm 0 {:.2} mm, arm 1 {:.2} mm",
+            self.received,
+            crate::metrics::fmt_ns(r.p50),
+            crate::metrics::fmt_ns(r.p99),
+            self.div_final[0],
+            self.div_final[1]
+        )
+    }
+
+    fn report(&self, ended_by: &str, out: &std::path::Path, duration_s: f64) -> ConsoleFeedback {
+        let hlog = out.join("round_trip.hlog");
+        let round_trip_hlog = self.rtt.write_log(&hlog, "round_trip", 0.0, duration_s).ok().map(|_| hlog);
+        ConsoleFeedback {
+            received: self.received,
+            sent_by_emulator: self.sent_by_emulator,
+            unknown_command: self.unknown_command,
+            ended_by: ended_by.into(),
+            round_trip_ns: self.rtt.summary(),
+            emulator_share_ns: self.share.summary(),
+            divergence_final_mm: self.div_final,
+            divergence_max_mm: self.div_max,
+            round_trip_hlog,
+        }
+    }
 }
 
 /// Where frames come from: each call gives the frame's planned offset from
@@ -128,6 +270,32 @@ fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::tran
     Ok(())
 }
 
+/// After the last frame: takes the feedback still coming until the
+/// emulator's feedback end marker, while an emulator publishes feedback, at
+/// most `--feedback-wait-s`. How it ended.
+fn wait_for_feedback(fb: &mut FeedbackIn, sent: u64, args: &ConsoleArgs, stop: &mut signals::StopCheck<impl FnMut() -> bool>) -> &'static str {
+    let deadline = now_ns() + (args.feedback_wait_s * 1e9) as u64;
+    let mut turns = 0u64;
+    loop {
+        fb.poll(sent);
+        if fb.sent_by_emulator.is_some() {
+            return "end_marker";
+        }
+        if fb.port.peers_connected() == 0 {
+            fb.poll(sent);
+            return if fb.sent_by_emulator.is_some() { "end_marker" } else { "no_emulator" };
+        }
+        if now_ns() > deadline {
+            return "timeout";
+        }
+        turns += 1;
+        if turns % 1024 == 0 && stop.requested() {
+            return "signal";
+        }
+        Wait::SpinYield.relax();
+    }
+}
+
 /// Runs the console with `args`; returns its report (also `console.json`).
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let seed = args.seed.unwrap_or_else(crate::service::plan::fresh_seed);
@@ -137,6 +305,8 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let node = open_node(&args.run_id, Role::Console)?;
     let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
+    let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
+    let mut fb = FeedbackIn::new(fb_port)?;
     signals::install();
     crate::service::place("console", args.core, args.avoid_core)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
@@ -161,6 +331,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut stop = signals::StopCheck::new(64, || node.termination_requested());
     let mut sample = FrameSample::ZERO;
     sample.len = ITP_FRAME_LEN as u32;
+    let mut next_live = 0u64;
     for i in 0..n {
         let (offset_ns, wire) = script.frame(i);
         let target = t_start + offset_ns;
@@ -169,7 +340,16 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             ended_by = "signal";
             break;
         }
-        wait_until_ns(target, slack_ns, Wait::SpinYield);
+        if fb.port.peers_connected() > 0 {
+            // Feedback flows: poll it while waiting, so each round trip is
+            // taken when the feedback arrives, not at the next frame.
+            while now_ns() < target {
+                fb.poll(sent);
+                Wait::SpinYield.relax();
+            }
+        } else {
+            wait_until_ns(target, slack_ns, Wait::SpinYield);
+        }
         sample.wire = wire;
         sample.console_index = i;
         let mut send_ns = 0;
@@ -182,11 +362,23 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             Err(_) => send_errors += 1,
         }
         sent += 1;
+        fb.sent(i, send_ns, &wire);
+        fb.poll(sent);
+        if args.live && send_ns >= next_live {
+            eprintln!("{}", fb.live_line());
+            next_live = send_ns + 1_000_000_000;
+        }
         lateness.record(send_ns.saturating_sub(target));
         if let Some(d) = direct.as_mut() {
             if FrameSink::send_with(d, &sample, |s| s.send_ns = now_ns()).is_ok() {
                 direct_sent += 1;
             }
+        }
+        if fb.sent_by_emulator.is_some() {
+            // The emulator ended the feedback early: its robot is gone.
+            // Stop, so the stream ends with an end marker it will take.
+            ended_by = "emulator_ended";
+            break;
         }
         if i % 1024 == 1023 && stop.requested() {
             ended_by = "signal";
@@ -199,6 +391,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     if let Some(d) = direct.as_mut() {
         let _ = FrameSink::send_with(d, &end, |_| {});
     }
+    let fb_ended = wait_for_feedback(&mut fb, sent, args, &mut stop);
     let steal = steal_timer.stop();
     let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
     let report = ConsoleReport {
@@ -214,7 +407,11 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         ended_by: ended_by.into(),
         steal_ms: steal.ms,
         steal_fraction: steal.fraction,
+        feedback: Some(fb.report(fb_ended, &args.out, duration_s)),
     };
+    if args.live || fb.received > 0 {
+        eprintln!("{}", fb.live_line());
+    }
     let path = args.out.join("console.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)

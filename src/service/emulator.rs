@@ -21,6 +21,7 @@ use crate::injector::{Fate, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::scenario::{Scenario, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
+use crate::service::feedback::{FeedbackPath, FeedbackReport};
 use crate::service::link::{Arrival, Link, LinkMeasures};
 use crate::service::udp::{self, ReturnPath};
 use crate::service::signals;
@@ -49,6 +50,33 @@ pub struct EmulatorConfig {
     /// Clear the loop's core of other processes' threads, movable kernel
     /// threads and device interrupts for the run ([`crate::host::isolate`]).
     pub isolate: bool,
+    /// Samples may carry opaque datagrams (the UDP bridge's raw mode); on
+    /// any other ingress a sample flagged raw is bad input.
+    pub accept_raw: bool,
+}
+
+/// Bad input from the sender, by kind: each also a drop (`wrong_size` for
+/// the lengths, `bad_flags`), and who was sending when it came.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct BadInput {
+    /// `len` 0.
+    pub len_zero: u64,
+    /// `len` between 1 and 123: a payload shorter than an ITP frame.
+    pub len_short: u64,
+    /// `len` above 124: more than the sample can carry.
+    pub len_oversize: u64,
+    /// Control bits no sender may set (garbage), a raw flag on an ingress
+    /// without raw payloads, or a malformed end marker.
+    pub bad_flags: u64,
+    /// The senders on the ingress when bad input was seen (node, executable
+    /// and pid; or address).
+    pub from: Vec<String>,
+}
+
+impl BadInput {
+    fn total(&self) -> u64 {
+        self.len_zero + self.len_short + self.len_oversize + self.bad_flags
+    }
 }
 
 /// A change in a peer's presence, seen by the emulator.
@@ -73,6 +101,14 @@ pub struct EmulatorFrames {
     pub sent_by_console: Option<u64>,
     /// Frames that passed with a wrong checksum (when not dropped for it).
     pub bad_checksum_passed: u64,
+    /// Bad input, by kind, and who sent it.
+    #[serde(default)]
+    pub bad_input: BadInput,
+    /// Of the delivered frames, those released while no robot was
+    /// subscribed: they went nowhere (a stand-alone emulator started before
+    /// its robot; see `--wait-for-peer-s`).
+    #[serde(default)]
+    pub delivered_unsubscribed: u64,
 }
 
 /// The emulator's own report, written as `emulator.json`: one flat JSON
@@ -115,8 +151,11 @@ pub struct EmulatorProcess {
     pub queue_capacity: usize,
     pub frames: EmulatorFrames,
     /// Why the loop ended: `end_marker` (the console finished and every held
-    /// frame was released) or `signal`.
+    /// frame was released), `signal`, or `peer_died` (see `dead_peers`).
     pub ended_by: String,
+    /// Peers of the run found dead by the emulator (role, executable, pid).
+    #[serde(default)]
+    pub dead_peers: Vec<String>,
     pub duration_s: f64,
     /// Turns of the busy loop, and the mean time of one: how often it looked
     /// for due releases and for a new frame.
@@ -129,6 +168,9 @@ pub struct EmulatorProcess {
     pub trace_overflowed: u64,
     pub steal_ms: u64,
     pub steal_fraction: f64,
+    /// The feedback path robot → console, when it was open.
+    #[serde(default)]
+    pub feedback: Option<FeedbackReport>,
 }
 
 /// The forward direction's loop state: the link, and what the loop counts
@@ -142,6 +184,16 @@ pub struct Forward {
     receive_errors: u64,
     last_error: Option<PortError>,
     sent_by_console: Option<u64>,
+    /// The feedback path, polled once per turn.
+    pub feedback: Option<Box<FeedbackPath>>,
+    /// When the forward stream ended and its end marker went to the robot.
+    forward_end_ns: Option<u64>,
+    /// Frames released to no robot, counted before the end marker.
+    delivered_unsubscribed: u64,
+    /// Bad input by kind.
+    pub bad_input: BadInput,
+    /// Whether raw (opaque) samples are accepted.
+    pub accept_raw: bool,
 }
 
 impl Forward {
@@ -156,18 +208,55 @@ impl Forward {
             receive_errors: 0,
             last_error: None,
             sent_by_console: None,
+            feedback: None,
+            forward_end_ns: None,
+            delivered_unsubscribed: 0,
+            bad_input: BadInput::default(),
+            accept_raw: true,
         }
     }
 
+    /// The loop with the feedback path `fb` polled in each turn.
+    pub fn with_feedback(mut self, fb: FeedbackPath) -> Forward {
+        self.feedback = Some(Box::new(fb));
+        self
+    }
+
     /// One turn of the loop: every release that is due, oldest first; the
-    /// return path; at most one frame in.
+    /// return path (UDP) or the feedback path (iceoryx2); at most one frame in.
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
         self.link.release_due(now_ns(), sink);
         if let Some(r) = ret {
             r.poll(source.sender());
         }
+        if let Some(f) = self.feedback.as_deref_mut() {
+            f.poll();
+        }
         self.take(source, now_ns);
+    }
+
+    /// Off the hot path: once the stream has drained, sends the robot the
+    /// end marker (once); then whether the loop may end, i.e. the feedback
+    /// path, if any, has ended too.
+    pub fn finished<K: FrameSink>(&mut self, sink: &mut K) -> bool {
+        if !self.drained() {
+            return false;
+        }
+        let now = now_ns();
+        let end = match self.forward_end_ns {
+            Some(t) => t,
+            None => {
+                self.delivered_unsubscribed = sink.unsubscribed();
+                let _ = sink.send_with(&FrameSample::end_marker(self.link.released()), |_| {});
+                self.forward_end_ns = Some(now);
+                now
+            }
+        };
+        match self.feedback.as_deref_mut() {
+            Some(f) => f.finished(now, end),
+            None => true,
+        }
     }
 
     /// Takes at most one frame from `source`, stamps it taken at `clock()`
@@ -176,13 +265,14 @@ impl Forward {
     pub fn take<S: FrameSource>(&mut self, source: &mut S, clock: impl FnOnce() -> u64) {
         let sample = &mut self.sample;
         match source.try_recv(sample) {
-            Ok(true) if sample.is_end() => self.sent_by_console = Some(sample.console_index),
+            // An end marker is the flag alone, with no payload.
+            Ok(true) if sample.flags == FrameSample::FLAG_END && sample.len == 0 => self.sent_by_console = Some(sample.console_index),
             Ok(true) => {
                 let t_take = clock();
                 sample.ingress_index = self.link.next_ingress_index();
                 sample.ingress_ns = t_take;
                 let arrival = |sequence| Arrival { sequence, console_index: sample.console_index, send_ns: sample.send_ns };
-                let entered = match classify(sample, self.drop_bad_checksum) {
+                let entered = match classify(sample, self.drop_bad_checksum, self.accept_raw, &mut self.bad_input) {
                     Ok((seq, bad)) => {
                         self.bad_checksum_passed += u64::from(bad);
                         self.link.ingress(t_take, *sample, arrival(Some(seq)))
@@ -213,12 +303,24 @@ impl Forward {
 /// its sequence if readable. Total over any sample (property-tested in
 /// `tests/input_prop.rs`).
 #[inline]
-pub fn classify(s: &FrameSample, drop_bad_checksum: bool) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+pub fn classify(s: &FrameSample, drop_bad_checksum: bool, accept_raw: bool, bad: &mut BadInput) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+    const KNOWN: u32 = FrameSample::FLAG_END | FrameSample::FLAG_RAW;
+    if s.flags & !KNOWN != 0 || s.is_end() || (s.is_raw() && !accept_raw) {
+        // Garbage control bits, an end marker with a payload, or an opaque
+        // datagram where none may come.
+        bad.bad_flags += 1;
+        return Err((Invalid::BadFlags, None));
+    }
     if s.is_raw() {
         // An opaque datagram: no protocol to check; its "sequence" is its console index.
         return Ok((s.console_index as u32, false));
     }
     if s.len as usize != ITP_FRAME_LEN {
+        match s.len {
+            0 => bad.len_zero += 1,
+            n if (n as usize) < ITP_FRAME_LEN => bad.len_short += 1,
+            _ => bad.len_oversize += 1,
+        }
         return Err((Invalid::WrongSize, None));
     }
     let view = ItpView::new_unchecked(&s.wire[..]);
@@ -238,11 +340,14 @@ struct Placement {
 
 /// Pins the loop's thread (keeping the trace writers off its core), clears
 /// the core if asked, and raises the thread's priority if asked.
-fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
+fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&FeedbackPath>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
     if let Some(core) = cfg.core {
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
         link.keep_trace_off_core(core);
+        if let Some(f) = fb {
+            f.keep_trace_off_core(core);
+        }
         if let Some(r) = ret {
             r.keep_trace_off_core(core);
         }
@@ -292,6 +397,19 @@ fn realtime(p: i32) -> Option<i32> {
     }
 }
 
+/// What the loop's look off the hot path (every 4096 turns) found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Look {
+    /// Nothing new: go on.
+    Go,
+    /// SIGINT/SIGTERM: stop now.
+    Stop,
+    /// The robot died: the console is told through the feedback loop (its
+    /// end marker comes early) and the stream drains as usual, so every
+    /// frame stays accounted for; without a feedback loop, stop now.
+    RobotDied,
+}
+
 /// How the loop ended.
 struct LoopEnd {
     ended_by: &'static str,
@@ -308,8 +426,10 @@ fn spin<S: FrameSource, K: FrameSink>(
     source: &mut S,
     sink: &mut K,
     mut ret: Option<&mut ReturnPath>,
-    mut stop_requested: impl FnMut() -> bool,
+    mut look: impl FnMut() -> Look,
 ) -> LoopEnd {
+    let mut robot_died = false;
+    let mut bad_seen = 0u64;
     let mut peer_events = Vec::new();
     let mut peers = (source.peers(), sink.peers());
     let t_start = now_ns();
@@ -318,11 +438,28 @@ fn spin<S: FrameSource, K: FrameSink>(
         fwd.turn(source, sink, ret.as_deref_mut());
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
-            if stop_requested() {
-                break "signal";
+            if fwd.bad_input.total() != bad_seen {
+                // Off the hot path: who is sending now.
+                bad_seen = fwd.bad_input.total();
+                for who in source.senders() {
+                    if !fwd.bad_input.from.contains(&who) {
+                        fwd.bad_input.from.push(who);
+                    }
+                }
             }
-            if fwd.drained() {
-                break "end_marker";
+            match look() {
+                Look::Go => {}
+                Look::Stop => break "signal",
+                Look::RobotDied => match fwd.feedback.as_deref_mut() {
+                    Some(f) => {
+                        robot_died = true;
+                        f.forward_end();
+                    }
+                    None => break "peer_died",
+                },
+            }
+            if fwd.finished(sink) {
+                break if robot_died { "peer_died" } else { "end_marker" };
             }
             if iter % (1 << 16) == 0 {
                 let now_peers = (source.peers(), sink.peers());
@@ -351,7 +488,8 @@ pub fn run<S: FrameSource, K: FrameSink>(
     source: &mut S,
     sink: &mut K,
     ret: Option<&mut ReturnPath>,
-    stop_requested: impl FnMut() -> bool,
+    feedback: Option<FeedbackPath>,
+    look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
@@ -361,14 +499,24 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
     // The trace and the histograms go to disk as the run goes.
     fwd.link.stream_to(&cfg.out_dir.join("trace_emulator.csv"), Some(&cfg.out_dir))?;
-    let mut placement = place(cfg, &fwd.link, ret.as_deref())?;
+    fwd.accept_raw = cfg.accept_raw;
+    if let Some(f) = feedback {
+        fwd = fwd.with_feedback(f);
+    }
+    let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     let steal_timer = StealTimer::start();
-    let end = spin(&mut fwd, source, sink, ret, stop_requested);
+    let end = spin(&mut fwd, source, sink, ret, look);
     let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
-    // Tell the simulator the stream ended (best effort: it may be gone).
-    let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
+    // Tell the simulator the stream ended (best effort: it may be gone),
+    // unless the loop already did.
+    if fwd.forward_end_ns.is_none() {
+        fwd.delivered_unsubscribed = sink.unsubscribed();
+        let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
+    }
+    let delivered_unsubscribed = fwd.delivered_unsubscribed;
     let steal = steal_timer.stop();
-    let report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    report.process.frames.delivered_unsubscribed = delivered_unsubscribed;
     let json = cfg.out_dir.join("emulator.json");
     std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
     Ok(report)
@@ -387,8 +535,9 @@ impl EmulatorReport {
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
-        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, .. } = fwd;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, bad_input, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
+        let feedback = feedback.map(|f| f.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
         if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
             eprintln!("emulator: last transport error: {e}");
         }
@@ -415,8 +564,11 @@ impl EmulatorReport {
                 held_at_end: l.held_at_end,
                 sent_by_console,
                 bad_checksum_passed,
+                bad_input,
+                delivered_unsubscribed: 0,
             },
             ended_by: end.ended_by.to_string(),
+            dead_peers: Vec::new(),
             duration_s,
             loop_iterations: iter,
             loop_iteration_ns_mean: if iter > 0 { (end.t_end - end.t_start) as f64 / iter as f64 } else { 0.0 },
@@ -425,6 +577,7 @@ impl EmulatorReport {
             trace_overflowed: l.trace_overflowed,
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
+            feedback,
         };
         Ok(EmulatorReport { shaping, process })
     }
@@ -440,6 +593,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     crate::service::write_pid(&args.out, "emulator")?;
     let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
     let mut ret = udp::return_path(args, &t, cfg.seed, cfg.expected_frames)?;
+    let fb = feedback_path(args, &t, cfg.seed, cfg.expected_frames)?;
     let bound = udp::BoundEndpoints::of(&t, args);
     let any_udp = args.ingress.is_udp() || args.egress.is_udp();
     if any_udp {
@@ -466,9 +620,41 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     }
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     // Polled every 4096 iterations; iceoryx2's own latch (once a node is
-    // open, it may take SIGINT/SIGTERM for itself) every 256th time.
-    let mut stop = signals::StopCheck::new(256, || t.node.as_ref().is_some_and(|n| n.termination_requested()));
-    let report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), || stop.requested())?;
+    // open, it may take SIGINT/SIGTERM for itself) every 256th time; the
+    // run's dead peers every 200 ms when stand-alone (under `netfi run` the
+    // runner reaps them, off this core; two reapers may wait on each other).
+    let node = t.node.as_ref().filter(|_| std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
+    let term = t.node.as_ref();
+    let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
+    let dead = std::cell::RefCell::new(Vec::<String>::new());
+    let mut next_reap = now_ns();
+    let look = || {
+        if stop.requested() {
+            return Look::Stop;
+        }
+        let now = now_ns();
+        let Some(n) = node.filter(|_| now >= next_reap) else { return Look::Go };
+        next_reap = now + 200_000_000;
+        let Ok(r) = n.reap_dead_peers() else { return Look::Go };
+        let mut found = Look::Go;
+        for p in r.dead() {
+            eprintln!("emulator: a peer died: {p}");
+            dead.borrow_mut().push(p.to_string());
+            // A dead console is reported, and the run goes on as before
+            // (until SIGINT/SIGTERM): a restarted console may take over.
+            if p.role == Some(crate::transport::Role::Simulator) {
+                found = Look::RobotDied;
+            }
+        }
+        found
+    };
+    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, look)?;
+    let dead = dead.into_inner();
+    if !dead.is_empty() {
+        report.process.dead_peers = dead;
+        let json = cfg.out_dir.join("emulator.json");
+        std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
+    }
     if any_udp {
         let return_path = ret.map(|r| r.finish(&cfg.out_dir)).transpose()?;
         let u = udp::UdpReport::new(args, &t, &bound, return_path);
@@ -477,6 +663,27 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         eprintln!("{}", summary_line(&report, &u));
     }
     Ok(report)
+}
+
+/// The feedback path the arguments ask for: with iceoryx2 on both sides and
+/// unless `--no-feedback`, through `--return-scenario` (default Normal).
+fn feedback_path(args: &EmulatorArgs, t: &crate::transport::Transports, seed: u64, expected: u64) -> anyhow::Result<Option<FeedbackPath>> {
+    use anyhow::Context;
+    let Some(node) = t.node.as_ref().filter(|_| !args.ingress.is_udp() && !args.egress.is_udp() && !args.no_feedback) else {
+        return Ok(None);
+    };
+    let name = args.return_scenario.as_deref().unwrap_or("Normal");
+    let spec = crate::load::resolve(name).with_context(|| format!("--return-scenario {name}"))?;
+    let seed = args.return_seed.or(spec.seed).unwrap_or_else(|| crate::scenario::splitmix64(seed ^ 0x6665_6564_6261_636b));
+    let capacity = spec.queue_capacity.unwrap_or(crate::service::plan::DEFAULT_QUEUE_CAPACITY);
+    anyhow::ensure!(capacity >= 1, "the return scenario's queue_capacity must be at least 1");
+    let scenario = Scenario::new(&spec, seed).with_context(|| format!("--return-scenario {name}"))?;
+    let (source, sink) = crate::transport::open_feedback(node)?;
+    eprintln!("emulator: feedback path through scenario {} seed {seed}, queue {capacity}", spec.name);
+    let mut path = crate::service::feedback::path(scenario, seed, capacity, expected, source, sink)?;
+    // Its trace goes to disk as the run goes, as the forward one's does.
+    path.link.stream_to(&args.out.join("trace_feedback.csv"), None)?;
+    Ok(Some(path))
 }
 
 /// The emulator's set-up from its arguments: the scenario resolved, the
@@ -505,6 +712,7 @@ fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
         out_dir: args.out.clone(),
         rt_priority: args.rt_priority,
         isolate: args.isolate,
+        accept_raw: args.payload == crate::transport::Payload::Raw,
     })
 }
 

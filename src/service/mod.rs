@@ -11,12 +11,14 @@
 //! | `link` | one direction of the emulator: injector, histograms, trace |
 //! | `emulator` | the forward loop around a link, and its wiring |
 //! | `udp` | the UDP return path (a link of its own) and `udp.json` |
+//! | `feedback` | the iceoryx2 feedback path robot → console (a link of its own) |
 //! | `console`, `simulator` | the two ends of a local run |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
 pub mod console;
 pub mod emulator;
+pub mod feedback;
 pub mod link;
 pub mod plan;
 pub mod report;

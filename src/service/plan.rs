@@ -114,12 +114,14 @@ impl Plan {
             payload: Payload::Itp,
             egress_bind: None,
             console_from: None,
-            return_scenario: None,
-            return_seed: None,
+            return_scenario: args.return_scenario.clone(),
+            return_seed: args.return_seed,
             return_to: None,
             no_return: false,
             idle_end_ms: None,
             udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
+            wait_for_peer_s: None,
+            no_feedback: false,
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),
@@ -133,6 +135,8 @@ impl Plan {
             out: out.clone(),
             no_direct: args.no_direct,
             wait_for_peer_s: 10.0,
+            feedback_wait_s: 5.0,
+            live: false,
         };
         Plan { run_id, out, spec, seed, scenario_path, planned_s, expected_frames, cores, simulator, emulator, console }
     }

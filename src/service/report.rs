@@ -104,6 +104,93 @@ pub struct DelayCheck {
     pub injected_within_model_band: Option<bool>,
 }
 
+/// The feedback loop robot → emulator → console: what the return scenario
+/// did, every feedback sample accounted for, and the round trip.
+///
+/// `sent_by_robot = entered`, `entered = delivered + dropped +
+/// held_at_end`, `delivered = received_by_console`: `balanced`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeedbackSection {
+    pub return_scenario: String,
+    pub seed: u64,
+    pub sent_by_robot: Option<u64>,
+    pub entered: u64,
+    pub delivered: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub held_at_end: u64,
+    pub received_by_console: Option<u64>,
+    pub balanced: bool,
+    pub loss_rate: f64,
+    pub loss_rate_ci95: [f64; 2],
+    pub injected_delay_ns: Summary,
+    /// Command sent → the robot's feedback naming it received, at the console.
+    pub round_trip_ns: Option<Summary>,
+    /// The emulator's own share of each round trip (both directions).
+    pub emulator_share_ns: Option<Summary>,
+    /// The robot's position (from its feedback) against the console's,
+    /// per arm, mm: at the last feedback, and the most seen.
+    pub divergence_final_mm: Option<[f64; 2]>,
+    pub divergence_max_mm: Option<[f64; 2]>,
+}
+
+impl FeedbackSection {
+    /// Joins the emulator's feedback path and the console's view of it.
+    pub fn join(e: &crate::service::feedback::FeedbackReport, c: Option<&crate::service::console::ConsoleFeedback>) -> FeedbackSection {
+        let received_by_console = c.map(|c| c.received);
+        let dropped: u64 = e.dropped.values().sum();
+        let balanced = e.sent_by_robot == Some(e.entered)
+            && e.entered == e.delivered + dropped + e.held_at_end
+            && received_by_console == Some(e.delivered);
+        FeedbackSection {
+            return_scenario: e.scenario.clone(),
+            seed: e.seed,
+            sent_by_robot: e.sent_by_robot,
+            entered: e.entered,
+            delivered: e.delivered,
+            dropped: e.dropped.clone(),
+            held_at_end: e.held_at_end,
+            received_by_console,
+            balanced,
+            loss_rate: e.loss_rate,
+            loss_rate_ci95: e.loss_rate_ci95,
+            injected_delay_ns: e.injected_delay_ns,
+            round_trip_ns: c.map(|c| c.round_trip_ns).filter(|s| s.count > 0),
+            emulator_share_ns: c.map(|c| c.emulator_share_ns).filter(|s| s.count > 0),
+            divergence_final_mm: c.map(|c| c.divergence_final_mm),
+            divergence_max_mm: c.map(|c| c.divergence_max_mm),
+        }
+    }
+
+    fn to_text(&self) -> String {
+        let opt = |v: Option<u64>| v.map_or("?".to_string(), |x| x.to_string());
+        let dropped: Vec<String> = self.dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
+        let mut s = format!(
+            "feedback   return scenario {} (seed {}): sent by robot {}  entered {}  delivered {}  received {}  held at end {}; dropped {}\n",
+            self.return_scenario,
+            self.seed,
+            opt(self.sent_by_robot),
+            self.entered,
+            self.delivered,
+            opt(self.received_by_console),
+            self.held_at_end,
+            if dropped.is_empty() { "none".into() } else { dropped.join(", ") }
+        );
+        s += &format!(
+            "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
+            if self.balanced { "balanced" } else { "NOT balanced" },
+            self.loss_rate,
+            self.loss_rate_ci95[0],
+            self.loss_rate_ci95[1]
+        );
+        s += &format!("  round trip        {}\n", line(&self.round_trip_ns));
+        s += &format!("  emulator's share  {}\n", line(&self.emulator_share_ns));
+        if let (Some(f), Some(m)) = (self.divergence_final_mm, self.divergence_max_mm) {
+            s += &format!("  live divergence   arm 0 final {:.2} mm (max {:.2}), arm 1 final {:.2} mm (max {:.2})\n", f[0], m[0], f[1], m[1]);
+        }
+        s
+    }
+}
+
 /// The report of one `netfi run`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {
@@ -121,6 +208,9 @@ pub struct RunReport {
     /// Delays seen vs drawn vs the analytic law (scenarios that delay).
     pub delay_check: Option<DelayCheck>,
     pub kinematics: Option<serde_json::Value>,
+    /// The feedback loop, when it was open.
+    #[serde(default)]
+    pub feedback: Option<FeedbackSection>,
     pub processes: Vec<ProcessEnd>,
     /// What went wrong: dead processes, frames lost between processes.
     pub faults: Vec<String>,
@@ -233,6 +323,9 @@ impl RunReport {
         if let Some(k) = &self.kinematics {
             s += &kinematics_text(k);
         }
+        if let Some(fb) = &self.feedback {
+            s += &fb.to_text();
+        }
         s += &format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
         for p in &self.processes {
             s += &format!("process    {:<9} pid {:<7} core {:<5} {}\n", p.role, p.pid, p.core.map_or("-".into(), |c| c.to_string()), p.status);
@@ -310,6 +403,16 @@ impl RunReport {
             None => (None, None),
         };
         let frames = account(console.as_ref(), emulator.as_ref(), simulator.as_ref());
+        let feedback = emulator
+            .as_ref()
+            .and_then(|e| e.feedback.as_ref())
+            .map(|f| FeedbackSection::join(f, console.as_ref().and_then(|c| c.feedback.as_ref())));
+        if let Some(f) = feedback.as_ref().filter(|f| !f.balanced) {
+            faults.push(format!(
+                "feedback not balanced: robot sent {:?}, {} entered, {} delivered, console received {:?}",
+                f.sent_by_robot, f.entered, f.delivered, f.received_by_console
+            ));
+        }
         if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
             faults.push(format!("{n} frames sent by the console never entered the emulator"));
         }
@@ -349,6 +452,7 @@ impl RunReport {
             injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
             overhead_ns,
             kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
+            feedback,
             processes,
             faults,
             peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),

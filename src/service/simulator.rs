@@ -16,7 +16,7 @@ use crate::host::StealTimer;
 use crate::frame::ItpFrame;
 use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSource;
@@ -54,6 +54,37 @@ pub struct SimulatorReport {
     pub steal_fraction: f64,
     pub received_csv: Option<PathBuf>,
     pub end_to_end_hlog: Option<PathBuf>,
+    /// Feedback samples published to the emulator (one per frame received).
+    #[serde(default)]
+    pub feedback_sent: u64,
+    /// Feedback samples the transport refused or that reached no emulator.
+    #[serde(default)]
+    pub feedback_errors: u64,
+}
+
+/// The robot's feedback after the command `s` (frame `f`): the command it
+/// answers and the pose the robot side holds now.
+#[inline]
+fn feedback(kin: &Kinematics, s: &FrameSample, sequence: u32, index: u64, commands: u64) -> FeedbackSample {
+    let robot = kin.robot_side();
+    let mut fb = FeedbackSample {
+        robot_index: index,
+        console_index: s.console_index,
+        command_send_ns: s.send_ns,
+        command_ingress_ns: s.ingress_ns,
+        command_release_ns: s.release_ns,
+        command_injected_delay_ns: s.injected_delay_ns,
+        sequence,
+        commands,
+        ..FeedbackSample::ZERO
+    };
+    for arm in 0..2 {
+        let p = robot.pose(arm);
+        fb.position[arm] = p.position;
+        fb.rotation[arm] = p.rotation;
+        fb.grasp[arm] = p.grasp;
+    }
+    fb
 }
 
 /// The ITP frame a sample from the emulator carries, and whether its
@@ -88,6 +119,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let node = open_node(&args.run_id, Role::Simulator)?;
     let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
+    let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
+    let (mut feedback_sent, mut feedback_errors) = (0u64, 0u64);
     signals::install();
     crate::service::place("simulator", args.core, args.avoid_core)?;
     let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
@@ -125,13 +158,24 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                     received_log.push((s.ingress_index, t));
                     e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
                     seen.record(t.saturating_sub(s.send_ns));
-                    match robot_frame(&s) {
-                        Err(()) => wrong_size += 1,
+                    let sequence = match robot_frame(&s) {
+                        Err(()) => {
+                            wrong_size += 1;
+                            0
+                        }
                         Ok((frame, checksum_ok)) => {
                             bad_checksum += u64::from(!checksum_ok);
                             kin.robot(t, &frame);
+                            frame.sequence
                         }
+                    };
+                    // Feedback for every command received, applied or not.
+                    let fb = feedback(&kin, &s, sequence, feedback_sent, received);
+                    match feedback_port.send_from(&fb, |f| f.send_ns = now_ns()) {
+                        Ok(n) if n > 0 => {}
+                        _ => feedback_errors += 1,
                     }
+                    feedback_sent += 1;
                 }
             }
             Ok(false) => {}
@@ -173,6 +217,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
         }
     };
     let t_end = now_ns();
+    // The feedback ends after the commands (best effort: the emulator may be gone).
+    let _ = feedback_port.send(&FeedbackSample::end_marker(feedback_sent));
     let received_csv = args.out.join("received.csv");
     write_received(&received_csv, &received_log)?;
     let duration_s = (t_end - t_start) as f64 / 1e9;
@@ -200,6 +246,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
         steal_fraction: steal.fraction,
         received_csv: Some(received_csv),
         end_to_end_hlog: Some(e2e_hlog),
+        feedback_sent,
+        feedback_errors,
     };
     let path = args.out.join("simulator.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;

@@ -39,13 +39,13 @@ pub mod ports;
 pub mod udp;
 
 pub use endpoint::{Endpoint, EndpointError, Payload};
-pub use open::{cleanup_stale, open, open_node, Egress, Ingress, Transports, Wiring};
+pub use open::{cleanup_stale, open, open_feedback, open_node, Egress, FeedbackEgress, FeedbackIngress, Ingress, Transports, Wiring};
 pub use ports::{FrameSink, FrameSource, MemoryPort, PortError};
 
 pub use ipc::{
     cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,
     DeadPeer, FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber,
-    IpcConfig, IpcLogLevel, IpcNode, NodeOpenError, PublisherOpenError, PublisherStats, Role,
+    IpcConfig, IpcLogLevel, IpcNode, IpcPayload, NodeOpenError, PublisherOpenError, PublisherStats, Role,
     RunId, RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
     MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };

@@ -3,7 +3,8 @@
 //! [`Endpoint`]s, so iceoryx2, UDP and any combination take one path
 //! through the emulator.
 
-use crate::sample::FrameSample;
+use crate::sample::{FeedbackSample, FrameSample};
+use std::collections::VecDeque;
 use crate::transport::endpoint::{Endpoint, Payload};
 use crate::transport::ports::{FrameSink, FrameSource, MemoryPort, PortError};
 use crate::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
@@ -60,6 +61,14 @@ impl FrameSource for Ingress {
         }
     }
 
+    fn senders(&mut self) -> Vec<String> {
+        match self {
+            Ingress::Iceoryx2(p) => FrameSource::senders(p),
+            Ingress::Udp(p) => p.sender().map(|a| vec![format!("udp://{}", a.addr())]).unwrap_or_default(),
+            Ingress::Memory(_) => Vec::new(),
+        }
+    }
+
     #[inline]
     fn sender(&self) -> Option<&PeerAddr> {
         match self {
@@ -87,6 +96,96 @@ impl FrameSink for Egress {
             Egress::Memory(p) => FrameSink::peers(p),
         }
     }
+
+    fn unsubscribed(&self) -> u64 {
+        match self {
+            Egress::Iceoryx2(p) => FrameSink::unsubscribed(p),
+            _ => 0,
+        }
+    }
+}
+
+/// Where the emulator takes the robot's feedback from.
+pub enum FeedbackIngress {
+    /// The robot's iceoryx2 port (`feedback`).
+    Iceoryx2(FrameSubscriber<FeedbackSample>),
+    /// A queue in memory (tests).
+    Memory(VecDeque<FeedbackSample>),
+}
+
+/// Where the emulator sends the feedback it releases.
+pub enum FeedbackEgress {
+    /// The console's iceoryx2 port (`feedback_out`).
+    Iceoryx2(FramePublisher<FeedbackSample>),
+    /// A queue in memory (tests).
+    Memory(VecDeque<FeedbackSample>),
+}
+
+impl FeedbackIngress {
+    /// Copies the next waiting feedback into `out`; `Ok(false)` if none waits.
+    #[inline]
+    pub fn try_recv(&mut self, out: &mut FeedbackSample) -> Result<bool, PortError> {
+        match self {
+            FeedbackIngress::Iceoryx2(p) => match p.try_recv() {
+                Ok(Some(s)) => {
+                    *out = s;
+                    Ok(true)
+                }
+                Ok(None) => Ok(false),
+                Err(e) => Err(PortError { port: format!("netfi/{}/{}", p.run_id(), p.channel()), message: e.to_string() }),
+            },
+            FeedbackIngress::Memory(q) => match q.pop_front() {
+                Some(s) => {
+                    *out = s;
+                    Ok(true)
+                }
+                None => Ok(false),
+            },
+        }
+    }
+
+    /// Robots publishing feedback now (`None` in memory).
+    pub fn peers(&self) -> Option<usize> {
+        match self {
+            FeedbackIngress::Iceoryx2(p) => Some(p.peers_connected()),
+            FeedbackIngress::Memory(_) => None,
+        }
+    }
+}
+
+impl FeedbackEgress {
+    /// Sends `sample` after `stamp` has had the last word on it; the
+    /// number of receivers it reached.
+    #[inline]
+    pub fn send_with(&mut self, sample: &FeedbackSample, stamp: impl FnOnce(&mut FeedbackSample)) -> Result<usize, PortError> {
+        match self {
+            FeedbackEgress::Iceoryx2(p) => p
+                .send_from(sample, stamp)
+                .map_err(|e| PortError { port: format!("netfi/{}/{}", p.run_id(), p.channel()), message: e.to_string() }),
+            FeedbackEgress::Memory(q) => {
+                let mut s = *sample;
+                stamp(&mut s);
+                q.push_back(s);
+                Ok(1)
+            }
+        }
+    }
+
+    /// Feedback sent while no console was subscribed.
+    pub fn unsubscribed(&self) -> u64 {
+        match self {
+            FeedbackEgress::Iceoryx2(p) => p.stats().unsubscribed,
+            FeedbackEgress::Memory(_) => 0,
+        }
+    }
+}
+
+/// Opens the feedback loop's two ports on `node`: the robot's `feedback`
+/// (subscriber) and the console's `feedback_out` (publisher).
+pub fn open_feedback(node: &IpcNode) -> Result<(FeedbackIngress, FeedbackEgress)> {
+    let out = node.publisher_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
+    let inp = node.subscriber_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
+    Ok((FeedbackIngress::Iceoryx2(inp), FeedbackEgress::Iceoryx2(out)))
 }
 
 /// How to open the emulator's transports, besides the endpoints.
@@ -108,6 +207,9 @@ pub struct Wiring {
     pub queue_capacity: usize,
     /// A UDP ingress ends the stream after this long without a datagram.
     pub idle_end_ns: Option<u64>,
+    /// Open the egress first and wait this long for a receiver on it
+    /// before opening the ingress (`None`: do not wait).
+    pub wait_for_peer_ns: Option<u64>,
 }
 
 /// The emulator's transports, open.
@@ -176,14 +278,28 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
         (false, Some(run_id)) => Some(open_node(run_id, Role::Emulator)?),
         (false, None) => anyhow::bail!("an iceoryx2 endpoint needs a run id (ingress {ingress}, egress {egress})"),
     };
+    let mut egress = match (sink, &node) {
+        (Some(s), _) => Egress::Udp(s),
+        (None, Some(n)) => Egress::Iceoryx2(n.publisher(Channel::Emulator).context("opening the emulator → simulator port")?),
+        (None, None) => unreachable!("a node is open when a side is iceoryx2"),
+    };
+    if let (Some(wait_ns), Egress::Iceoryx2(_)) = (w.wait_for_peer_ns, &egress) {
+        // The robot first: the console's frames are taken only once there is
+        // someone to release them to.
+        let deadline = crate::clock::now_ns() + wait_ns;
+        while egress.peers() == Some(0) {
+            if crate::clock::now_ns() > deadline {
+                anyhow::bail!("no robot subscribed to the emulator → simulator port within {} s", wait_ns as f64 / 1e9);
+            }
+            if node.as_ref().is_some_and(|n| n.termination_requested()) {
+                anyhow::bail!("stopped while waiting for a robot");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
     let ingress = match (source, &node) {
         (Some(s), _) => Ingress::Udp(s),
         (None, Some(n)) => Ingress::Iceoryx2(n.subscriber(Channel::Console).context("opening the console → emulator port")?),
-        (None, None) => unreachable!("a node is open when a side is iceoryx2"),
-    };
-    let egress = match (sink, &node) {
-        (Some(s), _) => Egress::Udp(s),
-        (None, Some(n)) => Egress::Iceoryx2(n.publisher(Channel::Emulator).context("opening the emulator → simulator port")?),
         (None, None) => unreachable!("a node is open when a side is iceoryx2"),
     };
     Ok(Transports { ingress, egress, node, arena })

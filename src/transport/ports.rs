@@ -39,6 +39,12 @@ pub trait FrameSource {
     fn sender(&self) -> Option<&PeerAddr> {
         None
     }
+
+    /// Who sends on this source now, as people name them, where the
+    /// transport knows: for reports of bad input. Off the hot path.
+    fn senders(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// A frame sink.
@@ -51,6 +57,12 @@ pub trait FrameSink {
     /// How many receivers are connected now, where the transport knows.
     fn peers(&mut self) -> Option<usize> {
         None
+    }
+
+    /// Samples sent while no receiver was connected (they went nowhere),
+    /// where the transport knows; 0 otherwise.
+    fn unsubscribed(&self) -> u64 {
+        0
     }
 }
 
@@ -92,6 +104,10 @@ impl FrameSink for MemoryPort {
 }
 
 impl FrameSource for FrameSubscriber {
+    fn senders(&mut self) -> Vec<String> {
+        self.publishers()
+    }
+
     #[inline]
     fn try_recv(&mut self, out: &mut FrameSample) -> Result<bool, PortError> {
         match FrameSubscriber::try_recv(self) {
@@ -119,5 +135,9 @@ impl FrameSink for FramePublisher {
 
     fn peers(&mut self) -> Option<usize> {
         Some(self.peers_connected())
+    }
+
+    fn unsubscribed(&self) -> u64 {
+        self.stats().unsubscribed
     }
 }

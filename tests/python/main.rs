@@ -190,16 +190,22 @@ fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
 }
 
+/// entered = delivered + dropped + held_at_end, every frame the console
+/// sent entered, and the emulator ended on the console's end marker.
+fn assert_emulator_balanced(emu: &Value, sent: u64) {
+    assert_emulator_account(emu, sent);
+    assert_eq!(emu["ended_by"], "end_marker");
+}
+
 /// entered = delivered + dropped + held_at_end, and every frame the console
 /// sent entered.
-fn assert_emulator_balanced(emu: &Value, sent: u64) {
+fn assert_emulator_account(emu: &Value, sent: u64) {
     let f = &emu["frames"];
     let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
     assert_eq!(u(&f["sent_by_console"]), sent, "{f}");
     assert_eq!(u(&f["entered"]), sent, "{f}");
     assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
     assert_eq!(u(&f["held_at_end"]), 0, "{f}");
-    assert_eq!(emu["ended_by"], "end_marker");
     assert_eq!(u(&emu["send_errors"]), 0);
 }
 
@@ -221,7 +227,7 @@ import json, netfi_iox as n, netfi_iox.run as r
 root, prefix = n.location("{id}")
 print(json.dumps({{
     "layout": r.file_layout(), "root": root, "prefix": prefix,
-    "services": [n.service_name("{id}", c) for c in ("console", "emulator", "direct")],
+    "services": [n.service_name("{id}", c) for c in n.CHANNELS],
     "nodes": [n.node_name("{id}", x) for x in ("console", "emulator", "simulator", "tool")],
     "limits": [r.SUBSCRIBER_BUFFER_FRAMES, r.MAX_PUBLISHERS_PER_CHANNEL, r.MAX_SUBSCRIBERS_PER_CHANNEL, r.MAX_NODES_PER_CHANNEL, r.HISTORY_FRAMES],
     "end": n.FLAG_END, "raw": n.FLAG_RAW, "itp_len": n.ITP_FRAME_LEN,
@@ -283,6 +289,39 @@ print(json.dumps({{
     }
     same_offset!(send_ns, console_index, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns, len, flags, wire, _pad);
     assert_eq!(off.as_object().unwrap().len(), 11, "a field the Rust type lacks: {off}");
+
+    // The feedback payload, likewise.
+    use netfi::sample::FeedbackSample;
+    let o = run_ok(
+        {
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python")).args([
+                "-c",
+                "import json, iceoryx2, netfi_iox as n; l = n.feedback_layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FeedbackSample); print(json.dumps(l))",
+            ]);
+            c
+        },
+        "python3 netfi_iox.feedback_layout",
+    );
+    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // SAFETY: as above.
+    let rust_name = unsafe { <FeedbackSample as iceoryx2::prelude::ZeroCopySend>::type_name() };
+    assert_eq!(l["iceoryx2_type_name"], rust_name);
+    assert_eq!(l["type_name"], FeedbackSample::TYPE_NAME);
+    assert_eq!(u(&l["size"]), core::mem::size_of::<FeedbackSample>() as u64);
+    assert_eq!(u(&l["alignment"]), core::mem::align_of::<FeedbackSample>() as u64);
+    let off = &l["offsets"];
+    macro_rules! same_feedback_offset {
+        ($($f:ident),*) => {$(
+            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(FeedbackSample, $f) as u64, stringify!($f));
+        )*};
+    }
+    same_feedback_offset!(
+        send_ns, robot_index, console_index, command_send_ns, command_ingress_ns, command_release_ns,
+        command_injected_delay_ns, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns,
+        sequence, flags, position, rotation, grasp, commands
+    );
+    assert_eq!(off.as_object().unwrap().len(), 18, "a field the Rust type lacks: {off}");
 }
 
 /// The Python ITP encoder and decoder agree with the Rust codec, checksum
@@ -356,6 +395,32 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     let check: Value = serde_json::from_slice(&check.stdout).unwrap();
     assert_eq!(check["dropped"]["ge_lomax"], e["frames"]["dropped"]["ge_lomax"]);
     assert!(u(&e["frames"]["dropped"]["ge_lomax"]) > 0);
+    // The feedback loop, balanced the other way: one feedback per command
+    // the robot received, every one through the return scenario (Normal)
+    // and to the Python console.
+    assert_feedback_balanced(&e, &r, &c, delivered);
+}
+
+/// Robot → emulator → console: the robot sent one feedback per command it
+/// received, each entered the emulator's feedback path and, through a
+/// Normal return scenario, reached the console, which measured its round
+/// trip.
+fn assert_feedback_balanced(e: &Value, r: &Value, c: &Value, commands: u64) {
+    let fb = &e["feedback"];
+    assert_eq!(u(&r["feedback_sent"]), commands, "{r}");
+    assert_eq!(u(&fb["sent_by_robot"]), commands, "{fb}");
+    assert_eq!(u(&fb["entered"]), commands, "{fb}");
+    let dropped: u64 = fb["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&fb["entered"]), u(&fb["delivered"]) + dropped + u(&fb["held_at_end"]), "{fb}");
+    assert_eq!((dropped, u(&fb["held_at_end"])), (0, 0), "Normal drops nothing: {fb}");
+    assert_eq!(fb["balanced"], true, "{fb}");
+    assert_eq!(fb["scenario"], "Normal");
+    let cf = &c["feedback"];
+    assert_eq!(u(&cf["received"]), commands, "{cf}");
+    assert_eq!(u(&cf["sent_by_emulator"]), commands, "{cf}");
+    assert_eq!(u(&cf["unknown_command"]), 0, "{cf}");
+    assert_eq!(cf["ended_by"], "end_marker", "{cf}");
+    assert_eq!(u(&cf["round_trip_us"]["count"]), commands, "{cf}");
 }
 
 /// netfi's own console → emulator → the Python robot: the robot decodes
@@ -384,6 +449,15 @@ fn rust_console_through_the_emulator_to_the_python_robot() {
     assert_eq!(u(&r["sent_by_console"]), 3000);
     assert_eq!((u(&r["bad_checksum"]), u(&r["wrong_size"])), (0, 0));
     assert!(u(&r["applied"]) > 0);
+    // The Python robot's feedback reached netfi's console, every piece.
+    let c = run.json("console.json");
+    assert_eq!(u(&e["feedback"]["entered"]), 3000, "{}", e["feedback"]);
+    assert_eq!(u(&c["feedback"]["received"]), 3000, "{}", c["feedback"]);
+    assert_eq!(u(&c["feedback"]["round_trip_ns"]["count"]), 3000, "{}", c["feedback"]);
+    assert_eq!(c["feedback"]["ended_by"], "end_marker");
+    for arm in 0..2 {
+        assert_eq!(c["feedback"]["divergence_max_mm"][arm].as_f64(), Some(0.0), "nothing lost, yet the robot diverged: {}", c["feedback"]);
+    }
     for arm in r["divergence"].as_array().unwrap() {
         for (k, v) in arm.as_object().unwrap() {
             assert!(v.as_f64().unwrap().abs() < 1e-9, "{k} diverged by {v} with nothing lost: {r}");
@@ -425,6 +499,12 @@ fn python_console_through_the_emulator_to_the_rust_simulator() {
     assert_eq!(u(&s["received_direct"]), 3000);
     assert_eq!((u(&s["bad_checksum"]), u(&s["wrong_size"])), (0, 0));
     assert_eq!(s["ended_by"], "end_marker");
+    // netfi's simulator's feedback reached the Python console, every piece.
+    let c = run.json("console.json");
+    assert_eq!(u(&s["feedback_sent"]), delivered, "{s}");
+    assert_eq!(u(&e["feedback"]["entered"]), delivered, "{}", e["feedback"]);
+    assert_eq!(u(&c["feedback"]["received"]), delivered, "{}", c["feedback"]);
+    assert_eq!(c["feedback"]["ended_by"], "end_marker");
 }
 
 /// The Python console replays the real capture: every record, in order,
@@ -490,4 +570,168 @@ fn a_client_of_another_payload_version_is_refused() {
     emu.finish("emulator", Duration::from_secs(60));
     robot.finish("robot", Duration::from_secs(60));
     assert_eq!(u(&run.json("robot.json")["received"]), 200);
+}
+
+/// Killing the Python robot mid-run: the emulator finds it dead, ends the
+/// feedback early, the console ends its stream on that, and the emulator
+/// drains it and ends, saying which peer died; every frame the console sent
+/// entered the emulator, and the emulator's account closes.
+#[test]
+fn killing_the_python_robot_ends_the_run_with_nothing_unaccounted() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("kill-robot");
+    let mut robot = run.python_robot();
+    let emu = run.emulator("PLM-1", &["--seed", "4", "--expected-frames", "60000"]);
+    let console = python("examples/console.py", &run)
+        .args(["--run-id", &run.id, "--frames", "60000", "--rate-hz", "1000", "--no-direct", "--out"])
+        .arg(run.out.join("console.json"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let console = Witness(Some(console));
+    std::thread::sleep(Duration::from_secs(3));
+    // SIGKILL: the robot leaves its node behind, as a crash does.
+    let mut child = robot.0.take().unwrap();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    console.finish("python console", Duration::from_secs(60));
+    emu.finish("emulator", Duration::from_secs(60));
+    let (c, e) = (run.json("console.json"), run.json("emulator.json"));
+    assert_eq!(e["ended_by"], "peer_died", "{e}");
+    let dead = e["dead_peers"].as_array().unwrap();
+    assert!(dead.iter().any(|d| d.as_str().unwrap().starts_with("simulator")), "{e}");
+    assert_eq!(c["ended_by"], "emulator_ended", "{c}");
+    let sent = u(&c["frames_sent"]);
+    assert!(sent > 1000 && sent < 60000, "the console stopped early: {sent}");
+    assert_eq!(u(&c["sent_unsubscribed"]), 0, "{c}");
+    assert_emulator_account(&e, sent);
+}
+
+/// A stand-alone emulator releases frames whether or not a robot is
+/// subscribed, and counts those that went nowhere apart; with
+/// `--wait-for-peer-s` it opens its input only once a robot is there.
+#[test]
+fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("no-robot");
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "300"]);
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "300", "--rate-hz", "1000", "--no-direct"]);
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    let e = run.json("emulator.json");
+    assert_emulator_balanced(&e, 300);
+    assert_eq!(u(&e["frames"]["delivered"]), 300);
+    assert_eq!(u(&e["frames"]["delivered_unsubscribed"]), 300, "{e}");
+
+    let run = Run::new("wait-robot");
+    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
+    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let emu = netfi()
+        .args(["emulator", "--run-id", &run.id, "--scenario", "Normal", "--seed", "1", "--wait-for-peer-s", "60", "--out"])
+        .arg(&run.out)
+        .args(&pin)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let emu = Witness(Some(emu));
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(!run.out.join("emulator.ready").exists(), "the emulator was ready without a robot");
+    let robot = run.python_robot();
+    wait_file(&run.out.join("emulator.ready"));
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "300", "--rate-hz", "1000", "--no-direct"]);
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    let (e, r) = (run.json("emulator.json"), run.json("robot.json"));
+    assert_emulator_balanced(&e, 300);
+    assert_eq!(u(&e["frames"]["delivered_unsubscribed"]), 0, "{e}");
+    assert_eq!(u(&r["received"]), 300, "{r}");
+}
+
+/// netfi's own processes, refused by a run whose channel carries another
+/// payload version, name both versions.
+#[test]
+fn the_rust_refusal_names_both_payload_versions() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("rust-refusal");
+    let holder = r#"
+import sys, netfi_iox as n
+class V0(n.FrameSample):
+    @staticmethod
+    def type_name():
+        return "netfi::FrameSample.v0"
+with n.RunNode(sys.argv[1], "tool") as node:
+    p = node.publisher("console", V0)
+    print("ready", flush=True)
+    sys.stdin.read()
+"#;
+    let mut c = Command::new("python3");
+    c.env("PYTHONPATH", root().join("clients/python"))
+        .env("NETFI_IOX_LAYOUT", rust_layout(&run.config))
+        .args(["-c", holder, &run.id])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut child = c.spawn().unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.as_mut().unwrap()), &mut line).unwrap();
+    assert_eq!(line.trim(), "ready");
+    let o = netfi()
+        .args(["emulator", "--run-id", &run.id, "--scenario", "Normal", "--no-pin", "--out"])
+        .arg(&run.out)
+        .output()
+        .unwrap();
+    drop(child.stdin.take());
+    let _ = child.wait();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "the emulator opened a v0 channel: {err}");
+    assert!(err.contains("netfi::FrameSample.v0") && err.contains("netfi::FrameSample.v1"), "{err}");
+}
+
+/// A foreign publisher's bad input — a `len` of zero, shorter or longer
+/// than a frame, garbage control bits, a raw flag, garbage bytes, then a
+/// flood faster than the emulator takes it — is dropped by kind and
+/// counted, with the sender named; the emulator stays up and the account
+/// closes.
+#[test]
+fn bad_input_is_counted_by_kind_and_its_sender_named() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("bad-input");
+    let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "40000"]);
+    let o = python("../../tests/python/bad_input.py", &run).args([&run.id, "30000"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sent: Value = serde_json::from_slice(&o.stdout).unwrap();
+    emu.finish("emulator", Duration::from_secs(60));
+    let e = run.json("emulator.json");
+    let f = &e["frames"];
+    // What the publisher was told its emulator's queue refused never entered.
+    let offered = u(&sent["sent"]);
+    let refused = u(&sent["refused"]);
+    assert_eq!(u(&f["entered"]), offered - refused, "{f}");
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert_eq!(u(&f["dropped"]["wrong_size"]), 3, "{f}");
+    assert_eq!(u(&f["dropped"]["bad_flags"]), 2, "{f}");
+    let b = &f["bad_input"];
+    assert_eq!((u(&b["len_zero"]), u(&b["len_short"]), u(&b["len_oversize"]), u(&b["bad_flags"])), (1, 1, 1, 2), "{b}");
+    assert_eq!(u(&f["bad_checksum_passed"]), 1, "{f}");
+    let from: Vec<&str> = b["from"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
+    assert!(from.iter().any(|w| w.starts_with("console") && w.contains("pid")), "{b}");
+    assert_eq!(e["ended_by"], "end_marker");
 }

@@ -350,3 +350,37 @@ impl Drop for Witness {
         let _ = self.0.wait();
     }
 }
+
+/// The feedback loop robot → emulator → console through its own scenario
+/// (`--return-scenario`): one feedback per command the robot received,
+/// every one accounted for, the return scenario's fates those it gives its
+/// seed in simulated time, and a round trip per feedback the console got.
+#[test]
+fn the_feedback_loop_is_shaped_accounted_for_and_timed() {
+    let (r, ok, out) = run("feedback", &["PLM-1", "--return-scenario", "PLM-2", "--frames", "4000", "--rate-hz", "2000", "--seed", "7"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let fb = &r["feedback"];
+    let received = u(&r["frames"]["received"]);
+    assert_eq!(fb["return_scenario"], "PLM-2", "{fb}");
+    assert_eq!(u(&fb["sent_by_robot"]), received, "{fb}");
+    assert_eq!(u(&fb["entered"]), received, "{fb}");
+    let dropped: u64 = fb["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&fb["entered"]), u(&fb["delivered"]) + dropped + u(&fb["held_at_end"]), "{fb}");
+    assert_eq!(u(&fb["received_by_console"]), u(&fb["delivered"]), "{fb}");
+    assert_eq!(fb["balanced"], true, "{fb}");
+    // ge_lomax decides per sample: the same seed over the same count in
+    // simulated time drops the very same feedback.
+    let seed = u(&r["emulator"]["feedback"]["seed"]).to_string();
+    let n = u(&fb["entered"]).to_string();
+    let o = netfi().args(["scenario", "check", "PLM-2", "--frames", &n, "--seed", &seed, "--json"]).output().unwrap();
+    let c: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(c["dropped"]["ge_lomax"], fb["dropped"]["ge_lomax"], "{fb}");
+    assert!(u(&fb["dropped"]["ge_lomax"]) > 0);
+    // One round trip per feedback the console received, each longer than
+    // the emulator's own share of it.
+    assert_eq!(u(&fb["round_trip_ns"]["count"]), u(&fb["delivered"]), "{fb}");
+    assert!(u(&fb["round_trip_ns"]["p50"]) >= u(&fb["emulator_share_ns"]["p50"]), "{fb}");
+    assert!(out.join("trace_feedback.csv").exists());
+    assert!(out.join("round_trip.hlog").exists());
+}

@@ -7,6 +7,10 @@ the baseline hop): synthetic bimanual motion at ``--rate-hz``, or a capture
 replayed with its original timing (or at ``--rate-hz``). Waits for the
 emulator to subscribe, stamps each sample with its send time, ends with the
 end-of-stream marker, and prints a JSON summary (also ``--out FILE``).
+Meanwhile it takes the robot's feedback as the emulator passes it back
+(channel ``feedback_out``) and measures the round trip of each command
+(sent → the robot's feedback naming it received); after its last frame it
+waits for the end of the feedback (``--feedback-wait-s``).
 
     python3 clients/python/examples/console.py --run-id R --rate-hz 1000 --duration-s 5
 """
@@ -21,7 +25,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import netfi_iox  # noqa: E402
-from netfi_iox import FrameSample, ItpFrame, RunNode, end_marker  # noqa: E402
+from netfi_iox import FeedbackSample, FrameSample, ItpFrame, RunNode, end_marker  # noqa: E402
 
 
 def synthetic(rate_hz: float, n: int):
@@ -59,14 +63,67 @@ def replay(records, rate_hz, n):
         yield (round(i * 1e9 / rate_hz) if rate_hz else offset_ns), wire
 
 
-def wait_until(target_ns: int) -> None:
-    """Sleeps until shortly before ``target_ns``, then polls the clock."""
+def wait_until(target_ns: int, poll=None) -> None:
+    """Sleeps until shortly before ``target_ns``, then polls the clock;
+    calls ``poll()`` at least every 100 µs meanwhile, when given."""
     while True:
+        if poll is not None:
+            poll()
         left = target_ns - time.monotonic_ns()
         if left <= 0:
             return
         if left > 300_000:
-            time.sleep((left - 200_000) / 1e9)
+            time.sleep(min(left - 200_000, 100_000 if poll is not None else left) / 1e9)
+
+
+class Feedback:
+    """The console's end of the feedback loop: counts the robot's feedback
+    and the round trip of each command it names."""
+
+    def __init__(self, port):
+        self.port = port
+        self.sample = FeedbackSample()
+        self.received = 0
+        self.unknown_command = 0
+        self.sent_by_emulator = None
+        self.rtt = []
+        self.sent = 0
+
+    def poll(self) -> None:
+        while self.port.receive_into(self.sample):
+            t = time.monotonic_ns()
+            f = self.sample
+            if f.is_end():
+                self.sent_by_emulator = f.robot_index
+                continue
+            self.received += 1
+            if f.console_index >= self.sent:
+                self.unknown_command += 1
+                continue
+            self.rtt.append(t - f.command_send_ns)
+
+    def wait_end(self, timeout_s: float, node) -> str:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.poll()
+            if self.sent_by_emulator is not None:
+                return "end_marker"
+            if self.port.peers_connected() == 0:
+                self.poll()
+                return "end_marker" if self.sent_by_emulator is not None else "no_emulator"
+            if time.monotonic() > deadline:
+                return "timeout"
+            if node.termination_requested():
+                return "signal"
+            time.sleep(0.0001)
+
+
+def quantiles_us(values) -> dict:
+    if not values:
+        return {"count": 0}
+    v = sorted(values)
+    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e3  # noqa: E731
+    return {"count": len(v), "p50": q(0.5), "p99": q(0.99), "max": v[-1] / 1e3}
 
 
 def main() -> int:
@@ -80,6 +137,7 @@ def main() -> int:
     ap.add_argument("--no-direct", action="store_true", help="do not send the direct (baseline) copies")
     ap.add_argument("--wait-for-peer-s", type=float, default=10.0, help="seconds to wait for the emulator")
     ap.add_argument("--out", help="also write the JSON summary here")
+    ap.add_argument("--feedback-wait-s", type=float, default=5.0, help="seconds to wait for the end of the feedback")
     a = ap.parse_args()
     if a.rate_hz is not None and not (a.rate_hz > 0 and math.isfinite(a.rate_hz)):
         ap.error("--rate-hz must be a positive number")
@@ -102,6 +160,7 @@ def main() -> int:
     with RunNode(a.run_id, "console") as node:
         port = node.publisher("console")
         direct = None if a.no_direct else node.publisher("direct")
+        fb = Feedback(node.subscriber("feedback_out", FeedbackSample))
         port.wait_for_subscriber(a.wait_for_peer_s, node)
         sent = send_errors = unsubscribed = direct_sent = 0
         ended_by = "done"
@@ -117,7 +176,7 @@ def main() -> int:
                 ended_by = "signal"
                 break
             target = t_start + offset_ns
-            wait_until(target)
+            wait_until(target, fb.poll)
             sample.set_frame(wire)
             sample.console_index = i
             try:
@@ -127,6 +186,13 @@ def main() -> int:
                 send_errors += 1
             lateness.append(time.monotonic_ns() - target)
             sent += 1
+            fb.sent = sent
+            fb.poll()
+            if fb.sent_by_emulator is not None:
+                # The emulator ended the feedback early (its robot died):
+                # stop, so the stream ends with a marker it will take.
+                ended_by = "emulator_ended"
+                break
             if direct is not None:
                 try:
                     direct.send(sample, stamp)
@@ -137,6 +203,7 @@ def main() -> int:
         port.send(end_marker(sent))
         if direct is not None:
             direct.send(end_marker(sent))
+        feedback_ended_by = fb.wait_end(a.feedback_wait_s, node)
 
     lateness.sort()
     duration_s = max(t_end - t_start, 0) / 1e9
@@ -155,6 +222,13 @@ def main() -> int:
             "p99": lateness[min(len(lateness) - 1, len(lateness) * 99 // 100)] / 1e3 if lateness else None,
         },
         "ended_by": ended_by,
+        "feedback": {
+            "received": fb.received,
+            "sent_by_emulator": fb.sent_by_emulator,
+            "unknown_command": fb.unknown_command,
+            "ended_by": feedback_ended_by,
+            "round_trip_us": quantiles_us(fb.rtt),
+        },
     }
     text = json.dumps(summary, indent=2)
     print(text)

@@ -5,7 +5,10 @@ Receives the frames the emulator releases (channel ``emulator``), applies ITP
 semantics to a pose per arm (commands apply only while the clutch is engaged;
 positions and rotations are incremental, the grasp absolute), and, unless
 ``--no-direct``, integrates the console's direct copies (channel ``direct``)
-too, to report how far the robot diverged. Ends on the emulator's
+too, to report how far the robot diverged. After each command it publishes
+its state as feedback (channel ``feedback``, ``netfi::FeedbackSample.v1``;
+``--no-feedback`` turns it off), which the emulator passes back to the
+console through the return scenario. Ends on the emulator's
 end-of-stream marker (or SIGINT/SIGTERM), then prints a JSON summary (also
 ``--out FILE``).
 
@@ -23,7 +26,7 @@ from typing import List
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import netfi_iox  # noqa: E402
-from netfi_iox import FrameSample, ItpFrame, RunNode  # noqa: E402
+from netfi_iox import FeedbackSample, FrameSample, ItpFrame, RunNode  # noqa: E402
 
 
 @dataclass
@@ -85,6 +88,24 @@ def robot_state(robot: Integrator, sample: FrameSample, frame: ItpFrame, recv_ns
     )
 
 
+def feedback_of(state: RobotState, robot_index: int, sample: FrameSample, commands: int) -> FeedbackSample:
+    """The feedback sample that carries ``state`` (the answer to ``sample``)."""
+    fb = FeedbackSample()
+    fb.robot_index = robot_index
+    fb.console_index = state.console_index
+    fb.sequence = state.sequence & 0xFFFFFFFF
+    fb.command_send_ns = state.send_ns
+    fb.command_ingress_ns = sample.ingress_ns
+    fb.command_release_ns = sample.release_ns
+    fb.command_injected_delay_ns = sample.injected_delay_ns
+    fb.commands = commands
+    for arm, p in enumerate(state.arms):
+        fb.position[arm][0], fb.position[arm][1], fb.position[arm][2] = p.x, p.y, p.z
+        fb.rotation[arm][0], fb.rotation[arm][1], fb.rotation[arm][2] = p.rx, p.ry, p.rz
+        fb.grasp[arm] = p.grasp
+    return fb
+
+
 def quantiles_us(values: List[int]) -> dict:
     if not values:
         return {"count": 0}
@@ -100,6 +121,7 @@ def main() -> int:
     ap.add_argument("--ready", help="create this file once subscribed (for scripts that start the console next)")
     ap.add_argument("--timeout-s", type=float, help="give up when no end marker came after this many seconds")
     ap.add_argument("--out", help="also write the JSON summary here")
+    ap.add_argument("--no-feedback", action="store_true", help="do not publish feedback")
     a = ap.parse_args()
 
     robot, console = Integrator(), Integrator()
@@ -107,8 +129,14 @@ def main() -> int:
     released_by_emulator = sent_by_console = None
     seen, extra = [], []
     last_state = None
+    feedback_sent = feedback_unsubscribed = 0
     with RunNode(a.run_id, "simulator") as node:
         port = node.subscriber("emulator")
+        feedback = None if a.no_feedback else node.publisher("feedback", FeedbackSample)
+
+        def stamp(f):
+            f.send_ns = time.monotonic_ns()
+
         direct = None if a.no_direct else node.subscriber("direct")
         if a.ready:
             open(a.ready, "w").close()
@@ -136,6 +164,10 @@ def main() -> int:
                     bad_checksum += 1
                 robot.apply(f)
                 last_state = robot_state(robot, s, f, t)
+                if feedback is not None:
+                    if feedback.send(feedback_of(last_state, feedback_sent, s, received), stamp) == 0:
+                        feedback_unsubscribed += 1
+                    feedback_sent += 1
             while direct is not None and direct.receive_into(d):
                 idle, last_frame = False, time.monotonic_ns()
                 if d.is_end():
@@ -162,6 +194,8 @@ def main() -> int:
             else:
                 idle_turns = 0
         t_end = time.monotonic_ns()
+        if feedback is not None:
+            feedback.send(netfi_iox.feedback_end_marker(feedback_sent))
 
     divergence = None
     if direct is not None and received_direct:
@@ -184,6 +218,8 @@ def main() -> int:
         "console_pose": [asdict(p) for p in console.arms] if received_direct else None,
         "divergence": divergence,
         "last_state": asdict(last_state) if last_state else None,
+        "feedback_sent": feedback_sent,
+        "feedback_unsubscribed": feedback_unsubscribed,
         "delay_seen_us": quantiles_us(seen),
         "end_to_end_extra_us": quantiles_us(extra),
         "ended_by": ended_by,

@@ -1,6 +1,6 @@
 """Python clients of netfi's iceoryx2 interface, version 1 (docs/interface.md).
 
-- :mod:`netfi_iox.payload`: the shared-memory sample ``netfi::FrameSample.v1``;
+- :mod:`netfi_iox.payload`: the shared-memory samples ``netfi::FrameSample.v1`` and ``netfi::FeedbackSample.v1``;
 - :mod:`netfi_iox.itp`: the ITP frame codec and its checksum;
 - :mod:`netfi_iox.run`: a run's configuration, names and ports;
 - :mod:`netfi_iox.capture`: reading netfi's LZ4 ITP captures.
@@ -9,13 +9,15 @@
 from . import capture
 from .itp import SURGEON_DISENGAGED, SURGEON_ENGAGED, FrameError, ItpFrame, checksum
 from .payload import (
-    FLAG_END, FLAG_RAW, INTERFACE_VERSION, ITP_FRAME_LEN, TYPE_NAME, FrameSample, end_marker, layout,
+    FEEDBACK_TYPE_NAME, FLAG_END, FLAG_RAW, INTERFACE_VERSION, ITP_FRAME_LEN, TYPE_NAME, FeedbackSample, FrameSample,
+    end_marker, feedback_end_marker, feedback_layout, layout,
 )
 from .run import (
     CHANNELS, InterfaceMismatch, NoPeer, RunNode, iceoryx2_config, location, node_name, service_name,
 )
 
 __all__ = [
+    "FEEDBACK_TYPE_NAME", "FeedbackSample", "feedback_end_marker", "feedback_layout",
     "CHANNELS", "FLAG_END", "FLAG_RAW", "INTERFACE_VERSION", "ITP_FRAME_LEN", "SURGEON_DISENGAGED",
     "SURGEON_ENGAGED", "TYPE_NAME", "FrameError", "FrameSample", "InterfaceMismatch", "ItpFrame", "NoPeer",
     "RunNode", "checksum", "end_marker", "iceoryx2_config", "layout", "location", "node_name", "service_name",

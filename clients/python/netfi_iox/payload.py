@@ -115,3 +115,98 @@ def end_marker(frames_sent: int) -> FrameSample:
     s.console_index = frames_sent
     s.flags = FLAG_END
     return s
+
+
+#: The iceoryx2 type name of the robot's feedback (channels ``feedback`` and
+#: ``feedback_out``).
+FEEDBACK_TYPE_NAME = "netfi::FeedbackSample.v1"
+
+
+class FeedbackSample(ctypes.Structure):
+    """The robot's feedback, one per command it received: which command it
+    answers, the robot's integrated pose then, and the emulator's stamps of
+    both directions (docs/interface.md). Mirrors ``FeedbackSample`` of
+    ``src/sample.rs`` (216 bytes, aligned to 8)."""
+
+    _fields_ = [
+        ("send_ns", ctypes.c_uint64),
+        ("robot_index", ctypes.c_uint64),
+        ("console_index", ctypes.c_uint64),
+        ("command_send_ns", ctypes.c_uint64),
+        ("command_ingress_ns", ctypes.c_uint64),
+        ("command_release_ns", ctypes.c_uint64),
+        ("command_injected_delay_ns", ctypes.c_uint64),
+        ("ingress_index", ctypes.c_uint64),
+        ("ingress_ns", ctypes.c_uint64),
+        ("injected_delay_ns", ctypes.c_uint64),
+        ("release_sched_ns", ctypes.c_uint64),
+        ("release_ns", ctypes.c_uint64),
+        ("sequence", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
+        ("position", (ctypes.c_int64 * 3) * 2),
+        ("rotation", (ctypes.c_double * 3) * 2),
+        ("grasp", ctypes.c_int32 * 2),
+        ("commands", ctypes.c_uint64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name (read by ``iceoryx2.get_type_name``)."""
+        return FEEDBACK_TYPE_NAME
+
+    def is_end(self) -> bool:
+        """Whether this sample is the end of the feedback stream."""
+        return bool(self.flags & FLAG_END)
+
+
+#: Byte offset of every field of :class:`FeedbackSample`.
+FEEDBACK_OFFSETS = {
+    "send_ns": 0,
+    "robot_index": 8,
+    "console_index": 16,
+    "command_send_ns": 24,
+    "command_ingress_ns": 32,
+    "command_release_ns": 40,
+    "command_injected_delay_ns": 48,
+    "ingress_index": 56,
+    "ingress_ns": 64,
+    "injected_delay_ns": 72,
+    "release_sched_ns": 80,
+    "release_ns": 88,
+    "sequence": 96,
+    "flags": 100,
+    "position": 104,
+    "rotation": 152,
+    "grasp": 200,
+    "commands": 208,
+}
+
+FEEDBACK_SIZE = 216
+
+
+def feedback_layout() -> dict:
+    """The layout ctypes actually gives :class:`FeedbackSample`."""
+    return {
+        "type_name": FEEDBACK_TYPE_NAME,
+        "size": ctypes.sizeof(FeedbackSample),
+        "alignment": ctypes.alignment(FeedbackSample),
+        "offsets": {name: getattr(FeedbackSample, name).offset for name, _ in FeedbackSample._fields_},
+    }
+
+
+def _check_feedback_layout() -> None:
+    actual = feedback_layout()
+    expected = {"type_name": FEEDBACK_TYPE_NAME, "size": FEEDBACK_SIZE, "alignment": ALIGNMENT, "offsets": FEEDBACK_OFFSETS}
+    if actual != expected:
+        raise ImportError(f"FeedbackSample layout differs from the interface: {actual} != {expected}")
+
+
+_check_feedback_layout()
+
+
+def feedback_end_marker(sent: int) -> FeedbackSample:
+    """The end of a feedback stream after ``sent`` feedback samples."""
+    s = FeedbackSample()
+    s.robot_index = sent
+    s.flags = FLAG_END
+    return s

@@ -11,10 +11,10 @@ from typing import Optional, Tuple, Type
 
 import iceoryx2 as iox
 
-from .payload import INTERFACE_VERSION, FrameSample
+from .payload import INTERFACE_VERSION, FeedbackSample, FrameSample
 
 #: The channels of a run: the last component of each service name.
-CHANNELS = ("console", "emulator", "direct")
+CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out")
 #: The roles a node may take: the last component of its node name.
 ROLES = ("console", "emulator", "simulator", "tool")
 

@@ -323,7 +323,7 @@ fn list_error(run: &str, e: &std::io::Error) -> CleanupError {
     }
 }
 
-fn describe(config: &IpcConfig, details: &Option<iceoryx2::node::NodeDetails>) -> DeadPeer {
+pub(super) fn describe(config: &IpcConfig, details: &Option<iceoryx2::node::NodeDetails>) -> DeadPeer {
     match details {
         Some(d) => {
             let node_name = d.name().as_str().to_owned();

@@ -95,6 +95,25 @@ pub use subscriber::{FrameRecvError, FrameSubscriber, SubscriberOpenError, Subsc
 /// The iceoryx2 service type of every port (see the module docs).
 type Ipc = iceoryx2::service::ipc::Service;
 
+/// A payload a channel carries: a fixed-size `#[repr(C)]` sample with a
+/// stable type name and an all-zero value to loan with.
+pub trait IpcPayload: iceoryx2::prelude::ZeroCopySend + Copy + core::fmt::Debug + 'static {
+    /// An all-zero sample.
+    const ZERO: Self;
+    /// The iceoryx2 type name.
+    const TYPE_NAME: &'static str;
+}
+
+impl IpcPayload for crate::sample::FrameSample {
+    const ZERO: Self = crate::sample::FrameSample::ZERO;
+    const TYPE_NAME: &'static str = crate::sample::FrameSample::TYPE_NAME;
+}
+
+impl IpcPayload for crate::sample::FeedbackSample {
+    const ZERO: Self = crate::sample::FeedbackSample::ZERO;
+    const TYPE_NAME: &'static str = crate::sample::FeedbackSample::TYPE_NAME;
+}
+
 /// Capacity of each subscriber's queue, in frames. A receiver can stall for
 /// `SUBSCRIBER_BUFFER_FRAMES / rate` (163 ms at 100 kHz) without loss.
 pub const SUBSCRIBER_BUFFER_FRAMES: usize = 16_384;
@@ -249,11 +268,18 @@ pub enum Channel {
     /// Console → simulator directly: the same frames without the emulator,
     /// the baseline hop measured in the same run.
     Direct,
+    /// Robot → emulator: the robot's feedback
+    /// ([`FeedbackSample`](crate::sample::FeedbackSample)), one per command
+    /// it received.
+    Feedback,
+    /// Emulator → console: the feedback that survived the return scenario.
+    FeedbackOut,
 }
 
 impl Channel {
-    /// Every channel: the pipeline in order, then the direct baseline.
-    pub const ALL: [Channel; 3] = [Channel::Console, Channel::Emulator, Channel::Direct];
+    /// Every channel: the pipeline in order, the direct baseline, then the
+    /// feedback loop.
+    pub const ALL: [Channel; 5] = [Channel::Console, Channel::Emulator, Channel::Direct, Channel::Feedback, Channel::FeedbackOut];
 
     /// The last component of the service name.
     pub fn as_str(self) -> &'static str {
@@ -261,6 +287,8 @@ impl Channel {
             Channel::Console => "console",
             Channel::Emulator => "emulator",
             Channel::Direct => "direct",
+            Channel::Feedback => "feedback",
+            Channel::FeedbackOut => "feedback_out",
         }
     }
 
@@ -268,15 +296,17 @@ impl Channel {
     pub fn producer(self) -> Role {
         match self {
             Channel::Console | Channel::Direct => Role::Console,
-            Channel::Emulator => Role::Emulator,
+            Channel::Emulator | Channel::FeedbackOut => Role::Emulator,
+            Channel::Feedback => Role::Simulator,
         }
     }
 
     /// The role that subscribes to this channel.
     pub fn consumer(self) -> Role {
         match self {
-            Channel::Console => Role::Emulator,
+            Channel::Console | Channel::Feedback => Role::Emulator,
             Channel::Emulator | Channel::Direct => Role::Simulator,
+            Channel::FeedbackOut => Role::Console,
         }
     }
 }

@@ -9,7 +9,8 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::mem::MaybeUninit;
 
-use super::service::{is_incompatible, open_service};
+use super::service::{is_incompatible, mismatch, open_service};
+use super::IpcPayload;
 use super::{
     Channel, Ipc, IpcConfig, RunId, MAX_PUBLISHERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES,
     SUBSCRIBER_BUFFER_FRAMES,
@@ -18,21 +19,21 @@ use crate::sample::FrameSample;
 
 /// The publishing end of a channel. Not `Send`: create it on the thread that
 /// sends.
-pub struct FramePublisher {
+pub struct FramePublisher<T: IpcPayload = FrameSample> {
     /// The sample the next send fills: loaned right after each send, so the
     /// loan (reclaiming what subscribers returned, across cores) is not on
     /// the path of a frame due for release. Declared first: dropped (the
     /// loan returned) before the port.
-    ready: Option<SampleMutUninit<Ipc, MaybeUninit<FrameSample>, ()>>,
+    ready: Option<SampleMutUninit<Ipc, MaybeUninit<T>, ()>>,
     // Declared before `service` so that the port is dropped first.
-    port: Publisher<Ipc, FrameSample, ()>,
-    service: PortFactory<Ipc, FrameSample, ()>,
+    port: Publisher<Ipc, T, ()>,
+    service: PortFactory<Ipc, T, ()>,
     run: RunId,
     channel: Channel,
     stats: PublisherStats,
 }
 
-impl std::fmt::Debug for FramePublisher {
+impl<T: IpcPayload> std::fmt::Debug for FramePublisher<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("FramePublisher")
             .field("run", &self.run)
@@ -63,11 +64,13 @@ pub enum PublisherOpenError {
     /// or from another iceoryx2 version: the processes of the run were not
     /// built from the same netfi.
     #[error(
-        "service `{service}` of run `{run}` exists but is incompatible (iceoryx2: {source}); every process of a run must be built from the same netfi"
+        "service `{service}` of run `{run}` exists but is incompatible: {detail} (iceoryx2: {source}); every process of a run must speak the same interface version"
     )]
     Incompatible {
         /// The service name.
         service: String,
+        /// Both sides' payload types: the existing service's and this build's.
+        detail: String,
         /// The run.
         run: String,
         /// The iceoryx2 failure.
@@ -168,7 +171,7 @@ pub enum FrameSendError {
     },
 }
 
-impl FramePublisher {
+impl<T: IpcPayload> FramePublisher<T> {
     pub(super) fn open(
         node: &Node<Ipc>,
         config: &IpcConfig,
@@ -180,6 +183,7 @@ impl FramePublisher {
             let (service, run) = (service_name.clone(), run.to_string());
             if is_incompatible(&source) {
                 PublisherOpenError::Incompatible {
+                    detail: mismatch::<T>(config, channel),
                     service,
                     run,
                     source,
@@ -235,19 +239,19 @@ impl FramePublisher {
     /// Returns the number of subscribers that received the frame (0 when
     /// none is registered), or [`FrameSendError::QueueFull`] when a
     /// registered subscriber did not receive it.
-    pub fn send_with<F: FnOnce(&mut FrameSample)>(
+    pub fn send_with<F: FnOnce(&mut T)>(
         &mut self,
         fill: F,
     ) -> Result<usize, FrameSendError> {
-        self.send_from(&FrameSample::ZERO, fill)
+        self.send_from(&T::ZERO, fill)
     }
 
     /// Sends a copy of `frame` that `stamp` may still change: the sample is
     /// written once, from `frame`, and `stamp` runs immediately before the
     /// send; see [`FramePublisher::send_with`].
-    pub fn send_from<F: FnOnce(&mut FrameSample)>(
+    pub fn send_from<F: FnOnce(&mut T)>(
         &mut self,
-        frame: &FrameSample,
+        frame: &T,
         stamp: F,
     ) -> Result<usize, FrameSendError> {
         let uninit = match self.ready.take() {
@@ -300,7 +304,7 @@ impl FramePublisher {
     }
 
     /// Sends a copy of `frame`; see [`FramePublisher::send_with`].
-    pub fn send(&mut self, frame: &FrameSample) -> Result<usize, FrameSendError> {
+    pub fn send(&mut self, frame: &T) -> Result<usize, FrameSendError> {
         self.send_from(frame, |_| {})
     }
 

@@ -12,21 +12,21 @@ use super::{
     Channel, Ipc, IpcConfig, HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL,
     MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES, SUBSCRIBER_MAX_BORROWED_SAMPLES,
 };
-use crate::sample::FrameSample;
+use super::IpcPayload;
 
 /// Opens the service of `channel`, creating it if needed, with every limit
 /// stated explicitly: opening a service created with smaller limits, another
 /// overflow mode or another sample type fails instead of silently adopting
 /// the other's settings.
-pub(super) fn open_service(
+pub(super) fn open_service<T: IpcPayload>(
     node: &Node<Ipc>,
     config: &IpcConfig,
     channel: Channel,
-) -> Result<PortFactory<Ipc, FrameSample, ()>, PublishSubscribeOpenOrCreateError> {
+) -> Result<PortFactory<Ipc, T, ()>, PublishSubscribeOpenOrCreateError> {
     let name = ServiceName::new(&config.service_name(channel))
         .expect("a validated run id always forms a valid service name");
     node.service_builder(&name)
-        .publish_subscribe::<FrameSample>()
+        .publish_subscribe::<T>()
         .max_publishers(MAX_PUBLISHERS_PER_CHANNEL)
         .max_subscribers(MAX_SUBSCRIBERS_PER_CHANNEL)
         .max_nodes(MAX_NODES_PER_CHANNEL)
@@ -58,4 +58,29 @@ pub(super) fn is_incompatible(e: &PublishSubscribeOpenOrCreateError) -> bool {
                 | E::InvalidTypeDefinition
         )
     )
+}
+
+/// What the existing service of `channel` carries against what this build
+/// speaks, for a refusal's message: both payload type names, sizes and
+/// alignments (read from the service's static configuration).
+pub(super) fn mismatch<T: IpcPayload>(config: &IpcConfig, channel: Channel) -> String {
+    use iceoryx2::prelude::MessagingPattern;
+    use iceoryx2::service::Service as _;
+    let ours = format!("{} ({} bytes, aligned to {})", T::TYPE_NAME, core::mem::size_of::<T>(), core::mem::align_of::<T>());
+    let name = match ServiceName::new(&config.service_name(channel)) {
+        Ok(n) => n,
+        Err(_) => return format!("this build speaks {ours}"),
+    };
+    match Ipc::details(&name, config.iceoryx2(), MessagingPattern::PublishSubscribe) {
+        Ok(Some(d)) => {
+            let p = &d.static_details.publish_subscribe().message_type_details().payload;
+            format!(
+                "the service carries {} ({} bytes, aligned to {}), this build speaks {ours}",
+                p.type_name(),
+                p.size(),
+                p.alignment()
+            )
+        }
+        _ => format!("this build speaks {ours}; the existing service's payload could not be read"),
+    }
 }

@@ -8,7 +8,8 @@ use iceoryx2::prelude::PortFactory as _;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use super::service::{is_incompatible, open_service};
+use super::service::{is_incompatible, mismatch, open_service};
+use super::IpcPayload;
 use super::{
     Channel, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };
@@ -17,13 +18,14 @@ use crate::sample::FrameSample;
 /// The subscribing end of a channel. Not `Send`: create it on the thread
 /// that receives.
 #[derive(Debug)]
-pub struct FrameSubscriber {
+pub struct FrameSubscriber<T: IpcPayload = FrameSample> {
     // Declared before `service` so that the port is dropped first.
-    port: Subscriber<Ipc, FrameSample, ()>,
-    service: PortFactory<Ipc, FrameSample, ()>,
+    port: Subscriber<Ipc, T, ()>,
+    service: PortFactory<Ipc, T, ()>,
     run: RunId,
     channel: Channel,
     stats: SubscriberStats,
+    config: IpcConfig,
 }
 
 /// Counters of one subscriber since it was opened.
@@ -40,11 +42,13 @@ pub enum SubscriberOpenError {
     /// or from another iceoryx2 version: the processes of the run were not
     /// built from the same netfi.
     #[error(
-        "service `{service}` of run `{run}` exists but is incompatible (iceoryx2: {source}); every process of a run must be built from the same netfi"
+        "service `{service}` of run `{run}` exists but is incompatible: {detail} (iceoryx2: {source}); every process of a run must speak the same interface version"
     )]
     Incompatible {
         /// The service name.
         service: String,
+        /// Both sides' payload types: the existing service's and this build's.
+        detail: String,
         /// The run.
         run: String,
         /// The iceoryx2 failure.
@@ -124,7 +128,7 @@ pub enum FrameRecvError {
     },
 }
 
-impl FrameSubscriber {
+impl<T: IpcPayload> FrameSubscriber<T> {
     pub(super) fn open(
         node: &Node<Ipc>,
         config: &IpcConfig,
@@ -136,6 +140,7 @@ impl FrameSubscriber {
             let (service, run) = (service_name.clone(), run.to_string());
             if is_incompatible(&source) {
                 SubscriberOpenError::Incompatible {
+                    detail: mismatch::<T>(config, channel),
                     service,
                     run,
                     source,
@@ -182,6 +187,7 @@ impl FrameSubscriber {
             run: run.clone(),
             channel,
             stats: SubscriberStats::default(),
+            config: config.clone(),
         })
     }
 
@@ -190,14 +196,14 @@ impl FrameSubscriber {
     /// publisher that appeared since the last one: poll continuously, or
     /// frames of a publisher that exits before the next poll are lost with
     /// it.
-    pub fn try_recv(&mut self) -> Result<Option<FrameSample>, FrameRecvError> {
+    pub fn try_recv(&mut self) -> Result<Option<T>, FrameRecvError> {
         self.recv_with(|frame| *frame)
     }
 
     /// Takes the oldest queued frame and lends it to `read` in place, without
     /// copying; the sample is released when `read` returns. `None` when the
     /// queue is empty. Never blocks.
-    pub fn recv_with<R, F: FnOnce(&FrameSample) -> R>(
+    pub fn recv_with<R, F: FnOnce(&T) -> R>(
         &mut self,
         read: F,
     ) -> Result<Option<R>, FrameRecvError> {
@@ -222,6 +228,29 @@ impl FrameSubscriber {
     /// [`IpcNode::reap_dead_peers`]: super::IpcNode::reap_dead_peers
     pub fn peers_connected(&self) -> usize {
         self.service.dynamic_config().number_of_publishers()
+    }
+
+    /// Who publishes on the channel now: each publisher's node as
+    /// `role (executable, pid N)` or `node \`name\` (…)`. Lists the run's
+    /// nodes: for reports, never per frame.
+    pub fn publishers(&self) -> Vec<String> {
+        use iceoryx2::node::{NodeState, NodeView};
+        use iceoryx2::prelude::CallbackProgression;
+        let mut ids = Vec::new();
+        self.service.dynamic_config().list_publishers(|d| {
+            ids.push(d.node_id);
+            CallbackProgression::Continue
+        });
+        let mut out = Vec::new();
+        let _ = iceoryx2::node::Node::<Ipc>::list(self.config.iceoryx2(), |state| {
+            if let NodeState::Alive(v) = &state {
+                if ids.contains(v.id()) {
+                    out.push(super::liveness::describe(&self.config, v.details()).to_string());
+                }
+            }
+            CallbackProgression::Continue
+        });
+        out
     }
 
     /// Counters since the subscriber was opened.
