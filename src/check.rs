@@ -120,9 +120,26 @@ pub struct StageReport {
     /// The model's long-run loss at this frame rate, where known exactly.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loss_rate_model: Option<f64>,
-    /// The model's mean delay in ms (delay stages).
+    /// The model's mean delay in ms (delay and jitter stages; the jitter's
+    /// clamp at 0 included).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delay_ms_model: Option<f64>,
+    /// The model's exact 99th percentile of the drawn delay in ms (jitter
+    /// stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_ms_p99_model: Option<f64>,
+    /// The model's lag-1 correlation of normal scores, and the Spearman rank
+    /// correlation of successive delays it implies (jitter stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlation_model: Option<CorrelationModel>,
+}
+
+/// A jitter stage's correlation: the AR(1) coefficient of its normal scores
+/// and the exact lag-1 rank correlation of the delays, `(6/π)·asin(ρ/2)`.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct CorrelationModel {
+    pub normal_scores_lag1: f64,
+    pub rank_lag1: f64,
 }
 
 /// What a scenario realized over a run in simulated time.
@@ -254,7 +271,18 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                 dropped: st.dropped(),
                 loss_rate: if reached > 0 { st.dropped() as f64 / reached as f64 } else { 0.0 },
                 loss_rate_model: st.model().loss_rate_exact(interval_ns.round() as u64),
-                delay_ms_model: (st.kind() == crate::model::ModelKind::Delay).then(|| st.model().mean_delay_ms_exact()),
+                delay_ms_model: st.model().is_delay().then(|| st.model().mean_delay_ms_exact()),
+                delay_ms_p99_model: match st.model() {
+                    crate::model::AnyModel::Jitter(j) => Some(j.quantile_ms(0.99)),
+                    _ => None,
+                },
+                correlation_model: match st.model() {
+                    crate::model::AnyModel::Jitter(j) if j.correlation() > 0.0 => Some(CorrelationModel {
+                        normal_scores_lag1: j.correlation(),
+                        rank_lag1: j.rank_correlation_exact(),
+                    }),
+                    _ => None,
+                },
             });
         }
     }

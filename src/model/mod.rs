@@ -18,6 +18,7 @@ pub mod delay;
 mod draw;
 pub mod ge_lomax;
 pub mod gilbert_elliott;
+pub mod jitter;
 pub mod markov4;
 pub mod outage;
 pub mod presets;
@@ -28,6 +29,7 @@ pub use bernoulli::{Bernoulli, BernoulliParams};
 pub use delay::{Delay, DelayDist, DelayParams, Order};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
+pub use jitter::{Jitter, JitterDist, JitterParams};
 pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
 pub use spec::ModelSpec;
@@ -105,16 +107,18 @@ pub enum ModelKind {
     GilbertElliott,
     Delay,
     Outage,
+    Jitter,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 6] = [
+    pub const ALL: [ModelKind; 7] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
         ModelKind::GilbertElliott,
         ModelKind::Delay,
         ModelKind::Outage,
+        ModelKind::Jitter,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -126,6 +130,7 @@ impl ModelKind {
             ModelKind::GilbertElliott => "gilbert_elliott",
             ModelKind::Delay => "delay",
             ModelKind::Outage => "outage",
+            ModelKind::Jitter => "jitter",
         }
     }
 
@@ -150,6 +155,7 @@ pub enum AnyModel {
     GilbertElliott(GilbertElliott),
     Delay(Delay),
     Outage(Outage),
+    Jitter(Jitter),
 }
 
 impl AnyModel {
@@ -161,6 +167,7 @@ impl AnyModel {
             AnyModel::GilbertElliott(_) => ModelKind::GilbertElliott,
             AnyModel::Delay(_) => ModelKind::Delay,
             AnyModel::Outage(_) => ModelKind::Outage,
+            AnyModel::Jitter(_) => ModelKind::Jitter,
         }
     }
 
@@ -173,6 +180,7 @@ impl AnyModel {
             AnyModel::GilbertElliott(m) => m.decide(t_ns, rng),
             AnyModel::Delay(m) => m.decide(t_ns, rng),
             AnyModel::Outage(m) => m.decide(t_ns, rng),
+            AnyModel::Jitter(m) => m.decide(t_ns, rng),
         }
     }
 
@@ -186,7 +194,7 @@ impl AnyModel {
             AnyModel::GeLomax(m) => Some(m.loss_rate_exact()),
             AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
             AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
-            AnyModel::Delay(_) => Some(0.0),
+            AnyModel::Delay(_) | AnyModel::Jitter(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
         }
     }
@@ -201,18 +209,40 @@ impl AnyModel {
     }
 
     /// The exact mean delay this model adds to a frame it passes, in ms
-    /// (`E[D]`, docs/spec.md §3.4); 0 for models that add no delay. For `fifo` order
+    /// (`E[D]`, docs/spec.md §3.4, §3.7, the clamp at 0 included); 0 for
+    /// models that add no delay. For `fifo` order
     /// this is the drawn delay; holding a frame behind its predecessor adds
     /// to it.
     pub fn mean_delay_ms_exact(&self) -> f64 {
         match self {
             AnyModel::Delay(m) => m.mean_ms_exact(),
+            AnyModel::Jitter(m) => m.mean_ms_exact(),
             _ => 0.0,
+        }
+    }
+
+    /// Whether this model delays frames (`delay`, `jitter`).
+    pub fn is_delay(&self) -> bool {
+        matches!(self, AnyModel::Delay(_) | AnyModel::Jitter(_))
+    }
+
+    /// The exact `q`-quantile of the delay this model draws, in ms, for the
+    /// models that delay (`None` otherwise). For `fifo` order this is the
+    /// drawn delay, before any hold.
+    pub fn delay_quantile_ms_exact(&self, q: f64) -> Option<f64> {
+        match self {
+            AnyModel::Delay(m) => Some(m.quantile_ms(q)),
+            AnyModel::Jitter(m) => Some(m.quantile_ms(q)),
+            _ => None,
         }
     }
 
     /// Whether this model can release frames out of their arrival order.
     pub fn may_reorder(&self) -> bool {
-        matches!(self, AnyModel::Delay(d) if d.may_reorder())
+        match self {
+            AnyModel::Delay(d) => d.may_reorder(),
+            AnyModel::Jitter(j) => j.may_reorder(),
+            _ => false,
+        }
     }
 }

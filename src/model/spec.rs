@@ -4,7 +4,7 @@
 
 use super::{
     AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
+    GilbertElliottParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
 };
 use serde::Serialize;
 
@@ -18,6 +18,7 @@ pub enum ModelSpec {
     GilbertElliott(GilbertElliottParams),
     Delay(DelayParams),
     Outage(OutageParams),
+    Jitter(JitterParams),
 }
 
 impl ModelSpec {
@@ -29,6 +30,7 @@ impl ModelSpec {
             ModelSpec::GilbertElliott(_) => ModelKind::GilbertElliott,
             ModelSpec::Delay(_) => ModelKind::Delay,
             ModelSpec::Outage(_) => ModelKind::Outage,
+            ModelSpec::Jitter(_) => ModelKind::Jitter,
         }
     }
 
@@ -41,6 +43,7 @@ impl ModelSpec {
             ModelSpec::GilbertElliott(p) => AnyModel::GilbertElliott(GilbertElliott::new(p)?),
             ModelSpec::Delay(p) => AnyModel::Delay(Delay::new(p)?),
             ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
+            ModelSpec::Jitter(p) => AnyModel::Jitter(Jitter::new(p)?),
         })
     }
 }

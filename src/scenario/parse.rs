@@ -262,6 +262,7 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::GilbertElliott => ModelSpec::GilbertElliott(params(ctx, &span, &loc, t)?),
                 ModelKind::Delay => ModelSpec::Delay(params(ctx, &span, &loc, t)?),
                 ModelKind::Outage => ModelSpec::Outage(params(ctx, &span, &loc, t)?),
+                ModelKind::Jitter => ModelSpec::Jitter(params(ctx, &span, &loc, t)?),
             };
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
@@ -550,6 +551,31 @@ mod tests {
         );
         assert!(ok.is_ok(), "{ok:?}");
         assert!(parse_str("[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 31557600\n", "s.toml", "s").is_ok());
+    }
+
+    #[test]
+    fn jitter_mistakes_name_file_line_and_field() {
+        let head = "name = \"j\"\n[[stage]]\nmodel = \"jitter\"\nmean_ms = 100\n";
+        // (the rest of the stage, line of the bad value, field, a piece of the message)
+        let cases = [
+            ("sd_ms = -1\ndist = \"normal\"\n", 5, "sd_ms", "≥ 0"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = 1\n", 7, "correlation", "[0, 1)"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = \"100%\"\n", 7, "correlation", "[0, 1)"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = -0.5\n", 7, "correlation", "[0, 1]"),
+            ("sd_ms = 20\ndist = \"lognormal\"\n", 6, "dist", "paretonormal"),
+            ("sd_ms = 4e6\ndist = \"pareto\"\n", 5, "sd_ms", "one hour"),
+            ("sd_ms = 20\ndist = \"pareto\"\norder = \"lifo\"\n", 7, "order", "fifo"),
+        ];
+        for (rest, line, field, piece) in cases {
+            let e = err(&format!("{head}{rest}"));
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{rest}");
+            assert_eq!(e.location.as_deref(), Some("stage 1 (jitter)"), "{e}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
+        let e = err(&format!("{head}sd_ms = 20\n"));
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("dist")), "{e}");
+        let ok = parse_str(&format!("{head}sd_ms = 20\ndist = \"paretonormal\"\ncorrelation = \"25%\"\n"), "s.toml", "s");
+        assert!(ok.is_ok(), "{ok:?}");
     }
 
     #[test]

@@ -18,6 +18,17 @@
 //!   the mean, so nothing is clipped; the tail beyond the 99.988th
 //!   percentile (the last table point) is lost. `fifo` order is not
 //!   reproduced: netem releases each packet at its own time.
+//! - `jitter` → `delay MEAN SIGMA [RHO%] distribution normal|pareto|paretonormal`
+//!   with netem's own tables. netem adds `SIGMA · t` with `t` the table's
+//!   standardized-by-convention entry, and its tables are not standardized:
+//!   `normal` is `Z` (sd 1), `pareto` is `(4/3)(P − 3/2)` (sd 1.155) and
+//!   `paretonormal` is `Z/4 + P − 3/2` (sd 1.052), so `SIGMA = sd_ms / sd t`
+//!   gives the same standard deviation; the tables hold 4096 quantiles and
+//!   clip at ±4 (netem's Pareto loses its tail beyond the 98.9th percentile,
+//!   which lowers its mean and spread). A correlation is passed as netem's,
+//!   which is approximate: netem mixes each uniform with the previous one,
+//!   narrowing the jitter (docs/spec.md §3.7); netfi keeps the law exact.
+//!   `fifo` order is not reproduced.
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
@@ -27,7 +38,7 @@
 use crate::cli::{ExportCmd, ExportNetemArgs};
 use anyhow::{bail, Result};
 use netfi::fit::family::{mean_loss_run_exact, Hyperexp};
-use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Model, Order, Verdict};
+use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Jitter, JitterDist, JitterParams, Model, Order, Verdict};
 use netfi::scenario::{self, ModelSpec, StageSpec};
 use rand::SeedableRng;
 use std::fmt::Write;
@@ -70,7 +81,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         let label = stage_label(i, st);
         let model = st.model.kind().name();
         let slot = match &st.model {
-            ModelSpec::Delay(_) => &mut delay,
+            ModelSpec::Delay(_) | ModelSpec::Jitter(_) => &mut delay,
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
@@ -79,7 +90,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         if let Some((j, _)) = slot {
             bail!(
                 "{label}: netem takes one {} per qdisc and stage {} already uses it",
-                if model == "delay" { "delay" } else { "loss model" },
+                if model == "delay" || model == "jitter" { "delay" } else { "loss model" },
                 *j + 1
             );
         }
@@ -121,6 +132,12 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 notes.push(format!("{label}: {note}"));
                 longest_delay_ms = longest_delay_ms.max(longest);
                 table = dist;
+                text
+            }
+            ModelSpec::Jitter(p) => {
+                let (text, note, longest) = jitter_as_netem(p)?;
+                notes.push(format!("{label}: {note}"));
+                longest_delay_ms = longest_delay_ms.max(longest);
                 text
             }
             ModelSpec::Outage(_) => unreachable!("refused above"),
@@ -280,6 +297,46 @@ fn stage_label(i: usize, st: &StageSpec) -> String {
 /// A probability as a tc percentage (tc keeps it to 1/2^32).
 fn pct(p: f64) -> String {
     format!("{}%", netfi::fit::family::round_sig(p * 100.0))
+}
+
+/// `jitter` as netem's `delay … distribution …`: the command text, the
+/// note, and the longest delay netem can give (mean + 4 sigma, its tables'
+/// reach).
+fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)> {
+    let j = Jitter::new(p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    // The standard deviation of netem's table variate for each law.
+    let table_sd = match p.dist {
+        JitterDist::Normal => 1.0,
+        JitterDist::Pareto => 4.0 / 3.0 * 0.75f64.sqrt(),
+        JitterDist::Paretonormal => netfi::model::jitter::PARETONORMAL_SD,
+    };
+    let sigma_ms = p.sd_ms / table_sd;
+    let rho = p.correlation.get();
+    let mut text = format!("delay {} {}", time_us(p.mean_ms.get()), time_us(sigma_ms));
+    if rho > 0.0 {
+        text.push(' ');
+        text.push_str(&pct(rho));
+    }
+    if p.sd_ms > 0.0 {
+        text.push_str(&format!(" distribution {}", p.dist.name()));
+    }
+    let mut note = format!(
+        "approximated: netem's {} table (4096 quantiles, clipped at ±4 sigma), sigma = sd_ms / {table_sd:.4} so the spread matches",
+        p.dist.name()
+    );
+    if rho > 0.0 {
+        note.push_str("; netem's correlation mixes each draw with the last and narrows the jitter, netfi's keeps the law exact");
+    }
+    if j.clamped_fraction_exact() > 0.0 {
+        note.push_str(&format!("; netfi clamps the {:.3}% of negative draws to 0", 100.0 * j.clamped_fraction_exact()));
+    }
+    if p.order == Order::Fifo {
+        note.push_str("; fifo order is not reproduced: netem releases each packet at its own time");
+    }
+    if p.sd_ms == 0.0 {
+        note = "exact (constant delay)".into();
+    }
+    Ok((text, note, p.mean_ms.get() + 4.0 * sigma_ms))
 }
 
 /// A duration for tc, in microseconds (tc keeps nanoseconds).

@@ -109,6 +109,15 @@ fn print_table(r: &CheckReport) {
                 s.loss_rate,
                 model
             );
+            if let Some(p99) = s.delay_ms_p99_model {
+                println!("  {:>5}  {:<16} model delay p99 {p99:.3} ms", "", "");
+            }
+            if let Some(c) = &s.correlation_model {
+                println!(
+                    "  {:>5}  {:<16} model lag-1 correlation {:.4} (normal scores), {:.4} (ranks)",
+                    "", "", c.normal_scores_lag1, c.rank_lag1
+                );
+            }
         }
     }
 }
