@@ -72,3 +72,41 @@ fn values_beyond_their_physical_range_are_refused_with_the_range() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("far.toml:3: stage 1 (delay): `min_ms`: 1000000000000000 ms is out of range: expected 0 to 3600000 ms (one hour)"), "{stderr}");
 }
+
+#[test]
+fn a_jitter_scenario_reports_its_exact_model_values() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_jitter.toml", "--frames", "50000", "--seed", "2", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stage = &v["stages"][1];
+    assert_eq!(stage["model"], "jitter");
+    // Far from 0 the clamp moves the mean by less than 1e-9 ms.
+    assert!((stage["delay_ms_model"].as_f64().unwrap() - 100.0).abs() < 1e-6, "{stage}");
+    let p99 = stage["delay_ms_p99_model"].as_f64().unwrap();
+    assert!(p99 > 150.0 && p99 < 200.0, "{stage}");
+    assert_eq!(stage["correlation_model"]["normal_scores_lag1"], 0.25);
+    let rank = stage["correlation_model"]["rank_lag1"].as_f64().unwrap();
+    assert!((rank - 6.0 / std::f64::consts::PI * (0.125f64).asin()).abs() < 1e-12);
+    // Stages without these values do not carry the keys.
+    assert!(v["stages"][0].get("delay_ms_p99_model").is_none());
+
+    let show = netfi().args(["scenario", "show", "config/scenarios/netem_jitter.toml"]).output().unwrap();
+    let text = String::from_utf8_lossy(&show.stdout);
+    assert!(text.contains("model = \"jitter\"") && text.contains("dist = \"paretonormal\"") && text.contains("correlation = 0.25"), "{text}");
+}
+
+#[test]
+fn a_bad_jitter_is_refused_with_file_line_and_field() {
+    let dir = std::env::temp_dir().join(format!("netfi-cli-jitter-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("jitter.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"jitter\"\nmean_ms = 10\nsd_ms = 5\ndist = \"normal\"\ncorrelation = 1\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("jitter.toml:6: stage 1 (jitter): `correlation`: 1 is out of range: expected a correlation in [0, 1)"), "{stderr}");
+}

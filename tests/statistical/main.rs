@@ -2,5 +2,6 @@
 //! seeds and stated significance levels. Slower than the unit tests (about
 //! 10^7 simulated frames per check); run with `cargo test --test statistical`.
 
+mod jitter;
 mod models;
 mod presets;

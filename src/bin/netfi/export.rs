@@ -327,7 +327,7 @@ fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)> {
     if rho > 0.0 {
         note.push_str("; netem's correlation mixes each draw with the last and narrows the jitter, netfi's keeps the law exact");
     }
-    if j.clamped_fraction_exact() > 0.0 {
+    if j.clamped_fraction_exact() > 1e-6 {
         note.push_str(&format!("; netfi clamps the {:.3}% of negative draws to 0", 100.0 * j.clamped_fraction_exact()));
     }
     if p.order == Order::Fifo {
