@@ -12,6 +12,11 @@
 //! - `reordered_fraction`: delivered frames released after a frame that
 //!   entered later (RFC 4737's reordered packets), over delivered frames.
 //! - `outages`: windows opened by `outage` stages, and their mean length.
+//! - `duplicated`: copies made by `duplicate` stages (only when there are
+//!   any). Each copy is released or dropped like a frame, so
+//!   `frames + duplicated = delivered + Σ dropped`, and `delivered` counts
+//!   copies; `loss_rate`, `delay_ms` and `loss_run_mean` are over the
+//!   original frames.
 
 use crate::injector::{Fate, Injector};
 use crate::scenario::Scenario;
@@ -132,6 +137,16 @@ pub struct StageReport {
     /// correlation of successive delays it implies (jitter stages).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correlation_model: Option<CorrelationModel>,
+    /// Copies the stage made, and the model's exact copies per frame reaching
+    /// it (duplicate stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duplicated: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duplicate_rate_model: Option<f64>,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// A jitter stage's correlation: the AR(1) coefficient of its normal scores
@@ -151,6 +166,9 @@ pub struct CheckReport {
     /// Mean arrival rate.
     pub rate_hz: f64,
     pub delivered: u64,
+    /// Copies made by `duplicate` stages (absent when none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub duplicated: u64,
     pub dropped: BTreeMap<String, u64>,
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
@@ -215,7 +233,8 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
     let counts = inj.counts();
     debug_assert!(counts.balanced() && counts.held == 0);
     let delivered = counts.released;
-    let dropped_total = counts.dropped();
+    // Runs of drops are counted over the originals' fates, copies apart.
+    let dropped_total = batches.events();
     let (loss_rate, loss_rate_ci95) = batches.rate_ci95();
     let ms = |ns: f64| ns / 1e6;
     let delay_ms = if delivered > 0 {
@@ -237,6 +256,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
         frames,
         rate_hz: if interval_ns > 0.0 { 1e9 / interval_ns } else { 0.0 },
         delivered,
+        duplicated: counts.duplicated,
         dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         loss_rate,
         loss_rate_ci95,
@@ -283,6 +303,8 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                     }),
                     _ => None,
                 },
+                duplicated: (st.kind() == crate::model::ModelKind::Duplicate).then(|| st.duplicated()),
+                duplicate_rate_model: st.model().duplicate_rate_exact(),
             });
         }
     }

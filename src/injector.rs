@@ -7,6 +7,13 @@
 //!   scheduled frame is later either released ([`Injector::pop_due`]) or
 //!   still held when the run ends ([`Injector::held`]). So at every moment
 //!   `entered = dropped + released + held`, which [`Counts::balanced`] checks.
+//! - Copies (`duplicate` stages, docs/spec.md §3.8) are counted apart: each
+//!   copy a stage makes adds one to [`Counts::duplicated`] and then has a
+//!   fate of its own (scheduled under its original's ingress index, or
+//!   dropped by a later stage or for `queue_full`). The balance becomes
+//!   `entered + duplicated = released + dropped + held`, the same as before
+//!   for a run without duplication; `released` may exceed `entered` by at
+//!   most the copies.
 //! - No clock, I/O or allocation after construction: `now_ns` is passed in,
 //!   the queue's capacity is fixed, and a frame that does not fit is a fate of
 //!   its own ([`DropCause::QueueFull`]), never a silent loss.
@@ -78,7 +85,11 @@ pub enum Fate {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Entered {
     pub ingress_index: u64,
+    /// The original frame's fate.
     pub fate: Fate,
+    /// Copies of it scheduled for release (under the same ingress index);
+    /// 0 without `duplicate` stages.
+    pub copies: u8,
 }
 
 /// Running totals. Per-stage drops live in the scenario's stages.
@@ -91,6 +102,9 @@ pub struct Counts {
     pub dropped_wrong_size: u64,
     pub dropped_bad_checksum: u64,
     pub held: u64,
+    /// Copies made by `duplicate` stages (each then released, dropped or
+    /// held like any frame).
+    pub duplicated: u64,
 }
 
 impl Counts {
@@ -98,9 +112,10 @@ impl Counts {
         self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum
     }
 
-    /// `entered = released + dropped + held`.
+    /// `entered + duplicated = released + dropped + held` (with no
+    /// duplication: `entered = released + dropped + held`).
     pub fn balanced(&self) -> bool {
-        self.entered == self.released + self.dropped() + self.held
+        self.entered + self.duplicated == self.released + self.dropped() + self.held
     }
 }
 
@@ -173,7 +188,8 @@ impl<T: Copy + Default> Injector<T> {
     #[inline]
     pub fn ingress(&mut self, now_ns: u64, item: T) -> Entered {
         let (ingress_index, offset_ns) = self.enter(now_ns);
-        let fate = match self.scenario.decide(offset_ns, now_ns) {
+        let decision = self.scenario.decide(offset_ns, now_ns);
+        let fate = match decision {
             Decision::Drop { phase, stage } => {
                 self.counts.dropped_by_stage += 1;
                 let kind = self.scenario.stage(phase, stage).kind();
@@ -189,7 +205,19 @@ impl<T: Copy + Default> Injector<T> {
                 }
             }
         };
-        Entered { ingress_index, fate }
+        let copies = *self.scenario.copies();
+        let mut scheduled = 0u8;
+        if copies.made() > 0 {
+            self.counts.duplicated += copies.made();
+            self.counts.dropped_by_stage += copies.dropped();
+            for &delay_ns in copies.delays_ns() {
+                match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, item) {
+                    Ok(_) => scheduled += 1,
+                    Err(_) => self.counts.dropped_queue_full += 1,
+                }
+            }
+        }
+        Entered { ingress_index, fate, copies: scheduled }
     }
 
     /// A malformed frame enters at `now_ns`: it gets an ingress index and is
@@ -200,7 +228,7 @@ impl<T: Copy + Default> Injector<T> {
             Invalid::WrongSize => self.counts.dropped_wrong_size += 1,
             Invalid::BadChecksum => self.counts.dropped_bad_checksum += 1,
         }
-        Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)) }
+        Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)), copies: 0 }
     }
 
     /// The earliest scheduled release, if any frame is held.
@@ -244,5 +272,68 @@ impl<T: Copy + Default> Injector<T> {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::parse_str;
+
+    fn injector(text: &str, capacity: usize) -> Injector<u32> {
+        Injector::new(Scenario::new(&parse_str(text, "s.toml", "s").unwrap(), 9).unwrap(), capacity)
+    }
+
+    #[test]
+    fn copies_keep_the_books_balanced() {
+        let mut inj = injector(
+            "[[stage]]\nmodel = \"duplicate\"\np = 0.3\n[[stage]]\nmodel = \"bernoulli\"\np = 0.2\n[[stage]]\nmodel = \"delay\"\nmin_ms = 3\n",
+            1 << 12,
+        );
+        let mut copies = 0u64;
+        let mut released_per_index = std::collections::BTreeMap::<u64, u32>::new();
+        for i in 0..20_000u64 {
+            let t = i * 1_000_000;
+            while let Some(r) = inj.pop_due(t) {
+                *released_per_index.entry(r.ingress_index).or_default() += 1;
+                assert_eq!(r.item, r.ingress_index as u32, "a copy carries its original's item");
+            }
+            let e = inj.ingress(t, i as u32);
+            copies += u64::from(e.copies);
+            let c = inj.counts();
+            assert!(c.balanced(), "{c:?}");
+        }
+        while let Some(r) = inj.pop_due(u64::MAX) {
+            *released_per_index.entry(r.ingress_index).or_default() += 1;
+        }
+        let c = inj.counts();
+        assert!(c.balanced() && c.held == 0, "{c:?}");
+        assert!(c.duplicated > 5_000 && copies > 4_000 && copies < c.duplicated, "{c:?} {copies}");
+        assert_eq!(c.released, c.entered + c.duplicated - c.dropped());
+        assert!(released_per_index.values().all(|&n| n <= 2));
+        assert_eq!(released_per_index.values().map(|&n| u64::from(n)).sum::<u64>(), c.released);
+    }
+
+    #[test]
+    fn a_copy_that_does_not_fit_is_queue_full() {
+        let mut inj = injector("[[stage]]\nmodel = \"duplicate\"\np = 1\n[[stage]]\nmodel = \"delay\"\nmin_ms = 1\n", 1);
+        let e = inj.ingress(0, 7);
+        assert!(matches!(e.fate, Fate::Scheduled { .. }));
+        assert_eq!(e.copies, 0);
+        let c = inj.counts();
+        assert_eq!((c.duplicated, c.dropped_queue_full, c.held), (1, 1, 1));
+        assert!(c.balanced());
+    }
+
+    #[test]
+    fn without_duplication_the_old_balance_holds() {
+        let mut inj = injector("[[stage]]\nmodel = \"bernoulli\"\np = 0.5\n", 16);
+        for i in 0..100 {
+            inj.ingress(i, 0);
+            while inj.pop_due(i).is_some() {}
+        }
+        let c = inj.counts();
+        assert_eq!(c.duplicated, 0);
+        assert_eq!(c.entered, c.released + c.dropped() + c.held);
     }
 }

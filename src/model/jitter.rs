@@ -446,7 +446,7 @@ mod tests {
     fn delay_of(v: Verdict) -> u64 {
         match v {
             Verdict::Pass { delay_ns } => delay_ns,
-            Verdict::Drop => panic!("a jitter stage never drops"),
+            other => panic!("a jitter stage only passes, got {other:?}"),
         }
     }
 

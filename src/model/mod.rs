@@ -15,6 +15,7 @@
 
 pub mod bernoulli;
 pub mod delay;
+pub mod duplicate;
 mod draw;
 pub mod ge_lomax;
 pub mod gilbert_elliott;
@@ -27,6 +28,7 @@ pub mod units;
 
 pub use bernoulli::{Bernoulli, BernoulliParams};
 pub use delay::{Delay, DelayDist, DelayParams, Order};
+pub use duplicate::{Duplicate, DuplicateParams};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
 pub use jitter::{Jitter, JitterDist, JitterParams};
@@ -67,6 +69,9 @@ pub enum Verdict {
     Pass { delay_ns: u64 },
     /// The frame is lost at this stage.
     Drop,
+    /// The frame goes on without delay, and so does a copy of it, through
+    /// the same later stages (`duplicate`, docs/spec.md §3.8).
+    Duplicate,
 }
 
 impl Verdict {
@@ -108,10 +113,11 @@ pub enum ModelKind {
     Delay,
     Outage,
     Jitter,
+    Duplicate,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 7] = [
+    pub const ALL: [ModelKind; 8] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
@@ -119,6 +125,7 @@ impl ModelKind {
         ModelKind::Delay,
         ModelKind::Outage,
         ModelKind::Jitter,
+        ModelKind::Duplicate,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -131,6 +138,7 @@ impl ModelKind {
             ModelKind::Delay => "delay",
             ModelKind::Outage => "outage",
             ModelKind::Jitter => "jitter",
+            ModelKind::Duplicate => "duplicate",
         }
     }
 
@@ -156,6 +164,7 @@ pub enum AnyModel {
     Delay(Delay),
     Outage(Outage),
     Jitter(Jitter),
+    Duplicate(Duplicate),
 }
 
 impl AnyModel {
@@ -168,6 +177,7 @@ impl AnyModel {
             AnyModel::Delay(_) => ModelKind::Delay,
             AnyModel::Outage(_) => ModelKind::Outage,
             AnyModel::Jitter(_) => ModelKind::Jitter,
+            AnyModel::Duplicate(_) => ModelKind::Duplicate,
         }
     }
 
@@ -181,6 +191,7 @@ impl AnyModel {
             AnyModel::Delay(m) => m.decide(t_ns, rng),
             AnyModel::Outage(m) => m.decide(t_ns, rng),
             AnyModel::Jitter(m) => m.decide(t_ns, rng),
+            AnyModel::Duplicate(m) => m.decide(t_ns, rng),
         }
     }
 
@@ -194,7 +205,7 @@ impl AnyModel {
             AnyModel::GeLomax(m) => Some(m.loss_rate_exact()),
             AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
             AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
-            AnyModel::Delay(_) | AnyModel::Jitter(_) => Some(0.0),
+            AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
         }
     }
@@ -218,6 +229,15 @@ impl AnyModel {
             AnyModel::Delay(m) => m.mean_ms_exact(),
             AnyModel::Jitter(m) => m.mean_ms_exact(),
             _ => 0.0,
+        }
+    }
+
+    /// The exact long-run number of copies per frame reaching the stage
+    /// (`duplicate`; `None` for the other models).
+    pub fn duplicate_rate_exact(&self) -> Option<f64> {
+        match self {
+            AnyModel::Duplicate(m) => Some(m.duplicate_rate_exact()),
+            _ => None,
         }
     }
 

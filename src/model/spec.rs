@@ -4,7 +4,7 @@
 
 use super::{
     AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
+    GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
 };
 use serde::Serialize;
 
@@ -19,6 +19,7 @@ pub enum ModelSpec {
     Delay(DelayParams),
     Outage(OutageParams),
     Jitter(JitterParams),
+    Duplicate(DuplicateParams),
 }
 
 impl ModelSpec {
@@ -31,6 +32,7 @@ impl ModelSpec {
             ModelSpec::Delay(_) => ModelKind::Delay,
             ModelSpec::Outage(_) => ModelKind::Outage,
             ModelSpec::Jitter(_) => ModelKind::Jitter,
+            ModelSpec::Duplicate(_) => ModelKind::Duplicate,
         }
     }
 
@@ -44,6 +46,7 @@ impl ModelSpec {
             ModelSpec::Delay(p) => AnyModel::Delay(Delay::new(p)?),
             ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
             ModelSpec::Jitter(p) => AnyModel::Jitter(Jitter::new(p)?),
+            ModelSpec::Duplicate(p) => AnyModel::Duplicate(Duplicate::new(p)?),
         })
     }
 }

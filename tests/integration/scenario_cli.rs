@@ -110,3 +110,31 @@ fn a_bad_jitter_is_refused_with_file_line_and_field() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("jitter.toml:6: stage 1 (jitter): `correlation`: 1 is out of range: expected a correlation in [0, 1)"), "{stderr}");
 }
+
+#[test]
+fn duplication_is_counted_apart() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_duplicate.toml", "--frames", "100000", "--seed", "3", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let copies = v["duplicated"].as_u64().unwrap();
+    let dropped: u64 = v["dropped"].as_object().unwrap().values().map(|n| n.as_u64().unwrap()).sum();
+    assert_eq!(100_000 + copies, v["delivered"].as_u64().unwrap() + dropped);
+    let stage = &v["stages"][0];
+    assert_eq!((stage["model"].as_str(), stage["duplicated"].as_u64()), (Some("duplicate"), Some(copies)));
+    assert_eq!(stage["duplicate_rate_model"], 0.01);
+    // Copies: 1% of 10^5 frames, binomial sd 31.5; 4 sd either side.
+    assert!((874..=1126).contains(&copies), "{copies}");
+
+    let dir = std::env::temp_dir().join(format!("netfi-cli-dup-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("dup.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"duplicate\"\n\np = 1.5\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("dup.toml:4: stage 1 (duplicate): `p`: 1.5 is not a probability"), "{stderr}");
+}

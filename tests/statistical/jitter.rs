@@ -39,7 +39,7 @@ fn delays_ms(p: &JitterParams, seed: u64, n: usize) -> Vec<f64> {
     (0..n as u64)
         .map(|i| match j.decide(i * FRAME_NS, &mut rng) {
             Verdict::Pass { delay_ns } => delay_ns as f64 / 1e6,
-            Verdict::Drop => panic!("a jitter stage never drops"),
+            other => panic!("a jitter stage only passes, got {other:?}"),
         })
         .collect()
 }

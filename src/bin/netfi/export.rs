@@ -29,6 +29,11 @@
 //!   which is approximate: netem mixes each uniform with the previous one,
 //!   narrowing the jitter (docs/spec.md §3.7); netfi keeps the law exact.
 //!   `fifo` order is not reproduced.
+//! - `duplicate` → `duplicate P`: exact when it is the first stage. netem
+//!   decides duplication before loss and sends the copy through the whole
+//!   qdisc again, so a copy meets netem's loss and delay afresh, as a netfi
+//!   copy meets the stages after its `duplicate`; stages before it would apply
+//!   once to both in netfi but to each in netem, which the note says.
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
@@ -75,6 +80,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
     let mut notes = Vec::new();
     let mut loss: Option<(usize, String)> = None;
     let mut delay: Option<(usize, String)> = None;
+    let mut dup: Option<(usize, String)> = None;
     let mut table: Option<(String, String)> = None;
     let mut longest_delay_ms = 0.0f64;
     for (i, st) in stages.iter().enumerate() {
@@ -82,6 +88,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         let model = st.model.kind().name();
         let slot = match &st.model {
             ModelSpec::Delay(_) | ModelSpec::Jitter(_) => &mut delay,
+            ModelSpec::Duplicate(_) => &mut dup,
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
@@ -90,7 +97,11 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         if let Some((j, _)) = slot {
             bail!(
                 "{label}: netem takes one {} per qdisc and stage {} already uses it",
-                if model == "delay" || model == "jitter" { "delay" } else { "loss model" },
+                match model {
+                    "delay" | "jitter" => "delay",
+                    "duplicate" => "duplication",
+                    _ => "loss model",
+                },
                 *j + 1
             );
         }
@@ -139,6 +150,16 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 notes.push(format!("{label}: {note}"));
                 longest_delay_ms = longest_delay_ms.max(longest);
                 text
+            }
+            ModelSpec::Duplicate(p) => {
+                if i == 0 {
+                    notes.push(format!("{label}: exact (duplicate; netem sends the copy through its loss and delay again, as netfi sends it through the later stages)"));
+                } else {
+                    notes.push(format!(
+                        "{label}: approximated: netem duplicates before anything else, so the {i} stage(s) before this one apply to the copy afresh in netem but once to both in netfi"
+                    ));
+                }
+                format!("duplicate {}", pct(p.p.get()))
             }
             ModelSpec::Outage(_) => unreachable!("refused above"),
         };
@@ -205,7 +226,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay].into_iter().flatten() {
+    for (_, text) in [&loss, &delay, &dup].into_iter().flatten() {
         cmd.push(' ');
         cmd.push_str(text);
     }

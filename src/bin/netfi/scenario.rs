@@ -76,6 +76,9 @@ fn print_table(r: &CheckReport) {
     println!("seed              {}", r.seed);
     println!("frames            {} at {:.1} Hz", r.frames, r.rate_hz);
     println!("delivered         {}", r.delivered);
+    if r.duplicated > 0 {
+        println!("duplicated        {} copies (delivered and dropped count them)", r.duplicated);
+    }
     for (reason, n) in &r.dropped {
         println!("dropped           {n} by {reason}");
     }
@@ -96,6 +99,7 @@ fn print_table(r: &CheckReport) {
         println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
         for s in &r.stages {
             let model = match (s.loss_rate_model, s.delay_ms_model) {
+                _ if s.duplicate_rate_model.is_some() => format!("{:.5} dup", s.duplicate_rate_model.unwrap_or(0.0)),
                 (_, Some(d)) => format!("{d:.3} ms"),
                 (Some(l), None) => format!("{l:.5}"),
                 (None, None) => "-".into(),
@@ -109,6 +113,14 @@ fn print_table(r: &CheckReport) {
                 s.loss_rate,
                 model
             );
+            if let Some(n) = s.duplicated {
+                println!(
+                    "  {:>5}  {:<16} copies {n} ({:.5} per frame reaching it)",
+                    "",
+                    "",
+                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
+                );
+            }
             if let Some(p99) = s.delay_ms_p99_model {
                 println!("  {:>5}  {:<16} model delay p99 {p99:.3} ms", "", "");
             }
