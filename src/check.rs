@@ -17,6 +17,11 @@
 //!   `frames + duplicated = delivered + Σ dropped`, and `delivered` counts
 //!   copies; `loss_rate`, `delay_ms` and `loss_run_mean` are over the
 //!   original frames.
+//! - `corruption`: delivered frames (originals and copies) that `corrupt`
+//!   stages asked to flip bits in, and how many of those the ITP checksum
+//!   catches or passes, found by applying the flips to a synthetic sealed
+//!   frame ([`synthetic_frame`]) with [`crate::frame::checksum_catches`]
+//!   (only when the scenario corrupts).
 
 use crate::injector::{Fate, Injector};
 use crate::scenario::Scenario;
@@ -103,6 +108,40 @@ pub struct DelayStats {
     pub max: f64,
 }
 
+/// Corrupted frames and what the ITP checksum makes of them.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct CorruptionStats {
+    /// Delivered frames with at least one flipped bit.
+    pub corrupted: u64,
+    /// Of those, frames whose checksum no longer matches.
+    pub caught: u64,
+    /// Of those, frames that still pass the checksum check (the flips were
+    /// in bytes it does not cover, or cancelled out).
+    pub passed: u64,
+}
+
+/// The frame `scenario check` corrupts to see what the checksum catches:
+/// arbitrary non-zero fields, sealed. One flip is caught or not by its byte
+/// alone; only cancelling multiple flips depend on the values.
+pub fn synthetic_frame() -> [u8; crate::frame::FRAME_LEN] {
+    crate::frame::ItpFrame {
+        sequence: 12_345,
+        delx: [17, -23],
+        dely: [-5, 42],
+        delz: [9, -1],
+        qx: [0.01, -0.02],
+        qy: [0.0, 0.03],
+        qz: [-0.01, 0.0],
+        qw: [1.0, 1.0],
+        buttonstate: [0, 1],
+        grasp: [250, -180],
+        surgeon_mode: crate::frame::SURGEON_ENGAGED,
+        ..Default::default()
+    }
+    .with_checksum()
+    .to_bytes()
+}
+
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct OutageStats {
     pub count: u64,
@@ -137,6 +176,15 @@ pub struct StageReport {
     /// correlation of successive delays it implies (jitter stages).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correlation_model: Option<CorrelationModel>,
+    /// Frames the stage corrupted, the model's exact fraction of the frames
+    /// reaching it, and the exact fraction of its flips the checksum catches
+    /// (corrupt stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrupted: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrupt_rate_model: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caught_fraction_model: Option<f64>,
     /// Copies the stage made, and the model's exact copies per frame reaching
     /// it (duplicate stages).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -176,6 +224,9 @@ pub struct CheckReport {
     pub delay_ms: DelayStats,
     pub reordered_fraction: f64,
     pub outages: OutageStats,
+    /// Only when the scenario has `corrupt` stages.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corruption: Option<CorruptionStats>,
     pub queue_capacity: usize,
     /// The most frames held at once.
     pub queue_depth_max: usize,
@@ -189,6 +240,7 @@ pub const PROGRESS_EVERY: u64 = 1 << 16;
 /// every [`PROGRESS_EVERY`] frames.
 pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut progress: impl FnMut(u64)) -> CheckReport {
     let frames = arrivals.len();
+    let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
     let mut batches = BatchMeans::new(frames);
     let mut delays = Histogram::<u64>::new_with_bounds(1, 24 * 3_600 * 1_000_000_000, 3).expect("static bounds are valid");
@@ -198,13 +250,22 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
     let mut in_run = false;
     let mut depth_max = 0usize;
     let mut release = ReleaseTally::default();
+    let frame = synthetic_frame();
+    let mut corruption = CorruptionStats { corrupted: 0, caught: 0, passed: 0 };
 
     for i in 0..frames {
         let t = arrivals.at(i);
         while let Some(r) = inj.pop_due(t) {
             release.record(&r);
         }
-        let e = inj.ingress(t, ());
+        let e = inj.ingress_with(t, (), |_, flips| {
+            corruption.corrupted += 1;
+            if crate::frame::checksum_catches(&frame, flips.bits()) {
+                corruption.caught += 1;
+            } else {
+                corruption.passed += 1;
+            }
+        });
         let dropped = match e.fate {
             Fate::Scheduled { delay_ns, .. } => {
                 delays.saturating_record(delay_ns);
@@ -264,6 +325,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
         delay_ms,
         reordered_fraction: if delivered > 0 { release.reordered as f64 / delivered as f64 } else { 0.0 },
         outages,
+        corruption: corrupts_any.then_some(corruption),
         queue_capacity: inj.queue_capacity(),
         queue_depth_max: depth_max,
         stages,
@@ -303,6 +365,10 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                     }),
                     _ => None,
                 },
+                corrupted: (st.kind() == crate::model::ModelKind::Corrupt).then(|| st.corrupted()),
+                corrupt_rate_model: st.model().corrupt_rate_exact(),
+                caught_fraction_model: (st.kind() == crate::model::ModelKind::Corrupt)
+                    .then(crate::model::Corrupt::caught_fraction_exact),
                 duplicated: (st.kind() == crate::model::ModelKind::Duplicate).then(|| st.duplicated()),
                 duplicate_rate_model: st.model().duplicate_rate_exact(),
             });

@@ -14,6 +14,7 @@
 //! a dropped frame is never shown to later stages, so they draw nothing for it.
 
 pub mod bernoulli;
+pub mod corrupt;
 pub mod delay;
 pub mod duplicate;
 mod draw;
@@ -27,6 +28,7 @@ mod spec;
 pub mod units;
 
 pub use bernoulli::{Bernoulli, BernoulliParams};
+pub use corrupt::{Corrupt, CorruptParams};
 pub use delay::{Delay, DelayDist, DelayParams, Order};
 pub use duplicate::{Duplicate, DuplicateParams};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
@@ -72,6 +74,10 @@ pub enum Verdict {
     /// The frame goes on without delay, and so does a copy of it, through
     /// the same later stages (`duplicate`, docs/spec.md §3.8).
     Duplicate,
+    /// The frame goes on without delay with bit `bit` flipped (byte
+    /// `bit / 8`, bit `bit % 8`): `corrupt`, docs/spec.md §3.9. The core
+    /// never touches bytes; the holder of the frame applies the flip.
+    Corrupt { bit: u16 },
 }
 
 impl Verdict {
@@ -114,10 +120,11 @@ pub enum ModelKind {
     Outage,
     Jitter,
     Duplicate,
+    Corrupt,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 8] = [
+    pub const ALL: [ModelKind; 9] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
@@ -126,6 +133,7 @@ impl ModelKind {
         ModelKind::Outage,
         ModelKind::Jitter,
         ModelKind::Duplicate,
+        ModelKind::Corrupt,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -139,6 +147,7 @@ impl ModelKind {
             ModelKind::Outage => "outage",
             ModelKind::Jitter => "jitter",
             ModelKind::Duplicate => "duplicate",
+            ModelKind::Corrupt => "corrupt",
         }
     }
 
@@ -165,6 +174,7 @@ pub enum AnyModel {
     Outage(Outage),
     Jitter(Jitter),
     Duplicate(Duplicate),
+    Corrupt(Corrupt),
 }
 
 impl AnyModel {
@@ -178,6 +188,7 @@ impl AnyModel {
             AnyModel::Outage(_) => ModelKind::Outage,
             AnyModel::Jitter(_) => ModelKind::Jitter,
             AnyModel::Duplicate(_) => ModelKind::Duplicate,
+            AnyModel::Corrupt(_) => ModelKind::Corrupt,
         }
     }
 
@@ -192,6 +203,7 @@ impl AnyModel {
             AnyModel::Outage(m) => m.decide(t_ns, rng),
             AnyModel::Jitter(m) => m.decide(t_ns, rng),
             AnyModel::Duplicate(m) => m.decide(t_ns, rng),
+            AnyModel::Corrupt(m) => m.decide(t_ns, rng),
         }
     }
 
@@ -205,7 +217,7 @@ impl AnyModel {
             AnyModel::GeLomax(m) => Some(m.loss_rate_exact()),
             AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
             AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
-            AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) => Some(0.0),
+            AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) | AnyModel::Corrupt(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
         }
     }
@@ -237,6 +249,15 @@ impl AnyModel {
     pub fn duplicate_rate_exact(&self) -> Option<f64> {
         match self {
             AnyModel::Duplicate(m) => Some(m.duplicate_rate_exact()),
+            _ => None,
+        }
+    }
+
+    /// The exact long-run fraction of frames reaching the stage that it
+    /// corrupts (`corrupt`; `None` for the other models).
+    pub fn corrupt_rate_exact(&self) -> Option<f64> {
+        match self {
+            AnyModel::Corrupt(m) => Some(m.corrupt_rate_exact()),
             _ => None,
         }
     }

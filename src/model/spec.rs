@@ -3,7 +3,7 @@
 //! an [`AnyModel`].
 
 use super::{
-    AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
+    AnyModel, Bernoulli, BernoulliParams, Corrupt, CorruptParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
     GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
 };
 use serde::Serialize;
@@ -20,6 +20,7 @@ pub enum ModelSpec {
     Outage(OutageParams),
     Jitter(JitterParams),
     Duplicate(DuplicateParams),
+    Corrupt(CorruptParams),
 }
 
 impl ModelSpec {
@@ -33,6 +34,7 @@ impl ModelSpec {
             ModelSpec::Outage(_) => ModelKind::Outage,
             ModelSpec::Jitter(_) => ModelKind::Jitter,
             ModelSpec::Duplicate(_) => ModelKind::Duplicate,
+            ModelSpec::Corrupt(_) => ModelKind::Corrupt,
         }
     }
 
@@ -47,6 +49,7 @@ impl ModelSpec {
             ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
             ModelSpec::Jitter(p) => AnyModel::Jitter(Jitter::new(p)?),
             ModelSpec::Duplicate(p) => AnyModel::Duplicate(Duplicate::new(p)?),
+            ModelSpec::Corrupt(p) => AnyModel::Corrupt(Corrupt::new(p)?),
         })
     }
 }

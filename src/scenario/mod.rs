@@ -21,6 +21,12 @@
 //! [`Scenario::copies`] until the next frame. A phase has at most
 //! [`MAX_DUPLICATE_STAGES`] duplicate stages, so a frame has at most
 //! [`MAX_COPIES`] copies, held in a fixed array: no allocation per frame.
+//!
+//! Flips (`corrupt`, docs/spec.md §3.9): the bits each `corrupt` stage a
+//! frame passes asked to flip are collected in a [`Flips`] (at most
+//! [`MAX_CORRUPT_STAGES`] per phase): the original's in
+//! [`Scenario::flips`], each copy's in [`Copies`] (a copy inherits the flips
+//! made before it was copied). The scenario never touches bytes.
 
 mod parse;
 mod presets;
@@ -55,12 +61,42 @@ pub const MAX_DUPLICATE_STAGES: usize = 4;
 /// reaches it.
 pub const MAX_COPIES: usize = (1 << MAX_DUPLICATE_STAGES) - 1;
 
+/// The most `corrupt` stages one phase may have.
+pub const MAX_CORRUPT_STAGES: usize = 4;
+
+/// The bits to flip in one frame (indices into its bytes, bit `i % 8` of
+/// byte `i / 8`), one per `corrupt` stage that corrupted it, in stage order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Flips {
+    bits: [u16; MAX_CORRUPT_STAGES],
+    len: u8,
+}
+
+impl Flips {
+    /// The bit indices, for [`crate::frame::flip_bits`].
+    #[inline]
+    pub fn bits(&self) -> &[u16] {
+        &self.bits[..usize::from(self.len)]
+    }
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    #[inline]
+    fn push(&mut self, bit: u16) {
+        // `Scenario::new` caps corrupt stages per phase at the array's size.
+        self.bits[usize::from(self.len)] = bit;
+        self.len += 1;
+    }
+}
+
 /// The copies of the frame last decided: the total delay of each copy that
 /// passed the whole pipeline (from the frame's ingress, in the order they
 /// were made), and how many later stages dropped.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Copies {
     delays_ns: [u64; MAX_COPIES],
+    flips: [Flips; MAX_COPIES],
     passed: u8,
     dropped: u8,
 }
@@ -69,6 +105,11 @@ impl Copies {
     /// Delays of the copies that passed.
     pub fn delays_ns(&self) -> &[u64] {
         &self.delays_ns[..usize::from(self.passed)]
+    }
+    /// The flips of each copy that passed, in the order of
+    /// [`Copies::delays_ns`].
+    pub fn flips(&self) -> &[Flips] {
+        &self.flips[..usize::from(self.passed)]
     }
     /// Copies that a later stage dropped.
     pub fn dropped(&self) -> u64 {
@@ -90,6 +131,7 @@ pub struct Stage {
     reached: u64,
     dropped: u64,
     duplicated: u64,
+    corrupted: u64,
 }
 
 impl Stage {
@@ -116,6 +158,10 @@ impl Stage {
     /// Copies this stage made so far (`duplicate`).
     pub fn duplicated(&self) -> u64 {
         self.duplicated
+    }
+    /// Frames this stage corrupted so far (`corrupt`).
+    pub fn corrupted(&self) -> u64 {
+        self.corrupted
     }
 }
 
@@ -147,6 +193,7 @@ pub struct Scenario {
     phases: Vec<Phase>,
     current: usize,
     copies: Copies,
+    flips: Flips,
 }
 
 impl Scenario {
@@ -195,6 +242,14 @@ impl Scenario {
                     format!("{duplicates} `duplicate` stages: at most {MAX_DUPLICATE_STAGES} per phase (each may double what reaches it)"),
                 ));
             }
+            let corrupts = ps.stages.iter().filter(|s| s.model.kind() == ModelKind::Corrupt).count();
+            if corrupts > MAX_CORRUPT_STAGES {
+                return Err(err(
+                    loc,
+                    Some("model".into()),
+                    format!("{corrupts} `corrupt` stages: at most {MAX_CORRUPT_STAGES} per phase"),
+                ));
+            }
             let labels = StageSpec::labels(&ps.stages);
             let mut stages = Vec::with_capacity(ps.stages.len());
             for (si, (st, label)) in ps.stages.iter().zip(labels).enumerate() {
@@ -211,11 +266,12 @@ impl Scenario {
                     reached: 0,
                     dropped: 0,
                     duplicated: 0,
+                    corrupted: 0,
                 });
             }
             phases.push(Phase { name: ps.name.clone(), start_offset_ns, stages });
         }
-        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default() })
+        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default(), flips: Flips::default() })
     }
 
     pub fn name(&self) -> &str {
@@ -251,10 +307,11 @@ impl Scenario {
         }
         let phase = self.current;
         let stages = &mut self.phases[phase].stages;
-        // Copies waiting to run: (first stage, time there).
-        let mut pending = [(0usize, 0u64); MAX_COPIES];
+        // Copies waiting to run: (first stage, time there, flips so far).
+        let mut pending = [(0usize, 0u64, Flips::default()); MAX_COPIES];
         let mut queued = 0usize;
-        let decision = match run_stages(stages, 0, t_ns, &mut pending, &mut queued) {
+        let mut flips = Flips::default();
+        let decision = match run_stages(stages, 0, t_ns, &mut flips, &mut pending, &mut queued) {
             Ok(t) => Decision::Pass { delay_ns: t - t_ns },
             // Both indices fit: `new` caps phases and stages at u16::MAX.
             Err(si) => Decision::Drop { phase: phase as u16, stage: si as u16 },
@@ -262,18 +319,27 @@ impl Scenario {
         let mut copies = Copies::default();
         let mut next = 0;
         while next < queued {
-            let (from, t) = pending[next];
+            let (from, t, mut copy_flips) = pending[next];
             next += 1;
-            match run_stages(stages, from, t, &mut pending, &mut queued) {
+            match run_stages(stages, from, t, &mut copy_flips, &mut pending, &mut queued) {
                 Ok(end) => {
                     copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
+                    copies.flips[usize::from(copies.passed)] = copy_flips;
                     copies.passed += 1;
                 }
                 Err(_) => copies.dropped += 1,
             }
         }
         self.copies = copies;
+        self.flips = flips;
         decision
+    }
+
+    /// The flips of the frame last decided (empty unless a `corrupt` stage
+    /// corrupted it).
+    #[inline]
+    pub fn flips(&self) -> &Flips {
+        &self.flips
     }
 
     /// The copies of the frame last decided.
@@ -292,7 +358,14 @@ impl Scenario {
 /// end)` or `Err(index of the stage that dropped it)`. A copy made on the way
 /// is queued in `pending` to start at the next stage.
 #[inline]
-fn run_stages(stages: &mut [Stage], from: usize, t_ns: u64, pending: &mut [(usize, u64); MAX_COPIES], queued: &mut usize) -> Result<u64, usize> {
+fn run_stages(
+    stages: &mut [Stage],
+    from: usize,
+    t_ns: u64,
+    flips: &mut Flips,
+    pending: &mut [(usize, u64, Flips); MAX_COPIES],
+    queued: &mut usize,
+) -> Result<u64, usize> {
     let mut t = t_ns;
     for (si, st) in stages.iter_mut().enumerate().skip(from) {
         st.reached += 1;
@@ -306,8 +379,12 @@ fn run_stages(stages: &mut [Stage], from: usize, t_ns: u64, pending: &mut [(usiz
                 st.duplicated += 1;
                 // At most MAX_DUPLICATE_STAGES duplicate stages, each at
                 // most doubling what reaches it: the array cannot overflow.
-                pending[*queued] = (si + 1, t);
+                pending[*queued] = (si + 1, t, *flips);
                 *queued += 1;
+            }
+            Verdict::Corrupt { bit } => {
+                st.corrupted += 1;
+                flips.push(bit);
             }
         }
     }
@@ -354,6 +431,27 @@ mod tests {
         assert_eq!(lossy.decide(0, 0), Decision::Drop { phase: 0, stage: 2 });
         assert_eq!((lossy.copies().delays_ns().len(), lossy.copies().dropped()), (0, 3));
         assert_eq!(lossy.phases()[0].stages()[2].dropped(), 4);
+    }
+
+    #[test]
+    fn flips_are_collected_and_copies_inherit_them() {
+        // Corrupt always, duplicate always, corrupt always: the original and
+        // the copy share the first flip, and each has its own second.
+        let c = "[[stage]]\nmodel = \"corrupt\"\np = 1\n";
+        let mut sc = scenario(&format!("{c}[[stage]]\nmodel = \"duplicate\"\np = 1\n{c}"), 4);
+        assert_eq!(sc.decide(0, 0), Decision::Pass { delay_ns: 0 });
+        let own = *sc.flips();
+        let copy = sc.copies().flips()[0];
+        assert_eq!((own.bits().len(), copy.bits().len()), (2, 2));
+        assert_eq!(own.bits()[0], copy.bits()[0]);
+        assert!(own.bits().iter().chain(copy.bits()).all(|&b| b < crate::model::corrupt::FRAME_BITS));
+        // A frame that meets no corrupt verdict has none, and they do not leak.
+        let mut sc = scenario("[[stage]]\nmodel = \"corrupt\"\np = 0\n", 4);
+        sc.decide(0, 0);
+        assert!(sc.flips().is_empty());
+        let five = c.repeat(MAX_CORRUPT_STAGES + 1);
+        let e = Scenario::new(&parse_str(&five, "s.toml", "s").unwrap(), 1).unwrap_err();
+        assert!(e.problem.contains("`corrupt` stages: at most 4"), "{e}");
     }
 
     #[test]

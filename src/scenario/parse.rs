@@ -264,6 +264,7 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::Outage => ModelSpec::Outage(params(ctx, &span, &loc, t)?),
                 ModelKind::Jitter => ModelSpec::Jitter(params(ctx, &span, &loc, t)?),
                 ModelKind::Duplicate => ModelSpec::Duplicate(params(ctx, &span, &loc, t)?),
+                ModelKind::Corrupt => ModelSpec::Corrupt(params(ctx, &span, &loc, t)?),
             };
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();

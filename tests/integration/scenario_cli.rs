@@ -138,3 +138,30 @@ fn duplication_is_counted_apart() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("dup.toml:4: stage 1 (duplicate): `p`: 1.5 is not a probability"), "{stderr}");
 }
+
+#[test]
+fn corruption_reports_what_the_checksum_catches() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_corrupt.toml", "--frames", "100000", "--seed", "3", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &v["corruption"];
+    let (n, caught, passed) = (c["corrupted"].as_u64().unwrap(), c["caught"].as_u64().unwrap(), c["passed"].as_u64().unwrap());
+    assert_eq!(caught + passed, n);
+    assert_eq!(v["stages"][0]["corrupted"].as_u64(), Some(n));
+    assert_eq!(v["stages"][0]["corrupt_rate_model"], 0.01);
+    // Corruption is not loss: every frame is delivered.
+    assert_eq!(v["delivered"], 100_000);
+
+    let dir = std::env::temp_dir().join(format!("netfi-cli-corrupt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("c.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"corrupt\"\np = \"150%\"\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("c.toml:3: stage 1 (corrupt): `p`: 1.5 is not a probability"), "{stderr}");
+}

@@ -34,6 +34,10 @@
 //!   qdisc again, so a copy meets netem's loss and delay afresh, as a netfi
 //!   copy meets the stages after its `duplicate`; stages before it would apply
 //!   once to both in netfi but to each in netem, which the note says.
+//! - `corrupt` → `corrupt P` (exact: one random bit of the packet). netem
+//!   flips a bit anywhere in the packet it holds, which over UDP includes
+//!   the IP and UDP headers (a flip there is caught by the UDP checksum or
+//!   drops the packet in the stack), not only the 124 ITP bytes.
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
@@ -81,6 +85,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
     let mut loss: Option<(usize, String)> = None;
     let mut delay: Option<(usize, String)> = None;
     let mut dup: Option<(usize, String)> = None;
+    let mut corrupt: Option<(usize, String)> = None;
     let mut table: Option<(String, String)> = None;
     let mut longest_delay_ms = 0.0f64;
     for (i, st) in stages.iter().enumerate() {
@@ -89,6 +94,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         let slot = match &st.model {
             ModelSpec::Delay(_) | ModelSpec::Jitter(_) => &mut delay,
             ModelSpec::Duplicate(_) => &mut dup,
+            ModelSpec::Corrupt(_) => &mut corrupt,
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
@@ -100,6 +106,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 match model {
                     "delay" | "jitter" => "delay",
                     "duplicate" => "duplication",
+                    "corrupt" => "corruption",
                     _ => "loss model",
                 },
                 *j + 1
@@ -160,6 +167,12 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                     ));
                 }
                 format!("duplicate {}", pct(p.p.get()))
+            }
+            ModelSpec::Corrupt(p) => {
+                notes.push(format!(
+                    "{label}: approximated: netem flips one random bit of the whole packet, headers included (over UDP a header flip is caught by the UDP checksum or the stack), netfi one of the 124 ITP bytes"
+                ));
+                format!("corrupt {}", pct(p.p.get()))
             }
             ModelSpec::Outage(_) => unreachable!("refused above"),
         };
@@ -226,7 +239,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay, &dup].into_iter().flatten() {
+    for (_, text) in [&loss, &delay, &dup, &corrupt].into_iter().flatten() {
         cmd.push(' ');
         cmd.push_str(text);
     }

@@ -93,12 +93,19 @@ fn print_table(r: &CheckReport) {
     );
     println!("reordered         {:.5} of delivered", r.reordered_fraction);
     println!("outages           {} windows, mean {:.1} ms", r.outages.count, r.outages.mean_ms);
+    if let Some(c) = &r.corruption {
+        println!(
+            "corrupted         {} delivered: {} caught by the checksum, {} passed it",
+            c.corrupted, c.caught, c.passed
+        );
+    }
     println!("queue             depth max {} of {}", r.queue_depth_max, r.queue_capacity);
     if !r.stages.is_empty() {
         println!("stages:");
         println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
         for s in &r.stages {
             let model = match (s.loss_rate_model, s.delay_ms_model) {
+                _ if s.corrupt_rate_model.is_some() => format!("{:.5} bad", s.corrupt_rate_model.unwrap_or(0.0)),
                 _ if s.duplicate_rate_model.is_some() => format!("{:.5} dup", s.duplicate_rate_model.unwrap_or(0.0)),
                 (_, Some(d)) => format!("{d:.3} ms"),
                 (Some(l), None) => format!("{l:.5}"),
@@ -113,6 +120,14 @@ fn print_table(r: &CheckReport) {
                 s.loss_rate,
                 model
             );
+            if let (Some(n), Some(caught)) = (s.corrupted, s.caught_fraction_model) {
+                println!(
+                    "  {:>5}  {:<16} corrupted {n} ({:.5} per frame reaching it); model: checksum catches {caught:.5} of them",
+                    "",
+                    "",
+                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
+                );
+            }
             if let Some(n) = s.duplicated {
                 println!(
                     "  {:>5}  {:<16} copies {n} ({:.5} per frame reaching it)",
