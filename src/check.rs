@@ -185,12 +185,27 @@ pub struct StageReport {
     pub corrupt_rate_model: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub caught_fraction_model: Option<f64>,
+    /// The exact fraction of frames sent at once (reorder stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub early_fraction_model: Option<f64>,
+    /// Slots opened, the exact mean slot spacing in ms, and the most frames a
+    /// slot releases (slot stages; `null` when unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slots: Option<SlotStats>,
     /// Copies the stage made, and the model's exact copies per frame reaching
     /// it (duplicate stages).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub duplicated: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub duplicate_rate_model: Option<f64>,
+}
+
+/// A slot stage's slots.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct SlotStats {
+    pub opened: u64,
+    pub spacing_ms_mean_model: f64,
+    pub frames_per_slot_max: Option<u64>,
 }
 
 fn is_zero(n: &u64) -> bool {
@@ -369,6 +384,18 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                 corrupt_rate_model: st.model().corrupt_rate_exact(),
                 caught_fraction_model: (st.kind() == crate::model::ModelKind::Corrupt)
                     .then(crate::model::Corrupt::caught_fraction_exact),
+                early_fraction_model: match st.model() {
+                    crate::model::AnyModel::Reorder(m) => Some(m.early_fraction_exact()),
+                    _ => None,
+                },
+                slots: match st.model() {
+                    crate::model::AnyModel::Slot(m) => Some(SlotStats {
+                        opened: m.slots_opened(),
+                        spacing_ms_mean_model: m.spacing_ms_mean_exact(),
+                        frames_per_slot_max: Some(m.frames_per_slot_max()).filter(|&n| n != u64::MAX),
+                    }),
+                    _ => None,
+                },
                 duplicated: (st.kind() == crate::model::ModelKind::Duplicate).then(|| st.duplicated()),
                 duplicate_rate_model: st.model().duplicate_rate_exact(),
             });

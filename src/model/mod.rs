@@ -24,6 +24,8 @@ pub mod jitter;
 pub mod markov4;
 pub mod outage;
 pub mod presets;
+pub mod reorder;
+pub mod slot;
 mod spec;
 pub mod units;
 
@@ -36,6 +38,8 @@ pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
 pub use jitter::{Jitter, JitterDist, JitterParams};
 pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
+pub use reorder::{Reorder, ReorderParams};
+pub use slot::{Slot, SlotParams};
 pub use spec::ModelSpec;
 pub use units::{Millis, Probability};
 
@@ -121,10 +125,12 @@ pub enum ModelKind {
     Jitter,
     Duplicate,
     Corrupt,
+    Reorder,
+    Slot,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 9] = [
+    pub const ALL: [ModelKind; 11] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
@@ -134,6 +140,8 @@ impl ModelKind {
         ModelKind::Jitter,
         ModelKind::Duplicate,
         ModelKind::Corrupt,
+        ModelKind::Reorder,
+        ModelKind::Slot,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -148,6 +156,8 @@ impl ModelKind {
             ModelKind::Jitter => "jitter",
             ModelKind::Duplicate => "duplicate",
             ModelKind::Corrupt => "corrupt",
+            ModelKind::Reorder => "reorder",
+            ModelKind::Slot => "slot",
         }
     }
 
@@ -175,6 +185,8 @@ pub enum AnyModel {
     Jitter(Jitter),
     Duplicate(Duplicate),
     Corrupt(Corrupt),
+    Reorder(Reorder),
+    Slot(Slot),
 }
 
 impl AnyModel {
@@ -189,6 +201,8 @@ impl AnyModel {
             AnyModel::Jitter(_) => ModelKind::Jitter,
             AnyModel::Duplicate(_) => ModelKind::Duplicate,
             AnyModel::Corrupt(_) => ModelKind::Corrupt,
+            AnyModel::Reorder(_) => ModelKind::Reorder,
+            AnyModel::Slot(_) => ModelKind::Slot,
         }
     }
 
@@ -204,6 +218,8 @@ impl AnyModel {
             AnyModel::Jitter(m) => m.decide(t_ns, rng),
             AnyModel::Duplicate(m) => m.decide(t_ns, rng),
             AnyModel::Corrupt(m) => m.decide(t_ns, rng),
+            AnyModel::Reorder(m) => m.decide(t_ns, rng),
+            AnyModel::Slot(m) => m.decide(t_ns, rng),
         }
     }
 
@@ -218,6 +234,7 @@ impl AnyModel {
             AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
             AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
             AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) | AnyModel::Corrupt(_) => Some(0.0),
+            AnyModel::Reorder(_) | AnyModel::Slot(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
         }
     }
@@ -240,6 +257,7 @@ impl AnyModel {
         match self {
             AnyModel::Delay(m) => m.mean_ms_exact(),
             AnyModel::Jitter(m) => m.mean_ms_exact(),
+            AnyModel::Reorder(m) => m.mean_ms_exact(),
             _ => 0.0,
         }
     }
@@ -264,7 +282,7 @@ impl AnyModel {
 
     /// Whether this model delays frames (`delay`, `jitter`).
     pub fn is_delay(&self) -> bool {
-        matches!(self, AnyModel::Delay(_) | AnyModel::Jitter(_))
+        matches!(self, AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Reorder(_))
     }
 
     /// The exact `q`-quantile of the delay this model draws, in ms, for the
@@ -283,6 +301,7 @@ impl AnyModel {
         match self {
             AnyModel::Delay(d) => d.may_reorder(),
             AnyModel::Jitter(j) => j.may_reorder(),
+            AnyModel::Reorder(r) => r.may_reorder(),
             _ => false,
         }
     }

@@ -4,7 +4,7 @@
 
 use super::{
     AnyModel, Bernoulli, BernoulliParams, Corrupt, CorruptParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
+    GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError, Reorder, ReorderParams, Slot, SlotParams,
 };
 use serde::Serialize;
 
@@ -21,6 +21,8 @@ pub enum ModelSpec {
     Jitter(JitterParams),
     Duplicate(DuplicateParams),
     Corrupt(CorruptParams),
+    Reorder(ReorderParams),
+    Slot(SlotParams),
 }
 
 impl ModelSpec {
@@ -35,6 +37,8 @@ impl ModelSpec {
             ModelSpec::Jitter(_) => ModelKind::Jitter,
             ModelSpec::Duplicate(_) => ModelKind::Duplicate,
             ModelSpec::Corrupt(_) => ModelKind::Corrupt,
+            ModelSpec::Reorder(_) => ModelKind::Reorder,
+            ModelSpec::Slot(_) => ModelKind::Slot,
         }
     }
 
@@ -50,6 +54,8 @@ impl ModelSpec {
             ModelSpec::Jitter(p) => AnyModel::Jitter(Jitter::new(p)?),
             ModelSpec::Duplicate(p) => AnyModel::Duplicate(Duplicate::new(p)?),
             ModelSpec::Corrupt(p) => AnyModel::Corrupt(Corrupt::new(p)?),
+            ModelSpec::Reorder(p) => AnyModel::Reorder(Reorder::new(p)?),
+            ModelSpec::Slot(p) => AnyModel::Slot(Slot::new(p)?),
         })
     }
 }

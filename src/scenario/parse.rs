@@ -265,6 +265,8 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::Jitter => ModelSpec::Jitter(params(ctx, &span, &loc, t)?),
                 ModelKind::Duplicate => ModelSpec::Duplicate(params(ctx, &span, &loc, t)?),
                 ModelKind::Corrupt => ModelSpec::Corrupt(params(ctx, &span, &loc, t)?),
+                ModelKind::Reorder => ModelSpec::Reorder(params(ctx, &span, &loc, t)?),
+                ModelKind::Slot => ModelSpec::Slot(params(ctx, &span, &loc, t)?),
             };
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
@@ -578,6 +580,24 @@ mod tests {
         assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("dist")), "{e}");
         let ok = parse_str(&format!("{head}sd_ms = 20\ndist = \"paretonormal\"\ncorrelation = \"25%\"\n"), "s.toml", "s");
         assert!(ok.is_ok(), "{ok:?}");
+    }
+
+    #[test]
+    fn new_netem_stages_name_file_line_and_field() {
+        let cases = [
+            ("[[stage]]\nmodel = \"slot\"\nmin_ms = 5\nmax_ms = 2\n", 4, "max_ms", "min_ms ≤ max_ms", "slot"),
+            ("[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 0\n", 5, "packets", "at least 1", "slot"),
+            ("[[stage]]\nmodel = \"reorder\"\np = 0.5\ngap = 0\ndelay_ms = 10\n", 4, "gap", "from 1", "reorder"),
+            ("[[stage]]\nmodel = \"reorder\"\np = 0.5\n", 1, "delay_ms", "missing", "reorder"),
+            ("[[stage]]\nmodel = \"corrupt\"\n\np = 1.2\n", 4, "p", "[0, 1]", "corrupt"),
+            ("[[stage]]\nmodel = \"duplicate\"\np = -1\n", 3, "p", "[0, 1]", "duplicate"),
+        ];
+        for (text, line, field, piece, model) in cases {
+            let e = err(text);
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{text}");
+            assert_eq!(e.location.as_deref(), Some(format!("stage 1 ({model})").as_str()), "{e}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
     }
 
     #[test]

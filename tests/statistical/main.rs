@@ -7,3 +7,4 @@ mod duplicate;
 mod jitter;
 mod models;
 mod presets;
+mod reorder_slot;

@@ -38,6 +38,12 @@
 //!   flips a bit anywhere in the packet it holds, which over UDP includes
 //!   the IP and UDP headers (a flip there is caught by the UDP checksum or
 //!   drops the packet in the stack), not only the 124 ITP bytes.
+//! - `reorder` → `delay D reorder P gap N` (exact: netem's rule; it takes
+//!   netem's one delay).
+//! - `slot` → `slot MIN MAX [packets N] [bytes B]`: netem counts a packet's
+//!   bytes from its link-layer header, 166 for an ITP frame over UDP, IPv4 and
+//!   Ethernet, where netfi counts the 124 ITP bytes, so `bytes` is scaled by
+//!   166/124 (approximated for other encapsulations).
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
@@ -86,13 +92,15 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
     let mut delay: Option<(usize, String)> = None;
     let mut dup: Option<(usize, String)> = None;
     let mut corrupt: Option<(usize, String)> = None;
+    let mut slot: Option<(usize, String)> = None;
     let mut table: Option<(String, String)> = None;
     let mut longest_delay_ms = 0.0f64;
     for (i, st) in stages.iter().enumerate() {
         let label = stage_label(i, st);
         let model = st.model.kind().name();
         let slot = match &st.model {
-            ModelSpec::Delay(_) | ModelSpec::Jitter(_) => &mut delay,
+            ModelSpec::Delay(_) | ModelSpec::Jitter(_) | ModelSpec::Reorder(_) => &mut delay,
+            ModelSpec::Slot(_) => &mut slot,
             ModelSpec::Duplicate(_) => &mut dup,
             ModelSpec::Corrupt(_) => &mut corrupt,
             ModelSpec::Outage(_) => bail!(
@@ -104,7 +112,8 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
             bail!(
                 "{label}: netem takes one {} per qdisc and stage {} already uses it",
                 match model {
-                    "delay" | "jitter" => "delay",
+                    "delay" | "jitter" | "reorder" => "delay",
+                    "slot" => "slot",
                     "duplicate" => "duplication",
                     "corrupt" => "corruption",
                     _ => "loss model",
@@ -174,6 +183,24 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 ));
                 format!("corrupt {}", pct(p.p.get()))
             }
+            ModelSpec::Reorder(p) => {
+                notes.push(format!("{label}: exact (delay … reorder … gap …)"));
+                longest_delay_ms = longest_delay_ms.max(p.delay_ms.get());
+                format!("delay {} reorder {} gap {}", time_us(p.delay_ms.get()), pct(p.p.get()), p.gap)
+            }
+            ModelSpec::Slot(p) => {
+                let mut text = format!("slot {} {}", time_us(p.min_ms.get()), time_us(p.max_ms.get()));
+                if let Some(n) = p.packets {
+                    text.push_str(&format!(" packets {n}"));
+                }
+                if let Some(b) = p.bytes {
+                    text.push_str(&format!(" bytes {}", (b as f64 * 166.0 / 124.0).ceil() as u64));
+                    notes.push(format!("{label}: approximated: bytes scaled by 166/124 (netem counts the UDP/IPv4/Ethernet headers too)"));
+                } else {
+                    notes.push(format!("{label}: exact (slot)"));
+                }
+                text
+            }
             ModelSpec::Outage(_) => unreachable!("refused above"),
         };
         *slot = Some((i, text));
@@ -239,7 +266,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay, &dup, &corrupt].into_iter().flatten() {
+    for (_, text) in [&loss, &delay, &dup, &corrupt, &slot].into_iter().flatten() {
         cmd.push(' ');
         cmd.push_str(text);
     }

@@ -128,6 +128,19 @@ fn print_table(r: &CheckReport) {
                     if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
                 );
             }
+            if let Some(f) = s.early_fraction_model {
+                println!("  {:>5}  {:<16} model: {f:.5} of frames sent at once", "", "");
+            }
+            if let Some(sl) = &s.slots {
+                println!(
+                    "  {:>5}  {:<16} slots {} (model spacing {:.3} ms, at most {} frames each)",
+                    "",
+                    "",
+                    sl.opened,
+                    sl.spacing_ms_mean_model,
+                    sl.frames_per_slot_max.map_or("any".to_string(), |n| n.to_string())
+                );
+            }
             if let Some(n) = s.duplicated {
                 println!(
                     "  {:>5}  {:<16} copies {n} ({:.5} per frame reaching it)",
