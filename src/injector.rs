@@ -239,7 +239,7 @@ impl<T: Copy + Default> Injector<T> {
                 }
             }
         };
-        let copies = *self.scenario.copies();
+        let copies = self.scenario.copies();
         let mut scheduled = 0u8;
         if copies.made() > 0 {
             self.counts.duplicated += copies.made();

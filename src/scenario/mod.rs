@@ -194,6 +194,9 @@ pub struct Scenario {
     current: usize,
     copies: Copies,
     flips: Flips,
+    /// Copies waiting to run through the rest of the pipeline: (first
+    /// stage, time there, flips so far). Scratch for [`Scenario::decide`].
+    pending: [(usize, u64, Flips); MAX_COPIES],
 }
 
 impl Scenario {
@@ -271,7 +274,10 @@ impl Scenario {
             }
             phases.push(Phase { name: ps.name.clone(), start_offset_ns, stages });
         }
-        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default(), flips: Flips::default() })
+        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default(),
+            flips: Flips::default(),
+            pending: [(0, 0, Flips::default()); MAX_COPIES],
+        })
     }
 
     pub fn name(&self) -> &str {
@@ -306,22 +312,25 @@ impl Scenario {
             self.current += 1;
         }
         let phase = self.current;
-        let stages = &mut self.phases[phase].stages;
-        // Copies waiting to run: (first stage, time there, flips so far).
-        let mut pending = [(0usize, 0u64, Flips::default()); MAX_COPIES];
+        // The copy arrays live in the scenario and are not cleared per frame:
+        // only their counts are reset, so a frame without copies or flips
+        // costs no more than before.
+        let Scenario { phases, copies, flips, pending, .. } = self;
+        let stages = &mut phases[phase].stages;
         let mut queued = 0usize;
-        let mut flips = Flips::default();
-        let decision = match run_stages(stages, 0, t_ns, &mut flips, &mut pending, &mut queued) {
+        flips.len = 0;
+        let decision = match run_stages(stages, 0, t_ns, flips, pending, &mut queued) {
             Ok(t) => Decision::Pass { delay_ns: t - t_ns },
             // Both indices fit: `new` caps phases and stages at u16::MAX.
             Err(si) => Decision::Drop { phase: phase as u16, stage: si as u16 },
         };
-        let mut copies = Copies::default();
+        copies.passed = 0;
+        copies.dropped = 0;
         let mut next = 0;
         while next < queued {
             let (from, t, mut copy_flips) = pending[next];
             next += 1;
-            match run_stages(stages, from, t, &mut copy_flips, &mut pending, &mut queued) {
+            match run_stages(stages, from, t, &mut copy_flips, pending, &mut queued) {
                 Ok(end) => {
                     copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
                     copies.flips[usize::from(copies.passed)] = copy_flips;
@@ -330,8 +339,6 @@ impl Scenario {
                 Err(_) => copies.dropped += 1,
             }
         }
-        self.copies = copies;
-        self.flips = flips;
         decision
     }
 
