@@ -165,3 +165,27 @@ fn corruption_reports_what_the_checksum_catches() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("c.toml:3: stage 1 (corrupt): `p`: 1.5 is not a probability"), "{stderr}");
 }
+
+#[test]
+fn export_netem_writes_the_new_stages_as_netems_own() {
+    let export = |file: &str| {
+        let out = netfi().args(["export", "netem", file, "--dev", "eth0"]).output().unwrap();
+        assert!(out.status.success(), "{file}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        let tc = text.lines().find(|l| l.starts_with("tc qdisc replace")).unwrap_or_else(|| panic!("{text}")).to_string();
+        (text, tc)
+    };
+    let (text, tc) = export("config/scenarios/netem_jitter.toml");
+    // sd 20 ms over netem's Pareto-normal table's sd 1.0518: sigma 19015 µs.
+    assert!(tc.ends_with("loss random 1% delay 100000us 19015us 25% distribution paretonormal"), "{tc}");
+    assert!(text.contains("netem's correlation mixes each draw with the last"), "{text}");
+    let (_, tc) = export("config/scenarios/netem_duplicate.toml");
+    assert!(tc.contains("duplicate 1%") && tc.contains("distribution normal"), "{tc}");
+    let (text, tc) = export("config/scenarios/netem_corrupt.toml");
+    assert!(tc.contains("corrupt 1%") && tc.contains("delay 5000us"), "{tc}");
+    assert!(text.contains("headers included"), "{text}");
+    let (_, tc) = export("config/scenarios/netem_reorder.toml");
+    assert!(tc.ends_with("delay 10000us reorder 25% gap 5"), "{tc}");
+    let (_, tc) = export("config/scenarios/netem_slot.toml");
+    assert!(tc.ends_with("loss random 1% slot 2000us 6000us packets 8"), "{tc}");
+}
