@@ -253,6 +253,46 @@ impl JitterParams {
     }
 }
 
+/// The jitter of law `dist` whose delay (clamp included) has mean
+/// `mean_ms` and 99th percentile `p99_ms`, in `reorder` order without
+/// correlation (set those after). Exact, by bisection on `sd_ms`: with the
+/// 99th percentile held at `p99_ms` (`mean = p99_ms − sd·h(z₀.₉₉)`), the
+/// clamped mean falls as `sd_ms` grows. Needs `0 < mean_ms < p99_ms`; the
+/// error names the field that cannot be met.
+pub fn fit_mean_p99(dist: JitterDist, mean_ms: f64, p99_ms: f64) -> Result<JitterParams, ParamError> {
+    if !(mean_ms.is_finite() && mean_ms > 0.0 && mean_ms <= MAX_DURATION_MS) {
+        return Err(ParamError::new("mean_ms", format!("{}: expected a mean delay above 0 and at most one hour", super::units::show(mean_ms))));
+    }
+    if !(p99_ms.is_finite() && p99_ms > mean_ms && p99_ms <= MAX_DURATION_MS) {
+        return Err(ParamError::new("p99_ms", format!("{}: expected a 99th percentile above the mean ({mean_ms} ms) and at most one hour", super::units::show(p99_ms))));
+    }
+    let h99 = dist.standard(normal_quantile(0.99));
+    let build = |sd: f64| -> Result<Jitter, ParamError> {
+        // sd ≤ sd_max keeps m ≥ 0 up to rounding.
+        Jitter::new(&JitterParams::new((p99_ms - sd * h99).max(0.0), sd, dist)?)
+    };
+    // The largest sd that keeps the unclamped mean ≥ 0, and the mean there.
+    let sd_max = (p99_ms / h99).min(MAX_DURATION_MS);
+    let lowest = build(sd_max)?.mean_ms_exact();
+    if mean_ms < lowest {
+        return Err(ParamError::new(
+            "mean_ms",
+            format!("{mean_ms} ms: with a 99th percentile of {p99_ms} ms a {} jitter has a mean of at least {lowest:.4} ms", dist.name()),
+        ));
+    }
+    let (mut lo, mut hi) = (0.0, sd_max);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if build(mid)?.mean_ms_exact() > mean_ms {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let sd = 0.5 * (lo + hi);
+    JitterParams::new((p99_ms - sd * h99).max(0.0), sd, dist)
+}
+
 /// A validated `jitter` stage and its state (the last normal score, and the
 /// last release for `fifo`).
 #[derive(Debug, Clone)]
@@ -529,6 +569,26 @@ mod tests {
         let j = Jitter::new(&jitter(100.0, 20.0, JitterDist::Pareto)).unwrap();
         let by_hand = 100.0 + 20.0 * (0.01f64.powf(-1.0 / 3.0) - 1.5) / PARETO_SD;
         assert!((j.quantile_ms(0.99) - by_hand).abs() < 1e-8);
+    }
+
+    #[test]
+    fn fit_to_a_mean_and_a_p99() {
+        for dist in JitterDist::ALL {
+            for (mean, p99) in [(100.0, 150.0), (40.0, 120.0)] {
+                let p = fit_mean_p99(dist, mean, p99).unwrap();
+                let j = Jitter::new(&p).unwrap();
+                assert!((j.mean_ms_exact() - mean).abs() < 1e-6, "{dist:?}: mean {}", j.mean_ms_exact());
+                assert!((j.quantile_ms(0.99) - p99).abs() < 1e-6, "{dist:?}: p99 {}", j.quantile_ms(0.99));
+            }
+        }
+        // Normal 4.65 sd from 0: the textbook answer, up to the clamp's
+        // ~10^-6 ms.
+        let p = fit_mean_p99(JitterDist::Normal, 100.0, 150.0).unwrap();
+        assert!((p.sd_ms - 50.0 / normal_quantile(0.99)).abs() < 1e-4 && (p.mean_ms.get() - 100.0).abs() < 1e-4, "{p:?}");
+        assert_eq!(fit_mean_p99(JitterDist::Normal, 100.0, 90.0).unwrap_err().field, "p99_ms");
+        assert_eq!(fit_mean_p99(JitterDist::Normal, 0.0, 90.0).unwrap_err().field, "mean_ms");
+        // A Pareto jitter cannot have a mean far below its p99's reach.
+        assert_eq!(fit_mean_p99(JitterDist::Pareto, 1.0, 1000.0).unwrap_err().field, "mean_ms");
     }
 
     #[test]
