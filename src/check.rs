@@ -12,6 +12,16 @@
 //! - `reordered_fraction`: delivered frames released after a frame that
 //!   entered later (RFC 4737's reordered packets), over delivered frames.
 //! - `outages`: windows opened by `outage` stages, and their mean length.
+//! - `duplicated`: copies made by `duplicate` stages (only when there are
+//!   any). Each copy is released or dropped like a frame, so
+//!   `frames + duplicated = delivered + Σ dropped`, and `delivered` counts
+//!   copies; `loss_rate`, `delay_ms` and `loss_run_mean` are over the
+//!   original frames.
+//! - `corruption`: delivered frames (originals and copies) that `corrupt`
+//!   stages asked to flip bits in, and how many of those the ITP checksum
+//!   catches or passes, found by applying the flips to a synthetic sealed
+//!   frame ([`synthetic_frame`]) with [`crate::frame::checksum_catches`]
+//!   (only when the scenario corrupts).
 
 use crate::injector::{Fate, Injector};
 use crate::scenario::Scenario;
@@ -98,6 +108,40 @@ pub struct DelayStats {
     pub max: f64,
 }
 
+/// Corrupted frames and what the ITP checksum makes of them.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct CorruptionStats {
+    /// Delivered frames with at least one flipped bit.
+    pub corrupted: u64,
+    /// Of those, frames whose checksum no longer matches.
+    pub caught: u64,
+    /// Of those, frames that still pass the checksum check (the flips were
+    /// in bytes it does not cover, or cancelled out).
+    pub passed: u64,
+}
+
+/// The frame `scenario check` corrupts to see what the checksum catches:
+/// arbitrary non-zero fields, sealed. One flip is caught or not by its byte
+/// alone; only cancelling multiple flips depend on the values.
+pub fn synthetic_frame() -> [u8; crate::frame::FRAME_LEN] {
+    crate::frame::ItpFrame {
+        sequence: 12_345,
+        delx: [17, -23],
+        dely: [-5, 42],
+        delz: [9, -1],
+        qx: [0.01, -0.02],
+        qy: [0.0, 0.03],
+        qz: [-0.01, 0.0],
+        qw: [1.0, 1.0],
+        buttonstate: [0, 1],
+        grasp: [250, -180],
+        surgeon_mode: crate::frame::SURGEON_ENGAGED,
+        ..Default::default()
+    }
+    .with_checksum()
+    .to_bytes()
+}
+
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct OutageStats {
     pub count: u64,
@@ -120,9 +164,60 @@ pub struct StageReport {
     /// The model's long-run loss at this frame rate, where known exactly.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub loss_rate_model: Option<f64>,
-    /// The model's mean delay in ms (delay stages).
+    /// The model's mean delay in ms (delay and jitter stages; the jitter's
+    /// clamp at 0 included).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delay_ms_model: Option<f64>,
+    /// The model's exact 99th percentile of the drawn delay in ms (jitter
+    /// stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_ms_p99_model: Option<f64>,
+    /// The model's lag-1 correlation of normal scores, and the Spearman rank
+    /// correlation of successive delays it implies (jitter stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlation_model: Option<CorrelationModel>,
+    /// Frames the stage corrupted, the model's exact fraction of the frames
+    /// reaching it, and the exact fraction of its flips the checksum catches
+    /// (corrupt stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrupted: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corrupt_rate_model: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub caught_fraction_model: Option<f64>,
+    /// The exact fraction of frames sent at once (reorder stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub early_fraction_model: Option<f64>,
+    /// Slots opened, the exact mean slot spacing in ms, and the most frames a
+    /// slot releases (slot stages; `null` when unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slots: Option<SlotStats>,
+    /// Copies the stage made, and the model's exact copies per frame reaching
+    /// it (duplicate stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duplicated: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duplicate_rate_model: Option<f64>,
+}
+
+/// A slot stage's slots.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct SlotStats {
+    pub opened: u64,
+    pub spacing_ms_mean_model: f64,
+    pub frames_per_slot_max: Option<u64>,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
+}
+
+/// A jitter stage's correlation: the AR(1) coefficient of its normal scores
+/// and the exact lag-1 rank correlation of the delays, `(6/π)·asin(ρ/2)`.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct CorrelationModel {
+    pub normal_scores_lag1: f64,
+    pub rank_lag1: f64,
 }
 
 /// What a scenario realized over a run in simulated time.
@@ -134,6 +229,9 @@ pub struct CheckReport {
     /// Mean arrival rate.
     pub rate_hz: f64,
     pub delivered: u64,
+    /// Copies made by `duplicate` stages (absent when none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub duplicated: u64,
     pub dropped: BTreeMap<String, u64>,
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
@@ -141,6 +239,9 @@ pub struct CheckReport {
     pub delay_ms: DelayStats,
     pub reordered_fraction: f64,
     pub outages: OutageStats,
+    /// Only when the scenario has `corrupt` stages.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corruption: Option<CorruptionStats>,
     pub queue_capacity: usize,
     /// The most frames held at once.
     pub queue_depth_max: usize,
@@ -154,6 +255,7 @@ pub const PROGRESS_EVERY: u64 = 1 << 16;
 /// every [`PROGRESS_EVERY`] frames.
 pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut progress: impl FnMut(u64)) -> CheckReport {
     let frames = arrivals.len();
+    let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
     let mut batches = BatchMeans::new(frames);
     let mut delays = Histogram::<u64>::new_with_bounds(1, 24 * 3_600 * 1_000_000_000, 3).expect("static bounds are valid");
@@ -163,13 +265,22 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
     let mut in_run = false;
     let mut depth_max = 0usize;
     let mut release = ReleaseTally::default();
+    let frame = synthetic_frame();
+    let mut corruption = CorruptionStats { corrupted: 0, caught: 0, passed: 0 };
 
     for i in 0..frames {
         let t = arrivals.at(i);
         while let Some(r) = inj.pop_due(t) {
             release.record(&r);
         }
-        let e = inj.ingress(t, ());
+        let e = inj.ingress_with(t, (), |_, flips| {
+            corruption.corrupted += 1;
+            if crate::frame::checksum_catches(&frame, flips.bits()) {
+                corruption.caught += 1;
+            } else {
+                corruption.passed += 1;
+            }
+        });
         let dropped = match e.fate {
             Fate::Scheduled { delay_ns, .. } => {
                 delays.saturating_record(delay_ns);
@@ -198,7 +309,8 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
     let counts = inj.counts();
     debug_assert!(counts.balanced() && counts.held == 0);
     let delivered = counts.released;
-    let dropped_total = counts.dropped();
+    // Runs of drops are counted over the originals' fates, copies apart.
+    let dropped_total = batches.events();
     let (loss_rate, loss_rate_ci95) = batches.rate_ci95();
     let ms = |ns: f64| ns / 1e6;
     let delay_ms = if delivered > 0 {
@@ -220,6 +332,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
         frames,
         rate_hz: if interval_ns > 0.0 { 1e9 / interval_ns } else { 0.0 },
         delivered,
+        duplicated: counts.duplicated,
         dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         loss_rate,
         loss_rate_ci95,
@@ -227,6 +340,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
         delay_ms,
         reordered_fraction: if delivered > 0 { release.reordered as f64 / delivered as f64 } else { 0.0 },
         outages,
+        corruption: corrupts_any.then_some(corruption),
         queue_capacity: inj.queue_capacity(),
         queue_depth_max: depth_max,
         stages,
@@ -254,7 +368,36 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                 dropped: st.dropped(),
                 loss_rate: if reached > 0 { st.dropped() as f64 / reached as f64 } else { 0.0 },
                 loss_rate_model: st.model().loss_rate_exact(interval_ns.round() as u64),
-                delay_ms_model: (st.kind() == crate::model::ModelKind::Delay).then(|| st.model().mean_delay_ms_exact()),
+                delay_ms_model: st.model().is_delay().then(|| st.model().mean_delay_ms_exact()),
+                delay_ms_p99_model: match st.model() {
+                    crate::model::AnyModel::Jitter(j) => Some(j.quantile_ms(0.99)),
+                    _ => None,
+                },
+                correlation_model: match st.model() {
+                    crate::model::AnyModel::Jitter(j) if j.correlation() > 0.0 => Some(CorrelationModel {
+                        normal_scores_lag1: j.correlation(),
+                        rank_lag1: j.rank_correlation_exact(),
+                    }),
+                    _ => None,
+                },
+                corrupted: (st.kind() == crate::model::ModelKind::Corrupt).then(|| st.corrupted()),
+                corrupt_rate_model: st.model().corrupt_rate_exact(),
+                caught_fraction_model: (st.kind() == crate::model::ModelKind::Corrupt)
+                    .then(crate::model::Corrupt::caught_fraction_exact),
+                early_fraction_model: match st.model() {
+                    crate::model::AnyModel::Reorder(m) => Some(m.early_fraction_exact()),
+                    _ => None,
+                },
+                slots: match st.model() {
+                    crate::model::AnyModel::Slot(m) => Some(SlotStats {
+                        opened: m.slots_opened(),
+                        spacing_ms_mean_model: m.spacing_ms_mean_exact(),
+                        frames_per_slot_max: Some(m.frames_per_slot_max()).filter(|&n| n != u64::MAX),
+                    }),
+                    _ => None,
+                },
+                duplicated: (st.kind() == crate::model::ModelKind::Duplicate).then(|| st.duplicated()),
+                duplicate_rate_model: st.model().duplicate_rate_exact(),
             });
         }
     }

@@ -143,6 +143,43 @@ fn write_f64x2(b: &mut [u8], v: [f64; ARMS]) {
     b[8..16].copy_from_slice(&v[1].to_le_bytes());
 }
 
+/// Bytes of the frame the checksum covers (docs/spec.md §2): `sequence`, the
+/// six position increments, both `buttonstate`s, `surgeon_mode`, and the
+/// `checksum` field itself: 4 + 24 + 8 + 4 + 4 = 44 of the 124.
+pub const CHECKSUM_COVERED_BYTES: usize = 44;
+
+/// Whether a change to byte `byte` of a frame changes what the checksum
+/// check compares. `pactyp`, `version`, the rotations (`Qx` … `Qw`) and
+/// `grasp` are not covered: a change there passes the check.
+pub const fn checksum_covers(byte: usize) -> bool {
+    matches!(byte, 0..=3 | 12..=35 | 100..=107 | 116..=123)
+}
+
+/// Flips bit `bit % 8` (least significant first) of byte `bit / 8` of
+/// `bytes` for each index in `bits` (a [`crate::model::Verdict::Corrupt`]'s
+/// bit); flipping a bit twice restores it. Indices past the buffer are
+/// ignored.
+#[inline]
+pub fn flip_bits(bytes: &mut [u8], bits: &[u16]) {
+    for &bit in bits {
+        if let Some(b) = bytes.get_mut(usize::from(bit / 8)) {
+            *b ^= 1 << (bit % 8);
+        }
+    }
+}
+
+/// Whether the ITP checksum check catches the flips `bits` applied to the
+/// frame `bytes`: the flipped frame's carried checksum no longer matches its
+/// fields while the original's did. One flip is caught exactly when
+/// [`checksum_covers`] its byte (a single bit changes the wrapping sum by
+/// ±2^k, never by 0); several flips can cancel.
+pub fn checksum_catches(bytes: &[u8; FRAME_LEN], bits: &[u16]) -> bool {
+    let before = ItpView::new_unchecked(&bytes[..]).verify_checksum();
+    let mut flipped = *bytes;
+    flip_bits(&mut flipped, bits);
+    before && !ItpView::new_unchecked(&flipped[..]).verify_checksum()
+}
+
 /// A checked view of one ITP frame in a byte buffer.
 ///
 /// Once constructed with [`ItpView::new_checked`] the buffer is known to be
@@ -648,6 +685,38 @@ mod tests {
         v.set_grasp([0x0102_0304, 0x0506_0708]);
         assert_eq!(&bytes[108..116], &[4, 3, 2, 1, 8, 7, 6, 5]);
         assert!(bytes[..108].iter().chain(&bytes[116..]).all(|&b| b == 0xAA));
+    }
+
+    #[test]
+    fn the_checksum_catches_exactly_the_flips_in_the_bytes_it_covers() {
+        let frame = ItpFrame {
+            sequence: 77,
+            delx: [3, -4],
+            dely: [5, 6],
+            delz: [-7, 8],
+            qw: [1.0, 1.0],
+            buttonstate: [1, 0],
+            grasp: [100, -100],
+            surgeon_mode: SURGEON_ENGAGED,
+            ..ItpFrame::default()
+        }
+        .with_checksum();
+        let bytes = frame.to_bytes();
+        let mut covered = 0;
+        for bit in 0..(FRAME_LEN * 8) as u16 {
+            let byte = usize::from(bit / 8);
+            assert_eq!(checksum_catches(&bytes, &[bit]), checksum_covers(byte), "bit {bit}");
+            covered += usize::from(checksum_covers(byte) && bit % 8 == 0);
+        }
+        assert_eq!(covered, CHECKSUM_COVERED_BYTES);
+        // grasp (108..116) is not covered: a flip there passes.
+        assert!(!checksum_catches(&bytes, &[108 * 8 + 3]));
+        // Two flips that cancel in the sum: +2^0 in delx[0] and −2^0 in dely[0]
+        // (delx[0] = 3 has bit 0 set → 2; dely[0] = 5 … use bit 1: 5 → 7, 3 → 1).
+        assert!(!checksum_catches(&bytes, &[12 * 8 + 1, 20 * 8 + 1]));
+        let mut twice = bytes;
+        flip_bits(&mut twice, &[5, 5]);
+        assert_eq!(twice, bytes);
     }
 
     #[test]

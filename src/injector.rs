@@ -7,13 +7,27 @@
 //!   scheduled frame is later either released ([`Injector::pop_due`]) or
 //!   still held when the run ends ([`Injector::held`]). So at every moment
 //!   `entered = dropped + released + held`, which [`Counts::balanced`] checks.
+//! - Copies (`duplicate` stages, docs/spec.md §3.8) are counted apart: each
+//!   copy a stage makes adds one to [`Counts::duplicated`] and then has a
+//!   fate of its own (scheduled under its original's ingress index, or
+//!   dropped by a later stage or for `queue_full`). The balance becomes
+//!   `entered + duplicated = released + dropped + held`, the same as before
+//!   for a run without duplication; `released` may exceed `entered` by at
+//!   most the copies.
+//! - Flips (`corrupt` stages, docs/spec.md §3.9): the injector is generic
+//!   over the item, so it does not flip bits itself. [`Injector::ingress_with`]
+//!   hands each scheduled item (the original and every copy) with its
+//!   non-empty [`Flips`] to the caller's `apply` before queueing it; the
+//!   emulator applies them to the frame's 124 bytes with
+//!   [`crate::frame::flip_bits`]. [`Counts::corrupted`] counts the scheduled
+//!   items that carried flips.
 //! - No clock, I/O or allocation after construction: `now_ns` is passed in,
 //!   the queue's capacity is fixed, and a frame that does not fit is a fate of
 //!   its own ([`DropCause::QueueFull`]), never a silent loss.
 //! - The timeline's phases are selected by the time since the first frame.
 
 use crate::model::ModelKind;
-use crate::scenario::{Decision, Scenario};
+use crate::scenario::{Decision, Flips, Scenario};
 use crate::scheduler::{CapacityError, QueueOrder, ReleaseQueue, Released};
 
 /// Why an entering frame could not be decided at all.
@@ -82,7 +96,13 @@ pub enum Fate {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Entered {
     pub ingress_index: u64,
+    /// The original frame's fate.
     pub fate: Fate,
+    /// Copies of it scheduled for release (under the same ingress index);
+    /// 0 without `duplicate` stages.
+    pub copies: u8,
+    /// Whether the original was scheduled with bits to flip.
+    pub corrupted: bool,
 }
 
 /// Running totals. Per-stage drops live in the scenario's stages.
@@ -96,6 +116,12 @@ pub struct Counts {
     pub dropped_bad_checksum: u64,
     pub dropped_bad_flags: u64,
     pub held: u64,
+    /// Copies made by `duplicate` stages (each then released, dropped or
+    /// held like any frame).
+    pub duplicated: u64,
+    /// Scheduled frames (originals and copies) that carry bits to flip
+    /// (`corrupt` stages). Not a fate: they are also counted as scheduled.
+    pub corrupted: u64,
 }
 
 impl Counts {
@@ -103,9 +129,10 @@ impl Counts {
         self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum + self.dropped_bad_flags
     }
 
-    /// `entered = released + dropped + held`.
+    /// `entered + duplicated = released + dropped + held` (with no
+    /// duplication: `entered = released + dropped + held`).
     pub fn balanced(&self) -> bool {
-        self.entered == self.released + self.dropped() + self.held
+        self.entered + self.duplicated == self.released + self.dropped() + self.held
     }
 }
 
@@ -175,18 +202,41 @@ impl<T: Copy + Default> Injector<T> {
     }
 
     /// A frame enters at `now_ns`: decide it, and queue it if it survives.
+    /// Bits a `corrupt` stage asked to flip are not applied (the item is
+    /// opaque here); use [`Injector::ingress_with`] to apply them.
     #[inline]
     pub fn ingress(&mut self, now_ns: u64, item: T) -> Entered {
+        self.ingress_with(now_ns, item, |_, _| {})
+    }
+
+    /// [`Injector::ingress`], calling `apply(&mut item, flips)` for the
+    /// original and each copy that is about to be queued with bits to flip
+    /// (never for one without). Each copy starts from the item as it entered.
+    #[inline]
+    pub fn ingress_with(&mut self, now_ns: u64, item: T, mut apply: impl FnMut(&mut T, &Flips)) -> Entered {
         let (ingress_index, offset_ns) = self.enter(now_ns);
-        let fate = match self.scenario.decide(offset_ns, now_ns) {
+        let decision = self.scenario.decide(offset_ns, now_ns);
+        let mut corrupted = false;
+        let fate = match decision {
             Decision::Drop { phase, stage } => {
                 self.counts.dropped_by_stage += 1;
                 let kind = self.scenario.stage(phase, stage).kind();
                 Fate::Dropped(DropCause::Stage { phase, stage, kind })
             }
             Decision::Pass { delay_ns } => {
-                match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, item) {
-                    Ok(release_ns) => Fate::Scheduled { release_ns, delay_ns: release_ns - now_ns },
+                let flips = *self.scenario.flips();
+                let mut own = item;
+                if !flips.is_empty() {
+                    apply(&mut own, &flips);
+                }
+                match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, own) {
+                    Ok(release_ns) => {
+                        if !flips.is_empty() {
+                            self.counts.corrupted += 1;
+                            corrupted = true;
+                        }
+                        Fate::Scheduled { release_ns, delay_ns: release_ns - now_ns }
+                    }
                     Err(_) => {
                         self.counts.dropped_queue_full += 1;
                         Fate::Dropped(DropCause::QueueFull)
@@ -194,7 +244,26 @@ impl<T: Copy + Default> Injector<T> {
                 }
             }
         };
-        Entered { ingress_index, fate }
+        let copies = self.scenario.copies();
+        let mut scheduled = 0u8;
+        if copies.made() > 0 {
+            self.counts.duplicated += copies.made();
+            self.counts.dropped_by_stage += copies.dropped();
+            for (&delay_ns, flips) in copies.delays_ns().iter().zip(copies.flips()) {
+                let mut copy = item;
+                if !flips.is_empty() {
+                    apply(&mut copy, flips);
+                }
+                match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, copy) {
+                    Ok(_) => {
+                        scheduled += 1;
+                        self.counts.corrupted += u64::from(!flips.is_empty());
+                    }
+                    Err(_) => self.counts.dropped_queue_full += 1,
+                }
+            }
+        }
+        Entered { ingress_index, fate, copies: scheduled, corrupted }
     }
 
     /// A malformed frame enters at `now_ns`: it gets an ingress index and is
@@ -206,7 +275,7 @@ impl<T: Copy + Default> Injector<T> {
             Invalid::BadChecksum => self.counts.dropped_bad_checksum += 1,
             Invalid::BadFlags => self.counts.dropped_bad_flags += 1,
         }
-        Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)) }
+        Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)), copies: 0, corrupted: false }
     }
 
     /// The earliest scheduled release, if any frame is held.
@@ -251,5 +320,104 @@ impl<T: Copy + Default> Injector<T> {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::parse_str;
+
+    fn injector(text: &str, capacity: usize) -> Injector<u32> {
+        Injector::new(Scenario::new(&parse_str(text, "s.toml", "s").unwrap(), 9).unwrap(), capacity)
+    }
+
+    #[test]
+    fn copies_keep_the_books_balanced() {
+        let mut inj = injector(
+            "[[stage]]\nmodel = \"duplicate\"\np = 0.3\n[[stage]]\nmodel = \"bernoulli\"\np = 0.2\n[[stage]]\nmodel = \"delay\"\nmin_ms = 3\n",
+            1 << 12,
+        );
+        let mut copies = 0u64;
+        let mut released_per_index = std::collections::BTreeMap::<u64, u32>::new();
+        for i in 0..20_000u64 {
+            let t = i * 1_000_000;
+            while let Some(r) = inj.pop_due(t) {
+                *released_per_index.entry(r.ingress_index).or_default() += 1;
+                assert_eq!(r.item, r.ingress_index as u32, "a copy carries its original's item");
+            }
+            let e = inj.ingress(t, i as u32);
+            copies += u64::from(e.copies);
+            let c = inj.counts();
+            assert!(c.balanced(), "{c:?}");
+        }
+        while let Some(r) = inj.pop_due(u64::MAX) {
+            *released_per_index.entry(r.ingress_index).or_default() += 1;
+        }
+        let c = inj.counts();
+        assert!(c.balanced() && c.held == 0, "{c:?}");
+        assert!(c.duplicated > 5_000 && copies > 4_000 && copies < c.duplicated, "{c:?} {copies}");
+        assert_eq!(c.released, c.entered + c.duplicated - c.dropped());
+        assert!(released_per_index.values().all(|&n| n <= 2));
+        assert_eq!(released_per_index.values().map(|&n| u64::from(n)).sum::<u64>(), c.released);
+    }
+
+    #[test]
+    fn a_copy_that_does_not_fit_is_queue_full() {
+        let mut inj = injector("[[stage]]\nmodel = \"duplicate\"\np = 1\n[[stage]]\nmodel = \"delay\"\nmin_ms = 1\n", 1);
+        let e = inj.ingress(0, 7);
+        assert!(matches!(e.fate, Fate::Scheduled { .. }));
+        assert_eq!(e.copies, 0);
+        let c = inj.counts();
+        assert_eq!((c.duplicated, c.dropped_queue_full, c.held), (1, 1, 1));
+        assert!(c.balanced());
+    }
+
+    #[test]
+    fn the_caller_applies_the_flips_to_its_own_bytes() {
+        let text = "[[stage]]\nmodel = \"corrupt\"\np = 0.5\n[[stage]]\nmodel = \"duplicate\"\np = 0.5\n";
+        let sc = Scenario::new(&parse_str(text, "s.toml", "s").unwrap(), 3).unwrap();
+        // The queue's items need `Default`, which a 124-byte array lacks.
+        #[derive(Clone, Copy, PartialEq, Debug)]
+        struct Bytes([u8; 124]);
+        impl Default for Bytes {
+            fn default() -> Self {
+                Bytes([0; 124])
+            }
+        }
+        let mut inj: Injector<Bytes> = Injector::new(sc, 1 << 10);
+        let clean = Bytes(crate::check::synthetic_frame());
+        let (mut corrupted_seen, mut released) = (0u64, 0u64);
+        for i in 0..2_000u64 {
+            let e = inj.ingress_with(i, clean, |b, flips| crate::frame::flip_bits(&mut b.0, flips.bits()));
+            assert_eq!(e.corrupted, matches!(e.fate, Fate::Scheduled { .. }) && e.corrupted);
+            while let Some(r) = inj.pop_due(u64::MAX) {
+                released += 1;
+                let differing: u32 = r.item.0.iter().zip(&clean.0).map(|(a, b)| (a ^ b).count_ones()).sum();
+                assert!(differing <= 1, "one corrupt stage flips at most one bit");
+                corrupted_seen += u64::from(differing == 1);
+            }
+        }
+        let c = inj.counts();
+        assert_eq!(c.corrupted, corrupted_seen);
+        assert_eq!(c.released, released);
+        assert!(c.balanced() && corrupted_seen > 800, "{c:?}");
+        // `ingress` leaves the item as it is.
+        let mut plain: Injector<Bytes> =
+            Injector::new(Scenario::new(&parse_str("[[stage]]\nmodel = \"corrupt\"\np = 1\n", "s.toml", "s").unwrap(), 3).unwrap(), 4);
+        assert!(plain.ingress(0, clean).corrupted);
+        assert_eq!(plain.pop_due(0).unwrap().item, clean);
+    }
+
+    #[test]
+    fn without_duplication_the_old_balance_holds() {
+        let mut inj = injector("[[stage]]\nmodel = \"bernoulli\"\np = 0.5\n", 16);
+        for i in 0..100 {
+            inj.ingress(i, 0);
+            while inj.pop_due(i).is_some() {}
+        }
+        let c = inj.counts();
+        assert_eq!(c.duplicated, 0);
+        assert_eq!(c.entered, c.released + c.dropped() + c.held);
     }
 }

@@ -195,7 +195,10 @@ impl Replica {
                             b.runs += u64::from(!prev);
                             prev = true;
                         }
-                        Verdict::Pass { delay_ns } => {
+                        // The fitted families (loss chains, delays) only
+                        // pass or drop; any other verdict passes at once.
+                        verdict => {
+                            let delay_ns = if let Verdict::Pass { delay_ns } = verdict { delay_ns } else { 0 };
                             prev = false;
                             let ms = delay_ns as f64 / 1e6;
                             b.delay_ms_sum += ms;

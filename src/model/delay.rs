@@ -412,7 +412,7 @@ mod tests {
     fn delay_of(v: Verdict) -> u64 {
         match v {
             Verdict::Pass { delay_ns } => delay_ns,
-            Verdict::Drop => panic!("a delay stage never drops"),
+            other => panic!("a delay stage only passes, got {other:?}"),
         }
     }
 

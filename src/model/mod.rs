@@ -14,22 +14,32 @@
 //! a dropped frame is never shown to later stages, so they draw nothing for it.
 
 pub mod bernoulli;
+pub mod corrupt;
 pub mod delay;
+pub mod duplicate;
 mod draw;
 pub mod ge_lomax;
 pub mod gilbert_elliott;
+pub mod jitter;
 pub mod markov4;
 pub mod outage;
 pub mod presets;
+pub mod reorder;
+pub mod slot;
 mod spec;
 pub mod units;
 
 pub use bernoulli::{Bernoulli, BernoulliParams};
+pub use corrupt::{Corrupt, CorruptParams};
 pub use delay::{Delay, DelayDist, DelayParams, Order};
+pub use duplicate::{Duplicate, DuplicateParams};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
+pub use jitter::{Jitter, JitterDist, JitterParams};
 pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
+pub use reorder::{Reorder, ReorderParams};
+pub use slot::{Slot, SlotParams};
 pub use spec::ModelSpec;
 pub use units::{Millis, Probability};
 
@@ -65,6 +75,13 @@ pub enum Verdict {
     Pass { delay_ns: u64 },
     /// The frame is lost at this stage.
     Drop,
+    /// The frame goes on without delay, and so does a copy of it, through
+    /// the same later stages (`duplicate`, docs/spec.md §3.8).
+    Duplicate,
+    /// The frame goes on without delay with bit `bit` flipped (byte
+    /// `bit / 8`, bit `bit % 8`): `corrupt`, docs/spec.md §3.9. The core
+    /// never touches bytes; the holder of the frame applies the flip.
+    Corrupt { bit: u16 },
 }
 
 impl Verdict {
@@ -105,16 +122,26 @@ pub enum ModelKind {
     GilbertElliott,
     Delay,
     Outage,
+    Jitter,
+    Duplicate,
+    Corrupt,
+    Reorder,
+    Slot,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 6] = [
+    pub const ALL: [ModelKind; 11] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
         ModelKind::GilbertElliott,
         ModelKind::Delay,
         ModelKind::Outage,
+        ModelKind::Jitter,
+        ModelKind::Duplicate,
+        ModelKind::Corrupt,
+        ModelKind::Reorder,
+        ModelKind::Slot,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -126,6 +153,11 @@ impl ModelKind {
             ModelKind::GilbertElliott => "gilbert_elliott",
             ModelKind::Delay => "delay",
             ModelKind::Outage => "outage",
+            ModelKind::Jitter => "jitter",
+            ModelKind::Duplicate => "duplicate",
+            ModelKind::Corrupt => "corrupt",
+            ModelKind::Reorder => "reorder",
+            ModelKind::Slot => "slot",
         }
     }
 
@@ -150,6 +182,11 @@ pub enum AnyModel {
     GilbertElliott(GilbertElliott),
     Delay(Delay),
     Outage(Outage),
+    Jitter(Jitter),
+    Duplicate(Duplicate),
+    Corrupt(Corrupt),
+    Reorder(Reorder),
+    Slot(Slot),
 }
 
 impl AnyModel {
@@ -161,6 +198,11 @@ impl AnyModel {
             AnyModel::GilbertElliott(_) => ModelKind::GilbertElliott,
             AnyModel::Delay(_) => ModelKind::Delay,
             AnyModel::Outage(_) => ModelKind::Outage,
+            AnyModel::Jitter(_) => ModelKind::Jitter,
+            AnyModel::Duplicate(_) => ModelKind::Duplicate,
+            AnyModel::Corrupt(_) => ModelKind::Corrupt,
+            AnyModel::Reorder(_) => ModelKind::Reorder,
+            AnyModel::Slot(_) => ModelKind::Slot,
         }
     }
 
@@ -173,6 +215,11 @@ impl AnyModel {
             AnyModel::GilbertElliott(m) => m.decide(t_ns, rng),
             AnyModel::Delay(m) => m.decide(t_ns, rng),
             AnyModel::Outage(m) => m.decide(t_ns, rng),
+            AnyModel::Jitter(m) => m.decide(t_ns, rng),
+            AnyModel::Duplicate(m) => m.decide(t_ns, rng),
+            AnyModel::Corrupt(m) => m.decide(t_ns, rng),
+            AnyModel::Reorder(m) => m.decide(t_ns, rng),
+            AnyModel::Slot(m) => m.decide(t_ns, rng),
         }
     }
 
@@ -186,7 +233,8 @@ impl AnyModel {
             AnyModel::GeLomax(m) => Some(m.loss_rate_exact()),
             AnyModel::Markov4(m) => Some(m.loss_rate_exact()),
             AnyModel::GilbertElliott(m) => Some(m.loss_rate_exact()),
-            AnyModel::Delay(_) => Some(0.0),
+            AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) | AnyModel::Corrupt(_) => Some(0.0),
+            AnyModel::Reorder(_) | AnyModel::Slot(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
         }
     }
@@ -201,18 +249,60 @@ impl AnyModel {
     }
 
     /// The exact mean delay this model adds to a frame it passes, in ms
-    /// (`E[D]`, docs/spec.md §3.4); 0 for models that add no delay. For `fifo` order
+    /// (`E[D]`, docs/spec.md §3.4, §3.7, the clamp at 0 included); 0 for
+    /// models that add no delay. For `fifo` order
     /// this is the drawn delay; holding a frame behind its predecessor adds
     /// to it.
     pub fn mean_delay_ms_exact(&self) -> f64 {
         match self {
             AnyModel::Delay(m) => m.mean_ms_exact(),
+            AnyModel::Jitter(m) => m.mean_ms_exact(),
+            AnyModel::Reorder(m) => m.mean_ms_exact(),
             _ => 0.0,
+        }
+    }
+
+    /// The exact long-run number of copies per frame reaching the stage
+    /// (`duplicate`; `None` for the other models).
+    pub fn duplicate_rate_exact(&self) -> Option<f64> {
+        match self {
+            AnyModel::Duplicate(m) => Some(m.duplicate_rate_exact()),
+            _ => None,
+        }
+    }
+
+    /// The exact long-run fraction of frames reaching the stage that it
+    /// corrupts (`corrupt`; `None` for the other models).
+    pub fn corrupt_rate_exact(&self) -> Option<f64> {
+        match self {
+            AnyModel::Corrupt(m) => Some(m.corrupt_rate_exact()),
+            _ => None,
+        }
+    }
+
+    /// Whether this model delays frames (`delay`, `jitter`).
+    pub fn is_delay(&self) -> bool {
+        matches!(self, AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Reorder(_))
+    }
+
+    /// The exact `q`-quantile of the delay this model draws, in ms, for the
+    /// models that delay (`None` otherwise). For `fifo` order this is the
+    /// drawn delay, before any hold.
+    pub fn delay_quantile_ms_exact(&self, q: f64) -> Option<f64> {
+        match self {
+            AnyModel::Delay(m) => Some(m.quantile_ms(q)),
+            AnyModel::Jitter(m) => Some(m.quantile_ms(q)),
+            _ => None,
         }
     }
 
     /// Whether this model can release frames out of their arrival order.
     pub fn may_reorder(&self) -> bool {
-        matches!(self, AnyModel::Delay(d) if d.may_reorder())
+        match self {
+            AnyModel::Delay(d) => d.may_reorder(),
+            AnyModel::Jitter(j) => j.may_reorder(),
+            AnyModel::Reorder(r) => r.may_reorder(),
+            _ => false,
+        }
     }
 }

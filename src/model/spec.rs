@@ -3,8 +3,8 @@
 //! an [`AnyModel`].
 
 use super::{
-    AnyModel, Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
-    GilbertElliottParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError,
+    AnyModel, Bernoulli, BernoulliParams, Corrupt, CorruptParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
+    GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError, Reorder, ReorderParams, Slot, SlotParams,
 };
 use serde::Serialize;
 
@@ -18,6 +18,11 @@ pub enum ModelSpec {
     GilbertElliott(GilbertElliottParams),
     Delay(DelayParams),
     Outage(OutageParams),
+    Jitter(JitterParams),
+    Duplicate(DuplicateParams),
+    Corrupt(CorruptParams),
+    Reorder(ReorderParams),
+    Slot(SlotParams),
 }
 
 impl ModelSpec {
@@ -29,6 +34,11 @@ impl ModelSpec {
             ModelSpec::GilbertElliott(_) => ModelKind::GilbertElliott,
             ModelSpec::Delay(_) => ModelKind::Delay,
             ModelSpec::Outage(_) => ModelKind::Outage,
+            ModelSpec::Jitter(_) => ModelKind::Jitter,
+            ModelSpec::Duplicate(_) => ModelKind::Duplicate,
+            ModelSpec::Corrupt(_) => ModelKind::Corrupt,
+            ModelSpec::Reorder(_) => ModelKind::Reorder,
+            ModelSpec::Slot(_) => ModelKind::Slot,
         }
     }
 
@@ -41,6 +51,11 @@ impl ModelSpec {
             ModelSpec::GilbertElliott(p) => AnyModel::GilbertElliott(GilbertElliott::new(p)?),
             ModelSpec::Delay(p) => AnyModel::Delay(Delay::new(p)?),
             ModelSpec::Outage(p) => AnyModel::Outage(Outage::new(p)?),
+            ModelSpec::Jitter(p) => AnyModel::Jitter(Jitter::new(p)?),
+            ModelSpec::Duplicate(p) => AnyModel::Duplicate(Duplicate::new(p)?),
+            ModelSpec::Corrupt(p) => AnyModel::Corrupt(Corrupt::new(p)?),
+            ModelSpec::Reorder(p) => AnyModel::Reorder(Reorder::new(p)?),
+            ModelSpec::Slot(p) => AnyModel::Slot(Slot::new(p)?),
         })
     }
 }

@@ -12,6 +12,21 @@
 //! never changes a stage's draws; give stages explicit names to keep that
 //! property when inserting a stage of the same model. A dropped frame goes no
 //! further, so later stages draw nothing for it.
+//!
+//! Copies (`duplicate`, docs/spec.md §3.8): a stage whose verdict is
+//! [`Verdict::Duplicate`] sends the frame on and a copy after it, through the
+//! same later stages. [`Scenario::decide`] runs the original to the end of
+//! the pipeline first, then each copy from the stage after the one that made
+//! it (copies of copies after their parents), and keeps the copies' fates in
+//! [`Scenario::copies`] until the next frame. A phase has at most
+//! [`MAX_DUPLICATE_STAGES`] duplicate stages, so a frame has at most
+//! [`MAX_COPIES`] copies, held in a fixed array: no allocation per frame.
+//!
+//! Flips (`corrupt`, docs/spec.md §3.9): the bits each `corrupt` stage a
+//! frame passes asked to flip are collected in a [`Flips`] (at most
+//! [`MAX_CORRUPT_STAGES`] per phase): the original's in
+//! [`Scenario::flips`], each copy's in [`Copies`] (a copy inherits the flips
+//! made before it was copied). The scenario never touches bytes.
 
 mod parse;
 mod presets;
@@ -37,6 +52,72 @@ pub enum Decision {
     Drop { phase: u16, stage: u16 },
 }
 
+/// The most `duplicate` stages one phase may have.
+pub const MAX_DUPLICATE_STAGES: usize = 4;
+/// The most copies of one frame: each duplicate stage at most doubles what
+/// reaches it.
+pub const MAX_COPIES: usize = (1 << MAX_DUPLICATE_STAGES) - 1;
+
+/// The most `corrupt` stages one phase may have.
+pub const MAX_CORRUPT_STAGES: usize = 4;
+
+/// The bits to flip in one frame (indices into its bytes, bit `i % 8` of
+/// byte `i / 8`), one per `corrupt` stage that corrupted it, in stage order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Flips {
+    bits: [u16; MAX_CORRUPT_STAGES],
+    len: u8,
+}
+
+impl Flips {
+    /// The bit indices, for [`crate::frame::flip_bits`].
+    #[inline]
+    pub fn bits(&self) -> &[u16] {
+        &self.bits[..usize::from(self.len)]
+    }
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    #[inline]
+    fn push(&mut self, bit: u16) {
+        // `Scenario::new` caps corrupt stages per phase at the array's size.
+        self.bits[usize::from(self.len)] = bit;
+        self.len += 1;
+    }
+}
+
+/// The copies of the frame last decided: the total delay of each copy that
+/// passed the whole pipeline (from the frame's ingress, in the order they
+/// were made), and how many later stages dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Copies {
+    delays_ns: [u64; MAX_COPIES],
+    flips: [Flips; MAX_COPIES],
+    passed: u8,
+    dropped: u8,
+}
+
+impl Copies {
+    /// Delays of the copies that passed.
+    pub fn delays_ns(&self) -> &[u64] {
+        &self.delays_ns[..usize::from(self.passed)]
+    }
+    /// The flips of each copy that passed, in the order of
+    /// [`Copies::delays_ns`].
+    pub fn flips(&self) -> &[Flips] {
+        &self.flips[..usize::from(self.passed)]
+    }
+    /// Copies that a later stage dropped.
+    pub fn dropped(&self) -> u64 {
+        u64::from(self.dropped)
+    }
+    /// All copies made: passed + dropped.
+    pub fn made(&self) -> u64 {
+        u64::from(self.passed) + u64::from(self.dropped)
+    }
+}
+
 /// One runnable stage: a model, its random stream and its counters.
 #[derive(Debug, Clone)]
 pub struct Stage {
@@ -46,6 +127,8 @@ pub struct Stage {
     preset: Option<String>,
     reached: u64,
     dropped: u64,
+    duplicated: u64,
+    corrupted: u64,
 }
 
 impl Stage {
@@ -68,6 +151,14 @@ impl Stage {
     /// Frames this stage dropped so far.
     pub fn dropped(&self) -> u64 {
         self.dropped
+    }
+    /// Copies this stage made so far (`duplicate`).
+    pub fn duplicated(&self) -> u64 {
+        self.duplicated
+    }
+    /// Frames this stage corrupted so far (`corrupt`).
+    pub fn corrupted(&self) -> u64 {
+        self.corrupted
     }
 }
 
@@ -98,6 +189,11 @@ pub struct Scenario {
     seed: u64,
     phases: Vec<Phase>,
     current: usize,
+    copies: Copies,
+    flips: Flips,
+    /// Copies waiting to run through the rest of the pipeline: (first
+    /// stage, time there, flips so far). Scratch for [`Scenario::decide`].
+    pending: [(usize, u64, Flips); MAX_COPIES],
 }
 
 impl Scenario {
@@ -138,6 +234,22 @@ impl Scenario {
             if ps.stages.len() > usize::from(u16::MAX) {
                 return Err(err(loc, None, format!("has {} stages; at most {} are supported", ps.stages.len(), u16::MAX)));
             }
+            let duplicates = ps.stages.iter().filter(|s| s.model.kind() == ModelKind::Duplicate).count();
+            if duplicates > MAX_DUPLICATE_STAGES {
+                return Err(err(
+                    loc,
+                    Some("model".into()),
+                    format!("{duplicates} `duplicate` stages: at most {MAX_DUPLICATE_STAGES} per phase (each may double what reaches it)"),
+                ));
+            }
+            let corrupts = ps.stages.iter().filter(|s| s.model.kind() == ModelKind::Corrupt).count();
+            if corrupts > MAX_CORRUPT_STAGES {
+                return Err(err(
+                    loc,
+                    Some("model".into()),
+                    format!("{corrupts} `corrupt` stages: at most {MAX_CORRUPT_STAGES} per phase"),
+                ));
+            }
             let labels = StageSpec::labels(&ps.stages);
             let mut stages = Vec::with_capacity(ps.stages.len());
             for (si, (st, label)) in ps.stages.iter().zip(labels).enumerate() {
@@ -153,11 +265,16 @@ impl Scenario {
                     preset: st.preset.clone(),
                     reached: 0,
                     dropped: 0,
+                    duplicated: 0,
+                    corrupted: 0,
                 });
             }
             phases.push(Phase { name: ps.name.clone(), start_offset_ns, stages });
         }
-        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0 })
+        Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default(),
+            flips: Flips::default(),
+            pending: [(0, 0, Flips::default()); MAX_COPIES],
+        })
     }
 
     pub fn name(&self) -> &str {
@@ -183,29 +300,175 @@ impl Scenario {
     /// Decides one frame. `offset_ns` is the frame's ingress time relative to
     /// the run's start (it selects the phase; it must not decrease from call
     /// to call); `t_ns` is its ingress time on the clock the models see.
+    /// The returned decision is the original frame's; its copies, if a
+    /// `duplicate` stage made any, are in [`Scenario::copies`] until the next
+    /// call.
     #[inline]
     pub fn decide(&mut self, offset_ns: u64, t_ns: u64) -> Decision {
         while self.current + 1 < self.phases.len() && self.phases[self.current + 1].start_offset_ns <= offset_ns {
             self.current += 1;
         }
-        let phase = &mut self.phases[self.current];
-        let mut t = t_ns;
-        for (si, st) in phase.stages.iter_mut().enumerate() {
-            st.reached += 1;
-            match st.model.decide(t, &mut st.rng) {
-                Verdict::Pass { delay_ns } => t = t.saturating_add(delay_ns),
-                Verdict::Drop => {
-                    st.dropped += 1;
-                    // Both indices fit: `new` caps phases and stages at u16::MAX.
-                    return Decision::Drop { phase: self.current as u16, stage: si as u16 };
+        let phase = self.current;
+        // The copy arrays live in the scenario and are not cleared per frame:
+        // only their counts are reset, so a frame without copies or flips
+        // costs no more than before.
+        let Scenario { phases, copies, flips, pending, .. } = self;
+        let stages = &mut phases[phase].stages;
+        let mut queued = 0usize;
+        flips.len = 0;
+        let decision = match run_stages(stages, 0, t_ns, flips, pending, &mut queued) {
+            Ok(t) => Decision::Pass { delay_ns: t - t_ns },
+            // Both indices fit: `new` caps phases and stages at u16::MAX.
+            Err(si) => Decision::Drop { phase: phase as u16, stage: si as u16 },
+        };
+        copies.passed = 0;
+        copies.dropped = 0;
+        let mut next = 0;
+        while next < queued {
+            let (from, t, mut copy_flips) = pending[next];
+            next += 1;
+            match run_stages(stages, from, t, &mut copy_flips, pending, &mut queued) {
+                Ok(end) => {
+                    copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
+                    copies.flips[usize::from(copies.passed)] = copy_flips;
+                    copies.passed += 1;
                 }
+                Err(_) => copies.dropped += 1,
             }
         }
-        Decision::Pass { delay_ns: t - t_ns }
+        decision
+    }
+
+    /// The flips of the frame last decided (empty unless a `corrupt` stage
+    /// corrupted it).
+    #[inline]
+    pub fn flips(&self) -> &Flips {
+        &self.flips
+    }
+
+    /// The copies of the frame last decided.
+    #[inline]
+    pub fn copies(&self) -> &Copies {
+        &self.copies
     }
 
     /// The stage that dropped a frame, by the indices of [`Decision::Drop`].
     pub fn stage(&self, phase: u16, stage: u16) -> &Stage {
         &self.phases[usize::from(phase)].stages[usize::from(stage)]
+    }
+}
+
+/// Runs a frame through `stages[from..]` starting at `t`: `Ok(time at the
+/// end)` or `Err(index of the stage that dropped it)`. A copy made on the way
+/// is queued in `pending` to start at the next stage.
+#[inline]
+fn run_stages(
+    stages: &mut [Stage],
+    from: usize,
+    t_ns: u64,
+    flips: &mut Flips,
+    pending: &mut [(usize, u64, Flips); MAX_COPIES],
+    queued: &mut usize,
+) -> Result<u64, usize> {
+    let mut t = t_ns;
+    for (si, st) in stages.iter_mut().enumerate().skip(from) {
+        st.reached += 1;
+        match st.model.decide(t, &mut st.rng) {
+            Verdict::Pass { delay_ns } => t = t.saturating_add(delay_ns),
+            Verdict::Drop => {
+                st.dropped += 1;
+                return Err(si);
+            }
+            Verdict::Duplicate => {
+                st.duplicated += 1;
+                // At most MAX_DUPLICATE_STAGES duplicate stages, each at
+                // most doubling what reaches it: the array cannot overflow.
+                pending[*queued] = (si + 1, t, *flips);
+                *queued += 1;
+            }
+            Verdict::Corrupt { bit } => {
+                st.corrupted += 1;
+                flips.push(bit);
+            }
+        }
+    }
+    Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenario(text: &str, seed: u64) -> Scenario {
+        Scenario::new(&parse_str(text, "s.toml", "s").unwrap(), seed).unwrap()
+    }
+
+    #[test]
+    fn a_copy_goes_through_the_later_stages_only() {
+        // Always duplicate, then a constant 5 ms delay: the original and its
+        // copy both arrive 5 ms later; the stage before draws once.
+        let mut sc = scenario(
+            "[[stage]]\nmodel = \"bernoulli\"\np = 0\n[[stage]]\nmodel = \"duplicate\"\np = 1\n[[stage]]\nmodel = \"delay\"\nmin_ms = 5\n",
+            1,
+        );
+        assert_eq!(sc.decide(0, 1_000), Decision::Pass { delay_ns: 5_000_000 });
+        assert_eq!(sc.copies().delays_ns(), &[5_000_000]);
+        assert_eq!(sc.copies().made(), 1);
+        let st = sc.phases()[0].stages();
+        assert_eq!((st[0].reached(), st[1].reached(), st[2].reached()), (1, 1, 2));
+        assert_eq!(st[1].duplicated(), 1);
+        // The next frame's copies replace these.
+        let mut no = scenario("[[stage]]\nmodel = \"duplicate\"\np = 0\n", 1);
+        no.decide(0, 0);
+        assert_eq!(no.copies().made(), 0);
+    }
+
+    #[test]
+    fn copies_of_copies_and_dropped_copies() {
+        // Two certain duplications: 1 original + 3 copies; a certain loss
+        // after them drops all four.
+        let two = "[[stage]]\nmodel = \"duplicate\"\np = 1\n[[stage]]\nmodel = \"duplicate\"\np = 1\n";
+        let mut sc = scenario(two, 1);
+        assert_eq!(sc.decide(0, 0), Decision::Pass { delay_ns: 0 });
+        assert_eq!((sc.copies().delays_ns().len(), sc.copies().dropped()), (3, 0));
+        let mut lossy = scenario(&format!("{two}[[stage]]\nmodel = \"bernoulli\"\np = 1\n"), 1);
+        assert_eq!(lossy.decide(0, 0), Decision::Drop { phase: 0, stage: 2 });
+        assert_eq!((lossy.copies().delays_ns().len(), lossy.copies().dropped()), (0, 3));
+        assert_eq!(lossy.phases()[0].stages()[2].dropped(), 4);
+    }
+
+    #[test]
+    fn flips_are_collected_and_copies_inherit_them() {
+        // Corrupt always, duplicate always, corrupt always: the original and
+        // the copy share the first flip, and each has its own second.
+        let c = "[[stage]]\nmodel = \"corrupt\"\np = 1\n";
+        let mut sc = scenario(&format!("{c}[[stage]]\nmodel = \"duplicate\"\np = 1\n{c}"), 4);
+        assert_eq!(sc.decide(0, 0), Decision::Pass { delay_ns: 0 });
+        let own = *sc.flips();
+        let copy = sc.copies().flips()[0];
+        assert_eq!((own.bits().len(), copy.bits().len()), (2, 2));
+        assert_eq!(own.bits()[0], copy.bits()[0]);
+        assert!(own.bits().iter().chain(copy.bits()).all(|&b| b < crate::model::corrupt::FRAME_BITS));
+        // A frame that meets no corrupt verdict has none, and they do not leak.
+        let mut sc = scenario("[[stage]]\nmodel = \"corrupt\"\np = 0\n", 4);
+        sc.decide(0, 0);
+        assert!(sc.flips().is_empty());
+        let five = c.repeat(MAX_CORRUPT_STAGES + 1);
+        let e = Scenario::new(&parse_str(&five, "s.toml", "s").unwrap(), 1).unwrap_err();
+        assert!(e.problem.contains("`corrupt` stages: at most 4"), "{e}");
+    }
+
+    #[test]
+    fn the_duplicate_stages_of_a_phase_are_bounded() {
+        let five = "[[stage]]\nmodel = \"duplicate\"\np = 1\n".repeat(MAX_DUPLICATE_STAGES + 1);
+        let spec = parse_str(&five, "s.toml", "s").unwrap();
+        let e = Scenario::new(&spec, 1).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("model"), "{e}");
+        assert!(e.problem.contains("at most 4"), "{e}");
+        // The most copies: 2^4 − 1, all held in the fixed array.
+        let four = "[[stage]]\nmodel = \"duplicate\"\np = 1\n".repeat(MAX_DUPLICATE_STAGES);
+        let mut sc = scenario(&four, 1);
+        sc.decide(0, 0);
+        assert_eq!(sc.copies().delays_ns().len(), MAX_COPIES);
     }
 }

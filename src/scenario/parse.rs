@@ -262,6 +262,11 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::GilbertElliott => ModelSpec::GilbertElliott(params(ctx, &span, &loc, t)?),
                 ModelKind::Delay => ModelSpec::Delay(params(ctx, &span, &loc, t)?),
                 ModelKind::Outage => ModelSpec::Outage(params(ctx, &span, &loc, t)?),
+                ModelKind::Jitter => ModelSpec::Jitter(params(ctx, &span, &loc, t)?),
+                ModelKind::Duplicate => ModelSpec::Duplicate(params(ctx, &span, &loc, t)?),
+                ModelKind::Corrupt => ModelSpec::Corrupt(params(ctx, &span, &loc, t)?),
+                ModelKind::Reorder => ModelSpec::Reorder(params(ctx, &span, &loc, t)?),
+                ModelKind::Slot => ModelSpec::Slot(params(ctx, &span, &loc, t)?),
             };
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
@@ -550,6 +555,49 @@ mod tests {
         );
         assert!(ok.is_ok(), "{ok:?}");
         assert!(parse_str("[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = 31557600\n", "s.toml", "s").is_ok());
+    }
+
+    #[test]
+    fn jitter_mistakes_name_file_line_and_field() {
+        let head = "name = \"j\"\n[[stage]]\nmodel = \"jitter\"\nmean_ms = 100\n";
+        // (the rest of the stage, line of the bad value, field, a piece of the message)
+        let cases = [
+            ("sd_ms = -1\ndist = \"normal\"\n", 5, "sd_ms", "≥ 0"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = 1\n", 7, "correlation", "[0, 1)"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = \"100%\"\n", 7, "correlation", "[0, 1)"),
+            ("sd_ms = 20\ndist = \"normal\"\ncorrelation = -0.5\n", 7, "correlation", "[0, 1]"),
+            ("sd_ms = 20\ndist = \"lognormal\"\n", 6, "dist", "paretonormal"),
+            ("sd_ms = 4e6\ndist = \"pareto\"\n", 5, "sd_ms", "one hour"),
+            ("sd_ms = 20\ndist = \"pareto\"\norder = \"lifo\"\n", 7, "order", "fifo"),
+        ];
+        for (rest, line, field, piece) in cases {
+            let e = err(&format!("{head}{rest}"));
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{rest}");
+            assert_eq!(e.location.as_deref(), Some("stage 1 (jitter)"), "{e}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
+        let e = err(&format!("{head}sd_ms = 20\n"));
+        assert_eq!((e.line, e.field.as_deref()), (Some(2), Some("dist")), "{e}");
+        let ok = parse_str(&format!("{head}sd_ms = 20\ndist = \"paretonormal\"\ncorrelation = \"25%\"\n"), "s.toml", "s");
+        assert!(ok.is_ok(), "{ok:?}");
+    }
+
+    #[test]
+    fn new_netem_stages_name_file_line_and_field() {
+        let cases = [
+            ("[[stage]]\nmodel = \"slot\"\nmin_ms = 5\nmax_ms = 2\n", 4, "max_ms", "min_ms ≤ max_ms", "slot"),
+            ("[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 0\n", 5, "packets", "at least 1", "slot"),
+            ("[[stage]]\nmodel = \"reorder\"\np = 0.5\ngap = 0\ndelay_ms = 10\n", 4, "gap", "from 1", "reorder"),
+            ("[[stage]]\nmodel = \"reorder\"\np = 0.5\n", 1, "delay_ms", "missing", "reorder"),
+            ("[[stage]]\nmodel = \"corrupt\"\n\np = 1.2\n", 4, "p", "[0, 1]", "corrupt"),
+            ("[[stage]]\nmodel = \"duplicate\"\np = -1\n", 3, "p", "[0, 1]", "duplicate"),
+        ];
+        for (text, line, field, piece, model) in cases {
+            let e = err(text);
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{text}");
+            assert_eq!(e.location.as_deref(), Some(format!("stage 1 ({model})").as_str()), "{e}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
     }
 
     #[test]

@@ -15,7 +15,8 @@
 
 use crate::check::{stage_reports, StageReport};
 use crate::clock::now_ns;
-use crate::injector::{BuildError, Entered, Fate, Injector, Invalid};
+use crate::injector::{Entered, Fate, Injector, Invalid};
+use crate::model::ModelKind;
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::FrameSample;
 use crate::scenario::Scenario;
@@ -94,6 +95,15 @@ pub struct Link<T> {
     hlogs: Option<[PathBuf; 2]>,
 }
 
+/// Stages whose verdicts the real-time link does not apply yet: copies
+/// (`duplicate`) and bit flips (`corrupt`).
+pub const REAL_TIME_UNSUPPORTED: [ModelKind; 2] = [ModelKind::Duplicate, ModelKind::Corrupt];
+
+/// The first stage of `scenario` the real-time link does not apply.
+fn unsupported_stage(scenario: &Scenario) -> Option<ModelKind> {
+    scenario.phases().iter().flat_map(|p| p.stages()).map(|s| s.kind()).find(|k| REAL_TIME_UNSUPPORTED.contains(k))
+}
+
 impl<T: Carried> Link<T> {
     /// A link through `scenario` holding at most `queue_capacity` items;
     /// `expected_frames` sizes the trace table and the loss interval's
@@ -101,8 +111,16 @@ impl<T: Carried> Link<T> {
     /// the link before pinning the loop's core, then
     /// [`keep_trace_off_core`](Self::keep_trace_off_core).
     /// A capacity out of range is an error that names the field and the
-    /// memory it would need.
-    pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> Result<Link<T>, BuildError> {
+    /// memory it would need; so is a stage the real-time link does not
+    /// apply yet ([`REAL_TIME_UNSUPPORTED`]).
+    pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> anyhow::Result<Link<T>> {
+        if let Some(kind) = unsupported_stage(&scenario) {
+            anyhow::bail!(
+                "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but not yet applied by the real-time emulator (a copy would be a second release of one ingress index, a corruption needs the frame's bytes); remove it from the run's scenario",
+                scenario.name(),
+                kind.name()
+            );
+        }
         let inj = Injector::try_new(scenario, queue_capacity)?;
         let (trace, writer) = trace::start(expected_frames.min(50_000_000) as usize);
         Ok(Link {
@@ -298,4 +316,22 @@ pub struct LinkReport {
     pub last_error: Option<PortError>,
     pub trace_overflowed: u64,
     pub trace_path: PathBuf,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sample::FrameSample;
+
+    #[test]
+    fn stages_the_real_time_link_does_not_apply_are_refused_by_name() {
+        for (model, extra) in [("duplicate", "p = 0.1"), ("corrupt", "p = 0.1")] {
+            let text = format!("name = \"x\"\n[[stage]]\nmodel = \"{model}\"\n{extra}\n");
+            let spec = crate::scenario::parse_str(&text, "x.toml", "x").unwrap();
+            let err = Link::<FrameSample>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).err().expect("refused");
+            assert!(err.to_string().contains(&format!("`{model}` stage")), "{err}");
+        }
+        let spec = crate::scenario::parse_str("name = \"ok\"\n[[stage]]\npreset = \"PLM-2\"\n", "ok.toml", "ok").unwrap();
+        assert!(Link::<FrameSample>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).is_ok());
+    }
 }

@@ -60,7 +60,7 @@
 //! addresses (useful with port 0).
 
 use crate::clock::now_ns;
-use crate::injector::{BuildError, Fate};
+use crate::injector::Fate;
 use crate::metrics::Summary;
 use crate::scenario::Scenario;
 use crate::service::args::EmulatorArgs;
@@ -176,7 +176,7 @@ impl ReturnPath {
         seed: u64,
         queue_capacity: usize,
         expected: u64,
-    ) -> Result<ReturnPath, BuildError> {
+    ) -> anyhow::Result<ReturnPath> {
         let shaped =
             Shaped { seed, link: Link::new(scenario, queue_capacity, expected)?, arena: Arena::new(queue_capacity + 1) };
         Ok(ReturnPath {

@@ -72,3 +72,120 @@ fn values_beyond_their_physical_range_are_refused_with_the_range() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("far.toml:3: stage 1 (delay): `min_ms`: 1000000000000000 ms is out of range: expected 0 to 3600000 ms (one hour)"), "{stderr}");
 }
+
+#[test]
+fn a_jitter_scenario_reports_its_exact_model_values() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_jitter.toml", "--frames", "50000", "--seed", "2", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stage = &v["stages"][1];
+    assert_eq!(stage["model"], "jitter");
+    // Far from 0 the clamp moves the mean by less than 1e-9 ms.
+    assert!((stage["delay_ms_model"].as_f64().unwrap() - 100.0).abs() < 1e-6, "{stage}");
+    let p99 = stage["delay_ms_p99_model"].as_f64().unwrap();
+    assert!(p99 > 150.0 && p99 < 200.0, "{stage}");
+    assert_eq!(stage["correlation_model"]["normal_scores_lag1"], 0.25);
+    let rank = stage["correlation_model"]["rank_lag1"].as_f64().unwrap();
+    assert!((rank - 6.0 / std::f64::consts::PI * (0.125f64).asin()).abs() < 1e-12);
+    // Stages without these values do not carry the keys.
+    assert!(v["stages"][0].get("delay_ms_p99_model").is_none());
+
+    let show = netfi().args(["scenario", "show", "config/scenarios/netem_jitter.toml"]).output().unwrap();
+    let text = String::from_utf8_lossy(&show.stdout);
+    assert!(text.contains("model = \"jitter\"") && text.contains("dist = \"paretonormal\"") && text.contains("correlation = 0.25"), "{text}");
+}
+
+#[test]
+fn a_bad_jitter_is_refused_with_file_line_and_field() {
+    let dir = std::env::temp_dir().join(format!("netfi-cli-jitter-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("jitter.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"jitter\"\nmean_ms = 10\nsd_ms = 5\ndist = \"normal\"\ncorrelation = 1\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("jitter.toml:6: stage 1 (jitter): `correlation`: 1 is out of range: expected a correlation in [0, 1)"), "{stderr}");
+}
+
+#[test]
+fn duplication_is_counted_apart() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_duplicate.toml", "--frames", "100000", "--seed", "3", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let copies = v["duplicated"].as_u64().unwrap();
+    let dropped: u64 = v["dropped"].as_object().unwrap().values().map(|n| n.as_u64().unwrap()).sum();
+    assert_eq!(100_000 + copies, v["delivered"].as_u64().unwrap() + dropped);
+    let stage = &v["stages"][0];
+    assert_eq!((stage["model"].as_str(), stage["duplicated"].as_u64()), (Some("duplicate"), Some(copies)));
+    assert_eq!(stage["duplicate_rate_model"], 0.01);
+    // Copies: 1% of 10^5 frames, binomial sd 31.5; 4 sd either side.
+    assert!((874..=1126).contains(&copies), "{copies}");
+
+    let dir = std::env::temp_dir().join(format!("netfi-cli-dup-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("dup.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"duplicate\"\n\np = 1.5\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("dup.toml:4: stage 1 (duplicate): `p`: 1.5 is not a probability"), "{stderr}");
+}
+
+#[test]
+fn corruption_reports_what_the_checksum_catches() {
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/netem_corrupt.toml", "--frames", "100000", "--seed", "3", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &v["corruption"];
+    let (n, caught, passed) = (c["corrupted"].as_u64().unwrap(), c["caught"].as_u64().unwrap(), c["passed"].as_u64().unwrap());
+    assert_eq!(caught + passed, n);
+    assert_eq!(v["stages"][0]["corrupted"].as_u64(), Some(n));
+    assert_eq!(v["stages"][0]["corrupt_rate_model"], 0.01);
+    // Corruption is not loss: every frame is delivered.
+    assert_eq!(v["delivered"], 100_000);
+
+    let dir = std::env::temp_dir().join(format!("netfi-cli-corrupt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("c.toml");
+    std::fs::write(&path, "[[stage]]\nmodel = \"corrupt\"\np = \"150%\"\n").unwrap();
+    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("c.toml:3: stage 1 (corrupt): `p`: 1.5 is not a probability"), "{stderr}");
+}
+
+#[test]
+fn export_netem_writes_the_new_stages_as_netems_own() {
+    let export = |file: &str| {
+        let out = netfi().args(["export", "netem", file, "--dev", "eth0"]).output().unwrap();
+        assert!(out.status.success(), "{file}: {}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8_lossy(&out.stdout).to_string();
+        let tc = text.lines().find(|l| l.starts_with("tc qdisc replace")).unwrap_or_else(|| panic!("{text}")).to_string();
+        (text, tc)
+    };
+    let (text, tc) = export("config/scenarios/netem_jitter.toml");
+    // sd 20 ms over netem's Pareto-normal table's sd 1.0518: sigma 19015 µs.
+    assert!(tc.ends_with("loss random 1% delay 100000us 19015us 25% distribution paretonormal"), "{tc}");
+    assert!(text.contains("netem's correlation mixes each draw with the last"), "{text}");
+    let (_, tc) = export("config/scenarios/netem_duplicate.toml");
+    assert!(tc.contains("duplicate 1%") && tc.contains("distribution normal"), "{tc}");
+    let (text, tc) = export("config/scenarios/netem_corrupt.toml");
+    assert!(tc.contains("corrupt 1%") && tc.contains("delay 5000us"), "{tc}");
+    assert!(text.contains("headers included"), "{text}");
+    let (_, tc) = export("config/scenarios/netem_reorder.toml");
+    assert!(tc.ends_with("delay 10000us reorder 25% gap 5"), "{tc}");
+    let (_, tc) = export("config/scenarios/netem_slot.toml");
+    assert!(tc.ends_with("loss random 1% slot 2000us 6000us packets 8"), "{tc}");
+}

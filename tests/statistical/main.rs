@@ -2,5 +2,9 @@
 //! seeds and stated significance levels. Slower than the unit tests (about
 //! 10^7 simulated frames per check); run with `cargo test --test statistical`.
 
+mod corrupt;
+mod duplicate;
+mod jitter;
 mod models;
 mod presets;
+mod reorder_slot;

@@ -132,7 +132,7 @@ fn delays_ms(params: &DelayParams, seed: u64, n: usize) -> Vec<f64> {
     (0..n as u64)
         .map(|i| match d.decide(i * FRAME_NS, &mut rng) {
             Verdict::Pass { delay_ns } => delay_ns as f64 / 1e6,
-            Verdict::Drop => panic!("a delay stage never drops"),
+            other => panic!("a delay stage only passes, got {other:?}"),
         })
         .collect()
 }

@@ -18,6 +18,32 @@
 //!   the mean, so nothing is clipped; the tail beyond the 99.988th
 //!   percentile (the last table point) is lost. `fifo` order is not
 //!   reproduced: netem releases each packet at its own time.
+//! - `jitter` → `delay MEAN SIGMA [RHO%] distribution normal|pareto|paretonormal`
+//!   with netem's own tables. netem adds `SIGMA · t` with `t` the table's
+//!   standardized-by-convention entry, and its tables are not standardized:
+//!   `normal` is `Z` (sd 1), `pareto` is `(4/3)(P − 3/2)` (sd 1.155) and
+//!   `paretonormal` is `Z/4 + P − 3/2` (sd 1.052), so `SIGMA = sd_ms / sd t`
+//!   gives the same standard deviation; the tables hold 4096 quantiles and
+//!   clip at ±4 (netem's Pareto loses its tail beyond the 98.9th percentile,
+//!   which lowers its mean and spread). A correlation is passed as netem's,
+//!   which is approximate: netem mixes each uniform with the previous one,
+//!   narrowing the jitter (docs/spec.md §3.7); netfi keeps the law exact.
+//!   `fifo` order is not reproduced.
+//! - `duplicate` → `duplicate P`: exact when it is the first stage. netem
+//!   decides duplication before loss and sends the copy through the whole
+//!   qdisc again, so a copy meets netem's loss and delay afresh, as a netfi
+//!   copy meets the stages after its `duplicate`; stages before it would apply
+//!   once to both in netfi but to each in netem, which the note says.
+//! - `corrupt` → `corrupt P` (exact: one random bit of the packet). netem
+//!   flips a bit anywhere in the packet it holds, which over UDP includes
+//!   the IP and UDP headers (a flip there is caught by the UDP checksum or
+//!   drops the packet in the stack), not only the 124 ITP bytes.
+//! - `reorder` → `delay D reorder P gap N` (exact: netem's rule; it takes
+//!   netem's one delay).
+//! - `slot` → `slot MIN MAX [packets N] [bytes B]`: netem counts a packet's
+//!   bytes from its link-layer header, 166 for an ITP frame over UDP, IPv4 and
+//!   Ethernet, where netfi counts the 124 ITP bytes, so `bytes` is scaled by
+//!   166/124 (approximated for other encapsulations).
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
@@ -27,7 +53,7 @@
 use crate::cli::{ExportCmd, ExportNetemArgs};
 use anyhow::{bail, Result};
 use netfi::fit::family::{mean_loss_run_exact, Hyperexp};
-use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Model, Order, Verdict};
+use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Jitter, JitterDist, JitterParams, Model, Order, Verdict};
 use netfi::scenario::{ModelSpec, StageSpec};
 use rand::SeedableRng;
 use std::fmt::Write;
@@ -64,13 +90,19 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
     let mut notes = Vec::new();
     let mut loss: Option<(usize, String)> = None;
     let mut delay: Option<(usize, String)> = None;
+    let mut dup: Option<(usize, String)> = None;
+    let mut corrupt: Option<(usize, String)> = None;
+    let mut slot: Option<(usize, String)> = None;
     let mut table: Option<(String, String)> = None;
     let mut longest_delay_ms = 0.0f64;
     for (i, st) in stages.iter().enumerate() {
         let label = stage_label(i, st);
         let model = st.model.kind().name();
         let slot = match &st.model {
-            ModelSpec::Delay(_) => &mut delay,
+            ModelSpec::Delay(_) | ModelSpec::Jitter(_) | ModelSpec::Reorder(_) => &mut delay,
+            ModelSpec::Slot(_) => &mut slot,
+            ModelSpec::Duplicate(_) => &mut dup,
+            ModelSpec::Corrupt(_) => &mut corrupt,
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
@@ -79,7 +111,13 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         if let Some((j, _)) = slot {
             bail!(
                 "{label}: netem takes one {} per qdisc and stage {} already uses it",
-                if model == "delay" { "delay" } else { "loss model" },
+                match model {
+                    "delay" | "jitter" | "reorder" => "delay",
+                    "slot" => "slot",
+                    "duplicate" => "duplication",
+                    "corrupt" => "corruption",
+                    _ => "loss model",
+                },
                 *j + 1
             );
         }
@@ -121,6 +159,46 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 notes.push(format!("{label}: {note}"));
                 longest_delay_ms = longest_delay_ms.max(longest);
                 table = dist;
+                text
+            }
+            ModelSpec::Jitter(p) => {
+                let (text, note, longest) = jitter_as_netem(p)?;
+                notes.push(format!("{label}: {note}"));
+                longest_delay_ms = longest_delay_ms.max(longest);
+                text
+            }
+            ModelSpec::Duplicate(p) => {
+                if i == 0 {
+                    notes.push(format!("{label}: exact (duplicate; netem sends the copy through its loss and delay again, as netfi sends it through the later stages)"));
+                } else {
+                    notes.push(format!(
+                        "{label}: approximated: netem duplicates before anything else, so the {i} stage(s) before this one apply to the copy afresh in netem but once to both in netfi"
+                    ));
+                }
+                format!("duplicate {}", pct(p.p.get()))
+            }
+            ModelSpec::Corrupt(p) => {
+                notes.push(format!(
+                    "{label}: approximated: netem flips one random bit of the whole packet, headers included (over UDP a header flip is caught by the UDP checksum or the stack), netfi one of the 124 ITP bytes"
+                ));
+                format!("corrupt {}", pct(p.p.get()))
+            }
+            ModelSpec::Reorder(p) => {
+                notes.push(format!("{label}: exact (delay … reorder … gap …)"));
+                longest_delay_ms = longest_delay_ms.max(p.delay_ms.get());
+                format!("delay {} reorder {} gap {}", time_us(p.delay_ms.get()), pct(p.p.get()), p.gap)
+            }
+            ModelSpec::Slot(p) => {
+                let mut text = format!("slot {} {}", time_us(p.min_ms.get()), time_us(p.max_ms.get()));
+                if let Some(n) = p.packets {
+                    text.push_str(&format!(" packets {n}"));
+                }
+                if let Some(b) = p.bytes {
+                    text.push_str(&format!(" bytes {}", (b as f64 * 166.0 / 124.0).ceil() as u64));
+                    notes.push(format!("{label}: approximated: bytes scaled by 166/124 (netem counts the UDP/IPv4/Ethernet headers too)"));
+                } else {
+                    notes.push(format!("{label}: exact (slot)"));
+                }
                 text
             }
             ModelSpec::Outage(_) => unreachable!("refused above"),
@@ -188,7 +266,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay].into_iter().flatten() {
+    for (_, text) in [&loss, &delay, &dup, &corrupt, &slot].into_iter().flatten() {
         cmd.push(' ');
         cmd.push_str(text);
     }
@@ -280,6 +358,46 @@ fn stage_label(i: usize, st: &StageSpec) -> String {
 /// A probability as a tc percentage (tc keeps it to 1/2^32).
 fn pct(p: f64) -> String {
     format!("{}%", netfi::fit::family::round_sig(p * 100.0))
+}
+
+/// `jitter` as netem's `delay … distribution …`: the command text, the
+/// note, and the longest delay netem can give (mean + 4 sigma, its tables'
+/// reach).
+fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)> {
+    let j = Jitter::new(p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    // The standard deviation of netem's table variate for each law.
+    let table_sd = match p.dist {
+        JitterDist::Normal => 1.0,
+        JitterDist::Pareto => 4.0 / 3.0 * 0.75f64.sqrt(),
+        JitterDist::Paretonormal => netfi::model::jitter::PARETONORMAL_SD,
+    };
+    let sigma_ms = p.sd_ms / table_sd;
+    let rho = p.correlation.get();
+    let mut text = format!("delay {} {}", time_us(p.mean_ms.get()), time_us(sigma_ms));
+    if rho > 0.0 {
+        text.push(' ');
+        text.push_str(&pct(rho));
+    }
+    if p.sd_ms > 0.0 {
+        text.push_str(&format!(" distribution {}", p.dist.name()));
+    }
+    let mut note = format!(
+        "approximated: netem's {} table (4096 quantiles, clipped at ±4 sigma), sigma = sd_ms / {table_sd:.4} so the spread matches",
+        p.dist.name()
+    );
+    if rho > 0.0 {
+        note.push_str("; netem's correlation mixes each draw with the last and narrows the jitter, netfi's keeps the law exact");
+    }
+    if j.clamped_fraction_exact() > 1e-6 {
+        note.push_str(&format!("; netfi clamps the {:.3}% of negative draws to 0", 100.0 * j.clamped_fraction_exact()));
+    }
+    if p.order == Order::Fifo {
+        note.push_str("; fifo order is not reproduced: netem releases each packet at its own time");
+    }
+    if p.sd_ms == 0.0 {
+        note = "exact (constant delay)".into();
+    }
+    Ok((text, note, p.mean_ms.get() + 4.0 * sigma_ms))
 }
 
 /// A duration for tc, in microseconds (tc keeps nanoseconds).

@@ -76,6 +76,9 @@ fn print_table(r: &CheckReport) {
     println!("seed              {}", r.seed);
     println!("frames            {} at {:.1} Hz", r.frames, r.rate_hz);
     println!("delivered         {}", r.delivered);
+    if r.duplicated > 0 {
+        println!("duplicated        {} copies (delivered and dropped count them)", r.duplicated);
+    }
     for (reason, n) in &r.dropped {
         println!("dropped           {n} by {reason}");
     }
@@ -90,12 +93,20 @@ fn print_table(r: &CheckReport) {
     );
     println!("reordered         {:.5} of delivered", r.reordered_fraction);
     println!("outages           {} windows, mean {:.1} ms", r.outages.count, r.outages.mean_ms);
+    if let Some(c) = &r.corruption {
+        println!(
+            "corrupted         {} delivered: {} caught by the checksum, {} passed it",
+            c.corrupted, c.caught, c.passed
+        );
+    }
     println!("queue             depth max {} of {}", r.queue_depth_max, r.queue_capacity);
     if !r.stages.is_empty() {
         println!("stages:");
         println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
         for s in &r.stages {
             let model = match (s.loss_rate_model, s.delay_ms_model) {
+                _ if s.corrupt_rate_model.is_some() => format!("{:.5} bad", s.corrupt_rate_model.unwrap_or(0.0)),
+                _ if s.duplicate_rate_model.is_some() => format!("{:.5} dup", s.duplicate_rate_model.unwrap_or(0.0)),
                 (_, Some(d)) => format!("{d:.3} ms"),
                 (Some(l), None) => format!("{l:.5}"),
                 (None, None) => "-".into(),
@@ -109,6 +120,44 @@ fn print_table(r: &CheckReport) {
                 s.loss_rate,
                 model
             );
+            if let (Some(n), Some(caught)) = (s.corrupted, s.caught_fraction_model) {
+                println!(
+                    "  {:>5}  {:<16} corrupted {n} ({:.5} per frame reaching it); model: checksum catches {caught:.5} of them",
+                    "",
+                    "",
+                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
+                );
+            }
+            if let Some(f) = s.early_fraction_model {
+                println!("  {:>5}  {:<16} model: {f:.5} of frames sent at once", "", "");
+            }
+            if let Some(sl) = &s.slots {
+                println!(
+                    "  {:>5}  {:<16} slots {} (model spacing {:.3} ms, at most {} frames each)",
+                    "",
+                    "",
+                    sl.opened,
+                    sl.spacing_ms_mean_model,
+                    sl.frames_per_slot_max.map_or("any".to_string(), |n| n.to_string())
+                );
+            }
+            if let Some(n) = s.duplicated {
+                println!(
+                    "  {:>5}  {:<16} copies {n} ({:.5} per frame reaching it)",
+                    "",
+                    "",
+                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
+                );
+            }
+            if let Some(p99) = s.delay_ms_p99_model {
+                println!("  {:>5}  {:<16} model delay p99 {p99:.3} ms", "", "");
+            }
+            if let Some(c) = &s.correlation_model {
+                println!(
+                    "  {:>5}  {:<16} model lag-1 correlation {:.4} (normal scores), {:.4} (ranks)",
+                    "", "", c.normal_scores_lag1, c.rank_lag1
+                );
+            }
         }
     }
 }
