@@ -98,19 +98,43 @@ fn robot_frame(s: &FrameSample) -> Result<(ItpFrame, bool), ()> {
     Ok((ItpFrame::parse_unverified(&view), view.verify_checksum()))
 }
 
-/// Writes `received.csv`: the ingress index and receive time of each frame
-/// that came through the emulator.
-fn write_received(path: &std::path::Path, log: &[(u64, u64)]) -> Result<()> {
-    let write = || -> std::io::Result<()> {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-        writeln!(w, "ingress_index,recv_ns")?;
-        for (i, t) in log {
-            writeln!(w, "{i},{t}")?;
+/// `received.csv`, written as frames arrive: the ingress index and receive
+/// time of each frame that came through the emulator. Memory stays flat
+/// however long the run; the first failed write is kept and reported, with
+/// the file's name, when the run ends (a full disk is an error, not a cut
+/// file).
+struct ReceivedLog {
+    path: std::path::PathBuf,
+    w: std::io::BufWriter<std::fs::File>,
+    error: Option<std::io::Error>,
+}
+
+impl ReceivedLog {
+    fn create(path: std::path::PathBuf) -> Result<ReceivedLog> {
+        let open = || -> std::io::Result<std::io::BufWriter<std::fs::File>> {
+            let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&path)?);
+            writeln!(w, "ingress_index,recv_ns")?;
+            Ok(w)
+        };
+        let w = open().with_context(|| format!("writing {}", path.display()))?;
+        Ok(ReceivedLog { path, w, error: None })
+    }
+
+    fn push(&mut self, ingress_index: u64, recv_ns: u64) {
+        if self.error.is_none() {
+            if let Err(e) = writeln!(self.w, "{ingress_index},{recv_ns}") {
+                self.error = Some(e);
+            }
         }
-        // A failed flush is an error too (a full disk), not a cut file.
-        w.flush()
-    };
-    write().with_context(|| format!("writing {}", path.display()))
+    }
+
+    fn finish(mut self) -> Result<()> {
+        let result = match self.error.take() {
+            Some(e) => Err(e),
+            None => self.w.flush(),
+        };
+        result.with_context(|| format!("writing {}", self.path.display()))
+    }
 }
 
 /// Runs the simulator; returns its report (also `simulator.json`).
@@ -131,7 +155,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut e2e = LatencyHistogram::new();
     let mut hop = LatencyHistogram::new();
     let mut seen = LatencyHistogram::new();
-    let mut received_log: Vec<(u64, u64)> = Vec::with_capacity(1 << 20);
+    let received_csv = args.out.join("received.csv");
+    let mut received_log = ReceivedLog::create(received_csv.clone())?;
     let (mut received, mut received_direct, mut wrong_size, mut bad_checksum, mut receive_errors) = (0u64, 0u64, 0u64, 0u64, 0u64);
     let mut released_by_emulator = None;
     let mut direct_ended = false;
@@ -155,7 +180,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
                     released_by_emulator = Some(s.console_index);
                 } else {
                     received += 1;
-                    received_log.push((s.ingress_index, t));
+                    received_log.push(s.ingress_index, t);
                     e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
                     seen.record(t.saturating_sub(s.send_ns));
                     let sequence = match robot_frame(&s) {
@@ -219,8 +244,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let t_end = now_ns();
     // The feedback ends after the commands (best effort: the emulator may be gone).
     let _ = feedback_port.send(&FeedbackSample::end_marker(feedback_sent));
-    let received_csv = args.out.join("received.csv");
-    write_received(&received_csv, &received_log)?;
+    received_log.finish()?;
     let duration_s = (t_end - t_start) as f64 / 1e9;
     let e2e_hlog = args.out.join("end_to_end.hlog");
     e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s).with_context(|| format!("writing {}", e2e_hlog.display()))?;
