@@ -294,7 +294,7 @@ fn remove_shm(select: impl Fn(&str) -> bool, older_than: Option<std::time::Durat
     use std::os::unix::fs::MetadataExt;
     // SAFETY: geteuid has no preconditions.
     let uid = unsafe { libc::geteuid() };
-    let Ok(rd) = std::fs::read_dir(super::node::SHM_DIR) else { return };
+    let Ok(rd) = std::fs::read_dir(SHM_DIR) else { return };
     for e in rd.filter_map(|e| e.ok()) {
         let Some(name) = e.file_name().to_str().map(str::to_owned) else { continue };
         if !select(&name) {
@@ -380,3 +380,6 @@ mod tests {
         assert_eq!(run("netfi_r1_123.details"), None);
     }
 }
+
+/// Where POSIX shared memory lives on Linux.
+pub(super) const SHM_DIR: &str = "/dev/shm";

@@ -219,15 +219,12 @@ impl Drop for IpcNode {
     }
 }
 
-/// Where POSIX shared memory lives on Linux.
-pub(super) const SHM_DIR: &str = "/dev/shm";
-
 /// A file in `/dev/shm` with `prefix` that another user owns.
 fn foreign_shm(prefix: &str) -> Option<(PathBuf, u32)> {
     use std::os::unix::fs::MetadataExt;
     // SAFETY: geteuid has no preconditions.
     let uid = unsafe { libc::geteuid() };
-    std::fs::read_dir(SHM_DIR).ok()?.filter_map(|e| e.ok()).find_map(|e| {
+    std::fs::read_dir(super::liveness::SHM_DIR).ok()?.filter_map(|e| e.ok()).find_map(|e| {
         let name = e.file_name();
         if !name.to_str().is_some_and(|n| n.starts_with(prefix)) {
             return None;
@@ -244,7 +241,7 @@ fn make_private(prefix: &str) {
     use std::os::unix::fs::{MetadataExt, PermissionsExt};
     // SAFETY: geteuid has no preconditions.
     let uid = unsafe { libc::geteuid() };
-    let Ok(rd) = std::fs::read_dir(SHM_DIR) else { return };
+    let Ok(rd) = std::fs::read_dir(super::liveness::SHM_DIR) else { return };
     for e in rd.filter_map(|e| e.ok()) {
         if !e.file_name().to_str().is_some_and(|n| n.starts_with(prefix)) {
             continue;
