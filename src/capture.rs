@@ -1,4 +1,4 @@
-//! Recorded ITP captures (SPEC §7): reading, writing and summarising them.
+//! Recorded ITP captures (docs/spec.md §7): reading, writing and summarising them.
 //!
 //! A capture is one standard LZ4 frame whose decompressed content is a
 //! sequence of records:

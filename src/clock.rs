@@ -1,4 +1,4 @@
-//! The one clock (SPEC §1): CLOCK_MONOTONIC nanoseconds, shared by every
+//! The one clock (docs/spec.md §1): CLOCK_MONOTONIC nanoseconds, shared by every
 //! process on a host, and the waiting strategies built on it. Used by the
 //! services only; the sans-IO core never reads a clock.
 

@@ -1,7 +1,7 @@
 //! The release queue: frames held by the injector until their scheduled
 //! release time, with a fixed capacity chosen at start-up.
 //!
-//! Two orders (SPEC §3.4). `Fifo` is a ring: releases leave in the order they
+//! Two orders (docs/spec.md §3.4). `Fifo` is a ring: releases leave in the order they
 //! were pushed, and a push whose time is earlier than the last one is held
 //! until that one (`release = max(own, previous)`), as an ordered transport
 //! does. `Reorder` leaves each frame at its own time, ties in ingress order:

@@ -1,4 +1,4 @@
-//! The per-frame trace (SPEC §6): one row per frame that reached the
+//! The per-frame trace (docs/spec.md §6): one row per frame that reached the
 //! emulator, written to disk as the run goes, off the hot path.
 //!
 //! The emulator's loop pushes fixed-size [`TraceEvent`]s into a wait-free

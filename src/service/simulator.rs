@@ -2,7 +2,7 @@
 //! ITP semantics (clutch, incremental motion, absolute grasp) to a robot-side
 //! pose, and measures what arrives: end-to-end latency beyond the injected
 //! delay (HDR), the bare hop of the console's direct copies, and the
-//! kinematics of SPEC §6 — console vs robot motion, divergence, clutch
+//! kinematics of docs/spec.md §6 — console vs robot motion, divergence, clutch
 //! activations, stalls.
 //!
 //! It shares a core with the console on small machines, so it polls and

@@ -44,7 +44,7 @@ class ArmPose:
 
 @dataclass
 class Integrator:
-    """Follows one stream of frames (SPEC §2, as netfi's simulator does)."""
+    """Follows one stream of frames (docs/spec.md §2, as netfi's simulator does)."""
 
     arms: List[ArmPose] = field(default_factory=lambda: [ArmPose(), ArmPose()])
     frames: int = 0

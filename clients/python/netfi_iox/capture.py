@@ -1,4 +1,4 @@
-"""Reading netfi's ITP captures (SPEC §7): one standard LZ4 frame whose
+"""Reading netfi's ITP captures (docs/spec.md §7): one standard LZ4 frame whose
 content is a sequence of records — u64 big-endian receive time in ns, u16
 big-endian payload length, one "dropped" flag byte, then the payload."""
 

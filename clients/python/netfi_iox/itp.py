@@ -1,4 +1,4 @@
-"""ITP master-to-slave frame codec (SPEC §2): 124 bytes, packed,
+"""ITP master-to-slave frame codec (docs/spec.md §2): 124 bytes, packed,
 little-endian, with the checksum netfi verifies."""
 
 import struct

@@ -4,7 +4,7 @@
 //!
 //! Mapping (one netem qdisc takes one loss model and one delay):
 //! - `bernoulli` → `loss random P` (exact);
-//! - `markov4` → `loss state p13 p31 p32 p23 p14` (exact: SPEC §3.3 is netem's);
+//! - `markov4` → `loss state p13 p31 p32 p23 p14` (exact: docs/spec.md §3.3 is netem's);
 //! - `gilbert_elliott` → `loss gemodel p r 1-h 1-k` (exact);
 //! - `ge_lomax` → `loss gemodel p r 100% 0%`, the simple Gilbert model with
 //!   the same loss rate and mean loss-run length: runs become geometric, the
