@@ -134,17 +134,25 @@ pub struct FeedbackSection {
 }
 
 impl FeedbackSection {
-    /// Joins the emulator's feedback path and the console's view of it.
-    pub fn join(e: &crate::service::feedback::FeedbackReport, c: Option<&crate::service::console::ConsoleFeedback>) -> FeedbackSection {
+    /// Joins the emulator's feedback path, the console's view of it and
+    /// the robot's own count of what it sent (`robot_sent`, from its
+    /// report): that count stands where the robot's end marker did not
+    /// reach the emulator before it stopped waiting for it.
+    pub fn join(
+        e: &crate::service::feedback::FeedbackReport,
+        c: Option<&crate::service::console::ConsoleFeedback>,
+        robot_sent: Option<u64>,
+    ) -> FeedbackSection {
         let received_by_console = c.map(|c| c.received);
         let dropped: u64 = e.dropped.values().sum();
-        let balanced = e.sent_by_robot == Some(e.entered)
+        let sent_by_robot = e.sent_by_robot.or(robot_sent);
+        let balanced = sent_by_robot == Some(e.entered)
             && e.entered == e.delivered + dropped + e.held_at_end
             && received_by_console == Some(e.delivered);
         FeedbackSection {
             return_scenario: e.scenario.clone(),
             seed: e.seed,
-            sent_by_robot: e.sent_by_robot,
+            sent_by_robot,
             entered: e.entered,
             delivered: e.delivered,
             dropped: e.dropped.clone(),
@@ -406,7 +414,7 @@ impl RunReport {
         let feedback = emulator
             .as_ref()
             .and_then(|e| e.feedback.as_ref())
-            .map(|f| FeedbackSection::join(f, console.as_ref().and_then(|c| c.feedback.as_ref())));
+            .map(|f| FeedbackSection::join(f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent)));
         if let Some(f) = feedback.as_ref().filter(|f| !f.balanced) {
             faults.push(format!(
                 "feedback not balanced: robot sent {:?}, {} entered, {} delivered, console received {:?}",

@@ -137,6 +137,132 @@ impl ReceivedLog {
     }
 }
 
+/// What the robot side has seen and done so far: its kinematics, its
+/// latency histograms, `received.csv` and its counts.
+struct Robot {
+    kin: Kinematics,
+    e2e: LatencyHistogram,
+    hop: LatencyHistogram,
+    seen: LatencyHistogram,
+    received_csv: PathBuf,
+    received_log: ReceivedLog,
+    received: u64,
+    received_direct: u64,
+    wrong_size: u64,
+    bad_checksum: u64,
+    receive_errors: u64,
+    released_by_emulator: Option<u64>,
+    direct_ended: bool,
+    feedback_sent: u64,
+    feedback_errors: u64,
+    last_frame_ns: u64,
+}
+
+impl Robot {
+    fn new(args: &SimulatorArgs) -> Result<Robot> {
+        let stall_ns = (args.stall_ms * 1e6) as u64;
+        let checksum_policy = if args.drop_bad_checksum { ChecksumPolicy::Discard } else { ChecksumPolicy::Apply };
+        let kin = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, checksum_policy, ..Default::default() })
+            .context("--stall-ms")?;
+        let received_csv = args.out.join("received.csv");
+        let received_log = ReceivedLog::create(received_csv.clone())?;
+        Ok(Robot {
+            kin,
+            e2e: LatencyHistogram::new(),
+            hop: LatencyHistogram::new(),
+            seen: LatencyHistogram::new(),
+            received_csv,
+            received_log,
+            received: 0,
+            received_direct: 0,
+            wrong_size: 0,
+            bad_checksum: 0,
+            receive_errors: 0,
+            released_by_emulator: None,
+            direct_ended: false,
+            feedback_sent: 0,
+            feedback_errors: 0,
+            last_frame_ns: now_ns(),
+        })
+    }
+
+    /// A command from the emulator, received at `t`: applied, measured, and
+    /// answered with feedback through `send` (which says whether a
+    /// subscriber took it).
+    fn command(&mut self, s: &FrameSample, t: u64, send: impl FnOnce(&FeedbackSample) -> bool) {
+        self.last_frame_ns = t;
+        if s.is_end() {
+            self.released_by_emulator = Some(s.console_index);
+            return;
+        }
+        self.received += 1;
+        self.received_log.push(s.ingress_index, t);
+        self.e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
+        self.seen.record(t.saturating_sub(s.send_ns));
+        let sequence = match robot_frame(s) {
+            Err(()) => {
+                self.wrong_size += 1;
+                0
+            }
+            Ok((frame, checksum_ok)) => {
+                self.bad_checksum += u64::from(!checksum_ok);
+                self.kin.robot(t, &frame);
+                frame.sequence
+            }
+        };
+        // Feedback for every command received, applied or not.
+        let fb = feedback(&self.kin, s, sequence, self.feedback_sent, self.received);
+        if !send(&fb) {
+            self.feedback_errors += 1;
+        }
+        self.feedback_sent += 1;
+    }
+
+    /// The console's own copy of a command, received straight at `t`.
+    fn direct(&mut self, d: &FrameSample, t: u64) {
+        if d.is_end() {
+            self.direct_ended = true;
+            return;
+        }
+        self.received_direct += 1;
+        self.hop.record(t.saturating_sub(d.send_ns));
+        if d.len as usize == ITP_FRAME_LEN {
+            self.kin.console(t, &ItpFrame::parse_unverified(&ItpView::new_unchecked(&d.wire[..])));
+        }
+    }
+
+    /// Writes `received.csv`'s end and the histogram logs, and reports.
+    fn finish(mut self, args: &SimulatorArgs, ended_by: &str, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport> {
+        self.received_log.finish()?;
+        let duration_s = (t_end - t_start) as f64 / 1e9;
+        let e2e_hlog = args.out.join("end_to_end.hlog");
+        self.e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s).with_context(|| format!("writing {}", e2e_hlog.display()))?;
+        let hop_hlog = args.out.join("direct_hop.hlog");
+        self.hop.write_log(&hop_hlog, "direct_hop", 0.0, duration_s).with_context(|| format!("writing {}", hop_hlog.display()))?;
+        self.kin.close(t_end);
+        Ok(SimulatorReport {
+            received: self.received,
+            received_direct: self.received_direct,
+            wrong_size: self.wrong_size,
+            bad_checksum: self.bad_checksum,
+            released_by_emulator: self.released_by_emulator,
+            end_to_end_extra_ns: self.e2e.summary(),
+            direct_hop_ns: self.hop.summary(),
+            delay_seen_ns: self.seen.summary(),
+            kinematics: serde_json::to_value(self.kin.report()).ok(),
+            ended_by: ended_by.into(),
+            duration_s,
+            receive_errors: self.receive_errors,
+            steal_ms: steal.ms,
+            steal_fraction: steal.fraction,
+            received_csv: Some(self.received_csv),
+            end_to_end_hlog: Some(e2e_hlog),
+            feedback_sent: self.feedback_sent,
+            feedback_errors: self.feedback_errors,
+        })
+    }
+}
+
 /// Runs the simulator; returns its report (also `simulator.json`).
 pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     crate::service::write_pid(&args.out, "simulator")?;
@@ -144,22 +270,10 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
     let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
-    let (mut feedback_sent, mut feedback_errors) = (0u64, 0u64);
     signals::install();
     crate::service::place("simulator", args.core, args.avoid_core)?;
     let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
-    let stall_ns = (args.stall_ms * 1e6) as u64;
-    let checksum_policy = if args.drop_bad_checksum { ChecksumPolicy::Discard } else { ChecksumPolicy::Apply };
-    let mut kin = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, checksum_policy, ..Default::default() })
-        .context("--stall-ms")?;
-    let mut e2e = LatencyHistogram::new();
-    let mut hop = LatencyHistogram::new();
-    let mut seen = LatencyHistogram::new();
-    let received_csv = args.out.join("received.csv");
-    let mut received_log = ReceivedLog::create(received_csv.clone())?;
-    let (mut received, mut received_direct, mut wrong_size, mut bad_checksum, mut receive_errors) = (0u64, 0u64, 0u64, 0u64, 0u64);
-    let mut released_by_emulator = None;
-    let mut direct_ended = false;
+    let mut robot = Robot::new(args)?;
     let steal_timer = StealTimer::start();
     std::fs::write(args.out.join("simulator.ready"), b"").context("writing simulator.ready")?;
     let t_start = now_ns();
@@ -168,111 +282,44 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut iter = 0u64;
     let mut stop_at: Option<u64> = None;
     let mut stop = signals::StopCheck::new(64, || node.termination_requested());
-    let mut last_frame_ns = now_ns();
     let ended_by = loop {
         let mut idle = true;
         match FrameSource::try_recv(&mut port, &mut s) {
             Ok(true) => {
-                let t = now_ns();
                 idle = false;
-                last_frame_ns = t;
-                if s.is_end() {
-                    released_by_emulator = Some(s.console_index);
-                } else {
-                    received += 1;
-                    received_log.push(s.ingress_index, t);
-                    e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
-                    seen.record(t.saturating_sub(s.send_ns));
-                    let sequence = match robot_frame(&s) {
-                        Err(()) => {
-                            wrong_size += 1;
-                            0
-                        }
-                        Ok((frame, checksum_ok)) => {
-                            bad_checksum += u64::from(!checksum_ok);
-                            kin.robot(t, &frame);
-                            frame.sequence
-                        }
-                    };
-                    // Feedback for every command received, applied or not.
-                    let fb = feedback(&kin, &s, sequence, feedback_sent, received);
-                    match feedback_port.send_from(&fb, |f| f.send_ns = now_ns()) {
-                        Ok(n) if n > 0 => {}
-                        _ => feedback_errors += 1,
-                    }
-                    feedback_sent += 1;
-                }
+                robot.command(&s, now_ns(), |fb| matches!(feedback_port.send_from(fb, |f| f.send_ns = now_ns()), Ok(n) if n > 0));
             }
             Ok(false) => {}
-            Err(_) => receive_errors += 1,
+            Err(_) => robot.receive_errors += 1,
         }
         match FrameSource::try_recv(&mut direct, &mut d) {
             Ok(true) => {
-                let t = now_ns();
                 idle = false;
-                if d.is_end() {
-                    direct_ended = true;
-                } else {
-                    received_direct += 1;
-                    hop.record(t.saturating_sub(d.send_ns));
-                    if d.len as usize == ITP_FRAME_LEN {
-                        kin.console(t, &ItpFrame::parse_unverified(&ItpView::new_unchecked(&d.wire[..])));
-                    }
-                }
+                robot.direct(&d, now_ns());
             }
             Ok(false) => {}
-            Err(_) => receive_errors += 1,
+            Err(_) => robot.receive_errors += 1,
         }
         if idle {
             wait.relax();
         }
         iter = iter.wrapping_add(1);
         if iter % 1024 == 0 {
-            if released_by_emulator.is_some() && (direct_ended || direct.peers_connected() == 0) {
+            if robot.released_by_emulator.is_some() && (robot.direct_ended || direct.peers_connected() == 0) {
                 break "end_marker";
             }
             if stop_at.is_none() && stop.requested() {
                 stop_at = Some(now_ns());
             }
-            if let Some(_t) = stop_at {
-                if released_by_emulator.is_some() || now_ns().saturating_sub(last_frame_ns) > 200_000_000 {
-                    break "signal";
-                }
+            if stop_at.is_some() && (robot.released_by_emulator.is_some() || now_ns().saturating_sub(robot.last_frame_ns) > 200_000_000) {
+                break "signal";
             }
         }
     };
     let t_end = now_ns();
     // The feedback ends after the commands (best effort: the emulator may be gone).
-    let _ = feedback_port.send(&FeedbackSample::end_marker(feedback_sent));
-    received_log.finish()?;
-    let duration_s = (t_end - t_start) as f64 / 1e9;
-    let e2e_hlog = args.out.join("end_to_end.hlog");
-    e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s).with_context(|| format!("writing {}", e2e_hlog.display()))?;
-    let hop_hlog = args.out.join("direct_hop.hlog");
-    hop.write_log(&hop_hlog, "direct_hop", 0.0, duration_s).with_context(|| format!("writing {}", hop_hlog.display()))?;
-    let steal = steal_timer.stop();
-    kin.close(t_end);
-    let kinematics = serde_json::to_value(kin.report()).ok();
-    let report = SimulatorReport {
-        received,
-        received_direct,
-        wrong_size,
-        bad_checksum,
-        released_by_emulator,
-        end_to_end_extra_ns: e2e.summary(),
-        direct_hop_ns: hop.summary(),
-        delay_seen_ns: seen.summary(),
-        kinematics,
-        ended_by: ended_by.into(),
-        duration_s,
-        receive_errors,
-        steal_ms: steal.ms,
-        steal_fraction: steal.fraction,
-        received_csv: Some(received_csv),
-        end_to_end_hlog: Some(e2e_hlog),
-        feedback_sent,
-        feedback_errors,
-    };
+    let _ = feedback_port.send(&FeedbackSample::end_marker(robot.feedback_sent));
+    let report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
     let path = args.out.join("simulator.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)
