@@ -16,6 +16,15 @@ use counting_alloc::{allocations, Counting};
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The count is process-wide and the test harness runs tests on threads of
+/// their own: one test's set-up would land in another's measured window.
+/// Each test holds this for its whole length, so they run one at a time.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Runs `frames` frames at 1 kHz (simulated time) through the emulator's
 /// link and returns the allocations made during the last `measured` of them,
 /// and the frames released.
@@ -49,6 +58,7 @@ fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) 
 
 #[test]
 fn the_emulator_link_does_not_allocate_per_frame() {
+    let _serial = one_at_a_time();
     let pipelines = [
         ("PLM-2 → DLM-2", "[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n"),
         ("every model", "[[stage]]\nmodel = \"bernoulli\"\np = 0.01\n[[stage]]\nmodel = \"markov4\"\np13 = 0.01\np31 = 0.3\n[[stage]]\nmodel = \"gilbert_elliott\"\np = 0.01\n[[stage]]\npreset = \"CLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 10\ndist = \"uniform\"\njitter_ms = 5\norder = \"fifo\"\n"),
@@ -67,6 +77,7 @@ fn the_emulator_link_does_not_allocate_per_frame() {
 /// scenario.
 #[test]
 fn the_feedback_path_does_not_allocate_per_sample() {
+    let _serial = one_at_a_time();
     use netfi::sample::FeedbackSample;
     use netfi::transport::{FeedbackEgress, FeedbackIngress};
     use std::collections::VecDeque;
