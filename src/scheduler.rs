@@ -447,9 +447,9 @@ impl<T: Copy + Default> ReleaseQueue<T> {
         }
     }
 
-    /// A queue holding at most `capacity` frames (1..=[`MAX_CAPACITY`]); all
-    /// memory is allocated and written here.
-    pub fn try_new(order: QueueOrder, capacity: usize) -> Result<Self, CapacityError> {
+    /// Whether a queue of `capacity` frames may be built, without building
+    /// it: the error [`try_new`](Self::try_new) would give.
+    pub fn check_capacity(order: QueueOrder, capacity: usize) -> Result<(), CapacityError> {
         if capacity == 0 {
             return Err(CapacityError::Zero);
         }
@@ -457,6 +457,13 @@ impl<T: Copy + Default> ReleaseQueue<T> {
             let bytes_per_frame = Self::bytes_per_frame(order);
             return Err(CapacityError::TooLarge { capacity, bytes_per_frame, bytes_needed: capacity as u128 * bytes_per_frame as u128 });
         }
+        Ok(())
+    }
+
+    /// A queue holding at most `capacity` frames (1..=[`MAX_CAPACITY`]); all
+    /// memory is allocated and written here.
+    pub fn try_new(order: QueueOrder, capacity: usize) -> Result<Self, CapacityError> {
+        Self::check_capacity(order, capacity)?;
         let inner = match order {
             QueueOrder::Fifo => {
                 let mut ring = VecDeque::with_capacity(capacity);

@@ -189,3 +189,11 @@ fn export_netem_writes_the_new_stages_as_netems_own() {
     let (_, tc) = export("config/scenarios/netem_slot.toml");
     assert!(tc.ends_with("loss random 1% slot 2000us 6000us packets 8"), "{tc}");
 }
+
+#[test]
+fn check_refuses_an_oversized_queue_with_a_message_not_a_panic() {
+    let o = netfi().args(["scenario", "check", "Normal", "--frames", "10", "--queue-capacity", "4294967295"]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("queue_capacity (--queue-capacity) of 4294967295 frames") && !err.contains("panicked"), "{err}");
+}

@@ -30,9 +30,9 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     let spec = load::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(fresh_seed);
     let queue_capacity = args.queue_capacity.or(spec.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
-    if queue_capacity == 0 {
-        bail!("--queue-capacity must be at least 1 frame");
-    }
+    // Refused here with the scheduler's own message, before the checker's
+    // queue is built.
+    netfi::scheduler::ReleaseQueue::<()>::check_capacity(netfi::scheduler::QueueOrder::Reorder, queue_capacity)?;
     let arrivals = match &args.capture {
         Some(path) => {
             let cap = netfi::capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
