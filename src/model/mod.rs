@@ -41,7 +41,7 @@ pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
 pub use reorder::{Reorder, ReorderParams};
 pub use slot::{Slot, SlotParams};
 pub use spec::ModelSpec;
-pub use units::{Millis, Probability};
+pub use units::{parse_duration, Millis, Probability, TimeUnit};
 
 use rand_xoshiro::Xoshiro256PlusPlus;
 

@@ -1,5 +1,7 @@
-//! Units as written in scenario files: probabilities (`0.3` or `"30%"`) and
-//! milliseconds (decimals allowed), validated at parse time.
+//! Units as written in scenario files and on the command line:
+//! probabilities (`0.3` or `"30%"`) and durations (a number in the field's
+//! own unit, decimals allowed, or a string with a unit: `"250ms"`, `"10s"`,
+//! `"1.5 min"`, `"500us"`; [`parse_duration`]), validated at parse time.
 //!
 //! Physical ranges (docs/spec.md §1). A [`Millis`] is any finite duration
 //! ≥ 0; each model then bounds its own durations to what a lab could mean,
@@ -111,7 +113,7 @@ impl<'de> Deserialize<'de> for Millis {
         impl serde::de::Visitor<'_> for V {
             type Value = Millis;
             fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a number of milliseconds ≥ 0 (decimals allowed)")
+                f.write_str("a number of milliseconds ≥ 0 (decimals allowed) or a duration with its unit, like \"250ms\" or \"2s\"")
             }
             fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Millis, E> {
                 Millis::new(v).map_err(E::custom)
@@ -122,8 +124,68 @@ impl<'de> Deserialize<'de> for Millis {
             fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Millis, E> {
                 Millis::new(v as f64).map_err(E::custom)
             }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Millis, E> {
+                parse_duration(v, TimeUnit::Ms).and_then(Millis::new).map_err(E::custom)
+            }
         }
         d.deserialize_any(V)
+    }
+}
+
+/// The unit a duration is read in when it is written as a bare number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimeUnit {
+    Ns,
+    Us,
+    Ms,
+    S,
+}
+
+impl TimeUnit {
+    /// Nanoseconds in one of this unit.
+    fn ns(self) -> f64 {
+        match self {
+            TimeUnit::Ns => 1.0,
+            TimeUnit::Us => 1e3,
+            TimeUnit::Ms => 1e6,
+            TimeUnit::S => 1e9,
+        }
+    }
+
+    fn suffix(self) -> &'static str {
+        match self {
+            TimeUnit::Ns => "ns",
+            TimeUnit::Us => "us",
+            TimeUnit::Ms => "ms",
+            TimeUnit::S => "s",
+        }
+    }
+}
+
+/// Parses a duration, in `unit` (the result is in that unit too): a bare
+/// number (`"250"`: already in `unit`) or a number with one of the units
+/// `ns`, `us` (or `µs`), `ms`, `s`, `min`, `h` (`"250ms"`, `"1.5 s"`). The
+/// result is finite and ≥ 0; the error says what is accepted.
+pub fn parse_duration(text: &str, unit: TimeUnit) -> Result<f64, String> {
+    const UNITS: [(&str, f64); 7] =
+        [("min", 60e9), ("ns", 1.0), ("us", 1e3), ("µs", 1e3), ("ms", 1e6), ("h", 3600e9), ("s", 1e9)];
+    let t = text.trim();
+    let bad = || {
+        format!(
+            "\"{text}\" is not a duration: expected a number ≥ 0 (in {}) or a number with a unit (ns, us, ms, s, min, h), like \"250ms\" or \"10s\"",
+            unit.suffix()
+        )
+    };
+    let (num, ns) = match UNITS.iter().find(|(u, _)| t.ends_with(u)) {
+        Some((u, f)) => (t[..t.len() - u.len()].trim(), *f),
+        None => (t, unit.ns()),
+    };
+    let v: f64 = num.parse().map_err(|_| bad())?;
+    let out = if ns == unit.ns() { v } else { v * ns / unit.ns() };
+    if out.is_finite() && out >= 0.0 {
+        Ok(out)
+    } else {
+        Err(bad())
     }
 }
 
@@ -193,5 +255,42 @@ pub fn ms_to_ns(ms: f64) -> u64 {
         u64::MAX
     } else {
         ns as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_read_in_their_unit_or_the_fields() {
+        assert_eq!(parse_duration("250ms", TimeUnit::S), Ok(0.25));
+        assert_eq!(parse_duration("10s", TimeUnit::S), Ok(10.0));
+        assert_eq!(parse_duration(" 1.5 min ", TimeUnit::S), Ok(90.0));
+        assert_eq!(parse_duration("2h", TimeUnit::Ms), Ok(7_200_000.0));
+        assert_eq!(parse_duration("500us", TimeUnit::Ms), Ok(0.5));
+        assert_eq!(parse_duration("500µs", TimeUnit::Ms), Ok(0.5));
+        assert_eq!(parse_duration("1500ns", TimeUnit::Us), Ok(1.5));
+        assert_eq!(parse_duration("12", TimeUnit::Ms), Ok(12.0));
+        assert_eq!(parse_duration("12", TimeUnit::S), Ok(12.0));
+        assert_eq!(parse_duration("1e3", TimeUnit::Ms), Ok(1000.0));
+        assert_eq!(parse_duration("1e-3s", TimeUnit::Ms), Ok(1.0));
+        for bad in ["", "ms", "-1s", "10 parsecs", "1e400s", "NaN", "inf"] {
+            let e = parse_duration(bad, TimeUnit::S).unwrap_err();
+            assert!(e.contains("is not a duration") && e.contains("250ms"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn millis_fields_accept_units() {
+        #[derive(Deserialize)]
+        struct F {
+            a: Millis,
+            b: Millis,
+        }
+        let f: F = toml::from_str("a = \"2s\"\nb = 7.5").unwrap();
+        assert_eq!((f.a.get(), f.b.get()), (2000.0, 7.5));
+        let e = toml::from_str::<F>("a = \"2 fortnights\"\nb = 1").err().unwrap().to_string();
+        assert!(e.contains("is not a duration"), "{e}");
     }
 }

@@ -25,6 +25,18 @@ pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
     }
 }
 
+/// Parses a time flag named `_s`: seconds, or a number with its unit
+/// (`250ms`, `10s`, `2min`).
+pub fn seconds(text: &str) -> Result<f64, String> {
+    crate::model::parse_duration(text, crate::model::TimeUnit::S)
+}
+
+/// Parses a time flag named `_ms`: milliseconds, or a number with its unit
+/// (`500us`, `250ms`, `2s`).
+pub fn millis(text: &str) -> Result<f64, String> {
+    crate::model::parse_duration(text, crate::model::TimeUnit::Ms)
+}
+
 /// An argv under construction: flags with values, and switches.
 #[derive(Debug, Default)]
 struct Argv(Vec<String>);
@@ -61,8 +73,9 @@ pub struct ConsoleArgs {
     /// Frames to send (default: --duration-s worth).
     #[arg(long, conflicts_with = "duration_s")]
     pub frames: Option<u64>,
-    /// Seconds to stream (default 10; with --capture, the whole capture).
-    #[arg(long)]
+    /// Seconds to stream, or a duration with its unit (`250ms`, `2min`);
+    /// default 10 s; with --capture, the whole capture.
+    #[arg(long, visible_alias = "duration", value_parser = seconds)]
     pub duration_s: Option<f64>,
     /// Replay a recorded capture (LZ4 ITP records) instead of synthetic motion;
     /// original timing unless --rate-hz is given.
@@ -84,11 +97,11 @@ pub struct ConsoleArgs {
     #[arg(long)]
     pub no_direct: bool,
     /// Seconds to wait for the emulator to subscribe before streaming.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = seconds)]
     pub wait_for_peer_s: f64,
     /// Seconds to wait, after the last frame, for the end of the robot's
     /// feedback (while an emulator publishes it).
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = seconds)]
     pub feedback_wait_s: f64,
     /// Print the round trip and the robot's divergence once a second.
     #[arg(long)]
@@ -173,7 +186,7 @@ pub struct EmulatorArgs {
     /// With a UDP ingress: end the run as if the console had ended, once no
     /// datagram has arrived for this many milliseconds (default: run until
     /// SIGINT/SIGTERM).
-    #[arg(long, value_name = "MS")]
+    #[arg(long, value_name = "MS", value_parser = millis)]
     pub idle_end_ms: Option<f64>,
     /// Requested kernel receive/send buffer of each UDP socket, bytes.
     #[arg(long, default_value_t = DEFAULT_UDP_BUFFER_BYTES)]
@@ -181,7 +194,7 @@ pub struct EmulatorArgs {
     /// Open the egress first and wait up to this many seconds for a robot
     /// to subscribe to it before opening the ingress, so no frame is
     /// released into nothing (a stand-alone emulator for foreign clients).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = seconds)]
     pub wait_for_peer_s: Option<f64>,
     /// With iceoryx2 on both sides: do not open the feedback loop
     /// (`feedback` → `feedback_out`).
@@ -200,7 +213,7 @@ pub struct SimulatorArgs {
     #[arg(long, conflicts_with = "core")]
     pub avoid_core: Option<usize>,
     /// A gap between received frames longer than this is a stall.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = millis)]
     pub stall_ms: f64,
     /// Ignore frames with a wrong ITP checksum (default: count and apply them).
     #[arg(long)]
@@ -217,8 +230,9 @@ pub struct SimulatorArgs {
 pub struct RunArgs {
     /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3, their calibrated -cal variants; see `netfi scenario list`).
     pub scenario: String,
-    /// Seconds to stream (default 10; with --capture, the whole capture).
-    #[arg(long)]
+    /// Seconds to stream, or a duration with its unit (`250ms`, `2min`);
+    /// default 10 s; with --capture, the whole capture.
+    #[arg(long, visible_alias = "duration", value_parser = seconds)]
     pub duration_s: Option<f64>,
     /// Frames to stream instead of a duration.
     #[arg(long, conflicts_with = "duration_s")]

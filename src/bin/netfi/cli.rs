@@ -35,6 +35,18 @@ pub enum Command {
     /// masks, interrupt affinities, the workqueue mask) and iceoryx2
     /// resources of dead processes. Every `netfi run` does this first.
     Restore(RestoreArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions {
+        /// The shell to complete for.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff) of netfi and its commands; `--dir`
+    /// writes one page per command there instead.
+    Man {
+        /// Write `netfi.1`, `netfi-run.1`, … into this directory.
+        #[arg(long)]
+        dir: Option<PathBuf>,
+    },
 }
 
 #[derive(Debug, Args)]

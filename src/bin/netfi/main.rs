@@ -1,6 +1,7 @@
 //! The `netfi` command line: a thin wrapper over the library.
 
 mod cli;
+mod docs;
 mod export;
 mod fit;
 mod restore;
@@ -25,6 +26,8 @@ fn main() -> std::process::ExitCode {
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
         cli::Command::Restore(a) => restore::run(a),
+        cli::Command::Completions { shell } => docs::completions(shell),
+        cli::Command::Man { dir } => docs::man(dir.as_deref()),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,57 @@
+//! What a user gets from `netfi completions`, `netfi man`, and times with
+//! units on the command line and in scenario files.
+
+use std::process::Command;
+
+fn netfi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_netfi"))
+}
+
+#[test]
+fn completions_cover_the_commands_and_their_flags() {
+    for shell in ["bash", "zsh", "fish"] {
+        let out = netfi().args(["completions", shell]).output().unwrap();
+        assert!(out.status.success(), "{shell}: {}", String::from_utf8_lossy(&out.stderr));
+        let script = String::from_utf8_lossy(&out.stdout);
+        for word in ["scenario", "export", "duration-s", "return-scenario"] {
+            assert!(script.contains(word), "{shell} completion lacks `{word}`");
+        }
+    }
+    let bad = netfi().args(["completions", "cmd.exe"]).output().unwrap();
+    assert!(!bad.status.success());
+}
+
+#[test]
+fn man_writes_a_page_per_command() {
+    let dir = std::env::temp_dir().join(format!("netfi-man-{}", std::process::id()));
+    let out = netfi().args(["man", "--dir"]).arg(&dir).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for page in ["netfi.1", "netfi-run.1", "netfi-scenario-check.1", "netfi-export-netem.1"] {
+        let text = std::fs::read_to_string(dir.join(page)).unwrap_or_else(|e| panic!("{page}: {e}"));
+        assert!(text.contains(".TH"), "{page} is not a roff page");
+    }
+    let run = std::fs::read_to_string(dir.join("netfi-run.1")).unwrap();
+    assert!(run.contains("duration"), "netfi-run.1 does not describe --duration-s");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn times_take_units_and_bad_ones_are_named() {
+    let dir = std::env::temp_dir().join(format!("netfi-units-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("slots.toml");
+    std::fs::write(&file, "name = \"units\"\nseed = 1\n[[stage]]\nmodel = \"slot\"\nmin_ms = \"2000us\"\nmax_ms = \"0.006s\"\n").unwrap();
+    let out = netfi().args(["scenario", "show"]).arg(&file).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let shown = String::from_utf8_lossy(&out.stdout);
+    assert!(shown.contains("min_ms = 2.0") && shown.contains("max_ms = 6.0"), "{shown}");
+    std::fs::write(&file, "name = \"units\"\nseed = 1\n[[stage]]\nmodel = \"slot\"\nmin_ms = 2\nmax_ms = \"6 parsecs\"\n").unwrap();
+    let out = netfi().args(["scenario", "show"]).arg(&file).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("slots.toml:6") && err.contains("`max_ms`") && err.contains("not a duration"), "{err}");
+    // On the command line: a unit is read, a bad one refused before anything runs.
+    let out = netfi().args(["run", "Normal", "--duration", "3 fortnights"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("\"3 fortnights\" is not a duration"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
