@@ -23,7 +23,7 @@
 //!   frame ([`synthetic_frame`]) with [`crate::frame::checksum_catches`]
 //!   (only when the scenario corrupts).
 
-use crate::injector::{Fate, Injector};
+use crate::injector::{Entered, Fate, Injector};
 use crate::scenario::Scenario;
 use crate::scheduler::Released;
 use crate::stats::BatchMeans;
@@ -253,7 +253,20 @@ pub const PROGRESS_EVERY: u64 = 1 << 16;
 
 /// Runs `scenario` over `arrivals` and reports. `progress(done)` is called
 /// every [`PROGRESS_EVERY`] frames.
-pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut progress: impl FnMut(u64)) -> CheckReport {
+pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, progress: impl FnMut(u64)) -> CheckReport {
+    run_observed(scenario, arrivals, queue_capacity, progress, |_, _, _| {})
+}
+
+/// [`run`], and `observe(ingress index, arrival ns, entered)` for every
+/// frame as it is decided: the per-frame fates a preview or a trace of the
+/// check is drawn from.
+pub fn run_observed(
+    scenario: Scenario,
+    arrivals: &Arrivals,
+    queue_capacity: usize,
+    mut progress: impl FnMut(u64),
+    mut observe: impl FnMut(u64, u64, &Entered),
+) -> CheckReport {
     let frames = arrivals.len();
     let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
@@ -281,6 +294,7 @@ pub fn run(scenario: Scenario, arrivals: &Arrivals, queue_capacity: usize, mut p
                 corruption.passed += 1;
             }
         });
+        observe(i, t, &e);
         let dropped = match e.fate {
             Fate::Scheduled { delay_ns, .. } => {
                 delays.saturating_record(delay_ns);
