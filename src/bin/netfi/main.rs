@@ -3,6 +3,7 @@
 mod cli;
 mod export;
 mod fit;
+mod report;
 mod restore;
 mod scenario;
 
@@ -25,6 +26,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
         cli::Command::Restore(a) => restore::run(a),
+        cli::Command::Report(a) => report::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
