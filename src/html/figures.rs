@@ -92,7 +92,8 @@ pub fn delay_law(t: &TraceSummary, law: Option<&Law>) -> Result<Option<String>, 
         lines.push(Line { label: "seen by the robot".into(), color: plot::BLUE, points: cdf_ms(&t.seen_ns) });
     }
     // The axis ends at the 99.9th percentile seen: one straggler would squeeze the rest.
-    let lo = t.drawn_ns.min().min(t.seen_ns.min()) as f64 / 1e6;
+    // An empty histogram's minimum reads 0: only the recorded ones count.
+    let lo = [&t.drawn_ns, &t.seen_ns].iter().filter(|h| !h.is_empty()).map(|h| h.min()).min().unwrap_or(0) as f64 / 1e6;
     let hi = (t.drawn_ns.value_at_quantile(0.999).max(t.seen_ns.value_at_quantile(0.999)) as f64 / 1e6).max(lo + 1e-3);
     let (lo, hi) = (lo - 0.02 * (hi - lo), hi + 0.02 * (hi - lo));
     if let Some(law) = law {

@@ -46,6 +46,15 @@ impl Law {
             Law::Jitter(j) => j.cdf_ms(x_ms),
         }
     }
+
+    /// Whether frames keep their order (`fifo`): a frame then waits for
+    /// the one before it, and the delays drawn lie at or above the law.
+    pub fn in_order(&self) -> bool {
+        match self {
+            Law::Delay(d) => !d.may_reorder(),
+            Law::Jitter(j) => !j.may_reorder(),
+        }
+    }
 }
 
 /// Everything the page shows.

@@ -145,7 +145,14 @@ fn delay_law(inp: &RunInputs) -> Result<Markup, HtmlError> {
             @match plot {
                 Some(svg) => {
                     (PreEscaped(svg))
-                    @if inp.law.is_none() { (none("no analytic law: the scenario is not one phase with one delay stage")) }
+                    @match &inp.law {
+                        None => (none("no analytic law: the scenario is not one phase with one delay stage")),
+                        Some(law) if law.in_order() => p #delay-law-fifo {
+                            "Frames keep their order: one may wait for the frame before it, so the delays drawn "
+                            "lie at or above the law, which is the draw without that wait."
+                        },
+                        Some(_) => {}
+                    }
                 }
                 None => (none("the run injected no delay")),
             }
