@@ -25,6 +25,7 @@ pub mod stats;
 
 pub mod clock;
 pub mod host;
+pub mod html;
 pub mod load;
 pub mod metrics;
 pub mod service;

@@ -199,9 +199,63 @@ impl FeedbackSection {
     }
 }
 
+/// Where a run comes from, so that a trial can be matched to its video and
+/// robot logs: the netfi version, the command line as run, when it started
+/// (wall clock, UTC), its seed and the host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    pub version: String,
+    /// The command line, quoted so that a shell runs it again as it was.
+    pub command_line: String,
+    /// RFC 3339, UTC, to the second.
+    pub started_utc: String,
+    pub seed: u64,
+    pub host: String,
+}
+
+impl Provenance {
+    /// This process's version, command line and host name; `started` is the
+    /// wall-clock time the run began.
+    pub fn capture(started: std::time::SystemTime, seed: u64) -> Provenance {
+        let words: Vec<String> = std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect();
+        // Only a word with a NUL byte cannot be quoted; an argument never has one.
+        let command_line = shlex::try_join(words.iter().map(String::as_str)).unwrap_or_else(|_| words.join(" "));
+        Provenance {
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            command_line,
+            started_utc: humantime::format_rfc3339_seconds(started).to_string(),
+            seed,
+            host: host_name(),
+        }
+    }
+
+    fn to_text(&self) -> String {
+        format!("provenance netfi {} on {}, started {} (seed {})
+  command  {}
+", self.version, self.host, self.started_utc, self.seed, self.command_line)
+    }
+}
+
+/// The host's name (`gethostname`), or `unknown`.
+fn host_name() -> String {
+    let mut buf = [0u8; 256];
+    // SAFETY: the buffer is writable for its whole length; the name is
+    // NUL-terminated within it unless truncated, which the search below allows for.
+    let rc = unsafe { libc::gethostname(buf.as_mut_ptr().cast(), buf.len()) };
+    let len = buf.iter().position(|b| *b == 0).unwrap_or(buf.len());
+    if rc != 0 || len == 0 {
+        return "unknown".into();
+    }
+    String::from_utf8_lossy(&buf[..len]).into_owned()
+}
+
 /// The report of one `netfi run`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunReport {
+    /// Version, command line, wall-clock start, seed and host (absent in
+    /// reports of older versions).
+    #[serde(default)]
+    pub provenance: Option<Provenance>,
     pub run_id: String,
     pub scenario: String,
     pub seed: u64,
@@ -277,6 +331,9 @@ impl RunReport {
         let opt = |v: Option<u64>| v.map_or("?".to_string(), |x| x.to_string());
         let f = &self.frames;
         s += &format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        if let Some(p) = &self.provenance {
+            s += &p.to_text();
+        }
         s += &format!(
             "frames     sent {}  entered {}  delivered {}  received {}  held at end {}\n",
             opt(f.sent),
@@ -448,6 +505,7 @@ impl RunReport {
             direct_hop,
         };
         RunReport {
+            provenance: None,
             delay_check: delay_check(&plan.spec, plan.seed, delays),
             run_id: plan.run_id.clone(),
             scenario: plan.spec.name.clone(),

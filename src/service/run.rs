@@ -334,6 +334,7 @@ fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
 /// for and which processes failed.
 pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
+    let started = std::time::SystemTime::now();
     let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps
@@ -366,6 +367,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let faults = procs.iter().filter_map(Proc::died).collect();
     let processes = procs.iter().map(Proc::end).collect();
     let mut report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    report.provenance = Some(crate::service::report::Provenance::capture(started, plan.seed));
     // A report that cannot be written (a full disk) is a fault of the run;
     // the report is still returned, for stdout.
     let json = serde_json::to_vec_pretty(&report)?;

@@ -47,6 +47,19 @@ pub enum Command {
         #[arg(long)]
         dir: Option<PathBuf>,
     },
+    /// Show the report of a finished run from its output directory; with
+    /// --html, write it as one self-contained page, `report.html`, there.
+    Report(ReportArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The run's output directory (what `netfi run --out` was given).
+    pub out_dir: PathBuf,
+    /// Write `report.html` into the directory (inline SVG plots and CSS,
+    /// no external file or URL) and print its path.
+    #[arg(long)]
+    pub html: bool,
 }
 
 #[derive(Debug, Args)]

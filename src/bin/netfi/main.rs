@@ -4,6 +4,7 @@ mod cli;
 mod docs;
 mod export;
 mod fit;
+mod report;
 mod restore;
 mod scenario;
 
@@ -28,6 +29,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Restore(a) => restore::run(a),
         cli::Command::Completions { shell } => docs::completions(shell),
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
+        cli::Command::Report(a) => report::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

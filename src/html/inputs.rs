@@ -1,0 +1,175 @@
+//! What a run left in its output directory, read for the page: the report,
+//! its optional control events, the HdrHistogram logs, the scenario's
+//! delay law and the trace's summary.
+//!
+//! Files are looked up in the directory by name (not by the absolute paths
+//! the report holds), so a run directory that was moved or copied still
+//! renders. A file the report says was written must be there; one it does
+//! not name is shown as not recorded.
+
+use super::trace::{self, TraceSummary};
+use super::HtmlError;
+use crate::model::AnyModel;
+use crate::service::report::RunReport;
+use hdrhistogram::Histogram;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// One control action during the run (a scenario switch, a pause). Runs
+/// record none yet; a report may carry them as `events: [{t_s, what}]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct ControlEvent {
+    /// Seconds since the run started.
+    pub t_s: f64,
+    pub what: String,
+}
+
+/// One latency distribution from an HdrHistogram log (all its intervals).
+pub struct Latency {
+    pub label: &'static str,
+    pub file: &'static str,
+    pub histogram: Option<Histogram<u64>>,
+}
+
+/// The analytic law of the scenario's delay: its one delay stage.
+#[derive(Debug, Clone)]
+pub enum Law {
+    Delay(crate::model::delay::Delay),
+    Jitter(crate::model::jitter::Jitter),
+}
+
+impl Law {
+    /// `P(D ≤ x_ms)`.
+    pub fn cdf_ms(&self, x_ms: f64) -> f64 {
+        match self {
+            Law::Delay(d) => d.cdf_ms(x_ms),
+            Law::Jitter(j) => j.cdf_ms(x_ms),
+        }
+    }
+
+    /// Whether frames keep their order (`fifo`): a frame then waits for
+    /// the one before it, and the delays drawn lie at or above the law.
+    pub fn in_order(&self) -> bool {
+        match self {
+            Law::Delay(d) => !d.may_reorder(),
+            Law::Jitter(j) => !j.may_reorder(),
+        }
+    }
+}
+
+/// Everything the page shows.
+pub struct RunInputs {
+    pub dir: PathBuf,
+    pub report: RunReport,
+    pub events: Vec<ControlEvent>,
+    pub latency: Vec<Latency>,
+    pub law: Option<Law>,
+    pub trace: Option<TraceSummary>,
+}
+
+/// The first time bin is about a 100th of the run, rounded up to 1, 2 or
+/// 5 × 10^k ns, and at least 10 ms.
+const BINS_PER_RUN: f64 = 100.0;
+const BIN_NS_MIN: u64 = 10_000_000;
+
+fn bin_ns(duration_s: f64) -> u64 {
+    let raw = (duration_s * 1e9 / BINS_PER_RUN).max(BIN_NS_MIN as f64);
+    let decade = 10f64.powf(raw.log10().floor());
+    let nice = [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * decade).find(|w| *w >= raw).unwrap_or(10.0 * decade);
+    nice as u64
+}
+
+impl RunInputs {
+    /// Reads the run directory `dir`.
+    pub fn read(dir: &Path) -> Result<RunInputs, HtmlError> {
+        let report_path = dir.join("report.json");
+        let bytes = std::fs::read(&report_path).map_err(|e| HtmlError::read(&report_path, e))?;
+        let value: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| HtmlError::malformed(&report_path, e.to_string()))?;
+        let events = match value.get("events") {
+            None | Some(serde_json::Value::Null) => Vec::new(),
+            Some(v) => Vec::<ControlEvent>::deserialize(v).map_err(|e| HtmlError::malformed(&report_path, format!("events: {e}")))?,
+        };
+        let report: RunReport = serde_json::from_value(value).map_err(|e| HtmlError::malformed(&report_path, e.to_string()))?;
+        let f = &report.files;
+        // The simulator writes direct_hop.hlog beside end_to_end.hlog.
+        let latency = vec![
+            latency(dir, "emulator added (end-to-end extra)", "end_to_end.hlog", f.end_to_end_hlog.is_some())?,
+            latency(dir, "direct hop", "direct_hop.hlog", f.end_to_end_hlog.is_some())?,
+            latency(dir, "release lateness", "lateness.hlog", f.lateness_hlog.is_some())?,
+            latency(dir, "decision", "decision.hlog", f.decision_hlog.is_some())?,
+        ];
+        let law = law(dir, &report)?;
+        let trace = match &f.trace {
+            Some(_) => {
+                Some(trace::summarize(&dir.join("trace.csv"), bin_ns(report.duration_s))?)
+            }
+            None => None,
+        };
+        Ok(RunInputs { dir: dir.to_path_buf(), report, events, latency, law, trace })
+    }
+}
+
+/// The histogram of `dir/file`, all intervals added; `None` when the run
+/// did not write it (`expected` false).
+fn latency(dir: &Path, label: &'static str, file: &'static str, expected: bool) -> Result<Latency, HtmlError> {
+    let histogram = if expected { Some(read_hlog(&dir.join(file))?) } else { None };
+    Ok(Latency { label, file, histogram })
+}
+
+/// Adds up every interval of an HdrHistogram interval log.
+pub fn read_hlog(path: &Path) -> Result<Histogram<u64>, HtmlError> {
+    use base64::Engine;
+    use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
+    let bytes = std::fs::read(path).map_err(|e| HtmlError::read(path, e))?;
+    let mut total: Option<Histogram<u64>> = None;
+    let mut de = hdrhistogram::serialization::Deserializer::new();
+    for entry in IntervalLogIterator::new(&bytes) {
+        let entry = entry.map_err(|e| HtmlError::malformed(path, format!("not an HdrHistogram interval log: {e:?}")))?;
+        let LogEntry::Interval(i) = entry else { continue };
+        let raw = base64::engine::general_purpose::STANDARD
+            .decode(i.encoded_histogram())
+            .map_err(|e| HtmlError::malformed(path, format!("an interval's histogram is not base64: {e}")))?;
+        let h: Histogram<u64> = de.deserialize(&mut raw.as_slice()).map_err(|e| HtmlError::malformed(path, format!("an interval's histogram does not decode: {e:?}")))?;
+        match &mut total {
+            Some(t) => t.add(&h).map_err(|e| HtmlError::malformed(path, format!("intervals of different ranges: {e:?}")))?,
+            None => {
+                let mut t = h;
+                t.auto(true);
+                total = Some(t);
+            }
+        }
+    }
+    total.ok_or_else(|| HtmlError::malformed(path, "no histogram interval in it"))
+}
+
+/// The law of the scenario's delay, when the scenario is one phase with one
+/// delay (or jitter) stage; the scenario is the run's own copy.
+fn law(dir: &Path, report: &RunReport) -> Result<Option<Law>, HtmlError> {
+    let path = dir.join("scenario.toml");
+    let spec = crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
+    let scenario = crate::scenario::Scenario::new(&spec, report.seed).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
+    let [phase] = scenario.phases() else { return Ok(None) };
+    let laws: Vec<Law> = phase
+        .stages()
+        .iter()
+        .filter_map(|s| match s.model() {
+            AnyModel::Delay(d) => Some(Law::Delay(d.clone())),
+            AnyModel::Jitter(j) => Some(Law::Jitter(j.clone())),
+            _ => None,
+        })
+        .collect();
+    Ok(match <[Law; 1]>::try_from(laws) {
+        Ok([one]) => Some(one),
+        Err(_) => None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn bin_widths_are_round() {
+        assert_eq!(super::bin_ns(0.0), 10_000_000);
+        assert_eq!(super::bin_ns(6.11), 100_000_000);
+        assert_eq!(super::bin_ns(3600.0), 50_000_000_000);
+    }
+}

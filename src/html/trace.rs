@@ -1,0 +1,274 @@
+//! `trace.csv` read as a stream, one row at a time, into fixed-size
+//! summaries: loss and delay per time bin, loss-run lengths, and the
+//! histograms of the delays drawn and seen. Memory stays bounded however
+//! long the run: at most [`MAX_BINS`] bins, one counter per distinct
+//! loss-run length, and two HdrHistograms.
+
+use super::HtmlError;
+use hdrhistogram::Histogram;
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::Path;
+
+/// The most time bins kept; when the run outlasts them, neighbours merge
+/// and the bin width doubles.
+pub const MAX_BINS: usize = 256;
+
+/// The frames of one time bin.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Bin {
+    /// Frames that entered the emulator.
+    pub frames: u64,
+    pub dropped: u64,
+    /// Delivered frames, and those of them the simulator received.
+    pub delivered: u64,
+    pub received: u64,
+    /// Sum of the injected delays of delivered frames, ns.
+    pub drawn_sum_ns: u128,
+    /// Sum and maximum of receive − send of received frames, ns.
+    pub seen_sum_ns: u128,
+    pub seen_max_ns: u64,
+}
+
+impl Bin {
+    fn merge(&mut self, o: &Bin) {
+        self.frames += o.frames;
+        self.dropped += o.dropped;
+        self.delivered += o.delivered;
+        self.received += o.received;
+        self.drawn_sum_ns += o.drawn_sum_ns;
+        self.seen_sum_ns += o.seen_sum_ns;
+        self.seen_max_ns = self.seen_max_ns.max(o.seen_max_ns);
+    }
+}
+
+/// What the trace says, summarized.
+#[derive(Debug, Clone)]
+pub struct TraceSummary {
+    /// Width of a bin, ns; bin `i` covers `[i·w, (i+1)·w)` after the first
+    /// frame's send time.
+    pub bin_ns: u64,
+    pub bins: Vec<Bin>,
+    /// Loss-run length (consecutive dropped frames, in ingress order) → count.
+    pub loss_runs: BTreeMap<u64, u64>,
+    /// Injected delays of delivered frames, ns.
+    pub drawn_ns: Histogram<u64>,
+    /// receive − send of received frames, ns.
+    pub seen_ns: Histogram<u64>,
+    pub rows: u64,
+}
+
+/// The columns read, by name (the header decides their positions).
+struct Columns {
+    send: usize,
+    fate: usize,
+    delay: usize,
+    recv: usize,
+}
+
+impl Columns {
+    fn from_header(header: &str) -> Option<Columns> {
+        let names: Vec<&str> = header.trim_end().split(',').collect();
+        let at = |n: &str| names.iter().position(|c| *c == n);
+        Some(Columns { send: at("send_ns")?, fate: at("fate")?, delay: at("delay_ns")?, recv: at("recv_ns")? })
+    }
+}
+
+impl TraceSummary {
+    fn new(bin_ns: u64) -> TraceSummary {
+        // Three significant digits from 1 ns to an hour: a delay histogram
+        // of a few tens of kB whatever the run's length.
+        let h = || Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds");
+        TraceSummary { bin_ns: bin_ns.max(1), bins: Vec::new(), loss_runs: BTreeMap::new(), drawn_ns: h(), seen_ns: h(), rows: 0 }
+    }
+
+    /// The bin of time `t_ns` (since the first send), merging bins until it fits.
+    fn bin(&mut self, t_ns: u64) -> &mut Bin {
+        let mut i = (t_ns / self.bin_ns) as usize;
+        while i >= MAX_BINS {
+            let merged: Vec<Bin> = self.bins.chunks(2).map(|c| {
+                let mut b = c[0];
+                if let Some(o) = c.get(1) {
+                    b.merge(o);
+                }
+                b
+            }).collect();
+            self.bins = merged;
+            self.bin_ns *= 2;
+            i = (t_ns / self.bin_ns) as usize;
+        }
+        if self.bins.len() <= i {
+            self.bins.resize(i + 1, Bin::default());
+        }
+        &mut self.bins[i]
+    }
+
+    /// The end of the last bin, s after the first frame's send.
+    pub fn end_s(&self) -> f64 {
+        self.bins.len() as f64 * self.bin_ns as f64 / 1e9
+    }
+
+    /// The middle of bin `i`, s after the first frame's send.
+    pub fn centre_s(&self, i: usize) -> f64 {
+        (i as f64 + 0.5) * self.bin_ns as f64 / 1e9
+    }
+}
+
+/// Reads `path` row by row. `bin_ns` is the first bin width (it doubles
+/// while the run outlasts [`MAX_BINS`] bins). A row that does not parse is
+/// an error naming the file and the line.
+pub fn summarize(path: &Path, bin_ns: u64) -> Result<TraceSummary, HtmlError> {
+    let file = std::fs::File::open(path).map_err(|e| HtmlError::read(path, e))?;
+    let mut lines = std::io::BufReader::with_capacity(1 << 16, file).lines();
+    let header = lines.next().transpose().map_err(|e| HtmlError::read(path, e))?.unwrap_or_default();
+    let cols = Columns::from_header(&header)
+        .ok_or_else(|| HtmlError::malformed(path, "line 1: not a trace header (send_ns, fate, delay_ns and recv_ns expected)"))?;
+    let mut s = TraceSummary::new(bin_ns);
+    let mut t0: Option<u64> = None;
+    let mut run = 0u64;
+    for (n, line) in lines.enumerate() {
+        let line = line.map_err(|e| HtmlError::read(path, e))?;
+        if line.is_empty() {
+            continue;
+        }
+        let row = Row::parse(&line, &cols).map_err(|what| HtmlError::malformed(path, format!("line {}: {what}", n + 2)))?;
+        let t = row.send_ns.saturating_sub(*t0.get_or_insert(row.send_ns));
+        s.rows += 1;
+        if row.dropped {
+            run += 1;
+        } else if run > 0 {
+            *s.loss_runs.entry(run).or_default() += 1;
+            run = 0;
+        }
+        s.add(t, &row);
+    }
+    if run > 0 {
+        *s.loss_runs.entry(run).or_default() += 1;
+    }
+    Ok(s)
+}
+
+impl TraceSummary {
+    fn add(&mut self, t_ns: u64, row: &Row) {
+        let (mut drawn, mut seen) = (None, None);
+        let b = self.bin(t_ns);
+        b.frames += 1;
+        if row.dropped {
+            b.dropped += 1;
+        }
+        if let Some(d) = row.delay_ns.filter(|_| row.delivered) {
+            b.delivered += 1;
+            b.drawn_sum_ns += u128::from(d);
+            drawn = Some(d);
+            if let Some(r) = row.recv_ns {
+                let v = r.saturating_sub(row.send_ns);
+                b.received += 1;
+                b.seen_sum_ns += u128::from(v);
+                b.seen_max_ns = b.seen_max_ns.max(v);
+                seen = Some(v);
+            }
+        }
+        // Values outside the bounds are clamped, not lost.
+        if let Some(d) = drawn {
+            self.drawn_ns.saturating_record(d.max(1));
+        }
+        if let Some(v) = seen {
+            self.seen_ns.saturating_record(v.max(1));
+        }
+    }
+}
+
+/// The cells of one row that the summaries use.
+struct Row {
+    send_ns: u64,
+    dropped: bool,
+    delivered: bool,
+    delay_ns: Option<u64>,
+    recv_ns: Option<u64>,
+}
+
+impl Row {
+    fn parse(line: &str, c: &Columns) -> Result<Row, String> {
+        let cells: Vec<&str> = line.split(',').collect();
+        let cell = |i: usize, name: &str| cells.get(i).copied().ok_or_else(|| format!("no {name} column ({} cells)", cells.len()));
+        let number = |i: usize, name: &str| -> Result<Option<u64>, String> {
+            let v = cell(i, name)?;
+            if v.is_empty() {
+                return Ok(None);
+            }
+            v.parse().map(Some).map_err(|_| format!("{name} {v:?} is not a count of ns"))
+        };
+        let fate = cell(c.fate, "fate")?;
+        if !matches!(fate, "delivered" | "dropped" | "held") {
+            return Err(format!("fate {fate:?} (delivered, dropped or held expected)"));
+        }
+        Ok(Row {
+            send_ns: number(c.send, "send_ns")?.ok_or("send_ns is empty")?,
+            dropped: fate == "dropped",
+            delivered: fate == "delivered",
+            delay_ns: number(c.delay, "delay_ns")?,
+            recv_ns: number(c.recv, "recv_ns")?,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> std::path::PathBuf {
+        let p = std::env::temp_dir().join(format!("netfi-html-trace-{}-{name}.csv", std::process::id()));
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const HEADER: &str = "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns\n";
+
+    #[test]
+    fn bins_loss_runs_and_delays() {
+        let mut text = HEADER.to_string();
+        // 10 frames 1 ms apart: dropped 2, 3, 4 and 7 (runs of 3 and 1).
+        for i in 0..10u64 {
+            let send = 1_000_000 + i * 1_000_000;
+            if [2, 3, 4, 7].contains(&i) {
+                text += &format!("{i},{i},{i},{send},{send},dropped,ge_lomax,1,1,,,,\n");
+            } else {
+                text += &format!("{i},{i},{i},{send},{send},delivered,,,,5000000,0,0,{}\n", send + 5_000_100);
+            }
+        }
+        let p = write("ok", &text);
+        let s = summarize(&p, 5_000_000).unwrap();
+        std::fs::remove_file(&p).ok();
+        assert_eq!(s.rows, 10);
+        assert_eq!(s.loss_runs, BTreeMap::from([(1, 1), (3, 1)]));
+        assert_eq!(s.bins.len(), 2);
+        assert_eq!((s.bins[0].frames, s.bins[0].dropped), (5, 3));
+        assert_eq!((s.bins[1].frames, s.bins[1].dropped), (5, 1));
+        assert_eq!(s.bins[1].seen_max_ns, 5_000_100);
+        assert_eq!(s.drawn_ns.len(), 6);
+        assert_eq!(s.seen_ns.len(), 6);
+    }
+
+    #[test]
+    fn long_runs_merge_bins_and_keep_every_frame() {
+        let mut text = HEADER.to_string();
+        for i in 0..3000u64 {
+            text += &format!("{i},{i},{i},{},0,dropped,x,1,1,,,,\n", i * 1_000_000);
+        }
+        let p = write("long", &text);
+        let s = summarize(&p, 1_000_000).unwrap();
+        std::fs::remove_file(&p).ok();
+        assert!(s.bins.len() <= MAX_BINS);
+        assert_eq!(s.bin_ns, 16_000_000);
+        assert_eq!(s.bins.iter().map(|b| b.frames).sum::<u64>(), 3000);
+        assert_eq!(s.loss_runs, BTreeMap::from([(3000, 1)]));
+    }
+
+    #[test]
+    fn a_bad_row_names_file_and_line() {
+        let p = write("bad", &format!("{HEADER}0,0,0,12,0,delivered,,,,x,,,\n"));
+        let e = summarize(&p, 1).unwrap_err().to_string();
+        std::fs::remove_file(&p).ok();
+        assert!(e.contains(&p.display().to_string()) && e.contains("line 2") && e.contains("delay_ns"), "{e}");
+    }
+}
