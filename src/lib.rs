@@ -31,3 +31,4 @@ pub mod metrics;
 pub mod service;
 pub mod trace;
 pub mod transport;
+pub mod ui;

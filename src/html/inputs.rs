@@ -72,7 +72,7 @@ pub struct RunInputs {
 const BINS_PER_RUN: f64 = 100.0;
 const BIN_NS_MIN: u64 = 10_000_000;
 
-fn bin_ns(duration_s: f64) -> u64 {
+pub fn bin_ns(duration_s: f64) -> u64 {
     let raw = (duration_s * 1e9 / BINS_PER_RUN).max(BIN_NS_MIN as f64);
     let decade = 10f64.powf(raw.log10().floor());
     let nice = [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * decade).find(|w| *w >= raw).unwrap_or(10.0 * decade);
@@ -148,20 +148,28 @@ fn law(dir: &Path, report: &RunReport) -> Result<Option<Law>, HtmlError> {
     let path = dir.join("scenario.toml");
     let spec = crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
     let scenario = crate::scenario::Scenario::new(&spec, report.seed).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
-    let [phase] = scenario.phases() else { return Ok(None) };
-    let laws: Vec<Law> = phase
-        .stages()
-        .iter()
-        .filter_map(|s| match s.model() {
-            AnyModel::Delay(d) => Some(Law::Delay(d.clone())),
-            AnyModel::Jitter(j) => Some(Law::Jitter(j.clone())),
-            _ => None,
-        })
-        .collect();
-    Ok(match <[Law; 1]>::try_from(laws) {
-        Ok([one]) => Some(one),
-        Err(_) => None,
-    })
+    Ok(Law::of_scenario(&scenario))
+}
+
+impl Law {
+    /// The law of `scenario`'s delay: its one delay or jitter stage, in a
+    /// scenario of one phase; `None` otherwise.
+    pub fn of_scenario(scenario: &crate::scenario::Scenario) -> Option<Law> {
+        let [phase] = scenario.phases() else { return None };
+        let laws: Vec<Law> = phase
+            .stages()
+            .iter()
+            .filter_map(|s| match s.model() {
+                AnyModel::Delay(d) => Some(Law::Delay(d.clone())),
+                AnyModel::Jitter(j) => Some(Law::Jitter(j.clone())),
+                _ => None,
+            })
+            .collect();
+        match <[Law; 1]>::try_from(laws) {
+            Ok([one]) => Some(one),
+            Err(_) => None,
+        }
+    }
 }
 
 #[cfg(test)]

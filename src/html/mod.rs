@@ -16,7 +16,7 @@
 //! `kinematics`, `events`; every plot is an `<svg class="plot">` with its
 //! own id.
 
-mod figures;
+pub mod figures;
 pub mod inputs;
 mod page;
 pub mod plot;

@@ -56,6 +56,8 @@ pub struct TraceSummary {
     /// receive − send of received frames, ns.
     pub seen_ns: Histogram<u64>,
     pub rows: u64,
+    /// Dropped frames since the last delivered one.
+    open_run: u64,
 }
 
 /// The columns read, by name (the header decides their positions).
@@ -75,11 +77,20 @@ impl Columns {
 }
 
 impl TraceSummary {
-    fn new(bin_ns: u64) -> TraceSummary {
+    /// An empty summary whose first bin is `bin_ns` wide.
+    pub fn new(bin_ns: u64) -> TraceSummary {
         // Three significant digits from 1 ns to an hour: a delay histogram
         // of a few tens of kB whatever the run's length.
         let h = || Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds");
-        TraceSummary { bin_ns: bin_ns.max(1), bins: Vec::new(), loss_runs: BTreeMap::new(), drawn_ns: h(), seen_ns: h(), rows: 0 }
+        TraceSummary {
+            bin_ns: bin_ns.max(1),
+            bins: Vec::new(),
+            loss_runs: BTreeMap::new(),
+            drawn_ns: h(),
+            seen_ns: h(),
+            rows: 0,
+            open_run: 0,
+        }
     }
 
     /// The bin of time `t_ns` (since the first send), merging bins until it fits.
@@ -125,7 +136,6 @@ pub fn summarize(path: &Path, bin_ns: u64) -> Result<TraceSummary, HtmlError> {
         .ok_or_else(|| HtmlError::malformed(path, "line 1: not a trace header (send_ns, fate, delay_ns and recv_ns expected)"))?;
     let mut s = TraceSummary::new(bin_ns);
     let mut t0: Option<u64> = None;
-    let mut run = 0u64;
     for (n, line) in lines.enumerate() {
         let line = line.map_err(|e| HtmlError::read(path, e))?;
         if line.is_empty() {
@@ -133,22 +143,39 @@ pub fn summarize(path: &Path, bin_ns: u64) -> Result<TraceSummary, HtmlError> {
         }
         let row = Row::parse(&line, &cols).map_err(|what| HtmlError::malformed(path, format!("line {}: {what}", n + 2)))?;
         let t = row.send_ns.saturating_sub(*t0.get_or_insert(row.send_ns));
-        s.rows += 1;
-        if row.dropped {
-            run += 1;
-        } else if run > 0 {
-            *s.loss_runs.entry(run).or_default() += 1;
-            run = 0;
-        }
-        s.add(t, &row);
+        s.record(t, &row);
     }
-    if run > 0 {
-        *s.loss_runs.entry(run).or_default() += 1;
-    }
+    s.close_run();
     Ok(s)
 }
 
 impl TraceSummary {
+    /// A frame of a simulated run (`scenario check`, a preview): at `t_ns`
+    /// after the first, dropped or delivered after `drawn_ns`; nobody
+    /// received it. Call [`TraceSummary::close_run`] after the last.
+    pub fn record_simulated(&mut self, t_ns: u64, drawn_ns: Option<u64>) {
+        let row = Row { send_ns: t_ns, dropped: drawn_ns.is_none(), delivered: drawn_ns.is_some(), delay_ns: drawn_ns, recv_ns: None };
+        self.record(t_ns, &row);
+    }
+
+    /// Counts the loss run still open at the end.
+    pub fn close_run(&mut self) {
+        if self.open_run > 0 {
+            *self.loss_runs.entry(self.open_run).or_default() += 1;
+            self.open_run = 0;
+        }
+    }
+
+    fn record(&mut self, t_ns: u64, row: &Row) {
+        self.rows += 1;
+        if row.dropped {
+            self.open_run += 1;
+        } else {
+            self.close_run();
+        }
+        self.add(t_ns, row);
+    }
+
     fn add(&mut self, t_ns: u64, row: &Row) {
         let (mut drawn, mut seen) = (None, None);
         let b = self.bin(t_ns);

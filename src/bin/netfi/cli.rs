@@ -35,6 +35,9 @@ pub enum Command {
     /// masks, interrupt affinities, the workqueue mask) and iceoryx2
     /// resources of dead processes. Every `netfi run` does this first.
     Restore(RestoreArgs),
+    /// The browser front end: build, preview, run and steer scenarios, and
+    /// read their reports (served on loopback).
+    Ui(UiArgs),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
     Completions {
         /// The shell to complete for.
@@ -60,6 +63,24 @@ pub struct ReportArgs {
     /// no external file or URL) and print its path.
     #[arg(long)]
     pub html: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct UiArgs {
+    /// Port to listen on (0: any free port, printed).
+    #[arg(long, default_value_t = 8080)]
+    pub port: u16,
+    /// Address to listen on. Anything but loopback lets whoever reaches it
+    /// start runs on this host.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub bind: std::net::IpAddr,
+    /// Parent directory of the runs' output directories.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// The core the runs' emulators use (default: the last core): the
+    /// server keeps off it.
+    #[arg(long)]
+    pub emulator_core: Option<usize>,
 }
 
 #[derive(Debug, Args)]

@@ -27,6 +27,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
         cli::Command::Restore(a) => restore::run(a),
+        cli::Command::Ui(a) => ui(a),
         cli::Command::Completions { shell } => docs::completions(shell),
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
         cli::Command::Report(a) => report::run(&a),
@@ -55,4 +56,15 @@ fn run(args: &netfi::service::args::RunArgs) -> anyhow::Result<()> {
         anyhow::bail!("the run had faults (see the report above and {})", report.files.report_json.display());
     }
     Ok(())
+}
+
+/// `netfi ui`: serves until interrupted.
+fn ui(a: cli::UiArgs) -> anyhow::Result<()> {
+    let last_core = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).max().unwrap_or(0);
+    netfi::ui::serve(netfi::ui::UiOptions {
+        bind: std::net::SocketAddr::new(a.bind, a.port),
+        out_dir: a.out,
+        netfi: std::env::current_exe()?,
+        emulator_core: a.emulator_core.unwrap_or(last_core),
+    })
 }

@@ -1,0 +1,117 @@
+//! The page's calls: preview, parse, and the runs (start, state, stop,
+//! live control, report).
+
+use super::runs::Start;
+use super::Ui;
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::response::{Html, IntoResponse, Response};
+use axum::Json;
+use serde::Deserialize;
+use std::sync::Arc;
+
+fn unprocessable(msg: impl std::fmt::Display) -> Response {
+    (StatusCode::UNPROCESSABLE_ENTITY, format!("{msg:#}")).into_response()
+}
+
+fn not_found(id: &str) -> Response {
+    (StatusCode::NOT_FOUND, format!("no run `{id}` was started here")).into_response()
+}
+
+#[derive(Debug, Deserialize)]
+pub struct PreviewQuery {
+    #[serde(default = "default_frames")]
+    frames: u64,
+    #[serde(default = "default_rate")]
+    rate_hz: f64,
+}
+
+fn default_frames() -> u64 {
+    100_000
+}
+
+fn default_rate() -> f64 {
+    1000.0
+}
+
+/// `POST /api/preview?frames=N&rate_hz=R` with a scenario's TOML: the
+/// checker's figures and plots as an HTML fragment, or the parser's error.
+pub async fn preview(Query(q): Query<PreviewQuery>, body: String) -> Response {
+    if !(1_000..=5_000_000).contains(&q.frames) {
+        return unprocessable(format!("frames: between 1000 and 5000000, got {}", q.frames));
+    }
+    let done = tokio::task::spawn_blocking(move || super::preview::render(&body, q.frames, q.rate_hz)).await;
+    match done {
+        Ok(Ok(html)) => Html(html).into_response(),
+        Ok(Err(e)) => unprocessable(e),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("preview failed: {e}")).into_response(),
+    }
+}
+
+/// `POST /api/parse` with a scenario's TOML: the scenario as the builder
+/// holds it (its file's tables as JSON), or the parser's error.
+pub async fn parse(body: String) -> Response {
+    if let Err(e) = crate::scenario::parse_str(&body, "scenario", "scenario") {
+        return unprocessable(e);
+    }
+    match toml::from_str::<toml::Value>(&body) {
+        Ok(v) => Json(v).into_response(),
+        Err(e) => unprocessable(e),
+    }
+}
+
+/// `POST /api/runs` `{toml, duration_s, seed}`: starts a run; `{id}`.
+pub async fn start(State(ui): State<Arc<Ui>>, Json(req): Json<Start>) -> Response {
+    match ui.runs.start(&ui.opts, &req) {
+        Ok(id) => Json(serde_json::json!({ "id": id })).into_response(),
+        Err(e) => unprocessable(e),
+    }
+}
+
+/// `GET /api/runs/{id}`: the run's state (and its report once ended).
+pub async fn status(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
+    match ui.runs.status(&id) {
+        Some(s) => Json(s).into_response(),
+        None => not_found(&id),
+    }
+}
+
+/// `POST /api/runs/{id}/stop`.
+pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
+    if ui.runs.stop(&id) {
+        StatusCode::NO_CONTENT.into_response()
+    } else {
+        not_found(&id)
+    }
+}
+
+/// `POST /api/runs/{id}/ctl` `{cmd, arg}`: live control of the run.
+pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): Json<serde_json::Value>) -> Response {
+    if ui.runs.out_dir(&id).is_none() {
+        return not_found(&id);
+    }
+    let _ = req;
+    (StatusCode::NOT_IMPLEMENTED, "live control is not available in this build").into_response()
+}
+
+/// `GET /runs/{id}/report`: the run's report page (written on first
+/// request once the run has ended).
+pub async fn report(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
+    let Some(out) = ui.runs.out_dir(&id) else { return not_found(&id) };
+    if ui.runs.status(&id).is_some_and(|s| s.state == "running") {
+        return (StatusCode::CONFLICT, "the run is still going: its report comes when it ends").into_response();
+    }
+    let page = tokio::task::spawn_blocking(move || {
+        let path = out.join("report.html");
+        if !path.exists() {
+            crate::html::write(&out)?;
+        }
+        std::fs::read_to_string(&path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))
+    })
+    .await;
+    match page {
+        Ok(Ok(html)) => Html(html).into_response(),
+        Ok(Err(e)) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e:#}")).into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}")).into_response(),
+    }
+}

@@ -1,0 +1,104 @@
+//! `netfi ui`: a browser front end on loopback. It builds scenarios from
+//! models with every parameter, presets and database targets; previews what
+//! a scenario realizes in simulated time ([`crate::check`]); loads and saves
+//! TOML; starts and stops runs (each a `netfi run` child process, so the
+//! emulator never shares a process with the server); steers a running one
+//! and shows its report page ([`crate::html`]).
+//!
+//! The server is one thread (a current-thread tokio runtime) kept off the
+//! emulator's core; every page asset is compiled into the binary, nothing is
+//! fetched at run time. Work that takes longer than a request should block
+//! (a preview) runs on tokio's blocking pool.
+
+mod api;
+mod builder;
+mod page;
+mod preview;
+mod runs;
+
+use anyhow::Context;
+use axum::routing::{get, post};
+use axum::Router;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// How `netfi ui` is set up.
+#[derive(Debug, Clone)]
+pub struct UiOptions {
+    /// Where to listen (loopback by default).
+    pub bind: SocketAddr,
+    /// Parent directory of the runs' output directories.
+    pub out_dir: PathBuf,
+    /// The `netfi` executable that runs are started with.
+    pub netfi: PathBuf,
+    /// The core the runs' emulators use: the server keeps off it.
+    pub emulator_core: usize,
+}
+
+/// What the handlers share.
+pub(crate) struct Ui {
+    pub opts: UiOptions,
+    pub runs: runs::Runs,
+}
+
+/// Serves until SIGINT/SIGTERM; stops the runs it started on the way out.
+pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
+    keep_off_core(opts.emulator_core)?;
+    if !opts.bind.ip().is_loopback() {
+        eprintln!(
+            "warning: netfi ui listens on {} — not loopback: anyone who reaches this address can start runs on this host",
+            opts.bind
+        );
+    }
+    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("creating {}", opts.out_dir.display()))?;
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the server's runtime")?;
+    let ui = Arc::new(Ui { runs: runs::Runs::default(), opts });
+    rt.block_on(async move {
+        let listener =
+            tokio::net::TcpListener::bind(ui.opts.bind).await.with_context(|| format!("listening on {}", ui.opts.bind))?;
+        let addr = listener.local_addr()?;
+        println!("netfi ui on http://{addr}/");
+        let app = router(ui.clone());
+        axum::serve(listener, app).with_graceful_shutdown(shutdown()).await.context("serving")?;
+        ui.runs.stop_all();
+        Ok(())
+    })
+}
+
+fn router(ui: Arc<Ui>) -> Router {
+    Router::new()
+        .route("/", get(page::index))
+        .route("/runs/{id}", get(page::run))
+        .route("/runs/{id}/report", get(api::report))
+        .route("/api/preview", post(api::preview))
+        .route("/api/parse", post(api::parse))
+        .route("/api/runs", post(api::start))
+        .route("/api/runs/{id}", get(api::status))
+        .route("/api/runs/{id}/stop", post(api::stop))
+        .route("/api/runs/{id}/ctl", post(api::ctl))
+        .route("/assets/app.js", get(page::script))
+        .route("/assets/app.css", get(page::style))
+        .with_state(ui)
+}
+
+async fn shutdown() {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (Ok(mut int), Ok(mut term)) = (signal(SignalKind::interrupt()), signal(SignalKind::terminate())) else {
+        return std::future::pending().await;
+    };
+    tokio::select! {
+        _ = int.recv() => {},
+        _ = term.recv() => {},
+    }
+}
+
+/// Keeps this process (its threads start after this) off the emulator's
+/// core; on a one-core host that cannot be, and is said loudly.
+fn keep_off_core(emulator_core: usize) -> anyhow::Result<()> {
+    if crate::host::cores_except(emulator_core).is_none() {
+        eprintln!("WARNING: netfi ui shares core {emulator_core} with the runs' emulators: there is no other core");
+        return Ok(());
+    }
+    crate::service::place("ui", None, Some(emulator_core))
+}
