@@ -27,10 +27,41 @@ pub const DISTS: [(&str, &str); 9] = [
     ("share_back", "· of which the feedback's (taken → released)"),
 ];
 
+/// Which windows a figure is taken over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Selection {
+    /// Steal at most `NETFI_BENCH_QUIET_STEAL`: where the bars are judged.
+    Quiet,
+    /// Quiet, and other processes under `NETFI_BENCH_QUIET_OTHERS`.
+    Calm,
+    All,
+}
+
+impl Selection {
+    pub const ALL: [Selection; 3] = [Selection::Quiet, Selection::Calm, Selection::All];
+
+    fn takes(self, w: &Window) -> bool {
+        match self {
+            Selection::Quiet => w.quiet,
+            Selection::Calm => w.calm,
+            Selection::All => true,
+        }
+    }
+
+    fn describe(self) -> &'static str {
+        match self {
+            Selection::Quiet => "quiet windows (low steal)",
+            Selection::Calm => "calm windows (low steal, other processes nearly idle)",
+            Selection::All => "all windows",
+        }
+    }
+}
+
 /// The figures of one part over one selection of windows.
 #[derive(Debug, Serialize)]
 pub struct Figures {
-    pub selection: &'static str,
+    pub selection: Selection,
     pub windows_used: usize,
     pub windows_total: usize,
     /// Steal over the windows used: the largest window's fraction, the mean
@@ -60,11 +91,10 @@ impl Hists {
 }
 
 impl Figures {
-    /// The figures of `p` over its quiet windows (`quiet_only`) or over
-    /// the whole interval after the warm-up.
-    pub fn of(p: &Part, quiet_only: bool) -> Figures {
+    /// The figures of `p` over the windows `sel` takes, after the warm-up.
+    pub fn of(p: &Part, sel: Selection) -> Figures {
         let warm = p.console_summary["warm_slots"].as_i64().unwrap_or(0);
-        let keep = |send_ns: i64, slot: i64| slot >= warm && (!quiet_only || windows::find(&p.windows, send_ns as u64).is_some_and(|i| p.windows[i].quiet));
+        let keep = |send_ns: i64, slot: i64| slot >= warm && (sel == Selection::All || windows::find(&p.windows, send_ns as u64).is_some_and(|i| sel.takes(&p.windows[i])));
         let mut h = Hists::default();
         for r in p.robot.iter().filter(|r| keep(r[2], r[1])) {
             let [route, _, send, recv, ingress, release, injected, _] = *r;
@@ -91,11 +121,11 @@ impl Figures {
                 h.add("share_back", f_rel - f_in - f_inj);
             }
         }
-        let used: Vec<&Window> = p.windows.iter().filter(|w| !quiet_only || w.quiet).collect();
-        Figures::from_hists(h, &used, p.windows.len(), if quiet_only { "quiet" } else { "all" })
+        let used: Vec<&Window> = p.windows.iter().filter(|w| sel.takes(w)).collect();
+        Figures::from_hists(h, &used, p.windows.len(), sel)
     }
 
-    fn from_hists(h: Hists, used: &[&Window], total: usize, selection: &'static str) -> Figures {
+    fn from_hists(h: Hists, used: &[&Window], total: usize, selection: Selection) -> Figures {
         let dists: BTreeMap<String, Summary> = h.0.iter().map(|(k, v)| (k.to_string(), v.summary())).collect();
         let pair = |a: &str, b: &str| match (dists.get(a), dists.get(b)) {
             (Some(a), Some(b)) => (difference(a, b, &KEYS), ratios(a, b)),
@@ -109,9 +139,9 @@ impl Figures {
             windows_used: used.len(),
             windows_total: total,
             steal_max: used.iter().map(|w| w.steal_fraction).fold(0.0, f64::max),
-            steal_mean: used.iter().map(|w| w.steal_fraction).sum::<f64>() / n,
+            steal_mean: used.iter().map(|w| w.steal_fraction).fold(0.0, |a, b| a + b) / n,
             steal_ms: used.iter().map(|w| w.steal_ms).sum(),
-            others_mean: used.iter().map(|w| w.others_busy_cores).sum::<f64>() / n,
+            others_mean: used.iter().map(|w| w.others_busy_cores).fold(0.0, |a, b| a + b) / n,
             others_max: used.iter().map(|w| w.others_busy_cores).fold(0.0, f64::max),
             dists,
             oneway_added_ns,
@@ -124,8 +154,8 @@ impl Figures {
     /// The host line of this selection.
     pub fn host_line(&self) -> String {
         format!(
-            "{} windows: {} of {}; steal {:.2}% on average, {:.2}% in the worst window ({} ms in all); other processes kept {:.2} cores busy on average, {:.2} at most",
-            self.selection,
+            "{}: {} of {}; steal {:.2}% on average, {:.2}% in the worst window ({} ms in all); other processes kept {:.2} cores busy on average, {:.2} at most",
+            self.selection.describe(),
             self.windows_used,
             self.windows_total,
             self.steal_mean * 100.0,
@@ -140,7 +170,6 @@ impl Figures {
     pub fn write_md(&self, md: &mut String) {
         let _ = writeln!(md, "\n*{}*\n", self.host_line());
         if self.windows_used == 0 {
-            let _ = writeln!(md, "(no window qualifies)");
             return;
         }
         let _ = writeln!(md, "| | p50 | p90 | p99 | p99.9 | max | frames |\n|---|---|---|---|---|---|---|");

@@ -1,7 +1,7 @@
 //! `python.json` and `python.md` (printed too).
 
 use crate::args::Settings;
-use crate::figures::{self, Figures};
+use crate::figures::{self, Figures, Selection};
 use crate::host::{host_facts, HostWindow};
 use crate::parts::Part;
 use anyhow::{Context, Result};
@@ -30,17 +30,17 @@ pub fn write(s: &Settings, parts: &[Part], bench_host: &HostWindow) -> Result<()
     let mut bars = Vec::new();
     let mut chain_p50 = serde_json::Map::new();
     for p in parts {
-        let (quiet, all) = (Figures::of(p, true), Figures::of(p, false));
-        write_part(&mut md, p, &quiet, &all);
+        let figs: Vec<Figures> = Selection::ALL.iter().map(|&sel| Figures::of(p, sel)).collect();
+        write_part(&mut md, p, &figs);
         if p.transport == "iceoryx2" {
-            bars = figures::bars(&quiet);
+            bars = figures::bars(&figs[0]);
         }
-        let pick = if quiet.windows_used > 0 { &quiet } else { &all };
+        let pick = figs.iter().find(|f| f.windows_used > 0).unwrap_or(&figs[2]);
         if let Some(d) = pick.dists.get("oneway_chain") {
             chain_p50.insert(p.transport.into(), json!({"p50_ns": d.p50, "selection": pick.selection}));
         }
         out.push(json!({
-            "transport": p.transport, "dir": p.dir, "quiet": quiet, "all": all, "windows": p.windows, "host": p.host,
+            "transport": p.transport, "dir": p.dir, "figures": figs, "windows": p.windows, "host": p.host,
             "console": p.console_summary, "robot": p.robot_summary, "emulator": p.emulator,
         }));
     }
@@ -53,7 +53,10 @@ pub fn write(s: &Settings, parts: &[Part], bench_host: &HostWindow) -> Result<()
     Ok(())
 }
 
-fn write_part(md: &mut String, p: &Part, quiet: &Figures, all: &Figures) {
+/// The part's tables: over the quiet windows, the calm ones and all (a
+/// selection that takes no window, or the same windows as the one before,
+/// is only named).
+fn write_part(md: &mut String, p: &Part, figs: &[Figures]) {
     let c = &p.console_summary;
     let e = &p.emulator;
     let _ = writeln!(md, "\n#### {}\n", title(p));
@@ -65,8 +68,15 @@ fn write_part(md: &mut String, p: &Part, quiet: &Figures, all: &Figures) {
         e["feedback"].get("entered").map_or(String::new(), |f| format!("; feedback: {f} in, {} delivered", e["feedback"]["delivered"])),
         p.host.steal_fraction * 100.0, p.host.load_start, p.host.load_end, p.host.others_busy_cores
     );
-    quiet.write_md(md);
-    all.write_md(md);
+    let mut shown: Option<usize> = None;
+    for f in figs {
+        if f.windows_used == 0 || shown == Some(f.windows_used) {
+            let _ = writeln!(md, "\n*{}*{}", f.host_line(), if f.windows_used == 0 { "" } else { " (the same windows as above)" });
+            continue;
+        }
+        f.write_md(md);
+        shown = Some(f.windows_used);
+    }
     let rows = figures::emulator_rows(e);
     if !rows.is_empty() {
         let _ = writeln!(md, "\n*The emulator's own histograms, whole part:*\n\n| | p50 | p90 | p99 | p99.9 | max | frames |\n|---|---|---|---|---|---|---|");

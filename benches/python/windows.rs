@@ -23,7 +23,10 @@ pub struct Window {
     /// Cores kept busy by processes other than this benchmark, the
     /// emulator and the Python console and robot.
     pub others_busy_cores: f64,
+    /// Steal at most the quiet fraction.
     pub quiet: bool,
+    /// Quiet, and other processes under the calm limit.
+    pub calm: bool,
 }
 
 struct Sample {
@@ -59,7 +62,7 @@ impl Sampler {
         Sampler { stop, handle }
     }
 
-    /// Stops sampling; the windows, each marked quiet or not.
+    /// Stops sampling; the windows, each marked quiet and calm or not.
     pub fn stop(self, quiet_steal: f64, quiet_others: f64) -> Vec<Window> {
         self.stop.store(true, Ordering::Relaxed);
         let samples = self.handle.join().unwrap_or_default();
@@ -79,7 +82,8 @@ fn window(a: &Sample, b: &Sample, quiet_steal: f64, quiet_others: f64) -> Window
         steal_ms: steal.ms,
         steal_fraction: steal.fraction,
         others_busy_cores: others,
-        quiet: steal.fraction <= quiet_steal && others <= quiet_others,
+        quiet: steal.fraction <= quiet_steal,
+        calm: steal.fraction <= quiet_steal && others <= quiet_others,
     }
 }
 
