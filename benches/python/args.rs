@@ -47,6 +47,9 @@ pub struct Settings {
     pub driver_core: Option<usize>,
     pub robot_core: Option<usize>,
     pub rt_priority: Option<i32>,
+    /// Let the emulator clear its core for its run (`netfi emulator
+    /// --isolate`, as `netfi run` and benches/overhead do).
+    pub isolate: bool,
     /// Wait before each part until other processes keep at most this many
     /// cores busy, for at most this many seconds (as benches/overhead).
     pub quiet: Option<(f64, f64)>,
@@ -104,6 +107,7 @@ impl Settings {
             driver_core,
             robot_core,
             rt_priority,
+            isolate: var("NETFI_BENCH_ISOLATE").is_none_or(|v| v != "0"),
             quiet,
         })
     }

@@ -34,7 +34,9 @@
 //!   share of the round trip: p50 ≤ 2 µs, p99 ≤ 20 µs) are judged over the
 //!   quiet windows; nothing is asserted.
 //!
-//! Placement: the emulator on the last core; the console on the first, the
+//! Placement: the emulator on the last core, which it clears of other
+//! threads and interrupts for its run (`netfi emulator --isolate`, as
+//! `netfi run` and benches/overhead do); the console on the first core, the
 //! robot on a third where there is one, else beside the console (both poll
 //! with `sched_yield`, so each gives the core up when it has nothing to do).
 //!
@@ -47,6 +49,7 @@
 //! | `NETFI_BENCH_QUIET_OTHERS` | 0.25 | … and the most cores other processes may keep busy in it |
 //! | `NETFI_BENCH_QUIET_CORES` | unset | before each part, wait until other processes keep at most this many cores busy (`NETFI_BENCH_QUIET_WAIT_S`, 600, at most) |
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator at this SCHED_FIFO priority |
+//! | `NETFI_BENCH_ISOLATE` | 1 | `0`: leave the emulator's core as it is |
 //! | `NETFI_BENCH_PYTHON` | `python3` | the interpreter |
 //! | `NETFI_BENCH_QUICK` | unset | `1`: as `--quick` |
 //! | `NETFI_BENCH_OUT` | `target/netfi-bench/python` | where results go |

@@ -152,6 +152,7 @@ fn start_emulator(s: &Settings, dir: &Path, run_id: Option<String>, udp: &[Strin
     let expected = (s.rate_hz * (s.seconds + 1.0)) as u64 + 16;
     let mut a = emulator::args(s, "Normal", &dir.join("emulator"), expected, run_id);
     a.no_feedback = false;
+    a.isolate = s.isolate && s.emulator_core.is_some();
     a.return_scenario = Some("Normal".into());
     Emulator::spawn(&dir.join("emulator"), &emulator::argv(&a, udp))
 }

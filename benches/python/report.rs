@@ -62,10 +62,11 @@ fn write_part(md: &mut String, p: &Part, figs: &[Figures]) {
     let _ = writeln!(md, "\n#### {}\n", title(p));
     let _ = writeln!(
         md,
-        "Console sent {} through / {} direct, got {} / {} answers back; the emulator took {} frames in and delivered {}, dropped {}{}. Steal over the part {:.2}%, load average {:.2} → {:.2}, other processes {:.2} cores busy.",
+        "Console sent {} through / {} direct, got {} / {} answers back; the emulator took {} frames in and delivered {}, dropped {}{}. {}. Steal over the part {:.2}%, load average {:.2} → {:.2}, other processes {:.2} cores busy.",
         c["sent"][0], c["sent"][1], c["feedback_received"][0], c["feedback_received"][1],
         e["frames"]["entered"], e["frames"]["delivered"], e["frames"]["dropped"],
         e["feedback"].get("entered").map_or(String::new(), |f| format!("; feedback: {f} in, {} delivered", e["feedback"]["delivered"])),
+        isolation(&e["isolation"]),
         p.host.steal_fraction * 100.0, p.host.load_start, p.host.load_end, p.host.others_busy_cores
     );
     let mut shown: Option<usize> = None;
@@ -83,6 +84,18 @@ fn write_part(md: &mut String, p: &Part, figs: &[Figures]) {
         for (label, s) in rows {
             let _ = writeln!(md, "| {label} | {} | {} | {} | {} | {} | {} |", fmt_ns(s.p50), fmt_ns(s.p90), fmt_ns(s.p99), fmt_ns(s.p999), fmt_ns(s.max), s.count);
         }
+    }
+}
+
+/// What `netfi emulator --isolate` did to its core, in words.
+fn isolation(iso: &Value) -> String {
+    match iso["cleared"].as_bool() {
+        Some(true) => format!(
+            "Core {} cleared for the emulator: {} threads of other processes and {} interrupts moved off it",
+            iso["core"], iso["threads_moved"], iso["irqs_moved"]
+        ),
+        Some(false) => format!("The emulator's core was not cleared ({})", iso["warnings"]),
+        None => "The emulator's core was not cleared (NETFI_BENCH_ISOLATE=0)".to_string(),
     }
 }
 
