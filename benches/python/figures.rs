@@ -15,7 +15,8 @@ use std::fmt::Write as _;
 pub const KEYS: [&str; 5] = ["p50", "p90", "p99", "p999", "max"];
 
 /// The distributions, in the order of the tables.
-pub const DISTS: [(&str, &str); 9] = [
+pub const DISTS: [(&str, &str); 10] = [
+    ("send_late", "console's send lateness (sent − the slot's time)"),
     ("oneway_direct", "one-way, direct (console → robot)"),
     ("oneway_chain", "one-way, through the emulator"),
     ("hop1", "· console → taken by the emulator"),
@@ -93,11 +94,14 @@ impl Hists {
 impl Figures {
     /// The figures of `p` over the windows `sel` takes, after the warm-up.
     pub fn of(p: &Part, sel: Selection) -> Figures {
-        let warm = p.console_summary["warm_slots"].as_i64().unwrap_or(0);
+        let c = &p.console_summary;
+        let warm = c["warm_slots"].as_i64().unwrap_or(0);
+        let (t0, half) = (c["t0_ns"].as_i64().unwrap_or(0), c["half_period_ns"].as_f64().unwrap_or(0.0));
         let keep = |send_ns: i64, slot: i64| slot >= warm && (sel == Selection::All || windows::find(&p.windows, send_ns as u64).is_some_and(|i| sel.takes(&p.windows[i])));
         let mut h = Hists::default();
         for r in p.robot.iter().filter(|r| keep(r[2], r[1])) {
-            let [route, _, send, recv, ingress, release, injected, _] = *r;
+            let [route, slot, send, recv, ingress, release, injected, _] = *r;
+            h.add("send_late", send - t0 - (slot as f64 * half) as i64);
             if route == 1 {
                 h.add("oneway_direct", recv - send);
                 continue;

@@ -60,19 +60,20 @@ class IoxRoutes:
         return self.tx[route].send(s, _stamp) > 0
 
     def poll(self, route: int, recs: Records) -> int:
-        n, f = 0, self.fb
-        while self.rx[route].receive_into(f):
-            t = now()
-            if f.is_end():
-                self.ended[route] = True
-                continue
-            n += 1
-            recs.add(
-                route, f.console_index, f.command_send_ns, t,
-                f.command_ingress_ns, f.command_release_ns, f.command_injected_delay_ns,
-                f.send_ns, f.ingress_ns, f.release_ns, f.injected_delay_ns, 0,
-            )
-        return n
+        """Takes at most one answer of ``route``; 1 if one came."""
+        f = self.fb
+        if not self.rx[route].receive_into(f):
+            return 0
+        t = now()
+        if f.is_end():
+            self.ended[route] = True
+            return 0
+        recs.add(
+            route, f.console_index, f.command_send_ns, t,
+            f.command_ingress_ns, f.command_release_ns, f.command_injected_delay_ns,
+            f.send_ns, f.ingress_ns, f.release_ns, f.injected_delay_ns, 0,
+        )
+        return 1
 
     def end(self, sent) -> None:
         for route in ROUTES:
@@ -119,18 +120,17 @@ class UdpRoutes:
             return False
 
     def poll(self, route: int, recs: Records) -> int:
-        n, sock, buf = 0, self.socks[route], self.buf
-        while True:
-            try:
-                size = sock.recv_into(buf)
-            except BlockingIOError:
-                return n
-            t = now()
-            if size < common.UDP_STAMP_OFFSET + 8:
-                continue
-            slot, sent = common.read_udp(buf)
-            n += 1
-            recs.add(route, slot, sent, t, 0, 0, 0, 0, 0, 0, 0, 0)
+        """Takes at most one echo of ``route``; 1 if one came."""
+        try:
+            size = self.socks[route].recv_into(self.buf)
+        except BlockingIOError:
+            return 0
+        t = now()
+        if size < common.UDP_STAMP_OFFSET + 8:
+            return 0
+        slot, sent = common.read_udp(self.buf)
+        recs.add(route, slot, sent, t, 0, 0, 0, 0, 0, 0, 0, 0)
+        return 1
 
     def end(self, sent) -> None:
         # The direct route tells the robot the stream is over; the chain has
@@ -166,12 +166,16 @@ class Drive:
         self.lateness_max = 0
 
     def poll(self) -> int:
+        """Takes every waiting answer, one of each route at a time (in the
+        order they were sent, as the routes alternate)."""
         got = 0
-        for route in ROUTES:
-            k = self.routes.poll(route, self.recs)
-            self.received[route] += k
-            got += k
-        return got
+        while True:
+            k0, k1 = self.routes.poll(CHAIN, self.recs), self.routes.poll(DIRECT, self.recs)
+            self.received[CHAIN] += k0
+            self.received[DIRECT] += k1
+            got += k0 + k1
+            if not (k0 or k1):
+                return got
 
     def in_flight(self) -> bool:
         return self.sent[0] > self.received[0] or self.sent[1] > self.received[1]

@@ -46,25 +46,26 @@ class IoxRobot:
         return {}
 
     def serve(self, route: int, recs: Records) -> int:
-        n, s, fb = 0, self.sample, self.fb
-        while self.rx[route].receive_into(s):
-            t = now()
-            if s.is_end():
-                self.tx[route].send(feedback_end_marker(self.answered[route]))
-                self.ended[route] = True
-                continue
-            n += 1
-            recs.add(route, s.console_index, s.send_ns, t, s.ingress_ns, s.release_ns, s.injected_delay_ns, 0)
-            fb.robot_index = self.answered[route]
-            fb.console_index = s.console_index
-            fb.command_send_ns = s.send_ns
-            fb.command_ingress_ns = s.ingress_ns
-            fb.command_release_ns = s.release_ns
-            fb.command_injected_delay_ns = s.injected_delay_ns
-            fb.commands = self.answered[route] + 1
-            self.tx[route].send(fb, _stamp)
-            self.answered[route] += 1
-        return n
+        """Takes at most one frame of ``route`` and answers it; 1 if one came."""
+        s, fb = self.sample, self.fb
+        if not self.rx[route].receive_into(s):
+            return 0
+        t = now()
+        if s.is_end():
+            self.tx[route].send(feedback_end_marker(self.answered[route]))
+            self.ended[route] = True
+            return 0
+        recs.add(route, s.console_index, s.send_ns, t, s.ingress_ns, s.release_ns, s.injected_delay_ns, 0)
+        fb.robot_index = self.answered[route]
+        fb.console_index = s.console_index
+        fb.command_send_ns = s.send_ns
+        fb.command_ingress_ns = s.ingress_ns
+        fb.command_release_ns = s.release_ns
+        fb.command_injected_delay_ns = s.injected_delay_ns
+        fb.commands = self.answered[route] + 1
+        self.tx[route].send(fb, _stamp)
+        self.answered[route] += 1
+        return 1
 
     def done(self, last_ns: int) -> bool:
         self.turns += 1
@@ -103,24 +104,23 @@ class UdpRobot:
         return {"chain": self.socks[CHAIN].getsockname()[1], "direct": self.socks[DIRECT].getsockname()[1]}
 
     def serve(self, route: int, recs: Records) -> int:
-        n, sock, buf = 0, self.socks[route], self.buf
-        while True:
-            try:
-                size, addr = sock.recvfrom_into(buf)
-            except BlockingIOError:
-                return n
-            t = now()
-            if size < common.UDP_STAMP_OFFSET + 8:
-                self.ended[route] = True
-                continue
-            slot, sent = common.read_udp(buf)
-            n += 1
-            recs.add(route, slot, sent, t, 0, 0, 0, 0)
-            try:
-                sock.sendto(self.view[:size], addr)
-                self.answered[route] += 1
-            except (BlockingIOError, OSError):
-                pass
+        """Takes at most one datagram of ``route`` and echoes it; 1 if one came."""
+        try:
+            size, addr = self.socks[route].recvfrom_into(self.buf)
+        except BlockingIOError:
+            return 0
+        t = now()
+        if size < common.UDP_STAMP_OFFSET + 8:
+            self.ended[route] = True
+            return 0
+        slot, sent = common.read_udp(self.buf)
+        recs.add(route, slot, sent, t, 0, 0, 0, 0)
+        try:
+            self.socks[route].sendto(self.view[:size], addr)
+            self.answered[route] += 1
+        except (BlockingIOError, OSError):
+            pass
+        return 1
 
     def done(self, last_ns: int) -> bool:
         return self.ended[DIRECT] and now() - last_ns > UDP_QUIET_NS
@@ -151,11 +151,18 @@ def main() -> int:
             json.dump(robot.ready(), f)
         t_start = last = now()
         while not robot.done(last):
+            # One frame of each route at a time: frames that piled up while
+            # the robot was off its core are taken in the order they were
+            # sent (the routes alternate), so neither route waits for the
+            # other's backlog.
             got = 0
-            for route in ROUTES:
-                k = robot.serve(route, recs)
-                received[route] += k
-                got += k
+            while True:
+                k0, k1 = robot.serve(CHAIN, recs), robot.serve(DIRECT, recs)
+                received[CHAIN] += k0
+                received[DIRECT] += k1
+                got += k0 + k1
+                if not (k0 or k1):
+                    break
             if got:
                 last = now()
             else:
