@@ -46,6 +46,8 @@ pub struct Settings {
     /// The console's core (benches/overhead calls it the driving core).
     pub driver_core: Option<usize>,
     pub robot_core: Option<usize>,
+    /// The Python programs' nice value, if one is set.
+    pub python_nice: Option<i32>,
     pub rt_priority: Option<i32>,
     /// Let the emulator clear its core for its run (`netfi emulator
     /// --isolate`, as `netfi run` and benches/overhead do).
@@ -77,6 +79,10 @@ impl Settings {
             Some(v) => Some(v.trim().parse::<i32>().with_context(|| format!("NETFI_BENCH_RT_PRIORITY={v}"))?),
             None => None,
         };
+        let python_nice = match var("NETFI_BENCH_PYTHON_NICE") {
+            Some(v) => Some(v.trim().parse::<i32>().with_context(|| format!("NETFI_BENCH_PYTHON_NICE={v}"))?),
+            None => None,
+        };
         let quiet = match var("NETFI_BENCH_QUIET_CORES") {
             Some(_) => Some((num("NETFI_BENCH_QUIET_CORES", 0.0)?, num("NETFI_BENCH_QUIET_WAIT_S", 600.0)?)),
             None => None,
@@ -106,6 +112,7 @@ impl Settings {
             emulator_core,
             driver_core,
             robot_core,
+            python_nice,
             rt_priority,
             isolate: var("NETFI_BENCH_ISOLATE").is_none_or(|v| v != "0"),
             quiet,

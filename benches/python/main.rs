@@ -51,6 +51,7 @@
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator at this SCHED_FIFO priority |
 //! | `NETFI_BENCH_ISOLATE` | 1 | `0`: leave the emulator's core as it is |
 //! | `NETFI_BENCH_PYTHON` | `python3` | the interpreter |
+//! | `NETFI_BENCH_PYTHON_NICE` | unset | run the Python console and robot at this nice value (e.g. `-10`, with root: ahead of other work on their core) |
 //! | `NETFI_BENCH_QUICK` | unset | `1`: as `--quick` |
 //! | `NETFI_BENCH_OUT` | `target/netfi-bench/python` | where results go |
 //!
@@ -99,13 +100,14 @@ fn run(args: &Args) -> Result<()> {
     netfi::service::signals::install();
     let _ = netfi::transport::cleanup_stale();
     println!(
-        "netfi Python benchmark: parts {}, {} s each at {} Hz per route; emulator core {:?}, console core {:?}, robot core {:?}; results in {}",
+        "netfi Python benchmark: parts {}, {} s each at {} Hz per route; emulator core {:?}, console core {:?}, robot core {:?}, Python nice value {:?}; results in {}",
         s.parts.join(","),
         s.seconds,
         s.rate_hz,
         s.emulator_core,
         s.driver_core,
         s.robot_core,
+        s.python_nice,
         s.out_dir.display()
     );
     let bench_host = host::HostTimer::start(None);

@@ -50,6 +50,9 @@ fn python(s: &Settings, script: &str, dir: &Path, who: &str, core: Option<usize>
     if let Some(core) = core {
         c.args(["--core", &core.to_string()]);
     }
+    if let Some(nice) = s.python_nice {
+        c.args(["--nice", &nice.to_string()]);
+    }
     c.stdin(Stdio::null()).stdout(log.try_clone()?).stderr(log).spawn().with_context(|| format!("starting {} {script}", s.python))
 }
 

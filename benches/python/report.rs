@@ -22,9 +22,9 @@ pub fn write(s: &Settings, parts: &[Part], bench_host: &HostWindow) -> Result<()
     let facts = host_facts(s);
     let _ = writeln!(
         md,
-        "{} cores ({}), kernel {}, clock source {}; emulator on core {:?}, console on {:?}, robot on {:?}; {} frames/s per route; load average {:.2} at the start, {:.2} at the end; steal over the benchmark {:.2}%; other processes kept {:.2} cores busy on average.",
+        "{} cores ({}), kernel {}, clock source {}; emulator on core {:?}, console on {:?}, robot on {:?} (Python nice value {}); {} frames/s per route; load average {:.2} at the start, {:.2} at the end; steal over the benchmark {:.2}%; other processes kept {:.2} cores busy on average.",
         facts["cores"], facts["cpu_model"].as_str().unwrap_or(""), facts["kernel"].as_str().unwrap_or(""), facts["clocksource"].as_str().unwrap_or(""),
-        s.emulator_core, s.driver_core, s.robot_core, s.rate_hz, bench_host.load_start, bench_host.load_end, bench_host.steal_fraction * 100.0, bench_host.others_busy_cores
+        s.emulator_core, s.driver_core, s.robot_core, s.python_nice.map_or("unchanged".to_string(), |n| n.to_string()), s.rate_hz, bench_host.load_start, bench_host.load_end, bench_host.steal_fraction * 100.0, bench_host.others_busy_cores
     );
     let mut out = Vec::new();
     let mut bars = Vec::new();

@@ -43,10 +43,18 @@ _U64 = struct.Struct("<Q")
 _U32 = struct.Struct("<I")
 
 
-def pin(core):
-    """Pins this process to ``core`` (None: leaves it where it is)."""
+def place(core, nice) -> None:
+    """Pins this process to ``core`` and sets its nice value (None: leaves
+    each as it is; a negative nice value needs CAP_SYS_NICE)."""
     if core is not None:
         os.sched_setaffinity(0, {core})
+    if nice is not None:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+
+
+def add_placement_args(ap) -> None:
+    ap.add_argument("--core", type=int, help="pin to this core")
+    ap.add_argument("--nice", type=int, help="run at this nice value")
 
 
 def frame(slot: int) -> bytearray:

@@ -225,11 +225,11 @@ def main() -> int:
     ap.add_argument("--rate-hz", type=float, default=1000.0, help="frames per second on each route")
     ap.add_argument("--duration-s", type=float, required=True)
     ap.add_argument("--warmup-s", type=float, default=0.5)
-    ap.add_argument("--core", type=int)
+    common.add_placement_args(ap)
     ap.add_argument("--records", required=True)
     ap.add_argument("--summary", required=True)
     a = ap.parse_args()
-    common.pin(a.core)
+    common.place(a.core, a.nice)
     if a.transport == "iceoryx2":
         routes = IoxRoutes(a.run_id, a.direct_run_id)
     else:
