@@ -103,7 +103,8 @@ pub fn run(s: &Settings, transport: &'static str) -> Result<Part> {
     let host = HostTimer::start(s.quiet);
     let ready_path = dir.join("robot.ready");
     let robot_args = |extra: &[String]| {
-        let mut v = vec!["--transport".to_string(), transport.into(), "--ready".into(), ready_path.display().to_string()];
+        let timeout_s = (s.seconds + 90.0).to_string();
+        let mut v = vec!["--transport".to_string(), transport.into(), "--ready".into(), ready_path.display().to_string(), "--timeout-s".into(), timeout_s];
         v.extend(extra.iter().cloned());
         v
     };

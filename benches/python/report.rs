@@ -64,7 +64,7 @@ fn write_part(md: &mut String, p: &Part, figs: &[Figures]) {
         md,
         "Console sent {} through / {} direct, got {} / {} answers back; the emulator took {} frames in and delivered {}, dropped {}{}. {}. Steal over the part {:.2}%, load average {:.2} → {:.2}, other processes {:.2} cores busy.",
         c["sent"][0], c["sent"][1], c["feedback_received"][0], c["feedback_received"][1],
-        e["frames"]["entered"], e["frames"]["delivered"], e["frames"]["dropped"],
+        e["frames"]["entered"], e["frames"]["delivered"], e["frames"]["dropped"].as_object().map_or(0, |m| m.values().filter_map(Value::as_u64).sum::<u64>()),
         e["feedback"].get("entered").map_or(String::new(), |f| format!("; feedback: {f} in, {} delivered", e["feedback"]["delivered"])),
         isolation(&e["isolation"]),
         p.host.steal_fraction * 100.0, p.host.load_start, p.host.load_end, p.host.others_busy_cores
