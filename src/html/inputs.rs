@@ -175,6 +175,22 @@ impl Law {
 #[cfg(test)]
 mod tests {
     #[test]
+    fn an_hlog_reads_back_as_written() {
+        let mut h = crate::metrics::LatencyHistogram::new();
+        for v in 1..=1000u64 {
+            h.record(v * 1000);
+        }
+        let path = std::env::temp_dir().join(format!("netfi-html-hlog-{}.hlog", std::process::id()));
+        h.write_log(&path, "t", 0.0, 1.0).unwrap();
+        let back = super::read_hlog(&path);
+        std::fs::remove_file(&path).ok();
+        let back = back.unwrap();
+        assert_eq!(back.len(), 1000);
+        assert_eq!(back.max(), h.inner().max());
+        assert_eq!(back.value_at_quantile(0.5), h.inner().value_at_quantile(0.5));
+    }
+
+    #[test]
     fn bin_widths_are_round() {
         assert_eq!(super::bin_ns(0.0), 10_000_000);
         assert_eq!(super::bin_ns(6.11), 100_000_000);

@@ -81,6 +81,11 @@ fn polylines(svg: &str) -> Vec<usize> {
         .collect()
 }
 
+/// The texts of a plot (titles, tick labels, legend), trimmed.
+fn texts(svg: &str) -> Vec<&str> {
+    svg.split("<text").skip(1).map(|t| t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].trim()).collect()
+}
+
 fn escaped(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;").replace('\'', "&#39;")
 }
@@ -132,7 +137,13 @@ fn the_page_is_self_contained_and_shows_the_run() {
         assert!(polylines(svg(&html, id)).iter().all(|n| *n >= 20), "{id}");
     }
     assert!(svg(&html, "plot-loss-runs").matches("<rect").count() >= 3);
-    assert!(svg(&html, "plot-divergence").contains("arm 1"));
+    // Text is drawn without a font file: the labels are there, as text.
+    let lat_texts = texts(svg(&html, "plot-latency"));
+    for label in ["Latency by percentile", "90%", "99%", "direct hop", "release lateness"] {
+        assert!(lat_texts.contains(&label), "{label:?} not in {lat_texts:?}");
+    }
+    let arms = texts(svg(&html, "plot-divergence"));
+    assert!(arms.contains(&"arm 0") && arms.contains(&"arm 1"), "{arms:?}");
     assert!(html.contains("id=\"no-events\"") && text_of(&html, "no-events") == "no control events");
     std::fs::remove_dir_all(&dir).ok();
 }
