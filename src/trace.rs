@@ -213,7 +213,9 @@ pub const RECV_COLUMN: usize = 12;
 /// Starts the writer thread (call before pinning the hot thread, so the
 /// writer is not confined to its core) and returns the hot path's sink.
 /// Rows are kept in memory until [`TraceWriter::stream_to`] gives files.
-pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
+/// `expected_copies` reserves room for the rows of copies (`duplicate`
+/// stages) likewise; 0 where the scenario makes none.
+pub fn start(expected_frames: usize, expected_copies: usize) -> (TraceSink, TraceWriter) {
     let (mut tx, mut rx) = rtrb::RingBuffer::<TraceEvent>::new(RING_CAPACITY);
     // Write every slot once before the hot path starts, so the ring's pages
     // are resident: otherwise a fresh page is faulted in every few dozen
@@ -231,7 +233,7 @@ pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
     let table = Table {
         base: 0,
         rows: VecDeque::with_capacity(expected_frames),
-        copies: VecDeque::new(),
+        copies: VecDeque::with_capacity(expected_copies),
         decision: LatencyHistogram::new(),
         lateness: LatencyHistogram::new(),
     };
@@ -593,7 +595,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("netfi-trace-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("trace.csv");
-        let (mut sink, mut writer) = start(4);
+        let (mut sink, mut writer) = start(4, 0);
         writer.stream_to(&path, Some(&dir)).unwrap();
         sink.push(ingress(0, Some(7), 10, 20, None, 120));
         let ge = DropCause::Stage { phase: 0, stage: 1, kind: ModelKind::GeLomax };

@@ -141,8 +141,10 @@ impl<T: Carried> Link<T> {
                 kind.name()
             );
         }
+        let rows = expected_frames.min(50_000_000) as usize;
+        let copies = if unsupported_stage(&scenario, &[ModelKind::Duplicate]).is_some() { rows } else { 0 };
         let inj = Injector::try_new(scenario, queue_capacity)?;
-        let (trace, writer) = trace::start(expected_frames.min(50_000_000) as usize);
+        let (trace, writer) = trace::start(rows, copies);
         Ok(Link {
             inj,
             trace,
