@@ -137,7 +137,7 @@ pub struct DelayCheck {
 /// The feedback loop robot → emulator → console: what the return scenario
 /// did, every feedback sample accounted for, and the round trip.
 ///
-/// `sent_by_robot = entered`, `entered = delivered + dropped +
+/// `sent_by_robot = entered`, `entered + duplicated = delivered + dropped +
 /// held_at_end`, `delivered = received_by_console`: `balanced`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeedbackSection {
@@ -146,6 +146,9 @@ pub struct FeedbackSection {
     pub sent_by_robot: Option<u64>,
     pub entered: u64,
     pub delivered: u64,
+    /// Copies made by `duplicate` stages of the return scenario.
+    #[serde(default)]
+    pub duplicated: u64,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
     pub received_by_console: Option<u64>,
@@ -185,6 +188,7 @@ impl FeedbackSection {
             sent_by_robot,
             entered: e.entered,
             delivered: e.delivered,
+            duplicated: e.duplicated,
             dropped: e.dropped.clone(),
             held_at_end: e.held_at_end,
             received_by_console,
@@ -213,6 +217,9 @@ impl FeedbackSection {
             self.held_at_end,
             if dropped.is_empty() { "none".into() } else { dropped.join(", ") }
         );
+        if self.duplicated > 0 {
+            s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
+        }
         s += &format!(
             "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
             if self.balanced { "balanced" } else { "NOT balanced" },

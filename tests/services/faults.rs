@@ -2,7 +2,7 @@
 //! and a `corrupt` stage applied by the real-time emulator between the
 //! real console and simulator.
 
-use super::{out_dir, run, u};
+use super::{netfi, out_dir, run, u, ONE_RUN_AT_A_TIME};
 use serde_json::Value;
 
 /// Duplicate (10%), then corrupt (20%, each frame and copy its own flip),
@@ -80,4 +80,39 @@ fn duplicates_and_corruption_are_accounted_for_exactly() {
     let passed_loss = (entered + duplicated - u(&f["dropped"]["bernoulli"])) as f64;
     let corrupted_rate = u(&c["corrupted"]) as f64 / passed_loss;
     assert!((corrupted_rate - 0.2).abs() < 5.0 * (0.2 * 0.8 / passed_loss).sqrt(), "corrupted rate {corrupted_rate}");
+}
+
+/// The robot → console feedback path applies `duplicate` in its return
+/// scenario: every feedback sample and copy is accounted for and reaches the
+/// console; `corrupt` there (feedback is not an ITP frame) is refused by
+/// name before the run starts.
+#[test]
+fn the_feedback_path_duplicates_and_refuses_corruption() {
+    let dir = out_dir("fb-dup-scenarios");
+    std::fs::create_dir_all(&dir).unwrap();
+    let dup = dir.join("fb_dup.toml");
+    std::fs::write(&dup, "name = \"fb_dup\"\n[[stage]]\nmodel = \"duplicate\"\np = 0.2\n[[stage]]\nmodel = \"bernoulli\"\np = 0.05\n").unwrap();
+    let corrupt = dir.join("fb_corrupt.toml");
+    std::fs::write(&corrupt, "name = \"fb_corrupt\"\n[[stage]]\nmodel = \"corrupt\"\np = 0.2\n").unwrap();
+    let (r, ok, _) = run("fb-dup", &["Normal", "--return-scenario", dup.to_str().unwrap(), "--frames", "3000", "--rate-hz", "2000", "--seed", "9"]);
+    assert!(ok, "{r:#}");
+    let fb = &r["feedback"];
+    let dropped: u64 = fb["dropped"].as_object().unwrap().values().map(u).sum();
+    let (entered, duplicated, delivered) = (u(&fb["entered"]), u(&fb["duplicated"]), u(&fb["delivered"]));
+    assert_eq!(entered + duplicated, delivered + dropped + u(&fb["held_at_end"]), "{fb}");
+    assert_eq!(Some(delivered), fb["received_by_console"].as_u64(), "{fb}");
+    assert_eq!(fb["balanced"], true, "{fb}");
+    // 3000 feedback samples, each copied with probability 0.2: within 5
+    // binomial standard deviations.
+    assert!((duplicated as f64 - 600.0).abs() < 5.0 * (3000.0f64 * 0.2 * 0.8).sqrt(), "{fb}");
+    let out = out_dir("fb-corrupt");
+    let o = {
+        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        netfi().args(["run", "Normal", "--return-scenario", corrupt.to_str().unwrap(), "--frames", "100", "--seed", "9", "--out"]).arg(&out).output().unwrap()
+    };
+    std::fs::remove_dir_all(&dir).ok();
+    std::fs::remove_dir_all(&out).ok();
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("the `corrupt` stage") && stderr.contains("fb_corrupt"), "{stderr}");
 }
