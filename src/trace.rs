@@ -328,6 +328,11 @@ impl Table {
         let unreleased = |c: &CopyRow| c.release_ns.is_none();
         let mine = self.copies.range(from..to);
         let Some(at) = mine.clone().position(|c| unreleased(c) && c.release_sched_ns == sched_ns).or_else(|| mine.clone().position(unreleased)) else {
+            // The copy's own event was lost (a full ring): its frame's row
+            // must still complete.
+            if let Some(row) = self.row_mut(ingress_index, false) {
+                row.copies_pending = row.copies_pending.saturating_sub(1);
+            }
             return;
         };
         let copy = &mut self.copies[from + at];
