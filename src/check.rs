@@ -396,8 +396,10 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                 },
                 corrupted: (st.kind() == crate::model::ModelKind::Corrupt).then(|| st.corrupted()),
                 corrupt_rate_model: st.model().corrupt_rate_exact(),
-                caught_fraction_model: (st.kind() == crate::model::ModelKind::Corrupt)
-                    .then(crate::model::Corrupt::caught_fraction_exact),
+                caught_fraction_model: match st.model() {
+                    crate::model::AnyModel::Corrupt(m) => m.caught_fraction_model(),
+                    _ => None,
+                },
                 early_fraction_model: match st.model() {
                     crate::model::AnyModel::Reorder(m) => Some(m.early_fraction_exact()),
                     _ => None,

@@ -25,11 +25,19 @@
 //! keeps draining the ring so the loop is never held up.
 //!
 //! # `trace.csv`
-//! One header line, then one row per ingress index, in ingress order:
+//! One header line, then one row per ingress index, in ingress order, and
+//! after it one row per copy of that frame a `duplicate` stage made and
+//! the queue took (docs/spec.md §3.8): a copy is released as a frame of its
+//! own, under its original's ingress index. The rows of one frame then
+//! account for it exactly: the copies made are its copy rows plus
+//! `copies_dropped`, and every row has one fate. Summed over the file,
+//! `entered + duplicated = delivered + dropped + held`, where `entered` is
+//! the rows with `copy` 0, `duplicated` the other rows plus the sum of
+//! `copies_dropped`, and `dropped` the `dropped` rows plus that sum.
 //!
 //! | column | meaning |
 //! |---|---|
-//! | `ingress_index` | the emulator's count of frames that entered (0, 1, …) |
+//! | `ingress_index` | the emulator's count of frames that entered (0, 1, …); a copy has its original's |
 //! | `sequence` | the ITP frame's `sequence` field (empty if malformed) |
 //! | `console_index` | the console's send counter |
 //! | `send_ns` | console send time, CLOCK_MONOTONIC ns |
@@ -41,6 +49,15 @@
 //! | `release_sched_ns` | scheduled release time |
 //! | `release_ns` | actual release time (just before publishing) |
 //! | `recv_ns` | simulator receive time (empty if not received) |
+//! | `copy` | 0 for the frame as it entered; k for its k-th copy the queue took |
+//! | `copies_dropped` | on a `copy` 0 row: copies of the frame that a later stage or a full queue dropped (their reasons are in the report's drop counts) |
+//! | `corrupted` | for a scheduled row: 1 if a `corrupt` stage flipped bits of it (docs/spec.md §3.9), else 0 |
+//!
+//! A copy row repeats its frame's `sequence`, `console_index`, `send_ns`
+//! and `ingress_ns`. A release is matched to the row it belongs to by its
+//! scheduled time (the original first when a copy is due at the same
+//! time); a copy still held at the end shows the release time its stages
+//! asked for.
 //!
 //! Times are integers; empty cells are missing values. `pandas.read_csv` and
 //! `polars.read_csv` read it as it is.
@@ -71,8 +88,19 @@ pub enum TraceEvent {
         release_sched_ns: u64,
         /// Time taken to decide the frame's fate.
         decision_ns: u64,
+        /// Copies of it the queue took; a [`TraceEvent::Copy`] follows for each.
+        copies: u8,
+        /// Copies of it that a later stage or a full queue dropped.
+        copies_dropped: u8,
+        /// Whether it was queued with bits flipped.
+        corrupted: bool,
     },
-    Release { ingress_index: u64, release_ns: u64 },
+    /// The `copy`-th copy (from 1) of the frame `ingress_index`, queued for
+    /// `release_sched_ns`.
+    Copy { ingress_index: u64, copy: u8, release_sched_ns: u64, corrupted: bool },
+    /// A release of the frame `ingress_index` (or of one of its copies)
+    /// scheduled for `release_sched_ns`.
+    Release { ingress_index: u64, release_sched_ns: u64, release_ns: u64 },
 }
 
 /// One row of the trace table.
@@ -86,14 +114,29 @@ pub struct Row {
     pub dropped: Option<DropCause>,
     pub release_sched_ns: u64,
     pub release_ns: Option<u64>,
+    /// Copies of it not yet released (their rows are in [`Table::copies`]).
+    pub copies_pending: u8,
+    pub copies_dropped: u8,
+    pub corrupted: bool,
 }
 
 impl Row {
     /// Its fate is final: dropped or released (or its ingress event was
-    /// lost, and it will never be).
+    /// lost, and it will never be), and so is every copy's.
     fn complete(&self) -> bool {
-        !self.present || self.dropped.is_some() || self.release_ns.is_some()
+        !self.present || ((self.dropped.is_some() || self.release_ns.is_some()) && self.copies_pending == 0)
     }
+}
+
+/// One copy's row: its frame's ingress index, its number, its schedule,
+/// its release.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CopyRow {
+    pub ingress_index: u64,
+    pub copy: u8,
+    pub release_sched_ns: u64,
+    pub release_ns: Option<u64>,
+    pub corrupted: bool,
 }
 
 /// The hot path's end of the ring.
@@ -127,8 +170,10 @@ struct Output {
 /// What the writer did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Written {
-    /// Rows written.
+    /// Rows written (copy rows included).
     pub rows: u64,
+    /// Rows written of frames (or copies) released with bits flipped.
+    pub corrupted_released: u64,
     /// Intervals appended to each histogram log.
     pub intervals: u64,
     /// Rows written before their frame was released (the writer held too
@@ -158,17 +203,24 @@ const PENDING_ROWS_START: usize = 4096;
 pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// The CSV's header line.
-pub const CSV_HEADER: &str = "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns";
+pub const CSV_HEADER: &str =
+    "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns,copy,copies_dropped,corrupted";
+
+/// The index of `recv_ns` among the CSV's columns: the emulator leaves it
+/// empty and the runner fills it in.
+pub const RECV_COLUMN: usize = 12;
 
 /// Starts the writer thread (call before pinning the hot thread, so the
 /// writer is not confined to its core) and returns the hot path's sink.
 /// Rows are kept in memory until [`TraceWriter::stream_to`] gives files.
-pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
+/// `expected_copies` reserves room for the rows of copies (`duplicate`
+/// stages) likewise; 0 where the scenario makes none.
+pub fn start(expected_frames: usize, expected_copies: usize) -> (TraceSink, TraceWriter) {
     let (mut tx, mut rx) = rtrb::RingBuffer::<TraceEvent>::new(RING_CAPACITY);
     // Write every slot once before the hot path starts, so the ring's pages
     // are resident: otherwise a fresh page is faulted in every few dozen
     // frames, on the hot thread, for the first pass through the ring.
-    let blank = TraceEvent::Release { ingress_index: 0, release_ns: 0 };
+    let blank = TraceEvent::Release { ingress_index: 0, release_sched_ns: 0, release_ns: 0 };
     while tx.push(blank).is_ok() {}
     while rx.pop().is_ok() {}
     let stop = Arc::new(AtomicBool::new(false));
@@ -178,8 +230,13 @@ pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
     // is allocated while the loop runs. Room for every row while there is
     // nowhere to write them (reserved, not touched: pages become resident
     // only as rows are stored).
-    let table =
-        Table { base: 0, rows: VecDeque::with_capacity(expected_frames), decision: LatencyHistogram::new(), lateness: LatencyHistogram::new() };
+    let table = Table {
+        base: 0,
+        rows: VecDeque::with_capacity(expected_frames),
+        copies: VecDeque::with_capacity(expected_copies),
+        decision: LatencyHistogram::new(),
+        lateness: LatencyHistogram::new(),
+    };
     let thread = std::thread::Builder::new()
         .name("netfi-trace".into())
         .spawn(move || writer(rx, out_rx, stop2, table))
@@ -192,6 +249,9 @@ pub fn start(expected_frames: usize) -> (TraceSink, TraceWriter) {
 struct Table {
     base: u64,
     rows: VecDeque<Row>,
+    /// The copies' rows, in ingress order (then copy order); only runs
+    /// with `duplicate` stages have any.
+    copies: VecDeque<CopyRow>,
     decision: LatencyHistogram,
     lateness: LatencyHistogram,
 }
@@ -199,49 +259,125 @@ struct Table {
 impl Table {
     fn apply(&mut self, ev: TraceEvent) {
         match ev {
-            TraceEvent::Ingress { ingress_index, sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, decision_ns } => {
-                if ingress_index < self.base {
-                    return;
-                }
-                let at = (ingress_index - self.base) as usize;
-                if self.rows.len() <= at {
-                    self.rows.resize(at + 1, Row::default());
-                }
-                let release_ns = self.rows[at].release_ns;
-                self.rows[at] = Row { present: true, sequence, console_index, send_ns, ingress_ns, dropped, release_sched_ns, release_ns };
+            TraceEvent::Ingress {
+                ingress_index,
+                sequence,
+                console_index,
+                send_ns,
+                ingress_ns,
+                dropped,
+                release_sched_ns,
+                decision_ns,
+                copies,
+                copies_dropped,
+                corrupted,
+            } => {
+                let Some(row) = self.row_mut(ingress_index, true) else { return };
+                let release_ns = row.release_ns;
+                *row = Row {
+                    present: true,
+                    sequence,
+                    console_index,
+                    send_ns,
+                    ingress_ns,
+                    dropped,
+                    release_sched_ns,
+                    release_ns,
+                    copies_pending: copies,
+                    copies_dropped,
+                    corrupted,
+                };
                 self.decision.record(decision_ns);
             }
-            TraceEvent::Release { ingress_index, release_ns } => {
-                let Some(row) = ingress_index.checked_sub(self.base).and_then(|at| self.rows.get_mut(at as usize)) else { return };
-                row.release_ns = Some(release_ns);
-                if row.present {
-                    self.lateness.record(release_ns.saturating_sub(row.release_sched_ns));
+            TraceEvent::Copy { ingress_index, copy, release_sched_ns, corrupted } => {
+                if ingress_index >= self.base {
+                    self.copies.push_back(CopyRow { ingress_index, copy, release_sched_ns, release_ns: None, corrupted });
                 }
             }
+            TraceEvent::Release { ingress_index, release_sched_ns, release_ns } => self.release(ingress_index, release_sched_ns, release_ns),
+        }
+    }
+
+    /// The row of `ingress_index`, if it is still held (with `grow`, made
+    /// room for if it is new).
+    fn row_mut(&mut self, ingress_index: u64, grow: bool) -> Option<&mut Row> {
+        let at = ingress_index.checked_sub(self.base)? as usize;
+        if grow && self.rows.len() <= at {
+            self.rows.resize(at + 1, Row::default());
+        }
+        self.rows.get_mut(at)
+    }
+
+    /// A release of `ingress_index` scheduled for `sched_ns`: the frame's
+    /// own if it is due then and not yet released, else its first
+    /// unreleased copy due then, else its first unreleased copy (a FIFO
+    /// queue may have moved a copy later than its stages asked).
+    fn release(&mut self, ingress_index: u64, sched_ns: u64, release_ns: u64) {
+        let Some(row) = self.row_mut(ingress_index, false) else { return };
+        let own = !row.present || (row.dropped.is_none() && row.release_ns.is_none() && (row.release_sched_ns == sched_ns || row.copies_pending == 0));
+        if own {
+            row.release_ns = Some(release_ns);
+            if row.present {
+                let late_ns = release_ns.saturating_sub(row.release_sched_ns);
+                self.lateness.record(late_ns);
+            }
+            return;
+        }
+        let from = self.copies.partition_point(|c| c.ingress_index < ingress_index);
+        let to = self.copies.partition_point(|c| c.ingress_index <= ingress_index);
+        let unreleased = |c: &CopyRow| c.release_ns.is_none();
+        let mine = self.copies.range(from..to);
+        let Some(at) = mine.clone().position(|c| unreleased(c) && c.release_sched_ns == sched_ns).or_else(|| mine.clone().position(unreleased)) else {
+            // The copy's own event was lost (a full ring): its frame's row
+            // must still complete.
+            if let Some(row) = self.row_mut(ingress_index, false) {
+                row.copies_pending = row.copies_pending.saturating_sub(1);
+            }
+            return;
+        };
+        let copy = &mut self.copies[from + at];
+        copy.release_ns = Some(release_ns);
+        copy.release_sched_ns = sched_ns;
+        self.lateness.record(release_ns.saturating_sub(sched_ns));
+        if let Some(row) = self.row_mut(ingress_index, false) {
+            row.copies_pending = row.copies_pending.saturating_sub(1);
         }
     }
 
     /// Takes the rows that are complete (or, past the bound, the oldest),
-    /// oldest first, into `f`; with `all`, every row.
-    fn drain(&mut self, all: bool, mut f: impl FnMut(u64, &Row, bool)) {
+    /// oldest first, each followed by its copies' rows, into `f`; with
+    /// `all`, every row.
+    fn drain(&mut self, all: bool, mut f: impl FnMut(u64, &Row, Option<&CopyRow>, bool)) {
         while let Some(front) = self.rows.front() {
             let forced = self.rows.len() > MAX_PENDING_ROWS;
             if !(all || forced || front.complete()) {
                 break;
             }
             let row = self.rows.pop_front().expect("a front row");
+            let incomplete = forced && !row.complete();
             if row.present {
-                f(self.base, &row, forced && !row.complete());
+                f(self.base, &row, None, incomplete);
+            }
+            while self.copies.front().is_some_and(|c| c.ingress_index <= self.base) {
+                let copy = self.copies.pop_front().expect("a front copy");
+                if row.present && copy.ingress_index == self.base {
+                    f(self.base, &row, Some(&copy), incomplete);
+                }
             }
             self.base += 1;
         }
     }
 }
 
-/// Formats one row (`recv_ns` empty: the runner joins it later).
-pub fn format_row(w: &mut impl Write, i: u64, r: &Row, recv: Option<u64>) -> std::io::Result<()> {
-    let (fate, reason, phase, stage) = match r.dropped {
-        None if r.release_ns.is_some() => ("delivered", "", String::new(), String::new()),
+/// Formats one row: the frame `r`, or with `copy` one of its copies
+/// (`recv_ns` empty: the runner joins it later).
+pub fn format_row(w: &mut impl Write, i: u64, r: &Row, copy: Option<&CopyRow>, recv: Option<u64>) -> std::io::Result<()> {
+    let (dropped, sched, released, corrupted) = match copy {
+        None => (r.dropped, r.release_sched_ns, r.release_ns, r.corrupted),
+        Some(c) => (None, c.release_sched_ns, c.release_ns, c.corrupted),
+    };
+    let (fate, reason, phase, stage) = match dropped {
+        None if released.is_some() => ("delivered", "", String::new(), String::new()),
         None => ("held", "", String::new(), String::new()),
         Some(c) => {
             let (p, s) = match c {
@@ -252,18 +388,24 @@ pub fn format_row(w: &mut impl Write, i: u64, r: &Row, recv: Option<u64>) -> std
         }
     };
     let opt = |v: Option<u64>| v.map(|x| x.to_string()).unwrap_or_default();
-    let scheduled = r.dropped.is_none();
+    let scheduled = dropped.is_none();
+    let (copy_no, copies_dropped) = match copy {
+        None => (0, Some(u64::from(r.copies_dropped))),
+        Some(c) => (c.copy, None),
+    };
     writeln!(
         w,
-        "{i},{},{},{},{},{fate},{reason},{phase},{stage},{},{},{},{}",
+        "{i},{},{},{},{},{fate},{reason},{phase},{stage},{},{},{},{},{copy_no},{},{}",
         r.sequence.map(|s| s.to_string()).unwrap_or_default(),
         r.console_index,
         r.send_ns,
         r.ingress_ns,
-        opt(scheduled.then(|| r.release_sched_ns - r.ingress_ns)),
-        opt(scheduled.then_some(r.release_sched_ns)),
-        opt(r.release_ns),
+        opt(scheduled.then(|| sched.saturating_sub(r.ingress_ns))),
+        opt(scheduled.then_some(sched)),
+        opt(released),
         opt(recv),
+        opt(copies_dropped),
+        opt(scheduled.then_some(u64::from(corrupted))),
     )
 }
 
@@ -331,11 +473,18 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
             table.apply(ev);
         }
         let mut write_rows = |table: &mut Table, all: bool, failed: &mut Option<anyhow::Error>| {
-            table.drain(all, |i, row, forced| {
+            table.drain(all, |i, row, copy, forced| {
                 written.forced += u64::from(forced);
                 if failed.is_none() {
-                    match format_row(&mut csv, i, row, None) {
-                        Ok(()) => written.rows += 1,
+                    match format_row(&mut csv, i, row, copy, None) {
+                        Ok(()) => {
+                            written.rows += 1;
+                            let (corrupted, released) = match copy {
+                                None => (row.corrupted, row.release_ns.is_some()),
+                                Some(c) => (c.corrupted, c.release_ns.is_some()),
+                            };
+                            written.corrupted_released += u64::from(corrupted && released);
+                        }
                         Err(e) => *failed = Some(anyhow::Error::new(e).context(format!("writing {}", csv_path.display()))),
                     }
                 }
@@ -431,7 +580,7 @@ pub fn write_csv(path: &Path, rows: &[Row], recv_ns: &[u64]) -> std::io::Result<
     writeln!(w, "{CSV_HEADER}")?;
     for (i, r) in rows.iter().enumerate() {
         if r.present {
-            format_row(&mut w, i as u64, r, recv_ns.get(i).copied().filter(|t| *t != 0))?;
+            format_row(&mut w, i as u64, r, None, recv_ns.get(i).copied().filter(|t| *t != 0))?;
         }
     }
     w.flush()
@@ -443,7 +592,7 @@ mod tests {
     use crate::model::ModelKind;
 
     fn ingress(i: u64, seq: Option<u32>, send: u64, at: u64, dropped: Option<DropCause>, sched: u64) -> TraceEvent {
-        TraceEvent::Ingress { ingress_index: i, sequence: seq, console_index: i, send_ns: send, ingress_ns: at, dropped, release_sched_ns: sched, decision_ns: 50 }
+        TraceEvent::Ingress { ingress_index: i, sequence: seq, console_index: i, send_ns: send, ingress_ns: at, dropped, release_sched_ns: sched, decision_ns: 50, copies: 0, copies_dropped: 0, corrupted: false }
     }
 
     #[test]
@@ -451,7 +600,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("netfi-trace-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("trace.csv");
-        let (mut sink, mut writer) = start(4);
+        let (mut sink, mut writer) = start(4, 0);
         writer.stream_to(&path, Some(&dir)).unwrap();
         sink.push(ingress(0, Some(7), 10, 20, None, 120));
         let ge = DropCause::Stage { phase: 0, stage: 1, kind: ModelKind::GeLomax };
@@ -460,7 +609,7 @@ mod tests {
         std::thread::sleep(std::time::Duration::from_millis(1200));
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text.lines().count(), 1, "{text}");
-        sink.push(TraceEvent::Release { ingress_index: 0, release_ns: 121 });
+        sink.push(TraceEvent::Release { ingress_index: 0, release_sched_ns: 120, release_ns: 121 });
         // Within the flush period both are on disk, before the end.
         std::thread::sleep(std::time::Duration::from_millis(1200));
         let text = std::fs::read_to_string(&path).unwrap();
@@ -471,9 +620,9 @@ mod tests {
         assert!(w.intervals >= 2);
         let text = std::fs::read_to_string(&path).unwrap();
         let lines: Vec<_> = text.lines().collect();
-        assert_eq!(lines[1], "0,7,0,10,20,delivered,,,,100,120,121,");
-        assert_eq!(lines[2], "1,8,1,30,40,dropped,ge_lomax,1,2,,,,");
-        assert_eq!(lines[3], "2,,2,50,60,held,,,,10,70,,");
+        assert_eq!(lines[1], "0,7,0,10,20,delivered,,,,100,120,121,,0,0,0");
+        assert_eq!(lines[2], "1,8,1,30,40,dropped,ge_lomax,1,2,,,,,0,0,");
+        assert_eq!(lines[3], "2,,2,50,60,held,,,,10,70,,,0,0,0");
         assert_eq!(sink.overflowed(), 0);
         // One interval per flush in each histogram log, tagged.
         for (file, tag) in [("decision.hlog", "decision"), ("lateness.hlog", "release_lateness")] {
@@ -492,11 +641,57 @@ mod tests {
 
     #[test]
     fn write_csv_joins_receive_times() {
-        let rows = [Row { present: true, sequence: Some(1), console_index: 0, send_ns: 1, ingress_ns: 2, dropped: None, release_sched_ns: 3, release_ns: Some(4) }];
+        let rows = [Row { present: true, sequence: Some(1), console_index: 0, send_ns: 1, ingress_ns: 2, dropped: None, release_sched_ns: 3, release_ns: Some(4), ..Row::default() }];
         let path = std::env::temp_dir().join(format!("netfi-trace-join-{}.csv", std::process::id()));
         write_csv(&path, &rows, &[9]).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         std::fs::remove_file(&path).ok();
-        assert_eq!(text.lines().nth(1), Some("0,1,0,1,2,delivered,,,,1,3,4,9"));
+        assert_eq!(text.lines().nth(1), Some("0,1,0,1,2,delivered,,,,1,3,4,9,0,0,0"));
+    }
+
+    #[test]
+    fn copies_get_rows_of_their_own_matched_by_scheduled_release() {
+        let mut t = Table { base: 0, rows: VecDeque::new(), copies: VecDeque::new(), decision: LatencyHistogram::new(), lateness: LatencyHistogram::new() };
+        // Frame 0: scheduled for 100, corrupted; two copies taken (for 300
+        // and 200, the second corrupted) and one dropped.
+        let mut ev = ingress(0, Some(5), 1, 10, None, 100);
+        if let TraceEvent::Ingress { copies, copies_dropped, corrupted, .. } = &mut ev {
+            (*copies, *copies_dropped, *corrupted) = (2, 1, true);
+        }
+        t.apply(ev);
+        t.apply(TraceEvent::Copy { ingress_index: 0, copy: 1, release_sched_ns: 300, corrupted: false });
+        t.apply(TraceEvent::Copy { ingress_index: 0, copy: 2, release_sched_ns: 200, corrupted: true });
+        // Frame 1: dropped, but its one copy is taken.
+        let ge = DropCause::Stage { phase: 0, stage: 2, kind: ModelKind::Bernoulli };
+        let mut ev = ingress(1, Some(6), 20, 30, Some(ge), 0);
+        if let TraceEvent::Ingress { copies, .. } = &mut ev {
+            *copies = 1;
+        }
+        t.apply(ev);
+        t.apply(TraceEvent::Copy { ingress_index: 1, copy: 1, release_sched_ns: 130, corrupted: false });
+        let write = |t: &mut Table, all| {
+            let mut out = Vec::new();
+            t.drain(all, |i, r, c, _| format_row(&mut out, i, r, c, None).unwrap());
+            out
+        };
+        t.apply(TraceEvent::Release { ingress_index: 0, release_sched_ns: 100, release_ns: 101 });
+        t.apply(TraceEvent::Release { ingress_index: 1, release_sched_ns: 130, release_ns: 131 });
+        t.apply(TraceEvent::Release { ingress_index: 0, release_sched_ns: 200, release_ns: 202 });
+        assert!(write(&mut t, false).is_empty(), "frame 0 still has a copy queued");
+        t.apply(TraceEvent::Release { ingress_index: 0, release_sched_ns: 300, release_ns: 303 });
+        let out = write(&mut t, false);
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines,
+            [
+                "0,5,0,1,10,delivered,,,,90,100,101,,0,1,1",
+                "0,5,0,1,10,delivered,,,,290,300,303,,1,,0",
+                "0,5,0,1,10,delivered,,,,190,200,202,,2,,1",
+                "1,6,1,20,30,dropped,bernoulli,1,3,,,,,0,0,",
+                "1,6,1,20,30,delivered,,,,100,130,131,,1,,0",
+            ]
+        );
+        assert!(t.rows.is_empty() && t.copies.is_empty());
     }
 }

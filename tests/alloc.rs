@@ -63,6 +63,9 @@ fn the_emulator_link_does_not_allocate_per_frame() {
         ("PLM-2 → DLM-2", "[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n"),
         ("every model", "[[stage]]\nmodel = \"bernoulli\"\np = 0.01\n[[stage]]\nmodel = \"markov4\"\np13 = 0.01\np31 = 0.3\n[[stage]]\nmodel = \"gilbert_elliott\"\np = 0.01\n[[stage]]\npreset = \"CLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 10\ndist = \"uniform\"\njitter_ms = 5\norder = \"fifo\"\n"),
         ("phases", "[[phase]]\npreset = \"DLM-3\"\n[[phase]]\nstart_s = 100\npreset = \"PLM-1\"\n"),
+        // Copies and flips: a copy is a second queue entry and trace row,
+        // a flip is applied to the sample's bytes in place.
+        ("duplicate + corrupt", "[[stage]]\nmodel = \"duplicate\"\np = 0.05\n[[stage]]\nmodel = \"corrupt\"\np = 0.1\n[[stage]]\nmodel = \"duplicate\"\np = 0.02\n[[stage]]\nmodel = \"bernoulli\"\np = 0.01\n[[stage]]\nmodel = \"delay\"\nmin_ms = 10\ndist = \"uniform\"\njitter_ms = 5\norder = \"reorder\"\n"),
     ];
     for (name, text) in pipelines {
         // 300 s of frames; the last 200 s measured, well past the queue's fill-up.

@@ -271,7 +271,7 @@ impl Confirmation {
                 let delays = metrics.contains(&Metric::DelayMsP99).then(|| {
                     Box::new(Histogram::<u64>::new_with_bounds(1, 3_600_000_000_000, 3).expect("static bounds"))
                 });
-                let sizes = if matches!(other, ModelSpec::Delay(_)) { DELAY_SIZES } else { GE_LOMAX_SIZES };
+                let sizes = if matches!(other, ModelSpec::Delay(_) | ModelSpec::Jitter(_)) { DELAY_SIZES } else { GE_LOMAX_SIZES };
                 (Sim::Frames { model, prev_drop: false, next_frame: 0, interval_ns: frame_interval_ns, delays }, sizes)
             }
         };

@@ -80,7 +80,7 @@ impl Grid {
     pub fn show(&self, value: f64) -> String {
         match self.kind {
             Kind::Loss | Kind::Outage => format!("{}%", super::fmt_sig(value * 100.0)),
-            Kind::Delay => format!("{} ms", super::fmt_sig(value)),
+            Kind::Delay | Kind::Jitter => format!("{} ms", super::fmt_sig(value)),
         }
     }
 
@@ -88,7 +88,7 @@ impl Grid {
     pub fn describe(&self) -> String {
         let step = match self.kind {
             Kind::Loss | Kind::Outage => format!("{}%", super::fmt_sig(self.step * 100.0)),
-            Kind::Delay => format!("{} ms", self.step),
+            Kind::Delay | Kind::Jitter => format!("{} ms", self.step),
         };
         format!(
             "{} {} to {} in steps of {step}",
@@ -257,8 +257,11 @@ impl Database {
     /// The entry of `kind` for `target`, as a model: an error names the
     /// covered range, or the nearest entries for an off-grid target.
     pub fn lookup(&self, kind: Kind, target: f64, field: &str) -> Result<ModelSpec, LookupError> {
-        let grid = Grid::of(kind);
         let err = |problem: String| LookupError { field: field.to_string(), problem };
+        if kind == Kind::Jitter {
+            return Err(err("jitter targets are solved in closed form, not stored (see `target_stage`)".into()));
+        }
+        let grid = Grid::of(kind);
         let Some(i) = grid.index_of(target) else {
             let lo = grid.target(grid.first_index);
             let hi = grid.target(grid.last_index);
@@ -300,6 +303,7 @@ impl Database {
             Kind::Outage => {
                 ModelSpec::Outage(self.outage.iter().find(|e| found(e.target)).ok_or_else(missing)?.params.clone())
             }
+            Kind::Jitter => unreachable!("refused above"),
         })
     }
 
@@ -469,7 +473,10 @@ pub const TARGET_KEYS: [&str; 3] = ["loss", "delay_ms_mean", "outage"];
 /// 250`, `outage = "10%"`) instead of a model: `None` if `table` has no
 /// target key; otherwise the database's model and a label for reports
 /// (`faultdb loss 30%`), or what is wrong. A `delay_ms_mean` stage may also
-/// give `order`.
+/// give `order`. A `delay_ms_mean` stage with `delay_ms_p99` is a jitter
+/// (docs/spec.md §3.7) of that mean and p99, solved in closed form
+/// ([`crate::model::jitter::fit_mean_p99`], nothing stored), with optional
+/// `dist` (default `normal`), `correlation` and `order`.
 pub fn target_stage(table: &toml::Table) -> Option<Result<(String, ModelSpec), LookupError>> {
     let given: Vec<&str> = TARGET_KEYS.iter().copied().filter(|k| table.contains_key(*k)).collect();
     let key = *given.first()?;
@@ -483,6 +490,9 @@ fn resolve_target(table: &toml::Table, key: &str, given: &[&str]) -> Result<(Str
             given[1],
             format!("a stage takes one target: `{}` or `{}`, not both (use two stages)", given[0], given[1]),
         ));
+    }
+    if key == "delay_ms_mean" && table.contains_key("delay_ms_p99") {
+        return jitter_target(table);
     }
     for k in table.keys() {
         if k != key && !(key == "delay_ms_mean" && k == "order") {
@@ -522,6 +532,61 @@ fn resolve_target(table: &toml::Table, key: &str, given: &[&str]) -> Result<(Str
         };
     }
     Ok((format!("faultdb {} {}", kind.name(), Grid::of(kind).show(target)), spec))
+}
+
+/// Keys a jitter target stage takes.
+const JITTER_TARGET_KEYS: [&str; 5] = ["delay_ms_mean", "delay_ms_p99", "dist", "correlation", "order"];
+
+/// `delay_ms_mean` with `delay_ms_p99`: the jitter of that mean and p99.
+fn jitter_target(table: &toml::Table) -> Result<(String, ModelSpec), LookupError> {
+    use crate::model::jitter::{fit_mean_p99, JitterDist};
+    let err = |field: &str, problem: String| LookupError { field: field.to_string(), problem };
+    if let Some(k) = table.keys().find(|k| !JITTER_TARGET_KEYS.contains(&k.as_str())) {
+        return Err(err(k, format!("does not apply to a jitter target stage: it takes only {}", JITTER_TARGET_KEYS.join(", "))));
+    }
+    let ms = |key: &str| match &table[key] {
+        toml::Value::Float(f) => Ok(*f),
+        toml::Value::Integer(i) => Ok(*i as f64),
+        other => Err(err(key, format!("expected a delay in ms, found {}", other.type_str()))),
+    };
+    let (mean_ms, p99_ms) = (ms("delay_ms_mean")?, ms("delay_ms_p99")?);
+    let dist = match table.get("dist").map(|v| v.as_str()) {
+        None => JitterDist::Normal,
+        Some(name) => JitterDist::ALL.into_iter().find(|d| Some(d.name()) == name).ok_or_else(|| {
+            let names: Vec<_> = JitterDist::ALL.iter().map(|d| d.name()).collect();
+            err("dist", format!("expected one of {}", names.join(", ")))
+        })?,
+    };
+    let from_param = |e: crate::model::ParamError| {
+        let field = match e.field.as_str() {
+            "mean_ms" => "delay_ms_mean",
+            "p99_ms" => "delay_ms_p99",
+            other => other,
+        };
+        err(field, e.problem)
+    };
+    let mut params = fit_mean_p99(dist, mean_ms, p99_ms).map_err(from_param)?;
+    if let Some(c) = table.get("correlation") {
+        let rho = match c {
+            toml::Value::Float(f) => Probability::new(*f),
+            toml::Value::Integer(i) => Probability::new(*i as f64),
+            toml::Value::String(s) => Probability::parse(s),
+            other => Err(format!("expected a correlation in [0, 1), found {}", other.type_str())),
+        }
+        .map_err(|p| err("correlation", p))?;
+        params = params.with_correlation(rho.get()).map_err(from_param)?;
+    }
+    if let Some(order) = table.get("order") {
+        params = params.with_order(match order.as_str() {
+            Some("reorder") => Order::Reorder,
+            Some("fifo") => Order::Fifo,
+            _ => return Err(err("order", format!("{order}: expected \"reorder\" or \"fifo\""))),
+        });
+    }
+    let spec = ModelSpec::Jitter(params);
+    spec.build().map_err(from_param)?;
+    let label = format!("fit jitter {} ms p99 {} ms {}", super::fmt_sig(mean_ms), super::fmt_sig(p99_ms), dist.name());
+    Ok((label, spec))
 }
 
 #[cfg(test)]

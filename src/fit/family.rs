@@ -152,6 +152,9 @@ impl Family {
             }
         };
         match kind {
+            Kind::Jitter => Err(FitError::BadRequest {
+                problem: "a jitter fit is solved in closed form, without a family to search (fit::jitter_searched)".into(),
+            }),
             Kind::Loss => {
                 let mut shape = GeLomaxShape {
                     transition: STUDY_TRANSITION,

@@ -18,6 +18,11 @@
 //!    from the search's ([`confirm`]), reporting each metric with its 95%
 //!    interval.
 //!
+//! `jitter` (a mean and a p99 of the delay, with a law and a correlation)
+//! needs no search: [`crate::model::jitter::fit_mean_p99`] solves it in
+//! closed form (bisection on an exact mean), so step 2 is that solution
+//! ([`jitter_searched`]); rounding and confirmation are as above.
+//!
 //! `fit` builds on [`crate::model`] alone (parameters, presets, stream
 //! seeds); `scenario` reads the database ([`db`]) for its target stages, so
 //! the dependency between the two goes one way.
@@ -40,6 +45,7 @@ pub mod run;
 pub use confirm::{Confirmation, Estimate};
 pub use family::{Family, Objective};
 
+use crate::model::jitter::{JitterDist, JitterParams};
 use crate::model::{DelayParams, GeLomaxParams, OutageParams};
 use crate::model::{stream_seed, ModelSpec};
 use serde::Serialize;
@@ -66,6 +72,9 @@ pub enum Kind {
     Delay,
     /// Communication loss, fitted as `outage`.
     Outage,
+    /// Jitter around a mean (docs/spec.md §3.7), fitted as `jitter` to a
+    /// mean and a p99 of the delay, in closed form.
+    Jitter,
 }
 
 impl Kind {
@@ -76,6 +85,7 @@ impl Kind {
             Kind::Loss => "loss",
             Kind::Delay => "delay",
             Kind::Outage => "outage",
+            Kind::Jitter => "jitter",
         }
     }
 
@@ -85,6 +95,7 @@ impl Kind {
             Kind::Loss => "ge_lomax",
             Kind::Delay => "delay",
             Kind::Outage => "outage",
+            Kind::Jitter => "jitter",
         }
     }
 
@@ -92,7 +103,7 @@ impl Kind {
     pub fn primary(self) -> Metric {
         match self {
             Kind::Loss | Kind::Outage => Metric::LossRate,
-            Kind::Delay => Metric::DelayMsMean,
+            Kind::Delay | Kind::Jitter => Metric::DelayMsMean,
         }
     }
 }
@@ -134,6 +145,7 @@ impl Metric {
             (Kind::Loss, false) => self == Metric::LossRunMean,
             (Kind::Delay, false) => matches!(self, Metric::DelayMsP99 | Metric::DelayMsStd),
             (Kind::Outage, false) => self == Metric::OutageMsMean,
+            (Kind::Jitter, false) => self == Metric::DelayMsP99,
         }
     }
 }
@@ -159,6 +171,11 @@ pub struct FitRequest {
     pub seed: u64,
     /// Frames per second of the simulated stream (only `outage` depends on it).
     pub frame_rate_hz: f64,
+    /// The law of a jitter fit (default normal).
+    pub jitter_dist: JitterDist,
+    /// The lag-1 correlation of a jitter fit, in [0, 1) (default 0); it
+    /// leaves the marginal law, so the mean and the p99, as they are.
+    pub jitter_correlation: f64,
 }
 
 impl FitRequest {
@@ -172,6 +189,8 @@ impl FitRequest {
             objective: Objective::Exact,
             seed,
             frame_rate_hz: DEFAULT_FRAME_RATE_HZ,
+            jitter_dist: JitterDist::Normal,
+            jitter_correlation: 0.0,
         }
     }
 
@@ -202,6 +221,7 @@ impl FitRequest {
                     (Kind::Loss, false) => "loss_run_mean",
                     (Kind::Delay, false) => "delay_ms_p99 or delay_ms_std",
                     (Kind::Outage, false) => "outage_ms_mean",
+                    (Kind::Jitter, false) => "delay_ms_p99",
                 };
                 return bad(format!(
                     "a {} fit cannot aim at {} here: expected {accepted}",
@@ -226,6 +246,15 @@ impl FitRequest {
                 };
                 return bad(format!("{} = {v}: expected {accepted}", g.metric.name()));
             }
+        }
+        if self.kind == Kind::Jitter && self.goals.len() != 2 {
+            return bad("a jitter fit takes a mean and a p99 of the delay (--p99-ms)".into());
+        }
+        if self.kind == Kind::Jitter && self.like.is_some() {
+            return bad("--like applies to loss, delay and outage fits, not jitter".into());
+        }
+        if !(0.0..1.0).contains(&self.jitter_correlation) {
+            return bad(format!("correlation {}: expected a number in [0, 1)", self.jitter_correlation));
         }
         if let Some(m) = self.delay_min_ms {
             if self.kind != Kind::Delay {
@@ -274,6 +303,7 @@ pub enum FittedParams {
     GeLomax(GeLomaxParams),
     Delay(DelayParams),
     Outage(OutageParams),
+    Jitter(JitterParams),
 }
 
 impl FittedParams {
@@ -282,7 +312,8 @@ impl FittedParams {
             ModelSpec::GeLomax(p) => FittedParams::GeLomax(p.clone()),
             ModelSpec::Delay(p) => FittedParams::Delay(p.clone()),
             ModelSpec::Outage(p) => FittedParams::Outage(p.clone()),
-            other => unreachable!("fits produce ge_lomax, delay or outage, not {:?}", other.kind()),
+            ModelSpec::Jitter(p) => FittedParams::Jitter(p.clone()),
+            other => unreachable!("fits produce ge_lomax, delay, outage or jitter, not {:?}", other.kind()),
         }
     }
 }
@@ -350,7 +381,8 @@ impl FitResult {
 /// What was found by the search, before confirmation.
 #[derive(Debug, Clone)]
 pub struct Searched {
-    pub family: Family,
+    /// What the family fixes and frees ([`Family::describe`]).
+    pub family: String,
     pub spec: ModelSpec,
     pub exact: Vec<f64>,
     pub stats: SearchStats,
@@ -446,7 +478,49 @@ pub fn conclude(req: &FitRequest, family: Family, result: &de::DeResult) -> Resu
     }
     let stats =
         SearchStats { generations: result.generations, evaluations: result.evaluations, objective: result.value };
-    Ok(Searched { family, spec, exact, stats })
+    Ok(Searched { family: family.describe(), spec, exact, stats })
+}
+
+/// A jitter fit's answer, in place of the search: the law's `sd_ms` and
+/// `mean_ms` solving the mean and p99 exactly
+/// ([`crate::model::jitter::fit_mean_p99`]), rounded to 7 significant
+/// digits, with the request's correlation; and the exact mean and p99 of
+/// the rounded parameters.
+pub fn jitter_searched(req: &FitRequest) -> Result<Searched, FitError> {
+    req.validate()?;
+    let (mean_ms, p99_ms) = (req.goals[0].value, req.goals[1].value);
+    let unreachable = |e: crate::model::ParamError| FitError::Unreachable {
+        kind: req.kind.name(),
+        family: jitter_family(req),
+        best: format!("no {} jitter: `{}` {}", req.jitter_dist.name(), e.field, e.problem),
+        hint: String::new(),
+    };
+    let solved = crate::model::jitter::fit_mean_p99(req.jitter_dist, mean_ms, p99_ms).map_err(unreachable)?;
+    let round = family::round_sig;
+    let params = JitterParams::new(round(solved.mean_ms.get()), round(solved.sd_ms), req.jitter_dist)
+        .and_then(|p| p.with_correlation(req.jitter_correlation))
+        .map_err(unreachable)?;
+    let model = crate::model::Jitter::new(&params).map_err(unreachable)?;
+    let exact = vec![model.mean_ms_exact(), model.quantile_ms(0.99)];
+    let off = req.goals.iter().zip(&exact).any(|(g, m)| ((m - g.value) / g.value).abs() > TOLERANCE_REL / 5.0);
+    if off {
+        return Err(FitError::Unreachable {
+            kind: req.kind.name(),
+            family: jitter_family(req),
+            best: format!("mean {} ms, p99 {} ms after rounding", fmt_sig(exact[0]), fmt_sig(exact[1])),
+            hint: String::new(),
+        });
+    }
+    let stats = SearchStats { generations: 0, evaluations: 0, objective: 0.0 };
+    Ok(Searched { family: jitter_family(req), spec: ModelSpec::Jitter(params), exact, stats })
+}
+
+fn jitter_family(req: &FitRequest) -> String {
+    format!(
+        "jitter: {} law, correlation {} (given); mean_ms and sd_ms solved in closed form for the mean and p99",
+        req.jitter_dist.name(),
+        req.jitter_correlation
+    )
 }
 
 fn unreachable_hint(req: &FitRequest) -> String {
@@ -489,7 +563,7 @@ pub fn assemble(req: &FitRequest, searched: Searched, confirmation: &Confirmatio
         windows: (req.kind == Kind::Outage).then(|| confirmation.windows()),
         frame_rate_hz: req.frame_rate_hz,
         objective: req.objective,
-        family: searched.family.describe(),
+        family: searched.family,
         search: searched.stats,
         tool_version: TOOL_VERSION,
         spec: searched.spec,

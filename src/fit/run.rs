@@ -9,7 +9,8 @@
 
 use super::confirm::Replica;
 use super::{
-    assemble, conclude, family_of, search, search_config, Confirmation, FitError, FitRequest, FitResult, Objective,
+    assemble, conclude, family_of, jitter_searched, search, search_config, Confirmation, FitError, FitRequest, FitResult, Kind,
+    Objective, Searched,
 };
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -25,6 +26,19 @@ pub enum Progress {
 
 /// Fits one request using up to `threads` threads.
 pub fn fit(req: &FitRequest, threads: usize, progress: &(dyn Fn(Progress) + Sync)) -> Result<FitResult, FitError> {
+    let searched = if req.kind == Kind::Jitter { jitter_searched(req)? } else { searched(req, threads, progress)? };
+    let metrics: Vec<_> = req.goals.iter().map(|g| g.metric).collect();
+    let mut confirmation = Confirmation::new(&searched.spec, &metrics, req.confirm_seed(), req.frame_interval_ns())?;
+    while !confirmation.done() {
+        run_round(&mut confirmation, threads);
+        let (batches, max_batches) = confirmation.batches_done();
+        progress(Progress::Confirm { batches, max_batches, frames: confirmation.frames() });
+    }
+    Ok(assemble(req, searched, &confirmation))
+}
+
+/// The search of a family, and its conclusion.
+fn searched(req: &FitRequest, threads: usize, progress: &(dyn Fn(Progress) + Sync)) -> Result<Searched, FitError> {
     let family = family_of(req)?;
     let crn_seed = req.crn_seed();
     let parallel = threads > 1 && req.objective == Objective::MonteCarlo;
@@ -45,15 +59,7 @@ pub fn fit(req: &FitRequest, threads: usize, progress: &(dyn Fn(Progress) + Sync
             progress(Progress::Search { generation, max_generations, objective })
         })
     };
-    let searched = conclude(req, family, &result)?;
-    let metrics: Vec<_> = req.goals.iter().map(|g| g.metric).collect();
-    let mut confirmation = Confirmation::new(&searched.spec, &metrics, req.confirm_seed(), req.frame_interval_ns())?;
-    while !confirmation.done() {
-        run_round(&mut confirmation, threads);
-        let (batches, max_batches) = confirmation.batches_done();
-        progress(Progress::Confirm { batches, max_batches, frames: confirmation.frames() });
-    }
-    Ok(assemble(req, searched, &confirmation))
+    conclude(req, family, &result)
 }
 
 /// Fits every request, each on one thread, `threads` at a time; results in

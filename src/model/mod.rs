@@ -30,7 +30,7 @@ mod spec;
 pub mod units;
 
 pub use bernoulli::{Bernoulli, BernoulliParams};
-pub use corrupt::{Corrupt, CorruptParams};
+pub use corrupt::{Corrupt, CorruptParams, Hits};
 pub use delay::{Delay, DelayDist, DelayParams, Order};
 pub use duplicate::{Duplicate, DuplicateParams};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
@@ -78,10 +78,11 @@ pub enum Verdict {
     /// The frame goes on without delay, and so does a copy of it, through
     /// the same later stages (`duplicate`, docs/spec.md §3.8).
     Duplicate,
-    /// The frame goes on without delay with bit `bit` flipped (byte
-    /// `bit / 8`, bit `bit % 8`): `corrupt`, docs/spec.md §3.9. The core
-    /// never touches bytes; the holder of the frame applies the flip.
-    Corrupt { bit: u16 },
+    /// The frame goes on without delay with the bits of the [`corrupt::Hits`]
+    /// flipped (bit `b` is bit `b % 8` of byte `b / 8`): `corrupt`,
+    /// docs/spec.md §3.9. The core never touches bytes; the holder of the
+    /// frame applies the flips.
+    Corrupt(corrupt::Hits),
 }
 
 impl Verdict {

@@ -62,10 +62,11 @@ pub const MAX_COPIES: usize = (1 << MAX_DUPLICATE_STAGES) - 1;
 pub const MAX_CORRUPT_STAGES: usize = 4;
 
 /// The bits to flip in one frame (indices into its bytes, bit `i % 8` of
-/// byte `i / 8`), one per `corrupt` stage that corrupted it, in stage order.
+/// byte `i / 8`), those of each `corrupt` stage that corrupted it (at most
+/// [`crate::model::corrupt::MAX_HITS`] each), in stage order.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Flips {
-    bits: [u16; MAX_CORRUPT_STAGES],
+    bits: [u16; MAX_CORRUPT_STAGES * crate::model::corrupt::MAX_HITS],
     len: u8,
 }
 
@@ -386,9 +387,11 @@ fn run_stages(
                 pending[*queued] = (si + 1, t, *flips);
                 *queued += 1;
             }
-            Verdict::Corrupt { bit } => {
+            Verdict::Corrupt(hits) => {
                 st.corrupted += 1;
-                flips.push(bit);
+                for &bit in hits.bits() {
+                    flips.push(bit);
+                }
             }
         }
     }

@@ -590,6 +590,10 @@ mod tests {
             ("[[stage]]\nmodel = \"reorder\"\np = 0.5\ngap = 0\ndelay_ms = 10\n", 4, "gap", "from 1", "reorder"),
             ("[[stage]]\nmodel = \"reorder\"\np = 0.5\n", 1, "delay_ms", "missing", "reorder"),
             ("[[stage]]\nmodel = \"corrupt\"\n\np = 1.2\n", 4, "p", "[0, 1]", "corrupt"),
+            ("[[stage]]\nmodel = \"corrupt\"\nber_per_byte = 1.5\n", 3, "ber_per_byte", "[0, 1]", "corrupt"),
+            ("[[stage]]\nmodel = \"corrupt\"\n\nber_per_byte = -0.01\n", 4, "ber_per_byte", "[0, 1]", "corrupt"),
+            ("[[stage]]\nmodel = \"corrupt\"\np = 0.1\nber_per_byte = \"0.1%\"\n", 4, "ber_per_byte", "not both", "corrupt"),
+            ("[[stage]]\nmodel = \"corrupt\"\n", 1, "p", "ber_per_byte", "corrupt"),
             ("[[stage]]\nmodel = \"duplicate\"\np = -1\n", 3, "p", "[0, 1]", "duplicate"),
         ];
         for (text, line, field, piece, model) in cases {

@@ -90,11 +90,21 @@ pub struct PeerEvent {
     pub connected: usize,
 }
 
-/// Frame accounting: `entered = delivered + dropped + held_at_end`.
+/// Frame accounting: `entered + duplicated = delivered + dropped +
+/// held_at_end` (`duplicated` is 0 without `duplicate` stages).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmulatorFrames {
     pub entered: u64,
     pub delivered: u64,
+    /// Copies made by `duplicate` stages; delivered copies are in `delivered`.
+    #[serde(default)]
+    pub duplicated: u64,
+    /// Frames and copies queued with bits flipped by `corrupt` stages, and
+    /// of those the ones delivered.
+    #[serde(default)]
+    pub corrupted: u64,
+    #[serde(default)]
+    pub corrupted_delivered: u64,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
     /// Frames the console said it sent (from its end marker), if it ended.
@@ -279,7 +289,8 @@ impl Forward {
                     }
                     Err((why, seq)) => self.link.reject(t_take, why, arrival(seq)),
                 };
-                if let Fate::Dropped(_) = entered.fate {
+                // A copy still queued shares what the sample holds.
+                if matches!(entered.fate, Fate::Dropped(_)) && entered.copies == 0 {
                     source.dropped(sample);
                 }
             }
@@ -494,6 +505,14 @@ pub fn run<S: FrameSource, K: FrameSink>(
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
+    if cfg.accept_raw {
+        // A raw sample's bytes live in the UDP source's arena, freed at its
+        // release: a copy would be sent from a freed slot, a flip would miss.
+        let unsupported = [crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
+        if let Some(kind) = crate::service::link::unsupported_stage(&scenario, &unsupported) {
+            anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
+        }
+    }
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
@@ -560,6 +579,9 @@ impl EmulatorReport {
             frames: EmulatorFrames {
                 entered: l.entered,
                 delivered: l.delivered,
+                duplicated: l.duplicated,
+                corrupted: l.corrupted,
+                corrupted_delivered: l.corrupted_delivered,
                 dropped: l.dropped,
                 held_at_end: l.held_at_end,
                 sent_by_console,

@@ -30,6 +30,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 impl Carried for FeedbackSample {
+    /// A copy of feedback is a second release of the same sample; a flip
+    /// needs an ITP frame's bytes, which feedback is not.
+    const UNSUPPORTED: &'static [crate::model::ModelKind] = &[crate::model::ModelKind::Corrupt];
+
     #[inline]
     fn ingress_ns(&self) -> u64 {
         self.ingress_ns
@@ -175,10 +179,11 @@ impl FeedbackPath {
             sent_by_robot: self.sent_by_robot,
             entered: l.entered,
             delivered: l.delivered,
+            duplicated: l.duplicated,
             delivered_unsubscribed: unsubscribed,
             dropped: l.dropped,
             held_at_end: l.held_at_end,
-            balanced: l.entered == l.delivered + dropped_total + l.held_at_end
+            balanced: l.entered + l.duplicated == l.delivered + dropped_total + l.held_at_end
                 && self.sent_by_robot.map_or(true, |n| n == l.entered),
             loss_rate: l.measures.loss_rate,
             loss_rate_ci95: l.measures.loss_rate_ci95,
@@ -192,8 +197,8 @@ impl FeedbackPath {
     }
 }
 
-/// What the feedback path did: `entered = delivered + dropped +
-/// held_at_end`; `balanced` also asks that every feedback sample the robot
+/// What the feedback path did: `entered + duplicated = delivered + dropped
+/// + held_at_end`; `balanced` also asks that every feedback sample the robot
 /// said it sent entered.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeedbackReport {
@@ -204,8 +209,12 @@ pub struct FeedbackReport {
     /// Feedback samples the robot said it sent (from its end marker).
     pub sent_by_robot: Option<u64>,
     pub entered: u64,
-    /// Released towards the console (including those whose send failed).
+    /// Released towards the console (including those whose send failed);
+    /// copies included.
     pub delivered: u64,
+    /// Copies made by `duplicate` stages of the return scenario.
+    #[serde(default)]
+    pub duplicated: u64,
     /// Of those, released while no console was subscribed.
     pub delivered_unsubscribed: u64,
     pub dropped: BTreeMap<String, u64>,

@@ -30,14 +30,38 @@ use std::path::{Path, PathBuf};
 
 /// What a link holds in its queue: anything that remembers when it entered.
 pub trait Carried: Copy + Default {
+    /// The stages a link of these items cannot apply. By default the two
+    /// that need the item to be its own bytes: a copy (`duplicate`) is a
+    /// second release of the same item, which an item that owns something
+    /// released with it (an arena slot) cannot be; a flip (`corrupt`) needs
+    /// the frame's bytes in the item.
+    const UNSUPPORTED: &'static [ModelKind] = &[ModelKind::Duplicate, ModelKind::Corrupt];
+
     /// The time the item was taken in, ns.
     fn ingress_ns(&self) -> u64;
+
+    /// Flips the bits `bits` of the item's frame (a `corrupt` stage's,
+    /// docs/spec.md §3.9). Called only where `corrupt` is not in
+    /// [`Carried::UNSUPPORTED`].
+    #[inline]
+    fn flip(&mut self, _bits: &[u16]) {}
 }
 
 impl Carried for FrameSample {
+    /// Copies and flips both apply: the sample holds the whole frame. (Raw
+    /// samples, whose bytes live in the UDP bridge's arena, are refused by
+    /// the emulator before the link is built.)
+    const UNSUPPORTED: &'static [ModelKind] = &[];
+
     #[inline]
     fn ingress_ns(&self) -> u64 {
         self.ingress_ns
+    }
+
+    /// Flips bits of the 124 wire bytes, in place (no allocation).
+    #[inline]
+    fn flip(&mut self, bits: &[u16]) {
+        crate::frame::flip_bits(&mut self.wire[..], bits);
     }
 }
 
@@ -95,13 +119,9 @@ pub struct Link<T> {
     hlogs: Option<[PathBuf; 2]>,
 }
 
-/// Stages whose verdicts the real-time link does not apply yet: copies
-/// (`duplicate`) and bit flips (`corrupt`).
-pub const REAL_TIME_UNSUPPORTED: [ModelKind; 2] = [ModelKind::Duplicate, ModelKind::Corrupt];
-
-/// The first stage of `scenario` the real-time link does not apply.
-fn unsupported_stage(scenario: &Scenario) -> Option<ModelKind> {
-    scenario.phases().iter().flat_map(|p| p.stages()).map(|s| s.kind()).find(|k| REAL_TIME_UNSUPPORTED.contains(k))
+/// The first stage of `scenario` among `unsupported`.
+pub fn unsupported_stage(scenario: &Scenario, unsupported: &[ModelKind]) -> Option<ModelKind> {
+    scenario.phases().iter().flat_map(|p| p.stages()).map(|s| s.kind()).find(|k| unsupported.contains(k))
 }
 
 impl<T: Carried> Link<T> {
@@ -111,18 +131,20 @@ impl<T: Carried> Link<T> {
     /// the link before pinning the loop's core, then
     /// [`keep_trace_off_core`](Self::keep_trace_off_core).
     /// A capacity out of range is an error that names the field and the
-    /// memory it would need; so is a stage the real-time link does not
-    /// apply yet ([`REAL_TIME_UNSUPPORTED`]).
+    /// memory it would need; so is a stage this link's items cannot carry
+    /// ([`Carried::UNSUPPORTED`]).
     pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> anyhow::Result<Link<T>> {
-        if let Some(kind) = unsupported_stage(&scenario) {
+        if let Some(kind) = unsupported_stage(&scenario, T::UNSUPPORTED) {
             anyhow::bail!(
-                "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but not yet applied by the real-time emulator (a copy would be a second release of one ingress index, a corruption needs the frame's bytes); remove it from the run's scenario",
+                "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but not applied on this path (a copy is a second release of the same item, a corruption needs the frame's bytes in the item); remove it from this path's scenario",
                 scenario.name(),
                 kind.name()
             );
         }
+        let rows = expected_frames.min(50_000_000) as usize;
+        let copies = if unsupported_stage(&scenario, &[ModelKind::Duplicate]).is_some() { rows } else { 0 };
         let inj = Injector::try_new(scenario, queue_capacity)?;
-        let (trace, writer) = trace::start(expected_frames.min(50_000_000) as usize);
+        let (trace, writer) = trace::start(rows, copies);
         Ok(Link {
             inj,
             trace,
@@ -162,10 +184,28 @@ impl<T: Carried> Link<T> {
 
     /// An item taken in at `now`: its fate is decided and, if it survives,
     /// it is queued. The caller frees whatever a dropped item holds.
+    /// Bits a `corrupt` stage flips are applied to the item (and to each
+    /// copy its own) before it is queued; each copy a `duplicate` stage
+    /// makes is queued under the same ingress index and released as an
+    /// item of its own.
     #[inline]
     pub fn ingress(&mut self, now: u64, item: T, arrival: Arrival) -> Entered {
-        let entered = self.inj.ingress(now, item);
-        self.record(now, entered, arrival);
+        let entered = self.inj.ingress_with(now, item, |it, flips| it.flip(flips.bits()));
+        let copies = self.inj.scenario().copies();
+        // Copies a later stage or a full queue dropped.
+        let copies_dropped = (copies.made() - u64::from(entered.copies)) as u8;
+        self.record(now, entered, arrival, copies_dropped);
+        for k in 0..usize::from(entered.copies) {
+            // The copies that fit the queue are the first ones made: once
+            // it is full, it stays full for the rest of this frame.
+            let copies = self.inj.scenario().copies();
+            self.trace.push(TraceEvent::Copy {
+                ingress_index: entered.ingress_index,
+                copy: k as u8 + 1,
+                release_sched_ns: now.saturating_add(copies.delays_ns()[k]),
+                corrupted: !copies.flips()[k].is_empty(),
+            });
+        }
         entered
     }
 
@@ -174,12 +214,12 @@ impl<T: Carried> Link<T> {
     #[inline]
     pub fn reject(&mut self, now: u64, why: Invalid, arrival: Arrival) -> Entered {
         let entered = self.inj.reject(now, why);
-        self.record(now, entered, arrival);
+        self.record(now, entered, arrival, 0);
         entered
     }
 
     #[inline]
-    fn record(&mut self, now: u64, entered: Entered, a: Arrival) {
+    fn record(&mut self, now: u64, entered: Entered, a: Arrival, copies_dropped: u8) {
         let decision_ns = now_ns().saturating_sub(now);
         self.decision.record(decision_ns);
         self.ingress_wait.record(now.saturating_sub(a.send_ns));
@@ -197,6 +237,9 @@ impl<T: Carried> Link<T> {
             dropped,
             release_sched_ns,
             decision_ns,
+            copies: entered.copies,
+            copies_dropped,
+            corrupted: entered.corrupted,
         });
     }
 
@@ -214,7 +257,7 @@ impl<T: Carried> Link<T> {
             };
             self.lateness.record(release_ns.saturating_sub(r.release_ns));
             self.injected.record(r.release_ns - r.item.ingress_ns());
-            self.trace.push(TraceEvent::Release { ingress_index: r.ingress_index, release_ns });
+            self.trace.push(TraceEvent::Release { ingress_index: r.ingress_index, release_sched_ns: r.release_ns, release_ns });
         }
     }
 
@@ -252,7 +295,7 @@ impl<T: Carried> Link<T> {
     pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkReport> {
         let counts = self.inj.counts();
         assert!(counts.balanced(), "frame accounting broken: {counts:?}");
-        self.writer.finish(trace_path)?;
+        let written = self.writer.finish(trace_path)?;
         let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
         let interval_ns = if counts.entered > 1 { duration_ns as f64 / counts.entered as f64 } else { 0.0 };
         let (stages, _) = stage_reports(self.inj.scenario(), interval_ns);
@@ -262,6 +305,9 @@ impl<T: Carried> Link<T> {
             queue_capacity: self.inj.queue_capacity(),
             entered: counts.entered,
             delivered: counts.released,
+            duplicated: counts.duplicated,
+            corrupted: counts.corrupted,
+            corrupted_delivered: written.corrupted_released,
             dropped: self.inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
             held_at_end: counts.held,
             measures: LinkMeasures {
@@ -299,15 +345,24 @@ pub struct LinkMeasures {
     pub release_lateness_ns: Summary,
 }
 
-/// What a link did: `entered = delivered + dropped + held_at_end`.
+/// What a link did: `entered + duplicated = delivered + dropped +
+/// held_at_end` (without `duplicate` stages, `duplicated` is 0).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinkReport {
     pub scenario: String,
     pub queue_order: String,
     pub queue_capacity: usize,
     pub entered: u64,
-    /// Released (including those whose send failed).
+    /// Released (including those whose send failed); copies included.
     pub delivered: u64,
+    /// Copies made by `duplicate` stages (each then delivered, dropped or
+    /// held like a frame).
+    pub duplicated: u64,
+    /// Frames and copies queued with bits flipped by `corrupt` stages.
+    pub corrupted: u64,
+    /// Of those, the ones released (counted by the trace writer: exact
+    /// unless `trace_overflowed` is not 0).
+    pub corrupted_delivered: u64,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
     pub measures: LinkMeasures,
@@ -324,14 +379,72 @@ mod tests {
     use crate::sample::FrameSample;
 
     #[test]
-    fn stages_the_real_time_link_does_not_apply_are_refused_by_name() {
-        for (model, extra) in [("duplicate", "p = 0.1"), ("corrupt", "p = 0.1")] {
-            let text = format!("name = \"x\"\n[[stage]]\nmodel = \"{model}\"\n{extra}\n");
+    fn items_that_cannot_carry_copies_or_flips_refuse_those_stages_by_name() {
+        #[derive(Clone, Copy, Default)]
+        struct Slot(u64);
+        impl Carried for Slot {
+            fn ingress_ns(&self) -> u64 {
+                self.0
+            }
+        }
+        for model in ["duplicate", "corrupt"] {
+            let text = format!("name = \"x\"\n[[stage]]\nmodel = \"{model}\"\np = 0.1\n");
             let spec = crate::scenario::parse_str(&text, "x.toml", "x").unwrap();
-            let err = Link::<FrameSample>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).err().expect("refused");
+            let err = Link::<Slot>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).err().expect("refused");
             assert!(err.to_string().contains(&format!("`{model}` stage")), "{err}");
+            // A sample holds its frame's bytes: both apply.
+            assert!(Link::<FrameSample>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).is_ok());
         }
         let spec = crate::scenario::parse_str("name = \"ok\"\n[[stage]]\npreset = \"PLM-2\"\n", "ok.toml", "ok").unwrap();
-        assert!(Link::<FrameSample>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).is_ok());
+        assert!(Link::<Slot>::new(Scenario::new(&spec, 1).unwrap(), 16, 16).is_ok());
+    }
+
+    /// Releases into a vector.
+    struct Collect(Vec<FrameSample>);
+    impl Release<FrameSample> for Collect {
+        fn release(&mut self, item: &FrameSample, _scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
+            self.0.push(*item);
+            Ok(now_ns())
+        }
+    }
+
+    #[test]
+    fn copies_are_released_as_frames_and_flips_reach_the_bytes() {
+        let text = "name = \"dc\"\n[[stage]]\nmodel = \"duplicate\"\np = 0.3\n[[stage]]\nmodel = \"corrupt\"\np = 0.4\n[[stage]]\nmodel = \"bernoulli\"\np = 0.1\n";
+        let spec = crate::scenario::parse_str(text, "dc.toml", "dc").unwrap();
+        let mut link = Link::<FrameSample>::new(Scenario::new(&spec, 7).unwrap(), 1 << 12, 4000).unwrap();
+        let mut clean = FrameSample::ZERO;
+        clean.wire = crate::check::synthetic_frame();
+        clean.len = crate::sample::ITP_FRAME_LEN as u32;
+        let mut out = Collect(Vec::new());
+        let n = 3000u64;
+        for i in 0..n {
+            let mut s = clean;
+            s.ingress_index = i;
+            link.ingress(i, s, Arrival { sequence: None, console_index: i, send_ns: i });
+            link.release_due(u64::MAX, &mut out);
+        }
+        let dir = std::env::temp_dir().join(format!("netfi-link-dc-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("trace.csv");
+        let r = link.finish(&path, n).unwrap();
+        let dropped: u64 = r.dropped.values().sum();
+        assert_eq!(r.entered + r.duplicated, r.delivered + dropped + r.held_at_end);
+        assert_eq!(out.0.len() as u64, r.delivered);
+        assert!(r.delivered > r.entered - dropped, "copies add releases: {r:?}");
+        let flipped = out.0.iter().filter(|s| s.wire != clean.wire).count() as u64;
+        assert_eq!(flipped, r.corrupted_delivered);
+        assert_eq!(r.corrupted, r.corrupted_delivered);
+        // The trace: one row per frame and per copy taken, fates exact.
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+        let originals = rows.iter().filter(|c| c[13] == "0").count() as u64;
+        let copy_rows = rows.len() as u64 - originals;
+        let copies_dropped: u64 = rows.iter().filter_map(|c| c[14].parse::<u64>().ok()).sum();
+        assert_eq!(originals, r.entered);
+        assert_eq!(copy_rows + copies_dropped, r.duplicated);
+        assert_eq!(rows.iter().filter(|c| c[5] == "delivered").count() as u64, r.delivered);
+        assert_eq!(rows.iter().filter(|c| c[5] == "delivered" && c[15] == "1").count() as u64, r.corrupted_delivered);
     }
 }

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 /// Every frame, from the console's send to the simulator's receive.
 ///
 /// `sent = entered + lost_before_emulator`,
-/// `entered = delivered + dropped + held_at_end`,
+/// `entered + duplicated = delivered + dropped + held_at_end`,
 /// `delivered = received + lost_after_emulator`; `balanced` is true when
 /// nothing was lost outside the scenario (no frame vanished between the
 /// processes) and the emulator's own account closes.
@@ -28,11 +28,41 @@ pub struct FrameAccount {
     pub entered: Option<u64>,
     pub delivered: Option<u64>,
     pub received: Option<u64>,
+    /// Copies made by `duplicate` stages (docs/spec.md §3.8): each is then
+    /// delivered, dropped or held like a frame, so `delivered` may exceed
+    /// `entered` by at most these.
+    #[serde(default)]
+    pub duplicated: Option<u64>,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: Option<u64>,
     pub lost_before_emulator: Option<u64>,
     pub lost_after_emulator: Option<u64>,
     pub balanced: bool,
+    /// What `corrupt` stages did and what the robot's checksum caught;
+    /// absent when nothing was corrupted.
+    #[serde(default)]
+    pub corruption: Option<Corruption>,
+}
+
+/// Frames the emulator corrupted (docs/spec.md §3.9) against what the
+/// simulator's ITP checksum check caught.
+///
+/// `delivered = caught + passed`. The checksum does not cover `pactyp`,
+/// `version`, the rotations or `grasp`: a flip there passes the check and
+/// the robot applies it (a flip in the grasp byte changes the grip). Caught
+/// are the frames the simulator found with a bad checksum, less those that
+/// already had one when they entered the emulator (`bad_checksum_passed`);
+/// exact when no frame was lost after the emulator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Corruption {
+    /// Frames and copies queued with bits flipped.
+    pub corrupted: u64,
+    /// Of those, the ones released to the robot.
+    pub delivered: u64,
+    /// Delivered corrupted frames the robot's checksum check rejected.
+    pub caught: Option<u64>,
+    /// Delivered corrupted frames whose checksum still held.
+    pub passed: Option<u64>,
 }
 
 /// What the injector itself adds, in ns.
@@ -107,7 +137,7 @@ pub struct DelayCheck {
 /// The feedback loop robot → emulator → console: what the return scenario
 /// did, every feedback sample accounted for, and the round trip.
 ///
-/// `sent_by_robot = entered`, `entered = delivered + dropped +
+/// `sent_by_robot = entered`, `entered + duplicated = delivered + dropped +
 /// held_at_end`, `delivered = received_by_console`: `balanced`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeedbackSection {
@@ -116,6 +146,9 @@ pub struct FeedbackSection {
     pub sent_by_robot: Option<u64>,
     pub entered: u64,
     pub delivered: u64,
+    /// Copies made by `duplicate` stages of the return scenario.
+    #[serde(default)]
+    pub duplicated: u64,
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
     pub received_by_console: Option<u64>,
@@ -147,7 +180,7 @@ impl FeedbackSection {
         let dropped: u64 = e.dropped.values().sum();
         let sent_by_robot = e.sent_by_robot.or(robot_sent);
         let balanced = sent_by_robot == Some(e.entered)
-            && e.entered == e.delivered + dropped + e.held_at_end
+            && e.entered + e.duplicated == e.delivered + dropped + e.held_at_end
             && received_by_console == Some(e.delivered);
         FeedbackSection {
             return_scenario: e.scenario.clone(),
@@ -155,6 +188,7 @@ impl FeedbackSection {
             sent_by_robot,
             entered: e.entered,
             delivered: e.delivered,
+            duplicated: e.duplicated,
             dropped: e.dropped.clone(),
             held_at_end: e.held_at_end,
             received_by_console,
@@ -183,6 +217,9 @@ impl FeedbackSection {
             self.held_at_end,
             if dropped.is_empty() { "none".into() } else { dropped.join(", ") }
         );
+        if self.duplicated > 0 {
+            s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
+        }
         s += &format!(
             "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
             if self.balanced { "balanced" } else { "NOT balanced" },
@@ -292,16 +329,22 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProces
     let entered = emulator.map(|e| e.frames.entered);
     let delivered = emulator.map(|e| e.frames.delivered);
     let received = simulator.map(|s| s.received);
+    let duplicated = emulator.map(|e| e.frames.duplicated);
     let held_at_end = emulator.map(|e| e.frames.held_at_end);
     let dropped = emulator.map(|e| e.frames.dropped.clone()).unwrap_or_default();
     let lost_before_emulator = sent.zip(entered).map(|(s, e)| s.saturating_sub(e));
     let lost_after_emulator = delivered.zip(received).map(|(d, r)| d.saturating_sub(r));
     let emulator_closes = match (entered, delivered, held_at_end) {
-        (Some(e), Some(d), Some(h)) => e == d + dropped.values().sum::<u64>() + h,
+        (Some(e), Some(d), Some(h)) => e + duplicated.unwrap_or(0) == d + dropped.values().sum::<u64>() + h,
         _ => false,
     };
     let balanced = emulator_closes && lost_before_emulator == Some(0) && lost_after_emulator == Some(0) && sent == entered && delivered == received;
-    FrameAccount { sent, entered, delivered, received, dropped, held_at_end, lost_before_emulator, lost_after_emulator, balanced }
+    let corruption = emulator.filter(|e| e.frames.corrupted > 0).map(|e| {
+        let f = &e.frames;
+        let caught = simulator.map(|s| s.bad_checksum.saturating_sub(f.bad_checksum_passed).min(f.corrupted_delivered));
+        Corruption { corrupted: f.corrupted, delivered: f.corrupted_delivered, caught, passed: caught.map(|c| f.corrupted_delivered - c) }
+    });
+    FrameAccount { sent, entered, delivered, received, duplicated, dropped, held_at_end, lost_before_emulator, lost_after_emulator, balanced, corruption }
 }
 
 /// `a − b` for the main percentiles.
@@ -342,12 +385,24 @@ impl RunReport {
             opt(f.received),
             opt(f.held_at_end)
         );
+        if let Some(n) = f.duplicated.filter(|n| *n > 0) {
+            s += &format!("duplicated {n} copies made (each delivered, dropped or held like a frame: delivered may exceed entered by these)\n");
+        }
         let dropped: Vec<String> = f.dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
         s += &format!("dropped    {}\n", if dropped.is_empty() { "none".into() } else { dropped.join(", ") });
+        if let Some(c) = &f.corruption {
+            s += &format!(
+                "corrupted  {} queued with flipped bits, {} delivered: {} caught by the robot's checksum, {} passed (the checksum does not cover pactyp, version, the rotations or the grasp byte: a flip there is applied)\n",
+                c.corrupted,
+                c.delivered,
+                opt(c.caught),
+                opt(c.passed)
+            );
+        }
         s += &format!(
             "accounting {}\n",
             if f.balanced {
-                "balanced: every frame that entered was delivered, dropped by the scenario, or held at the end".to_string()
+                "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end".to_string()
             } else {
                 format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator))
             }
@@ -547,6 +602,60 @@ struct Delays {
     seen: Vec<u64>,
 }
 
+/// The simulator's receive times (`received.csv`), by ingress index: the
+/// first receipt of each index, and the further ones of indices received
+/// more than once (copies, docs/spec.md §3.8), each with the release time
+/// it was scheduled for, which tells a copy's receipt from its original's.
+#[derive(Debug, Default)]
+struct Receipts {
+    /// `(recv_ns, release_sched_ns)` by ingress index; `recv_ns` 0: none.
+    first: Vec<(u64, u64)>,
+    more: BTreeMap<u64, Vec<(u64, u64)>>,
+}
+
+impl Receipts {
+    fn read(path: &Path) -> Result<Receipts> {
+        let mut r = Receipts::default();
+        let Ok(f) = std::fs::File::open(path) else { return Ok(r) };
+        for line in std::io::BufReader::new(f).lines().skip(1) {
+            let line = line.with_context(|| format!("reading {}", path.display()))?;
+            let mut it = line.split(',').map(str::parse::<u64>);
+            let (Some(Ok(i)), Some(Ok(t))) = (it.next(), it.next()) else { continue };
+            let sched = it.next().and_then(Result::ok).unwrap_or(0);
+            let i = i as usize;
+            if r.first.len() <= i {
+                r.first.resize(i + 1, (0, 0));
+            }
+            if r.first[i].0 == 0 {
+                r.first[i] = (t, sched);
+            } else {
+                r.more.entry(i as u64).or_default().push((t, sched));
+            }
+        }
+        Ok(r)
+    }
+
+    /// Takes the receipt of the row of `index` scheduled for `sched`: one
+    /// scheduled then (a `received.csv` without that column matches any),
+    /// or else any left for that index.
+    fn take(&mut self, index: usize, sched: Option<u64>) -> Option<u64> {
+        let matches = |r: &(u64, u64)| r.1 == 0 || sched.is_none_or(|s| s == r.1);
+        let first = *self.first.get(index).filter(|f| f.0 != 0)?;
+        let more = self.more.get_mut(&(index as u64));
+        if !matches(&first) {
+            if let Some(m) = more {
+                if let Some(k) = m.iter().position(matches) {
+                    return Some(m.remove(k).0);
+                }
+            }
+        }
+        // The first receipt goes; the next one, if any, takes its place.
+        let next = self.more.get_mut(&(index as u64)).and_then(|m| (!m.is_empty()).then(|| m.remove(0)));
+        self.first[index] = next.unwrap_or((0, 0));
+        Some(first.0)
+    }
+}
+
 /// Joins `trace_emulator.csv` with `received.csv` into `trace.csv`, and
 /// collects the delays of the frames that made it through.
 fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
@@ -554,19 +663,7 @@ fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
     if !emu.exists() {
         return Ok(None);
     }
-    let mut recv: Vec<u64> = Vec::new();
-    if let Ok(f) = std::fs::File::open(out.join("received.csv")) {
-        for line in std::io::BufReader::new(f).lines().skip(1) {
-            let line = line?;
-            let mut it = line.split(',');
-            if let (Some(Ok(i)), Some(Ok(t))) = (it.next().map(str::parse::<usize>), it.next().map(str::parse::<u64>)) {
-                if recv.len() <= i {
-                    recv.resize(i + 1, 0);
-                }
-                recv[i] = t;
-            }
-        }
-    }
+    let mut recv = Receipts::read(&out.join("received.csv"))?;
     let path = out.join("trace.csv");
     let named = |p: &Path| format!("writing {}", p.display());
     let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&path).with_context(|| named(&path))?);
@@ -577,12 +674,18 @@ fn merge_trace(out: &Path, delays: &mut Delays) -> Result<Option<PathBuf>> {
             writeln!(w, "{line}").with_context(|| named(&path))?;
             continue;
         }
-        let cols: Vec<&str> = line.split(',').collect();
+        let mut cols: Vec<&str> = line.split(',').collect();
         let index: usize = cols[0].parse().unwrap_or(usize::MAX);
-        match recv.get(index).filter(|t| **t != 0) {
+        // Columns: 3 send_ns, 5 fate, 9 delay_ns, 10 release_sched_ns (see `trace`).
+        let sched = cols.get(10).and_then(|x| x.parse::<u64>().ok());
+        let received = if cols.get(5) == Some(&"delivered") { recv.take(index, sched) } else { None };
+        match received {
             Some(t) => {
-                writeln!(w, "{line}{t}").with_context(|| named(&path))?;
-                // Columns: 3 send_ns, 9 delay_ns (see `trace`).
+                let t_text = t.to_string();
+                if let Some(c) = cols.get_mut(crate::trace::RECV_COLUMN) {
+                    *c = &t_text;
+                }
+                writeln!(w, "{}", cols.join(",")).with_context(|| named(&path))?;
                 if let (Some(Ok(send)), Some(Ok(delay))) = (cols.get(3).map(|x| x.parse::<u64>()), cols.get(9).map(|x| x.parse::<u64>())) {
                     delays.injected.push(delay);
                     delays.seen.push(t.saturating_sub(send));

@@ -35,6 +35,9 @@ pub struct SimulatorReport {
     /// Frames received on the direct (baseline) port.
     pub received_direct: u64,
     pub wrong_size: u64,
+    /// Frames whose ITP checksum did not hold: what the check catches (of
+    /// the emulator's corruption, docs/spec.md §3.9, a flip in a byte the
+    /// checksum covers; a flip in `grasp` or the rotations passes).
     pub bad_checksum: u64,
     /// Frames the emulator said it released (from its end marker).
     pub released_by_emulator: Option<u64>,
@@ -98,8 +101,10 @@ fn robot_frame(s: &FrameSample) -> Result<(ItpFrame, bool), ()> {
     Ok((ItpFrame::parse_unverified(&view), view.verify_checksum()))
 }
 
-/// `received.csv`, written as frames arrive: the ingress index and receive
-/// time of each frame that came through the emulator. Memory stays flat
+/// `received.csv`, written as frames arrive: the ingress index, receive
+/// time and scheduled release time of each frame that came through the
+/// emulator (a copy, docs/spec.md §3.8, has its original's ingress index;
+/// its scheduled release tells the two apart). Memory stays flat
 /// however long the run; the first failed write is kept and reported, with
 /// the file's name, when the run ends (a full disk is an error, not a cut
 /// file).
@@ -113,16 +118,16 @@ impl ReceivedLog {
     fn create(path: std::path::PathBuf) -> Result<ReceivedLog> {
         let open = || -> std::io::Result<std::io::BufWriter<std::fs::File>> {
             let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&path)?);
-            writeln!(w, "ingress_index,recv_ns")?;
+            writeln!(w, "ingress_index,recv_ns,release_sched_ns")?;
             Ok(w)
         };
         let w = open().with_context(|| format!("writing {}", path.display()))?;
         Ok(ReceivedLog { path, w, error: None })
     }
 
-    fn push(&mut self, ingress_index: u64, recv_ns: u64) {
+    fn push(&mut self, ingress_index: u64, recv_ns: u64, release_sched_ns: u64) {
         if self.error.is_none() {
-            if let Err(e) = writeln!(self.w, "{ingress_index},{recv_ns}") {
+            if let Err(e) = writeln!(self.w, "{ingress_index},{recv_ns},{release_sched_ns}") {
                 self.error = Some(e);
             }
         }
@@ -196,7 +201,7 @@ impl Robot {
             return;
         }
         self.received += 1;
-        self.received_log.push(s.ingress_index, t);
+        self.received_log.push(s.ingress_index, t, s.release_sched_ns);
         self.e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
         self.seen.record(t.saturating_sub(s.send_ns));
         let sequence = match robot_frame(s) {

@@ -52,6 +52,27 @@ fn fit_prints_its_seed_and_a_stage() {
 }
 
 #[test]
+fn fit_jitter_takes_mean_p99_law_and_correlation() {
+    let out = netfi(&["fit", "jitter", "100ms", "--p99-ms", "180", "--dist", "paretonormal", "--correlation", "25%", "--seed", "3", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["model"], "jitter");
+    assert_eq!(v["params"]["dist"], "paretonormal");
+    assert_eq!(v["params"]["correlation"], 0.25);
+    assert_eq!(v["within_tolerance"], true);
+    assert_eq!(v["target"]["delay_ms_p99"], 180.0);
+    for (args, says) in [
+        (&["fit", "jitter", "100", "--p99-ms", "180", "--dist", "cauchy"][..], "expected one of normal, pareto, paretonormal"),
+        (&["fit", "jitter", "100", "--p99-ms", "80"][..], "above the mean"),
+        (&["fit", "jitter", "100", "--p99-ms", "180", "--correlation", "1"][..], "[0, 1)"),
+    ] {
+        let bad = netfi(args);
+        assert!(!bad.status.success(), "{args:?}");
+        assert!(String::from_utf8_lossy(&bad.stderr).contains(says), "{args:?}: {}", String::from_utf8_lossy(&bad.stderr));
+    }
+}
+
+#[test]
 fn export_maps_loss_and_delay_and_says_what_is_approximated() {
     let out = netfi(&["export", "netem", "config/scenarios/plm2_dlm2.toml", "--dev", "veth0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

@@ -13,4 +13,5 @@
 mod cli;
 mod database;
 mod fits;
+mod jitter;
 mod scenarios;

@@ -11,6 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+mod faults;
 mod integrity;
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());

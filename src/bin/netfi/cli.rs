@@ -169,6 +169,22 @@ pub enum FitCmd {
         #[command(flatten)]
         common: FitCommon,
     },
+    /// Jitter (docs/spec.md §3.7): a delay law around a mean, fitted to a mean and a p99 in closed form.
+    Jitter {
+        /// Target mean delay in ms: 100 or 100ms.
+        target: String,
+        /// The 99th percentile of the delay, in ms (above the mean).
+        #[arg(long)]
+        p99_ms: f64,
+        /// The law: normal, pareto or paretonormal.
+        #[arg(long, default_value = "normal")]
+        dist: String,
+        /// Lag-1 correlation in [0, 1): 0.25 or 25% (the mean and p99 do not depend on it).
+        #[arg(long, default_value = "0")]
+        correlation: String,
+        #[command(flatten)]
+        common: FitCommon,
+    },
     /// Build the fault parameter database (every target of its grid), or verify one.
     Db(FitDbArgs),
 }

@@ -38,6 +38,12 @@
 //!   flips a bit anywhere in the packet it holds, which over UDP includes
 //!   the IP and UDP headers (a flip there is caught by the UDP checksum or
 //!   drops the packet in the stack), not only the 124 ITP bytes.
+//!   With `ber_per_byte = q` (each byte in error independently) netem,
+//!   which corrupts per packet, gets `corrupt P` with `P = 1 − (1 − q)^124`,
+//!   the probability that a frame has at least one byte in error: the
+//!   fraction of frames corrupted is the same, but netem flips one bit in
+//!   each where netfi flips one in each byte in error (up to 4), and netem's
+//!   headers are exposed too.
 //! - `reorder` → `delay D reorder P gap N` (exact: netem's rule; it takes
 //!   netem's one delay).
 //! - `slot` → `slot MIN MAX [packets N] [bytes B]`: netem counts a packet's
@@ -177,12 +183,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 }
                 format!("duplicate {}", pct(p.p.get()))
             }
-            ModelSpec::Corrupt(p) => {
-                notes.push(format!(
-                    "{label}: approximated: netem flips one random bit of the whole packet, headers included (over UDP a header flip is caught by the UDP checksum or the stack), netfi one of the 124 ITP bytes"
-                ));
-                format!("corrupt {}", pct(p.p.get()))
-            }
+            ModelSpec::Corrupt(p) => corrupt_line(p, &label, &mut notes),
             ModelSpec::Reorder(p) => {
                 notes.push(format!("{label}: exact (delay … reorder … gap …)"));
                 longest_delay_ms = longest_delay_ms.max(p.delay_ms.get());
@@ -545,6 +546,28 @@ fn fnv(s: &str) -> u64 {
     h
 }
 
+/// The netem words for a `corrupt` stage, and its note.
+fn corrupt_line(p: &netfi::model::CorruptParams, label: &str, notes: &mut Vec<String>) -> String {
+    let headers = "netem flips one random bit of the whole packet, headers included (over UDP a header flip is caught by the UDP checksum or the stack), netfi one of the 124 ITP bytes";
+    match (p.p, p.ber_per_byte) {
+        (_, Some(q)) => {
+            let per_packet = -(124.0 * (-q.get()).ln_1p()).exp_m1();
+            notes.push(format!(
+                "{label}: approximated: netem corrupts per packet, so ber_per_byte {} becomes corrupt {} = 1 − (1 − q)^124, the frames with at least one byte in error; netem then flips one bit where netfi flips one in each byte in error (up to 4), and {headers}",
+                q.get(),
+                pct(per_packet)
+            ));
+            format!("corrupt {}", pct(per_packet))
+        }
+        (Some(p), None) => {
+            notes.push(format!("{label}: approximated: {headers}"));
+            format!("corrupt {}", pct(p.get()))
+        }
+        // `Corrupt::new` refuses a stage with neither.
+        (None, None) => String::new(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -591,5 +614,18 @@ mod tests {
         assert!(text.contains("distribution netfi-h2-"), "{text}");
         assert!(note.contains("mean 299.1"), "{note}");
         assert!(longest > 1000.0 && longest < 1500.0, "{longest}");
+    }
+
+    #[test]
+    fn corrupt_per_byte_becomes_the_per_packet_rate() {
+        let mut notes = Vec::new();
+        let q = netfi::model::CorruptParams::per_byte(0.001).unwrap();
+        let text = corrupt_line(&q, "stage 1 (corrupt)", &mut notes);
+        // 1 − 0.999^124 = 0.11658…
+        assert_eq!(text, format!("corrupt {}", pct(1.0 - 0.999f64.powi(124))));
+        assert!(text.starts_with("corrupt 11.6"), "{text}");
+        assert!(notes[0].contains("approximated") && notes[0].contains("per packet"), "{notes:?}");
+        let p = netfi::model::CorruptParams::new(0.02).unwrap();
+        assert_eq!(corrupt_line(&p, "s", &mut notes), "corrupt 2%");
     }
 }

@@ -7,6 +7,7 @@ use netfi::fit::db::{self, Database, Grid};
 use netfi::fit::run::{self, Progress};
 use netfi::fit::{FitRequest, FitResult, Kind, Metric, Objective, TOLERANCE_REL};
 use netfi::host::StealTimer;
+use netfi::model::jitter::JitterDist;
 use netfi::model::Probability;
 use netfi::service::run::fresh_seed;
 use std::path::Path;
@@ -41,6 +42,15 @@ pub fn run(cmd: FitCmd) -> Result<()> {
                 req = req.with_goal(Metric::OutageMsMean, v);
             }
             req.frame_rate_hz = rate_hz;
+            fit_one(req, &common)
+        }
+        FitCmd::Jitter { target, p99_ms, dist, correlation, common } => {
+            let mut req = request(Kind::Jitter, parse_ms(&target)?, &common)?.with_goal(Metric::DelayMsP99, p99_ms);
+            req.jitter_dist = JitterDist::ALL.into_iter().find(|d| d.name() == dist).ok_or_else(|| {
+                let names: Vec<_> = JitterDist::ALL.iter().map(|d| d.name()).collect();
+                anyhow::anyhow!("--dist {dist}: expected one of {}", names.join(", "))
+            })?;
+            req.jitter_correlation = parse_fraction(&correlation, "correlation")?;
             fit_one(req, &common)
         }
         FitCmd::Db(args) => {

@@ -120,9 +120,14 @@ fn print_table(r: &CheckReport) {
                 s.loss_rate,
                 model
             );
-            if let (Some(n), Some(caught)) = (s.corrupted, s.caught_fraction_model) {
+            if let Some(n) = s.corrupted {
+                // Per byte (`ber_per_byte`), several flips in a frame can
+                // cancel in the checksum: what it catches is measured above.
+                let caught = s.caught_fraction_model.map_or("checksum's catch measured above (several flips a frame)".to_string(), |c| {
+                    format!("checksum catches {c:.5} of them")
+                });
                 println!(
-                    "  {:>5}  {:<16} corrupted {n} ({:.5} per frame reaching it); model: checksum catches {caught:.5} of them",
+                    "  {:>5}  {:<16} corrupted {n} ({:.5} per frame reaching it); model: {caught}",
                     "",
                     "",
                     if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
