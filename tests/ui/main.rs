@@ -92,7 +92,10 @@ fn until(tab: &Tab, code: &str, secs: u64) -> serde_json::Value {
         if truthy {
             return v;
         }
-        assert!(t0.elapsed() < Duration::from_secs(secs), "timed out waiting for `{code}`");
+        if t0.elapsed() > Duration::from_secs(secs) {
+            let page = js(tab, "document.querySelector('main')?.innerText ?? document.body.innerText");
+            panic!("timed out waiting for `{code}`; the page shows:\n{}", page.as_str().unwrap_or_default());
+        }
         std::thread::sleep(Duration::from_millis(100));
     }
 }
@@ -146,7 +149,7 @@ fn build_preview_run_switch_report() {
     // frames is about ±0.01 wide around 0.3 (the burst lengths widen it):
     // 0.25–0.35 is several intervals.
     click(&tab, "#preview-btn");
-    until(&tab, "document.getElementById('preview-loss')", 60);
+    until(&tab, "!!document.getElementById('preview-loss')", 60);
     let loss: f64 = text(&tab, "preview-loss").parse().unwrap();
     assert!((0.25..0.35).contains(&loss), "preview realized loss {loss}");
     assert!(svg_points(&tab, "plot-loss-raster") > 1000, "the loss raster shows no drops");
@@ -177,7 +180,7 @@ fn build_preview_run_switch_report() {
 
     // The report page: the same loss figure, the switch, plots with data.
     click(&tab, "#report-link");
-    until(&tab, "document.getElementById('realized-loss')", 60);
+    until(&tab, "!!document.getElementById('realized-loss')", 60);
     let shown = text(&tab, "realized-loss");
     assert!(shown.contains(&format!("{run_loss:.4}")), "report shows `{shown}`, the run {run_loss:.4}");
     assert!(text(&tab, "events").contains("DLM-1"), "the report's events lack the switch");
