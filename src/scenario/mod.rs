@@ -32,7 +32,7 @@ mod parse;
 mod presets;
 mod spec;
 
-pub use parse::{parse_str, preset, ScenarioError};
+pub use parse::{parse_str, parse_str_with, preset, FileError, NoFiles, ScenarioError, ScenarioFiles};
 pub use presets::preset_stages;
 pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
 // Names that live in `model` (which `fit` uses without depending on
