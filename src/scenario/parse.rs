@@ -671,6 +671,56 @@ mod tests {
         }
     }
 
+    /// Files held in memory, parsed as the shell parses them.
+    struct MemFiles(&'static [(&'static str, &'static str)]);
+
+    impl MemFiles {
+        fn get(&self, file: &str) -> Result<&'static str, FileError> {
+            self.0.iter().find(|(n, _)| *n == file).map(|(_, t)| *t).ok_or(FileError { file: file.into(), at: None, problem: "no such file".into() })
+        }
+    }
+
+    impl ScenarioFiles for MemFiles {
+        fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError> {
+            Schedule::parse(self.get(file)?)
+                .map(Arc::new)
+                .map_err(|e| FileError { file: file.into(), at: e.line.map(|l| format!("line {l}")), problem: e.problem })
+        }
+        fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError> {
+            Recording::parse_trace_csv(self.get(file)?).map(Arc::new).map_err(|e| FileError { file: file.into(), at: e.at, problem: e.problem })
+        }
+    }
+
+    const FILES: MemFiles = MemFiles(&[("ok.up", "1\n2\n"), ("bad.up", "1\n3\n2\n"), ("zeros.up", "0\n0\n"), ("empty.up", "")]);
+
+    #[test]
+    fn link_stage_mistakes_are_refused_at_parse_time() {
+        let cases = [
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 0\n", 3, "rate_bit_s", "rate of zero"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_bytes = 100\n", 4, "queue_bytes", "at least one packet"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_packets = 0\n", 4, "queue_packets", "from 1"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nrate = 5\n", 4, "rate", "unknown field"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n", 3, "file", "`bad.up` line 3: 2 ms comes after 3 ms"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"zeros.up\"\n", 3, "file", "`zeros.up` line 2: every time is 0"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"empty.up\"\n", 3, "file", "`empty.up`: the trace is empty"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\nqueue_bytes = 10\n", 4, "queue_bytes", "at least one packet"),
+            ("[[stage]]\nmodel = \"replay\"\nfile = \"none.csv\"\n", 3, "file", "no such file"),
+        ];
+        for (text, line, field, piece) in cases {
+            let e = parse_str_with(text, "s.toml", "s", &FILES).expect_err(text);
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{text}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
+        let ok = parse_str_with("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\n", "s.toml", "s", &FILES).unwrap();
+        assert_eq!(ok.phases[0].stages.len(), 2);
+        // Printed back, the trace stage names its file, not its contents.
+        let toml = ok.to_toml();
+        assert!(toml.contains("model = \"trace\"") && toml.contains("file = \"ok.up\"") && toml.contains("rate_bit_s = 1000000.0"), "{toml}");
+        // Text alone cannot name files.
+        let e = parse_str("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\n", "s.toml", "s").unwrap_err();
+        assert!(e.problem.contains("cannot name other files"), "{e}");
+    }
+
     #[test]
     fn a_built_timeline_checks_its_phase_starts_too() {
         let mut spec = preset("Normal").unwrap();
