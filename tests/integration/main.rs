@@ -1,3 +1,4 @@
 mod capture;
 mod core;
 mod scenario_cli;
+mod links;
