@@ -250,3 +250,59 @@ fn a_delay_capture_replays_the_delays_it_carries() {
     let e = netfi::load::parse_file(&scenario).unwrap_err();
     assert!(e.to_string().contains("records no delays"), "{e}");
 }
+
+fn netfi(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
+}
+
+#[test]
+fn scenario_check_reports_the_link() {
+    let out = netfi(&["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "20000", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let link = &v["links"][0];
+    assert_eq!(link["model"], "rate");
+    assert_eq!(link["capacity_bit_s"].as_f64(), Some(1e6));
+    // Offered 1.33 Mbit/s on the wire: the link is busy from the first
+    // frame to the last departure, and drops what its 50 packets cannot hold.
+    assert!(link["utilisation"].as_f64().unwrap() > 0.999, "{link}");
+    assert_eq!(link["queue_packets_max"], 50);
+    let dropped = v["dropped"]["link_queue"].as_u64().unwrap();
+    assert_eq!(link["frames_dropped"].as_u64(), Some(dropped));
+    assert_eq!(v["delivered"].as_u64().unwrap() + dropped, 20_000);
+    // 20 s of frames: one occupancy entry per second.
+    assert_eq!(link["occupancy"].as_array().unwrap().len(), 20);
+    // Full queue: 50 packets of 166 bytes at 1 Mbit/s, 66.4 ms.
+    let p99 = link["delay_ms"]["p99"].as_f64().unwrap();
+    assert!((p99 - 50.0 * 1.328).abs() < 0.1, "{p99}");
+    let table = netfi(&["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "2000"]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(table.contains("utilisation") && table.contains("queue over time"), "{table}");
+}
+
+#[test]
+fn show_and_export_speak_of_the_link_stages() {
+    let out = netfi(&["scenario", "show", "config/scenarios/rate_bottleneck.toml"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("model = \"rate\"") && text.contains("# phase 1 stage `rate#0`: rate 1000000 bit/s"), "{text}");
+    let out = netfi(&["export", "netem", "config/scenarios/rate_bottleneck.toml"]);
+    let script = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(script.contains("netem limit 50 rate 1000000bit\n"), "{script}");
+
+    let dir = Scratch::new("cli");
+    std::fs::write(dir.0.join("one.up"), "1\n").unwrap();
+    std::fs::write(dir.0.join("bad.up"), "1\n2\nten\n").unwrap();
+    let scenario = dir.0.join("t.toml");
+    std::fs::write(&scenario, "[[stage]]\nmodel = \"trace\"\nfile = \"one.up\"\n").unwrap();
+    let path = scenario.to_str().unwrap();
+    let show = String::from_utf8_lossy(&netfi(&["scenario", "show", path]).stdout).into_owned();
+    assert!(show.contains("trace of 1 opportunities of 1504 bytes every 1 ms (mean 12.032 Mbit/s)"), "{show}");
+    let out = netfi(&["export", "netem", path]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot follow a link trace"));
+    std::fs::write(&scenario, "name = \"x\"\n\n[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n").unwrap();
+    let out = netfi(&["scenario", "check", path]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("t.toml:5") && err.contains("`bad.up` line 3: `ten` is not a time"), "{err}");
+}
