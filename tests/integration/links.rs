@@ -306,3 +306,30 @@ fn show_and_export_speak_of_the_link_stages() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("t.toml:5") && err.contains("`bad.up` line 3: `ten` is not a time"), "{err}");
 }
+
+#[test]
+fn shipped_scenarios_that_read_files_parse_build_run_and_print_back() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenarios/files");
+    let files = netfi::load::DirFiles::new(&dir);
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        if text.contains("shared/data/") && !dir.join("../../../../shared/data/traces").exists() {
+            eprintln!("skipped {}: the shared Mahimahi traces are absent", path.display());
+            continue;
+        }
+        let s = netfi::load::parse_file(&path).unwrap_or_else(|e| panic!("{e}"));
+        let sc = Scenario::new(&s, s.seed.unwrap_or(1)).unwrap_or_else(|e| panic!("{e}"));
+        let r = netfi::check::run(sc, &netfi::check::Arrivals::Rate { frames: 20_000, rate_hz: 1000.0 }, 1 << 16, |_| {});
+        assert_eq!(r.frames, r.delivered + r.dropped.values().sum::<u64>(), "{}", path.display());
+        assert!(!r.links.is_empty(), "{}", path.display());
+        let again = netfi::scenario::parse_str_with(&s.to_toml(), "again", "again", &files).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(again.phases, s.phases, "{}", path.display());
+        n += 1;
+    }
+    assert!(n >= 1, "found no scenario in {}", dir.display());
+}

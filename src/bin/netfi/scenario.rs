@@ -39,6 +39,7 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     let arrivals = match &args.capture {
         Some(path) => {
             let cap = netfi::capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+            eprintln!("capture {}: {} records, layout `{}`", path.display(), cap.records.len(), cap.layout.describe());
             let t0 = cap.records.first().map_or(0, |r| r.time_ns);
             let mut times: Vec<u64> = cap.records.iter().map(|r| r.time_ns.saturating_sub(t0)).collect();
             // Wall-clock captures can step backwards; the injector's clock cannot.
