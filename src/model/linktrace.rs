@@ -274,7 +274,9 @@ impl LinkTrace {
     /// The first opportunity strictly after `t_ns`.
     #[inline]
     fn first_after(&self, t_ns: u64) -> u64 {
-        let rel = t_ns - self.base_ns.unwrap_or(t_ns);
+        // A frame may reach the stage before the first one did, after an
+        // upstream reorder: it waits for the trace's first opportunities.
+        let rel = t_ns.saturating_sub(self.base_ns.unwrap_or(t_ns));
         self.schedule.first_at_or_after_ms(rel / 1_000_000 + 1)
     }
 
@@ -417,6 +419,20 @@ mod tests {
         // At 1 ms both have gone into transit.
         assert!(matches!(m.decide(1_000_000, &mut rng), Verdict::Pass { .. }));
         assert_eq!(m.stats().frames_dropped, 1);
+    }
+
+    #[test]
+    fn frames_out_of_time_order_are_served_in_arrival_order() {
+        // After a reordering stage a frame may reach the link earlier than
+        // the one before it: it queues behind it.
+        let mut m = link("1\n", |_| {});
+        let mut rng = <StageRng as rand::SeedableRng>::seed_from_u64(1);
+        let t0 = 50_000_000;
+        assert_eq!(m.decide(t0, &mut rng), Verdict::Pass { delay_ns: 1_000_000 });
+        assert_eq!(m.decide(t0 - 20_000_000, &mut rng), Verdict::Pass { delay_ns: 21_000_000 });
+        let mut r = crate::model::Rate::new(&crate::model::RateParams::new(8e6)).unwrap();
+        assert_eq!(r.decide(t0, &mut rng), Verdict::Pass { delay_ns: 124_000 });
+        assert_eq!(r.decide(t0 - 1_000_000, &mut rng), Verdict::Pass { delay_ns: 1_248_000 });
     }
 
     #[test]
