@@ -333,3 +333,84 @@ fn shipped_scenarios_that_read_files_parse_build_run_and_print_back() {
     }
     assert!(n >= 1, "found no scenario in {}", dir.display());
 }
+
+/// mm-link's `LinkQueue` (Mahimahi, `src/frontend/link_queue.cc`) as it is
+/// written, with a drop-tail packet limit as its `DroppingPacketQueue`: time
+/// in whole ms, opportunities spent up to `now` before a packet is queued.
+/// Returns each packet's departure ms, or `None` if dropped.
+fn mm_link(schedule: &[u64], arrivals: &[(u64, i64)], limit: usize) -> Vec<Option<u64>> {
+    let period = *schedule.last().unwrap();
+    let (mut next, mut base) = (0usize, 0u64);
+    let mut queue: std::collections::VecDeque<(usize, i64)> = Default::default();
+    let mut in_transit: Option<(usize, i64)> = None;
+    let mut out = vec![None; arrivals.len()];
+    let mut rationalize = |now: u64, queue: &mut std::collections::VecDeque<(usize, i64)>, out: &mut Vec<Option<u64>>| {
+        while schedule[next] + base <= now {
+            let this = schedule[next] + base;
+            let mut left: i64 = 1504;
+            next = (next + 1) % schedule.len();
+            if next == 0 {
+                base += period;
+            }
+            while left > 0 {
+                if in_transit.is_none() {
+                    in_transit = queue.pop_front();
+                    if in_transit.is_none() {
+                        break;
+                    }
+                }
+                let p = in_transit.as_mut().unwrap();
+                p.1 -= left;
+                left = 0;
+                if p.1 <= 0 {
+                    left = -p.1;
+                    out[p.0] = Some(this);
+                    in_transit = None;
+                }
+            }
+        }
+    };
+    for (id, &(ms, bytes)) in arrivals.iter().enumerate() {
+        rationalize(ms, &mut queue, &mut out);
+        if queue.len() < limit {
+            queue.push_back((id, bytes));
+        }
+    }
+    // Long enough for the queue to drain (the trace repeats for ever).
+    rationalize(arrivals.last().unwrap().0 + 1_000_000, &mut queue, &mut out);
+    out
+}
+
+#[test]
+fn a_trace_link_departs_every_packet_when_mm_link_does() {
+    use netfi::model::{LinkTrace, LinkTraceParams, Verdict};
+    let trace = [2u64, 2, 3, 7, 7, 7, 8, 12, 15, 15];
+    let schedule = Schedule::from_ms(&trace).unwrap();
+    // Bursts of packets of assorted sizes (up to one opportunity, as mm-link
+    // requires) at whole ms, some during silences of the trace.
+    let mut arrivals = vec![(0u64, 1000i64)];
+    let mut x = 12345u64;
+    for ms in 0..400u64 {
+        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        for j in 0..(x >> 61) {
+            arrivals.push((ms, 40 + ((x >> (20 + 3 * j)) % 1465) as i64));
+        }
+    }
+    for limit in [usize::MAX, 6] {
+        let want = mm_link(&trace, &arrivals, limit);
+        let mut p = LinkTraceParams::new("t", schedule.clone());
+        p.mtu_bytes = 1504;
+        p.queue_packets = Some(if limit == usize::MAX { 1 << 20 } else { limit as u64 });
+        let mut link = LinkTrace::new(&p).unwrap();
+        // The trace's time 0 is the first arrival: 0 ms here, as for mm-link.
+        for (k, &(ms, bytes)) in arrivals.iter().enumerate() {
+            let got = match link.decide_len(ms * 1_000_000, bytes as u64) {
+                Verdict::Pass { delay_ns } => Some((ms * 1_000_000 + delay_ns) / 1_000_000),
+                Verdict::Drop => None,
+                v => panic!("{v:?}"),
+            };
+            assert_eq!(got, want[k], "limit {limit}: packet {k} of {bytes} bytes at {ms} ms");
+        }
+        assert!(limit == usize::MAX || want.iter().any(Option::is_none), "the limit must bite");
+    }
+}
