@@ -114,7 +114,7 @@ pub struct Rate {
 impl Rate {
     pub fn new(p: &RateParams) -> Result<Rate, ParamError> {
         let r = p.rate_bit_s;
-        if !r.is_finite() || r < 1.0 || r > MAX_RATE_BIT_S || r.fract() != 0.0 {
+        if !r.is_finite() || !(1.0..=MAX_RATE_BIT_S).contains(&r) || r.fract() != 0.0 {
             return Err(ParamError::new(
                 "rate_bit_s",
                 format!("{r} is not a link rate: expected a whole number of bit/s from 1 to {MAX_RATE_BIT_S:e} (a rate of zero carries nothing)"),
