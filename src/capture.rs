@@ -9,7 +9,22 @@
 //!
 //! `time_ns` is the recorder's receive time (the shipped capture uses the wall
 //! clock), `dropped` a flag byte kept as written, and the payload one ITP frame
-//! of 124 bytes. A record of any other length is an error that names the record
+//! of 124 bytes.
+//!
+//! The study's delay-trial captures use a second record layout, where the
+//! delay in seconds the study's tool drew for the frame follows the length
+//! field in place of the flag byte ([`RecordLayout::Delay`]):
+//!
+//! ```text
+//! u64 BE time_ns | u16 BE length | f32 BE delay_s | payload (length bytes)
+//! ```
+//!
+//! The reader tells the two apart on the first records (where the second
+//! record's length field falls, and, for a capture of one record, its
+//! size; when both layouts fit, whichever makes the first frame's ITP
+//! checksum match) and says which it found ([`CaptureReader::layout`],
+//! [`Capture::layout`]). A delay capture's records carry their delay in
+//! [`CaptureRecord::delay_s`]; its `dropped` is 0. A record of any other length is an error that names the record
 //! index and its byte offset in the decompressed stream; so is a stream that
 //! ends inside a record.
 //!
@@ -61,6 +76,39 @@ pub const RECORD_HEADER_LEN: usize = 11;
 
 /// Bytes in a record that carries one ITP frame.
 pub const RECORD_LEN: usize = RECORD_HEADER_LEN + FRAME_LEN;
+
+/// Bytes in a delay capture's record header: time (8), length (2), delay (4).
+pub const DELAY_RECORD_HEADER_LEN: usize = 14;
+
+/// The two record layouts a capture may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordLayout {
+    /// `u64 time_ns | u16 len | u8 dropped | payload`: netfi's and the
+    /// study's console recordings.
+    Dropped,
+    /// `u64 time_ns | u16 len | f32 delay_s | payload`: the study's
+    /// delay-trial captures.
+    Delay,
+}
+
+impl RecordLayout {
+    /// Bytes before the payload.
+    pub const fn header_len(self) -> usize {
+        match self {
+            RecordLayout::Dropped => RECORD_HEADER_LEN,
+            RecordLayout::Delay => DELAY_RECORD_HEADER_LEN,
+        }
+    }
+
+    /// The layout in words, for reports.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            RecordLayout::Dropped => "time | length | dropped flag | frame",
+            RecordLayout::Delay => "time | length | delay (s) | frame",
+        }
+    }
+}
 
 /// Longest step backwards in time between consecutive records that [`load`]
 /// accepts (and counts): 1 s.
@@ -193,12 +241,16 @@ pub enum CaptureError {
 }
 
 /// One record of a capture carrying an ITP frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CaptureRecord {
     /// Receive time at the recorder, ns.
     pub time_ns: u64,
-    /// The "dropped" flag byte as written (0: the frame was delivered).
+    /// The "dropped" flag byte as written (0: the frame was delivered; 0 in
+    /// a delay capture).
     pub dropped: u8,
+    /// The delay the study's tool drew for the frame, s (delay captures
+    /// only).
+    pub delay_s: Option<f32>,
     /// The ITP frame's wire bytes.
     pub payload: [u8; FRAME_LEN],
 }
@@ -206,7 +258,7 @@ pub struct CaptureRecord {
 impl CaptureRecord {
     /// A record of a delivered frame.
     pub fn new(time_ns: u64, frame: &ItpFrame) -> CaptureRecord {
-        CaptureRecord { time_ns, dropped: 0, payload: frame.to_bytes() }
+        CaptureRecord { time_ns, dropped: 0, delay_s: None, payload: frame.to_bytes() }
     }
 
     /// Whether the recorder flagged the frame as dropped.
@@ -281,6 +333,15 @@ pub struct CaptureReader<R: Read> {
     record: u64,
     offset: u64,
     done: bool,
+    /// The record layout, once the first record has been looked at.
+    layout: Option<RecordLayout>,
+    /// Content read ahead to tell the layout, handed out before the
+    /// decoder's: the bytes and how many have been handed out.
+    ahead: Vec<u8>,
+    ahead_pos: usize,
+    /// The decoder has reported the end of the content once: it is not
+    /// asked again (it would look for a second frame).
+    content_ended: bool,
 }
 
 impl CaptureReader<BufReader<File>> {
@@ -297,7 +358,17 @@ impl<R: Read> CaptureReader<R> {
     /// Reads a capture from an LZ4-compressed stream.
     pub fn new(reader: R) -> Self {
         let tap = Tap { inner: reader, consumed: 0, flg: None, eof: false };
-        CaptureReader { decoder: FrameDecoder::new(tap), path: None, record: 0, offset: 0, done: false }
+        CaptureReader {
+            decoder: FrameDecoder::new(tap),
+            path: None,
+            record: 0,
+            offset: 0,
+            done: false,
+            layout: None,
+            ahead: Vec::new(),
+            ahead_pos: 0,
+            content_ended: false,
+        }
     }
 
     /// Names the stream's file in error messages.
@@ -357,28 +428,86 @@ impl<R: Read> CaptureReader<R> {
         CaptureError::Truncated { path: self.path.clone(), record: self.record, offset: self.offset, needed, found }
     }
 
+    /// The record layout found (known once the first record has been read).
+    pub fn layout(&self) -> Option<RecordLayout> {
+        self.layout
+    }
+
+    /// Fills `buf` from the content: first what was read ahead, then the
+    /// decoder.
+    fn read_content(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let from_ahead = (self.ahead.len() - self.ahead_pos).min(buf.len());
+        buf[..from_ahead].copy_from_slice(&self.ahead[self.ahead_pos..self.ahead_pos + from_ahead]);
+        self.ahead_pos += from_ahead;
+        if from_ahead == buf.len() || self.content_ended {
+            return Ok(from_ahead);
+        }
+        let got = read_full(&mut self.decoder, &mut buf[from_ahead..])?;
+        self.content_ended = from_ahead + got < buf.len();
+        Ok(from_ahead + got)
+    }
+
+    /// Skips up to `n` bytes of content; returns how many there were.
+    fn skip_content(&mut self, n: usize) -> io::Result<usize> {
+        let mut scratch = [0u8; 512];
+        let mut skipped = 0;
+        while skipped < n {
+            let want = (n - skipped).min(scratch.len());
+            let got = self.read_content(&mut scratch[..want])?;
+            skipped += got;
+            if got < want {
+                break;
+            }
+        }
+        Ok(skipped)
+    }
+
+    /// Reads the first two records' worth of content ahead and decides the
+    /// layout (see the module docs).
+    fn detect_layout(&mut self) -> io::Result<RecordLayout> {
+        let mut ahead = vec![0u8; 2 * (DELAY_RECORD_HEADER_LEN + FRAME_LEN)];
+        let got = read_full(&mut self.decoder, &mut ahead)?;
+        self.content_ended = got < ahead.len();
+        ahead.truncate(got);
+        let layout = guess_layout(&ahead);
+        self.ahead = ahead;
+        self.ahead_pos = 0;
+        Ok(layout)
+    }
+
     /// Reads the next record; `Ok(None)` at a clean end of the content.
     pub fn read_record(&mut self) -> Result<Option<CaptureRecord>, CaptureError> {
-        let mut header = [0u8; RECORD_HEADER_LEN];
-        let got = read_full(&mut self.decoder, &mut header).map_err(|e| self.read_error(e))?;
+        let layout = match self.layout {
+            Some(l) => l,
+            None => {
+                let l = self.detect_layout().map_err(|e| self.read_error(e))?;
+                self.layout = Some(l);
+                l
+            }
+        };
+        let header_len = layout.header_len();
+        let mut header = [0u8; DELAY_RECORD_HEADER_LEN];
+        let got = self.read_content(&mut header[..header_len]).map_err(|e| self.read_error(e))?;
         if got == 0 {
             self.check_trailing()?;
             return Ok(None);
         }
-        if got < RECORD_HEADER_LEN {
-            return Err(self.truncated(RECORD_HEADER_LEN, got));
+        if got < header_len {
+            return Err(self.truncated(header_len, got));
         }
         let time_ns = u64::from_be_bytes(header[0..8].try_into().expect("8 bytes"));
         let length = u16::from_be_bytes([header[8], header[9]]);
-        let dropped = header[10];
-        let needed = RECORD_HEADER_LEN + length as usize;
+        let (dropped, delay_s) = match layout {
+            RecordLayout::Dropped => (header[10], None),
+            RecordLayout::Delay => (0, Some(f32::from_be_bytes(header[10..14].try_into().expect("4 bytes")))),
+        };
+        let needed = header_len + length as usize;
 
         if length as usize != FRAME_LEN {
             // Skip the payload so a reader may carry on past this record.
-            let skipped = io::copy(&mut (&mut self.decoder).take(length as u64), &mut io::sink())
-                .map_err(|e| self.read_error(e))? as usize;
+            let skipped = self.skip_content(length as usize).map_err(|e| self.read_error(e))?;
             if skipped < length as usize {
-                return Err(self.truncated(needed, RECORD_HEADER_LEN + skipped));
+                return Err(self.truncated(needed, header_len + skipped));
             }
             let err = CaptureError::WrongLength {
                 path: self.path.clone(),
@@ -393,13 +522,41 @@ impl<R: Read> CaptureReader<R> {
         }
 
         let mut payload = [0u8; FRAME_LEN];
-        let got = read_full(&mut self.decoder, &mut payload).map_err(|e| self.read_error(e))?;
+        let got = self.read_content(&mut payload).map_err(|e| self.read_error(e))?;
         if got < FRAME_LEN {
-            return Err(self.truncated(needed, RECORD_HEADER_LEN + got));
+            return Err(self.truncated(needed, header_len + got));
         }
         self.record += 1;
         self.offset += needed as u64;
-        Ok(Some(CaptureRecord { time_ns, dropped, payload }))
+        Ok(Some(CaptureRecord { time_ns, dropped, delay_s, payload }))
+    }
+}
+
+/// The layout the first bytes of a capture's content fit (module docs).
+fn guess_layout(ahead: &[u8]) -> RecordLayout {
+    let length_at = |at: usize| ahead.get(at + 8..at + 10).map(|b| u16::from_be_bytes([b[0], b[1]]) as usize);
+    let fits = |layout: RecordLayout| {
+        let first = layout.header_len() + FRAME_LEN;
+        length_at(0) == Some(FRAME_LEN)
+            && match length_at(first) {
+                Some(n) => n == FRAME_LEN,
+                // One record (or a second one cut short): its size decides.
+                None => ahead.len() == first,
+            }
+    };
+    let checksum_ok = |layout: RecordLayout| {
+        let h = layout.header_len();
+        ahead.get(h..h + FRAME_LEN).is_some_and(|p| {
+            let bytes: &[u8; FRAME_LEN] = p.try_into().expect("one frame");
+            ItpFrame::parse(&ItpView::new_unchecked(bytes)).is_ok()
+        })
+    };
+    match (fits(RecordLayout::Dropped), fits(RecordLayout::Delay)) {
+        (false, true) => RecordLayout::Delay,
+        (true, true) if !checksum_ok(RecordLayout::Dropped) && checksum_ok(RecordLayout::Delay) => RecordLayout::Delay,
+        // Anything else reads as netfi's own layout, whose errors then say
+        // what is wrong.
+        _ => RecordLayout::Dropped,
     }
 }
 
@@ -496,6 +653,19 @@ impl<W: Write> CaptureWriter<W> {
         header[10] = dropped;
         self.encoder.write_all(&header).map_err(|e| self.write_error(e))?;
         self.encoder.write_all(payload).map_err(|e| self.write_error(e))?;
+        self.record += 1;
+        Ok(())
+    }
+
+    /// Appends a record in the delay layout ([`RecordLayout::Delay`]): the
+    /// frame and the delay drawn for it. A capture must not mix layouts.
+    pub fn write_delay_record(&mut self, time_ns: u64, delay_s: f32, payload: &[u8; FRAME_LEN]) -> Result<(), CaptureError> {
+        let mut bytes = [0u8; DELAY_RECORD_HEADER_LEN + FRAME_LEN];
+        bytes[0..8].copy_from_slice(&time_ns.to_be_bytes());
+        bytes[8..10].copy_from_slice(&(FRAME_LEN as u16).to_be_bytes());
+        bytes[10..14].copy_from_slice(&delay_s.to_be_bytes());
+        bytes[DELAY_RECORD_HEADER_LEN..].copy_from_slice(payload);
+        self.encoder.write_all(&bytes).map_err(|e| self.write_error(e))?;
         self.record += 1;
         Ok(())
     }
@@ -658,6 +828,8 @@ pub struct Capture {
     pub path: PathBuf,
     /// Every record, in file order.
     pub records: Vec<CaptureRecord>,
+    /// The record layout found.
+    pub layout: RecordLayout,
     /// Derived statistics.
     pub stats: CaptureStats,
 }
@@ -690,7 +862,8 @@ fn read_checked<R: Read>(mut reader: CaptureReader<R>, path: Option<&Path>) -> R
     if let Some(why) = stats.refusal() {
         return Err(CaptureError::Damaged { path: path.map(Path::to_path_buf), why, stats: Box::new(stats) });
     }
-    Ok(Capture { path: path.map(Path::to_path_buf).unwrap_or_default(), records, stats })
+    let layout = reader.layout().unwrap_or(RecordLayout::Dropped);
+    Ok(Capture { path: path.map(Path::to_path_buf).unwrap_or_default(), records, layout, stats })
 }
 
 #[cfg(test)]
@@ -722,12 +895,35 @@ mod tests {
         send_sync::<CaptureError>();
     }
 
+    fn delay_capture(n: u32) -> Vec<u8> {
+        let mut w = CaptureWriter::new(Vec::new());
+        for i in 0..n {
+            w.write_delay_record(1_000 * u64::from(i), 0.25 + i as f32 * 1e-3, &frame(i, 1).to_bytes()).unwrap();
+        }
+        w.finish().unwrap()
+    }
+
+    #[test]
+    fn both_record_layouts_are_read_and_told_apart() {
+        for n in [1u32, 2, 50] {
+            let cap = parse(&delay_capture(n)).unwrap();
+            assert_eq!(cap.layout, RecordLayout::Delay, "{n} records");
+            assert_eq!(cap.records.len(), n as usize);
+            assert_eq!(cap.records[n as usize - 1].delay_s, Some(0.25 + (n - 1) as f32 * 1e-3));
+            assert_eq!(cap.records[0].frame().unwrap().sequence, 0);
+            let plain = parse(&capture_bytes(&[CaptureRecord::new(5, &frame(1, 1)); 3][..n.min(3) as usize])).unwrap();
+            assert_eq!(plain.layout, RecordLayout::Dropped);
+            assert_eq!(plain.records[0].delay_s, None);
+        }
+    }
+
     #[test]
     fn writer_reader_round_trip() {
         let records: Vec<_> = (0..1000u32)
             .map(|i| CaptureRecord {
                 time_ns: 1_000_000 * i as u64 + 7,
                 dropped: (i % 3) as u8,
+                delay_s: None,
                 payload: frame(i, (i % 5 != 0) as i32).to_bytes(),
             })
             .collect();

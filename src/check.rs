@@ -246,6 +246,140 @@ pub struct CheckReport {
     /// The most frames held at once.
     pub queue_depth_max: usize,
     pub stages: Vec<StageReport>,
+    /// The link stages (`rate`, `trace`): utilisation, queue occupancy over
+    /// time, time-at-stage percentiles (absent when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub links: Vec<LinkReport>,
+}
+
+/// A link stage's outcome (`rate`, `trace`; docs/spec.md §3.12, §3.13).
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct LinkReport {
+    pub phase: usize,
+    pub label: String,
+    pub model: String,
+    /// Frames (payloads) admitted and dropped for the queue (`link_queue`),
+    /// and the packets they went as.
+    pub frames: u64,
+    pub frames_dropped: u64,
+    pub packets: u64,
+    pub packets_dropped: u64,
+    /// Wire bytes admitted.
+    pub bytes: u64,
+    /// The link's capacity: its rate, or the trace's mean.
+    pub capacity_bit_s: f64,
+    /// Bytes admitted over the time from the first frame to the last
+    /// departure, bit/s.
+    pub carried_bit_s: f64,
+    /// The fraction of that time (`rate`) or of the opportunities' bytes
+    /// (`trace`) the link used.
+    pub utilisation: f64,
+    /// Time at the stage of the frames admitted (queueing and
+    /// serialization), ms.
+    pub delay_ms: LinkDelay,
+    /// The most packets and bytes queued at once.
+    pub queue_packets_max: u64,
+    pub queue_bytes_max: u64,
+    /// Queue occupancy over time: per second of the run (from its first
+    /// frame), the most packets and bytes queued when a frame came.
+    pub occupancy: Vec<Occupancy>,
+}
+
+/// Percentiles of a link stage's time at the stage, ms.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct LinkDelay {
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+/// One second of a link's queue.
+#[derive(Debug, Clone, Copy, Serialize, serde::Deserialize, PartialEq)]
+pub struct Occupancy {
+    pub second: u64,
+    pub packets_max: u64,
+    pub bytes_max: u64,
+}
+
+/// The most seconds of occupancy a report keeps per link (a day).
+pub const MAX_OCCUPANCY_SECONDS: usize = 86_400;
+
+/// Queue occupancy of every link stage, second by second.
+struct LinkSampler {
+    /// (phase, stage) of each link stage.
+    at: Vec<(u16, u16)>,
+    seconds: Vec<Vec<Occupancy>>,
+}
+
+impl LinkSampler {
+    fn new(scenario: &Scenario) -> LinkSampler {
+        let mut at = Vec::new();
+        for (pi, phase) in scenario.phases().iter().enumerate() {
+            for (si, st) in phase.stages().iter().enumerate() {
+                if st.kind().is_link() {
+                    at.push((pi as u16, si as u16));
+                }
+            }
+        }
+        let seconds = vec![Vec::new(); at.len()];
+        LinkSampler { at, seconds }
+    }
+
+    /// Records each link's queue after a frame at `offset_ns` into the run.
+    #[inline]
+    fn sample(&mut self, scenario: &Scenario, offset_ns: u64) {
+        let second = offset_ns / 1_000_000_000;
+        for (&(p, s), series) in self.at.iter().zip(&mut self.seconds) {
+            let Some((packets, bytes)) = scenario.stage(p, s).model().link_queued() else { continue };
+            let full = series.len() >= MAX_OCCUPANCY_SECONDS;
+            match series.last_mut() {
+                Some(o) if o.second == second => {
+                    o.packets_max = o.packets_max.max(packets);
+                    o.bytes_max = o.bytes_max.max(bytes);
+                }
+                _ if !full => series.push(Occupancy { second, packets_max: packets, bytes_max: bytes }),
+                _ => {}
+            }
+        }
+    }
+
+    fn reports(self, scenario: &Scenario) -> Vec<LinkReport> {
+        self.at.iter().zip(self.seconds).map(|(&(p, s), occupancy)| link_report(scenario, p, s, occupancy)).collect()
+    }
+}
+
+fn link_report(scenario: &Scenario, p: u16, s: u16, occupancy: Vec<Occupancy>) -> LinkReport {
+    let st = scenario.stage(p, s);
+    let stats = st.model().link_stats().expect("a link stage");
+    let span_ns = stats.first_ns.map_or(0, |f| stats.last_departure_ns.saturating_sub(f));
+    let capacity_bit_s = match st.model() {
+        crate::model::AnyModel::Rate(m) => m.rate_bit_s() as f64,
+        crate::model::AnyModel::LinkTrace(m) => m.schedule().mean_rate_bit_s(m.opportunity_bytes()),
+        _ => 0.0,
+    };
+    LinkReport {
+        phase: usize::from(p),
+        label: st.label().to_string(),
+        model: st.kind().name().to_string(),
+        frames: stats.frames,
+        frames_dropped: stats.frames_dropped,
+        packets: stats.packets,
+        packets_dropped: stats.packets_dropped,
+        bytes: stats.bytes,
+        capacity_bit_s,
+        carried_bit_s: if span_ns > 0 { stats.bytes as f64 * 8.0 / (span_ns as f64 / 1e9) } else { 0.0 },
+        utilisation: st.model().link_utilisation().unwrap_or(0.0),
+        delay_ms: LinkDelay {
+            p50: stats.delay_ms_quantile(0.5),
+            p90: stats.delay_ms_quantile(0.9),
+            p99: stats.delay_ms_quantile(0.99),
+            max: stats.delay_ns.max() as f64 / 1e6,
+        },
+        queue_packets_max: stats.queue_packets_max,
+        queue_bytes_max: stats.queue_bytes_max,
+        occupancy,
+    }
 }
 
 /// How often the progress callback is called, in frames.
@@ -269,6 +403,7 @@ pub fn run_observed(
 ) -> CheckReport {
     let frames = arrivals.len();
     let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
+    let mut links = LinkSampler::new(&scenario);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
     let mut batches = BatchMeans::new(frames);
     let mut delays = Histogram::<u64>::new_with_bounds(1, 24 * 3_600 * 1_000_000_000, 3).expect("static bounds are valid");
@@ -310,6 +445,9 @@ pub fn run_observed(
         in_run = dropped;
         batches.record(dropped);
         depth_max = depth_max.max(inj.held());
+        if !links.at.is_empty() {
+            links.sample(inj.scenario(), t - arrivals.at(0));
+        }
         if (i + 1) % PROGRESS_EVERY == 0 {
             progress(i + 1);
         }
@@ -340,6 +478,7 @@ pub fn run_observed(
     let interval_ns = arrivals.mean_interval_ns();
     let scenario = inj.scenario();
     let (stages, outages) = stage_reports(scenario, interval_ns);
+    let links = links.reports(scenario);
     CheckReport {
         scenario: scenario.name().to_string(),
         seed: scenario.seed(),
@@ -358,6 +497,7 @@ pub fn run_observed(
         queue_capacity: inj.queue_capacity(),
         queue_depth_max: depth_max,
         stages,
+        links,
     }
 }
 

@@ -77,7 +77,8 @@ impl DropCause {
     /// or `bad_checksum`.
     pub fn reason(self) -> &'static str {
         match self {
-            DropCause::Stage { kind, .. } => kind.name(),
+            // `link_queue` for the link stages (`rate`, `trace`).
+            DropCause::Stage { kind, .. } => kind.drop_reason(),
             DropCause::QueueFull => "queue_full",
             DropCause::Invalid(i) => i.name(),
         }
@@ -306,7 +307,11 @@ impl<T: Copy + Default> Injector<T> {
                 .map(|s| s.dropped())
                 .sum();
             if n > 0 {
-                out.push((kind.name(), n));
+                // Both link stages report as `link_queue`: one entry.
+                match out.iter_mut().find(|(name, _)| *name == kind.drop_reason()) {
+                    Some((_, total)) => *total += n,
+                    None => out.push((kind.drop_reason(), n)),
+                }
             }
         }
         for (name, n) in [

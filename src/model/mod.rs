@@ -13,6 +13,7 @@
 //! is the stage's own random stream. A model that drops a frame adds no delay;
 //! a dropped frame is never shown to later stages, so they draw nothing for it.
 
+pub mod backlog;
 pub mod bernoulli;
 pub mod corrupt;
 pub mod delay;
@@ -21,9 +22,12 @@ mod draw;
 pub mod ge_lomax;
 pub mod gilbert_elliott;
 pub mod jitter;
+pub mod linktrace;
 pub mod markov4;
 pub mod outage;
 pub mod presets;
+pub mod rate;
+pub mod replay;
 pub mod reorder;
 pub mod slot;
 mod spec;
@@ -36,9 +40,12 @@ pub use duplicate::{Duplicate, DuplicateParams};
 pub use ge_lomax::{GeLomax, GeLomaxParams};
 pub use gilbert_elliott::{GilbertElliott, GilbertElliottParams};
 pub use jitter::{Jitter, JitterDist, JitterParams};
+pub use linktrace::{LinkTrace, LinkTraceParams, Schedule};
 pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
+pub use rate::{Rate, RateParams};
 pub use reorder::{Reorder, ReorderParams};
+pub use replay::{Recording, Replay, ReplayParams};
 pub use slot::{Slot, SlotParams};
 pub use spec::ModelSpec;
 pub use units::{parse_duration, Millis, Probability, TimeUnit};
@@ -128,10 +135,13 @@ pub enum ModelKind {
     Corrupt,
     Reorder,
     Slot,
+    Rate,
+    LinkTrace,
+    Replay,
 }
 
 impl ModelKind {
-    pub const ALL: [ModelKind; 11] = [
+    pub const ALL: [ModelKind; 14] = [
         ModelKind::Bernoulli,
         ModelKind::GeLomax,
         ModelKind::Markov4,
@@ -143,6 +153,9 @@ impl ModelKind {
         ModelKind::Corrupt,
         ModelKind::Reorder,
         ModelKind::Slot,
+        ModelKind::Rate,
+        ModelKind::LinkTrace,
+        ModelKind::Replay,
     ];
 
     /// The name used in scenario files (`model = "..."`).
@@ -159,7 +172,25 @@ impl ModelKind {
             ModelKind::Corrupt => "corrupt",
             ModelKind::Reorder => "reorder",
             ModelKind::Slot => "slot",
+            ModelKind::Rate => "rate",
+            ModelKind::LinkTrace => "trace",
+            ModelKind::Replay => "replay",
         }
+    }
+
+    /// The reason a drop by this model is reported under: the model's name,
+    /// but `link_queue` for the link stages (`rate`, `trace`), whose only
+    /// drops are their queue's.
+    pub const fn drop_reason(self) -> &'static str {
+        match self {
+            ModelKind::Rate | ModelKind::LinkTrace => "link_queue",
+            other => other.name(),
+        }
+    }
+
+    /// Whether this model is a link with a queue (`rate`, `trace`).
+    pub const fn is_link(self) -> bool {
+        matches!(self, ModelKind::Rate | ModelKind::LinkTrace)
     }
 
     pub fn from_name(name: &str) -> Option<ModelKind> {
@@ -188,6 +219,9 @@ pub enum AnyModel {
     Corrupt(Corrupt),
     Reorder(Reorder),
     Slot(Slot),
+    Rate(Rate),
+    LinkTrace(LinkTrace),
+    Replay(Replay),
 }
 
 impl AnyModel {
@@ -204,6 +238,9 @@ impl AnyModel {
             AnyModel::Corrupt(_) => ModelKind::Corrupt,
             AnyModel::Reorder(_) => ModelKind::Reorder,
             AnyModel::Slot(_) => ModelKind::Slot,
+            AnyModel::Rate(_) => ModelKind::Rate,
+            AnyModel::LinkTrace(_) => ModelKind::LinkTrace,
+            AnyModel::Replay(_) => ModelKind::Replay,
         }
     }
 
@@ -221,6 +258,49 @@ impl AnyModel {
             AnyModel::Corrupt(m) => m.decide(t_ns, rng),
             AnyModel::Reorder(m) => m.decide(t_ns, rng),
             AnyModel::Slot(m) => m.decide(t_ns, rng),
+            AnyModel::Rate(m) => m.decide(t_ns, rng),
+            AnyModel::LinkTrace(m) => m.decide(t_ns, rng),
+            AnyModel::Replay(m) => m.decide(t_ns, rng),
+        }
+    }
+
+    /// [`AnyModel::decide`] for a payload of `len` bytes: the link stages
+    /// (`rate`, `trace`) cut it into packets; the other models do not look
+    /// at sizes.
+    #[inline]
+    pub fn decide_len(&mut self, t_ns: u64, len: u64, rng: &mut StageRng) -> Verdict {
+        match self {
+            AnyModel::Rate(m) => m.decide_len(t_ns, len),
+            AnyModel::LinkTrace(m) => m.decide_len(t_ns, len),
+            other => other.decide(t_ns, rng),
+        }
+    }
+
+    /// The link statistics of a link stage (`rate`, `trace`).
+    pub fn link_stats(&self) -> Option<&backlog::LinkStats> {
+        match self {
+            AnyModel::Rate(m) => Some(m.stats()),
+            AnyModel::LinkTrace(m) => Some(m.stats()),
+            _ => None,
+        }
+    }
+
+    /// A link stage's utilisation so far (see [`Rate::utilisation`],
+    /// [`LinkTrace::utilisation`]).
+    pub fn link_utilisation(&self) -> Option<f64> {
+        match self {
+            AnyModel::Rate(m) => Some(m.utilisation()),
+            AnyModel::LinkTrace(m) => Some(m.utilisation()),
+            _ => None,
+        }
+    }
+
+    /// A link stage's queue as of its last frame: packets and wire bytes.
+    pub fn link_queued(&self) -> Option<(u64, u64)> {
+        match self {
+            AnyModel::Rate(m) => Some(m.queued()),
+            AnyModel::LinkTrace(m) => Some(m.queued()),
+            _ => None,
         }
     }
 
@@ -237,6 +317,10 @@ impl AnyModel {
             AnyModel::Delay(_) | AnyModel::Jitter(_) | AnyModel::Duplicate(_) | AnyModel::Corrupt(_) => Some(0.0),
             AnyModel::Reorder(_) | AnyModel::Slot(_) => Some(0.0),
             AnyModel::Outage(m) => m.loss_rate_approx(frame_interval_ns),
+            // A queue's losses depend on the arrivals; a replay's repeat its
+            // recording's.
+            AnyModel::Rate(_) | AnyModel::LinkTrace(_) => None,
+            AnyModel::Replay(m) => Some(m.recording().loss_rate()),
         }
     }
 
@@ -303,6 +387,7 @@ impl AnyModel {
             AnyModel::Delay(d) => d.may_reorder(),
             AnyModel::Jitter(j) => j.may_reorder(),
             AnyModel::Reorder(r) => r.may_reorder(),
+            AnyModel::Replay(r) => r.may_reorder(),
             _ => false,
         }
     }

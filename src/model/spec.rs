@@ -5,6 +5,7 @@
 use super::{
     AnyModel, Bernoulli, BernoulliParams, Corrupt, CorruptParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott,
     GilbertElliottParams, Duplicate, DuplicateParams, Jitter, JitterParams, Markov4, Markov4Params, ModelKind, Outage, OutageParams, ParamError, Reorder, ReorderParams, Slot, SlotParams,
+    LinkTrace, LinkTraceParams, Rate, RateParams, Replay, ReplayParams,
 };
 use serde::Serialize;
 
@@ -23,6 +24,10 @@ pub enum ModelSpec {
     Corrupt(CorruptParams),
     Reorder(ReorderParams),
     Slot(SlotParams),
+    Rate(RateParams),
+    #[serde(rename = "trace")]
+    LinkTrace(LinkTraceParams),
+    Replay(ReplayParams),
 }
 
 impl ModelSpec {
@@ -39,6 +44,9 @@ impl ModelSpec {
             ModelSpec::Corrupt(_) => ModelKind::Corrupt,
             ModelSpec::Reorder(_) => ModelKind::Reorder,
             ModelSpec::Slot(_) => ModelKind::Slot,
+            ModelSpec::Rate(_) => ModelKind::Rate,
+            ModelSpec::LinkTrace(_) => ModelKind::LinkTrace,
+            ModelSpec::Replay(_) => ModelKind::Replay,
         }
     }
 
@@ -56,6 +64,9 @@ impl ModelSpec {
             ModelSpec::Corrupt(p) => AnyModel::Corrupt(Corrupt::new(p)?),
             ModelSpec::Reorder(p) => AnyModel::Reorder(Reorder::new(p)?),
             ModelSpec::Slot(p) => AnyModel::Slot(Slot::new(p)?),
+            ModelSpec::Rate(p) => AnyModel::Rate(Rate::new(p)?),
+            ModelSpec::LinkTrace(p) => AnyModel::LinkTrace(LinkTrace::new(p)?),
+            ModelSpec::Replay(p) => AnyModel::Replay(Replay::new(p)?),
         })
     }
 }

@@ -32,7 +32,7 @@ mod parse;
 mod presets;
 mod spec;
 
-pub use parse::{parse_str, preset, ScenarioError};
+pub use parse::{parse_str, parse_str_with, preset, FileError, NoFiles, ScenarioError, ScenarioFiles};
 pub use presets::preset_stages;
 pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
 // Names that live in `model` (which `fit` uses without depending on
@@ -306,6 +306,20 @@ impl Scenario {
     /// call.
     #[inline]
     pub fn decide(&mut self, offset_ns: u64, t_ns: u64) -> Decision {
+        self.decide_payload(offset_ns, t_ns, None)
+    }
+
+    /// [`Scenario::decide`] for a payload of `len` bytes: the link stages
+    /// (`rate`, `trace`, docs/spec.md §3.12–3.13) cut it into packets of
+    /// their MTU instead of using their configured `payload_bytes`; the
+    /// other stages do not look at sizes.
+    #[inline]
+    pub fn decide_len(&mut self, offset_ns: u64, t_ns: u64, len: u64) -> Decision {
+        self.decide_payload(offset_ns, t_ns, Some(len))
+    }
+
+    #[inline]
+    fn decide_payload(&mut self, offset_ns: u64, t_ns: u64, len: Option<u64>) -> Decision {
         while self.current + 1 < self.phases.len() && self.phases[self.current + 1].start_offset_ns <= offset_ns {
             self.current += 1;
         }
@@ -317,7 +331,7 @@ impl Scenario {
         let stages = &mut phases[phase].stages;
         let mut queued = 0usize;
         flips.len = 0;
-        let decision = match run_stages(stages, 0, t_ns, flips, pending, &mut queued) {
+        let decision = match run_stages(stages, 0, t_ns, len, flips, pending, &mut queued) {
             Ok(t) => Decision::Pass { delay_ns: t - t_ns },
             // Both indices fit: `new` caps phases and stages at u16::MAX.
             Err(si) => Decision::Drop { phase: phase as u16, stage: si as u16 },
@@ -328,7 +342,7 @@ impl Scenario {
         while next < queued {
             let (from, t, mut copy_flips) = pending[next];
             next += 1;
-            match run_stages(stages, from, t, &mut copy_flips, pending, &mut queued) {
+            match run_stages(stages, from, t, len, &mut copy_flips, pending, &mut queued) {
                 Ok(end) => {
                     copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
                     copies.flips[usize::from(copies.passed)] = copy_flips;
@@ -367,6 +381,7 @@ fn run_stages(
     stages: &mut [Stage],
     from: usize,
     t_ns: u64,
+    len: Option<u64>,
     flips: &mut Flips,
     pending: &mut [(usize, u64, Flips); MAX_COPIES],
     queued: &mut usize,
@@ -374,7 +389,11 @@ fn run_stages(
     let mut t = t_ns;
     for (si, st) in stages.iter_mut().enumerate().skip(from) {
         st.reached += 1;
-        match st.model.decide(t, &mut st.rng) {
+        let verdict = match len {
+            None => st.model.decide(t, &mut st.rng),
+            Some(len) => st.model.decide_len(t, len, &mut st.rng),
+        };
+        match verdict {
             Verdict::Pass { delay_ns } => t = t.saturating_add(delay_ns),
             Verdict::Drop => {
                 st.dropped += 1;
@@ -459,6 +478,18 @@ mod tests {
         let five = c.repeat(MAX_CORRUPT_STAGES + 1);
         let e = Scenario::new(&parse_str(&five, "s.toml", "s").unwrap(), 1).unwrap_err();
         assert!(e.problem.contains("`corrupt` stages: at most 4"), "{e}");
+    }
+
+    #[test]
+    fn a_payload_size_reaches_the_link_stages() {
+        // 8 Mbit/s: a byte per µs. A 4000-byte payload goes as three packets
+        // (1500, 1500, 1000) and leaves after 4 ms; the configured 124 bytes
+        // take 124 µs.
+        let mut sc = scenario("[[stage]]\nmodel = \"bernoulli\"\np = 0\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 8e6\n", 1);
+        assert_eq!(sc.decide_len(0, 0, 4000), Decision::Pass { delay_ns: 4_000_000 });
+        assert_eq!(sc.decide(0, 10_000_000), Decision::Pass { delay_ns: 124_000 });
+        let stats = sc.phases()[0].stages()[1].model().link_stats().unwrap();
+        assert_eq!((stats.frames, stats.packets, stats.bytes), (2, 4, 4124));
     }
 
     #[test]

@@ -37,7 +37,9 @@ use crate::model::ModelSpec;
 use crate::model::ModelKind;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
+use crate::model::{Recording, Schedule};
 use std::fmt;
+use std::sync::Arc;
 use toml::Spanned;
 
 /// A scenario that could not be read, with where and why.
@@ -96,10 +98,63 @@ struct RawPhase {
     stage: Option<Vec<Spanned<toml::Table>>>,
 }
 
+/// A file a scenario names that could not be used: which file, where in it
+/// (`line 3`, `record 7`), and what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FileError {
+    pub file: String,
+    pub at: Option<String>,
+    pub problem: String,
+}
+
+impl fmt::Display for FileError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "`{}`", self.file)?;
+        if let Some(at) = &self.at {
+            write!(f, " {at}")?;
+        }
+        write!(f, ": {}", self.problem)
+    }
+}
+
+/// The files a scenario's stages name (`trace` link traces, `replay`
+/// recordings), read and parsed by the shell ([`crate::load`]): the core
+/// only parses text.
+pub trait ScenarioFiles {
+    /// The link trace `file` names (relative to the scenario file).
+    fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError>;
+    /// The recording `file` names (a `trace.csv` or a delay capture).
+    fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError>;
+}
+
+/// No files: a scenario given as text alone cannot name any.
+pub struct NoFiles;
+
+impl NoFiles {
+    fn refuse(file: &str) -> FileError {
+        FileError { file: file.into(), at: None, problem: "a scenario not read from a file cannot name other files".into() }
+    }
+}
+
+impl ScenarioFiles for NoFiles {
+    fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError> {
+        Err(NoFiles::refuse(file))
+    }
+    fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError> {
+        Err(NoFiles::refuse(file))
+    }
+}
+
 /// Parses scenario TOML. `origin` names the source in errors; `default_name`
-/// is used when the file has no `name`.
+/// is used when the file has no `name`. Stages that name files (`trace`,
+/// `replay`) are refused: see [`parse_str_with`].
 pub fn parse_str(text: &str, origin: &str, default_name: &str) -> Result<ScenarioSpec, ScenarioError> {
-    let ctx = Ctx { text, origin };
+    parse_str_with(text, origin, default_name, &NoFiles)
+}
+
+/// [`parse_str`], with the files the stages name read through `files`.
+pub fn parse_str_with(text: &str, origin: &str, default_name: &str, files: &dyn ScenarioFiles) -> Result<ScenarioSpec, ScenarioError> {
+    let ctx = Ctx { text, origin, files };
     let raw: RawScenario = toml::from_str(text).map_err(|e| ctx.toml_error(&e))?;
     if let Some(0) = raw.queue_capacity {
         return Err(ctx.err(ctx.key_line(0..text.len(), "queue_capacity"), None, Some("queue_capacity"), "must be at least 1 frame"));
@@ -205,6 +260,16 @@ fn parse_stages(ctx: &Ctx, raw: Vec<Spanned<toml::Table>>, phase: Option<usize>)
     Ok(stages)
 }
 
+/// Reads the file a `trace` or `replay` stage names into its parameters.
+fn read_files(ctx: &Ctx, model: &mut ModelSpec) -> Result<(), FileError> {
+    match model {
+        ModelSpec::LinkTrace(p) => p.schedule = Some(ctx.files.link_trace(&p.file)?),
+        ModelSpec::Replay(p) => p.recording = Some(ctx.files.recording(&p.file)?),
+        _ => {}
+    }
+    Ok(())
+}
+
 fn take_string(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &str, t: &mut toml::Table, key: &str) -> Result<Option<String>, ScenarioError> {
     match t.remove(key) {
         None => Ok(None),
@@ -267,7 +332,12 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::Corrupt => ModelSpec::Corrupt(params(ctx, &span, &loc, t)?),
                 ModelKind::Reorder => ModelSpec::Reorder(params(ctx, &span, &loc, t)?),
                 ModelKind::Slot => ModelSpec::Slot(params(ctx, &span, &loc, t)?),
+                ModelKind::Rate => ModelSpec::Rate(params(ctx, &span, &loc, t)?),
+                ModelKind::LinkTrace => ModelSpec::LinkTrace(params(ctx, &span, &loc, t)?),
+                ModelKind::Replay => ModelSpec::Replay(params(ctx, &span, &loc, t)?),
             };
+            let mut model = model;
+            read_files(ctx, &mut model).map_err(|e| ctx.err(ctx.key_line(span.clone(), "file").or(header_line), Some(&loc), Some("file"), e.to_string()))?;
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
                 return Err(ctx.err(ctx.key_line(span, &key).or(header_line), Some(&loc), Some(&e.field), e.problem));
@@ -331,6 +401,7 @@ fn params<P: DeserializeOwned>(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &s
 struct Ctx<'a> {
     text: &'a str,
     origin: &'a str,
+    files: &'a dyn ScenarioFiles,
 }
 
 impl Ctx<'_> {
@@ -602,6 +673,56 @@ mod tests {
             assert_eq!(e.location.as_deref(), Some(format!("stage 1 ({model})").as_str()), "{e}");
             assert!(e.problem.contains(piece), "{e}");
         }
+    }
+
+    /// Files held in memory, parsed as the shell parses them.
+    struct MemFiles(&'static [(&'static str, &'static str)]);
+
+    impl MemFiles {
+        fn get(&self, file: &str) -> Result<&'static str, FileError> {
+            self.0.iter().find(|(n, _)| *n == file).map(|(_, t)| *t).ok_or(FileError { file: file.into(), at: None, problem: "no such file".into() })
+        }
+    }
+
+    impl ScenarioFiles for MemFiles {
+        fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError> {
+            Schedule::parse(self.get(file)?)
+                .map(Arc::new)
+                .map_err(|e| FileError { file: file.into(), at: e.line.map(|l| format!("line {l}")), problem: e.problem })
+        }
+        fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError> {
+            Recording::parse_trace_csv(self.get(file)?).map(Arc::new).map_err(|e| FileError { file: file.into(), at: e.at, problem: e.problem })
+        }
+    }
+
+    const FILES: MemFiles = MemFiles(&[("ok.up", "1\n2\n"), ("bad.up", "1\n3\n2\n"), ("zeros.up", "0\n0\n"), ("empty.up", "")]);
+
+    #[test]
+    fn link_stage_mistakes_are_refused_at_parse_time() {
+        let cases = [
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 0\n", 3, "rate_bit_s", "rate of zero"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_bytes = 100\n", 4, "queue_bytes", "at least one packet"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_packets = 0\n", 4, "queue_packets", "from 1"),
+            ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nrate = 5\n", 4, "rate", "unknown field"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n", 3, "file", "`bad.up` line 3: 2 ms comes after 3 ms"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"zeros.up\"\n", 3, "file", "`zeros.up` line 2: every time is 0"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"empty.up\"\n", 3, "file", "`empty.up`: the trace is empty"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\nqueue_bytes = 10\n", 4, "queue_bytes", "at least one packet"),
+            ("[[stage]]\nmodel = \"replay\"\nfile = \"none.csv\"\n", 3, "file", "no such file"),
+        ];
+        for (text, line, field, piece) in cases {
+            let e = parse_str_with(text, "s.toml", "s", &FILES).expect_err(text);
+            assert_eq!((e.line, e.field.as_deref()), (Some(line), Some(field)), "{e}\n{text}");
+            assert!(e.problem.contains(piece), "{e}");
+        }
+        let ok = parse_str_with("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\n", "s.toml", "s", &FILES).unwrap();
+        assert_eq!(ok.phases[0].stages.len(), 2);
+        // Printed back, the trace stage names its file, not its contents.
+        let toml = ok.to_toml();
+        assert!(toml.contains("model = \"trace\"") && toml.contains("file = \"ok.up\"") && toml.contains("rate_bit_s = 1000000.0"), "{toml}");
+        // Text alone cannot name files.
+        let e = parse_str("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\n", "s.toml", "s").unwrap_err();
+        assert!(e.problem.contains("cannot name other files"), "{e}");
     }
 
     #[test]

@@ -1,4 +1,5 @@
 mod capture;
 mod core;
-mod scenario_cli;
 mod docs_cli;
+mod links;
+mod scenario_cli;

@@ -8,3 +8,4 @@ mod jitter;
 mod models;
 mod presets;
 mod reorder_slot;
+mod links;

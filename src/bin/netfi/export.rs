@@ -53,6 +53,18 @@
 //! - The queue: netem holds delayed packets in a queue of `limit` packets
 //!   (1000 by default) and drops what does not fit; `limit` is raised to
 //!   hold the stream for the longest delay in the table, with 25% spare.
+//! - `rate` → `rate Rbit [packet_overhead [cellsize [celloverhead]]]`
+//!   (docs/spec.md §3.12): netem's own bottleneck. netem counts a packet's
+//!   bytes from its link-layer header, 42 more than netfi's payload for an
+//!   ITP frame over UDP, IPv4 and Ethernet, so `packet_overhead` is
+//!   netfi's `overhead_bytes` − 42 (netem accepts a negative overhead);
+//!   the stage's `queue_packets` becomes netem's `limit` (a `queue_bytes`
+//!   limit is turned into packets of the stage's size); a payload cut into
+//!   several packets is approximated (netem sends each datagram as it is).
+//!   netem truncates each packet's time to the ns, netfi rounds up once.
+//! - `trace` (a Mahimahi link trace) and `replay` (recorded fates) have no
+//!   netem equivalent: netem has no time-varying rate and no per-packet
+//!   schedule; they are refused (use Mahimahi's `mm-link` for a trace).
 //! - `outage` windows and timelines of several phases have no netem
 //!   equivalent: they are refused.
 
@@ -99,6 +111,8 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
     let mut dup: Option<(usize, String)> = None;
     let mut corrupt: Option<(usize, String)> = None;
     let mut slot: Option<(usize, String)> = None;
+    let mut rate: Option<(usize, String)> = None;
+    let mut rate_limit: Option<u64> = None;
     let mut table: Option<(String, String)> = None;
     let mut longest_delay_ms = 0.0f64;
     for (i, st) in stages.iter().enumerate() {
@@ -109,6 +123,13 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
             ModelSpec::Slot(_) => &mut slot,
             ModelSpec::Duplicate(_) => &mut dup,
             ModelSpec::Corrupt(_) => &mut corrupt,
+            ModelSpec::Rate(_) => &mut rate,
+            ModelSpec::LinkTrace(_) => bail!(
+                "{label}: netem cannot follow a link trace (its `rate` is fixed); netfi export refuses `trace` stages: run Mahimahi's mm-link with the same trace file instead"
+            ),
+            ModelSpec::Replay(_) => bail!(
+                "{label}: netem cannot replay recorded per-frame fates (it draws each packet's fate afresh); netfi export refuses `replay` stages"
+            ),
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
@@ -120,6 +141,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 match model {
                     "delay" | "jitter" | "reorder" => "delay",
                     "slot" => "slot",
+                    "rate" => "rate",
                     "duplicate" => "duplication",
                     "corrupt" => "corruption",
                     _ => "loss model",
@@ -202,14 +224,28 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
                 }
                 text
             }
-            ModelSpec::Outage(_) => unreachable!("refused above"),
+            ModelSpec::Rate(p) => {
+                let (text, note, limit) = rate_as_netem(p, &label)?;
+                notes.push(format!("{label}: {note}"));
+                rate_limit = Some(limit);
+                text
+            }
+            ModelSpec::Outage(_) | ModelSpec::LinkTrace(_) | ModelSpec::Replay(_) => unreachable!("refused above"),
         };
         *slot = Some((i, text));
     }
 
     let needed = (args.rate_hz * longest_delay_ms / 1e3 * 1.25).ceil() as u64 + 1;
-    let limit = needed.max(NETEM_DEFAULT_LIMIT);
-    if needed > NETEM_DEFAULT_LIMIT {
+    let limit = match rate_limit {
+        // The rate stage's queue is netem's limit; a delay's hold shares it.
+        Some(l) if needed > l => {
+            notes.push(format!("queue: the rate stage's limit {l} is raised to {needed} to hold the delayed packets too (netem has one queue for both)"));
+            needed
+        }
+        Some(l) => l,
+        None => needed.max(NETEM_DEFAULT_LIMIT),
+    };
+    if needed > NETEM_DEFAULT_LIMIT && rate_limit.is_none() {
         notes.push(format!(
             "queue: at {} Hz a delay of up to {longest_delay_ms:.1} ms holds about {} packets, more than netem's default limit of {NETEM_DEFAULT_LIMIT}; limit raised to {limit} (packets beyond the limit are dropped)",
             args.rate_hz,
@@ -267,7 +303,7 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
         writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay, &dup, &corrupt, &slot].into_iter().flatten() {
+    for (_, text) in [&loss, &delay, &dup, &corrupt, &slot, &rate].into_iter().flatten() {
         cmd.push(' ');
         cmd.push_str(text);
     }
@@ -402,6 +438,42 @@ fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)> {
 }
 
 /// A duration for tc, in microseconds (tc keeps nanoseconds).
+/// Bytes netem counts of an ITP frame's datagram beyond its payload: UDP
+/// (8), IPv4 (20) and Ethernet (14) headers.
+const NETEM_HEADER_BYTES: i64 = 42;
+
+/// `rate` as netem's `rate … [packet_overhead [cellsize [celloverhead]]]`:
+/// the text, the note, and the queue limit in packets.
+fn rate_as_netem(p: &netfi::model::RateParams, label: &str) -> Result<(String, String, u64)> {
+    let m = netfi::model::Rate::new(p).map_err(|e| anyhow::anyhow!("{label}: {e}"))?;
+    let packets = m.packets();
+    let overhead = packets.overhead_bytes as i64 - NETEM_HEADER_BYTES;
+    let mut text = format!("rate {}bit", m.rate_bit_s());
+    let (cell, cell_overhead) = m.cell().unwrap_or((0, 0));
+    if overhead != 0 || cell != 0 {
+        text.push_str(&format!(" {overhead}"));
+    }
+    if cell != 0 {
+        text.push_str(&format!(" {cell} {cell_overhead}"));
+    }
+    let mut notes = vec![format!(
+        "packet_overhead {overhead}: netem counts the UDP/IPv4/Ethernet headers ({NETEM_HEADER_BYTES} bytes) netfi leaves out of the payload"
+    )];
+    let per_frame = packets.count(packets.payload_bytes);
+    if per_frame > 1 {
+        notes.push(format!("approximated: netfi cuts each {}-byte payload into {per_frame} packets sharing its fate; netem sends each datagram as it comes", packets.payload_bytes));
+    }
+    let limit = match packets.limit {
+        netfi::model::backlog::QueueLimit::Packets(n) => n,
+        netfi::model::backlog::QueueLimit::Bytes(b) => {
+            let n = (b / packets.largest_packet_bytes()).max(1);
+            notes.push(format!("approximated: netem's limit counts packets: queue_bytes {b} becomes {n} packets of this stage's size"));
+            n
+        }
+    };
+    Ok((text, format!("rate (netem's own): {}", notes.join("; ")), limit))
+}
+
 fn time_us(ms: f64) -> String {
     format!("{}us", (ms * 1e3).round() as u64)
 }

@@ -20,6 +20,9 @@ pub fn run(cmd: ScenarioCmd) -> Result<()> {
         ScenarioCmd::Show { scenario } => {
             let spec = load::resolve(&scenario)?;
             print!("{}", spec.to_toml());
+            for line in file_stage_notes(&Scenario::new(&spec, 0)?) {
+                println!("# {line}");
+            }
             Ok(())
         }
     }
@@ -36,6 +39,7 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     let arrivals = match &args.capture {
         Some(path) => {
             let cap = netfi::capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+            eprintln!("capture {}: {} records, layout `{}`", path.display(), cap.records.len(), cap.layout.describe());
             let t0 = cap.records.first().map_or(0, |r| r.time_ns);
             let mut times: Vec<u64> = cap.records.iter().map(|r| r.time_ns.saturating_sub(t0)).collect();
             // Wall-clock captures can step backwards; the injector's clock cannot.
@@ -71,6 +75,73 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the link and replay stages hold, for `scenario show` (comments
+/// after the TOML: the files they read are not printed).
+fn file_stage_notes(scenario: &Scenario) -> Vec<String> {
+    use netfi::model::AnyModel;
+    let mut out = Vec::new();
+    for (pi, phase) in scenario.phases().iter().enumerate() {
+        for st in phase.stages() {
+            let at = format!("phase {} stage `{}`", pi + 1, st.label());
+            let queue = |p: &netfi::model::backlog::Packets| {
+                let limit = match p.limit {
+                    netfi::model::backlog::QueueLimit::Packets(n) => format!("{n} packets"),
+                    netfi::model::backlog::QueueLimit::Bytes(b) => format!("{b} bytes"),
+                };
+                format!("{}-byte payloads in {} packet(s) (MTU {}, +{} bytes each), queue {limit}", p.payload_bytes, p.count(p.payload_bytes), p.mtu_bytes, p.overhead_bytes)
+            };
+            match st.model() {
+                AnyModel::Rate(m) => out.push(format!("{at}: rate {} bit/s, {}", m.rate_bit_s(), queue(m.packets()))),
+                AnyModel::LinkTrace(m) => out.push(format!(
+                    "{at}: trace of {} opportunities of {} bytes every {} ms (mean {:.3} Mbit/s), repeated; {}",
+                    m.schedule().len(),
+                    m.opportunity_bytes(),
+                    m.schedule().period_ms(),
+                    m.schedule().mean_rate_bit_s(m.opportunity_bytes()) / 1e6,
+                    queue(m.packets())
+                )),
+                AnyModel::Replay(m) => {
+                    let r = m.recording();
+                    out.push(format!(
+                        "{at}: replay of {} recorded fates ({}): loss {:.5}, mean delay {:.3} ms, repeated",
+                        r.len(),
+                        r.kind().name(),
+                        r.loss_rate(),
+                        r.mean_delay_ms()
+                    ))
+                }
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+fn print_links(r: &CheckReport) {
+    for l in &r.links {
+        println!("link              phase {} `{}` ({})", l.phase + 1, l.label, l.model);
+        println!(
+            "  carried         {:.3} Mbit/s of {:.3} Mbit/s capacity, utilisation {:.4}",
+            l.carried_bit_s / 1e6,
+            l.capacity_bit_s / 1e6,
+            l.utilisation
+        );
+        println!(
+            "  frames          {} ({} packets), {} dropped by link_queue ({} packets)",
+            l.frames, l.packets, l.frames_dropped, l.packets_dropped
+        );
+        println!(
+            "  time at link ms p50 {:.3}  p90 {:.3}  p99 {:.3}  max {:.3}",
+            l.delay_ms.p50, l.delay_ms.p90, l.delay_ms.p99, l.delay_ms.max
+        );
+        println!("  queue max       {} packets, {} bytes", l.queue_packets_max, l.queue_bytes_max);
+        // Occupancy over time: ten evenly spaced seconds (all of them in --json).
+        let step = (l.occupancy.len() / 10).max(1);
+        let shown: Vec<String> = l.occupancy.iter().step_by(step).map(|o| format!("{}s:{}", o.second, o.packets_max)).collect();
+        println!("  queue over time {} (second:packets max)", shown.join(" "));
+    }
+}
+
 fn print_table(r: &CheckReport) {
     println!("scenario          {}", r.scenario);
     println!("seed              {}", r.seed);
@@ -100,6 +171,7 @@ fn print_table(r: &CheckReport) {
         );
     }
     println!("queue             depth max {} of {}", r.queue_depth_max, r.queue_capacity);
+    print_links(r);
     if !r.stages.is_empty() {
         println!("stages:");
         println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
