@@ -11,10 +11,17 @@
 //! rate and delay hold in flight, the frame taken out is simply the earliest
 //! held: the queue is measured, not the stream.
 //!
+//! Times are the benchmark thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`),
+//! not wall time: on a shared machine the wall clock also counts the time
+//! the thread waited for a core, which says nothing about the queue (the
+//! caches the other processes share are still theirs to disturb, so the
+//! load is printed).
+//!
 //! `cargo bench --bench queue` (about a minute); `-- wheel` or `-- heap`
 //! narrows it. Load and host steal are printed beside the results.
 
-use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
+use criterion::measurement::{Measurement, ValueFormatter};
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use netfi::host::CpuTimes;
 use netfi::model::{StageRng, Verdict};
 use netfi::scenario::{self, ModelSpec};
@@ -66,8 +73,66 @@ fn uniform(depth: usize) -> Releases {
     Releases { spacing_ns: 1_000, delays_ns: std::sync::Arc::new(delays) }
 }
 
+/// The calling thread's CPU time, in ns: it stands still while the thread
+/// waits for a core.
+fn thread_cpu_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid timespec for the call to fill.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    assert_eq!(rc, 0, "CLOCK_THREAD_CPUTIME_ID is available on Linux");
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Criterion's measurement by [`thread_cpu_ns`].
+struct ThreadCpu;
+
+impl Measurement for ThreadCpu {
+    type Intermediate = u64;
+    type Value = u64;
+    fn start(&self) -> u64 {
+        thread_cpu_ns()
+    }
+    fn end(&self, start: u64) -> u64 {
+        thread_cpu_ns() - start
+    }
+    fn add(&self, a: &u64, b: &u64) -> u64 {
+        a + b
+    }
+    fn zero(&self) -> u64 {
+        0
+    }
+    fn to_f64(&self, v: &u64) -> f64 {
+        *v as f64
+    }
+    fn formatter(&self) -> &dyn ValueFormatter {
+        &CpuNs
+    }
+}
+
+/// Nanoseconds of CPU time, shown as they are.
+struct CpuNs;
+
+impl ValueFormatter for CpuNs {
+    fn scale_values(&self, _typical: f64, _values: &mut [f64]) -> &'static str {
+        "ns (cpu)"
+    }
+    fn scale_throughputs(&self, _typical: f64, throughput: &Throughput, values: &mut [f64]) -> &'static str {
+        let per = match throughput {
+            Throughput::Elements(n) | Throughput::Bytes(n) | Throughput::BytesDecimal(n) => *n as f64,
+            _ => 1.0,
+        };
+        for v in values {
+            *v = per * 1e9 / *v;
+        }
+        "/s (cpu)"
+    }
+    fn scale_for_machines(&self, _values: &mut [f64]) -> &'static str {
+        "ns"
+    }
+}
+
 /// The wheel, then the heap, at a constant `depth`.
-fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, name: &str, depth: usize, releases: &Releases, item: I) {
+fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, name: &str, depth: usize, releases: &Releases, item: I) {
     let mut q = ReleaseQueue::<I>::new(QueueOrder::Reorder, depth + 1);
     let mut i = 0u64;
     while q.len() < depth {
@@ -98,7 +163,7 @@ fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'
     assert_eq!(q.len(), depth, "the depth stays constant");
 }
 
-fn queue_depths(c: &mut Criterion) {
+fn queue_depths(c: &mut Criterion<ThreadCpu>) {
     let dlm2 = std::sync::Arc::new(dlm2_delays_ns());
     let mut g = c.benchmark_group("reorder push+pop");
     for depth in [1usize, 1_000, 100_000, 1_000_000] {
@@ -128,7 +193,7 @@ fn queue_depths(c: &mut Criterion) {
     g.finish();
 }
 
-fn report_host(_c: &mut Criterion) {
+fn report_host(_c: &mut Criterion<ThreadCpu>) {
     if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
         let s = now.steal_since(start);
         println!("host steal during the benchmarks: {} ms ({:.3}% of CPU time)", s.ms, s.fraction * 100.0);
@@ -140,7 +205,7 @@ fn report_host(_c: &mut Criterion) {
 
 static START: std::sync::OnceLock<CpuTimes> = std::sync::OnceLock::new();
 
-fn start(_c: &mut Criterion) {
+fn start(_c: &mut Criterion<ThreadCpu>) {
     if let Some(t) = CpuTimes::read() {
         let _ = START.set(t);
     }
@@ -152,6 +217,7 @@ fn start(_c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default()
+        .with_measurement(ThreadCpu)
         .warm_up_time(std::time::Duration::from_millis(300))
         .measurement_time(std::time::Duration::from_secs(1))
         .sample_size(20);

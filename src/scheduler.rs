@@ -7,26 +7,44 @@
 //! does. `Reorder` leaves each frame at its own time, ties in ingress order:
 //! exactly the order of `(release_ns, ingress_index)`.
 //!
-//! `Reorder` is a hierarchical timing wheel over the whole `u64` range of
-//! nanoseconds, so its cost does not grow with the number of frames held
-//! (a binary heap's does, by a cache miss per level once it outgrows the
-//! cache). Eleven levels of 64 slots each split a time into 6-bit digits; a
-//! frame sits at the level of the highest digit in which its release time
-//! differs from the wheel's cursor, in the slot named by that digit. Level 0
-//! therefore holds exact times, one per slot, and its slots are kept in
-//! ingress order; higher slots are unordered bags that are moved down a level
-//! (cascaded) when level 0 runs empty. A frame is moved at most once per
-//! level, whatever the depth. A bitmap of occupied slots per level finds the
-//! earliest one in a few instructions, and because level 0 always holds the
-//! earliest frame, [`ReleaseQueue::next_release_ns`] is one bit scan.
+//! `Reorder` keeps its frames in a slab (node and item at one index; links
+//! are `u32` indices) and each frame in one of two structures, both in
+//! exact `(release_ns, ingress_index)` order; the earliest frame is the
+//! earlier of their two first ones, so which one holds a frame changes its
+//! cost, never the order.
 //!
-//! The cursor never passes the earliest frame held. A push earlier than the
-//! cursor (never the case while time moves forward: the injector pushes at
-//! `now + delay` and releases at most up to `now`) gathers the lower levels
-//! into one slot and moves the cursor back, a bounded number of list splices.
+//! - The **calendar** holds nearly every frame: one level of `2^k` buckets
+//!   (`2^k` the power of two at or below the capacity), each `2^s` ns wide.
+//!   A push puts a frame at the front of its bucket's list (a bag); a pop
+//!   takes the head of the first bucket, which is kept in exact order (a
+//!   bag is sorted when it becomes the first: a few frames), and finds the
+//!   next occupied bucket in a two-level bitmap. The bucket width is chosen
+//!   whenever the calendar runs empty, from how far ahead of the earliest
+//!   frame the pushes reached since the last choice: the window spans the
+//!   stream's delay spread (rate × delay frames over `2^k` buckets), so a
+//!   bucket holds a few frames at any depth, and a frame is moved once in
+//!   and once out, whatever the depth. Pops prefetch the node and item of
+//!   the frames a few buckets ahead: at depth those lines were last touched
+//!   at the frame's push, long out of cache.
+//! - A hierarchical **timing wheel** takes what the calendar does not: a
+//!   frame outside its window (the first frames of a stream, before the
+//!   width fits; a frame due before everything held; an outlier far ahead)
+//!   or deeper than `WALK_MAX` (8) frames into the first bucket. Eleven levels of 64
+//!   slots each split a time into 6-bit digits; a frame sits at the level of
+//!   the highest digit in which its release time differs from the wheel's
+//!   cursor, in the slot named by that digit. Level 0 therefore holds exact
+//!   times, and higher slots are bags moved down a level (cascaded) when
+//!   level 0 runs empty; a frame is moved at most once per level. A frame
+//!   earlier than the cursor waits in a short sorted list (at most 32) that
+//!   is merged into the wheel when full. The wheel's frames move into the
+//!   calendar, a few per push, once its window covers them.
 //!
-//! Neither order allocates after construction: the wheel's frames live in a
-//! slab whose free slots and slot lists are intrusive `u32` links, and a push
+//! A push walks at most 8 frames of the first bucket (or 32 of the wheel's
+//! early list); a pop scans bitmap words and sorts the next bucket; the
+//! wheel's cascades move a frame at most once per level.
+//!
+//! Neither order allocates after construction: the reorder queue's frames
+//! live in a slab whose free slots and lists are intrusive `u32` links, and a push
 //! onto a full queue hands the item back as [`Full`] so the caller records
 //! the fate. The capacity is bounded by [`MAX_CAPACITY`]; a larger one is a
 //! [`CapacityError`] that names the memory it would take.
@@ -146,15 +164,17 @@ const AHEAD_BUCKETS: u64 = 16;
 const MIGRATE_PER_PUSH: usize = 2;
 
 /// One level of `2^bits` buckets of `2^shift` ns each: a frame due at `t`
-/// is in bucket `t >> shift` (absolute), stored at index `bucket & mask`;
-/// each bucket's list is in `(release_ns, ingress_index)` order.
+/// is in bucket `t >> shift` (absolute), stored at index `bucket & mask`.
+/// The first bucket's list is in `(release_ns, ingress_index)` order; any
+/// other is a bag, pushed at its front and put in order when it becomes the
+/// first, so a push touches no other frame.
 ///
 /// Invariants: every frame's bucket is in `first..=hi`, and `hi - first ≤
 /// mask`, so the circular indices of held frames never collide and buckets
 /// in index order from `first` are in time order; `first` holds the
 /// earliest frame, whose release is `first_ns`. The bucket width is chosen
 /// only when the calendar is empty, from how far ahead of the earliest frame
-/// pushes reached since it was last chosen (`reach_ns`), so a window spans
+/// pushes reached on average since it was last chosen, so a window spans
 /// the delay spread of the stream and a bucket holds a few frames.
 #[derive(Debug, Clone)]
 struct Calendar {
@@ -170,7 +190,15 @@ struct Calendar {
     first_ns: u64,
     hi: u64,
     len: usize,
-    reach_ns: u64,
+    /// Sum and count of how far ahead of the earliest frame pushes reached
+    /// since the width was chosen.
+    reach_sum_ns: u64,
+    reach_count: u64,
+    /// Pushes refused for a deep bucket, and taken, since then; too many
+    /// refusals close the calendar to pushes until it drains and starts over.
+    refusals: u64,
+    taken: u64,
+    closed: bool,
     /// The prefetch cursor: a bucket at or after `first`, and a frame in it.
     ahead: u64,
     ahead_node: u32,
@@ -220,7 +248,11 @@ impl Calendar {
             first_ns: 0,
             hi: 0,
             len: 0,
-            reach_ns: 0,
+            reach_sum_ns: 0,
+            reach_count: 0,
+            refusals: 0,
+            taken: 0,
+            closed: false,
             ahead: 0,
             ahead_node: NIL,
         }
@@ -267,27 +299,37 @@ impl Calendar {
     }
 
     /// An empty calendar starts over at `release_ns`, with buckets as wide
-    /// as the reach seen since the last start asks: the window covers it 1.5
-    /// times over.
+    /// as the pushes since the last start ask: the window spans twice their
+    /// mean reach (rounded up to a power of two). Not their largest reach:
+    /// a delay law's tail (the largest of N exponential delays is ln N
+    /// means) would widen every bucket for a few frames, which the wheel
+    /// holds as well until the window reaches them.
     fn rebase(&mut self, release_ns: u64) {
-        if self.reach_ns > 0 {
-            let want_ns = self.reach_ns.saturating_add(self.reach_ns / 2);
+        if self.reach_count > 0 {
+            let want_ns = (self.reach_sum_ns / self.reach_count).saturating_mul(2);
             self.shift = 64 - (want_ns >> self.bits).leading_zeros();
-            self.reach_ns = 0;
         }
+        (self.reach_sum_ns, self.reach_count, self.refusals, self.taken, self.closed) = (0, 0, 0, 0, false);
         let a = release_ns >> self.shift;
         (self.first, self.hi, self.ahead, self.ahead_node) = (a, a, a, NIL);
     }
 
     /// Puts node `n` into its bucket; `false` (nothing changed) when it
-    /// falls outside the window or deeper into a bucket than [`WALK_MAX`].
+    /// falls outside the window or deeper into a bucket than [`WALK_MAX`],
+    /// or the calendar is closed.
     #[inline]
     fn insert(&mut self, nodes: &mut [Node], n: u32) -> bool {
         let key = nodes[n as usize].key();
         if self.len == 0 {
             self.rebase(key.0);
-        } else if key.0 > self.first_ns {
-            self.reach_ns = self.reach_ns.max(key.0 - self.first_ns);
+        } else {
+            if key.0 > self.first_ns {
+                self.reach_sum_ns = self.reach_sum_ns.saturating_add(key.0 - self.first_ns);
+                self.reach_count += 1;
+            }
+            if self.closed {
+                return false;
+            }
         }
         let a = key.0 >> self.shift;
         let fits = if a < self.first { self.hi - a <= self.mask } else { a - self.first <= self.mask };
@@ -296,7 +338,9 @@ impl Calendar {
         }
         let idx = (a & self.mask) as usize;
         let head = self.heads[idx];
-        if head == NIL || key < nodes[head as usize].key() {
+        if a != self.first || self.len == 0 || head == NIL || key < nodes[head as usize].key() {
+            // Any bucket but the first is a bag: the front touches no other
+            // frame (it is put in order when it becomes the first).
             nodes[n as usize].next = head;
             self.heads[idx] = n;
             if head == NIL {
@@ -312,6 +356,7 @@ impl Calendar {
                 }
                 walked += 1;
                 if walked == WALK_MAX {
+                    self.refuse();
                     return false;
                 }
                 prev = next;
@@ -320,6 +365,7 @@ impl Calendar {
             nodes[prev as usize].next = n;
         }
         self.len += 1;
+        self.taken += 1;
         if self.len == 1 || a <= self.first {
             self.first = a;
             self.first_ns = nodes[self.heads[idx] as usize].release_ns;
@@ -328,9 +374,21 @@ impl Calendar {
         true
     }
 
+    /// A push refused for a deep bucket: buckets too wide for the stream
+    /// now (its delays shrank). Past one refusal in 16 pushes, the calendar
+    /// takes no more until it drains, and then starts over with a width
+    /// from the pushes seen meanwhile.
+    #[cold]
+    fn refuse(&mut self) {
+        self.refusals += 1;
+        if self.refusals > 64 && self.refusals * 16 > self.taken {
+            self.closed = true;
+        }
+    }
+
     /// Takes the earliest frame out (the calendar holds one).
     #[inline]
-    fn remove_first(&mut self, nodes: &[Node]) -> u32 {
+    fn remove_first(&mut self, nodes: &mut [Node]) -> u32 {
         let idx = (self.first & self.mask) as usize;
         let n = self.heads[idx];
         let next = nodes[n as usize].next;
@@ -340,12 +398,47 @@ impl Calendar {
             self.unmark(idx);
             if self.len > 0 {
                 self.first = self.next_occupied(self.first + 1);
+                self.sort_first(nodes);
             }
         }
         if self.len > 0 {
             self.first_ns = nodes[self.head() as usize].release_ns;
         }
         n
+    }
+
+    /// Puts the first bucket, a bag until now, in `(release_ns,
+    /// ingress_index)` order: an insertion sort that takes the bag from its
+    /// front, i.e. latest push first, so frames pushed in order (the usual
+    /// case) each go to the front at once. A few frames, as the width is
+    /// chosen; quadratic only in a bucket that gathered many frames in mixed
+    /// order.
+    #[inline]
+    fn sort_first(&mut self, nodes: &mut [Node]) {
+        let idx = (self.first & self.mask) as usize;
+        let mut n = self.heads[idx];
+        let mut sorted = NIL;
+        while n != NIL {
+            let next = nodes[n as usize].next;
+            let key = nodes[n as usize].key();
+            if sorted == NIL || key < nodes[sorted as usize].key() {
+                nodes[n as usize].next = sorted;
+                sorted = n;
+            } else {
+                let mut prev = sorted;
+                loop {
+                    let after = nodes[prev as usize].next;
+                    if after == NIL || nodes[after as usize].key() > key {
+                        break;
+                    }
+                    prev = after;
+                }
+                nodes[n as usize].next = nodes[prev as usize].next;
+                nodes[prev as usize].next = n;
+            }
+            n = next;
+        }
+        self.heads[idx] = sorted;
     }
 
     /// Moves the prefetch cursor one frame on and returns that frame (NIL
@@ -700,6 +793,8 @@ struct Timeline<T> {
     len: usize,
     calendar: Calendar,
     wheel: Wheel,
+    /// The last frame the calendar refused to take from the wheel.
+    refused: u32,
 }
 
 impl<T: Copy + Default> Timeline<T> {
@@ -710,7 +805,7 @@ impl<T: Copy + Default> Timeline<T> {
         let nodes = (0..capacity)
             .map(|i| Node { release_ns: 0, ingress_index: 0, next: if i + 1 < capacity { i as u32 + 1 } else { NIL } })
             .collect();
-        Timeline { nodes, items: vec![T::default(); capacity], free: 0, len: 0, calendar: Calendar::new(capacity), wheel: Wheel::new() }
+        Timeline { nodes, items: vec![T::default(); capacity], free: 0, len: 0, calendar: Calendar::new(capacity), wheel: Wheel::new(), refused: NIL }
     }
 
     #[inline]
@@ -745,21 +840,27 @@ impl<T: Copy + Default> Timeline<T> {
 
     /// Moves the wheel's earliest frames into the calendar while its window
     /// covers them: after the calendar starts over with wider buckets, the
-    /// frames that did not fit the old window join it, a few per push.
-    #[cold]
+    /// frames that did not fit the old window join it, a few per push. A
+    /// frame the calendar refused (its bucket too deep) is not offered again
+    /// while it is the wheel's first.
     fn migrate(&mut self) {
         for _ in 0..MIGRATE_PER_PUSH {
             if self.wheel.len == 0 {
                 return;
             }
-            let release_ns = self.nodes[self.wheel.first() as usize].release_ns;
-            let (a, c) = (release_ns >> self.calendar.shift, &self.calendar);
+            let n = self.wheel.first();
+            if n == self.refused || self.calendar.closed {
+                return;
+            }
+            let a = self.nodes[n as usize].release_ns >> self.calendar.shift;
+            let c = &self.calendar;
             if if a < c.first { c.hi - a > c.mask } else { a - c.first > c.mask } {
                 return;
             }
             let n = self.wheel.remove_first(&mut self.nodes);
             if !self.calendar.insert(&mut self.nodes, n) {
                 self.wheel.insert(&mut self.nodes, n);
+                self.refused = n;
                 return;
             }
         }
@@ -789,7 +890,7 @@ impl<T: Copy + Default> Timeline<T> {
     /// their push) arrive before they are taken.
     #[inline]
     fn pop_calendar(&mut self) -> u32 {
-        let n = self.calendar.remove_first(&self.nodes);
+        let n = self.calendar.remove_first(&mut self.nodes);
         for _ in 0..2 {
             let m = self.calendar.step_ahead(&self.nodes);
             if m == NIL {
@@ -816,7 +917,9 @@ pub struct ReleaseQueue<T> {
 }
 
 impl<T: Copy + Default> ReleaseQueue<T> {
-    /// The memory one frame of capacity takes in a queue of this order.
+    /// The memory one frame of capacity takes in a queue of this order: for
+    /// `Reorder`, the slab's node and item (the calendar's bucket heads and
+    /// bitmaps add at most 4.2 bytes a frame, left out of this figure).
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),
