@@ -334,6 +334,7 @@ impl Calendar {
         let a = key.0 >> self.shift;
         let fits = if a < self.first { self.hi - a <= self.mask } else { a - self.first <= self.mask };
         if !fits {
+            self.refuse();
             return false;
         }
         let idx = (a & self.mask) as usize;
@@ -374,10 +375,12 @@ impl Calendar {
         true
     }
 
-    /// A push refused for a deep bucket: buckets too wide for the stream
-    /// now (its delays shrank). Past one refusal in 16 pushes, the calendar
-    /// takes no more until it drains, and then starts over with a width
-    /// from the pushes seen meanwhile.
+    /// A push refused: outside the window (buckets too narrow for the
+    /// stream's spread; the width chosen from its first frames, or its
+    /// delays grew) or deep in the first bucket (too wide: its delays
+    /// shrank). Past one refusal in 16 pushes, the calendar takes no more
+    /// until it drains, and then starts over with a width from the pushes
+    /// seen meanwhile.
     #[cold]
     fn refuse(&mut self) {
         self.refusals += 1;
