@@ -20,14 +20,17 @@
 //! `cargo bench --bench queue` (about a minute); `-- wheel` or `-- heap`
 //! narrows it. Load and host steal are printed beside the results.
 
-use criterion::measurement::{Measurement, ValueFormatter};
-use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use netfi::host::CpuTimes;
 use netfi::model::{StageRng, Verdict};
 use netfi::scenario::{self, ModelSpec};
 use netfi::scheduler::{QueueOrder, ReleaseQueue};
 use rand::SeedableRng;
 use std::hint::black_box;
+
+#[path = "common/cpu_time.rs"]
+mod cpu_time;
+use cpu_time::ThreadCpu;
 
 #[path = "../tests/common/heap_queue.rs"]
 mod heap_queue;
@@ -71,64 +74,6 @@ fn uniform(depth: usize) -> Releases {
     let spread_ns = 2 * depth as u64 * 1_000;
     let delays = (0..DELAYS as u64).map(|i| netfi::scenario::splitmix64(i) % spread_ns.max(1)).collect();
     Releases { spacing_ns: 1_000, delays_ns: std::sync::Arc::new(delays) }
-}
-
-/// The calling thread's CPU time, in ns: it stands still while the thread
-/// waits for a core.
-fn thread_cpu_ns() -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: `ts` is a valid timespec for the call to fill.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    assert_eq!(rc, 0, "CLOCK_THREAD_CPUTIME_ID is available on Linux");
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
-
-/// Criterion's measurement by [`thread_cpu_ns`].
-struct ThreadCpu;
-
-impl Measurement for ThreadCpu {
-    type Intermediate = u64;
-    type Value = u64;
-    fn start(&self) -> u64 {
-        thread_cpu_ns()
-    }
-    fn end(&self, start: u64) -> u64 {
-        thread_cpu_ns() - start
-    }
-    fn add(&self, a: &u64, b: &u64) -> u64 {
-        a + b
-    }
-    fn zero(&self) -> u64 {
-        0
-    }
-    fn to_f64(&self, v: &u64) -> f64 {
-        *v as f64
-    }
-    fn formatter(&self) -> &dyn ValueFormatter {
-        &CpuNs
-    }
-}
-
-/// Nanoseconds of CPU time, shown as they are.
-struct CpuNs;
-
-impl ValueFormatter for CpuNs {
-    fn scale_values(&self, _typical: f64, _values: &mut [f64]) -> &'static str {
-        "ns (cpu)"
-    }
-    fn scale_throughputs(&self, _typical: f64, throughput: &Throughput, values: &mut [f64]) -> &'static str {
-        let per = match throughput {
-            Throughput::Elements(n) | Throughput::Bytes(n) | Throughput::BytesDecimal(n) => *n as f64,
-            _ => 1.0,
-        };
-        for v in values {
-            *v = per * 1e9 / *v;
-        }
-        "/s (cpu)"
-    }
-    fn scale_for_machines(&self, _values: &mut [f64]) -> &'static str {
-        "ns"
-    }
 }
 
 /// The wheel, then the heap, at a constant `depth`.
