@@ -1,6 +1,7 @@
-//! The reorder queue's push + pop cost against its depth: the timing wheel
-//! (`ReleaseQueue` with `QueueOrder::Reorder`) beside the binary heap it
-//! replaced, in the same run. Each case fills the queue to a depth once,
+//! The reorder queue's push + pop cost against its depth: `ReleaseQueue`
+//! with `QueueOrder::Reorder` (a calendar, with a timing wheel for what
+//! falls outside it; labelled `wheel`) beside the binary heap it replaced,
+//! in the same run. Each case fills the queue to a depth once,
 //! then every iteration pushes one frame and takes the earliest out, so the
 //! depth stays constant.
 //!
