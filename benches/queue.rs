@@ -1,6 +1,7 @@
-//! The reorder queue's push + pop cost against its depth: the timing wheel
-//! (`ReleaseQueue` with `QueueOrder::Reorder`) beside the binary heap it
-//! replaced, in the same run. Each case fills the queue to a depth once,
+//! The reorder queue's push + pop cost against its depth: `ReleaseQueue`
+//! with `QueueOrder::Reorder` (a calendar, with a timing wheel for what
+//! falls outside it; labelled `wheel`) beside the binary heap it replaced,
+//! in the same run. Each case fills the queue to a depth once,
 //! then every iteration pushes one frame and takes the earliest out, so the
 //! depth stays constant.
 //!
@@ -10,6 +11,12 @@
 //! over twice the depth in microseconds. At a depth beyond what the arrival
 //! rate and delay hold in flight, the frame taken out is simply the earliest
 //! held: the queue is measured, not the stream.
+//!
+//! Times are the benchmark thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`),
+//! not wall time: on a shared machine the wall clock also counts the time
+//! the thread waited for a core, which says nothing about the queue (the
+//! caches the other processes share are still theirs to disturb, so the
+//! load is printed).
 //!
 //! `cargo bench --bench queue` (about a minute); `-- wheel` or `-- heap`
 //! narrows it. Load and host steal are printed beside the results.
@@ -21,6 +28,10 @@ use netfi::scenario::{self, ModelSpec};
 use netfi::scheduler::{QueueOrder, ReleaseQueue};
 use rand::SeedableRng;
 use std::hint::black_box;
+
+#[path = "common/cpu_time.rs"]
+mod cpu_time;
+use cpu_time::ThreadCpu;
 
 #[path = "../tests/common/heap_queue.rs"]
 mod heap_queue;
@@ -67,7 +78,7 @@ fn uniform(depth: usize) -> Releases {
 }
 
 /// The wheel, then the heap, at a constant `depth`.
-fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, name: &str, depth: usize, releases: &Releases, item: I) {
+fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, name: &str, depth: usize, releases: &Releases, item: I) {
     let mut q = ReleaseQueue::<I>::new(QueueOrder::Reorder, depth + 1);
     let mut i = 0u64;
     while q.len() < depth {
@@ -98,7 +109,7 @@ fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'
     assert_eq!(q.len(), depth, "the depth stays constant");
 }
 
-fn queue_depths(c: &mut Criterion) {
+fn queue_depths(c: &mut Criterion<ThreadCpu>) {
     let dlm2 = std::sync::Arc::new(dlm2_delays_ns());
     let mut g = c.benchmark_group("reorder push+pop");
     for depth in [1usize, 1_000, 100_000, 1_000_000] {
@@ -128,7 +139,7 @@ fn queue_depths(c: &mut Criterion) {
     g.finish();
 }
 
-fn report_host(_c: &mut Criterion) {
+fn report_host(_c: &mut Criterion<ThreadCpu>) {
     if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
         let s = now.steal_since(start);
         println!("host steal during the benchmarks: {} ms ({:.3}% of CPU time)", s.ms, s.fraction * 100.0);
@@ -140,7 +151,7 @@ fn report_host(_c: &mut Criterion) {
 
 static START: std::sync::OnceLock<CpuTimes> = std::sync::OnceLock::new();
 
-fn start(_c: &mut Criterion) {
+fn start(_c: &mut Criterion<ThreadCpu>) {
     if let Some(t) = CpuTimes::read() {
         let _ = START.set(t);
     }
@@ -152,6 +163,7 @@ fn start(_c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default()
+        .with_measurement(ThreadCpu)
         .warm_up_time(std::time::Duration::from_millis(300))
         .measurement_time(std::time::Duration::from_secs(1))
         .sample_size(20);

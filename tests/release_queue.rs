@@ -233,3 +233,14 @@ fn dlm2_releases_are_the_heaps_at_1_khz_and_300_khz() {
     let phases = "[[phase]]\npreset = \"DLM-3\"\n[[phase]]\nstart_s = 60\n[[phase.stage]]\nmodel = \"delay\"\nmin_ms = 1\ndist = \"uniform\"\njitter_ms = 40\n";
     assert!(same_as_the_heap(phases, 1_000_000, 150_000, 13) > 100_000);
 }
+
+/// A fast stream whose delay spread shrinks a thousandfold, then bursts on
+/// one release time: the calendar's width, chosen from the wide phase, no
+/// longer fits; the releases are still the heap's.
+#[test]
+fn releases_are_the_heaps_when_the_spread_changes() {
+    let text = "[[phase]]\n[[phase.stage]]\nmodel = \"delay\"\nmin_ms = 1\ndist = \"uniform\"\njitter_ms = 200\n\
+                [[phase]]\nstart_s = 1.5\n[[phase.stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.2\n\
+                [[phase]]\nstart_s = 3\npreset = \"CLM-2\"\n";
+    assert!(same_as_the_heap(text, 10_000, 450_000, 14) > 300_000);
+}

@@ -19,6 +19,11 @@ pub struct Args {
     /// still win. For checking that the benchmark runs, not for figures.
     #[arg(long)]
     pub quick: bool,
+    /// The throughput search's first rate, frames/s (default 50 000, or
+    /// `NETFI_BENCH_THROUGHPUT_FROM`): it doubles from here until a rate
+    /// fails, then bisects. Starting near the expected figure saves trials.
+    #[arg(long, value_name = "HZ")]
+    pub throughput_from: Option<f64>,
     /// Parts to run (latency, delay, product, throughput, sockperf; default
     /// all, or `NETFI_BENCH_PARTS`). Other words, such as a `cargo bench`
     /// filter, are ignored.
@@ -36,6 +41,8 @@ pub struct Settings {
     pub rates_hz: Vec<f64>,
     pub parts: Vec<String>,
     pub throughput_trial_s: f64,
+    /// The throughput search's first rate.
+    pub throughput_from_hz: f64,
     pub rt_priority: Option<i32>,
     /// Wait before each interval until other processes keep at most this
     /// many cores busy, for at most this many seconds.
@@ -80,7 +87,12 @@ impl Settings {
         let interval_s = num("NETFI_BENCH_SECONDS", interval)?;
         let repetitions = num("NETFI_BENCH_REPS", reps)? as usize;
         let throughput_trial_s = num("NETFI_BENCH_THROUGHPUT_S", trial)?;
+        let throughput_from_hz = match args.throughput_from {
+            Some(hz) => hz,
+            None => num("NETFI_BENCH_THROUGHPUT_FROM", 50_000.0)?,
+        };
         anyhow::ensure!(interval_s > 0.0 && repetitions >= 1 && throughput_trial_s > 0.0, "intervals and repetitions must be positive");
+        anyhow::ensure!(throughput_from_hz >= 1000.0, "the throughput search starts at 1000 frames/s or more");
         let rt_priority = parsed::<i32>("NETFI_BENCH_RT_PRIORITY", "")?;
         let quiet = match parsed::<f64>("NETFI_BENCH_QUIET_CORES", ": expected a number of cores")? {
             Some(cores) => Some((cores, num("NETFI_BENCH_QUIET_WAIT_S", 600.0)?)),
@@ -107,6 +119,7 @@ impl Settings {
             rates_hz: rates()?,
             parts: parts(args)?,
             throughput_trial_s,
+            throughput_from_hz,
             rt_priority,
             quiet,
             out_dir,

@@ -29,6 +29,17 @@ pub struct Trial {
     console_send_errors: Option<u64>,
     emulator_send_errors: Option<u64>,
     ingress_wait_p99_ns: Option<u64>,
+    /// The console's send lateness (behind its pacing), p99: the console
+    /// keeps up while this stays small.
+    console_send_lateness_p99_ns: Option<u64>,
+    /// The emulator loop's turns and their mean length.
+    emulator_turns: Option<u64>,
+    emulator_turn_ns_mean: Option<f64>,
+    /// The share of the emulator's core spent on frames rather than in
+    /// empty turns: `1 − (empty turn) / (mean turn)`, the empty turn's cost
+    /// being the shortest mean turn of the search (its slowest rate is
+    /// nearly all empty turns). Filled in after the search.
+    emulator_busy_share: Option<f64>,
     release_lateness_p99_ns: Option<u64>,
     steal_fraction: f64,
     host: HostWindow,
@@ -63,6 +74,10 @@ fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Tria
         console_send_errors: r.console.as_ref().map(|c| c.send_errors),
         emulator_send_errors: r.emulator.as_ref().map(|e| e.send_errors),
         ingress_wait_p99_ns: r.overhead_ns.ingress_wait.map(|p| p.p99),
+        console_send_lateness_p99_ns: r.console.as_ref().map(|c| c.send_lateness_ns.p99),
+        emulator_turns: r.emulator.as_ref().map(|e| e.loop_iterations),
+        emulator_turn_ns_mean: r.emulator.as_ref().map(|e| e.loop_iteration_ns_mean),
+        emulator_busy_share: None,
         release_lateness_p99_ns: r.overhead_ns.release_lateness.map(|p| p.p99),
         steal_fraction: r.steal.fraction,
         host,
@@ -97,10 +112,12 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
     let run = |rate: f64, trials: &mut Vec<Trial>| -> Result<bool> {
         let t = trial(s, label, scenario, rate)?;
         println!(
-            "  throughput {label} {:>9.0} frames/s: {} (console {:.0}/s, steal {:.2}%, others {:.2} cores)",
+            "  throughput {label} {:>9.0} frames/s: {} (console {:.0}/s, send lateness p99 {} ns; emulator turn {:.0} ns; steal {:.2}%, others {:.2} cores)",
             rate,
             t.verdict,
             t.console_rate_hz.unwrap_or(0.0),
+            t.console_send_lateness_p99_ns.unwrap_or(0),
+            t.emulator_turn_ns_mean.unwrap_or(0.0),
             t.steal_fraction * 100.0,
             t.host.others_busy_cores
         );
@@ -147,14 +164,28 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
             hi = Some(mid);
         }
     }
+    busy_shares(&mut trials);
     Ok((lo.unwrap_or(0.0), trials))
 }
 
+/// Fills in each trial's emulator busy share (see [`Trial`]): with `turns`
+/// turns of mean length `m` over the wall time, of which each costs at least
+/// an empty turn `e`, the core spent `1 − e / m` of its time beyond that.
+fn busy_shares(trials: &mut [Trial]) {
+    let empty_turn_ns = trials.iter().filter_map(|t| t.emulator_turn_ns_mean).filter(|&m| m > 0.0).fold(f64::INFINITY, f64::min);
+    if !empty_turn_ns.is_finite() {
+        return;
+    }
+    for t in trials.iter_mut() {
+        t.emulator_busy_share = t.emulator_turn_ns_mean.filter(|&m| m > 0.0).map(|m| 1.0 - empty_turn_ns / m);
+        println!("  {:>9.0} frames/s: emulator busy {:.0}% of its core (mean turn {:.0} ns, empty turn {empty_turn_ns:.0} ns)", t.rate_hz, t.emulator_busy_share.unwrap_or(0.0) * 100.0, t.emulator_turn_ns_mean.unwrap_or(0.0));
+    }
+}
 
 /// The throughput part: the search for Normal and for PLM-2 + DLM-2.
 pub fn throughput_part(s: &Settings, res: &mut Results) -> Result<()> {
     for (label, key, scenario) in [("normal", "Normal", "Normal"), ("plm2_dlm2", "PLM-2 + DLM-2", PLM2_DLM2)] {
-        let (best, trials) = search(s, label, scenario, 50_000.0, 3_200_000.0)?;
+        let (best, trials) = search(s, label, scenario, s.throughput_from_hz, 3_200_000.0)?;
         println!("  throughput {key}: {best:.0} frames/s sustained for {} s", s.throughput_trial_s);
         let first_fail = trials.iter().filter(|t| !t.sustained).min_by(|a, b| a.rate_hz.total_cmp(&b.rate_hz)).map(|t| t.verdict.clone());
         res.throughput_fps.insert(key.to_string(), best);

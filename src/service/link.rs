@@ -261,6 +261,12 @@ impl<T: Carried> Link<T> {
         }
     }
 
+    /// The earliest scheduled release, if an item is held.
+    #[inline]
+    pub fn next_release_ns(&self) -> Option<u64> {
+        self.inj.next_release_ns()
+    }
+
     /// Items released so far.
     pub fn released(&self) -> u64 {
         self.inj.counts().released
