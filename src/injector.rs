@@ -297,6 +297,11 @@ impl<T: Copy + Default> Injector<T> {
         self.scenario.splice(from_ns, self.start_ns.is_some(), timeline)
     }
 
+    /// Makes room for `extra` phases to be switched in without allocating.
+    pub fn reserve_phases(&mut self, extra: usize) {
+        self.scenario.reserve_phases(extra);
+    }
+
     /// Pauses all faults (every frame passes at once, no stage draws) or
     /// resumes them.
     pub fn set_paused(&mut self, paused: bool) {

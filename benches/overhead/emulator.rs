@@ -42,6 +42,9 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         no_return: false,
         idle_end_ms: None,
         udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
+        telemetry_ms: s.telemetry_ms,
+        reorder_queue: false,
+        no_control: s.telemetry_ms == 0,
     }
 }
 
