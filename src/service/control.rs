@@ -366,8 +366,8 @@ impl Server {
     }
 
     fn current(&self) -> &Mirrored {
-        let i = (self.shared.phase.load(Ordering::Relaxed) as usize).min(self.timeline.len() - 1);
-        &self.timeline[i]
+        let now = self.now_offset_ns();
+        &self.timeline[self.timeline.iter().rposition(|m| m.start_ns <= now).unwrap_or(0)]
     }
 
     fn send_switch(&mut self, spec: Arc<ScenarioSpec>, from_phase: usize, at_ns: Option<u64>) -> Result<String, String> {
@@ -483,7 +483,9 @@ impl Server {
     fn state(&self) -> State {
         let started = self.shared.start_ns.load(Ordering::Relaxed) != 0;
         let now = self.now_offset_ns();
-        let phase = (self.shared.phase.load(Ordering::Relaxed) as usize).min(self.timeline.len() - 1);
+        // The phase the timeline has at this moment (the loop moves to it
+        // with its next frame).
+        let phase = self.timeline.iter().rposition(|m| m.start_ns <= now).unwrap_or(0);
         let cur = &self.timeline[phase];
         State {
             t_s: now as f64 / 1e9,

@@ -1,6 +1,7 @@
 //! The `netfi` command line: a thin wrapper over the library.
 
 mod cli;
+mod ctl;
 mod export;
 mod fit;
 mod restore;
@@ -25,6 +26,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
         cli::Command::Restore(a) => restore::run(a),
+        cli::Command::Ctl(a) => ctl::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

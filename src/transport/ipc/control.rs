@@ -302,7 +302,7 @@ impl TelemetryPublisher {
 pub struct TelemetrySubscriber {
     port: Subscriber<Ipc, TelemetrySample, ()>,
     _service: PubSubFactory<Ipc, TelemetrySample, ()>,
-    _node: IpcNode,
+    node: IpcNode,
 }
 
 impl TelemetrySubscriber {
@@ -312,12 +312,17 @@ impl TelemetrySubscriber {
         let node = IpcNode::open(config, Role::Tool)?;
         let service = telemetry_service(&node, false)?;
         let port = service.subscriber_builder().create().map_err(|e| side_err(config, TELEMETRY_SERVICE, e))?;
-        Ok(TelemetrySubscriber { port, _service: service, _node: node })
+        Ok(TelemetrySubscriber { port, _service: service, node })
     }
 
     /// The next interval received, if any.
     pub fn recv(&self) -> Option<TelemetrySample> {
         self.port.receive().ok().flatten().map(|s| *s.payload())
+    }
+
+    /// Whether SIGINT or SIGTERM came (see [`IpcNode::termination_requested`]).
+    pub fn termination_requested(&self) -> bool {
+        self.node.termination_requested()
     }
 
     /// Whether the emulator still publishes.
