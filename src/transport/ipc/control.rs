@@ -79,7 +79,15 @@ pub struct TelemetrySample {
     pub lateness_ns: [u64; 4],
 }
 
-const _: () = assert!(core::mem::size_of::<TelemetrySample>() == 136);
+// The layout docs/interface.md gives, field by field.
+const _: () = {
+    use core::mem::{align_of, offset_of, size_of};
+    assert!(size_of::<TelemetrySample>() == 136 && align_of::<TelemetrySample>() == 8);
+    assert!(offset_of!(TelemetrySample, seq) == 8 && offset_of!(TelemetrySample, start_ns) == 16);
+    assert!(offset_of!(TelemetrySample, entered) == 32 && offset_of!(TelemetrySample, loss_rate) == 56);
+    assert!(offset_of!(TelemetrySample, phase) == 64 && offset_of!(TelemetrySample, injected_ns) == 72);
+    assert!(offset_of!(TelemetrySample, lateness_ns) == 104);
+};
 
 impl TelemetrySample {
     /// The iceoryx2 type name.
