@@ -271,7 +271,7 @@ struct Server {
 /// How long a request waits for the loop to take its command.
 const APPLY_WAIT: Duration = Duration::from_secs(2);
 /// How often the control thread wakes.
-const TICK: Duration = Duration::from_millis(2);
+const TICK: Duration = Duration::from_millis(5);
 
 impl Server {
     fn new(settings: Settings, commands: rtrb::Producer<Command>, applied: rtrb::Consumer<Applied>, shared: Arc<Shared>, telemetry: mpsc::Receiver<TelemetrySample>) -> Server {
