@@ -103,7 +103,7 @@ impl TelemetrySample {
 pub enum SideOpenError {
     /// No emulator of this run serves the service on this host (as this
     /// user): the run does not exist, has ended, or was started without it.
-    #[error("no run `{run}` with a {service} service on this host (is its emulator running, as this user, with an iceoryx2 side?)")]
+    #[error("no run `{run}` with a {service} service on this host (is its emulator running, as this user, with a run id, and not with --no-control{}?)", if *.service == TELEMETRY_SERVICE { " or --telemetry-ms 0" } else { "" })]
     NoSuchRun {
         /// The run.
         run: String,
