@@ -27,7 +27,7 @@
 //! - The timeline's phases are selected by the time since the first frame.
 
 use crate::model::ModelKind;
-use crate::scenario::{Decision, Flips, Scenario};
+use crate::scenario::{Decision, Flips, Scenario, Switched, Timeline};
 use crate::scheduler::{CapacityError, QueueOrder, ReleaseQueue, Released};
 
 /// Why an entering frame could not be decided at all.
@@ -153,6 +153,13 @@ impl<T: Copy + Default> Injector<T> {
     /// (1..=[`crate::scheduler::MAX_CAPACITY`]), all allocated here.
     pub fn try_new(scenario: Scenario, queue_capacity: usize) -> Result<Self, BuildError> {
         let order = if scenario.may_reorder() { QueueOrder::Reorder } else { QueueOrder::Fifo };
+        Self::try_with_order(scenario, queue_capacity, order)
+    }
+
+    /// [`Injector::try_new`] with the queue's order chosen by the caller: a
+    /// run that may be switched to a scenario that reorders needs
+    /// `Reorder` from the start.
+    pub fn try_with_order(scenario: Scenario, queue_capacity: usize, order: QueueOrder) -> Result<Self, BuildError> {
         let queue = ReleaseQueue::try_new(order, queue_capacity)?;
         Ok(Injector { scenario, queue, start_ns: None, counts: Counts::default() })
     }
@@ -277,6 +284,29 @@ impl<T: Copy + Default> Injector<T> {
             Invalid::BadFlags => self.counts.dropped_bad_flags += 1,
         }
         Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)), copies: 0, corrupted: false }
+    }
+
+    /// Switches the scenario (see [`crate::scenario::Timeline`]): from
+    /// `at_ns` (ns from the run's first frame), or from `now_ns` when
+    /// `at_ns` is `None` or already past, `timeline`'s phases replace the
+    /// rest of the run's timeline. Frames already queued keep their release
+    /// times. Allocates nothing; refused (the timeline handed back) when the
+    /// run has no room left for the phases.
+    pub fn switch(&mut self, now_ns: u64, at_ns: Option<u64>, timeline: Timeline) -> Result<Switched, Timeline> {
+        let now_offset_ns = self.start_ns.map_or(0, |s| now_ns.saturating_sub(s));
+        let from_ns = at_ns.map_or(now_offset_ns, |at| at.max(now_offset_ns));
+        self.scenario.splice(from_ns, self.start_ns.is_some(), timeline)
+    }
+
+    /// Makes room for `extra` phases to be switched in without allocating.
+    pub fn reserve_phases(&mut self, extra: usize) {
+        self.scenario.reserve_phases(extra);
+    }
+
+    /// Pauses all faults (every frame passes at once, no stage draws) or
+    /// resumes them.
+    pub fn set_paused(&mut self, paused: bool) {
+        self.scenario.set_paused(paused);
     }
 
     /// The earliest scheduled release, if any frame is held.

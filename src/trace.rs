@@ -139,6 +139,19 @@ pub struct CopyRow {
     pub corrupted: bool,
 }
 
+/// An observer of the trace's events, called by the writer thread (never
+/// by the loop) as it drains the ring: the telemetry's interval
+/// aggregation ([`crate::service::telemetry`]).
+pub trait Tap: Send {
+    /// A frame entered at `ingress_ns`; `dropped` if its fate was a drop.
+    fn ingress(&mut self, ingress_ns: u64, dropped: bool);
+    /// A frame was released at `release_ns` after `injected_ns` of injected
+    /// delay, `lateness_ns` after its scheduled release.
+    fn release(&mut self, release_ns: u64, injected_ns: u64, lateness_ns: u64);
+    /// The writer's periodic wake-up (every few milliseconds).
+    fn tick(&mut self);
+}
+
 /// The hot path's end of the ring.
 pub struct TraceSink {
     tx: rtrb::Producer<TraceEvent>,
@@ -185,6 +198,7 @@ pub struct Written {
 pub struct TraceWriter {
     stop: Arc<AtomicBool>,
     output: Option<mpsc::Sender<Output>>,
+    taps: mpsc::Sender<Box<dyn Tap>>,
     thread: std::thread::JoinHandle<anyhow::Result<Written>>,
 }
 
@@ -226,6 +240,7 @@ pub fn start(expected_frames: usize, expected_copies: usize) -> (TraceSink, Trac
     let stop = Arc::new(AtomicBool::new(false));
     let stop2 = stop.clone();
     let (out_tx, out_rx) = mpsc::channel();
+    let (tap_tx, tap_rx) = mpsc::channel::<Box<dyn Tap>>();
     // Allocated here, not in the thread, so that nothing the writer holds
     // is allocated while the loop runs. Room for every row while there is
     // nowhere to write them (reserved, not touched: pages become resident
@@ -236,12 +251,14 @@ pub fn start(expected_frames: usize, expected_copies: usize) -> (TraceSink, Trac
         copies: VecDeque::with_capacity(expected_copies),
         decision: LatencyHistogram::new(),
         lateness: LatencyHistogram::new(),
+        tap: None,
+        taps: tap_rx,
     };
     let thread = std::thread::Builder::new()
         .name("netfi-trace".into())
         .spawn(move || writer(rx, out_rx, stop2, table))
         .expect("spawning the trace writer thread");
-    (TraceSink { tx, overflowed: 0 }, TraceWriter { stop, output: Some(out_tx), thread })
+    (TraceSink { tx, overflowed: 0 }, TraceWriter { stop, output: Some(out_tx), taps: tap_tx, thread })
 }
 
 /// The rows between the oldest incomplete one and the newest, and the
@@ -254,9 +271,21 @@ struct Table {
     copies: VecDeque<CopyRow>,
     decision: LatencyHistogram,
     lateness: LatencyHistogram,
+    tap: Option<Box<dyn Tap>>,
+    taps: mpsc::Receiver<Box<dyn Tap>>,
 }
 
 impl Table {
+    /// Takes a tap if one was given, and wakes it.
+    fn tick(&mut self) {
+        if let Ok(t) = self.taps.try_recv() {
+            self.tap = Some(t);
+        }
+        if let Some(t) = self.tap.as_mut() {
+            t.tick();
+        }
+    }
+
     fn apply(&mut self, ev: TraceEvent) {
         match ev {
             TraceEvent::Ingress {
@@ -288,6 +317,9 @@ impl Table {
                     corrupted,
                 };
                 self.decision.record(decision_ns);
+                if let Some(t) = self.tap.as_mut() {
+                    t.ingress(ingress_ns, dropped.is_some());
+                }
             }
             TraceEvent::Copy { ingress_index, copy, release_sched_ns, corrupted } => {
                 if ingress_index >= self.base {
@@ -320,9 +352,14 @@ impl Table {
             if row.present {
                 let late_ns = release_ns.saturating_sub(row.release_sched_ns);
                 self.lateness.record(late_ns);
+                let injected_ns = row.release_sched_ns.saturating_sub(row.ingress_ns);
+                if let Some(t) = self.tap.as_mut() {
+                    t.release(release_ns, injected_ns, late_ns);
+                }
             }
             return;
         }
+        let ingress_ns = row.ingress_ns;
         let from = self.copies.partition_point(|c| c.ingress_index < ingress_index);
         let to = self.copies.partition_point(|c| c.ingress_index <= ingress_index);
         let unreleased = |c: &CopyRow| c.release_ns.is_none();
@@ -339,6 +376,9 @@ impl Table {
         copy.release_ns = Some(release_ns);
         copy.release_sched_ns = sched_ns;
         self.lateness.record(release_ns.saturating_sub(sched_ns));
+        if let Some(t) = self.tap.as_mut() {
+            t.release(release_ns, sched_ns.saturating_sub(ingress_ns), release_ns.saturating_sub(sched_ns));
+        }
         if let Some(row) = self.row_mut(ingress_index, false) {
             row.copies_pending = row.copies_pending.saturating_sub(1);
         }
@@ -419,6 +459,7 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
         while let Ok(ev) = rx.pop() {
             table.apply(ev);
         }
+        table.tick();
         match out_rx.try_recv() {
             Ok(out) => break out,
             // The handle was dropped without `finish`: nobody will ask.
@@ -472,6 +513,7 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
         while let Ok(ev) = rx.pop() {
             table.apply(ev);
         }
+        table.tick();
         let mut write_rows = |table: &mut Table, all: bool, failed: &mut Option<anyhow::Error>| {
             table.drain(all, |i, row, copy, forced| {
                 written.forced += u64::from(forced);
@@ -561,6 +603,13 @@ impl TraceWriter {
         // The thread is alive until `finish`; a send cannot fail before.
         let _ = tx.send(Output { csv, csv_path: csv_path.to_path_buf(), hlogs });
         Ok(paths)
+    }
+
+    /// Hands every trace event from now on to `tap` as well, on the writer
+    /// thread.
+    pub fn tap(&self, tap: Box<dyn Tap>) {
+        // The thread is alive until `finish`; a send cannot fail before.
+        let _ = self.taps.send(tap);
     }
 
     /// Stops the writer after it has written everything pushed so far

@@ -121,3 +121,31 @@ fn the_feedback_path_does_not_allocate_per_sample() {
     assert_eq!(n, 0, "{n} allocations in {} feedback samples", frames / 2);
     assert!(released > frames / 2, "only {released} feedback samples released");
 }
+
+#[test]
+fn a_live_switch_and_a_pause_do_not_allocate_in_the_loop() {
+    let _one = one_at_a_time();
+    let parse = |t: &str| scenario::parse_str(t, "alloc.toml", "alloc").unwrap();
+    let (a, b) = (parse("[[stage]]\npreset = \"PLM-2\"\n"), parse("[[stage]]\npreset = \"DLM-1\"\n"));
+    let mut sc = Scenario::new(&a, 3).unwrap();
+    sc.reserve_phases(scenario::MAX_RUN_PHASES);
+    let mut inj: netfi::injector::Injector<u64> =
+        netfi::injector::Injector::try_with_order(sc, 1 << 16, netfi::scheduler::QueueOrder::Reorder).unwrap();
+    // Built off the loop, as the control thread does.
+    let mut timelines: Vec<_> = (0..20).map(|i| scenario::Timeline::new(if i % 2 == 0 { &b } else { &a }, 0).unwrap()).collect();
+    let mut retired = Vec::with_capacity(timelines.len());
+    let before = allocations();
+    for i in 0..20_000u64 {
+        let now = i * 1_000_000;
+        while inj.pop_due(now).is_some() {}
+        if i % 1000 == 999 {
+            let t = timelines.pop().unwrap();
+            retired.push(inj.switch(now, None, t).unwrap());
+            inj.set_paused(i % 3000 == 2999);
+        }
+        inj.ingress(now, i);
+    }
+    let made = allocations() - before;
+    assert_eq!(made, 0, "{made} allocations across 20 switches");
+    assert_eq!(inj.scenario().phases().len(), 21);
+}

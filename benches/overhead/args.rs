@@ -53,6 +53,10 @@ pub struct Settings {
     /// Clear the emulator's core of every other thread and interrupt that
     /// may run elsewhere, for the whole benchmark (`netfi::host::isolate`).
     pub isolate: bool,
+    /// The emulator's telemetry interval, ms (`NETFI_BENCH_TELEMETRY_MS`,
+    /// default the emulator's 100); 0 runs it without the control and
+    /// telemetry services, to compare.
+    pub telemetry_ms: u64,
 }
 
 /// A non-empty environment variable.
@@ -125,6 +129,7 @@ impl Settings {
             out_dir,
             emulator_core,
             driver_core,
+            telemetry_ms: num("NETFI_BENCH_TELEMETRY_MS", netfi::service::telemetry::DEFAULT_INTERVAL_MS as f64)? as u64,
         })
     }
 

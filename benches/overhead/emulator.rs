@@ -16,7 +16,9 @@ use std::time::{Duration, Instant};
 /// writing to `dir`, on the emulator's core (and at the real-time priority,
 /// when one is set). The transports' flags go after [`argv`]'s.
 pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_id: Option<String>) -> EmulatorArgs {
+    let iceoryx2 = run_id.is_some();
     EmulatorArgs {
+        no_control: s.telemetry_ms == 0 || !iceoryx2,
         run_id,
         scenario: scenario.into(),
         seed: Some(1),
@@ -33,8 +35,10 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         payload: Payload::Itp,
         egress_bind: None,
         console_from: None,
-        // The benchmark measures the forward path, as it always has.
-        no_feedback: true,
+        // The benchmark measures the forward path, as it always has (the
+        // flag names the iceoryx2 feedback loop: a UDP chain, which has no
+        // run id, refuses it).
+        no_feedback: iceoryx2,
         wait_for_peer_s: None,
         return_scenario: None,
         return_seed: None,
@@ -42,6 +46,8 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         no_return: false,
         idle_end_ms: None,
         udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
+        telemetry_ms: s.telemetry_ms,
+        reorder_queue: false,
     }
 }
 

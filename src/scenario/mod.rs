@@ -31,10 +31,12 @@
 mod parse;
 mod presets;
 mod spec;
+mod switch;
 
 pub use parse::{parse_str, parse_str_with, preset, FileError, NoFiles, ScenarioError, ScenarioFiles};
 pub use presets::preset_stages;
 pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
+pub use switch::{Switched, Timeline, MAX_RUN_PHASES};
 // Names that live in `model` (which `fit` uses without depending on
 // `scenario`), re-exported where scenario code has always found them.
 pub use crate::model::presets::{canonical_name, preset_label, PRESET_NAMES};
@@ -195,6 +197,8 @@ pub struct Scenario {
     /// Copies waiting to run through the rest of the pipeline: (first
     /// stage, time there, flips so far). Scratch for [`Scenario::decide`].
     pending: [(usize, u64, Flips); MAX_COPIES],
+    /// Every frame passes untouched and no stage draws ([`Scenario::set_paused`]).
+    paused: bool,
 }
 
 impl Scenario {
@@ -275,6 +279,7 @@ impl Scenario {
         Ok(Scenario { name: spec.name.clone(), seed, phases, current: 0, copies: Copies::default(),
             flips: Flips::default(),
             pending: [(0, 0, Flips::default()); MAX_COPIES],
+            paused: false,
         })
     }
 
@@ -324,6 +329,9 @@ impl Scenario {
             self.current += 1;
         }
         let phase = self.current;
+        if self.paused {
+            return self.pass_untouched();
+        }
         // The copy arrays live in the scenario and are not cleared per frame:
         // only their counts are reset, so a frame without copies or flips
         // costs no more than before.

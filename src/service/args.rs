@@ -200,6 +200,19 @@ pub struct EmulatorArgs {
     /// (`feedback` → `feedback_out`).
     #[arg(long)]
     pub no_feedback: bool,
+    /// Publish telemetry (counts, loss, delay and lateness percentiles)
+    /// every this many milliseconds on the run's telemetry service; 0: none.
+    #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS")]
+    pub telemetry_ms: u64,
+    /// Hold frames in the reordering release queue (a timing wheel) even if
+    /// the scenario cannot reorder, so that `netfi ctl switch` may switch the
+    /// run to one that does.
+    #[arg(long)]
+    pub reorder_queue: bool,
+    /// Serve no control and no telemetry service (`netfi ctl` cannot reach
+    /// the run).
+    #[arg(long)]
+    pub no_control: bool,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -299,6 +312,16 @@ pub struct RunArgs {
     /// price of the in-run baseline and the console-side kinematics.
     #[arg(long)]
     pub no_direct: bool,
+    /// The emulator's telemetry interval, ms (0: none); see `netfi ctl watch`.
+    #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS")]
+    pub telemetry_ms: u64,
+    /// Hold frames in the reordering release queue from the start, so that
+    /// `netfi ctl switch` may switch to a scenario that reorders.
+    #[arg(long)]
+    pub reorder_queue: bool,
+    /// Run without the control and telemetry services (`netfi ctl`).
+    #[arg(long)]
+    pub no_control: bool,
 }
 
 impl ConsoleArgs {
@@ -335,6 +358,9 @@ impl EmulatorArgs {
             .opt("--return-seed", self.return_seed)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
             .switch("--no-feedback", self.no_feedback)
+            .val("--telemetry-ms", self.telemetry_ms)
+            .switch("--reorder-queue", self.reorder_queue)
+            .switch("--no-control", self.no_control)
             .0
     }
 

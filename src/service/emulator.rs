@@ -54,6 +54,11 @@ pub struct EmulatorConfig {
     /// Samples may carry opaque datagrams (the UDP bridge's raw mode); on
     /// any other ingress a sample flagged raw is bad input.
     pub accept_raw: bool,
+    /// Serve live control (and telemetry, every `telemetry_ms`; 0: none)
+    /// for this run ([`crate::service::control`]).
+    pub control: Option<(crate::transport::IpcConfig, u64)>,
+    /// Use the reordering release queue whatever the scenario.
+    pub reorder_queue: bool,
 }
 
 /// Bad input from the sender, by kind: each also a drop (`wrong_size` for
@@ -140,6 +145,10 @@ pub struct Shaping {
     #[serde(flatten)]
     pub link: LinkMeasures,
     pub peer_events: Vec<PeerEvent>,
+    /// Live control actions that took effect (`netfi ctl`), in order; also
+    /// streamed to `events.jsonl` as they happen.
+    #[serde(default)]
+    pub events: Vec<crate::service::control::ControlEvent>,
     pub trace_path: Option<PathBuf>,
     pub decision_hlog: Option<PathBuf>,
     pub lateness_hlog: Option<PathBuf>,
@@ -479,6 +488,7 @@ fn spin<S: FrameSource, K: FrameSink>(
     sink: &mut K,
     mut ret: Option<&mut ReturnPath>,
     mut look: impl FnMut() -> Look,
+    mut control: Option<&mut crate::service::control::ControlPort>,
 ) -> LoopEnd {
     let mut robot_died = false;
     let mut bad_seen = 0u64;
@@ -490,6 +500,9 @@ fn spin<S: FrameSource, K: FrameSink>(
         fwd.turn(source, sink, ret.as_deref_mut());
         iter = iter.wrapping_add(1);
         if iter % 4096 == 0 {
+            if let Some(c) = control.as_deref_mut() {
+                c.poll(&mut fwd.link);
+            }
             if fwd.bad_input.total() != bad_seen {
                 // Off the hot path: who is sending now.
                 bad_seen = fwd.bad_input.total();
@@ -563,9 +576,14 @@ pub fn run<S: FrameSource, K: FrameSink>(
     if let Some(f) = feedback {
         fwd = fwd.with_feedback(f);
     }
+    let mut control = start_control(cfg, &mut fwd.link)?;
     let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
+    if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
+        h.keep_off_core(core);
+    }
     let steal_timer = StealTimer::start();
-    let end = spin(&mut fwd, source, sink, ret, look);
+    let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
+    let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
     let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
     // Tell the simulator the stream ended (best effort: it may be gone),
     // unless the loop already did.
@@ -576,10 +594,39 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let delivered_unsubscribed = fwd.delivered_unsubscribed;
     let steal = steal_timer.stop();
     let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    report.shaping.events = events;
     report.process.frames.delivered_unsubscribed = delivered_unsubscribed;
     let json = cfg.out_dir.join("emulator.json");
     std::fs::write(&json, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", json.display()))?;
     Ok(report)
+}
+
+/// The live control of the run, when it has one: the queue as asked, room
+/// for switched phases, the control thread started and its telemetry
+/// tapped from the trace (before the loop's core is pinned).
+fn start_control(
+    cfg: &EmulatorConfig,
+    link: &mut Link<FrameSample>,
+) -> anyhow::Result<Option<(crate::service::control::ControlPort, crate::service::control::ControlHandle)>> {
+    use crate::service::control;
+    if cfg.reorder_queue {
+        link.reorder_queue()?;
+    }
+    let Some((run, telemetry_ms)) = cfg.control.clone() else { return Ok(None) };
+    link.injector_mut().reserve_phases(control::PHASE_ROOM);
+    let interval_ns = (telemetry_ms > 0).then(|| telemetry_ms.saturating_mul(1_000_000));
+    let settings = control::Settings {
+        run,
+        spec: cfg.scenario.clone(),
+        queue_order: link.injector_mut().queue_order(),
+        out_dir: cfg.out_dir.clone(),
+        telemetry_interval_ns: interval_ns,
+    };
+    let (port, handle) = control::start(settings)?;
+    if let Some(tap) = interval_ns.and_then(|ns| handle.aggregator(ns)) {
+        link.tap_trace(tap);
+    }
+    Ok(Some((port, handle)))
 }
 
 impl EmulatorReport {
@@ -605,6 +652,7 @@ impl EmulatorReport {
         let shaping = Shaping {
             link: l.measures,
             peer_events: end.peer_events,
+            events: Vec::new(),
             trace_path: Some(l.trace_path),
             decision_hlog: Some(decision_hlog),
             lateness_hlog: Some(lateness_hlog),
@@ -776,6 +824,11 @@ fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
         rt_priority: args.rt_priority,
         isolate: args.isolate,
         accept_raw: args.payload == crate::transport::Payload::Raw,
+        control: match (&args.run_id, args.no_control) {
+            (Some(run), false) => Some((crate::transport::IpcConfig::new(crate::transport::RunId::new(run)?), args.telemetry_ms)),
+            _ => None,
+        },
+        reorder_queue: args.reorder_queue,
     })
 }
 

@@ -182,6 +182,24 @@ impl<T: Carried> Link<T> {
         self.inj.scenario()
     }
 
+    /// The injector, for live control ([`super::control::ControlPort`]).
+    pub fn injector_mut(&mut self) -> &mut Injector<T> {
+        &mut self.inj
+    }
+
+    /// Rebuilds the (still unused) release queue as a timing wheel, so that
+    /// the run can be switched to a scenario that reorders.
+    pub fn reorder_queue(&mut self) -> anyhow::Result<()> {
+        let (scenario, capacity) = (self.inj.scenario().clone(), self.inj.queue_capacity());
+        self.inj = Injector::try_with_order(scenario, capacity, crate::scheduler::QueueOrder::Reorder)?;
+        Ok(())
+    }
+
+    /// Hands the trace's events to `tap` as well (on the writer thread).
+    pub fn tap_trace(&self, tap: Box<dyn crate::trace::Tap>) {
+        self.writer.tap(tap);
+    }
+
     /// An item taken in at `now`: its fate is decided and, if it survives,
     /// it is queued. The caller frees whatever a dropped item holds.
     /// Bits a `corrupt` stage flips are applied to the item (and to each

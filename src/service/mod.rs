@@ -11,12 +11,14 @@
 //! | `link` | one direction of the emulator: injector, histograms, trace |
 //! | `emulator` | the forward loop around a link, and its wiring |
 //! | `udp` | the UDP return path (a link of its own) and `udp.json` |
+//! | `control`, `telemetry` | live control of a running emulator, and its telemetry, off the loop |
 //! | `feedback` | the iceoryx2 feedback path robot → console (a link of its own) |
 //! | `console`, `simulator` | the two ends of a local run |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
 pub mod console;
+pub mod control;
 pub mod emulator;
 pub mod feedback;
 pub mod link;
@@ -26,6 +28,7 @@ pub mod run;
 pub mod signals;
 pub mod simulator;
 pub mod supervise;
+pub mod telemetry;
 pub mod udp;
 
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.

@@ -122,6 +122,9 @@ impl Plan {
             udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
             wait_for_peer_s: None,
             no_feedback: false,
+            telemetry_ms: args.telemetry_ms,
+            reorder_queue: args.reorder_queue,
+            no_control: args.no_control,
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),

@@ -314,6 +314,10 @@ pub struct RunReport {
     /// What went wrong: dead processes, frames lost between processes.
     pub faults: Vec<String>,
     pub peer_events: Vec<PeerEvent>,
+    /// Live control actions that took effect (`netfi ctl`): seconds from
+    /// the run's first frame, and what was done.
+    #[serde(default)]
+    pub events: Vec<crate::service::control::ControlEvent>,
     pub steal: Steal,
     pub files: Files,
     pub console: Option<ConsoleReport>,
@@ -457,6 +461,9 @@ impl RunReport {
         for e in &self.peer_events {
             s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, e.peer, e.connected);
         }
+        for e in &self.events {
+            s += &format!("control    t={:.3}s {}\n", e.t_s, e.what);
+        }
         for fault in &self.faults {
             s += &format!("FAULT      {fault}\n");
         }
@@ -577,6 +584,7 @@ impl RunReport {
             processes,
             faults,
             peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),
+            events: e.map(|e| e.events.clone()).unwrap_or_default(),
             steal,
             files: Files {
                 out_dir: out.clone(),

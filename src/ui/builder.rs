@@ -8,9 +8,11 @@
 use crate::model::ModelKind;
 use serde_json::{json, Value};
 
-/// A stage of `kind` with typical parameters, as a scenario file writes it.
-pub fn default_stage(kind: ModelKind) -> Value {
-    match kind {
+/// A stage of `kind` with typical parameters, as a scenario file writes it;
+/// `None` for the stages that read a file (`trace`, `replay`): the page
+/// cannot hand the server a file of the user's, so they are written by hand.
+pub fn default_stage(kind: ModelKind) -> Option<Value> {
+    Some(match kind {
         ModelKind::Bernoulli => json!({ "model": "bernoulli", "p": 0.1 }),
         ModelKind::GeLomax => json!({
             "model": "ge_lomax",
@@ -40,7 +42,9 @@ pub fn default_stage(kind: ModelKind) -> Value {
         ModelKind::Corrupt => json!({ "model": "corrupt", "p": 0.01 }),
         ModelKind::Reorder => json!({ "model": "reorder", "p": 0.25, "gap": 5, "delay_ms": 10.0 }),
         ModelKind::Slot => json!({ "model": "slot", "min_ms": 2.0, "max_ms": 6.0, "packets": 8 }),
-    }
+        ModelKind::Rate => json!({ "model": "rate", "rate_bit_s": 1_000_000, "queue_packets": 1000 }),
+        ModelKind::LinkTrace | ModelKind::Replay => return None,
+    })
 }
 
 /// The values a choice field of a stage takes, by field name.
@@ -63,7 +67,8 @@ pub const PROBABILITY_FIELDS: [&str; 15] = [
 /// their default stages, the choices, the probability fields, the presets
 /// (name and what it is) and the database's target kinds.
 pub fn catalogue() -> Value {
-    let models: Vec<Value> = ModelKind::ALL.iter().map(|k| json!({ "name": k.name(), "stage": default_stage(*k) })).collect();
+    let models: Vec<Value> =
+        ModelKind::ALL.iter().filter_map(|k| Some(json!({ "name": k.name(), "stage": default_stage(*k)? }))).collect();
     let presets: Vec<Value> = crate::scenario::PRESET_NAMES
         .iter()
         .map(|n| json!({ "name": n, "label": crate::scenario::preset_label(n).unwrap_or("") }))
@@ -89,7 +94,7 @@ mod tests {
     #[test]
     fn every_default_stage_parses() {
         for k in ModelKind::ALL {
-            let stage = default_stage(k);
+            let Some(stage) = default_stage(k) else { continue };
             let text = format!("name = \"t\"\n[[stage]]\n{}", toml::to_string(&stage).unwrap());
             crate::scenario::parse_str(&text, "<ui>", "t").unwrap_or_else(|e| panic!("{}: {e}", k.name()));
         }

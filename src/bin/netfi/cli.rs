@@ -31,6 +31,9 @@ pub enum Command {
     /// Export a scenario to another tool's configuration.
     #[command(subcommand)]
     Export(ExportCmd),
+    /// Steer and watch a running emulator: show its scenario, switch it,
+    /// pause faults, print its telemetry.
+    Ctl(CtlArgs),
     /// Put back what killed runs left on this host: cleared cores (thread
     /// masks, interrupt affinities, the workqueue mask) and iceoryx2
     /// resources of dead processes. Every `netfi run` does this first.
@@ -255,4 +258,51 @@ pub struct ExportNetemArgs {
     /// those found on this machine first; `TC_LIB_DIR` wins when set).
     #[arg(long)]
     pub table_dir: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct CtlArgs {
+    /// The run to steer (its emulator must be running, as this user).
+    #[arg(long)]
+    pub run_id: String,
+    /// Print the emulator's answer as JSON (`watch`: one object per interval).
+    #[arg(long, global = true)]
+    pub json: bool,
+    #[command(subcommand)]
+    pub command: CtlCmd,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CtlCmd {
+    /// The current scenario, phase, pause, and the phases to come.
+    Show,
+    /// Switch to a scenario file, a preset, or a target (`loss=30%`,
+    /// `delay_ms_mean=250`, `outage=10%`): it replaces the rest of the run's
+    /// timeline from now or from --at.
+    Switch {
+        /// A scenario file (TOML), a preset name, or a target.
+        scenario: String,
+        /// When, from the run's first frame (`12.5s`, `250ms`, a number of
+        /// ms), or `+5s` from now (default: now).
+        #[arg(long, value_name = "TIME")]
+        at: Option<String>,
+    },
+    /// Go to a phase (number from 1, or name) of the scenario running.
+    Phase {
+        /// The phase.
+        phase: String,
+        /// When (as for `switch`).
+        #[arg(long, value_name = "TIME")]
+        at: Option<String>,
+    },
+    /// Pause every fault: frames pass untouched, with no added delay.
+    Pause,
+    /// Resume the faults where they stopped.
+    Resume,
+    /// Print the telemetry (one row per interval) until the run ends.
+    Watch {
+        /// Stop after this many intervals.
+        #[arg(long)]
+        count: Option<u64>,
+    },
 }

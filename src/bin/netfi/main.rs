@@ -1,6 +1,7 @@
 //! The `netfi` command line: a thin wrapper over the library.
 
 mod cli;
+mod ctl;
 mod docs;
 mod export;
 mod fit;
@@ -31,6 +32,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Completions { shell } => docs::completions(shell),
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
         cli::Command::Report(a) => report::run(&a),
+        cli::Command::Ctl(a) => ctl::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

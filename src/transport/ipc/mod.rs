@@ -71,6 +71,7 @@
 //! when set) the first time a transport object is created; [`set_log_level`]
 //! overrides it.
 
+pub mod control;
 mod liveness;
 mod node;
 mod publisher;

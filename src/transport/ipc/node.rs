@@ -130,6 +130,11 @@ impl IpcNode {
         Ok(this)
     }
 
+    /// The iceoryx2 node, for the services opened beside the channels.
+    pub(super) fn raw(&self) -> &Node<Ipc> {
+        &self.node
+    }
+
     /// The run configuration.
     pub fn config(&self) -> &IpcConfig {
         &self.config
@@ -237,7 +242,7 @@ fn foreign_shm(prefix: &str) -> Option<(PathBuf, u32)> {
 /// Takes group and other permissions off this user's shared-memory files
 /// with `prefix` (iceoryx2 creates the management segment 0666): the
 /// processes of a run are all this user's.
-fn make_private(prefix: &str) {
+pub(super) fn make_private(prefix: &str) {
     use std::os::unix::fs::{MetadataExt, PermissionsExt};
     // SAFETY: geteuid has no preconditions.
     let uid = unsafe { libc::geteuid() };
