@@ -351,8 +351,8 @@ impl Table {
             row.release_ns = Some(release_ns);
             if row.present {
                 let late_ns = release_ns.saturating_sub(row.release_sched_ns);
-                self.lateness.record(late_ns);
                 let injected_ns = row.release_sched_ns.saturating_sub(row.ingress_ns);
+                self.lateness.record(late_ns);
                 if let Some(t) = self.tap.as_mut() {
                     t.release(release_ns, injected_ns, late_ns);
                 }
@@ -700,7 +700,7 @@ mod tests {
 
     #[test]
     fn copies_get_rows_of_their_own_matched_by_scheduled_release() {
-        let mut t = Table { base: 0, rows: VecDeque::new(), copies: VecDeque::new(), decision: LatencyHistogram::new(), lateness: LatencyHistogram::new() };
+        let mut t = Table { base: 0, rows: VecDeque::new(), copies: VecDeque::new(), decision: LatencyHistogram::new(), lateness: LatencyHistogram::new(), tap: None, taps: std::sync::mpsc::channel().1 };
         // Frame 0: scheduled for 100, corrupted; two copies taken (for 300
         // and 200, the second corrupted) and one dropped.
         let mut ev = ingress(0, Some(5), 1, 10, None, 100);

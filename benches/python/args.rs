@@ -55,6 +55,9 @@ pub struct Settings {
     /// Wait before each part until other processes keep at most this many
     /// cores busy, for at most this many seconds (as benches/overhead).
     pub quiet: Option<(f64, f64)>,
+    /// The emulator's telemetry interval, ms (`NETFI_BENCH_TELEMETRY_MS`,
+    /// default the emulator's; 0 serves neither control nor telemetry).
+    pub telemetry_ms: u64,
 }
 
 fn var(name: &str) -> Option<String> {
@@ -104,6 +107,7 @@ impl Settings {
             seconds,
             rate_hz,
             window_s,
+            telemetry_ms: num("NETFI_BENCH_TELEMETRY_MS", netfi::service::telemetry::DEFAULT_INTERVAL_MS as f64)? as u64,
             quiet_steal: num("NETFI_BENCH_QUIET_STEAL", 0.01)?,
             quiet_others: num("NETFI_BENCH_QUIET_OTHERS", 0.25)?,
             parts: parts(args),

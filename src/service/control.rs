@@ -116,6 +116,9 @@ pub struct Settings {
     pub out_dir: PathBuf,
     /// Telemetry interval, ns; `None`: no telemetry.
     pub telemetry_interval_ns: Option<u64>,
+    /// The stages the run's link cannot apply ([`crate::service::link::Carried::UNSUPPORTED`]):
+    /// a switch to a scenario with one is refused.
+    pub unsupported: &'static [crate::model::ModelKind],
 }
 
 /// A command for the loop.
@@ -372,7 +375,7 @@ impl Server {
 
     fn send_switch(&mut self, spec: Arc<ScenarioSpec>, from_phase: usize, at_ns: Option<u64>) -> Result<String, String> {
         let timeline = Timeline::new(&spec, from_phase).map_err(|e| e.to_string())?;
-        check_real_time(&timeline)?;
+        check_real_time(&timeline, self.settings.unsupported)?;
         if self.settings.queue_order == QueueOrder::Fifo && timeline.may_reorder() {
             return Err(format!(
                 "scenario `{}` can release frames out of order, but this run's release queue is FIFO (its scenario cannot reorder); start the run with `--reorder-queue` to switch to it",
@@ -526,11 +529,10 @@ pub fn resolve(t: &Target) -> Result<ScenarioSpec, ScenarioError> {
 }
 
 /// Refuses stages the real-time link does not apply.
-fn check_real_time(t: &Timeline) -> Result<(), String> {
-    let kinds = crate::service::link::REAL_TIME_UNSUPPORTED;
+fn check_real_time(t: &Timeline, kinds: &[crate::model::ModelKind]) -> Result<(), String> {
     match t.phases().iter().flat_map(|p| p.stages()).map(|s| s.kind()).find(|k| kinds.contains(k)) {
         Some(kind) => Err(format!(
-            "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but not yet applied by the real-time emulator",
+            "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but this run's link cannot apply it",
             t.name(),
             kind.name()
         )),

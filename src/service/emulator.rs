@@ -560,10 +560,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
     if cfg.accept_raw {
-        // A raw sample's bytes live in the UDP source's arena, freed at its
-        // release: a copy would be sent from a freed slot, a flip would miss.
-        let unsupported = [crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
-        if let Some(kind) = crate::service::link::unsupported_stage(&scenario, &unsupported) {
+        if let Some(kind) = crate::service::link::unsupported_stage(&scenario, RAW_UNSUPPORTED) {
             anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
         }
     }
@@ -601,6 +598,11 @@ pub fn run<S: FrameSource, K: FrameSink>(
     Ok(report)
 }
 
+/// What a raw sample (`--payload raw`) cannot go through: its bytes live
+/// in the UDP source's arena, freed at its release, so a copy would be sent
+/// from a freed slot, and a flip would miss.
+const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
+
 /// The live control of the run, when it has one: the queue as asked, room
 /// for switched phases, the control thread started and its telemetry
 /// tapped from the trace (before the loop's core is pinned).
@@ -621,6 +623,7 @@ fn start_control(
         queue_order: link.injector_mut().queue_order(),
         out_dir: cfg.out_dir.clone(),
         telemetry_interval_ns: interval_ns,
+        unsupported: if cfg.accept_raw { RAW_UNSUPPORTED } else { <FrameSample as crate::service::link::Carried>::UNSUPPORTED },
     };
     let (port, handle) = control::start(settings)?;
     if let Some(tap) = interval_ns.and_then(|ns| handle.aggregator(ns)) {
