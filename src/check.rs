@@ -151,7 +151,11 @@ pub struct OutageStats {
 /// One stage's share of the outcome.
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct StageReport {
+    /// Its phase and its place in the phase, both counted from 1, as in the
+    /// text report, the trace's `phase`/`stage` columns and the parser's
+    /// messages.
     pub phase: usize,
+    pub stage: usize,
     pub label: String,
     pub model: String,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -255,6 +259,7 @@ pub struct CheckReport {
 /// A link stage's outcome (`rate`, `trace`; docs/spec.md §3.12, §3.13).
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct LinkReport {
+    /// Its phase, from 1.
     pub phase: usize,
     pub label: String,
     pub model: String,
@@ -359,7 +364,7 @@ fn link_report(scenario: &Scenario, p: u16, s: u16, occupancy: Vec<Occupancy>) -
         _ => 0.0,
     };
     LinkReport {
-        phase: usize::from(p),
+        phase: usize::from(p) + 1,
         label: st.label().to_string(),
         model: st.kind().name().to_string(),
         frames: stats.frames,
@@ -508,13 +513,14 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
     let mut outage_ns = 0f64;
     let mut stages = Vec::new();
     for (pi, phase) in scenario.phases().iter().enumerate() {
-        for st in phase.stages() {
+        for (si, st) in phase.stages().iter().enumerate() {
             let w = st.model().outage_windows();
             outage_count += w.count;
             outage_ns += w.total_ns as f64 + w.total_frames as f64 * interval_ns;
             let reached = st.reached();
             stages.push(StageReport {
-                phase: pi,
+                phase: pi + 1,
+                stage: si + 1,
                 label: st.label().to_string(),
                 model: st.kind().name().to_string(),
                 preset: st.preset().map(str::to_string),

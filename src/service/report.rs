@@ -80,7 +80,11 @@ pub struct Overhead {
     /// (the physical floor of one hop, measured in the same run).
     pub direct_hop: Option<Summary>,
     /// `end_to_end_extra − direct_hop`, percentile by percentile: what the
-    /// emulator adds over a direct console → simulator hop.
+    /// emulator adds over a direct console → simulator hop. A difference of
+    /// two distributions' percentiles, not a per-frame figure: it is
+    /// negative where the direct hop's tail is the longer one (the two
+    /// paths are preempted at different moments), and the text report says
+    /// so where it prints one.
     pub added_over_direct: Option<BTreeMap<String, i64>>,
 }
 
@@ -420,7 +424,7 @@ impl RunReport {
                 (Some(l), None) => format!("model loss {l:.4}"),
                 _ => String::new(),
             };
-            s += &format!("  stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase + 1, st.label, st.reached, st.dropped, st.loss_rate);
+            s += &format!("  phase {} stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase, st.stage, st.label, st.reached, st.dropped, st.loss_rate);
         }
         if let Some(d) = &self.injected_delay_ns {
             s += &format!("delay      injected mean {:.3} ms; {}\n", d.mean / 1e6, line(&self.injected_delay_ns));
@@ -433,6 +437,9 @@ impl RunReport {
         s += &format!("  direct hop        {}\n", line(&self.overhead_ns.direct_hop));
         if let Some(a) = &self.overhead_ns.added_over_direct {
             s += &format!("  added over direct p50 {} ns  p99 {} ns  p99.9 {} ns\n", a["p50"], a["p99"], a["p999"]);
+            if a.values().any(|v| *v < 0) {
+                s += "    (each a difference of the two lines above at that percentile, not a per-frame figure: negative\n     where the direct hop's own tail is longer; release lateness is the emulator's per-frame cost)\n";
+            }
         }
         if let Some(dc) = &self.delay_check {
             s += &format!("delay law  {} frames; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames);

@@ -85,13 +85,18 @@ pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response
     }
 }
 
-/// `POST /api/runs/{id}/ctl` `{cmd, arg}`: live control of the run.
+/// `POST /api/runs/{id}/ctl` `{cmd, arg}`: live control of the run
+/// (`switch` to a preset, `pause`, `resume`, `show`) through its control
+/// service; the emulator's answer, or its error (the scenario parser's).
 pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): Json<serde_json::Value>) -> Response {
     if ui.runs.out_dir(&id).is_none() {
         return not_found(&id);
     }
-    let _ = req;
-    (StatusCode::NOT_IMPLEMENTED, "live control is not available in this build").into_response()
+    match tokio::task::spawn_blocking(move || super::live::control(&id, &req)).await {
+        Ok(Ok(answer)) => Json(answer).into_response(),
+        Ok(Err(e)) => unprocessable(e),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}")).into_response(),
+    }
 }
 
 /// `GET /runs/{id}/report`: the run's report page (written on first

@@ -12,11 +12,13 @@
 
 mod api;
 mod builder;
+mod live;
 mod page;
 mod preview;
 mod runs;
 
 use anyhow::Context;
+use std::future::IntoFuture;
 use axum::routing::{get, post};
 use axum::Router;
 use std::net::SocketAddr;
@@ -44,6 +46,7 @@ pub(crate) struct Ui {
 
 /// Serves until SIGINT/SIGTERM; stops the runs it started on the way out.
 pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
+    let mask = runs::CpuMask::current().context("reading this process's CPU mask")?;
     keep_off_core(opts.emulator_core)?;
     if !opts.bind.ip().is_loopback() {
         eprintln!(
@@ -53,14 +56,19 @@ pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("creating {}", opts.out_dir.display()))?;
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the server's runtime")?;
-    let ui = Arc::new(Ui { runs: runs::Runs::default(), opts });
+    let ui = Arc::new(Ui { runs: runs::Runs::new(mask), opts });
     rt.block_on(async move {
         let listener =
             tokio::net::TcpListener::bind(ui.opts.bind).await.with_context(|| format!("listening on {}", ui.opts.bind))?;
         let addr = listener.local_addr()?;
         println!("netfi ui on http://{addr}/");
         let app = router(ui.clone());
-        axum::serve(listener, app).with_graceful_shutdown(shutdown()).await.context("serving")?;
+        // A signal ends the serving at once: a browser's idle keep-alive
+        // connection would hold a graceful shutdown open for ever.
+        tokio::select! {
+            served = axum::serve(listener, app).into_future() => served.context("serving")?,
+            () = shutdown() => {}
+        }
         ui.runs.stop_all();
         Ok(())
     })

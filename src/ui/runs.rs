@@ -12,10 +12,44 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 /// The runs, by id.
-#[derive(Default)]
 pub(crate) struct Runs {
     runs: Mutex<BTreeMap<String, Run>>,
     next: AtomicU64,
+    /// The CPU mask the server was started with: its runs get it back (the
+    /// server itself keeps off the emulator's core).
+    mask: CpuMask,
+}
+
+/// A CPU affinity mask.
+#[derive(Clone, Copy)]
+pub(crate) struct CpuMask(libc::cpu_set_t);
+
+impl CpuMask {
+    /// This thread's mask.
+    pub fn current() -> std::io::Result<CpuMask> {
+        // SAFETY: a zeroed cpu_set_t is valid; the kernel fills it.
+        let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+        // SAFETY: `set` is a valid cpu_set_t of the size given; pid 0 is this thread.
+        if unsafe { libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(CpuMask(set))
+    }
+
+    /// Gives `cmd`'s process this mask (between fork and exec).
+    fn give(self, cmd: &mut Command) {
+        use std::os::unix::process::CommandExt;
+        let set = self.0;
+        // SAFETY: sched_setaffinity is async-signal-safe; `set` is a copy owned by the closure.
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
 }
 
 struct Run {
@@ -26,6 +60,8 @@ struct Run {
     started: Instant,
     /// The exit status once seen.
     exit: Option<std::process::ExitStatus>,
+    /// Its telemetry as it comes (until it ends).
+    telemetry: Option<super::live::Telemetry>,
 }
 
 /// What a run's page shows.
@@ -42,6 +78,8 @@ pub(crate) struct Status {
     pub report: Option<serde_json::Value>,
     /// The end of the run's standard error, once it ended.
     pub stderr_tail: Option<String>,
+    /// The last telemetry interval as a table, and the loss over time.
+    pub live: Option<String>,
 }
 
 /// What starting a run needs.
@@ -53,6 +91,10 @@ pub(crate) struct Start {
 }
 
 impl Runs {
+    pub fn new(mask: CpuMask) -> Runs {
+        Runs { runs: Mutex::default(), next: AtomicU64::new(0), mask }
+    }
+
     /// Validates the scenario (the parser's own errors) and starts `netfi
     /// run` on it; the run's id.
     pub fn start(&self, opts: &UiOptions, req: &Start) -> anyhow::Result<String> {
@@ -70,7 +112,10 @@ impl Runs {
             std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))
         };
         let mut cmd = Command::new(&opts.netfi);
-        cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id, "--duration-s", &req.duration_s.to_string()]);
+        // A run started here may be switched to any scenario: its queue
+        // keeps release-time order whatever its own scenario.
+        cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id, "--duration-s", &req.duration_s.to_string(), "--reorder-queue"]);
+        self.mask.give(&mut cmd);
         if let Some(seed) = req.seed {
             cmd.args(["--seed", &seed.to_string()]);
         }
@@ -80,7 +125,8 @@ impl Runs {
             .stderr(log("run.stderr")?)
             .spawn()
             .with_context(|| format!("starting {}", opts.netfi.display()))?;
-        let run = Run { child, out, scenario, duration_s: req.duration_s, started: Instant::now(), exit: None };
+        let telemetry = super::live::Telemetry::follow(&id).ok();
+        let run = Run { child, out, scenario, duration_s: req.duration_s, started: Instant::now(), exit: None, telemetry };
         self.runs.lock().expect("runs lock").insert(id.clone(), run);
         Ok(id)
     }
@@ -96,6 +142,12 @@ impl Runs {
         let run = runs.get_mut(id)?;
         if run.exit.is_none() {
             run.exit = run.child.try_wait().ok().flatten();
+        }
+        let live = run.telemetry.as_ref().and_then(|t| t.html());
+        if run.exit.is_some() {
+            if let Some(mut t) = run.telemetry.take() {
+                t.stop();
+            }
         }
         let read = |name: &str| std::fs::read_to_string(run.out.join(name)).ok();
         let report = run.exit.and_then(|_| read("report.json")).and_then(|t| serde_json::from_str(&t).ok());
@@ -113,6 +165,7 @@ impl Runs {
             out: run.out.display().to_string(),
             report,
             stderr_tail,
+            live,
         })
     }
 

@@ -184,8 +184,8 @@ fn build_preview_run_switch_report() {
     let shown = text(&tab, "realized-loss");
     assert!(shown.contains(&format!("{run_loss:.4}")), "report shows `{shown}`, the run {run_loss:.4}");
     assert!(text(&tab, "events").contains("DLM-1"), "the report's events lack the switch");
-    let plotted = js(&tab, "Array.from(document.querySelectorAll('svg[id^=plot-]')).map(s => s.id)");
-    let ids: Vec<String> = serde_json::from_value(plotted).unwrap();
+    let plotted = js(&tab, "JSON.stringify(Array.from(document.querySelectorAll('svg[id^=plot-]')).map(s => s.id))");
+    let ids: Vec<String> = serde_json::from_str(plotted.as_str().unwrap_or("[]")).unwrap();
     assert!(ids.iter().any(|id| svg_points(&tab, id) > 20), "no plot with data points among {ids:?}");
     screenshot(&tab, "report.png");
 }

@@ -120,16 +120,7 @@ fn at_ms(client: &ControlClient, text: &str) -> Result<f64> {
 }
 
 fn parse_ms(t: &str) -> Result<f64> {
-    let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
-        (n, 1.0)
-    } else if let Some(n) = t.strip_suffix('s') {
-        (n, 1e3)
-    } else {
-        (t, 1.0)
-    };
-    let v: f64 = num.trim().parse()?;
-    anyhow::ensure!(v.is_finite() && v >= 0.0, "a time cannot be negative");
-    Ok(v * scale)
+    netfi::model::parse_duration(t, netfi::model::TimeUnit::Ms).map_err(anyhow::Error::msg)
 }
 
 /// `netfi ctl watch`: the telemetry as a live table, until the run ends,

@@ -119,7 +119,7 @@ fn file_stage_notes(scenario: &Scenario) -> Vec<String> {
 
 fn print_links(r: &CheckReport) {
     for l in &r.links {
-        println!("link              phase {} `{}` ({})", l.phase + 1, l.label, l.model);
+        println!("link              phase {} `{}` ({})", l.phase, l.label, l.model);
         println!(
             "  carried         {:.3} Mbit/s of {:.3} Mbit/s capacity, utilisation {:.4}",
             l.carried_bit_s / 1e6,
@@ -185,7 +185,7 @@ fn print_table(r: &CheckReport) {
             };
             println!(
                 "  {:>5}  {:<16} {:>12} {:>12} {:>9.5} {:>9}",
-                s.phase + 1,
+                s.phase,
                 s.label,
                 s.reached,
                 s.dropped,
