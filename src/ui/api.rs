@@ -92,7 +92,8 @@ pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): J
     if ui.runs.out_dir(&id).is_none() {
         return not_found(&id);
     }
-    match tokio::task::spawn_blocking(move || super::live::control(&id, &req)).await {
+    let netfi = ui.opts.netfi.clone();
+    match tokio::task::spawn_blocking(move || super::live::control(&netfi, &id, &req)).await {
         Ok(Ok(answer)) => Json(answer).into_response(),
         Ok(Err(e)) => unprocessable(e),
         Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}")).into_response(),

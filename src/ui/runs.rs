@@ -125,7 +125,7 @@ impl Runs {
             .stderr(log("run.stderr")?)
             .spawn()
             .with_context(|| format!("starting {}", opts.netfi.display()))?;
-        let telemetry = super::live::Telemetry::follow(&id).ok();
+        let telemetry = super::live::Telemetry::follow(&opts.netfi, &id).ok();
         let run = Run { child, out, scenario, duration_s: req.duration_s, started: Instant::now(), exit: None, telemetry };
         self.runs.lock().expect("runs lock").insert(id.clone(), run);
         Ok(id)

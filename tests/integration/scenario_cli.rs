@@ -197,3 +197,31 @@ fn check_refuses_an_oversized_queue_with_a_message_not_a_panic() {
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("queue_capacity (--queue-capacity) of 4294967295 frames") && !err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn check_trace_writes_every_fate_in_a_runs_columns() {
+    let dir = std::env::temp_dir().join(format!("netfi-check-trace-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("trace.csv");
+    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "5", "--json", "--trace"]).arg(&path).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(netfi::trace::CSV_HEADER));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 20_000);
+    let dropped = rows.iter().filter(|r| r[5] == "dropped").count() as u64;
+    assert_eq!(dropped, v["dropped"]["ge_lomax"].as_u64().unwrap());
+    assert!(rows.iter().filter(|r| r[5] == "dropped").all(|r| r[6] == "ge_lomax" && r[7] == "1" && r[8] == "1"));
+    assert!(rows.iter().filter(|r| r[5] == "delivered").all(|r| r[9] == "0" && r[10] == r[11]));
+    // The same seed, the same fates: the trace is the check's, frame by frame.
+    let again = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "5", "--trace"]).arg(dir.join("again.csv")).output().unwrap();
+    assert!(again.status.success());
+    assert_eq!(std::fs::read_to_string(dir.join("again.csv")).unwrap(), text);
+    // A file that cannot be written is an error naming it.
+    let bad = netfi().args(["scenario", "check", "PLM-2", "--frames", "2000", "--trace", "/nonexistent-dir/trace.csv"]).output().unwrap();
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("/nonexistent-dir/trace.csv"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

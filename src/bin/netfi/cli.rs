@@ -126,6 +126,11 @@ pub struct CheckArgs {
     /// Release-queue capacity in frames (default: the file's, else 65536).
     #[arg(long)]
     pub queue_capacity: Option<usize>,
+    /// Also write every frame's fate to FILE, in a run's `trace.csv`
+    /// columns (send and ingress at the simulated arrival, released at the
+    /// scheduled time; copies are counted in the report, not given rows).
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<std::path::PathBuf>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,

@@ -65,8 +65,16 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     if arrivals.len() < 2_000_000 {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let report = check::run(scenario, &arrivals, queue_capacity, |done| bar.set_position(done));
+    let mut trace = args.trace.as_deref().map(TraceOut::create).transpose()?;
+    let report = check::run_observed(scenario, &arrivals, queue_capacity, |done| bar.set_position(done), |i, t, e| {
+        if let Some(w) = trace.as_mut() {
+            w.row(i, t, e);
+        }
+    });
     bar.finish_and_clear();
+    if let Some(w) = trace {
+        w.finish()?;
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -235,6 +243,59 @@ fn print_table(r: &CheckReport) {
                     "", "", c.normal_scores_lag1, c.rank_lag1
                 );
             }
+        }
+    }
+}
+
+/// `scenario check --trace FILE`: every frame's fate as a run's trace row.
+struct TraceOut {
+    w: std::io::BufWriter<std::fs::File>,
+    path: std::path::PathBuf,
+    failed: Option<std::io::Error>,
+}
+
+impl TraceOut {
+    fn create(path: &std::path::Path) -> Result<TraceOut> {
+        use std::io::Write;
+        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
+        writeln!(w, "{}", netfi::trace::CSV_HEADER).with_context(|| format!("writing {}", path.display()))?;
+        Ok(TraceOut { w, path: path.to_path_buf(), failed: None })
+    }
+
+    /// The frame `i` that arrived at `t_ns` and was decided `e`; in
+    /// simulated time a scheduled frame leaves exactly when scheduled.
+    fn row(&mut self, i: u64, t_ns: u64, e: &netfi::injector::Entered) {
+        use netfi::injector::Fate;
+        if self.failed.is_some() {
+            return;
+        }
+        let (dropped, release_sched_ns) = match e.fate {
+            Fate::Scheduled { release_ns, .. } => (None, release_ns),
+            Fate::Dropped(c) => (Some(c), 0),
+        };
+        let row = netfi::trace::Row {
+            present: true,
+            console_index: i,
+            send_ns: t_ns,
+            ingress_ns: t_ns,
+            dropped,
+            release_sched_ns,
+            release_ns: dropped.is_none().then_some(release_sched_ns),
+            corrupted: e.corrupted,
+            ..Default::default()
+        };
+        if let Err(err) = netfi::trace::format_row(&mut self.w, i, &row, None, None) {
+            self.failed = Some(err);
+        }
+    }
+
+    fn finish(mut self) -> Result<()> {
+        use std::io::Write;
+        let flushed = self.w.flush();
+        match self.failed.take().map_or(flushed, Err) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(anyhow::Error::new(e).context(format!("writing {}", self.path.display()))),
         }
     }
 }
