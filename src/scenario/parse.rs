@@ -88,12 +88,30 @@ struct RawScenario {
     phase: Option<Vec<Spanned<RawPhase>>>,
 }
 
+/// A time as a file writes it: a number in the field's unit, or a string
+/// with its own (`"90s"`, `"2min"`; [`crate::model::parse_duration`]).
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum TimeValue {
+    Number(f64),
+    Text(String),
+}
+
+impl TimeValue {
+    fn in_unit(&self, unit: crate::model::TimeUnit) -> Result<f64, String> {
+        match self {
+            TimeValue::Number(v) => Ok(*v),
+            TimeValue::Text(t) => crate::model::parse_duration(t, unit),
+        }
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPhase {
     name: Option<String>,
-    start_s: Option<f64>,
-    start_ms: Option<f64>,
+    start_s: Option<TimeValue>,
+    start_ms: Option<TimeValue>,
     preset: Option<String>,
     stage: Option<Vec<Spanned<toml::Table>>>,
 }
@@ -189,7 +207,11 @@ fn parse_phases(ctx: &Ctx, raw_phases: Vec<Spanned<RawPhase>>) -> Result<Vec<Pha
         let line = Some(ctx.line_of(span.start));
         let loc = format!("phase {}", i + 1);
         let rp = sp.into_inner();
-        let start_ms = match (rp.start_s, rp.start_ms) {
+        let time = |v: &Option<TimeValue>, field: &str, unit| {
+            v.as_ref().map(|t| t.in_unit(unit)).transpose().map_err(|e| ctx.err(ctx.key_line(span.clone(), field), Some(&loc), Some(field), e))
+        };
+        let (start_s, start_ms) = (time(&rp.start_s, "start_s", crate::model::TimeUnit::S)?, time(&rp.start_ms, "start_ms", crate::model::TimeUnit::Ms)?);
+        let start_ms = match (start_s, start_ms) {
             (Some(s), None) => s * 1e3,
             (None, Some(ms)) => ms,
             (None, None) if i == 0 => 0.0,

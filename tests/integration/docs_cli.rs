@@ -49,6 +49,15 @@ fn times_take_units_and_bad_ones_are_named() {
     let out = netfi().args(["scenario", "show"]).arg(&file).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("slots.toml:6") && err.contains("`max_ms`") && err.contains("not a duration"), "{err}");
+    // A phase's start too.
+    std::fs::write(&file, "name = \"t\"\n[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = \"1.5min\"\npreset = \"PLM-2\"\n").unwrap();
+    let out = netfi().args(["scenario", "show"]).arg(&file).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("start_ms = 90000.0"), "{}", String::from_utf8_lossy(&out.stdout));
+    std::fs::write(&file, "name = \"t\"\n[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_s = \"soon\"\npreset = \"PLM-2\"\n").unwrap();
+    let out = netfi().args(["scenario", "show"]).arg(&file).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("slots.toml:5") && err.contains("`start_s`") && err.contains("not a duration"), "{err}");
     // On the command line: a unit is read, a bad one refused before anything runs.
     let out = netfi().args(["run", "Normal", "--duration", "3 fortnights"]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
