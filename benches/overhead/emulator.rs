@@ -4,7 +4,7 @@
 use crate::args::Settings;
 use crate::NETFI;
 use anyhow::{bail, Context, Result};
-use netfi::service::args::EmulatorArgs;
+use netfi::service::args::{ControlArgs, EmulatorArgs};
 use netfi::service::emulator::EmulatorReport;
 use netfi::transport::udp::DEFAULT_UDP_BUFFER_BYTES;
 use netfi::transport::{Endpoint, Payload};
@@ -18,7 +18,6 @@ use std::time::{Duration, Instant};
 pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_id: Option<String>) -> EmulatorArgs {
     let iceoryx2 = run_id.is_some();
     EmulatorArgs {
-        no_control: s.telemetry_ms == 0 || !iceoryx2,
         run_id,
         scenario: scenario.into(),
         seed: Some(1),
@@ -46,8 +45,7 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         no_return: false,
         idle_end_ms: None,
         udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
-        telemetry_ms: s.telemetry_ms,
-        reorder_queue: false,
+        control: ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 },
     }
 }
 

@@ -200,19 +200,33 @@ pub struct EmulatorArgs {
     /// (`feedback` → `feedback_out`).
     #[arg(long)]
     pub no_feedback: bool,
+    #[command(flatten)]
+    pub control: ControlArgs,
+}
+
+/// The emulator's live control and telemetry (`netfi ctl`), as `netfi
+/// emulator` and `netfi run` take them.
+#[derive(Debug, Clone, Args)]
+pub struct ControlArgs {
     /// Publish telemetry (counts, loss, delay and lateness percentiles)
     /// every this many milliseconds on the run's telemetry service; 0: none.
     #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS")]
     pub telemetry_ms: u64,
-    /// Hold frames in the reordering release queue (a timing wheel) even if
-    /// the scenario cannot reorder, so that `netfi ctl switch` may switch the
-    /// run to one that does.
+    /// Hold frames in the reordering release queue even if the scenario
+    /// cannot reorder, so that `netfi ctl switch` may switch the run to one
+    /// that does.
     #[arg(long)]
     pub reorder_queue: bool,
     /// Serve no control and no telemetry service (`netfi ctl` cannot reach
     /// the run).
     #[arg(long)]
     pub no_control: bool,
+}
+
+impl ControlArgs {
+    fn argv(&self, a: Argv) -> Argv {
+        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue).switch("--no-control", self.no_control)
+    }
 }
 
 #[derive(Debug, Clone, Args)]
@@ -312,16 +326,8 @@ pub struct RunArgs {
     /// price of the in-run baseline and the console-side kinematics.
     #[arg(long)]
     pub no_direct: bool,
-    /// The emulator's telemetry interval, ms (0: none); see `netfi ctl watch`.
-    #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS")]
-    pub telemetry_ms: u64,
-    /// Hold frames in the reordering release queue from the start, so that
-    /// `netfi ctl switch` may switch to a scenario that reorders.
-    #[arg(long)]
-    pub reorder_queue: bool,
-    /// Run without the control and telemetry services (`netfi ctl`).
-    #[arg(long)]
-    pub no_control: bool,
+    #[command(flatten)]
+    pub control: ControlArgs,
 }
 
 impl ConsoleArgs {
@@ -348,7 +354,8 @@ impl EmulatorArgs {
     pub fn to_argv(&self) -> Vec<String> {
         let a = Argv::default().opt("--run-id", self.run_id.as_ref()).val("--scenario", &self.scenario).opt("--seed", self.seed);
         let a = a.val("--out", self.out.display()).val("--expected-frames", self.expected_frames);
-        a.opt("--core", self.core)
+        let a = a
+            .opt("--core", self.core)
             .switch("--no-pin", self.no_pin)
             .opt("--queue-capacity", self.queue_capacity)
             .opt("--rt-priority", self.rt_priority)
@@ -357,11 +364,8 @@ impl EmulatorArgs {
             .opt("--return-scenario", self.return_scenario.as_ref())
             .opt("--return-seed", self.return_seed)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
-            .switch("--no-feedback", self.no_feedback)
-            .val("--telemetry-ms", self.telemetry_ms)
-            .switch("--reorder-queue", self.reorder_queue)
-            .switch("--no-control", self.no_control)
-            .0
+            .switch("--no-feedback", self.no_feedback);
+        self.control.argv(a).0
     }
 
     /// Checks that the options fit the endpoints, with errors that say what

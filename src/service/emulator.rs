@@ -827,11 +827,11 @@ fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
         rt_priority: args.rt_priority,
         isolate: args.isolate,
         accept_raw: args.payload == crate::transport::Payload::Raw,
-        control: match (&args.run_id, args.no_control) {
-            (Some(run), false) => Some((crate::transport::IpcConfig::new(crate::transport::RunId::new(run)?), args.telemetry_ms)),
+        control: match (&args.run_id, args.control.no_control) {
+            (Some(run), false) => Some((crate::transport::IpcConfig::new(crate::transport::RunId::new(run)?), args.control.telemetry_ms)),
             _ => None,
         },
-        reorder_queue: args.reorder_queue,
+        reorder_queue: args.control.reorder_queue,
     })
 }
 

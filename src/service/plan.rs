@@ -122,9 +122,7 @@ impl Plan {
             udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
             wait_for_peer_s: None,
             no_feedback: false,
-            telemetry_ms: args.telemetry_ms,
-            reorder_queue: args.reorder_queue,
-            no_control: args.no_control,
+            control: args.control.clone(),
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),
