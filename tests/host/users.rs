@@ -12,10 +12,32 @@ fn shm_with(needle: &str) -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// The netfi binary where the user nobody may run it: the build's own
+/// path may pass through a directory only its owner can enter (a checkout
+/// under `mktemp -d`), so a copy is made once in a directory of its own.
+fn netfi_for_nobody() -> &'static str {
+    static COPY: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    COPY.get_or_init(|| {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let exe = dir.join("netfi");
+        std::fs::copy(netfi_exe(), &exe).unwrap();
+        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
+        exe.to_str().unwrap().to_string()
+    })
+}
+
+/// Removes the copy [`netfi_for_nobody`] made, if any.
+fn remove_netfi_for_nobody() {
+    let _ = std::fs::remove_dir_all(std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id())));
+}
+
 /// `netfi …` as the user nobody.
 fn as_nobody(args: &[&str]) -> Command {
     let mut c = Command::new("setpriv");
-    c.args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", netfi_exe()])
+    c.args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", netfi_for_nobody()])
         .args(args)
         .current_dir("/tmp")
         .env_remove("XDG_RUNTIME_DIR");
@@ -60,6 +82,7 @@ fn a_run_leaves_nothing_in_dev_shm_and_another_user_runs_after_root() {
     let _ = std::fs::remove_dir_all(format!("/tmp/netfi-iceoryx2-{NOBODY}"));
     let _ = std::fs::remove_dir_all(format!("/tmp/netfi-{NOBODY}"));
     let _ = std::fs::remove_dir_all(&out);
+    remove_netfi_for_nobody();
     assert!(o.status.success(), "a second user could not run after root:\n{stderr}");
     assert!(left.is_empty(), "the second user's run left {left:?} in /dev/shm");
 }
