@@ -1,0 +1,88 @@
+//! Draws docs/performance.md's "cost as the work grows" figures from the
+//! measured points in `docs/cost.csv`: one SVG per axis (rate, queue depth,
+//! stream count, payload size), one line per series.
+//!
+//! ```sh
+//! cargo run --example cost_plot            # writes docs/cost-<axis>.svg
+//! ```
+//!
+//! `docs/cost.csv` has a header and the columns `axis,x,series,ns,machine,
+//! load,steal,command`: `ns` is the cost of one frame (or one packet) in ns
+//! at `x`, measured on `machine` under that load average and steal (%) by
+//! `command`. The figures are rebuilt from it, never edited by hand.
+
+use netfi::html::plot::{self, Figure, Line, Scale};
+use plotters::prelude::SeriesLabelPosition;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// One axis: its name in the CSV, its title and label, whether it is
+/// logarithmic.
+const AXES: [(&str, &str, &str, bool); 4] = [
+    ("rate", "Emulator's CPU per frame against the rate", "frames per second", true),
+    ("depth", "Release queue: push + pop against its depth", "frames held", true),
+    ("streams", "Release lateness p99 against the stream count (1 kHz each)", "streams", true),
+    ("payload", "Emulator's cost per payload against its size", "payload bytes", true),
+];
+
+const COLORS: [plotters::style::RGBColor; 5] = [plot::BLUE, plot::ORANGE, plot::GREEN, plot::PURPLE, plot::GREY];
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs");
+    let csv = std::fs::read_to_string(docs.join("cost.csv")).map_err(|e| format!("docs/cost.csv: {e}"))?;
+    let points = parse(&csv)?;
+    for (axis, title, x_desc, log) in AXES {
+        let Some(series) = points.get(axis) else { continue };
+        let svg = figure(axis, title, x_desc, log, series)?;
+        let path = docs.join(format!("cost-{axis}.svg"));
+        // A file of its own needs the namespace an inline <svg> does without.
+        let svg = svg.replacen("<svg ", "<svg xmlns=\"http://www.w3.org/2000/svg\" ", 1);
+        std::fs::write(&path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("{}", path.display());
+    }
+    Ok(())
+}
+
+/// axis → series → points (x, ns), in file order.
+type Points = BTreeMap<String, BTreeMap<String, Vec<(f64, f64)>>>;
+
+fn parse(csv: &str) -> Result<Points, String> {
+    let mut out = Points::new();
+    for (i, line) in csv.lines().enumerate().skip(1) {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.splitn(8, ',').collect();
+        let num = |k: usize| f.get(k).and_then(|v| v.trim().parse::<f64>().ok()).ok_or(format!("docs/cost.csv line {}: column {} is not a number", i + 1, k + 1));
+        let (x, ns) = (num(1)?, num(3)?);
+        out.entry(f[0].to_string()).or_default().entry(f[2].to_string()).or_default().push((x, ns));
+    }
+    Ok(out)
+}
+
+fn figure(axis: &str, title: &str, x_desc: &str, log: bool, series: &BTreeMap<String, Vec<(f64, f64)>>) -> Result<String, String> {
+    let all = || series.values().flatten();
+    let (x0, x1) = all().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (y1,) = (all().fold(0.0_f64, |m, p| m.max(p.1)),);
+    let scale = |lo: f64, hi: f64| if log { Scale::log(lo / 1.5..hi * 1.5) } else { Scale::linear(lo..hi) };
+    let lines = series
+        .iter()
+        .zip(COLORS.iter().cycle())
+        .map(|((label, pts), &color)| Line { label: label.clone(), color, points: pts.clone() })
+        .collect();
+    let id = format!("cost-{axis}");
+    let fig = Figure {
+        id: &id,
+        title,
+        x_desc,
+        y_desc: "ns",
+        x: scale(x0, x1),
+        y: Scale::linear(0.0..y1 * 1.15),
+        x_fmt: &plot::short,
+        y_fmt: &plot::short,
+        lines,
+        bars: Vec::new(),
+        legend: SeriesLabelPosition::UpperLeft,
+    };
+    plot::svg(&fig).map_err(|e| e.to_string())
+}
