@@ -425,7 +425,7 @@ fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
     use netfi::scheduler::QueueOrder;
     // 1 Mbit/s, 124 + 42 wire bytes a frame: 1.328 ms each. Frames every
     // 0.5 ms keep it busy from the first: frame k leaves at (k + 1)·1.328 ms.
-    let link = "model = \"rate\"\nrate_bit_s = 1_000_000\noverhead_bytes = 42\n";
+    let link = "model = \"rate\"\nrate_bit_s = 1_000_000\noverhead_bytes = 42\nqueue_packets = 5000\n";
     let serialization_ns = 1_328_000u64;
     let backlogged_ns = |k: u64| (k + 1) * serialization_ns - k * 500_000;
     let two_phases = format!("[[phase]]\n[[phase.stage]]\n{link}[[phase]]\nstart_s = 1\n[[phase.stage]]\n{link}");
