@@ -310,15 +310,27 @@ pub struct Occupancy {
 /// The most seconds of occupancy a report keeps per link (a day).
 pub const MAX_OCCUPANCY_SECONDS: usize = 86_400;
 
-/// Queue occupancy of every link stage, second by second.
-struct LinkSampler {
+/// Queue occupancy of every link stage, second by second: the checker's
+/// and the emulator's ([`crate::service::link`]) alike. Sampling after
+/// each frame reads one queue length per link stage and allocates nothing
+/// while the seconds fit the room reserved at the start.
+#[derive(Debug, Clone)]
+pub struct LinkSampler {
     /// (phase, stage) of each link stage.
     at: Vec<(u16, u16)>,
     seconds: Vec<Vec<Occupancy>>,
+    /// Frames each stage had seen (admitted or dropped) at the last sample:
+    /// a stage is sampled only after a frame reached it (not while its
+    /// phase is over, or an earlier stage dropped the frame).
+    seen: Vec<u64>,
+    /// The first frame's time: second 0 starts there.
+    origin_ns: Option<u64>,
 }
 
 impl LinkSampler {
-    fn new(scenario: &Scenario) -> LinkSampler {
+    /// The link stages of `scenario`, with room for `reserve_seconds` of
+    /// occupancy each (at most [`MAX_OCCUPANCY_SECONDS`]).
+    pub fn new(scenario: &Scenario, reserve_seconds: usize) -> LinkSampler {
         let mut at = Vec::new();
         for (pi, phase) in scenario.phases().iter().enumerate() {
             for (si, st) in phase.stages().iter().enumerate() {
@@ -327,16 +339,37 @@ impl LinkSampler {
                 }
             }
         }
-        let seconds = vec![Vec::new(); at.len()];
-        LinkSampler { at, seconds }
+        let reserve = reserve_seconds.min(MAX_OCCUPANCY_SECONDS);
+        let seconds = (0..at.len()).map(|_| Vec::with_capacity(reserve)).collect();
+        let seen = vec![0; at.len()];
+        LinkSampler { at, seconds, seen, origin_ns: None }
     }
 
-    /// Records each link's queue after a frame at `offset_ns` into the run.
+    /// Whether the scenario has no link stage (sampling is then a no-op).
     #[inline]
-    fn sample(&mut self, scenario: &Scenario, offset_ns: u64) {
-        let second = offset_ns / 1_000_000_000;
-        for (&(p, s), series) in self.at.iter().zip(&mut self.seconds) {
-            let Some((packets, bytes)) = scenario.stage(p, s).model().link_queued() else { continue };
+    pub fn is_empty(&self) -> bool {
+        self.at.is_empty()
+    }
+
+    /// The link stage at (`p`, `s`) of `scenario`, if it is still one
+    /// (a live switch may have cut its phase).
+    fn stage<'a>(scenario: &'a Scenario, p: u16, s: u16) -> Option<&'a crate::scenario::Stage> {
+        let st = scenario.phases().get(usize::from(p))?.stages().get(usize::from(s))?;
+        st.kind().is_link().then_some(st)
+    }
+
+    /// Records the queue of each link the frame that came at `t_ns` reached.
+    #[inline]
+    pub fn sample(&mut self, scenario: &Scenario, t_ns: u64) {
+        let second = t_ns.saturating_sub(*self.origin_ns.get_or_insert(t_ns)) / 1_000_000_000;
+        for ((&(p, s), series), seen) in self.at.iter().zip(&mut self.seconds).zip(&mut self.seen) {
+            let Some(model) = Self::stage(scenario, p, s).map(|st| st.model()) else { continue };
+            let (Some(stats), Some((packets, bytes))) = (model.link_stats(), model.link_queued()) else { continue };
+            let reached = stats.frames + stats.frames_dropped;
+            if reached == *seen {
+                continue;
+            }
+            *seen = reached;
             let full = series.len() >= MAX_OCCUPANCY_SECONDS;
             match series.last_mut() {
                 Some(o) if o.second == second => {
@@ -349,13 +382,17 @@ impl LinkSampler {
         }
     }
 
-    fn reports(self, scenario: &Scenario) -> Vec<LinkReport> {
-        self.at.iter().zip(self.seconds).map(|(&(p, s), occupancy)| link_report(scenario, p, s, occupancy)).collect()
+    /// One report per link stage still in `scenario`.
+    pub fn reports(&self, scenario: &Scenario) -> Vec<LinkReport> {
+        self.at
+            .iter()
+            .zip(&self.seconds)
+            .filter_map(|(&(p, s), occupancy)| Some(link_report(Self::stage(scenario, p, s)?, p, occupancy.clone())))
+            .collect()
     }
 }
 
-fn link_report(scenario: &Scenario, p: u16, s: u16, occupancy: Vec<Occupancy>) -> LinkReport {
-    let st = scenario.stage(p, s);
+fn link_report(st: &crate::scenario::Stage, p: u16, occupancy: Vec<Occupancy>) -> LinkReport {
     let stats = st.model().link_stats().expect("a link stage");
     let span_ns = stats.first_ns.map_or(0, |f| stats.last_departure_ns.saturating_sub(f));
     let capacity_bit_s = match st.model() {
@@ -408,7 +445,7 @@ pub fn run_observed(
 ) -> CheckReport {
     let frames = arrivals.len();
     let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
-    let mut links = LinkSampler::new(&scenario);
+    let mut links = LinkSampler::new(&scenario, 64);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
     let mut batches = BatchMeans::new(frames);
     let mut delays = Histogram::<u64>::new_with_bounds(1, 24 * 3_600 * 1_000_000_000, 3).expect("static bounds are valid");
@@ -450,8 +487,8 @@ pub fn run_observed(
         in_run = dropped;
         batches.record(dropped);
         depth_max = depth_max.max(inj.held());
-        if !links.at.is_empty() {
-            links.sample(inj.scenario(), t - arrivals.at(0));
+        if !links.is_empty() {
+            links.sample(inj.scenario(), t);
         }
         if (i + 1) % PROGRESS_EVERY == 0 {
             progress(i + 1);

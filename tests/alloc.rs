@@ -65,6 +65,9 @@ fn the_emulator_link_does_not_allocate_per_frame() {
         ("phases", "[[phase]]\npreset = \"DLM-3\"\n[[phase]]\nstart_s = 100\npreset = \"PLM-1\"\n"),
         // Copies and flips: a copy is a second queue entry and trace row,
         // a flip is applied to the sample's bytes in place.
+        // A link stage: its queue, and the emulator's sampling of it second
+        // by second (1.33 Mbit/s offered to 2 Mbit/s).
+        ("rate link", "[[stage]]\nmodel = \"rate\"\nrate_bit_s = 2_000_000\noverhead_bytes = 42\n[[stage]]\npreset = \"PLM-2\"\n"),
         ("duplicate + corrupt", "[[stage]]\nmodel = \"duplicate\"\np = 0.05\n[[stage]]\nmodel = \"corrupt\"\np = 0.1\n[[stage]]\nmodel = \"duplicate\"\np = 0.02\n[[stage]]\nmodel = \"bernoulli\"\np = 0.01\n[[stage]]\nmodel = \"delay\"\nmin_ms = 10\ndist = \"uniform\"\njitter_ms = 5\norder = \"reorder\"\n"),
     ];
     for (name, text) in pipelines {

@@ -47,6 +47,63 @@ pub fn percentiles(series: &[Latency]) -> Result<Option<String>, HtmlError> {
     .map(Some)
 }
 
+/// One log's percentiles interval by interval (one interval per second):
+/// p50, p99 and the most, at each interval's middle; `None` for a log of
+/// fewer than two intervals with values.
+pub fn percentiles_over_time(s: &Latency, id: &str) -> Result<Option<String>, HtmlError> {
+    let filled: Vec<_> = s.intervals.iter().filter(|i| i.count > 0).collect();
+    if filled.len() < 2 {
+        return Ok(None);
+    }
+    let line = |label: &str, color, v: &dyn Fn(&super::inputs::IntervalPoint) -> u64| Line {
+        label: label.into(),
+        color,
+        points: filled.iter().map(|i| (i.start_s + i.duration_s / 2.0, v(i).max(1) as f64)).collect(),
+    };
+    let lines = vec![line("p50", plot::BLUE, &|i| i.p50), line("p99", plot::ORANGE, &|i| i.p99), line("most", plot::GREY, &|i| i.max)];
+    let (_, y) = extent(&lines);
+    let end = s.intervals.iter().map(|i| i.start_s + i.duration_s).fold(1.0, f64::max);
+    plot::svg(&Figure {
+        id,
+        title: &format!("{} per second", s.label),
+        x_desc: "time since the log started (s)",
+        y_desc: "latency",
+        x: Scale::linear(0.0..end),
+        y: Scale::log((y.start / 2.0).max(0.5)..y.end * 2.0),
+        x_fmt: &plot::short,
+        y_fmt: &|v| fmt_ns(*v as u64),
+        lines,
+        bars: Vec::new(),
+        legend: SeriesLabelPosition::UpperRight,
+    })
+    .map(Some)
+}
+
+/// A link stage's queue over time: the most packets queued in each second
+/// of the run (from its first frame).
+pub fn link_occupancy(l: &crate::check::LinkReport, id: &str) -> Result<Option<String>, HtmlError> {
+    if l.occupancy.is_empty() {
+        return Ok(None);
+    }
+    let points: Vec<(f64, f64)> = l.occupancy.iter().map(|o| (o.second as f64 + 0.5, o.packets_max as f64)).collect();
+    let end = l.occupancy.last().map_or(1.0, |o| o.second as f64 + 1.0);
+    let top = points.iter().map(|p| p.1).fold(1.0, f64::max) * 1.1;
+    plot::svg(&Figure {
+        id,
+        title: &format!("Queue of phase {} {}, per second", l.phase, l.label),
+        x_desc: "time since the first frame (s)",
+        y_desc: "packets queued, most",
+        x: Scale::linear(0.0..end),
+        y: Scale::linear(0.0..top),
+        x_fmt: &plot::short,
+        y_fmt: &plot::short,
+        lines: vec![Line { label: "packets queued, most".into(), color: plot::GREEN, points }],
+        bars: Vec::new(),
+        legend: SeriesLabelPosition::UpperRight,
+    })
+    .map(Some)
+}
+
 /// `x = 1/(1 − q)` as the percentile it stands for: 10 → `90%`.
 fn percentile_label(x: &f64) -> String {
     let p = 100.0 * (1.0 - 1.0 / x.max(1.0));

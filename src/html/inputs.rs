@@ -24,11 +24,26 @@ pub struct ControlEvent {
     pub what: String,
 }
 
-/// One latency distribution from an HdrHistogram log (all its intervals).
+/// One latency distribution from an HdrHistogram log (all its intervals),
+/// and its percentiles interval by interval.
 pub struct Latency {
     pub label: &'static str,
     pub file: &'static str,
     pub histogram: Option<Histogram<u64>>,
+    /// One point per interval of the log (empty when not recorded).
+    pub intervals: Vec<IntervalPoint>,
+}
+
+/// One interval of an HdrHistogram log: when it started (seconds from the
+/// log's start), how long it lasted, its count and percentiles (ns).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntervalPoint {
+    pub start_s: f64,
+    pub duration_s: f64,
+    pub count: u64,
+    pub p50: u64,
+    pub p99: u64,
+    pub max: u64,
 }
 
 /// The analytic law of the scenario's delay: its one delay stage.
@@ -109,19 +124,31 @@ impl RunInputs {
     }
 }
 
-/// The histogram of `dir/file`, all intervals added; `None` when the run
-/// did not write it (`expected` false).
+/// The histogram of `dir/file`, all intervals added, and its intervals;
+/// `None` when the run did not write it (`expected` false).
 fn latency(dir: &Path, label: &'static str, file: &'static str, expected: bool) -> Result<Latency, HtmlError> {
-    let histogram = if expected { Some(read_hlog(&dir.join(file))?) } else { None };
-    Ok(Latency { label, file, histogram })
+    let (histogram, intervals) = if expected {
+        let (h, i) = read_hlog_intervals(&dir.join(file))?;
+        (Some(h), i)
+    } else {
+        (None, Vec::new())
+    };
+    Ok(Latency { label, file, histogram, intervals })
 }
 
 /// Adds up every interval of an HdrHistogram interval log.
 pub fn read_hlog(path: &Path) -> Result<Histogram<u64>, HtmlError> {
+    read_hlog_intervals(path).map(|(total, _)| total)
+}
+
+/// Adds up every interval of an HdrHistogram interval log, and returns
+/// each interval's count and percentiles too.
+pub fn read_hlog_intervals(path: &Path) -> Result<(Histogram<u64>, Vec<IntervalPoint>), HtmlError> {
     use base64::Engine;
     use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
     let bytes = std::fs::read(path).map_err(|e| HtmlError::read(path, e))?;
     let mut total: Option<Histogram<u64>> = None;
+    let mut points = Vec::new();
     let mut de = hdrhistogram::serialization::Deserializer::new();
     for entry in IntervalLogIterator::new(&bytes) {
         let entry = entry.map_err(|e| HtmlError::malformed(path, format!("not an HdrHistogram interval log: {e:?}")))?;
@@ -130,6 +157,15 @@ pub fn read_hlog(path: &Path) -> Result<Histogram<u64>, HtmlError> {
             .decode(i.encoded_histogram())
             .map_err(|e| HtmlError::malformed(path, format!("an interval's histogram is not base64: {e}")))?;
         let h: Histogram<u64> = de.deserialize(&mut raw.as_slice()).map_err(|e| HtmlError::malformed(path, format!("an interval's histogram does not decode: {e:?}")))?;
+        let q = |q: f64| if h.is_empty() { 0 } else { h.value_at_quantile(q) };
+        points.push(IntervalPoint {
+            start_s: i.start_timestamp().as_secs_f64(),
+            duration_s: i.duration().as_secs_f64(),
+            count: h.len(),
+            p50: q(0.5),
+            p99: q(0.99),
+            max: h.max(),
+        });
         match &mut total {
             Some(t) => t.add(&h).map_err(|e| HtmlError::malformed(path, format!("intervals of different ranges: {e:?}")))?,
             None => {
@@ -139,7 +175,8 @@ pub fn read_hlog(path: &Path) -> Result<Histogram<u64>, HtmlError> {
             }
         }
     }
-    total.ok_or_else(|| HtmlError::malformed(path, "no histogram interval in it"))
+    let total = total.ok_or_else(|| HtmlError::malformed(path, "no histogram interval in it"))?;
+    Ok((total, points))
 }
 
 /// The law of the scenario's delay, when the scenario is one phase with one

@@ -36,6 +36,7 @@ pub fn page(inp: &RunInputs) -> Result<String, HtmlError> {
                 (provenance(r))
                 (summary(r))
                 (latency(inp)?)
+                (links(r)?)
                 (delay_law(inp)?)
                 (over_time(inp)?)
                 (loss_runs(inp)?)
@@ -108,12 +109,21 @@ fn summary(r: &RunReport) -> Markup {
 
 fn latency(inp: &RunInputs) -> Result<Markup, HtmlError> {
     let plot = figures::percentiles(&inp.latency)?;
+    let mut over_time = Vec::new();
+    for s in &inp.latency {
+        let id = format!("plot-latency-over-time-{}", s.file.trim_end_matches(".hlog").replace('_', "-"));
+        over_time.extend(figures::percentiles_over_time(s, &id)?);
+    }
     Ok(html! {
         section #latency {
             h2 { "What netfi adds: latency percentiles" }
             p { "From the HdrHistogram logs. Emulator added: receive − send − injected delay through the emulator; "
                 "direct hop: the same frames sent straight to the simulator; release lateness: actual − scheduled release." }
             @match plot { Some(svg) => (PreEscaped(svg)), None => (none("no latency recorded")) }
+            @if !over_time.is_empty() {
+                p { "Over time, from the logs' one interval per second:" }
+                @for svg in &over_time { (PreEscaped(svg)) }
+            }
             table #latency-table {
                 tr { th { "" } th { "file" } th { "frames" } th { "p50" } th { "p90" } th { "p99" } th { "p99.9" } th { "max" } }
                 @for s in &inp.latency {
@@ -130,6 +140,41 @@ fn latency(inp: &RunInputs) -> Result<Markup, HtmlError> {
                     }
                 }
             }
+        }
+    })
+}
+
+/// The link stages (`rate`, `trace`): utilisation, queueing delay
+/// percentiles and the queue over time, per stage.
+fn links(r: &RunReport) -> Result<Markup, HtmlError> {
+    if r.links.is_empty() {
+        return Ok(html! {});
+    }
+    let mut plots = Vec::new();
+    for (i, l) in r.links.iter().enumerate() {
+        plots.extend(figures::link_occupancy(l, &format!("plot-link-occupancy-{}", i + 1))?);
+    }
+    Ok(html! {
+        section #links {
+            h2 { "Link stages: utilisation, queue, queueing delay" }
+            p { "Utilisation: the share of the link's time (rate) or of its delivery opportunities' bytes (trace) used. "
+                "Time at stage: arrival to the last packet's departure (queueing and serialization)." }
+            table #link-table {
+                tr { th { "phase" } th { "stage" } th { "utilisation" } th { "capacity (bit/s)" } th { "carried (bit/s)" }
+                     th { "queue max (packets)" } th { "queue max (bytes)" } th { "p50 (ms)" } th { "p90 (ms)" } th { "p99 (ms)" } th { "max (ms)" }
+                     th { "dropped for the queue" } }
+                @for l in &r.links {
+                    tr.link {
+                        td { (l.phase) } td { (l.label) }
+                        td.utilisation data-value=(l.utilisation) { (format!("{:.3}", l.utilisation)) }
+                        td { (format!("{:.0}", l.capacity_bit_s)) } td { (format!("{:.0}", l.carried_bit_s)) }
+                        td { (l.queue_packets_max) } td { (l.queue_bytes_max) }
+                        @for v in [l.delay_ms.p50, l.delay_ms.p90, l.delay_ms.p99, l.delay_ms.max] { td { (format!("{v:.3}")) } }
+                        td { (l.frames_dropped) " of " (l.frames + l.frames_dropped) }
+                    }
+                }
+            }
+            @for svg in &plots { (PreEscaped(svg)) }
         }
     })
 }

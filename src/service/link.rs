@@ -13,7 +13,7 @@
 //! start-up and the trace goes through a wait-free ring to a writer thread,
 //! which streams it (and the histograms' interval logs) to disk.
 
-use crate::check::{stage_reports, StageReport};
+use crate::check::{stage_reports, LinkSampler, StageReport};
 use crate::clock::now_ns;
 use crate::injector::{Entered, Fate, Injector, Invalid};
 use crate::model::ModelKind;
@@ -117,6 +117,8 @@ pub struct Link<T> {
     last_error: Option<PortError>,
     /// The histogram logs streamed by the trace writer.
     hlogs: Option<[PathBuf; 2]>,
+    /// The link stages' (`rate`, `trace`) queue occupancy, second by second.
+    links: LinkSampler,
 }
 
 /// The first stage of `scenario` among `unsupported`.
@@ -143,6 +145,9 @@ impl<T: Carried> Link<T> {
         }
         let rows = expected_frames.min(50_000_000) as usize;
         let copies = if unsupported_stage(&scenario, &[ModelKind::Duplicate]).is_some() { rows } else { 0 };
+        // Room for a day of occupancy per link stage, reserved (its pages
+        // are touched only as seconds pass): no allocation while sampling.
+        let links = LinkSampler::new(&scenario, crate::check::MAX_OCCUPANCY_SECONDS);
         let inj = Injector::try_new(scenario, queue_capacity)?;
         let (trace, writer) = trace::start(rows, copies);
         Ok(Link {
@@ -157,6 +162,7 @@ impl<T: Carried> Link<T> {
             send_errors: 0,
             last_error: None,
             hlogs: None,
+            links,
         })
     }
 
@@ -209,6 +215,9 @@ impl<T: Carried> Link<T> {
     #[inline]
     pub fn ingress(&mut self, now: u64, item: T, arrival: Arrival) -> Entered {
         let entered = self.inj.ingress_with(now, item, |it, flips| it.flip(flips.bits()));
+        if !self.links.is_empty() {
+            self.links.sample(self.inj.scenario(), now);
+        }
         let copies = self.inj.scenario().copies();
         // Copies a later stage or a full queue dropped.
         let copies_dropped = (copies.made() - u64::from(entered.copies)) as u8;
@@ -342,6 +351,7 @@ impl<T: Carried> Link<T> {
                 ingress_wait_ns: self.ingress_wait.summary(),
                 decision_ns: self.decision.summary(),
                 release_lateness_ns: self.lateness.summary(),
+                links: self.links.reports(self.inj.scenario()),
             },
             send_errors: self.send_errors,
             last_error: self.last_error,
@@ -367,6 +377,11 @@ pub struct LinkMeasures {
     pub decision_ns: Summary,
     /// Actual − scheduled release.
     pub release_lateness_ns: Summary,
+    /// The link stages (`rate`, `trace`): utilisation, queue occupancy
+    /// second by second, queueing delay percentiles, as `netfi scenario
+    /// check` reports them (absent when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub links: Vec<crate::check::LinkReport>,
 }
 
 /// What a link did: `entered + duplicated = delivered + dropped +

@@ -305,6 +305,10 @@ pub struct RunReport {
     pub loss_rate: Option<f64>,
     pub loss_rate_ci95: Option<[f64; 2]>,
     pub stages: Vec<StageReport>,
+    /// The link stages (`rate`, `trace`): utilisation, queue occupancy
+    /// over time, queueing delay percentiles (absent when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub links: Vec<crate::check::LinkReport>,
     /// Injected delay of delivered frames (ns).
     pub injected_delay_ns: Option<Summary>,
     pub overhead_ns: Overhead,
@@ -426,6 +430,7 @@ impl RunReport {
             };
             s += &format!("  phase {} stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase, st.stage, st.label, st.reached, st.dropped, st.loss_rate);
         }
+        s += &links_text(&self.links);
         if let Some(d) = &self.injected_delay_ns {
             s += &format!("delay      injected mean {:.3} ms; {}\n", d.mean / 1e6, line(&self.injected_delay_ns));
         }
@@ -488,6 +493,29 @@ impl RunReport {
 
 /// The kinematics as lines: per arm, the motion length on each side and the
 /// divergence; clutch activations; stalls at the robot.
+/// The link stages' lines of the text report.
+fn links_text(links: &[crate::check::LinkReport]) -> String {
+    let mut s = String::new();
+    for l in links {
+        s += &format!(
+            "  link phase {} {:<14} utilisation {:.3} ({:.0} of {:.0} bit/s); queue max {} packets, {} bytes; time at stage p50 {:.3} ms p99 {:.3} ms max {:.3} ms; {} of {} frames dropped for the queue\n",
+            l.phase,
+            l.label,
+            l.utilisation,
+            l.carried_bit_s,
+            l.capacity_bit_s,
+            l.queue_packets_max,
+            l.queue_bytes_max,
+            l.delay_ms.p50,
+            l.delay_ms.p99,
+            l.delay_ms.max,
+            l.frames_dropped,
+            l.frames + l.frames_dropped
+        );
+    }
+    s
+}
+
 fn kinematics_text(k: &serde_json::Value) -> String {
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let mut s = String::new();
@@ -584,6 +612,7 @@ impl RunReport {
             loss_rate: e.map(|e| e.link.loss_rate),
             loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
             stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),
+            links: e.map(|e| e.link.links.clone()).unwrap_or_default(),
             injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
             overhead_ns,
             kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),

@@ -15,7 +15,7 @@ use crate::frame::ItpView;
 use crate::host::StealTimer;
 use crate::frame::ItpFrame;
 use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
-use crate::metrics::{LatencyHistogram, Summary};
+use crate::metrics::{IntervalLog, LatencyHistogram, Summary};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
@@ -146,8 +146,10 @@ impl ReceivedLog {
 /// latency histograms, `received.csv` and its counts.
 struct Robot {
     kin: Kinematics,
-    e2e: LatencyHistogram,
-    hop: LatencyHistogram,
+    /// `end_to_end.hlog` and `direct_hop.hlog`, streamed one interval
+    /// per second.
+    e2e: IntervalLog,
+    hop: IntervalLog,
     seen: LatencyHistogram,
     received_csv: PathBuf,
     received_log: ReceivedLog,
@@ -171,10 +173,15 @@ impl Robot {
             .context("--stall-ms")?;
         let received_csv = args.out.join("received.csv");
         let received_log = ReceivedLog::create(received_csv.clone())?;
+        let origin_ns = now_ns();
+        let hlog = |file: &str, tag: &str| {
+            let path = args.out.join(file);
+            IntervalLog::create(&path, tag, origin_ns).with_context(|| format!("writing {}", path.display()))
+        };
         Ok(Robot {
             kin,
-            e2e: LatencyHistogram::new(),
-            hop: LatencyHistogram::new(),
+            e2e: hlog("end_to_end.hlog", "end_to_end_extra")?,
+            hop: hlog("direct_hop.hlog", "direct_hop")?,
             seen: LatencyHistogram::new(),
             received_csv,
             received_log,
@@ -236,14 +243,22 @@ impl Robot {
         }
     }
 
-    /// Writes `received.csv`'s end and the histogram logs, and reports.
+    /// Ends the histogram logs' current intervals once they have lasted a
+    /// second (called every few hundred turns of the loop, not per frame).
+    fn tick(&mut self, now: u64) {
+        self.e2e.tick(now);
+        self.hop.tick(now);
+    }
+
+    /// Writes `received.csv`'s end and the histogram logs' last
+    /// intervals, and reports.
     fn finish(mut self, args: &SimulatorArgs, ended_by: &str, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport> {
         self.received_log.finish()?;
         let duration_s = (t_end - t_start) as f64 / 1e9;
         let e2e_hlog = args.out.join("end_to_end.hlog");
-        self.e2e.write_log(&e2e_hlog, "end_to_end_extra", 0.0, duration_s).with_context(|| format!("writing {}", e2e_hlog.display()))?;
-        let hop_hlog = args.out.join("direct_hop.hlog");
-        self.hop.write_log(&hop_hlog, "direct_hop", 0.0, duration_s).with_context(|| format!("writing {}", hop_hlog.display()))?;
+        // The whole run's figures: the sum of the intervals written.
+        let e2e = self.e2e.finish(t_end)?;
+        let hop = self.hop.finish(t_end)?;
         self.kin.close(t_end);
         Ok(SimulatorReport {
             received: self.received,
@@ -251,8 +266,8 @@ impl Robot {
             wrong_size: self.wrong_size,
             bad_checksum: self.bad_checksum,
             released_by_emulator: self.released_by_emulator,
-            end_to_end_extra_ns: self.e2e.summary(),
-            direct_hop_ns: self.hop.summary(),
+            end_to_end_extra_ns: e2e.summary(),
+            direct_hop_ns: hop.summary(),
             delay_seen_ns: self.seen.summary(),
             kinematics: serde_json::to_value(self.kin.report()).ok(),
             ended_by: ended_by.into(),
@@ -310,6 +325,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
         }
         iter = iter.wrapping_add(1);
         if iter % 1024 == 0 {
+            robot.tick(now_ns());
             if robot.released_by_emulator.is_some() && (robot.direct_ended || direct.peers_connected() == 0) {
                 break "end_marker";
             }

@@ -414,3 +414,57 @@ fn a_trace_link_departs_every_packet_when_mm_link_does() {
         assert!(limit == usize::MAX || want.iter().any(Option::is_none), "the limit must bite");
     }
 }
+
+/// What a link's queue does at a phase boundary and at a live switch
+/// (docs/spec.md §3.12, "Phases and live switches"): each phase has its own
+/// link, which starts empty; the old phase's packets keep their departure
+/// times; an ordered (`fifo`) release queue still holds a frame behind the
+/// one before it, a `reorder` queue lets it overtake.
+#[test]
+fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
+    use netfi::scheduler::QueueOrder;
+    // 1 Mbit/s, 124 + 42 wire bytes a frame: 1.328 ms each. Frames every
+    // 0.5 ms keep it busy from the first: frame k leaves at (k + 1)·1.328 ms.
+    let link = "model = \"rate\"\nrate_bit_s = 1_000_000\noverhead_bytes = 42\nqueue_packets = 5000\n";
+    let serialization_ns = 1_328_000u64;
+    let backlogged_ns = |k: u64| (k + 1) * serialization_ns - k * 500_000;
+    let two_phases = format!("[[phase]]\n[[phase.stage]]\n{link}[[phase]]\nstart_s = 1\n[[phase.stage]]\n{link}");
+    let one_phase = format!("[[stage]]\n{link}");
+    let build = |text: &str, order| {
+        let spec = parse_str(text, "test.toml", "test").unwrap_or_else(|e| panic!("{e}"));
+        let mut sc = Scenario::new(&spec, 1).unwrap();
+        sc.reserve_phases(4);
+        (Injector::<()>::try_with_order(sc, 1 << 16, order).unwrap(), spec)
+    };
+    let release = |inj: &mut Injector<()>, t: u64| match inj.ingress(t, ()).fate {
+        Fate::Scheduled { release_ns, .. } => release_ns,
+        f => panic!("{f:?}"),
+    };
+    for order in [QueueOrder::Reorder, QueueOrder::Fifo] {
+        // A phase boundary at 1 s, and a live switch (to the same scenario) at 1 s.
+        for switch in [false, true] {
+            let (mut inj, spec) = build(if switch { &one_phase } else { &two_phases }, order);
+            let mut last = 0;
+            for k in 0..2000u64 {
+                last = release(&mut inj, k * 500_000);
+                assert_eq!(last - k * 500_000, backlogged_ns(k), "frame {k}");
+            }
+            if switch {
+                let timeline = netfi::scenario::Timeline::new(&spec, 0).unwrap();
+                inj.switch(1_000_000_000, None, timeline).unwrap();
+            }
+            // The old link still has 1.66 s of backlog; the new one is empty.
+            let first_new = release(&mut inj, 1_000_000_000);
+            let second_new = release(&mut inj, 1_000_500_000);
+            match order {
+                QueueOrder::Reorder => {
+                    assert_eq!(first_new, 1_000_000_000 + serialization_ns, "switch {switch}");
+                    assert_eq!(second_new, 1_000_000_000 + 2 * serialization_ns, "switch {switch}");
+                }
+                QueueOrder::Fifo => assert_eq!((first_new, second_new), (last, last), "switch {switch}"),
+            }
+            let links = inj.scenario().phases().len();
+            assert_eq!(links, 2, "switch {switch}");
+        }
+    }
+}

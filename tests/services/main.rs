@@ -74,6 +74,91 @@ fn normal_delivers_every_frame_and_measures_overhead() {
     for f in ["decision.hlog", "lateness.hlog", "end_to_end.hlog", "report.json"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+    // The simulator's logs have one interval per second of its run (the
+    // last one partial), their counts adding up to the frames it received,
+    // and the whole-run figures are those of the intervals' sum.
+    let sim = &r["simulator"];
+    let seconds = sim["duration_s"].as_f64().unwrap();
+    for (file, count, summary) in [
+        ("end_to_end.hlog", u(&sim["received"]), &sim["end_to_end_extra_ns"]),
+        ("direct_hop.hlog", u(&sim["received_direct"]), &sim["direct_hop_ns"]),
+    ] {
+        let (total, intervals) = netfi::html::inputs::read_hlog_intervals(&out.join(file)).unwrap();
+        let n = intervals.len() as f64;
+        assert!(n >= seconds.floor() && n <= seconds.ceil() + 1.0, "{file}: {n} intervals in a run of {seconds} s");
+        assert!(intervals.iter().all(|i| i.duration_s <= 1.5), "{file}: {intervals:?}");
+        assert_eq!(intervals.iter().map(|i| i.count).sum::<u64>(), count, "{file}");
+        assert_eq!(total.len(), count, "{file}");
+        assert_eq!(u(&summary["count"]), count, "{file}");
+        assert_eq!(u(&summary["p99"]), total.value_at_quantile(0.99), "{file}");
+        assert_eq!(u(&summary["max"]), total.max(), "{file}");
+    }
+}
+
+/// A run through a `rate` link below its capacity: the report's link
+/// section shows the utilisation the offered load implies, the queue second
+/// by second and the time at the link; the HTML report shows them too.
+#[test]
+fn a_rate_link_reports_utilisation_queue_and_queueing_delay() {
+    let dir = out_dir("rate-link-scenario");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenario = dir.join("rate.toml");
+    // 2 Mbit/s; 124 + 42 = 166 wire bytes a frame, 1.328 ms of the link's
+    // time each; at 1 kHz the offered load is 1.328 Mbit/s.
+    std::fs::write(&scenario, "name = \"rate\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 2_000_000\noverhead_bytes = 42\n").unwrap();
+    let (r, ok, out) = run("rate-link", &[scenario.to_str().unwrap(), "--duration-s", "2", "--seed", "1"]);
+    assert!(ok, "{r:#}");
+    assert_conserved(&r);
+    let links = r["links"].as_array().unwrap_or_else(|| panic!("no links section: {r:#}"));
+    assert_eq!(links.len(), 1, "{links:?}");
+    let l = &links[0];
+    let f = |k: &str| l[k].as_f64().unwrap_or_else(|| panic!("{k} missing: {l}"));
+    let frames = u(&l["frames"]);
+    assert_eq!(frames + u(&l["frames_dropped"]), u(&r["frames"]["entered"]), "{l}");
+    assert_eq!(u(&l["bytes"]), frames * 166, "{l}");
+    // Utilisation = busy time over the span from the first frame to the
+    // last departure; busy time = bytes · 8 / rate exactly, so utilisation ·
+    // capacity is the bit rate carried over the same span.
+    assert_eq!(f("capacity_bit_s"), 2e6);
+    assert!((f("utilisation") * f("capacity_bit_s") - f("carried_bit_s")).abs() < 1e-6 * f("carried_bit_s"), "{l}");
+    // Below capacity the link carries what is offered: over the span of
+    // arrivals A (first to last frame taken in, from the trace) the
+    // offered load is bytes · 8 / A, and utilisation = busy / (A + the
+    // last frame's time at the link) = (offered / capacity) · A / (A +
+    // d_last), with d_last at most the report's longest time at the link.
+    // (The arrivals are the emulator's take times: on a loaded host they
+    // come in bursts, so A is measured rather than taken as 2 s.)
+    let trace = std::fs::read_to_string(out.join("trace.csv")).unwrap();
+    let ingress: Vec<u64> = trace.lines().skip(1).map(|row| row.split(',').nth(4).unwrap().parse().unwrap()).collect();
+    let span_s = (ingress.iter().max().unwrap() - ingress.iter().min().unwrap()) as f64 / 1e9;
+    let offered = u(&l["bytes"]) as f64 * 8.0 / span_s / 2e6;
+    let d_last_s = l["delay_ms"]["max"].as_f64().unwrap() / 1e3;
+    let (lo, hi) = (offered * span_s / (span_s + d_last_s), offered);
+    let util = f("utilisation");
+    assert!(util >= lo * (1.0 - 1e-6) && util <= hi * (1.0 + 1e-6), "utilisation {util} outside [{lo}, {hi}]: {l}");
+    assert!(util < 1.0, "{l}");
+    // No frame spends less than its own serialization at the link.
+    assert!(l["delay_ms"]["p50"].as_f64().unwrap() >= 1.328 * (1.0 - 1e-3), "{l}");
+    assert!(l["delay_ms"]["max"].as_f64().unwrap() >= l["delay_ms"]["p99"].as_f64().unwrap(), "{l}");
+    // Occupancy second by second: each second of the stream has an entry,
+    // and a frame counts itself in the queue.
+    let occ = l["occupancy"].as_array().unwrap();
+    assert!((2..=3).contains(&occ.len()), "{occ:?}");
+    assert!(occ.iter().all(|o| u(&o["packets_max"]) >= 1 && u(&o["bytes_max"]) >= 166), "{occ:?}");
+    // emulator.json carries the same section.
+    let em: Value = serde_json::from_slice(&std::fs::read(out.join("emulator.json")).unwrap()).unwrap();
+    assert_eq!(em["links"][0]["frames"], l["frames"], "{em:#}");
+    // The HTML report: the table and the queue plot with one point a second.
+    let o = netfi().arg("report").arg(&out).arg("--html").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("id=\"links\"") && html.contains(&format!("data-value=\"{}\"", l["utilisation"])), "no link table");
+    let at = html.find("id=\"plot-link-occupancy-1\"").expect("no occupancy plot");
+    let plot = &html[at..at + html[at..].find("</svg>").unwrap()];
+    assert!(plot.contains("<polyline"), "no line in the occupancy plot");
+    // And the simulator's per-second latency over time.
+    assert!(html.contains("id=\"plot-latency-over-time-end-to-end\""), "no end-to-end over time plot");
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
