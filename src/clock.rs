@@ -33,6 +33,9 @@ pub enum Wait {
     /// Busy-wait, but offer the core to other runnable threads on each turn
     /// (`sched_yield`): for processes that share a core.
     SpinYield,
+    /// Sleep this many nanoseconds between polls: for many processes that
+    /// share few cores, none of which may spin.
+    Nap(u64),
 }
 
 impl Wait {
@@ -42,6 +45,7 @@ impl Wait {
         match self {
             Wait::Spin => std::hint::spin_loop(),
             Wait::SpinYield => std::thread::yield_now(),
+            Wait::Nap(ns) => std::thread::sleep(std::time::Duration::from_nanos(ns)),
         }
     }
 }

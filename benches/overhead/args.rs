@@ -5,7 +5,7 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// The parts of the benchmark, in the order they run within a repetition.
-pub const PARTS: [&str; 5] = ["latency", "delay", "product", "throughput", "sockperf"];
+pub const PARTS: [&str; 6] = ["latency", "delay", "product", "throughput", "sockperf", "streams"];
 
 /// The benchmark's command line, after `cargo bench --bench overhead --`.
 #[derive(Debug, clap::Parser)]
@@ -24,7 +24,7 @@ pub struct Args {
     /// fails, then bisects. Starting near the expected figure saves trials.
     #[arg(long, value_name = "HZ")]
     pub throughput_from: Option<f64>,
-    /// Parts to run (latency, delay, product, throughput, sockperf; default
+    /// Parts to run (latency, delay, product, throughput, sockperf, streams; default
     /// all, or `NETFI_BENCH_PARTS`). Other words, such as a `cargo bench`
     /// filter, are ignored.
     pub parts: Vec<String>,
@@ -57,6 +57,9 @@ pub struct Settings {
     /// default the emulator's 100); 0 runs it without the control and
     /// telemetry services, to compare.
     pub telemetry_ms: u64,
+    /// Stream counts of the streams part (`NETFI_BENCH_STREAMS`, default
+    /// 1,2,8,32).
+    pub stream_counts: Vec<usize>,
 }
 
 /// A non-empty environment variable.
@@ -130,6 +133,7 @@ impl Settings {
             emulator_core,
             driver_core,
             telemetry_ms: num("NETFI_BENCH_TELEMETRY_MS", netfi::service::telemetry::DEFAULT_INTERVAL_MS as f64)? as u64,
+            stream_counts: stream_counts()?,
         })
     }
 
@@ -155,6 +159,17 @@ fn rates() -> Result<Vec<f64>> {
     };
     anyhow::ensure!(rates_hz.iter().all(|r| r.is_finite() && *r > 0.0), "NETFI_BENCH_RATES: rates must be positive");
     Ok(rates_hz)
+}
+
+/// `NETFI_BENCH_STREAMS`, else 1, 2, 8 and 32.
+fn stream_counts() -> Result<Vec<usize>> {
+    let counts = match var("NETFI_BENCH_STREAMS") {
+        Some(v) => v.split(',').map(|n| n.trim().parse::<usize>().with_context(|| format!("NETFI_BENCH_STREAMS: `{n}` is not a count"))).collect::<Result<Vec<_>>>()?,
+        None => vec![1, 2, 8, 32],
+    };
+    let max = netfi::service::plan::MAX_STREAMS as usize;
+    anyhow::ensure!(counts.iter().all(|n| (1..=max).contains(n)), "NETFI_BENCH_STREAMS: counts from 1 to {max}");
+    Ok(counts)
 }
 
 /// `NETFI_BENCH_PARTS`, else the part names among the arguments, else all.

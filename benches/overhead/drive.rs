@@ -45,7 +45,7 @@ impl Drive {
 
     /// Takes every waiting frame of both routes, recording those after the
     /// warm-up (`warm` slots).
-    fn poll_routes(&mut self, ends: &mut impl Ends, warm: u64, stamped: bool) {
+    pub fn poll_routes(&mut self, ends: &mut impl Ends, warm: u64, stamped: bool) {
         while let Some(a) = ends.poll(Route::Chain) {
             self.chain_received += 1;
             if a.slot >= warm {
@@ -66,7 +66,7 @@ impl Drive {
     }
 
     /// Sends slot `slot` on its route (chain on even slots, direct on odd).
-    fn send(&mut self, ends: &mut impl Ends, slot: u64) {
+    pub fn send(&mut self, ends: &mut impl Ends, slot: u64) {
         let route = if slot % 2 == 0 { Route::Chain } else { Route::Direct };
         let ok = ends.send(route, slot, &wire(slot));
         match (route, ok) {
@@ -127,6 +127,53 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
             if target > now_ns() + 2 * SLEEP_SLACK_NS {
                 sleep_until_ns(target - SLEEP_SLACK_NS);
             }
+        }
+    }
+    d.seconds = (now_ns().saturating_sub(t_record)) as f64 / 1e9;
+    d
+}
+
+/// [`drive`] over `ends.len()` streams at `rate_hz` per route each, in one
+/// thread: stream k's slots come `k / n` of a slot after stream 0's (the
+/// consoles are not in step), and every stream's routes are polled between
+/// sends. The figures are of all streams together.
+pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns: u64) -> Drive {
+    let (warm, slots) = slots_for(rate_hz, seconds);
+    let n = ends.len() as u64;
+    let half_period_ns = 1e9 / rate_hz / 2.0;
+    let at = |e: u64| (((e / n) as f64 + (e % n) as f64 / n as f64) * half_period_ns) as u64;
+    let mut d = Drive::default();
+    let t0 = now_ns() + 1_000_000;
+    let (mut e, events) = (0u64, slots * n);
+    let (mut t_record, mut drain_until) = (0u64, u64::MAX);
+    loop {
+        let now = now_ns();
+        if stop_requested() {
+            break;
+        }
+        if e < events && now >= t0 + at(e) {
+            let slot = e / n;
+            d.send(&mut ends[(e % n) as usize], slot);
+            if slot >= warm {
+                if e == warm * n {
+                    t_record = now;
+                }
+                d.send_lateness.record(now - (t0 + at(e)));
+            }
+            e += 1;
+            if e == events {
+                drain_until = now_ns() + drain_ns;
+            }
+        }
+        for end in ends.iter_mut() {
+            d.poll_routes(end, warm, true);
+        }
+        if e == events {
+            if !d.in_flight() || now_ns() > drain_until {
+                break;
+            }
+        } else if !d.in_flight() && t0 + at(e) > now_ns() + 2 * SLEEP_SLACK_NS {
+            sleep_until_ns(t0 + at(e) - SLEEP_SLACK_NS);
         }
     }
     d.seconds = (now_ns().saturating_sub(t_record)) as f64 / 1e9;

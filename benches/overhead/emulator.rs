@@ -46,6 +46,8 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         idle_end_ms: None,
         udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
         control: ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 },
+        streams: 1,
+        stream_scenario: Vec::new(),
     }
 }
 
@@ -99,7 +101,22 @@ impl Emulator {
 
     /// Waits up to `wait` for the emulator to end by itself, then stops it;
     /// returns its report.
-    pub fn finish(mut self, wait: Duration) -> Result<EmulatorReport> {
+    pub fn finish(self, wait: Duration) -> Result<EmulatorReport> {
+        let dir = self.dir.clone();
+        self.end(wait);
+        read_report(&dir)
+    }
+
+    /// [`Emulator::finish`] of an emulator of `n` streams (`--streams`):
+    /// each stream's report.
+    pub fn finish_streams(self, wait: Duration, n: usize) -> Result<Vec<EmulatorReport>> {
+        let dir = self.dir.clone();
+        self.end(wait);
+        (0..n).map(|k| read_report(&netfi::service::plan::stream_dir(&dir, n, k))).collect()
+    }
+
+    /// Waits up to `wait` for the emulator to end by itself, then stops it.
+    fn end(mut self, wait: Duration) {
         let t0 = Instant::now();
         while t0.elapsed() < wait {
             if let Ok(Some(_)) = self.child.try_wait() {
@@ -108,12 +125,6 @@ impl Emulator {
             std::thread::sleep(Duration::from_millis(5));
         }
         self.stop();
-        let path = self.dir.join("emulator.json");
-        let report: EmulatorReport = serde_json::from_slice(&std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?)
-            .with_context(|| format!("parsing {}", path.display()))?;
-        // The per-frame trace is not needed here, and at 100 kHz it is large.
-        let _ = std::fs::remove_file(self.dir.join("trace_emulator.csv"));
-        Ok(report)
     }
 
     fn stop(&mut self) {
@@ -133,6 +144,16 @@ impl Emulator {
         }
         let _ = self.child.wait();
     }
+}
+
+/// The `emulator.json` in `dir`; its per-frame trace, not needed here (and
+/// large at 100 kHz), is removed.
+fn read_report(dir: &Path) -> Result<EmulatorReport> {
+    let path = dir.join("emulator.json");
+    let report: EmulatorReport = serde_json::from_slice(&std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?)
+        .with_context(|| format!("parsing {}", path.display()))?;
+    let _ = std::fs::remove_file(dir.join("trace_emulator.csv"));
+    Ok(report)
 }
 
 impl Drop for Emulator {

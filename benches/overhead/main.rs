@@ -33,6 +33,10 @@
 //!   end-to-end latency beyond the injected delay.
 //! - **Product run.** `netfi run Normal` as shipped (console and simulator
 //!   processes), for its own report of the same quantities.
+//! - **Streams.** One emulator serving N streams (`--streams N`), the
+//!   benchmark playing all N consoles and robots in one thread: release
+//!   lateness, the time inside the emulator and the added latency at 1 kHz
+//!   per stream, for N = 1, 2, 8, 32 (`streams.json`).
 //! - **Throughput.** `netfi run --no-direct` at rising rates (doubling, then
 //!   bisection) for 10 s each; a rate is sustained when every frame is
 //!   delivered or dropped by the scenario, nothing else.
@@ -51,7 +55,8 @@
 //! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
 //! | `NETFI_BENCH_QUICK` | unset | `1`: every part briefly (as `--quick`): 1 s intervals, 1 repetition, 1 s throughput trials |
-//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `sockperf` |
+//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `sockperf`, `streams` |
+//! | `NETFI_BENCH_STREAMS` | `1,2,8,32` | stream counts of the streams part (1 kHz per route per stream) |
 //! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput trial |
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator and this benchmark's threads at this SCHED_FIFO priority |
 //! | `NETFI_BENCH_QUIET_CORES` | unset | before each interval, wait until other processes keep at most this many cores busy |
@@ -83,6 +88,7 @@ mod probe;
 mod product;
 mod report;
 mod sockperf;
+mod streams;
 mod throughput;
 
 use anyhow::{bail, Context, Result};
@@ -150,6 +156,7 @@ struct Results {
     sockperfs: Vec<Value>,
     throughput: BTreeMap<String, Value>,
     throughput_fps: BTreeMap<String, f64>,
+    streams: Vec<Value>,
 }
 
 /// Fails with "interrupted" once Ctrl-C or SIGTERM has been received.
@@ -187,6 +194,9 @@ fn run(args: &Args) -> Result<()> {
     }
     if s.wants("throughput") {
         throughput::throughput_part(&s, &mut res)?;
+    }
+    if s.wants("streams") {
+        streams::streams_part(&s, &mut res)?;
     }
     let fig = Figures::of(&s, &res);
     check_interrupted()?;

@@ -106,6 +106,10 @@ pub struct ConsoleArgs {
     /// Print the round trip and the robot's divergence once a second.
     #[arg(long)]
     pub live: bool,
+    /// Sleep this many microseconds between polls instead of yielding the
+    /// core (many consoles sharing few cores, `netfi run --streams`).
+    #[arg(long, value_name = "US")]
+    pub nap_us: Option<u64>,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -202,6 +206,15 @@ pub struct EmulatorArgs {
     pub no_feedback: bool,
     #[command(flatten)]
     pub control: ControlArgs,
+    /// Serve this many console → robot streams in one loop (iceoryx2 on
+    /// both sides): stream K's services are those of run `<run-id>-s<K>`
+    /// (stream 0: the run's own), its files go to `<out>/stream-K/`.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=crate::service::plan::MAX_STREAMS as i64))]
+    pub streams: u32,
+    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
+    /// Streams not named take --scenario.
+    #[arg(long, value_name = "K=SCENARIO")]
+    pub stream_scenario: Vec<String>,
 }
 
 /// The emulator's live control and telemetry (`netfi ctl`), as `netfi
@@ -251,6 +264,10 @@ pub struct SimulatorArgs {
     /// Directory for `received.csv`, `end_to_end.hlog` and `simulator.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// Sleep this many microseconds between idle polls instead of yielding
+    /// the core (many robots sharing few cores, `netfi run --streams`).
+    #[arg(long, value_name = "US")]
+    pub nap_us: Option<u64>,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -328,6 +345,15 @@ pub struct RunArgs {
     pub no_direct: bool,
     #[command(flatten)]
     pub control: ControlArgs,
+    /// Console → robot pairs through the one emulator (1 to 64), each with
+    /// its own services, scenario, seed, accounting and files
+    /// (`<out>/stream-K/` when more than one).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=crate::service::plan::MAX_STREAMS as i64))]
+    pub streams: u32,
+    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
+    /// Streams not named take the run's scenario.
+    #[arg(long, value_name = "K=SCENARIO")]
+    pub stream_scenario: Vec<String>,
 }
 
 impl ConsoleArgs {
@@ -344,6 +370,7 @@ impl ConsoleArgs {
             .val("--wait-for-peer-s", self.wait_for_peer_s)
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
+            .opt("--nap-us", self.nap_us)
             .0
     }
 }
@@ -364,14 +391,22 @@ impl EmulatorArgs {
             .opt("--return-scenario", self.return_scenario.as_ref())
             .opt("--return-seed", self.return_seed)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
-            .switch("--no-feedback", self.no_feedback);
-        self.control.argv(a).0
+            .switch("--no-feedback", self.no_feedback)
+            .opt("--streams", (self.streams > 1).then_some(self.streams));
+        let mut a = self.control.argv(a);
+        for k in &self.stream_scenario {
+            a = a.val("--stream-scenario", k);
+        }
+        a.0
     }
 
     /// Checks that the options fit the endpoints, with errors that say what
     /// would be accepted.
     pub fn validate(&self) -> anyhow::Result<()> {
         let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
+        if (self.streams > 1 || !self.stream_scenario.is_empty()) && (i || e) {
+            bail!("--streams and --stream-scenario need iceoryx2 on both sides");
+        }
         if let Some(s) = self.wait_for_peer_s {
             if !(s.is_finite() && s >= 0.0) {
                 bail!("--wait-for-peer-s must be a non-negative number of seconds, got {s}");
@@ -456,6 +491,7 @@ impl SimulatorArgs {
             .opt("--avoid-core", self.avoid_core)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
+            .opt("--nap-us", self.nap_us)
             .0
     }
 }

@@ -292,8 +292,14 @@ fn wait_for_feedback(fb: &mut FeedbackIn, sent: u64, args: &ConsoleArgs, stop: &
         if turns % 1024 == 0 && stop.requested() {
             return "signal";
         }
-        Wait::SpinYield.relax();
+        wait(args).relax();
     }
+}
+
+/// How this console waits between polls: yielding its core, or napping
+/// (`--nap-us`, many consoles on few cores).
+fn wait(args: &ConsoleArgs) -> Wait {
+    args.nap_us.map_or(Wait::SpinYield, |us| Wait::Nap(us * 1000))
 }
 
 /// Runs the console with `args`; returns its report (also `console.json`).
@@ -322,7 +328,9 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     };
     // Sleep until this long before a frame's time, then poll: a VM's wake-up
     // latency is tens of µs; at ≥ 20 kHz there is no time to sleep at all.
-    let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else { 200_000 };
+    // A napping console sleeps up to the frame's time itself.
+    let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else if args.nap_us.is_some() { 0 } else { 200_000 };
+    let wait = wait(args);
     let mut lateness = LatencyHistogram::new();
     let (mut send_errors, mut sent_unsubscribed, mut direct_sent, mut sent) = (0u64, 0u64, 0u64, 0u64);
     let steal_timer = StealTimer::start();
@@ -345,10 +353,10 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
             // taken when the feedback arrives, not at the next frame.
             while now_ns() < target {
                 fb.poll(sent);
-                Wait::SpinYield.relax();
+                wait.relax();
             }
         } else {
-            wait_until_ns(target, slack_ns, Wait::SpinYield);
+            wait_until_ns(target, slack_ns, wait);
         }
         sample.wire = wire;
         sample.console_index = i;

@@ -394,14 +394,14 @@ pub fn classify(s: &FrameSample, drop_bad_checksum: bool, accept_raw: bool, bad:
 }
 
 /// How the loop's thread was placed.
-struct Placement {
-    isolation: Option<crate::host::isolate::Isolation>,
-    realtime_priority: Option<i32>,
+pub(crate) struct Placement {
+    pub(crate) isolation: Option<crate::host::isolate::Isolation>,
+    pub(crate) realtime_priority: Option<i32>,
 }
 
 /// Pins the loop's thread (keeping the trace writers off its core), clears
 /// the core if asked, and raises the thread's priority if asked.
-fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&FeedbackPath>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
+pub(crate) fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&FeedbackPath>, ret: Option<&ReturnPath>) -> anyhow::Result<Placement> {
     if let Some(core) = cfg.core {
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
@@ -472,12 +472,13 @@ pub enum Look {
 }
 
 /// How the loop ended.
-struct LoopEnd {
-    ended_by: &'static str,
-    iterations: u64,
-    t_start: u64,
-    t_end: u64,
-    peer_events: Vec<PeerEvent>,
+#[derive(Debug, Clone)]
+pub(crate) struct LoopEnd {
+    pub(crate) ended_by: &'static str,
+    pub(crate) iterations: u64,
+    pub(crate) t_start: u64,
+    pub(crate) t_end: u64,
+    pub(crate) peer_events: Vec<PeerEvent>,
 }
 
 /// Turns the loop until the stream has ended and drained, or a stop is
@@ -556,6 +557,23 @@ pub fn run<S: FrameSource, K: FrameSink>(
     feedback: Option<FeedbackPath>,
     look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
+    let mut fwd = forward(cfg, feedback)?;
+    let mut control = start_control(cfg, &mut fwd.link)?;
+    let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
+    if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
+        h.keep_off_core(core);
+    }
+    let steal_timer = StealTimer::start();
+    let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
+    let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
+    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
+    conclude(cfg, fwd, sink, end, isolation, placement.realtime_priority, steal_timer.stop(), events)
+}
+
+/// The loop state of one stream as `cfg` sets it up: its directory, its
+/// link (the trace and the histograms going to disk as the run goes), the
+/// feedback path `feedback`.
+pub(crate) fn forward(cfg: &EmulatorConfig, feedback: Option<FeedbackPath>) -> anyhow::Result<Forward> {
     use anyhow::Context;
     std::fs::create_dir_all(&cfg.out_dir).with_context(|| format!("creating {}", cfg.out_dir.display()))?;
     let scenario = Scenario::new(&cfg.scenario, cfg.seed)?;
@@ -567,30 +585,35 @@ pub fn run<S: FrameSource, K: FrameSink>(
     // The trace's writer thread starts before pinning, and is then kept off
     // the loop's core, so it runs elsewhere and never preempts the loop.
     let mut fwd = Forward::new(Link::new(scenario, cfg.queue_capacity, cfg.expected_frames)?, cfg.drop_bad_checksum);
-    // The trace and the histograms go to disk as the run goes.
     fwd.link.stream_to(&cfg.out_dir.join("trace_emulator.csv"), Some(&cfg.out_dir))?;
     fwd.accept_raw = cfg.accept_raw;
     if let Some(f) = feedback {
         fwd = fwd.with_feedback(f);
     }
-    let mut control = start_control(cfg, &mut fwd.link)?;
-    let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
-    if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
-        h.keep_off_core(core);
-    }
-    let steal_timer = StealTimer::start();
-    let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
-    let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
-    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
-    // Tell the simulator the stream ended (best effort: it may be gone),
-    // unless the loop already did.
+    Ok(fwd)
+}
+
+/// After the loop: tells the robot the stream ended (best effort: it may be
+/// gone) unless the loop already did, then writes the stream's trace,
+/// histograms and `emulator.json`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn conclude<K: FrameSink>(
+    cfg: &EmulatorConfig,
+    mut fwd: Forward,
+    sink: &mut K,
+    end: LoopEnd,
+    isolation: Option<IsolationSummary>,
+    realtime_priority: Option<i32>,
+    steal: crate::host::Steal,
+    events: Vec<crate::service::control::ControlEvent>,
+) -> anyhow::Result<EmulatorReport> {
+    use anyhow::Context;
     if fwd.forward_end_ns.is_none() {
         fwd.delivered_unsubscribed = sink.unsubscribed();
         let _ = sink.send_with(&FrameSample::end_marker(fwd.link.released()), |_| {});
     }
     let delivered_unsubscribed = fwd.delivered_unsubscribed;
-    let steal = steal_timer.stop();
-    let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, placement.realtime_priority, steal)?;
+    let mut report = EmulatorReport::assemble(cfg, fwd, end, isolation, realtime_priority, steal)?;
     report.shaping.events = events;
     report.process.frames.delivered_unsubscribed = delivered_unsubscribed;
     let json = cfg.out_dir.join("emulator.json");
@@ -606,7 +629,7 @@ const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::D
 /// The live control of the run, when it has one: the queue as asked, room
 /// for switched phases, the control thread started and its telemetry
 /// tapped from the trace (before the loop's core is pinned).
-fn start_control(
+pub(crate) fn start_control(
     cfg: &EmulatorConfig,
     link: &mut Link<FrameSample>,
 ) -> anyhow::Result<Option<(crate::service::control::ControlPort, crate::service::control::ControlHandle)>> {
@@ -703,6 +726,9 @@ impl EmulatorReport {
 pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     args.validate()?;
+    if args.streams > 1 || !args.stream_scenario.is_empty() {
+        return crate::service::streams::main(args);
+    }
     let cfg = config(args)?;
     crate::service::write_pid(&args.out, "emulator")?;
     let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
@@ -781,7 +807,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
 
 /// The feedback path the arguments ask for: with iceoryx2 on both sides and
 /// unless `--no-feedback`, through `--return-scenario` (default Normal).
-fn feedback_path(args: &EmulatorArgs, t: &crate::transport::Transports, seed: u64, expected: u64) -> anyhow::Result<Option<FeedbackPath>> {
+pub(crate) fn feedback_path(args: &EmulatorArgs, t: &crate::transport::Transports, seed: u64, expected: u64) -> anyhow::Result<Option<FeedbackPath>> {
     use anyhow::Context;
     let Some(node) = t.node.as_ref().filter(|_| !args.ingress.is_udp() && !args.egress.is_udp() && !args.no_feedback) else {
         return Ok(None);
@@ -802,7 +828,7 @@ fn feedback_path(args: &EmulatorArgs, t: &crate::transport::Transports, seed: u6
 
 /// The emulator's set-up from its arguments: the scenario resolved, the
 /// seed, queue capacity and core chosen.
-fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
+pub(crate) fn config(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
     let spec = crate::load::resolve(&args.scenario)?;
     let seed = args.seed.or(spec.seed).unwrap_or_else(crate::service::plan::fresh_seed);
     let default_capacity = match args.payload {

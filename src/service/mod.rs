@@ -27,6 +27,7 @@ pub mod report;
 pub mod run;
 pub mod signals;
 pub mod simulator;
+pub mod streams;
 pub mod supervise;
 pub mod telemetry;
 pub mod udp;

@@ -15,6 +15,67 @@ pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
 /// Default frame rate of a run, Hz.
 pub const DEFAULT_RATE_HZ: f64 = 1000.0;
 
+/// The most streams one run may carry (`--streams`).
+pub const MAX_STREAMS: u32 = 64;
+
+/// Sleep between the idle polls of each console and robot of a run of
+/// several streams (µs): many processes share the cores left beside the
+/// emulator's, and none may spin.
+pub const STREAM_NAP_US: u64 = 200;
+
+/// The run id whose services stream `k` uses: the run's own for stream 0,
+/// `<run>-s<k>` for the others (`netfi/<run>-s<k>/console`, ...).
+pub fn stream_run_id(run_id: &str, k: usize) -> String {
+    if k == 0 {
+        run_id.to_string()
+    } else {
+        format!("{run_id}-s{k}")
+    }
+}
+
+/// The seed of stream `k`: the run's seed for stream 0 (so one stream is
+/// today's run), `splitmix64(seed ^ splitmix64(k))` for the others.
+pub fn stream_seed(seed: u64, k: usize) -> u64 {
+    if k == 0 {
+        seed
+    } else {
+        scenario::splitmix64(seed ^ scenario::splitmix64(k as u64))
+    }
+}
+
+/// Where stream `k` of a run of `streams` writes: the run's directory for
+/// a single stream, `<out>/stream-<k>/` otherwise.
+pub fn stream_dir(out: &std::path::Path, streams: usize, k: usize) -> PathBuf {
+    if streams <= 1 {
+        out.to_path_buf()
+    } else {
+        out.join(format!("stream-{k}"))
+    }
+}
+
+/// `K=SCENARIO` (`--stream-scenario`): the stream and its scenario.
+pub fn parse_stream_scenario(text: &str, streams: u32) -> anyhow::Result<(usize, String)> {
+    let (k, what) = text.split_once('=').ok_or_else(|| anyhow::anyhow!("--stream-scenario {text}: expected K=SCENARIO"))?;
+    let k: u32 = k.trim().parse().map_err(|_| anyhow::anyhow!("--stream-scenario {text}: K must be a stream number"))?;
+    anyhow::ensure!(k < streams, "--stream-scenario {text}: stream {k} does not exist (streams 0 to {})", streams - 1);
+    anyhow::ensure!(!what.is_empty(), "--stream-scenario {text}: no scenario");
+    Ok((k as usize, what.to_string()))
+}
+
+/// One console → robot pair of a run: its services' run id, scenario,
+/// seed, directory and the arguments of its two ends.
+#[derive(Debug, Clone)]
+pub struct StreamPlan {
+    pub index: usize,
+    pub run_id: String,
+    pub out: PathBuf,
+    pub spec: ScenarioSpec,
+    pub seed: u64,
+    pub scenario_path: PathBuf,
+    pub console: ConsoleArgs,
+    pub simulator: SimulatorArgs,
+}
+
 /// A seed for runs given none: from the time and the process id.
 pub fn fresh_seed() -> u64 {
     let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
@@ -73,6 +134,9 @@ pub struct Plan {
     pub simulator: SimulatorArgs,
     pub emulator: EmulatorArgs,
     pub console: ConsoleArgs,
+    /// Every stream, stream 0 first; one stream is the run itself (its
+    /// directory, run id, seed and ends).
+    pub streams: Vec<StreamPlan>,
 }
 
 impl Plan {
@@ -94,6 +158,7 @@ impl Plan {
             // A core of its own: it may busy-poll.
             spin: cores.simulator.is_some(),
             out: out.clone(),
+            nap_us: None,
         };
         let emulator = EmulatorArgs {
             run_id: Some(run_id.clone()),
@@ -123,6 +188,8 @@ impl Plan {
             wait_for_peer_s: None,
             no_feedback: false,
             control: args.control.clone(),
+            streams: 1,
+            stream_scenario: Vec::new(),
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),
@@ -138,8 +205,44 @@ impl Plan {
             wait_for_peer_s: 10.0,
             feedback_wait_s: 5.0,
             live: false,
+            nap_us: None,
         };
-        Plan { run_id, out, spec, seed, scenario_path, planned_s, expected_frames, cores, simulator, emulator, console }
+        let stream0 = StreamPlan {
+            index: 0,
+            run_id: run_id.clone(),
+            out: out.clone(),
+            spec: spec.clone(),
+            seed,
+            scenario_path: scenario_path.clone(),
+            console: console.clone(),
+            simulator: simulator.clone(),
+        };
+        Plan { run_id, out, spec, seed, scenario_path, planned_s, expected_frames, cores, simulator, emulator, console, streams: vec![stream0] }
+    }
+
+    /// The plan with `specs.len()` streams (`specs[k]`: stream k's
+    /// scenario); one spec leaves it as it is. Each stream gets its run id,
+    /// seed and directory, its ends nap between polls, and the emulator is
+    /// told of the streams.
+    pub fn with_streams(mut self, specs: Vec<ScenarioSpec>) -> Plan {
+        let n = specs.len();
+        if n <= 1 {
+            return self;
+        }
+        self.streams = specs.into_iter().enumerate().map(|(k, spec)| self.stream(n, k, spec)).collect();
+        self.emulator.streams = n as u32;
+        self.emulator.stream_scenario =
+            self.streams.iter().skip(1).map(|s| format!("{}={}", s.index, s.scenario_path.display())).collect();
+        self.emulator.scenario = self.streams[0].scenario_path.display().to_string();
+        self
+    }
+
+    fn stream(&self, n: usize, k: usize, spec: ScenarioSpec) -> StreamPlan {
+        let (run_id, out, seed) = (stream_run_id(&self.run_id, k), stream_dir(&self.out, n, k), stream_seed(self.seed, k));
+        let console = ConsoleArgs { run_id: run_id.clone(), seed: Some(seed), out: out.clone(), nap_us: Some(STREAM_NAP_US), ..self.console.clone() };
+        let simulator = SimulatorArgs { run_id: run_id.clone(), out: out.clone(), spin: false, nap_us: Some(STREAM_NAP_US), ..self.simulator.clone() };
+        let scenario_path = out.join("scenario.toml");
+        StreamPlan { index: k, run_id, out, spec, seed, scenario_path, console, simulator }
     }
 }
 

@@ -333,6 +333,10 @@ pub struct RunReport {
     /// stages, delays, overhead, peer events, files).
     pub emulator: Option<EmulatorProcess>,
     pub simulator: Option<SimulatorReport>,
+    /// A run of several streams (`--streams N`): each stream and the
+    /// total; the fields above are then stream 0's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub streams: Option<crate::service::streams::RunStreams>,
 }
 
 /// Joins the services' reports.
@@ -487,6 +491,9 @@ impl RunReport {
             s += &format!("  histogram {}\n", h.display());
         }
         s += &format!("  report    {}\n", self.files.report_json.display());
+        if let Some(st) = &self.streams {
+            s += &st.to_text();
+        }
         s
     }
 }
@@ -634,6 +641,7 @@ impl RunReport {
             console,
             emulator,
             simulator,
+            streams: None,
         }
     }
 }

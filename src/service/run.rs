@@ -14,9 +14,9 @@
 
 use crate::clock::now_ns;
 use crate::host::StealTimer;
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, ScenarioSpec};
 use crate::service::args::RunArgs;
-use crate::service::plan::Plan;
+use crate::service::plan::{parse_stream_scenario, stream_run_id, stream_seed, Plan};
 use crate::service::report::{ProcessEnd, RunReport};
 use crate::service::signals;
 use crate::service::supervise::{Seen, State, Supervisor};
@@ -182,13 +182,12 @@ impl OutDirLock {
 /// own, created exclusively (`scenario.<run id>.toml`, read-only): no other
 /// run can have written or can overwrite it. `scenario.toml` beside it is
 /// the copy kept for people.
-fn write_run_scenario(plan: &Plan) -> Result<PathBuf> {
+fn write_run_scenario(spec: &ScenarioSpec, path: &Path, out: &Path, run_id: &str) -> Result<PathBuf> {
     use std::io::Write;
     use std::os::unix::fs::OpenOptionsExt;
-    let toml = plan.spec.to_toml();
-    let path = &plan.scenario_path;
+    let toml = spec.to_toml();
     std::fs::write(path, &toml).with_context(|| format!("writing {}", path.display()))?;
-    let own = plan.out.join(format!("scenario.{}.toml", plan.run_id));
+    let own = own_scenario(out, run_id);
     // A file left by an earlier run with this run id (given with --run-id).
     let _ = std::fs::remove_file(&own);
     let mut f = std::fs::OpenOptions::new()
@@ -201,6 +200,36 @@ fn write_run_scenario(plan: &Plan) -> Result<PathBuf> {
     Ok(own)
 }
 
+/// The emulator's own copy of a stream's scenario.
+fn own_scenario(out: &Path, run_id: &str) -> PathBuf {
+    out.join(format!("scenario.{run_id}.toml"))
+}
+
+/// Writes every stream's scenario and tells the emulator where they are.
+fn write_scenarios(plan: &mut Plan) -> Result<()> {
+    let own = plan.streams.iter().map(|s| write_run_scenario(&s.spec, &s.scenario_path, &s.out, &s.run_id)).collect::<Result<Vec<_>>>()?;
+    plan.emulator.scenario = own[0].display().to_string();
+    if own.len() > 1 {
+        plan.emulator.stream_scenario = own.iter().enumerate().skip(1).map(|(k, p)| format!("{k}={}", p.display())).collect();
+    }
+    Ok(())
+}
+
+/// Each stream's scenario (`--stream-scenario K=...`, else `spec`), each
+/// checked with its seed, and each stream's run id checked.
+fn stream_specs(args: &RunArgs, spec: ScenarioSpec, seed: u64, run_id: &str) -> Result<Vec<ScenarioSpec>> {
+    let mut specs = vec![spec; args.streams as usize];
+    for text in &args.stream_scenario {
+        let (k, what) = parse_stream_scenario(text, args.streams)?;
+        specs[k] = crate::load::resolve(&what).with_context(|| format!("--stream-scenario {text}"))?;
+    }
+    for (k, s) in specs.iter().enumerate() {
+        Scenario::new(s, stream_seed(seed, k)).with_context(|| format!("the scenario of stream {k}"))?;
+        crate::transport::RunId::new(&stream_run_id(run_id, k)).with_context(|| format!("the run id of stream {k}"))?;
+    }
+    Ok(specs)
+}
+
 /// Resolves the scenario and the seed, plans the run, and readies its
 /// output directory: locked for this run, stale files of an earlier run
 /// there removed, what an earlier emulator left moved put back, the
@@ -211,6 +240,7 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     // Validate the scenario here, so a bad one fails before any process starts.
     Scenario::new(&spec, seed)?;
     let run_id = args.run_id.clone().unwrap_or_else(fresh_run_id);
+    let mut specs = stream_specs(args, spec, seed, &run_id)?;
     let host_cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
     // A pin that cannot be honoured is an error when asked for, and a loud
     // warning (also in the report's isolation line) otherwise.
@@ -220,19 +250,28 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     if let (None, Some(w)) = (args.emulator_core, crate::host::isolate::pin_problem()) {
         eprintln!("WARNING: {w}");
     }
-    let mut plan = Plan::new(args, spec, seed, run_id, &host_cores);
+    let first = specs.remove(0);
+    let mut plan = Plan::new(args, first.clone(), seed, run_id, &host_cores);
+    if !specs.is_empty() {
+        specs.insert(0, first);
+        plan = plan.with_streams(specs);
+    }
     let out = &plan.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let lock = OutDirLock::take(out)?;
-    for role in ["console", "emulator", "simulator"] {
-        for ext in ["ready", "json", "pid"] {
-            let _ = std::fs::remove_file(out.join(format!("{role}.{ext}")));
+    let dirs = std::iter::once(out).chain(plan.streams.iter().map(|s| &s.out));
+    for dir in dirs {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for role in ["console", "emulator", "simulator"] {
+            for ext in ["ready", "json", "pid"] {
+                let _ = std::fs::remove_file(dir.join(format!("{role}.{ext}")));
+            }
         }
     }
     // What killed runs left cleared (their owners and guardian all dead)
     // is put back before anything else, as `netfi restore` does.
     restore_orphans(None);
-    plan.emulator.scenario = write_run_scenario(&plan)?.display().to_string();
+    write_scenarios(&mut plan)?;
     let cleaned = crate::transport::cleanup_stale()?;
     if cleaned > 0 {
         eprintln!("removed resources of {cleaned} dead process(es) of earlier runs");
@@ -240,85 +279,131 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     Ok((plan, lock))
 }
 
-/// Starts the simulator, the emulator and the console, each once the one
-/// before is ready; stops those started if one fails to start.
-fn start(plan: &Plan) -> Result<[Proc; 3]> {
+/// The processes of a run: each stream's console and robot, and the one
+/// emulator.
+struct Procs {
+    consoles: Vec<Proc>,
+    emulator: Proc,
+    simulators: Vec<Proc>,
+}
+
+impl Procs {
+    /// Consoles, emulator, robots: the order of the report.
+    fn all(&self) -> impl Iterator<Item = &Proc> {
+        self.consoles.iter().chain(std::iter::once(&self.emulator)).chain(self.simulators.iter())
+    }
+
+    fn all_mut(&mut self) -> impl Iterator<Item = &mut Proc> {
+        self.consoles.iter_mut().chain(std::iter::once(&mut self.emulator)).chain(self.simulators.iter_mut())
+    }
+}
+
+/// Starts `role` in `out` and waits until it is ready.
+fn start_one(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path) -> Result<Proc> {
+    let mut p = spawn(role, args, core, out)?;
+    wait_ready(&mut p, out, Duration::from_secs(30))?;
+    Ok(p)
+}
+
+/// Starts the simulators, the emulator and the consoles, each kind once
+/// the one before is ready; stops those started if one fails to start.
+fn start(plan: &Plan) -> Result<Procs> {
     let (out, cores) = (&plan.out, plan.cores);
-    let mut sim = spawn("simulator", plan.simulator.to_argv(), cores.simulator, out)?;
-    wait_ready(&mut sim, out, Duration::from_secs(30))?;
-    let mut emu = match spawn("emulator", plan.emulator.to_argv(), cores.emulator, out) {
+    let stop = |started: &mut [Proc]| started.iter_mut().for_each(Proc::terminate);
+    let mut simulators = Vec::new();
+    for s in &plan.streams {
+        match start_one("simulator", s.simulator.to_argv(), cores.simulator, &s.out) {
+            Ok(p) => simulators.push(p),
+            Err(e) => {
+                stop(&mut simulators);
+                return Err(e);
+            }
+        }
+    }
+    let emulator = match start_one("emulator", plan.emulator.to_argv(), cores.emulator, out) {
         Ok(p) => p,
         Err(e) => {
-            sim.terminate();
+            stop(&mut simulators);
             return Err(e);
         }
     };
-    if let Err(e) = wait_ready(&mut emu, out, Duration::from_secs(30)) {
-        sim.terminate();
-        return Err(e);
+    let mut procs = Procs { consoles: Vec::new(), emulator, simulators };
+    for s in &plan.streams {
+        match spawn("console", s.console.to_argv(), cores.console, &s.out) {
+            Ok(p) => procs.consoles.push(p),
+            Err(e) => {
+                procs.all_mut().for_each(Proc::terminate);
+                return Err(e);
+            }
+        }
     }
-    match spawn("console", plan.console.to_argv(), cores.console, out) {
-        Ok(con) => Ok([con, emu, sim]),
-        Err(e) => {
-            emu.terminate();
-            sim.terminate();
-            Err(e)
+    Ok(procs)
+}
+
+/// Reaps the dead iceoryx2 peers of every stream of the run.
+fn reap(ipcs: &[crate::transport::IpcConfig]) {
+    for cfg in ipcs {
+        if let Ok(r) = crate::transport::cleanup_dead_nodes(cfg) {
+            for dead in r.dead() {
+                eprintln!("reaped a dead peer: {dead}");
+            }
         }
     }
 }
 
-/// Watches the three processes until they have ended, stopping them as
-/// the [`Supervisor`] says; reaps the run's dead iceoryx2 peers meanwhile.
-/// Returns whether the run was interrupted.
-fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
+/// Watches the processes until they have ended, stopping them as the
+/// [`Supervisor`] says (each stream's console and robot as one role);
+/// reaps the run's dead iceoryx2 peers meanwhile. Returns whether the run
+/// was interrupted.
+fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
     let started = Instant::now();
     let mut policy = Supervisor::new(plan.planned_s);
     // The runner reaps the run's dead processes, off the emulator's core, so
     // the survivors see their peer counts drop and a restarted peer can take
     // over its port.
-    let ipc = crate::transport::RunId::new(&plan.run_id).ok().map(crate::transport::IpcConfig::new);
+    let ipcs: Vec<_> =
+        plan.streams.iter().filter_map(|s| crate::transport::RunId::new(&s.run_id).ok().map(crate::transport::IpcConfig::new)).collect();
     let mut last_reap = Instant::now();
     loop {
         std::thread::sleep(Duration::from_millis(5));
-        for p in procs.iter_mut() {
+        procs.all_mut().for_each(|p| {
             p.poll();
-        }
+        });
         if last_reap.elapsed() > Duration::from_millis(200) {
             last_reap = Instant::now();
-            if let Some(r) = ipc.as_ref().and_then(|cfg| crate::transport::cleanup_dead_nodes(cfg).ok()) {
-                for dead in r.dead() {
-                    eprintln!("reaped a dead peer: {dead}");
-                }
-            }
+            reap(&ipcs);
         }
         if signals::ensure_installed() {
             eprintln!("WARNING: the Ctrl-C handler had been replaced; put back");
         }
-        let [con, emu, sim] = procs;
         let seen = Seen {
             now: started.elapsed(),
             stop_requested: signals::stop_requested(),
-            console: con.state(),
-            emulator: emu.state(),
-            simulator: sim.state(),
+            console: State::of_group(procs.consoles.iter().map(Proc::state)),
+            emulator: procs.emulator.state(),
+            simulator: State::of_group(procs.simulators.iter().map(Proc::state)),
         };
         let was_interrupted = policy.interrupted();
         let o = policy.look(seen);
         if policy.interrupted() && !was_interrupted {
             eprintln!("stopping: console, then emulator, then simulator");
         }
-        for (stop, p) in [(o.stop_console, &mut *con), (o.stop_emulator, &mut *emu), (o.stop_simulator, &mut *sim)] {
-            if stop {
-                p.terminate();
-            }
+        if o.stop_console {
+            procs.consoles.iter_mut().for_each(Proc::terminate);
+        }
+        if o.stop_emulator {
+            procs.emulator.terminate();
+        }
+        if o.stop_simulator {
+            procs.simulators.iter_mut().for_each(Proc::terminate);
         }
         if o.kill_all {
-            for p in procs.iter_mut() {
+            for p in procs.all_mut() {
                 if !p.poll() {
                     let _ = p.child.kill();
                 }
             }
-            for p in procs.iter_mut() {
+            for p in procs.all_mut() {
                 let _ = p.child.wait();
                 p.poll();
             }
@@ -327,6 +412,37 @@ fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
             return policy.interrupted();
         }
     }
+}
+
+/// The run's report: the services' reports joined; with several streams,
+/// each stream's (also `<out>/stream-K/report.json`) and the total, under
+/// stream 0's.
+fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: crate::host::Steal, interrupted: bool) -> RunReport {
+    if plan.streams.len() == 1 {
+        let faults = procs.all().filter_map(Proc::died).collect();
+        let processes = procs.all().map(Proc::end).collect();
+        return RunReport::assemble(plan, duration_s, steal, processes, faults, interrupted);
+    }
+    let mut lines = Vec::new();
+    let mut reports = Vec::new();
+    for (k, s) in plan.streams.iter().enumerate() {
+        let own = [&procs.consoles[k], &procs.emulator, &procs.simulators[k]];
+        let faults = own.iter().filter_map(|p| p.died()).collect();
+        let processes = own.iter().map(|p| p.end()).collect();
+        let sp = Plan { run_id: s.run_id.clone(), out: s.out.clone(), spec: s.spec.clone(), seed: s.seed, scenario_path: s.scenario_path.clone(), ..plan.clone() };
+        let mut r = RunReport::assemble(&sp, duration_s, steal, processes, faults, interrupted);
+        if let Err(e) = serde_json::to_vec_pretty(&r).map_err(anyhow::Error::from).and_then(|j| Ok(std::fs::write(&r.files.report_json, j)?)) {
+            r.faults.push(format!("writing {}: {e}", r.files.report_json.display()));
+        }
+        lines.push(crate::service::streams::RunStream::of(k, &r));
+        reports.push(r);
+    }
+    let mut top = reports.swap_remove(0);
+    top.processes = procs.all().map(Proc::end).collect();
+    top.faults = lines.iter().flat_map(|l| l.faults.iter().map(move |f| format!("stream {}: {f}", l.stream))).collect();
+    top.files.report_json = plan.out.join("report.json");
+    top.streams = Some(crate::service::streams::RunStreams::of(lines));
+    top
 }
 
 /// Runs a scenario end to end and returns its report (also written to
@@ -362,11 +478,11 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     // An emulator that died while its core was cleared could not put back
     // what it moved; its record lets the runner do it.
     restore_orphans(Some(std::process::id() as i32));
-    // The emulator read its own copy at its start; the one kept is scenario.toml.
-    let _ = std::fs::remove_file(&plan.emulator.scenario);
-    let faults = procs.iter().filter_map(Proc::died).collect();
-    let processes = procs.iter().map(Proc::end).collect();
-    let mut report = RunReport::assemble(&plan, duration_s, steal, processes, faults, interrupted);
+    // The emulator read its own copies at its start; the ones kept are scenario.toml.
+    for s in &plan.streams {
+        let _ = std::fs::remove_file(own_scenario(&s.out, &s.run_id));
+    }
+    let mut report = assemble(&plan, &procs, duration_s, steal, interrupted);
     report.provenance = Some(crate::service::report::Provenance::capture(started, plan.seed));
     // A report that cannot be written (a full disk) is a fault of the run;
     // the report is still returned, for stdout.

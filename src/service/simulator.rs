@@ -292,7 +292,11 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
     signals::install();
     crate::service::place("simulator", args.core, args.avoid_core)?;
-    let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
+    let wait = match (args.spin, args.nap_us) {
+        (true, _) => Wait::Spin,
+        (false, Some(us)) => Wait::Nap(us * 1000),
+        (false, None) => Wait::SpinYield,
+    };
     let mut robot = Robot::new(args)?;
     let steal_timer = StealTimer::start();
     std::fs::write(args.out.join("simulator.ready"), b"").context("writing simulator.ready")?;

@@ -32,6 +32,22 @@ impl State {
     fn ended(self) -> bool {
         self != State::Running
     }
+
+    /// The state of one role's processes together (the consoles or the
+    /// robots of a run of several streams): running while any runs, then
+    /// failed if any failed.
+    pub fn of_group(states: impl IntoIterator<Item = State>) -> State {
+        let (mut running, mut failed) = (false, false);
+        for s in states {
+            running |= s == State::Running;
+            failed |= s == State::Failed;
+        }
+        match (running, failed) {
+            (true, _) => State::Running,
+            (false, true) => State::Failed,
+            (false, false) => State::Succeeded,
+        }
+    }
 }
 
 /// What the runner sees at one look.
@@ -141,6 +157,14 @@ impl Supervisor {
 mod tests {
     use super::State::*;
     use super::*;
+
+    #[test]
+    fn a_group_runs_while_any_runs_then_fails_if_any_failed() {
+        assert_eq!(State::of_group([Succeeded, Running, Failed]), Running);
+        assert_eq!(State::of_group([Succeeded, Failed]), Failed);
+        assert_eq!(State::of_group([Succeeded, Succeeded]), Succeeded);
+        assert_eq!(State::of_group([Succeeded]), Succeeded);
+    }
 
     fn seen(t: f64, console: State, emulator: State, simulator: State) -> Seen {
         Seen { now: Duration::from_secs_f64(t), stop_requested: false, console, emulator, simulator }
