@@ -201,6 +201,14 @@ pub struct EmulatorProcess {
 /// it ends as soon as one is due.
 pub const TAKE_MAX: usize = 64;
 
+/// How close a release must be for an idle loop to wait for it on the
+/// clock alone rather than poll its ports once more: a little more than one
+/// idle turn (the ingress, feedback and return polls, 150–300 ns here), so
+/// that a release is stamped within a clock read of its time instead of
+/// anywhere in the turn that straddles it. The loop only waits when its
+/// last look at the ingress found nothing, so a busy stream never does.
+pub const RELEASE_SPIN_NS: u64 = 400;
+
 /// What one receive gave.
 enum Taken {
     /// A frame, taken in at this time and decided.
@@ -232,6 +240,12 @@ pub struct Forward {
     pub bad_input: BadInput,
     /// Whether raw (opaque) samples are accepted.
     pub accept_raw: bool,
+    /// How near a release an idle turn waits for it on the clock
+    /// ([`RELEASE_SPIN_NS`]; 0: never, as when one loop serves several
+    /// streams, where a wait would delay the others).
+    pub release_spin_ns: u64,
+    /// The last turn found nothing waiting at the ingress.
+    idle: bool,
 }
 
 impl Forward {
@@ -251,6 +265,8 @@ impl Forward {
             delivered_unsubscribed: 0,
             bad_input: BadInput::default(),
             accept_raw: true,
+            release_spin_ns: RELEASE_SPIN_NS,
+            idle: false,
         }
     }
 
@@ -265,14 +281,33 @@ impl Forward {
     /// waits at the ingress, up to [`TAKE_MAX`] ([`Forward::take`]).
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
-        self.link.release_due(now_ns(), sink);
+        let now = self.wait_for_release(now_ns());
+        self.link.release_due(now, sink);
         if let Some(r) = ret {
             r.poll(source.sender());
         }
         if let Some(f) = self.feedback.as_deref_mut() {
             f.poll();
         }
-        self.take(source, now_ns);
+        self.idle = self.take(source, now_ns);
+    }
+
+    /// An idle loop whose next release falls within `release_spin_ns`
+    /// waits for it reading only the clock, and returns the time it read
+    /// last (`now` otherwise).
+    #[inline]
+    fn wait_for_release(&self, now: u64) -> u64 {
+        match self.link.next_release_ns() {
+            Some(t) if self.idle && t > now && t - now <= self.release_spin_ns => {
+                let mut now = now;
+                while now < t {
+                    std::hint::spin_loop();
+                    now = now_ns();
+                }
+                now
+            }
+            _ => now,
+        }
     }
 
     /// Off the hot path: once the stream has drained, sends the robot the
@@ -302,16 +337,18 @@ impl Forward {
     /// stamped taken at `clock()` (read once per frame that came) and
     /// decided. The batch ends early once a held frame is due at the time
     /// read for the last frame, so that a release waits behind at most one
-    /// decision (no clock is read for the check).
+    /// decision (no clock is read for the check). Returns whether nothing
+    /// waited at all.
     #[inline]
-    pub fn take<S: FrameSource>(&mut self, source: &mut S, mut clock: impl FnMut() -> u64) {
-        for _ in 0..TAKE_MAX {
+    pub fn take<S: FrameSource>(&mut self, source: &mut S, mut clock: impl FnMut() -> u64) -> bool {
+        for i in 0..TAKE_MAX {
             match self.take_one(source, &mut clock) {
-                Taken::Frame(t_take) if self.link.next_release_ns().is_some_and(|t| t <= t_take) => return,
+                Taken::Frame(t_take) if self.link.next_release_ns().is_some_and(|t| t <= t_take) => return false,
                 Taken::Frame(_) | Taken::EndMarker => {}
-                Taken::Nothing => return,
+                Taken::Nothing => return i == 0,
             }
         }
+        false
     }
 
     /// Takes at most one frame from `source` and decides it.
