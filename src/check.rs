@@ -382,13 +382,21 @@ impl LinkSampler {
         }
     }
 
-    /// One report per link stage still in `scenario`.
+    /// One report per link stage of `scenario`, in timeline order. A stage
+    /// at a place the sampler did not follow (switched in by live control
+    /// after the start) has its counts, utilisation and delays but no
+    /// occupancy series. (A phase cut by a switch had not started, so a
+    /// series kept at its place is its successor's.)
     pub fn reports(&self, scenario: &Scenario) -> Vec<LinkReport> {
-        self.at
-            .iter()
-            .zip(&self.seconds)
-            .filter_map(|(&(p, s), occupancy)| Some(link_report(Self::stage(scenario, p, s)?, p, occupancy.clone())))
-            .collect()
+        let mut out = Vec::new();
+        for (pi, phase) in scenario.phases().iter().enumerate() {
+            for (si, st) in phase.stages().iter().enumerate().filter(|(_, st)| st.kind().is_link()) {
+                let at = (pi as u16, si as u16);
+                let occupancy = self.at.iter().position(|a| *a == at).map(|i| self.seconds[i].clone()).unwrap_or_default();
+                out.push(link_report(st, at.0, occupancy));
+            }
+        }
+        out
     }
 }
 

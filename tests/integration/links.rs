@@ -444,9 +444,11 @@ fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
         // A phase boundary at 1 s, and a live switch (to the same scenario) at 1 s.
         for switch in [false, true] {
             let (mut inj, spec) = build(if switch { &one_phase } else { &two_phases }, order);
+            let mut sampler = netfi::check::LinkSampler::new(inj.scenario(), 8);
             let mut last = 0;
             for k in 0..2000u64 {
                 last = release(&mut inj, k * 500_000);
+                sampler.sample(inj.scenario(), k * 500_000);
                 assert_eq!(last - k * 500_000, backlogged_ns(k), "frame {k}");
             }
             if switch {
@@ -455,7 +457,9 @@ fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
             }
             // The old link still has 1.66 s of backlog; the new one is empty.
             let first_new = release(&mut inj, 1_000_000_000);
+            sampler.sample(inj.scenario(), 1_000_000_000);
             let second_new = release(&mut inj, 1_000_500_000);
+            sampler.sample(inj.scenario(), 1_000_500_000);
             match order {
                 QueueOrder::Reorder => {
                     assert_eq!(first_new, 1_000_000_000 + serialization_ns, "switch {switch}");
@@ -463,8 +467,16 @@ fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
                 }
                 QueueOrder::Fifo => assert_eq!((first_new, second_new), (last, last), "switch {switch}"),
             }
-            let links = inj.scenario().phases().len();
-            assert_eq!(links, 2, "switch {switch}");
+            // Each link reports the frames that reached it; the old one's
+            // queue is not sampled after its phase (its series ends in second
+            // 0), the new one's starts in second 1 with its own frames. A
+            // link switched in live has no series (the sampler follows the
+            // links the run started with).
+            let links = sampler.reports(inj.scenario());
+            assert_eq!(links.iter().map(|l| (l.phase, l.frames)).collect::<Vec<_>>(), [(1, 2000), (2, 2)], "switch {switch}");
+            assert_eq!(links[0].occupancy.iter().map(|o| o.second).collect::<Vec<_>>(), [0], "switch {switch}");
+            let new_series: Vec<_> = links[1].occupancy.iter().map(|o| (o.second, o.packets_max)).collect();
+            assert_eq!(new_series, if switch { vec![] } else { vec![(1, 2)] }, "switch {switch}");
         }
     }
 }
