@@ -106,6 +106,8 @@ pub struct ConsoleArgs {
     /// Print the round trip and the robot's divergence once a second.
     #[arg(long)]
     pub live: bool,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -202,6 +204,8 @@ pub struct EmulatorArgs {
     pub no_feedback: bool,
     #[command(flatten)]
     pub control: ControlArgs,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 /// The emulator's live control and telemetry (`netfi ctl`), as `netfi
@@ -251,6 +255,8 @@ pub struct SimulatorArgs {
     /// Directory for `received.csv`, `end_to_end.hlog` and `simulator.json`.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -328,6 +334,8 @@ pub struct RunArgs {
     pub no_direct: bool,
     #[command(flatten)]
     pub control: ControlArgs,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 impl ConsoleArgs {
@@ -345,6 +353,9 @@ impl ConsoleArgs {
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
             .0
+            .into_iter()
+            .chain(self.video.argv())
+            .collect()
     }
 }
 
@@ -365,13 +376,17 @@ impl EmulatorArgs {
             .opt("--return-seed", self.return_seed)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
             .switch("--no-feedback", self.no_feedback);
-        self.control.argv(a).0
+        self.control.argv(a).0.into_iter().chain(self.video.argv()).collect()
     }
 
     /// Checks that the options fit the endpoints, with errors that say what
     /// would be accepted.
     pub fn validate(&self) -> anyhow::Result<()> {
         let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
+        self.video.validate()?;
+        if self.video.on() && (i || e) {
+            bail!("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's");
+        }
         if let Some(s) = self.wait_for_peer_s {
             if !(s.is_finite() && s >= 0.0) {
                 bail!("--wait-for-peer-s must be a non-negative number of seconds, got {s}");
@@ -457,6 +472,9 @@ impl SimulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
             .0
+            .into_iter()
+            .chain(self.video.argv())
+            .collect()
     }
 }
 

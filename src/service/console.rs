@@ -52,6 +52,9 @@ pub struct ConsoleReport {
     /// The robot's feedback as it came back through the emulator.
     #[serde(default)]
     pub feedback: Option<ConsoleFeedback>,
+    /// The video as it came back through the emulator, when the run has video.
+    #[serde(default)]
+    pub video: Option<crate::service::video::ReceivedVideo>,
 }
 
 /// What the console saw of the robot's feedback.
@@ -307,6 +310,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
     let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
     let mut fb = FeedbackIn::new(fb_port)?;
+    let video = crate::service::video::receiver(&args.run_id, &args.video, 2.0 * crate::service::video::VIDEO_GRACE_NS as f64 / 1e9)?;
     signals::install();
     crate::service::place("console", args.core, args.avoid_core)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
@@ -392,6 +396,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         let _ = FrameSink::send_with(d, &end, |_| {});
     }
     let fb_ended = wait_for_feedback(&mut fb, sent, args, &mut stop);
+    let video = video.map(|v| v.finish()).transpose()?;
     let steal = steal_timer.stop();
     let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
     let report = ConsoleReport {
@@ -408,6 +413,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         steal_ms: steal.ms,
         steal_fraction: steal.fraction,
         feedback: Some(fb.report(fb_ended, &args.out, duration_s)),
+        video,
     };
     if args.live || fb.received > 0 {
         eprintln!("{}", fb.live_line());

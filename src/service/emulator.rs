@@ -191,6 +191,9 @@ pub struct EmulatorProcess {
     /// The feedback path robot → console, when it was open.
     #[serde(default)]
     pub feedback: Option<FeedbackReport>,
+    /// The video path robot → console, when the run has video.
+    #[serde(default)]
+    pub video: Option<crate::service::video::VideoLinkReport>,
 }
 
 /// The most frames one turn takes in. A burst is taken whole up to this, so
@@ -224,6 +227,8 @@ pub struct Forward {
     sent_by_console: Option<u64>,
     /// The feedback path, polled once per turn.
     pub feedback: Option<Box<FeedbackPath>>,
+    /// The video path, polled once per turn.
+    pub video: Option<Box<crate::service::video::VideoPath>>,
     /// When the forward stream ended and its end marker went to the robot.
     forward_end_ns: Option<u64>,
     /// Frames released to no robot, counted before the end marker.
@@ -247,6 +252,7 @@ impl Forward {
             last_error: None,
             sent_by_console: None,
             feedback: None,
+            video: None,
             forward_end_ns: None,
             delivered_unsubscribed: 0,
             bad_input: BadInput::default(),
@@ -272,6 +278,9 @@ impl Forward {
         if let Some(f) = self.feedback.as_deref_mut() {
             f.poll();
         }
+        if let Some(v) = self.video.as_deref_mut() {
+            v.poll();
+        }
         self.take(source, now_ns);
     }
 
@@ -292,9 +301,10 @@ impl Forward {
                 now
             }
         };
+        let video = self.video.as_deref_mut().map_or(true, |v| v.finished(now, end));
         match self.feedback.as_deref_mut() {
-            Some(f) => f.finished(now, end),
-            None => true,
+            Some(f) => f.finished(now, end) && video,
+            None => video,
         }
     }
 
@@ -554,6 +564,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     sink: &mut K,
     ret: Option<&mut ReturnPath>,
     feedback: Option<FeedbackPath>,
+    video: Option<crate::service::video::VideoPath>,
     look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
@@ -573,10 +584,14 @@ pub fn run<S: FrameSource, K: FrameSink>(
     if let Some(f) = feedback {
         fwd = fwd.with_feedback(f);
     }
+    fwd.video = video.map(Box::new);
     let mut control = start_control(cfg, &mut fwd.link)?;
     let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
         h.keep_off_core(core);
+    }
+    if let (Some(core), Some(v)) = (cfg.core, fwd.video.as_deref()) {
+        v.keep_trace_off_core(core);
     }
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
@@ -645,9 +660,10 @@ impl EmulatorReport {
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
-        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, bad_input, .. } = fwd;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, video, bad_input, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
         let feedback = feedback.map(|f| f.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
+        let video = video.map(|v| v.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
         if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
             eprintln!("emulator: last transport error: {e}");
         }
@@ -692,6 +708,7 @@ impl EmulatorReport {
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
             feedback,
+            video,
         };
         Ok(EmulatorReport { shaping, process })
     }
@@ -708,6 +725,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
     let mut ret = udp::return_path(args, &t, cfg.seed, cfg.expected_frames)?;
     let fb = feedback_path(args, &t, cfg.seed, cfg.expected_frames)?;
+    let video = t.node.as_ref().map(|n| crate::service::video::path(&args.video, n, cfg.seed, &args.out)).transpose()?.flatten();
     let bound = udp::BoundEndpoints::of(&t, args);
     let any_udp = args.ingress.is_udp() || args.egress.is_udp();
     if any_udp {
@@ -762,7 +780,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         }
         found
     };
-    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, look)?;
+    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, video, look)?;
     let dead = dead.into_inner();
     if !dead.is_empty() {
         report.process.dead_peers = dead;

@@ -208,7 +208,14 @@ impl<T: Carried> Link<T> {
     /// item of its own.
     #[inline]
     pub fn ingress(&mut self, now: u64, item: T, arrival: Arrival) -> Entered {
-        let entered = self.inj.ingress_with(now, item, |it, flips| it.flip(flips.bits()));
+        self.ingress_len(now, item, None, arrival)
+    }
+
+    /// [`Link::ingress`] for a payload of `len` bytes when given (the link
+    /// stages cut it into packets of their MTU: variable-size payloads).
+    #[inline]
+    pub fn ingress_len(&mut self, now: u64, item: T, len: Option<u64>, arrival: Arrival) -> Entered {
+        let entered = self.inj.ingress_len_with(now, item, len, |it, flips| it.flip(flips.bits()));
         let copies = self.inj.scenario().copies();
         // Copies a later stage or a full queue dropped.
         let copies_dropped = (copies.made() - u64::from(entered.copies)) as u8;

@@ -94,6 +94,7 @@ impl Plan {
             // A core of its own: it may busy-poll.
             spin: cores.simulator.is_some(),
             out: out.clone(),
+            video: args.video.clone(),
         };
         let emulator = EmulatorArgs {
             run_id: Some(run_id.clone()),
@@ -123,6 +124,7 @@ impl Plan {
             wait_for_peer_s: None,
             no_feedback: false,
             control: args.control.clone(),
+            video: args.video.clone(),
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),
@@ -138,6 +140,7 @@ impl Plan {
             wait_for_peer_s: 10.0,
             feedback_wait_s: 5.0,
             live: false,
+            video: args.video.clone(),
         };
         Plan { run_id, out, spec, seed, scenario_path, planned_s, expected_frames, cores, simulator, emulator, console }
     }
