@@ -696,12 +696,13 @@ impl VideoSection {
         s += "\n";
         let f = &self.frames;
         s += &format!(
-            "  frames     {} through the emulator: {} whole, {} damaged, {} lost; dropped {}; accounting {}\n",
+            "  frames     {} through the emulator: {} whole, {} damaged, {} lost; dropped {}; held at end {}; accounting {}\n",
             f.sent,
             f.whole,
             f.damaged,
             f.lost,
             if dropped.is_empty() { "none".into() } else { dropped.join(", ") },
+            self.held_at_end,
             if self.balanced { "balanced" } else { "NOT balanced" }
         );
         s += &format!("  delay      {}\n", line_ms(self.delay_ns.as_ref()));

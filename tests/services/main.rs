@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 mod faults;
 mod integrity;
+mod video;
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
