@@ -310,9 +310,10 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
     let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
     let mut fb = FeedbackIn::new(fb_port)?;
-    let video = crate::service::video::receiver(&args.run_id, &args.video, 2.0 * crate::service::video::VIDEO_GRACE_NS as f64 / 1e9)?;
     signals::install();
     crate::service::place("console", args.core, args.avoid_core)?;
+    // After the placement, whose CPU mask its thread inherits: off the emulator's core.
+    let video = crate::service::video::receiver(&args.run_id, &args.video, 2.0 * crate::service::video::VIDEO_GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
     let source = match &args.capture {

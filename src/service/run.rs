@@ -335,6 +335,7 @@ fn supervise(plan: &Plan, procs: &mut [Proc; 3]) -> bool {
 pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
     let started = std::time::SystemTime::now();
+    args.video.validate()?;
     let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps

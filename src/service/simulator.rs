@@ -280,9 +280,9 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
     let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
     signals::install();
-    // Started before the simulator is placed: the camera's thread is not pinned to its core.
-    let camera = crate::service::video::camera(&args.run_id, &args.video)?;
     crate::service::place("simulator", args.core, args.avoid_core)?;
+    // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.
+    let camera = crate::service::video::camera(&args.run_id, &args.video)?;
     let wait = if args.spin { Wait::Spin } else { Wait::SpinYield };
     let mut robot = Robot::new(args)?;
     let steal_timer = StealTimer::start();
