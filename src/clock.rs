@@ -12,6 +12,19 @@ pub fn now_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// CLOCK_MONOTONIC now, or as soon as it reaches `t_ns`: busy-waits on the
+/// clock alone until then. For a release prepared ahead of its time.
+#[inline]
+pub fn now_from_ns(t_ns: u64) -> u64 {
+    loop {
+        let now = now_ns();
+        if now >= t_ns {
+            return now;
+        }
+        std::hint::spin_loop();
+    }
+}
+
 /// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (may wake late by
 /// the scheduler's latency; never early).
 pub fn sleep_until_ns(t_ns: u64) {

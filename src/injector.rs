@@ -40,6 +40,8 @@ pub enum Invalid {
     /// Its control bits are none the sender may set (garbage, or a
     /// malformed end marker).
     BadFlags,
+    /// Its payload is larger than the run's maximum (variable-size payloads).
+    TooLarge,
 }
 
 impl Invalid {
@@ -48,6 +50,7 @@ impl Invalid {
             Invalid::WrongSize => "wrong_size",
             Invalid::BadChecksum => "bad_checksum",
             Invalid::BadFlags => "bad_flags",
+            Invalid::TooLarge => "too_large",
         }
     }
 }
@@ -116,6 +119,8 @@ pub struct Counts {
     pub dropped_wrong_size: u64,
     pub dropped_bad_checksum: u64,
     pub dropped_bad_flags: u64,
+    /// Payloads larger than the run's maximum.
+    pub dropped_too_large: u64,
     pub held: u64,
     /// Copies made by `duplicate` stages (each then released, dropped or
     /// held like any frame).
@@ -127,7 +132,7 @@ pub struct Counts {
 
 impl Counts {
     pub fn dropped(&self) -> u64 {
-        self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum + self.dropped_bad_flags
+        self.dropped_by_stage + self.dropped_queue_full + self.dropped_wrong_size + self.dropped_bad_checksum + self.dropped_bad_flags + self.dropped_too_large
     }
 
     /// `entered + duplicated = released + dropped + held` (with no
@@ -221,9 +226,20 @@ impl<T: Copy + Default> Injector<T> {
     /// original and each copy that is about to be queued with bits to flip
     /// (never for one without). Each copy starts from the item as it entered.
     #[inline]
-    pub fn ingress_with(&mut self, now_ns: u64, item: T, mut apply: impl FnMut(&mut T, &Flips)) -> Entered {
+    pub fn ingress_with(&mut self, now_ns: u64, item: T, apply: impl FnMut(&mut T, &Flips)) -> Entered {
+        self.ingress_len_with(now_ns, item, None, apply)
+    }
+
+    /// [`Injector::ingress_with`] for a payload of `len` bytes when given:
+    /// the link stages (`rate`, `trace`) cut that size into packets
+    /// ([`Scenario::decide_len`]) instead of their configured payload.
+    #[inline]
+    pub fn ingress_len_with(&mut self, now_ns: u64, item: T, len: Option<u64>, mut apply: impl FnMut(&mut T, &Flips)) -> Entered {
         let (ingress_index, offset_ns) = self.enter(now_ns);
-        let decision = self.scenario.decide(offset_ns, now_ns);
+        let decision = match len {
+            Some(len) => self.scenario.decide_len(offset_ns, now_ns, len),
+            None => self.scenario.decide(offset_ns, now_ns),
+        };
         let mut corrupted = false;
         let fate = match decision {
             Decision::Drop { phase, stage } => {
@@ -282,6 +298,7 @@ impl<T: Copy + Default> Injector<T> {
             Invalid::WrongSize => self.counts.dropped_wrong_size += 1,
             Invalid::BadChecksum => self.counts.dropped_bad_checksum += 1,
             Invalid::BadFlags => self.counts.dropped_bad_flags += 1,
+            Invalid::TooLarge => self.counts.dropped_too_large += 1,
         }
         Entered { ingress_index, fate: Fate::Dropped(DropCause::Invalid(why)), copies: 0, corrupted: false }
     }
@@ -349,6 +366,7 @@ impl<T: Copy + Default> Injector<T> {
             ("wrong_size", self.counts.dropped_wrong_size),
             ("bad_checksum", self.counts.dropped_bad_checksum),
             ("bad_flags", self.counts.dropped_bad_flags),
+            ("too_large", self.counts.dropped_too_large),
         ] {
             if n > 0 {
                 out.push((name, n));

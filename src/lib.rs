@@ -22,6 +22,7 @@ pub mod sample;
 pub mod scenario;
 pub mod scheduler;
 pub mod stats;
+pub mod video;
 
 pub mod clock;
 pub mod host;

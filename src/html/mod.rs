@@ -21,6 +21,7 @@ pub mod inputs;
 mod page;
 pub mod plot;
 pub mod trace;
+mod video;
 
 use std::path::{Path, PathBuf};
 

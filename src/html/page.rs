@@ -41,6 +41,7 @@ pub fn page(inp: &RunInputs) -> Result<String, HtmlError> {
                 (over_time(inp)?)
                 (loss_runs(inp)?)
                 (kinematics(r)?)
+                (super::video::section(r))
                 (events(inp))
             }
         }

@@ -110,6 +110,8 @@ pub struct ConsoleArgs {
     /// core (many consoles sharing few cores, `netfi run --streams`).
     #[arg(long, value_name = "US")]
     pub nap_us: Option<u64>,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -215,6 +217,8 @@ pub struct EmulatorArgs {
     /// Streams not named take --scenario.
     #[arg(long, value_name = "K=SCENARIO")]
     pub stream_scenario: Vec<String>,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 /// The emulator's live control and telemetry (`netfi ctl`), as `netfi
@@ -268,6 +272,8 @@ pub struct SimulatorArgs {
     /// the core (many robots sharing few cores, `netfi run --streams`).
     #[arg(long, value_name = "US")]
     pub nap_us: Option<u64>,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -354,6 +360,8 @@ pub struct RunArgs {
     /// Streams not named take the run's scenario.
     #[arg(long, value_name = "K=SCENARIO")]
     pub stream_scenario: Vec<String>,
+    #[command(flatten)]
+    pub video: crate::service::video::VideoArgs,
 }
 
 impl ConsoleArgs {
@@ -372,6 +380,9 @@ impl ConsoleArgs {
             .switch("--live", self.live)
             .opt("--nap-us", self.nap_us)
             .0
+            .into_iter()
+            .chain(self.video.argv())
+            .collect()
     }
 }
 
@@ -397,7 +408,7 @@ impl EmulatorArgs {
         for k in &self.stream_scenario {
             a = a.val("--stream-scenario", k);
         }
-        a.0
+        a.0.into_iter().chain(self.video.argv()).collect()
     }
 
     /// Checks that the options fit the endpoints, with errors that say what
@@ -406,6 +417,13 @@ impl EmulatorArgs {
         let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
         if (self.streams > 1 || !self.stream_scenario.is_empty()) && (i || e) {
             bail!("--streams and --stream-scenario need iceoryx2 on both sides");
+        }
+        self.video.validate()?;
+        if self.video.on() && (i || e) {
+            bail!("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's");
+        }
+        if self.video.on() && self.streams > 1 {
+            bail!("--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", self.streams);
         }
         if let Some(s) = self.wait_for_peer_s {
             if !(s.is_finite() && s >= 0.0) {
@@ -493,6 +511,9 @@ impl SimulatorArgs {
             .val("--stall-ms", self.stall_ms)
             .opt("--nap-us", self.nap_us)
             .0
+            .into_iter()
+            .chain(self.video.argv())
+            .collect()
     }
 }
 

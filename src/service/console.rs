@@ -52,6 +52,9 @@ pub struct ConsoleReport {
     /// The robot's feedback as it came back through the emulator.
     #[serde(default)]
     pub feedback: Option<ConsoleFeedback>,
+    /// The video as it came back through the emulator, when the run has video.
+    #[serde(default)]
+    pub video: Option<crate::service::video::ReceivedVideo>,
 }
 
 /// What the console saw of the robot's feedback.
@@ -315,6 +318,8 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let mut fb = FeedbackIn::new(fb_port)?;
     signals::install();
     crate::service::place("console", args.core, args.avoid_core)?;
+    // After the placement, whose CPU mask its thread inherits: off the emulator's core.
+    let video = crate::service::video::receiver(&args.run_id, &args.video, 2.0 * crate::service::video::VIDEO_GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
     let source = match &args.capture {
@@ -400,6 +405,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         let _ = FrameSink::send_with(d, &end, |_| {});
     }
     let fb_ended = wait_for_feedback(&mut fb, sent, args, &mut stop);
+    let video = video.map(|v| v.finish()).transpose()?;
     let steal = steal_timer.stop();
     let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
     let report = ConsoleReport {
@@ -416,6 +422,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         steal_ms: steal.ms,
         steal_fraction: steal.fraction,
         feedback: Some(fb.report(fb_ended, &args.out, duration_s)),
+        video,
     };
     if args.live || fb.received > 0 {
         eprintln!("{}", fb.live_line());

@@ -191,6 +191,9 @@ pub struct EmulatorProcess {
     /// The feedback path robot → console, when it was open.
     #[serde(default)]
     pub feedback: Option<FeedbackReport>,
+    /// The video path robot → console, when the run has video.
+    #[serde(default)]
+    pub video: Option<crate::service::video::VideoLinkReport>,
 }
 
 /// The most frames one turn takes in. A burst is taken whole up to this, so
@@ -201,12 +204,14 @@ pub struct EmulatorProcess {
 /// it ends as soon as one is due.
 pub const TAKE_MAX: usize = 64;
 
-/// How close a release must be for an idle loop to wait for it on the
-/// clock alone rather than poll its ports once more: a little more than one
-/// idle turn (the ingress, feedback and return polls, 150–300 ns here), so
-/// that a release is stamped within a clock read of its time instead of
-/// anywhere in the turn that straddles it. The loop only waits when its
-/// last look at the ingress found nothing, so a busy stream never does.
+/// How close a release must be for an idle loop to prepare it now and wait
+/// for its moment on the clock alone rather than poll its ports once more:
+/// a little more than one idle turn (the ingress, feedback and return
+/// polls, 150–300 ns here) plus the release's own work (the queue's pop and
+/// the copy into the publisher's sample), so that a release is stamped
+/// within a clock read of its time instead of anywhere in the turn that
+/// straddles it, after that work. The loop only does so when its last look
+/// at the ingress found nothing, so a busy stream never waits.
 pub const RELEASE_SPIN_NS: u64 = 400;
 
 /// What one receive gave.
@@ -232,6 +237,8 @@ pub struct Forward {
     sent_by_console: Option<u64>,
     /// The feedback path, polled once per turn.
     pub feedback: Option<Box<FeedbackPath>>,
+    /// The video path, polled once per turn.
+    pub video: Option<Box<crate::service::video::VideoPath>>,
     /// When the forward stream ended and its end marker went to the robot.
     forward_end_ns: Option<u64>,
     /// Frames released to no robot, counted before the end marker.
@@ -261,6 +268,7 @@ impl Forward {
             last_error: None,
             sent_by_console: None,
             feedback: None,
+            video: None,
             forward_end_ns: None,
             delivered_unsubscribed: 0,
             bad_input: BadInput::default(),
@@ -281,31 +289,30 @@ impl Forward {
     /// waits at the ingress, up to [`TAKE_MAX`] ([`Forward::take`]).
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
-        let now = self.wait_for_release(now_ns());
-        self.link.release_due(now, sink);
+        self.link.release_due(self.due_until(now_ns()), sink);
         if let Some(r) = ret {
             r.poll(source.sender());
         }
         if let Some(f) = self.feedback.as_deref_mut() {
             f.poll();
         }
+        if let Some(v) = self.video.as_deref_mut() {
+            v.poll();
+        }
         self.idle = self.take(source, now_ns);
     }
 
-    /// An idle loop whose next release falls within `release_spin_ns`
-    /// waits for it reading only the clock, and returns the time it read
-    /// last (`now` otherwise).
+    /// The time up to which releases are due in this turn: `now`, or, when
+    /// the loop is idle and its next release falls within
+    /// `release_spin_ns`, that release's time. The release is then taken
+    /// out of the queue and written into its sample ahead of time, and its
+    /// stamp waits on the clock for the moment itself (a frame sink's
+    /// release never sends before the scheduled time). Nothing is taken in meanwhile, so
+    /// no frame can come due earlier.
     #[inline]
-    fn wait_for_release(&self, now: u64) -> u64 {
+    fn due_until(&self, now: u64) -> u64 {
         match self.link.next_release_ns() {
-            Some(t) if self.idle && t > now && t - now <= self.release_spin_ns => {
-                let mut now = now;
-                while now < t {
-                    std::hint::spin_loop();
-                    now = now_ns();
-                }
-                now
-            }
+            Some(t) if self.idle && t > now && t - now <= self.release_spin_ns => t,
             _ => now,
         }
     }
@@ -327,9 +334,10 @@ impl Forward {
                 now
             }
         };
+        let video = self.video.as_deref_mut().map_or(true, |v| v.finished(now, end));
         match self.feedback.as_deref_mut() {
-            Some(f) => f.finished(now, end),
-            None => true,
+            Some(f) => f.finished(now, end) && video,
+            None => video,
         }
     }
 
@@ -592,13 +600,18 @@ pub fn run<S: FrameSource, K: FrameSink>(
     sink: &mut K,
     ret: Option<&mut ReturnPath>,
     feedback: Option<FeedbackPath>,
+    video: Option<crate::service::video::VideoPath>,
     look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
     let mut fwd = forward(cfg, feedback)?;
+    fwd.video = video.map(Box::new);
     let mut control = start_control(cfg, &mut fwd.link)?;
     let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
         h.keep_off_core(core);
+    }
+    if let (Some(core), Some(v)) = (cfg.core, fwd.video.as_deref()) {
+        v.keep_trace_off_core(core);
     }
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
@@ -705,9 +718,10 @@ impl EmulatorReport {
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
-        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, bad_input, .. } = fwd;
+        let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, video, bad_input, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
         let feedback = feedback.map(|f| f.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
+        let video = video.map(|v| v.finish(&cfg.out_dir, end.t_end - end.t_start)).transpose()?;
         if let Some(e) = l.last_error.as_ref().or(last_error.as_ref()) {
             eprintln!("emulator: last transport error: {e}");
         }
@@ -752,6 +766,7 @@ impl EmulatorReport {
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
             feedback,
+            video,
         };
         Ok(EmulatorReport { shaping, process })
     }
@@ -771,6 +786,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut t = crate::transport::open(&args.ingress, &args.egress, &args.wiring(cfg.queue_capacity))?;
     let mut ret = udp::return_path(args, &t, cfg.seed, cfg.expected_frames)?;
     let fb = feedback_path(args, &t, cfg.seed, cfg.expected_frames)?;
+    let video = t.node.as_ref().map(|n| crate::service::video::path(&args.video, n, cfg.seed, &args.out)).transpose()?.flatten();
     let bound = udp::BoundEndpoints::of(&t, args);
     let any_udp = args.ingress.is_udp() || args.egress.is_udp();
     if any_udp {
@@ -825,7 +841,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         }
         found
     };
-    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, look)?;
+    let mut report = run(&cfg, &mut t.ingress, &mut t.egress, ret.as_mut(), fb, video, look)?;
     let dead = dead.into_inner();
     if !dead.is_empty() {
         report.process.dead_peers = dead;

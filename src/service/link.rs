@@ -68,7 +68,9 @@ impl Carried for FrameSample {
 /// Where a link's released items go.
 pub trait Release<T> {
     /// Sends `item`, due at `scheduled_ns`. Returns the time it went out
-    /// (taken as late as possible), or that time and the error.
+    /// (taken as late as possible), or that time and the error. The frame
+    /// sinks' impl, the only one the loop hands an item ahead of its time
+    /// (`Forward::turn`), waits for that time before it sends.
     fn release(&mut self, item: &T, scheduled_ns: u64) -> Result<u64, (u64, PortError)>;
 }
 
@@ -81,7 +83,9 @@ impl<K: FrameSink> Release<FrameSample> for K {
         let sent = self.send_with(item, |s| {
             s.release_sched_ns = scheduled_ns;
             s.injected_delay_ns = scheduled_ns - s.ingress_ns;
-            release_ns = now_ns();
+            // A release prepared ahead of its time waits for it here, the
+            // last thing before the send.
+            release_ns = crate::clock::now_from_ns(scheduled_ns);
             s.release_ns = release_ns;
         });
         match sent {
@@ -214,7 +218,14 @@ impl<T: Carried> Link<T> {
     /// item of its own.
     #[inline]
     pub fn ingress(&mut self, now: u64, item: T, arrival: Arrival) -> Entered {
-        let entered = self.inj.ingress_with(now, item, |it, flips| it.flip(flips.bits()));
+        self.ingress_len(now, item, None, arrival)
+    }
+
+    /// [`Link::ingress`] for a payload of `len` bytes when given (the link
+    /// stages cut it into packets of their MTU: variable-size payloads).
+    #[inline]
+    pub fn ingress_len(&mut self, now: u64, item: T, len: Option<u64>, arrival: Arrival) -> Entered {
+        let entered = self.inj.ingress_len_with(now, item, len, |it, flips| it.flip(flips.bits()));
         if !self.links.is_empty() {
             self.links.sample(self.inj.scenario(), now);
         }

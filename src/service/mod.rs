@@ -13,6 +13,7 @@
 //! | `udp` | the UDP return path (a link of its own) and `udp.json` |
 //! | `control`, `telemetry` | live control of a running emulator, and its telemetry, off the loop |
 //! | `feedback` | the iceoryx2 feedback path robot → console (a link of its own) |
+//! | `video` | the video stream: the robot's camera, the emulator's video path (a link of its own), the console's receiver |
 //! | `console`, `simulator` | the two ends of a local run |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
@@ -29,6 +30,7 @@ pub mod signals;
 pub mod simulator;
 pub mod streams;
 pub mod supervise;
+pub mod video;
 pub mod telemetry;
 pub mod udp;
 

@@ -159,6 +159,7 @@ impl Plan {
             spin: cores.simulator.is_some(),
             out: out.clone(),
             nap_us: None,
+            video: args.video.clone(),
         };
         let emulator = EmulatorArgs {
             run_id: Some(run_id.clone()),
@@ -190,6 +191,7 @@ impl Plan {
             control: args.control.clone(),
             streams: 1,
             stream_scenario: Vec::new(),
+            video: args.video.clone(),
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),
@@ -206,6 +208,7 @@ impl Plan {
             feedback_wait_s: 5.0,
             live: false,
             nap_us: None,
+            video: args.video.clone(),
         };
         let stream0 = StreamPlan {
             index: 0,

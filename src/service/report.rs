@@ -318,6 +318,9 @@ pub struct RunReport {
     /// The feedback loop, when it was open.
     #[serde(default)]
     pub feedback: Option<FeedbackSection>,
+    /// The video stream, when the run has one (`--video-mbps`).
+    #[serde(default)]
+    pub video: Option<crate::service::video::VideoSection>,
     pub processes: Vec<ProcessEnd>,
     /// What went wrong: dead processes, frames lost between processes.
     pub faults: Vec<String>,
@@ -466,6 +469,9 @@ impl RunReport {
         if let Some(fb) = &self.feedback {
             s += &fb.to_text();
         }
+        if let Some(v) = &self.video {
+            s += &v.to_text();
+        }
         s += &format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
         for p in &self.processes {
             s += &format!("process    {:<9} pid {:<7} core {:<5} {}\n", p.role, p.pid, p.core.map_or("-".into(), |c| c.to_string()), p.status);
@@ -582,6 +588,14 @@ impl RunReport {
                 f.sent_by_robot, f.entered, f.delivered, f.received_by_console
             ));
         }
+        let video = crate::service::video::VideoSection::join(
+            emulator.as_ref().and_then(|e| e.video.as_ref()),
+            console.as_ref().and_then(|c| c.video.as_ref()),
+            simulator.as_ref().and_then(|s| s.camera.as_ref()),
+        );
+        if let Some(v) = video.as_ref().filter(|v| !v.balanced) {
+            faults.push(format!("video not balanced: {:?}, dropped {:?}, held at end {}", v.frames, v.dropped, v.held_at_end));
+        }
         if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
             faults.push(format!("{n} frames sent by the console never entered the emulator"));
         }
@@ -624,6 +638,7 @@ impl RunReport {
             overhead_ns,
             kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
             feedback,
+            video,
             processes,
             faults,
             peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),

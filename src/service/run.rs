@@ -451,6 +451,8 @@ fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: crate::host::Ste
 pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
     let started = std::time::SystemTime::now();
+    args.video.validate()?;
+    anyhow::ensure!(!args.video.on() || args.streams == 1, "--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", args.streams);
     let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps

@@ -63,6 +63,9 @@ pub struct SimulatorReport {
     /// Feedback samples the transport refused or that reached no emulator.
     #[serde(default)]
     pub feedback_errors: u64,
+    /// The camera, when the run has video.
+    #[serde(default)]
+    pub camera: Option<crate::service::video::CameraReport>,
 }
 
 /// The robot's feedback after the command `s` (frame `f`): the command it
@@ -279,6 +282,7 @@ impl Robot {
             end_to_end_hlog: Some(e2e_hlog),
             feedback_sent: self.feedback_sent,
             feedback_errors: self.feedback_errors,
+            camera: None,
         })
     }
 }
@@ -292,6 +296,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
     signals::install();
     crate::service::place("simulator", args.core, args.avoid_core)?;
+    // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.
+    let camera = crate::service::video::camera(&args.run_id, &args.video)?;
     let wait = match (args.spin, args.nap_us) {
         (true, _) => Wait::Spin,
         (false, Some(us)) => Wait::Nap(us * 1000),
@@ -344,7 +350,8 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let t_end = now_ns();
     // The feedback ends after the commands (best effort: the emulator may be gone).
     let _ = feedback_port.send(&FeedbackSample::end_marker(robot.feedback_sent));
-    let report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
+    let mut report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
+    report.camera = camera.map(|c| c.finish()).transpose()?;
     let path = args.out.join("simulator.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)

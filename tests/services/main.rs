@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 mod faults;
 mod integrity;
 mod streams;
+mod video;
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 

@@ -77,6 +77,7 @@ mod node;
 mod publisher;
 mod service;
 mod subscriber;
+pub mod video;
 
 use core::fmt;
 use std::str::FromStr;
@@ -275,12 +276,18 @@ pub enum Channel {
     Feedback,
     /// Emulator → console: the feedback that survived the return scenario.
     FeedbackOut,
+    /// Robot → emulator: video frames, `[u8]` with a
+    /// [`VideoHeader`](crate::sample::VideoHeader) ([`video`]).
+    Video,
+    /// Emulator → console: the video frames that survived the video scenario.
+    VideoOut,
 }
 
 impl Channel {
     /// Every channel: the pipeline in order, the direct baseline, then the
     /// feedback loop.
-    pub const ALL: [Channel; 5] = [Channel::Console, Channel::Emulator, Channel::Direct, Channel::Feedback, Channel::FeedbackOut];
+    pub const ALL: [Channel; 7] =
+        [Channel::Console, Channel::Emulator, Channel::Direct, Channel::Feedback, Channel::FeedbackOut, Channel::Video, Channel::VideoOut];
 
     /// The last component of the service name.
     pub fn as_str(self) -> &'static str {
@@ -290,6 +297,8 @@ impl Channel {
             Channel::Direct => "direct",
             Channel::Feedback => "feedback",
             Channel::FeedbackOut => "feedback_out",
+            Channel::Video => "video",
+            Channel::VideoOut => "video_out",
         }
     }
 
@@ -297,17 +306,17 @@ impl Channel {
     pub fn producer(self) -> Role {
         match self {
             Channel::Console | Channel::Direct => Role::Console,
-            Channel::Emulator | Channel::FeedbackOut => Role::Emulator,
-            Channel::Feedback => Role::Simulator,
+            Channel::Emulator | Channel::FeedbackOut | Channel::VideoOut => Role::Emulator,
+            Channel::Feedback | Channel::Video => Role::Simulator,
         }
     }
 
     /// The role that subscribes to this channel.
     pub fn consumer(self) -> Role {
         match self {
-            Channel::Console | Channel::Feedback => Role::Emulator,
+            Channel::Console | Channel::Feedback | Channel::Video => Role::Emulator,
             Channel::Emulator | Channel::Direct => Role::Simulator,
-            Channel::FeedbackOut => Role::Console,
+            Channel::FeedbackOut | Channel::VideoOut => Role::Console,
         }
     }
 }

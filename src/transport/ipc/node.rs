@@ -177,6 +177,21 @@ impl IpcNode {
         s
     }
 
+    /// Opens the publishing end of a video channel (`video`, `video_out`)
+    /// for payloads of at most `max_len` bytes.
+    pub fn video_publisher(&self, channel: Channel, max_len: usize) -> Result<super::video::VideoPublisher, super::video::VideoOpenError> {
+        let p = super::video::VideoPublisher::open(&self.node, &self.config, channel, max_len);
+        make_private(self.config.prefix());
+        p
+    }
+
+    /// Opens the subscribing end of a video channel.
+    pub fn video_subscriber(&self, channel: Channel) -> Result<super::video::VideoSubscriber, super::video::VideoOpenError> {
+        let s = super::video::VideoSubscriber::open(&self.node, &self.config, channel);
+        make_private(self.config.prefix());
+        s
+    }
+
     /// Finds the nodes of this run whose process died without cleaning up
     /// (kill -9, crash, power loss of a container), removes their resources
     /// and reports them.

@@ -1,0 +1,728 @@
+//! The video stream of a run (`netfi run --video-mbps R`): a synthetic
+//! camera on the robot side (a thread of the simulator) publishes one
+//! variable-size frame every period on `netfi/<run>/video`; the emulator
+//! passes each through a [`Link`] of its own, shaped by `--video-scenario`
+//! (default `Normal`), and releases survivors on `netfi/<run>/video_out`,
+//! where the console (a thread of its own) measures each frame's delay,
+//! whether it arrived whole, and the freezes ([`crate::video`]).
+//!
+//! **No copy on the way in.** The emulator keeps the sample it took off
+//! `video` borrowed in a slot while the link holds the frame (the link
+//! queues only the slot's number), and copies the frame's bytes once, into
+//! a sample loaned on `video_out`, when it is released: one copy of each
+//! delivered byte, none of a dropped one. The link's queue holds one frame
+//! fewer than the channel lets the emulator borrow
+//! ([`VIDEO_HELD_FRAMES`]), so a slot is always free for the next frame;
+//! a frame beyond that is the drop `queue_full`. The link stages (`rate`,
+//! `trace`) see each frame's own size ([`Link::ingress_len`]); a frame
+//! larger than the run's maximum (`--video-max-bytes`) is the drop
+//! `too_large`.
+//!
+//! The path is polled by the emulator's loop once per turn, like the
+//! feedback path ([`super::feedback`]): every due release, then at most one
+//! frame in; nothing allocates or locks per frame.
+
+use crate::clock::now_ns;
+use crate::injector::{Fate, Invalid};
+use crate::metrics::{LatencyHistogram, Summary};
+use crate::sample::VideoHeader;
+use crate::scenario::Scenario;
+use crate::service::link::{Arrival, Carried, Link, Release};
+use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, DEFAULT_VIDEO_MAX_BYTES, VIDEO_HELD_FRAMES};
+use crate::transport::{Channel, PortError, Role};
+use crate::video::{drop_kind, DropKind, Freezes, Gop};
+use anyhow::Context;
+use clap::Args;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The largest `--video-max-bytes`: the link stages' largest payload, 64 MiB.
+pub const MAX_VIDEO_MAX_BYTES: usize = crate::model::backlog::MAX_PAYLOAD_BYTES as usize;
+
+/// The video stream's flags, the same for `netfi run` and each service.
+#[derive(Debug, Clone, Args)]
+pub struct VideoArgs {
+    /// Add a synthetic camera on the robot side streaming video back to the
+    /// console at this mean bit rate, Mbit/s (default: no video).
+    #[arg(long, value_name = "MBIT_S")]
+    pub video_mbps: Option<f64>,
+    /// The camera's frame rate, Hz.
+    #[arg(long, default_value_t = 60.0)]
+    pub video_hz: f64,
+    /// Frames per group of pictures (one key frame, then delta frames).
+    #[arg(long, default_value_t = 30)]
+    pub video_gop: u32,
+    /// A key frame's size over a delta frame's.
+    #[arg(long, default_value_t = 8.0)]
+    pub video_key_ratio: f64,
+    /// The largest video payload of the run, bytes; a larger frame is the
+    /// emulator's drop `too_large`.
+    #[arg(long, default_value_t = DEFAULT_VIDEO_MAX_BYTES)]
+    pub video_max_bytes: usize,
+    /// The scenario (file or preset) the video goes through, robot →
+    /// console (default Normal: nothing injected).
+    #[arg(long, value_name = "SCENARIO")]
+    pub video_scenario: Option<String>,
+    /// Seed of the video scenario (default: derived from the run's seed).
+    #[arg(long)]
+    pub video_seed: Option<u64>,
+}
+
+impl Default for VideoArgs {
+    /// No video.
+    fn default() -> Self {
+        VideoArgs {
+            video_mbps: None,
+            video_hz: 60.0,
+            video_gop: 30,
+            video_key_ratio: 8.0,
+            video_max_bytes: DEFAULT_VIDEO_MAX_BYTES,
+            video_scenario: None,
+            video_seed: None,
+        }
+    }
+}
+
+impl VideoArgs {
+    /// Whether the run has video.
+    pub fn on(&self) -> bool {
+        self.video_mbps.is_some()
+    }
+
+    /// The group of pictures asked for, checked.
+    pub fn gop(&self) -> anyhow::Result<Gop> {
+        let mbps = self.video_mbps.unwrap_or(1.0);
+        Gop::new(mbps * 1e6, self.video_hz, self.video_gop, self.video_key_ratio).map_err(|e| anyhow::anyhow!("--video-*: {e}"))
+    }
+
+    /// Checks the flags: a bit rate, frame rate and group that make sense,
+    /// a maximum payload in range, and no video options without video.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if !self.on() {
+            anyhow::ensure!(
+                self.video_scenario.is_none() && self.video_seed.is_none(),
+                "--video-scenario and --video-seed need --video-mbps (the video stream is off)"
+            );
+            return Ok(());
+        }
+        self.gop()?;
+        anyhow::ensure!(
+            (1..=MAX_VIDEO_MAX_BYTES).contains(&self.video_max_bytes),
+            "--video-max-bytes must be from 1 to {MAX_VIDEO_MAX_BYTES} bytes, got {}",
+            self.video_max_bytes
+        );
+        Ok(())
+    }
+
+    /// The flags as an argv (nothing when off).
+    pub fn argv(&self) -> Vec<String> {
+        let Some(mbps) = self.video_mbps else { return Vec::new() };
+        let mut a = vec![
+            "--video-mbps".to_string(),
+            mbps.to_string(),
+            "--video-hz".into(),
+            self.video_hz.to_string(),
+            "--video-gop".into(),
+            self.video_gop.to_string(),
+            "--video-key-ratio".into(),
+            self.video_key_ratio.to_string(),
+            "--video-max-bytes".into(),
+            self.video_max_bytes.to_string(),
+        ];
+        if let Some(s) = &self.video_scenario {
+            a.extend(["--video-scenario".to_string(), s.clone()]);
+        }
+        if let Some(s) = self.video_seed {
+            a.extend(["--video-seed".to_string(), s.to_string()]);
+        }
+        a
+    }
+}
+
+/// What the emulator's video link holds: the slot of the borrowed sample,
+/// and what the link and the release need of it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct VideoItem {
+    pub slot: u32,
+    pub len: u32,
+    pub ingress_index: u64,
+    pub ingress_ns: u64,
+}
+
+impl Carried for VideoItem {
+    #[inline]
+    fn ingress_ns(&self) -> u64 {
+        self.ingress_ns
+    }
+}
+
+/// The release side: the slots of the borrowed samples and the port.
+struct Out<'a> {
+    slots: &'a mut [Option<VideoSample>],
+    free: &'a mut Vec<u32>,
+    sink: &'a mut VideoPublisher,
+    unsubscribed: &'a mut u64,
+    bytes_delivered: &'a mut u64,
+}
+
+impl Release<VideoItem> for Out<'_> {
+    /// Copies the frame once into a sample of `video_out`, stamped with its
+    /// ingress and release times, and returns the borrowed one.
+    #[inline]
+    fn release(&mut self, item: &VideoItem, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
+        let sample = self.slots[item.slot as usize].take().expect("a held frame keeps its sample");
+        self.free.push(item.slot);
+        let mut h = *sample.header();
+        h.ingress_index = item.ingress_index;
+        h.ingress_ns = item.ingress_ns;
+        h.release_sched_ns = scheduled_ns;
+        let mut release_ns = 0;
+        let sent = self.sink.send_copy(&h, sample.bytes(), |h| {
+            release_ns = now_ns();
+            h.release_ns = release_ns;
+        });
+        drop(sample);
+        *self.bytes_delivered += u64::from(item.len);
+        match sent {
+            Ok(n) => {
+                *self.unsubscribed += u64::from(n == 0);
+                Ok(release_ns)
+            }
+            Err(e) => Err((now_ns(), PortError { port: "video_out".into(), message: e.to_string() })),
+        }
+    }
+}
+
+/// How long the video path waits, once the forward stream has ended, for
+/// the camera's end marker while a camera still publishes: 2 s.
+pub const VIDEO_GRACE_NS: u64 = 2_000_000_000;
+
+/// The emulator's video direction: its link, its ports and the borrowed
+/// samples it holds.
+pub struct VideoPath {
+    pub link: Link<VideoItem>,
+    source: VideoSubscriber,
+    sink: VideoPublisher,
+    slots: Vec<Option<VideoSample>>,
+    free: Vec<u32>,
+    max_bytes: usize,
+    seed: u64,
+    sent_by_camera: Option<u64>,
+    end_forwarded: bool,
+    damaged: u64,
+    lost: u64,
+    bytes_entered: u64,
+    bytes_delivered: u64,
+    unsubscribed: u64,
+    receive_errors: u64,
+    last_rx_ns: u64,
+}
+
+impl VideoPath {
+    /// One turn: every due release, then at most one frame in.
+    #[inline]
+    pub fn poll(&mut self) {
+        let VideoPath { link, slots, free, sink, unsubscribed, bytes_delivered, .. } = self;
+        link.release_due(now_ns(), &mut Out { slots, free, sink, unsubscribed, bytes_delivered });
+        match self.source.try_recv() {
+            Ok(Some(s)) => self.take(s),
+            Ok(None) => {}
+            Err(_) => self.receive_errors += 1,
+        }
+    }
+
+    #[inline]
+    fn take(&mut self, s: VideoSample) {
+        let h = *s.header();
+        if h.is_end() {
+            self.sent_by_camera = Some(h.frame_index);
+            return;
+        }
+        let t = now_ns();
+        self.last_rx_ns = t;
+        let len = s.bytes().len();
+        self.bytes_entered += len as u64;
+        let arrival = Arrival { sequence: None, console_index: h.frame_index, send_ns: h.send_ns };
+        if len > self.max_bytes || len != h.len as usize {
+            let why = if len > self.max_bytes { Invalid::TooLarge } else { Invalid::WrongSize };
+            self.link.reject(t, why, arrival);
+            self.lost += 1;
+            return;
+        }
+        // A slot is always free: the link holds one frame fewer than there are slots.
+        let slot = self.free.pop().expect("a free slot");
+        let item = VideoItem { slot, len: len as u32, ingress_index: self.link.next_ingress_index(), ingress_ns: t };
+        self.slots[slot as usize] = Some(s);
+        let entered = self.link.ingress_len(t, item, Some(len as u64), arrival);
+        if let Fate::Dropped(cause) = entered.fate {
+            self.slots[slot as usize] = None;
+            self.free.push(slot);
+            match drop_kind(len as u64, cause.reason(), crate::model::backlog::DEFAULT_MTU_BYTES) {
+                DropKind::Damaged => self.damaged += 1,
+                DropKind::Lost => self.lost += 1,
+            }
+        }
+    }
+
+    /// Whether the path has ended, asked off the hot path once the forward
+    /// stream has ended (at `forward_end_ns`): the camera's end marker has
+    /// come and nothing is held; or no camera publishes and nothing is
+    /// held; or the grace has passed. Sends the console the end marker when
+    /// it ends.
+    pub fn finished(&mut self, now: u64, forward_end_ns: u64) -> bool {
+        if self.end_forwarded {
+            return true;
+        }
+        let held = self.link.held();
+        let camera_gone = self.source.peers_connected() == 0 && now.saturating_sub(self.last_rx_ns) > 50_000_000;
+        let done = (held == 0 && (self.sent_by_camera.is_some() || camera_gone)) || now.saturating_sub(forward_end_ns) > VIDEO_GRACE_NS;
+        if done {
+            self.forward_end();
+        }
+        done
+    }
+
+    /// Sends the console the end marker (best effort), once.
+    pub fn forward_end(&mut self) {
+        if !self.end_forwarded {
+            self.end_forwarded = true;
+            let _ = self.sink.send_end(self.link.released());
+        }
+    }
+
+    /// Keeps the trace's writer thread off `core`.
+    pub fn keep_trace_off_core(&self, core: usize) {
+        self.link.keep_trace_off_core(core);
+    }
+
+    /// Stops the trace writer, writes `trace_video.csv` into `out_dir`,
+    /// checks the account, and reports.
+    pub fn finish(mut self, out_dir: &Path, duration_ns: u64) -> anyhow::Result<VideoLinkReport> {
+        self.forward_end();
+        // What the link still holds goes back to the camera's channel.
+        self.slots.iter_mut().for_each(|s| drop(s.take()));
+        let l = self.link.finish(&out_dir.join("trace_video.csv"), duration_ns)?;
+        let dropped_total: u64 = l.dropped.values().sum();
+        Ok(VideoLinkReport {
+            scenario: l.scenario,
+            seed: self.seed,
+            max_bytes: self.max_bytes,
+            sent_by_camera: self.sent_by_camera,
+            entered: l.entered,
+            delivered: l.delivered,
+            delivered_unsubscribed: self.unsubscribed,
+            dropped: l.dropped,
+            dropped_damaged: self.damaged,
+            dropped_lost: self.lost,
+            held_at_end: l.held_at_end,
+            balanced: l.entered == l.delivered + dropped_total + l.held_at_end && self.damaged + self.lost == dropped_total,
+            bytes_entered: self.bytes_entered,
+            bytes_delivered: self.bytes_delivered,
+            injected_delay_ns: l.measures.injected_delay_ns,
+            release_lateness_ns: l.measures.release_lateness_ns,
+            stages: serde_json::to_value(&l.measures.stages).unwrap_or_default(),
+            send_errors: l.send_errors,
+            receive_errors: self.receive_errors,
+            trace_path: l.trace_path,
+        })
+    }
+}
+
+/// What the emulator's video path did: `entered = delivered + dropped +
+/// held_at_end`, and every drop is damaged or lost ([`crate::video`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VideoLinkReport {
+    pub scenario: String,
+    pub seed: u64,
+    pub max_bytes: usize,
+    /// Frames the camera said it sent (from its end marker).
+    pub sent_by_camera: Option<u64>,
+    pub entered: u64,
+    pub delivered: u64,
+    /// Of those, released while no console was subscribed.
+    pub delivered_unsubscribed: u64,
+    pub dropped: BTreeMap<String, u64>,
+    /// Dropped frames of several packets taken by a loss stage.
+    pub dropped_damaged: u64,
+    /// Dropped frames lost whole.
+    pub dropped_lost: u64,
+    pub held_at_end: u64,
+    pub balanced: bool,
+    pub bytes_entered: u64,
+    pub bytes_delivered: u64,
+    pub injected_delay_ns: Summary,
+    pub release_lateness_ns: Summary,
+    /// The video scenario's stages (a link stage's utilisation and queue).
+    pub stages: serde_json::Value,
+    pub send_errors: u64,
+    pub receive_errors: u64,
+    pub trace_path: PathBuf,
+}
+
+/// The emulator's video path, when the arguments ask for one: through
+/// `--video-scenario` (default Normal), seeded from `--video-seed` or the
+/// run's seed.
+pub fn path(args: &VideoArgs, node: &crate::transport::IpcNode, seed: u64, out: &Path) -> anyhow::Result<Option<VideoPath>> {
+    if !args.on() {
+        return Ok(None);
+    }
+    args.validate()?;
+    let name = args.video_scenario.as_deref().unwrap_or("Normal");
+    let spec = crate::load::resolve(name).with_context(|| format!("--video-scenario {name}"))?;
+    let seed = args.video_seed.or(spec.seed).unwrap_or_else(|| crate::scenario::splitmix64(seed ^ 0x7669_6465_6f00_0000));
+    let scenario = Scenario::new(&spec, seed).with_context(|| format!("--video-scenario {name}"))?;
+    let source = node.video_subscriber(Channel::Video).context("opening the robot → emulator video port")?;
+    let sink = node.video_publisher(Channel::VideoOut, args.video_max_bytes).context("opening the emulator → console video port")?;
+    let expected = 3600 * 60;
+    let mut link = Link::new(scenario, VIDEO_HELD_FRAMES - 1, expected)?;
+    link.stream_to(&out.join("trace_video.csv"), None)?;
+    eprintln!("emulator: video path through scenario {} seed {seed}, at most {} bytes a frame", spec.name, args.video_max_bytes);
+    let mut free: Vec<u32> = Vec::with_capacity(VIDEO_HELD_FRAMES);
+    free.extend((0..VIDEO_HELD_FRAMES as u32).rev());
+    Ok(Some(VideoPath {
+        link,
+        source,
+        sink,
+        slots: (0..VIDEO_HELD_FRAMES).map(|_| None).collect(),
+        free,
+        max_bytes: args.video_max_bytes,
+        seed,
+        sent_by_camera: None,
+        end_forwarded: false,
+        damaged: 0,
+        lost: 0,
+        bytes_entered: 0,
+        bytes_delivered: 0,
+        unsubscribed: 0,
+        receive_errors: 0,
+        last_rx_ns: 0,
+    }))
+}
+
+/// What the camera did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraReport {
+    pub frame_hz: f64,
+    pub gop_frames: u32,
+    pub key_bytes: u64,
+    pub delta_bytes: u64,
+    /// The sizes' mean bit rate, bit/s.
+    pub bit_rate_bit_s: f64,
+    pub frames_sent: u64,
+    pub bytes_sent: u64,
+    /// Frames the channel refused (no emulator's queue room, a loan).
+    pub send_errors: u64,
+    /// Frames published while no emulator was subscribed.
+    pub sent_unsubscribed: u64,
+}
+
+/// A thread that runs until told to stop, then hands back its report.
+pub struct Worker<R> {
+    stop: Arc<AtomicBool>,
+    handle: std::thread::JoinHandle<anyhow::Result<R>>,
+}
+
+impl<R> Worker<R> {
+    /// Tells the thread to stop and waits for its report.
+    pub fn finish(self) -> anyhow::Result<R> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.join().map_err(|_| anyhow::anyhow!("the video thread panicked"))?
+    }
+}
+
+fn spawn<R: Send + 'static>(name: &str, f: impl FnOnce(Arc<AtomicBool>) -> anyhow::Result<R> + Send + 'static) -> anyhow::Result<Worker<R>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    let handle = std::thread::Builder::new().name(name.into()).spawn(move || f(s)).context("starting the video thread")?;
+    Ok(Worker { stop, handle })
+}
+
+/// Starts the camera (in the simulator): a thread of its own, on its own
+/// node, publishing on `video` once the emulator subscribes, until stopped.
+pub fn camera(run_id: &str, args: &VideoArgs) -> anyhow::Result<Option<Worker<CameraReport>>> {
+    if !args.on() {
+        return Ok(None);
+    }
+    args.validate()?;
+    let (run_id, args) = (run_id.to_string(), args.clone());
+    spawn("netfi-camera", move |stop| run_camera(&run_id, &args, &stop)).map(Some)
+}
+
+fn run_camera(run_id: &str, args: &VideoArgs, stop: &AtomicBool) -> anyhow::Result<CameraReport> {
+    let gop = args.gop()?;
+    let node = crate::transport::open_node(run_id, Role::Simulator)?;
+    // The camera writes what its sizes say; the run's maximum is the emulator's check.
+    let max = args.video_max_bytes.max(gop.key_bytes as usize);
+    let mut port = node.video_publisher(Channel::Video, max).context("opening the robot → emulator video port")?;
+    let mut r = CameraReport {
+        frame_hz: args.video_hz,
+        gop_frames: gop.frames,
+        key_bytes: gop.key_bytes,
+        delta_bytes: gop.delta_bytes,
+        bit_rate_bit_s: gop.bit_rate(args.video_hz),
+        frames_sent: 0,
+        bytes_sent: 0,
+        send_errors: 0,
+        sent_unsubscribed: 0,
+    };
+    while port.peers_connected() == 0 && !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let period_ns = 1e9 / args.video_hz;
+    let t0 = now_ns();
+    let mut i = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        let target = t0 + (i as f64 * period_ns) as u64;
+        let now = now_ns();
+        if now < target {
+            std::thread::sleep(std::time::Duration::from_nanos((target - now).min(2_000_000)));
+            continue;
+        }
+        let (len, key) = gop.size(i);
+        let h = VideoHeader {
+            frame_index: i,
+            len: len as u32,
+            flags: if key { VideoHeader::FLAG_KEY } else { 0 },
+            gop_index: (i % u64::from(gop.frames)) as u32,
+            ..VideoHeader::default()
+        };
+        match port.send_fill(&h, len as usize, |k| pattern(i, k), |h| h.send_ns = now_ns()) {
+            Ok(0) => r.sent_unsubscribed += 1,
+            Ok(_) => {}
+            Err(_) => r.send_errors += 1,
+        }
+        r.frames_sent += 1;
+        r.bytes_sent += len;
+        i += 1;
+    }
+    let _ = port.send_end(r.frames_sent);
+    Ok(r)
+}
+
+/// Byte `k` of frame `i`: what the console checks.
+#[inline]
+fn pattern(i: u64, k: usize) -> u8 {
+    (i as u8).wrapping_add(k as u8)
+}
+
+/// What the console saw of the video.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReceivedVideo {
+    pub received: u64,
+    /// Received with every byte as sent.
+    pub whole: u64,
+    /// Received with wrong bytes or length.
+    pub damaged: u64,
+    /// Whole frames older than one already displayed (not displayed).
+    pub late: u64,
+    pub bytes: u64,
+    /// Camera send → console receive, of the whole frames.
+    pub delay_ns: Summary,
+    /// Gaps between displayed frames over two frame periods.
+    pub freezes: u64,
+    pub freeze_total_ms: f64,
+    pub freeze_longest_ms: f64,
+    pub freeze_threshold_ms: f64,
+    /// Frames the emulator said it released (from its end marker).
+    pub released_by_emulator: Option<u64>,
+}
+
+/// Starts the console's video receiver: a thread of its own, on its own
+/// node, taking frames off `video_out` until stopped (then until the
+/// emulator's end marker, at most `wait_s` more).
+pub fn receiver(run_id: &str, args: &VideoArgs, wait_s: f64) -> anyhow::Result<Option<Worker<ReceivedVideo>>> {
+    if !args.on() {
+        return Ok(None);
+    }
+    args.validate()?;
+    let (run_id, hz) = (run_id.to_string(), args.video_hz);
+    let wait_ns = (wait_s * 1e9) as u64;
+    // Subscribed before the console streams, so no frame is released into nothing.
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let w = spawn("netfi-video-rx", move |stop| {
+        let node = crate::transport::open_node(&run_id, Role::Console)?;
+        let port = node.video_subscriber(Channel::VideoOut).context("opening the emulator → console video port")?;
+        let _ = ready_tx.send(());
+        run_receiver(port, hz, wait_ns, &stop)
+    })?;
+    if ready_rx.recv().is_err() {
+        return w.finish().map(|_| None);
+    }
+    Ok(Some(w))
+}
+
+fn run_receiver(mut port: VideoSubscriber, hz: f64, wait_ns: u64, stop: &AtomicBool) -> anyhow::Result<ReceivedVideo> {
+    let mut delay = LatencyHistogram::new();
+    let mut freezes = Freezes::new(hz);
+    let (mut received, mut whole, mut damaged, mut late, mut bytes) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    let mut shown: Option<u64> = None;
+    let mut released_by_emulator = None;
+    let mut deadline: Option<u64> = None;
+    loop {
+        match port.try_recv() {
+            Ok(Some(s)) => {
+                let t = now_ns();
+                let h = *s.header();
+                if h.is_end() {
+                    released_by_emulator = Some(h.frame_index);
+                    break;
+                }
+                received += 1;
+                let b = s.bytes();
+                bytes += b.len() as u64;
+                let intact = b.len() == h.len as usize && b.iter().enumerate().step_by(509).all(|(k, &v)| v == pattern(h.frame_index, k));
+                if !intact {
+                    damaged += 1;
+                    continue;
+                }
+                whole += 1;
+                delay.record(t.saturating_sub(h.send_ns));
+                if shown.is_some_and(|i| h.frame_index <= i) {
+                    late += 1;
+                } else {
+                    shown = Some(h.frame_index);
+                    freezes.displayed(t);
+                }
+            }
+            Ok(None) => {
+                if stop.load(Ordering::Relaxed) {
+                    let now = now_ns();
+                    let d = *deadline.get_or_insert(now + wait_ns);
+                    if now > d || port.peers_connected() == 0 {
+                        break;
+                    }
+                }
+                std::thread::sleep(std::time::Duration::from_micros(50));
+            }
+            Err(_) => std::thread::sleep(std::time::Duration::from_millis(1)),
+        }
+    }
+    Ok(ReceivedVideo {
+        received,
+        whole,
+        damaged,
+        late,
+        bytes,
+        delay_ns: delay.summary(),
+        freezes: freezes.count,
+        freeze_total_ms: freezes.total_ns as f64 / 1e6,
+        freeze_longest_ms: freezes.longest_ns as f64 / 1e6,
+        freeze_threshold_ms: freezes.threshold_ns() as f64 / 1e6,
+        released_by_emulator,
+    })
+}
+
+/// The video stream of a run robot → emulator → console: what the camera
+/// sent, what the video scenario did, and what the console saw.
+///
+/// `frames` counts the frames the emulator took in less those it released
+/// while no console listened: whole (arrived with every byte), damaged
+/// (part lost: dropped part-way by a loss stage, or arrived with wrong
+/// bytes) and lost. `balanced`: the emulator's account holds and the
+/// console received what the emulator released to it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VideoSection {
+    pub scenario: String,
+    pub seed: u64,
+    pub camera: Option<CameraReport>,
+    pub frames: crate::video::FrameTally,
+    pub dropped: BTreeMap<String, u64>,
+    pub held_at_end: u64,
+    /// Whole frames older than one already displayed.
+    pub late: Option<u64>,
+    /// Camera send → console receive of the whole frames.
+    pub delay_ns: Option<Summary>,
+    /// The delay the video scenario injected (a link stage's queueing and
+    /// serialization included).
+    pub injected_delay_ns: Summary,
+    pub freezes: Option<u64>,
+    pub freeze_total_ms: Option<f64>,
+    pub freeze_longest_ms: Option<f64>,
+    pub freeze_threshold_ms: Option<f64>,
+    pub bytes_entered: u64,
+    pub bytes_delivered: u64,
+    /// The video scenario's stages (a link stage's utilisation, queue and delay).
+    pub stages: serde_json::Value,
+    pub balanced: bool,
+}
+
+impl VideoSection {
+    /// Joins the emulator's video path, the console's receiver and the
+    /// camera's report; `None` without video.
+    pub fn join(e: Option<&VideoLinkReport>, c: Option<&ReceivedVideo>, camera: Option<&CameraReport>) -> Option<VideoSection> {
+        let e = e?;
+        let sent = e.entered.saturating_sub(e.delivered_unsubscribed);
+        let (whole, damaged_rx) = c.map_or((0, 0), |c| (c.whole, c.damaged));
+        let balanced = e.balanced && c.is_some_and(|c| c.received + e.delivered_unsubscribed == e.delivered);
+        Some(VideoSection {
+            scenario: e.scenario.clone(),
+            seed: e.seed,
+            camera: camera.cloned(),
+            frames: crate::video::FrameTally::new(sent, whole, damaged_rx, e.dropped_damaged),
+            dropped: e.dropped.clone(),
+            held_at_end: e.held_at_end,
+            late: c.map(|c| c.late),
+            delay_ns: c.map(|c| c.delay_ns).filter(|d| d.count > 0),
+            injected_delay_ns: e.injected_delay_ns,
+            freezes: c.map(|c| c.freezes),
+            freeze_total_ms: c.map(|c| c.freeze_total_ms),
+            freeze_longest_ms: c.map(|c| c.freeze_longest_ms),
+            freeze_threshold_ms: c.map(|c| c.freeze_threshold_ms),
+            bytes_entered: e.bytes_entered,
+            bytes_delivered: e.bytes_delivered,
+            stages: e.stages.clone(),
+            balanced,
+        })
+    }
+
+    /// The section as lines of the run's text report.
+    pub fn to_text(&self) -> String {
+        let dropped: Vec<String> = self.dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
+        let mut s = format!("video      scenario {} (seed {})", self.scenario, self.seed);
+        if let Some(c) = &self.camera {
+            s += &format!(
+                ": camera {:.0} Hz, {:.2} Mbit/s, GOP {} (key {} B, delta {} B), {} frames sent",
+                c.frame_hz,
+                c.bit_rate_bit_s / 1e6,
+                c.gop_frames,
+                c.key_bytes,
+                c.delta_bytes,
+                c.frames_sent
+            );
+        }
+        s += "\n";
+        let f = &self.frames;
+        s += &format!(
+            "  frames     {} through the emulator: {} whole, {} damaged, {} lost; dropped {}; held at end {}; accounting {}\n",
+            f.sent,
+            f.whole,
+            f.damaged,
+            f.lost,
+            if dropped.is_empty() { "none".into() } else { dropped.join(", ") },
+            self.held_at_end,
+            if self.balanced { "balanced" } else { "NOT balanced" }
+        );
+        s += &format!("  delay      {}\n", line_ms(self.delay_ns.as_ref()));
+        if let (Some(n), Some(t), Some(l), Some(th)) = (self.freezes, self.freeze_total_ms, self.freeze_longest_ms, self.freeze_threshold_ms) {
+            s += &format!("  freezes    {n} (gaps over {th:.1} ms): total {t:.1} ms, longest {l:.1} ms\n");
+        }
+        s
+    }
+}
+
+fn line_ms(d: Option<&Summary>) -> String {
+    match d {
+        Some(d) => format!(
+            "p50 {:.2} ms  p90 {:.2} ms  p99 {:.2} ms  max {:.2} ms  ({} whole frames)",
+            d.p50 as f64 / 1e6,
+            d.p90 as f64 / 1e6,
+            d.p99 as f64 / 1e6,
+            d.max as f64 / 1e6,
+            d.count
+        ),
+        None => "-".into(),
+    }
+}

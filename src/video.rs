@@ -1,0 +1,215 @@
+//! The pure parts of the synthetic video stream (`netfi run --video-mbps`):
+//! the sizes of a group of pictures, the per-frame accounting, and the
+//! freeze detector. No clock, no I/O: times come in as ns.
+//!
+//! **Sizes.** A group of pictures of `gop_frames` frames is one key frame of
+//! `key_ratio` times a delta frame's size, then `gop_frames − 1` delta
+//! frames; the sizes are scaled so that the stream's mean bit rate is the
+//! one asked: `delta = R / (8 · hz) · gop / (gop − 1 + key_ratio)` bytes.
+//!
+//! **Fates.** A frame is *whole* when it reached the console with every
+//! byte; *damaged* when part of it was lost: a frame of several packets
+//! (larger than one MTU) that a loss stage dropped (on a packet network
+//! the other packets would have arrived, but the frame cannot be decoded),
+//! or one that arrived with wrong bytes; *lost* when none of it arrived (a
+//! one-packet frame dropped, or a frame dropped whole: the link's queue,
+//! the emulator's queue, a payload over the run's maximum). The core
+//! decides one fate per payload (its packets share it, see
+//! [`crate::model::backlog`]), so which dropped frames were damaged is told
+//! from the drop's reason and the frame's size ([`drop_kind`]).
+//!
+//! **Freezes.** The console displays each whole frame newer than the last
+//! one displayed. A gap between two displayed frames longer than two frame
+//! periods is a freeze of the gap's length ([`Freezes`]).
+
+use serde::{Deserialize, Serialize};
+
+/// The sizes of a group of pictures at a bit rate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gop {
+    /// Frames per group (the key frame included).
+    pub frames: u32,
+    pub key_bytes: u64,
+    pub delta_bytes: u64,
+}
+
+impl Gop {
+    /// The group for `bit_rate_bit_s` at `frame_hz` frames a second, with
+    /// `frames` frames a group and key frames `key_ratio` times a delta
+    /// frame. Every frame has at least one byte.
+    pub fn new(bit_rate_bit_s: f64, frame_hz: f64, frames: u32, key_ratio: f64) -> Result<Gop, String> {
+        if !(bit_rate_bit_s.is_finite() && bit_rate_bit_s > 0.0 && bit_rate_bit_s <= 1e11) {
+            return Err(format!("the video's bit rate must be above 0 and at most 100 Gbit/s, got {bit_rate_bit_s} bit/s"));
+        }
+        if !(frame_hz.is_finite() && (0.1..=10_000.0).contains(&frame_hz)) {
+            return Err(format!("the video's frame rate must be from 0.1 to 10000 Hz, got {frame_hz}"));
+        }
+        if frames == 0 {
+            return Err("a group of pictures has at least one frame".into());
+        }
+        if !(key_ratio.is_finite() && (1.0..=1000.0).contains(&key_ratio)) {
+            return Err(format!("the key frame ratio must be from 1 to 1000, got {key_ratio}"));
+        }
+        let mean = bit_rate_bit_s / 8.0 / frame_hz;
+        let delta = mean * f64::from(frames) / (f64::from(frames) - 1.0 + key_ratio);
+        let delta_bytes = (delta.round() as u64).max(1);
+        let key_bytes = ((delta * key_ratio).round() as u64).max(1);
+        Ok(Gop { frames, key_bytes, delta_bytes })
+    }
+
+    /// Frame `index`'s size and whether it is a key frame.
+    #[inline]
+    pub fn size(&self, index: u64) -> (u64, bool) {
+        if index % u64::from(self.frames) == 0 {
+            (self.key_bytes, true)
+        } else {
+            (self.delta_bytes, false)
+        }
+    }
+
+    /// The mean bit rate the sizes give, bit/s.
+    pub fn bit_rate(&self, frame_hz: f64) -> f64 {
+        let group = self.key_bytes + self.delta_bytes * u64::from(self.frames - 1);
+        group as f64 * 8.0 * frame_hz / f64::from(self.frames)
+    }
+}
+
+/// What became of a dropped frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DropKind {
+    /// Part of it lost: undecodable.
+    Damaged,
+    /// Lost whole.
+    Lost,
+}
+
+/// A frame of `len` bytes dropped for `reason` (a drop reason of the
+/// report) on packets of `mtu_bytes`: damaged when a loss stage took a
+/// frame of several packets, else lost (module docs).
+pub fn drop_kind(len: u64, reason: &str, mtu_bytes: u64) -> DropKind {
+    let whole_drop = matches!(reason, "link_queue" | "queue_full" | "too_large" | "wrong_size" | "bad_flags" | "outage");
+    if len > mtu_bytes && !whole_drop {
+        DropKind::Damaged
+    } else {
+        DropKind::Lost
+    }
+}
+
+/// The freezes of a displayed stream: gaps between consecutive displayed
+/// frames longer than a threshold (two frame periods).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Freezes {
+    threshold_ns: u64,
+    last_ns: Option<u64>,
+    pub count: u64,
+    pub total_ns: u64,
+    pub longest_ns: u64,
+}
+
+impl Freezes {
+    /// A detector for a stream of `frame_hz` frames a second.
+    pub fn new(frame_hz: f64) -> Freezes {
+        Freezes { threshold_ns: (2e9 / frame_hz) as u64, last_ns: None, count: 0, total_ns: 0, longest_ns: 0 }
+    }
+
+    /// A frame displayed at `t_ns` (times do not decrease).
+    #[inline]
+    pub fn displayed(&mut self, t_ns: u64) {
+        if let Some(last) = self.last_ns {
+            let gap = t_ns.saturating_sub(last);
+            if gap > self.threshold_ns {
+                self.count += 1;
+                self.total_ns += gap;
+                self.longest_ns = self.longest_ns.max(gap);
+            }
+        }
+        self.last_ns = Some(t_ns);
+    }
+
+    /// The threshold, ns.
+    pub fn threshold_ns(&self) -> u64 {
+        self.threshold_ns
+    }
+}
+
+/// The frames of a video stream by fate: `sent = whole + damaged + lost`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FrameTally {
+    pub sent: u64,
+    pub whole: u64,
+    pub damaged: u64,
+    pub lost: u64,
+}
+
+impl FrameTally {
+    /// The tally of `sent` frames of which `whole` arrived whole, `damaged_received`
+    /// arrived with wrong bytes and `damaged_dropped` were dropped part-way
+    /// ([`drop_kind`]); the rest were lost. Frames the console did not see
+    /// but the emulator did not drop either (still held at the end) count as
+    /// lost.
+    pub fn new(sent: u64, whole: u64, damaged_received: u64, damaged_dropped: u64) -> FrameTally {
+        let damaged = (damaged_received + damaged_dropped).min(sent.saturating_sub(whole));
+        FrameTally { sent, whole, damaged, lost: sent.saturating_sub(whole + damaged) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_gop_gives_the_bit_rate_asked() {
+        let g = Gop::new(8e6, 60.0, 30, 8.0).unwrap();
+        assert_eq!(g.size(0), (g.key_bytes, true));
+        assert_eq!(g.size(1), (g.delta_bytes, false));
+        assert_eq!(g.size(30), (g.key_bytes, true));
+        // delta = 16666.7 · 30 / 37 = 13513.5 → 13514 (rounded), key 8× the exact delta.
+        assert_eq!((g.delta_bytes, g.key_bytes), (13514, 108108));
+        // Rounding to whole bytes moves the rate by less than one byte a frame.
+        assert!((g.bit_rate(60.0) - 8e6).abs() < 8.0 * 60.0, "{}", g.bit_rate(60.0));
+        let one = Gop::new(8e6, 60.0, 1, 8.0).unwrap();
+        assert_eq!(one.size(5), (one.key_bytes, true));
+        assert!((one.bit_rate(60.0) - 8e6).abs() < 8.0 * 60.0);
+    }
+
+    #[test]
+    fn bad_gop_parameters_are_refused() {
+        assert!(Gop::new(0.0, 60.0, 30, 8.0).unwrap_err().contains("bit rate"));
+        assert!(Gop::new(8e6, 0.0, 30, 8.0).unwrap_err().contains("frame rate"));
+        assert!(Gop::new(8e6, 60.0, 0, 8.0).is_err());
+        assert!(Gop::new(8e6, 60.0, 30, 0.5).unwrap_err().contains("key frame"));
+        assert!(Gop::new(f64::NAN, 60.0, 30, 8.0).is_err());
+    }
+
+    #[test]
+    fn a_loss_damages_a_frame_of_several_packets_and_a_queue_loses_it() {
+        assert_eq!(drop_kind(4000, "bernoulli", 1500), DropKind::Damaged);
+        assert_eq!(drop_kind(4000, "ge_lomax", 1500), DropKind::Damaged);
+        assert_eq!(drop_kind(1500, "bernoulli", 1500), DropKind::Lost);
+        assert_eq!(drop_kind(4000, "link_queue", 1500), DropKind::Lost);
+        assert_eq!(drop_kind(4000, "queue_full", 1500), DropKind::Lost);
+        assert_eq!(drop_kind(1 << 30, "too_large", 1500), DropKind::Lost);
+    }
+
+    #[test]
+    fn freezes_are_gaps_over_two_periods() {
+        let mut f = Freezes::new(50.0); // 20 ms a frame, threshold 40 ms
+        assert_eq!(f.threshold_ns(), 40_000_000);
+        for t in [0, 20, 40, 80, 100, 200, 201] {
+            f.displayed(t * 1_000_000);
+        }
+        // 40 → 80 is exactly two periods: no freeze; 100 → 200 is one.
+        assert_eq!((f.count, f.total_ns, f.longest_ns), (1, 100_000_000, 100_000_000));
+        f.displayed(500_000_000);
+        assert_eq!((f.count, f.total_ns, f.longest_ns), (2, 399_000_000, 299_000_000));
+    }
+
+    #[test]
+    fn the_tally_adds_up() {
+        let t = FrameTally::new(100, 90, 1, 4);
+        assert_eq!(t, FrameTally { sent: 100, whole: 90, damaged: 5, lost: 5 });
+        assert_eq!(t.whole + t.damaged + t.lost, t.sent);
+        // More damage claimed than frames missing cannot happen; it is capped.
+        assert_eq!(FrameTally::new(10, 10, 0, 3), FrameTally { sent: 10, whole: 10, damaged: 0, lost: 0 });
+    }
+}
