@@ -84,9 +84,10 @@ impl Emulator {
             if let Ok(Some(status)) = e.child.try_wait() {
                 bail!("the emulator ended before it was ready ({status}); see {}", dir.join("emulator.log").display());
             }
-            if t0.elapsed() > Duration::from_secs(30) {
+            // An emulator of many streams sets each up first.
+            if t0.elapsed() > Duration::from_secs(120) {
                 e.stop();
-                bail!("the emulator was not ready after 30 s; see {}", dir.join("emulator.log").display());
+                bail!("the emulator was not ready after 120 s; see {}", dir.join("emulator.log").display());
             }
             std::thread::sleep(Duration::from_millis(2));
         }

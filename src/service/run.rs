@@ -320,7 +320,12 @@ fn start(plan: &Plan) -> Result<Procs> {
             }
         }
     }
-    let emulator = match start_one("emulator", plan.emulator.to_argv(), cores.emulator, out) {
+    // Each stream's link, queue, trace and feedback path are set up before
+    // the emulator is ready: a second or so each on a loaded machine.
+    let ready_s = 30 + 2 * plan.streams.len() as u64;
+    let emulator = match spawn("emulator", plan.emulator.to_argv(), cores.emulator, out)
+        .and_then(|mut p| wait_ready(&mut p, out, Duration::from_secs(ready_s)).map(|_| p))
+    {
         Ok(p) => p,
         Err(e) => {
             stop(&mut simulators);

@@ -4,8 +4,10 @@
 //! scenario, seed, link, feedback path, trace and `emulator.json` (in
 //! `<out>/stream-K/`), served by one loop on one core.
 //!
-//! The loop turns each stream's [`Forward`] once per round, stream 0 first:
-//! a round costs N turns, and a release falls due at most one round late.
+//! The loop turns each stream's [`Forward`] once per round, stream 0 first;
+//! after each turn, if any stream's earliest release is due, every
+//! stream's due frames go out, so a release waits behind at most one
+//! stream's turn, not a round of N.
 //! Every 4096 rounds it looks at the stop flag and serves live control,
 //! which acts on stream 0 (its telemetry is stream 0's too). Nothing in a
 //! round allocates or locks: the streams are a slice fixed before the
@@ -252,15 +254,36 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     Ok(reports.swap_remove(0))
 }
 
+/// Releases every stream's due frames; the earliest release left.
+#[inline]
+fn release_all(lanes: &mut [Lane]) -> u64 {
+    let now = now_ns();
+    let mut next = u64::MAX;
+    for l in lanes.iter_mut() {
+        l.fwd.link.release_due(now, &mut l.t.egress);
+        next = next.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
+    }
+    next
+}
+
 /// Turns every stream once per round until each has ended and drained, or
 /// a stop is requested; everything else happens every 4096 rounds.
 fn spin(lanes: &mut [Lane], mut look: impl FnMut() -> Look, mut control: Option<&mut crate::service::control::ControlPort>) -> LoopEnd {
     let t_start = now_ns();
     let mut rounds: u64 = 0;
     let mut robot_died = false;
+    // The earliest release of any stream, as last seen.
+    let mut due = u64::MAX;
     let ended_by = loop {
-        for l in lanes.iter_mut() {
+        for k in 0..lanes.len() {
+            let l = &mut lanes[k];
             l.fwd.turn(&mut l.t.ingress, &mut l.t.egress, None);
+            // A release of any stream that fell due (a frame just taken with
+            // no delay, or another stream's) goes now, not a round later.
+            due = due.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
+            if due <= now_ns() {
+                due = release_all(lanes);
+            }
         }
         rounds = rounds.wrapping_add(1);
         if rounds % 4096 != 0 {
