@@ -575,8 +575,8 @@ impl Calendar {
     /// past `hi`.
     #[inline]
     fn next_within(&self, cursor: u64, dist: u64) -> Option<u64> {
-        let from = cursor.max(self.first) + 1;
-        let end = self.hi.min(self.first + dist);
+        let from = cursor.max(self.first).saturating_add(1);
+        let end = self.hi.min(self.first.saturating_add(dist));
         if self.len == 0 || from > end {
             return None;
         }
@@ -1014,7 +1014,7 @@ impl<T: Copy + Default> Timeline<T> {
         let c = &mut self.calendar;
         for _ in 0..2 {
             let Some(a) = c.next_within(c.ahead, AHEAD_BUCKETS) else {
-                c.ahead = c.ahead.max(c.first + AHEAD_BUCKETS).min(c.hi);
+                c.ahead = c.ahead.max(c.first.saturating_add(AHEAD_BUCKETS)).min(c.hi);
                 break;
             };
             c.ahead = a;
@@ -1024,7 +1024,7 @@ impl<T: Copy + Default> Timeline<T> {
         }
         for _ in 0..2 {
             let Some(a) = c.next_within(c.near, NEAR_BUCKETS) else {
-                c.near = c.near.max(c.first + NEAR_BUCKETS).min(c.hi);
+                c.near = c.near.max(c.first.saturating_add(NEAR_BUCKETS)).min(c.hi);
                 break;
             };
             c.near = a;
