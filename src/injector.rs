@@ -340,6 +340,16 @@ impl<T: Copy + Default> Injector<T> {
         Some(r)
     }
 
+    /// [`pop_due`](Self::pop_due), the item read in place in the queue
+    /// ([`ReleaseQueue::pop_due_ref`]): a caller that copies it on copies
+    /// it once.
+    #[inline]
+    pub fn pop_due_ref(&mut self, now_ns: u64) -> Option<Released<&T>> {
+        let r = self.queue.pop_due_ref(now_ns)?;
+        self.counts.released += 1;
+        Some(r)
+    }
+
     /// Drop counts by reason (model name, `queue_full`, `wrong_size`,
     /// `bad_checksum`), zero counts omitted, in a stable order.
     pub fn drops_by_reason(&self) -> Vec<(&'static str, u64)> {

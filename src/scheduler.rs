@@ -8,13 +8,18 @@
 //! exactly the order of `(release_ns, ingress_index)`.
 //!
 //! `Reorder` keeps its frames in a slab (node and item at one index; links
-//! are `u32` indices) and each frame in one of two structures, both in
+//! are `u32` indices; items on cache-line boundaries when a whole number of
+//! lines, as the emulator's 192-byte sample, and the large arrays advised
+//! onto huge pages, so that a deep queue's pops, scattered over the slab,
+//! neither straddle lines nor miss the TLB) and each frame in one of two
+//! structures, both in
 //! exact `(release_ns, ingress_index)` order; the earliest frame is the
 //! earlier of their two first ones, so which one holds a frame changes its
 //! cost, never the order.
 //!
 //! - The **calendar** holds nearly every frame: one level of `2^k` buckets
-//!   (`2^k` the power of two at or below the capacity), each `2^s` ns wide.
+//!   (`2^k` twice the power of two at or above the capacity), each `2^s` ns
+//!   wide.
 //!   A push puts a frame at the front of its bucket's list (a bag); a pop
 //!   takes the head of the first bucket, which is kept in exact order (a
 //!   bag is sorted when it becomes the first: a few frames), and finds the
@@ -22,10 +27,12 @@
 //!   whenever the calendar runs empty, from how far ahead of the earliest
 //!   frame the pushes reached since the last choice: the window spans the
 //!   stream's delay spread (rate × delay frames over `2^k` buckets), so a
-//!   bucket holds a few frames at any depth, and a frame is moved once in
-//!   and once out, whatever the depth. Pops prefetch the node and item of
-//!   the frames a few buckets ahead: at depth those lines were last touched
-//!   at the frame's push, long out of cache.
+//!   bucket holds about one frame at any depth, and a frame is moved once
+//!   in and once out, whatever the depth. Pops prefetch the node and item
+//!   of the first frame of each bucket up to 32 ahead, and of the second of
+//!   those up to 12 ahead (its place is known once the first is in cache):
+//!   at depth those lines were last touched at the frame's push, long out
+//!   of cache.
 //! - A hierarchical **timing wheel** takes what the calendar does not: a
 //!   frame outside its window (the first frames of a stream, before the
 //!   width fits; a frame due before everything held; an outlier far ahead)
@@ -43,13 +50,16 @@
 //! early list); a pop scans bitmap words and sorts the next bucket; the
 //! wheel's cascades move a frame at most once per level.
 //!
+//! A pop can leave the item in place ([`ReleaseQueue::pop_ref`],
+//! [`ReleaseQueue::pop_due_ref`]): its slot is free again but not written
+//! before the next push, which the borrow holds off, so a caller that copies
+//! the item on (the emulator, into the publisher's loan) copies it once.
+//!
 //! Neither order allocates after construction: the reorder queue's frames
 //! live in a slab whose free slots and lists are intrusive `u32` links, and a push
 //! onto a full queue hands the item back as [`Full`] so the caller records
 //! the fate. The capacity is bounded by [`MAX_CAPACITY`]; a larger one is a
 //! [`CapacityError`] that names the memory it would take.
-
-use std::collections::VecDeque;
 
 /// The order a queue releases in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,6 +146,27 @@ impl Node {
 /// Issues a prefetch of the cache lines of `*p`: a hint, never a fault.
 #[inline(always)]
 fn prefetch<X>(p: *const X) {
+    prefetch_hint::<{ HINT_KEEP }, X>(p)
+}
+
+/// [`prefetch`] for data read once (an item at its pop): brought close to
+/// the core without displacing what stays in use from the outer caches.
+#[inline(always)]
+fn prefetch_once<X>(p: *const X) {
+    prefetch_hint::<{ HINT_ONCE }, X>(p)
+}
+
+#[cfg(target_arch = "x86_64")]
+const HINT_KEEP: i32 = core::arch::x86_64::_MM_HINT_T0;
+#[cfg(target_arch = "x86_64")]
+const HINT_ONCE: i32 = core::arch::x86_64::_MM_HINT_NTA;
+#[cfg(not(target_arch = "x86_64"))]
+const HINT_KEEP: i32 = 0;
+#[cfg(not(target_arch = "x86_64"))]
+const HINT_ONCE: i32 = 0;
+
+#[inline(always)]
+fn prefetch_hint<const HINT: i32, X>(p: *const X) {
     #[cfg(target_arch = "x86_64")]
     {
         let bytes = p.cast::<i8>();
@@ -143,12 +174,98 @@ fn prefetch<X>(p: *const X) {
         while off < size_of::<X>() {
             // SAFETY: prefetching has no effect on memory and cannot fault,
             // whatever the address; SSE is part of the x86_64 baseline.
-            unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>(bytes.wrapping_add(off)) };
+            unsafe { core::arch::x86_64::_mm_prefetch::<HINT>(bytes.wrapping_add(off)) };
             off += 64;
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = p;
+}
+
+/// A vector of `len` copies of `value`, every page written here: a fresh
+/// page touched on the hot path would cost a page fault (microseconds, more
+/// in a VM) to the frame on it. On Linux a region of 2 MiB or more is first
+/// advised to be backed by huge pages: a deep queue's frames are read in
+/// release order, i.e. scattered over the whole region, and with 4 KiB
+/// pages nearly every pop would also miss the TLB (a page walk) at depth.
+/// The advice is a hint: where huge pages are off, nothing changes but the
+/// TLB misses.
+fn resident_vec<X: Clone>(len: usize, value: X) -> Vec<X> {
+    let mut v: Vec<X> = Vec::with_capacity(len);
+    advise_huge_pages(v.as_mut_ptr().cast::<u8>(), len * size_of::<X>());
+    v.resize(len, value);
+    v
+}
+
+#[cfg(target_os = "linux")]
+fn advise_huge_pages(start: *mut u8, bytes: usize) {
+    const HUGE: usize = 2 << 20;
+    let from = (start as usize).next_multiple_of(HUGE);
+    let to = (start as usize + bytes) / HUGE * HUGE;
+    if to > from {
+        // SAFETY: the range lies inside an allocation this function's caller
+        // owns and has not yet written; the advice changes how its pages are
+        // backed, never their contents, and a refusal is harmless.
+        unsafe { libc::madvise(from as *mut libc::c_void, to - from, libc::MADV_HUGEPAGE) };
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn advise_huge_pages(_start: *mut u8, _bytes: usize) {}
+
+/// An item on cache-line boundaries: the emulator's 192-byte sample then
+/// spans 3 lines, not 4 (a large allocation starts 16 bytes past a page).
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(64))]
+struct Lined<T>(T);
+
+/// The reorder queue's items, at their frames' slab indices: on cache-line
+/// boundaries when their size is a multiple of a line, packed otherwise
+/// (an 8-byte item or a `()` would waste most of a line). Only one of the
+/// two vectors is used, chosen at compile time.
+#[derive(Debug, Clone)]
+struct Items<T> {
+    packed: Vec<T>,
+    lined: Vec<Lined<T>>,
+}
+
+impl<T: Copy + Default> Items<T> {
+    const LINED: bool = size_of::<T>() >= 64 && size_of::<T>() % 64 == 0;
+
+    fn new(capacity: usize) -> Self {
+        if Self::LINED {
+            Items { packed: Vec::new(), lined: resident_vec(capacity, Lined(T::default())) }
+        } else {
+            Items { packed: resident_vec(capacity, T::default()), lined: Vec::new() }
+        }
+    }
+
+    /// The memory an item takes in the store.
+    const fn bytes() -> usize {
+        if Self::LINED {
+            size_of::<Lined<T>>()
+        } else {
+            size_of::<T>()
+        }
+    }
+
+    #[inline(always)]
+    fn get(&self, n: u32) -> &T {
+        if Self::LINED {
+            &self.lined[n as usize].0
+        } else {
+            &self.packed[n as usize]
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, n: u32, item: T) {
+        if Self::LINED {
+            self.lined[n as usize].0 = item;
+        } else {
+            self.packed[n as usize] = item;
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -157,8 +274,11 @@ fn prefetch<X>(p: *const X) {
 /// The most frames a push walks past in a calendar bucket before it leaves
 /// the frame to the wheel: it bounds a push's cost whatever the times.
 const WALK_MAX: u32 = 8;
-/// How far ahead of the earliest frame, in buckets, pops prefetch.
-const AHEAD_BUCKETS: u64 = 16;
+/// How far ahead of the earliest frame, in buckets, pops prefetch the
+/// first frame of a bucket, and the second (whose place is known only once
+/// the first is in cache).
+const AHEAD_BUCKETS: u64 = 32;
+const NEAR_BUCKETS: u64 = 12;
 /// Frames moved from the wheel into the calendar at each push while the
 /// wheel holds frames the calendar's window covers.
 const MIGRATE_PER_PUSH: usize = 2;
@@ -199,15 +319,21 @@ struct Calendar {
     refusals: u64,
     taken: u64,
     closed: bool,
-    /// The prefetch cursor: a bucket at or after `first`, and a frame in it.
+    /// The prefetch cursors: the last buckets whose first frame (`ahead`)
+    /// and second frame (`near`) were prefetched.
     ahead: u64,
-    ahead_node: u32,
+    near: u64,
 }
 
-/// The number of calendar buckets for a capacity: the power of two at or
-/// below it (at least 64), so the index costs at most 4 bytes a frame.
+/// The number of calendar buckets for a capacity: twice the power of two
+/// at or above it (at least 64). The window spans twice the pushes' mean
+/// reach, which is about the span of the frames held (a push is mostly the
+/// latest frame), so a full queue fills at most half the buckets: about one
+/// frame a bucket, whose place is known from the bucket's head alone and
+/// can be prefetched well before it is taken. The heads cost at most 16
+/// bytes a frame of capacity (4 bytes a bucket).
 fn calendar_bits(capacity: usize) -> u32 {
-    (usize::BITS - 1 - capacity.max(1).leading_zeros()).max(6)
+    (capacity.max(1).next_power_of_two().trailing_zeros() + 1).max(6)
 }
 
 /// The next set bit at or after `start` in `bits`, circularly.
@@ -237,7 +363,7 @@ impl Calendar {
         let buckets = 1usize << bits;
         let words = buckets / 64;
         Calendar {
-            heads: vec![NIL; buckets],
+            heads: resident_vec(buckets, NIL),
             words: vec![0; words],
             summary: vec![0; words.div_ceil(64)],
             bits,
@@ -254,7 +380,7 @@ impl Calendar {
             taken: 0,
             closed: false,
             ahead: 0,
-            ahead_node: NIL,
+            near: 0,
         }
     }
 
@@ -311,7 +437,7 @@ impl Calendar {
         }
         (self.reach_sum_ns, self.reach_count, self.refusals, self.taken, self.closed) = (0, 0, 0, 0, false);
         let a = release_ns >> self.shift;
-        (self.first, self.hi, self.ahead, self.ahead_node) = (a, a, a, NIL);
+        (self.first, self.hi, self.ahead, self.near) = (a, a, a, a);
     }
 
     /// Puts node `n` into its bucket; `false` (nothing changed) when it
@@ -444,35 +570,18 @@ impl Calendar {
         self.heads[idx] = sorted;
     }
 
-    /// Moves the prefetch cursor one frame on and returns that frame (NIL
-    /// when it is far enough ahead, or at the end). A cursor left on a frame
-    /// since taken out only prefetches the wrong lines once.
+    /// The next occupied bucket after `cursor` (or after the first, if
+    /// the cursor is behind it) within `dist` buckets of the first and not
+    /// past `hi`.
     #[inline]
-    fn step_ahead(&mut self, nodes: &[Node]) -> u32 {
-        if self.len == 0 {
-            return NIL;
+    fn next_within(&self, cursor: u64, dist: u64) -> Option<u64> {
+        let from = cursor.max(self.first).saturating_add(1);
+        let end = self.hi.min(self.first.saturating_add(dist));
+        if self.len == 0 || from > end {
+            return None;
         }
-        if self.ahead < self.first || self.ahead_node == NIL {
-            self.ahead = self.first;
-            self.ahead_node = self.head();
-            return self.ahead_node;
-        }
-        let next = nodes[self.ahead_node as usize].next;
-        if next != NIL {
-            self.ahead_node = next;
-            return next;
-        }
-        if self.ahead >= self.hi || self.ahead - self.first >= AHEAD_BUCKETS {
-            return NIL;
-        }
-        let a = self.next_occupied(self.ahead + 1);
-        if a > self.hi {
-            self.ahead = self.hi;
-            return NIL;
-        }
-        self.ahead = a;
-        self.ahead_node = self.heads[(a & self.mask) as usize];
-        self.ahead_node
+        let a = self.next_occupied(from);
+        (a <= end).then_some(a)
     }
 }
 
@@ -790,7 +899,7 @@ impl Wheel {
 #[derive(Debug, Clone)]
 struct Timeline<T> {
     nodes: Vec<Node>,
-    items: Vec<T>,
+    items: Items<T>,
     free: u32,
     /// Frames held, in both.
     len: usize,
@@ -802,13 +911,13 @@ struct Timeline<T> {
 
 impl<T: Copy + Default> Timeline<T> {
     fn new(capacity: usize) -> Self {
-        // Every node and item is written here, so the memory is resident
-        // before the first frame: a fresh page touched on the hot path would
-        // cost a page fault (microseconds, more in a VM) to the frame on it.
-        let nodes = (0..capacity)
-            .map(|i| Node { release_ns: 0, ingress_index: 0, next: if i + 1 < capacity { i as u32 + 1 } else { NIL } })
-            .collect();
-        Timeline { nodes, items: vec![T::default(); capacity], free: 0, len: 0, calendar: Calendar::new(capacity), wheel: Wheel::new(), refused: NIL }
+        // Every node and item is written here (`resident_vec`), so the memory
+        // is resident before the first frame.
+        let mut nodes = resident_vec(capacity, Node { release_ns: 0, ingress_index: 0, next: NIL });
+        for (i, node) in nodes.iter_mut().enumerate().take(capacity - 1) {
+            node.next = i as u32 + 1;
+        }
+        Timeline { nodes, items: Items::new(capacity), free: 0, len: 0, calendar: Calendar::new(capacity), wheel: Wheel::new(), refused: NIL }
     }
 
     #[inline]
@@ -830,7 +939,7 @@ impl<T: Copy + Default> Timeline<T> {
         let node = &mut self.nodes[n as usize];
         self.free = node.next;
         *node = Node { release_ns, ingress_index, next: NIL };
-        self.items[n as usize] = item;
+        self.items.set(n, item);
         self.len += 1;
         if !self.calendar.insert(&mut self.nodes, n) {
             self.wheel.insert(&mut self.nodes, n);
@@ -869,8 +978,10 @@ impl<T: Copy + Default> Timeline<T> {
         }
     }
 
+    /// Takes the earliest frame out: its slab index, free again (its item
+    /// stays in place until the next push).
     #[inline]
-    fn pop(&mut self) -> Option<Released<T>> {
+    fn pop(&mut self) -> Option<u32> {
         let n = if self.wheel.len == 0 {
             if self.calendar.len == 0 {
                 return None;
@@ -881,11 +992,17 @@ impl<T: Copy + Default> Timeline<T> {
         } else {
             self.pop_calendar()
         };
-        let node = self.nodes[n as usize];
         self.nodes[n as usize].next = self.free;
         self.free = n;
         self.len -= 1;
-        Some(Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items[n as usize] })
+        Some(n)
+    }
+
+    /// The frame at slab index `n`, its item read in place.
+    #[inline]
+    fn released(&self, n: u32) -> Released<&T> {
+        let node = &self.nodes[n as usize];
+        Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items.get(n) }
     }
 
     /// The calendar's earliest frame; the frames a few buckets on are
@@ -894,21 +1011,86 @@ impl<T: Copy + Default> Timeline<T> {
     #[inline]
     fn pop_calendar(&mut self) -> u32 {
         let n = self.calendar.remove_first(&mut self.nodes);
+        let c = &mut self.calendar;
         for _ in 0..2 {
-            let m = self.calendar.step_ahead(&self.nodes);
-            if m == NIL {
+            let Some(a) = c.next_within(c.ahead, AHEAD_BUCKETS) else {
+                c.ahead = c.ahead.max(c.first.saturating_add(AHEAD_BUCKETS)).min(c.hi);
                 break;
-            }
+            };
+            c.ahead = a;
+            let m = c.heads[(a & c.mask) as usize];
             prefetch(&self.nodes[m as usize]);
-            prefetch(&self.items[m as usize]);
+            prefetch_once(self.items.get(m));
+        }
+        for _ in 0..2 {
+            let Some(a) = c.next_within(c.near, NEAR_BUCKETS) else {
+                c.near = c.near.max(c.first.saturating_add(NEAR_BUCKETS)).min(c.hi);
+                break;
+            };
+            c.near = a;
+            let m = self.nodes[c.heads[(a & c.mask) as usize] as usize].next;
+            if m != NIL {
+                prefetch(&self.nodes[m as usize]);
+                prefetch_once(self.items.get(m));
+            }
         }
         n
     }
 }
 
+/// The FIFO order: frames in a ring, in push order. A pop leaves the
+/// frame in its slot (free again) until a push wraps round to it, so it can
+/// be read in place.
+#[derive(Debug, Clone)]
+struct Ring<T> {
+    slots: Vec<Released<T>>,
+    head: usize,
+    len: usize,
+    last_release_ns: u64,
+}
+
+impl<T: Copy + Default> Ring<T> {
+    fn new(capacity: usize) -> Self {
+        let slots = resident_vec(capacity, Released { release_ns: 0, ingress_index: 0, item: T::default() });
+        Ring { slots, head: 0, len: 0, last_release_ns: 0 }
+    }
+
+    #[inline]
+    fn push(&mut self, release_ns: u64, ingress_index: u64, item: T) -> Result<u64, Full<T>> {
+        let capacity = self.slots.len();
+        if self.len == capacity {
+            return Err(Full(item));
+        }
+        let release_ns = release_ns.max(self.last_release_ns);
+        self.last_release_ns = release_ns;
+        let at = self.head + self.len;
+        self.slots[if at >= capacity { at - capacity } else { at }] = Released { release_ns, ingress_index, item };
+        self.len += 1;
+        Ok(release_ns)
+    }
+
+    /// Takes the first frame out: its slot.
+    #[inline]
+    fn pop(&mut self) -> Option<usize> {
+        if self.len == 0 {
+            return None;
+        }
+        let at = self.head;
+        self.head = if at + 1 == self.slots.len() { 0 } else { at + 1 };
+        self.len -= 1;
+        Some(at)
+    }
+
+    #[inline]
+    fn released(&self, at: usize) -> Released<&T> {
+        let r = &self.slots[at];
+        Released { release_ns: r.release_ns, ingress_index: r.ingress_index, item: &r.item }
+    }
+}
+
 #[derive(Debug, Clone)]
 enum Inner<T> {
-    Fifo { ring: VecDeque<Released<T>>, last_release_ns: u64 },
+    Fifo(Ring<T>),
     Reorder(Box<Timeline<T>>),
 }
 
@@ -922,11 +1104,11 @@ pub struct ReleaseQueue<T> {
 impl<T: Copy + Default> ReleaseQueue<T> {
     /// The memory one frame of capacity takes in a queue of this order: for
     /// `Reorder`, the slab's node and item (the calendar's bucket heads and
-    /// bitmaps add at most 4.2 bytes a frame, left out of this figure).
+    /// bitmaps add at most 16.5 bytes a frame, left out of this figure).
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),
-            QueueOrder::Reorder => size_of::<Node>() + size_of::<T>(),
+            QueueOrder::Reorder => size_of::<Node>() + Items::<T>::bytes(),
         }
     }
 
@@ -948,12 +1130,7 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     pub fn try_new(order: QueueOrder, capacity: usize) -> Result<Self, CapacityError> {
         Self::check_capacity(order, capacity)?;
         let inner = match order {
-            QueueOrder::Fifo => {
-                let mut ring = VecDeque::with_capacity(capacity);
-                ring.resize(capacity, Released { release_ns: 0, ingress_index: 0, item: T::default() });
-                ring.clear();
-                Inner::Fifo { ring, last_release_ns: 0 }
-            }
+            QueueOrder::Fifo => Inner::Fifo(Ring::new(capacity)),
             QueueOrder::Reorder => Inner::Reorder(Box::new(Timeline::new(capacity))),
         };
         Ok(ReleaseQueue { inner, capacity })
@@ -979,7 +1156,7 @@ impl<T: Copy + Default> ReleaseQueue<T> {
 
     pub fn len(&self) -> usize {
         match &self.inner {
-            Inner::Fifo { ring, .. } => ring.len(),
+            Inner::Fifo(ring) => ring.len,
             Inner::Reorder(t) => t.len,
         }
     }
@@ -994,15 +1171,7 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     #[inline]
     pub fn push(&mut self, release_ns: u64, ingress_index: u64, item: T) -> Result<u64, Full<T>> {
         match &mut self.inner {
-            Inner::Fifo { ring, last_release_ns } => {
-                if ring.len() == self.capacity {
-                    return Err(Full(item));
-                }
-                let release_ns = release_ns.max(*last_release_ns);
-                *last_release_ns = release_ns;
-                ring.push_back(Released { release_ns, ingress_index, item });
-                Ok(release_ns)
-            }
+            Inner::Fifo(ring) => ring.push(release_ns, ingress_index, item),
             Inner::Reorder(t) => t.push(release_ns, ingress_index, item),
         }
     }
@@ -1011,7 +1180,7 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     #[inline]
     pub fn next_release_ns(&self) -> Option<u64> {
         match &self.inner {
-            Inner::Fifo { ring, .. } => ring.front().map(|r| r.release_ns),
+            Inner::Fifo(ring) => (ring.len > 0).then(|| ring.slots[ring.head].release_ns),
             Inner::Reorder(t) => t.next_release_ns(),
         }
     }
@@ -1028,9 +1197,34 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     /// Takes the next frame regardless of its time (shutdown, draining).
     #[inline]
     pub fn pop(&mut self) -> Option<Released<T>> {
+        self.pop_ref().map(|r| Released { release_ns: r.release_ns, ingress_index: r.ingress_index, item: *r.item })
+    }
+
+    /// [`pop_due`](Self::pop_due), the item read in place: it stays in the
+    /// queue's memory, free again, until the next push (which the borrow
+    /// holds off), so a caller that copies it on (the emulator, into the
+    /// publisher's loan) copies it once, not twice.
+    #[inline]
+    pub fn pop_due_ref(&mut self, now_ns: u64) -> Option<Released<&T>> {
+        match self.next_release_ns() {
+            Some(t) if t <= now_ns => self.pop_ref(),
+            _ => None,
+        }
+    }
+
+    /// [`pop`](Self::pop), the item read in place (see
+    /// [`pop_due_ref`](Self::pop_due_ref)).
+    #[inline]
+    pub fn pop_ref(&mut self) -> Option<Released<&T>> {
         match &mut self.inner {
-            Inner::Fifo { ring, .. } => ring.pop_front(),
-            Inner::Reorder(t) => t.pop(),
+            Inner::Fifo(ring) => {
+                let at = ring.pop()?;
+                Some(ring.released(at))
+            }
+            Inner::Reorder(t) => {
+                let n = t.pop()?;
+                Some(t.released(n))
+            }
         }
     }
 }

@@ -284,8 +284,8 @@ impl<T: Carried> Link<T> {
     /// Releases into `sink` every item due at `now`, oldest first.
     #[inline]
     pub fn release_due(&mut self, now: u64, sink: &mut impl Release<T>) {
-        while let Some(r) = self.inj.pop_due(now) {
-            let release_ns = match sink.release(&r.item, r.release_ns) {
+        while let Some(r) = self.inj.pop_due_ref(now) {
+            let release_ns = match sink.release(r.item, r.release_ns) {
                 Ok(t) => t,
                 Err((t, e)) => {
                     self.send_errors += 1;
