@@ -205,14 +205,15 @@ pub struct EmulatorProcess {
 pub const TAKE_MAX: usize = 64;
 
 /// How close a release must be for an idle loop to prepare it now and wait
-/// for its moment on the clock alone rather than poll its ports once more:
-/// a little more than one idle turn (the ingress, feedback and return
-/// polls, 150–300 ns here) plus the release's own work (the queue's pop and
-/// the copy into the publisher's sample), so that a release is stamped
-/// within a clock read of its time instead of anywhere in the turn that
-/// straddles it, after that work. The loop only does so when its last look
-/// at the ingress found nothing, so a busy stream never waits.
-pub const RELEASE_SPIN_NS: u64 = 400;
+/// for its moment on the clock alone rather than poll its ports once more.
+/// A release is then stamped within a clock read of its time, after the
+/// queue's pop and the copy into the publisher's sample, instead of anywhere
+/// in the turn that straddles it. The window is a few idle turns (150–350 ns
+/// each here, longer when a frame comes in), so that the loop sees every
+/// release inside it at least once. The loop only prepares when its last
+/// look at the ingress found nothing, so a busy stream never waits; an idle
+/// one may take in a frame up to this much later.
+pub const RELEASE_SPIN_NS: u64 = 1_000;
 
 /// What one receive gave.
 enum Taken {
