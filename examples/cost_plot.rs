@@ -21,7 +21,7 @@ use std::path::Path;
 const AXES: [(&str, &str, &str, bool); 4] = [
     ("rate", "Emulator's CPU per frame against the rate", "frames per second", true),
     ("depth", "Release queue: push + pop against its depth", "frames held", true),
-    ("streams", "Release lateness p99 against the stream count (1 kHz each)", "streams", true),
+    ("streams", "Release lateness and ingress wait against the stream count (1 kHz each)", "streams", true),
     ("payload", "Emulator's cost per payload against its size", "payload bytes", true),
 ];
 
@@ -53,6 +53,9 @@ fn parse(csv: &str) -> Result<Points, String> {
             continue;
         }
         let f: Vec<&str> = line.splitn(8, ',').collect();
+        if f.len() < 4 {
+            return Err(format!("docs/cost.csv line {}: fewer than 4 columns", i + 1));
+        }
         let num = |k: usize| f.get(k).and_then(|v| v.trim().parse::<f64>().ok()).ok_or(format!("docs/cost.csv line {}: column {} is not a number", i + 1, k + 1));
         let (x, ns) = (num(1)?, num(3)?);
         out.entry(f[0].to_string()).or_default().entry(f[2].to_string()).or_default().push((x, ns));
@@ -63,7 +66,9 @@ fn parse(csv: &str) -> Result<Points, String> {
 fn figure(axis: &str, title: &str, x_desc: &str, log: bool, series: &BTreeMap<String, Vec<(f64, f64)>>) -> Result<String, String> {
     let all = || series.values().flatten();
     let (x0, x1) = all().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let (y1,) = (all().fold(0.0_f64, |m, p| m.max(p.1)),);
+    let (y0, y1) = all().fold((f64::MAX, 0.0_f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    // Figures that span more than a decade are read on a log scale.
+    let y = if y1 > 20.0 * y0 { Scale::log(y0 / 1.5..y1 * 1.5) } else { Scale::linear(0.0..y1 * 1.15) };
     let scale = |lo: f64, hi: f64| if log { Scale::log(lo / 1.5..hi * 1.5) } else { Scale::linear(lo..hi) };
     let lines = series
         .iter()
@@ -77,7 +82,7 @@ fn figure(axis: &str, title: &str, x_desc: &str, log: bool, series: &BTreeMap<St
         x_desc,
         y_desc: "ns",
         x: scale(x0, x1),
-        y: Scale::linear(0.0..y1 * 1.15),
+        y,
         x_fmt: &plot::short,
         y_fmt: &plot::short,
         lines,
