@@ -23,7 +23,7 @@ use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::scenario::{Scenario, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
 use crate::service::feedback::{FeedbackPath, FeedbackReport};
-use crate::service::link::{Arrival, Link, LinkMeasures};
+use crate::service::link::{Arrival, Link, LinkMeasures, OnTime};
 use crate::service::udp::{self, ReturnPath};
 use crate::service::signals;
 use crate::transport::{FrameSink, FrameSource, PortError};
@@ -290,7 +290,11 @@ impl Forward {
     /// waits at the ingress, up to [`TAKE_MAX`] ([`Forward::take`]).
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
-        self.link.release_due(self.due_until(now_ns()), sink);
+        let now = now_ns();
+        match self.due_until(now) {
+            t if t > now => self.link.release_due(t, &mut OnTime(sink)),
+            _ => self.link.release_due(now, sink),
+        }
         if let Some(r) = ret {
             r.poll(source.sender());
         }
@@ -307,8 +311,8 @@ impl Forward {
     /// the loop is idle and its next release falls within
     /// `release_spin_ns`, that release's time. The release is then taken
     /// out of the queue and written into its sample ahead of time, and its
-    /// stamp waits on the clock for the moment itself (a frame sink's
-    /// release never sends before the scheduled time). Nothing is taken in meanwhile, so
+    /// stamp waits on the clock for the moment itself ([`OnTime`]: never
+    /// sent before the scheduled time). Nothing is taken in meanwhile, so
     /// no frame can come due earlier.
     #[inline]
     fn due_until(&self, now: u64) -> u64 {

@@ -68,9 +68,7 @@ impl Carried for FrameSample {
 /// Where a link's released items go.
 pub trait Release<T> {
     /// Sends `item`, due at `scheduled_ns`. Returns the time it went out
-    /// (taken as late as possible), or that time and the error. The frame
-    /// sinks' impl, the only one the loop hands an item ahead of its time
-    /// (`Forward::turn`), waits for that time before it sends.
+    /// (taken as late as possible), or that time and the error.
     fn release(&mut self, item: &T, scheduled_ns: u64) -> Result<u64, (u64, PortError)>;
 }
 
@@ -79,19 +77,36 @@ pub trait Release<T> {
 impl<K: FrameSink> Release<FrameSample> for K {
     #[inline]
     fn release(&mut self, item: &FrameSample, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
-        let mut release_ns = 0;
-        let sent = self.send_with(item, |s| {
-            s.release_sched_ns = scheduled_ns;
-            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
-            // A release prepared ahead of its time waits for it here, the
-            // last thing before the send.
-            release_ns = crate::clock::now_from_ns(scheduled_ns);
-            s.release_ns = release_ns;
-        });
-        match sent {
-            Ok(_) => Ok(release_ns),
-            Err(e) => Err((now_ns(), e)),
-        }
+        release_frame(self, item, scheduled_ns, now_ns)
+    }
+}
+
+/// A frame sink handed releases ahead of their time (`Forward::turn`
+/// prepares a release due within a few turns): each waits on the clock for
+/// its scheduled moment, the last thing before the send, so it is never
+/// sent early and is stamped within a clock read of its time.
+pub struct OnTime<'a, K>(pub &'a mut K);
+
+impl<K: FrameSink> Release<FrameSample> for OnTime<'_, K> {
+    #[inline]
+    fn release(&mut self, item: &FrameSample, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
+        release_frame(self.0, item, scheduled_ns, || crate::clock::now_from_ns(scheduled_ns))
+    }
+}
+
+/// Sends `item` into `sink`, stamped by `stamp_clock` as late as possible.
+#[inline]
+fn release_frame<K: FrameSink>(sink: &mut K, item: &FrameSample, scheduled_ns: u64, stamp_clock: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
+    let mut release_ns = 0;
+    let sent = sink.send_with(item, |s| {
+        s.release_sched_ns = scheduled_ns;
+        s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+        release_ns = stamp_clock();
+        s.release_ns = release_ns;
+    });
+    match sent {
+        Ok(_) => Ok(release_ns),
+        Err(e) => Err((now_ns(), e)),
     }
 }
 
