@@ -13,8 +13,11 @@ import iceoryx2 as iox
 
 from .payload import INTERFACE_VERSION, FeedbackSample, FrameSample
 
-#: The channels of a run: the last component of each service name.
-CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out")
+#: The channels of a run: the last component of each service name. The
+#: video channels (``[u8]`` slices with a ``netfi::VideoHeader.v1`` header,
+#: docs/interface.md) are named here; this module has no payload type for
+#: them yet.
+CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out", "video", "video_out")
 #: The roles a node may take: the last component of its node name.
 ROLES = ("console", "emulator", "simulator", "tool")
 
