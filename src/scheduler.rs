@@ -32,7 +32,8 @@
 //!   of the first frame of each bucket up to 32 ahead, and of the second of
 //!   those up to 12 ahead (its place is known once the first is in cache):
 //!   at depth those lines were last touched at the frame's push, long out
-//!   of cache.
+//!   of cache. A pop prefetches the next frame's item once more, from
+//!   whichever cache still holds it.
 //! - A hierarchical **timing wheel** takes what the calendar does not: a
 //!   frame outside its window (the first frames of a stream, before the
 //!   width fits; a frame due before everything held; an outlier far ahead)
@@ -1005,34 +1006,43 @@ impl<T: Copy + Default> Timeline<T> {
         Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items.get(n) }
     }
 
-    /// The calendar's earliest frame; the frames a few buckets on are
-    /// prefetched, so that at depth their lines (node and item, cold since
-    /// their push) arrive before they are taken.
+    /// The calendar's earliest frame. What the following pops take is
+    /// prefetched: the item of the new first frame (the next pop's, if the
+    /// wheel holds none earlier), and, a few buckets on, the node and item
+    /// of the first frame of the next occupied bucket and of the second of
+    /// the one after the `near` cursor, so that at depth their lines (cold
+    /// since their push) arrive before they are taken. One bucket per
+    /// cursor and pop: a pop takes at most one bucket's frame, so the
+    /// cursors keep their distance.
     #[inline]
     fn pop_calendar(&mut self) -> u32 {
         let n = self.calendar.remove_first(&mut self.nodes);
         let c = &mut self.calendar;
-        for _ in 0..2 {
-            let Some(a) = c.next_within(c.ahead, AHEAD_BUCKETS) else {
-                c.ahead = c.ahead.max(c.first.saturating_add(AHEAD_BUCKETS)).min(c.hi);
-                break;
-            };
-            c.ahead = a;
-            let m = c.heads[(a & c.mask) as usize];
-            prefetch(&self.nodes[m as usize]);
-            prefetch_once(self.items.get(m));
+        if c.len > 0 {
+            // Prefetched once already, a few buckets back; at depth the line
+            // is often gone again by now (the streaming items evict it), and
+            // from the outer caches it arrives within the caller's turn.
+            prefetch(self.items.get(c.head()));
         }
-        for _ in 0..2 {
-            let Some(a) = c.next_within(c.near, NEAR_BUCKETS) else {
-                c.near = c.near.max(c.first.saturating_add(NEAR_BUCKETS)).min(c.hi);
-                break;
-            };
-            c.near = a;
-            let m = self.nodes[c.heads[(a & c.mask) as usize] as usize].next;
-            if m != NIL {
+        match c.next_within(c.ahead, AHEAD_BUCKETS) {
+            Some(a) => {
+                c.ahead = a;
+                let m = c.heads[(a & c.mask) as usize];
                 prefetch(&self.nodes[m as usize]);
                 prefetch_once(self.items.get(m));
             }
+            None => c.ahead = c.ahead.max(c.first.saturating_add(AHEAD_BUCKETS)).min(c.hi),
+        }
+        match c.next_within(c.near, NEAR_BUCKETS) {
+            Some(a) => {
+                c.near = a;
+                let m = self.nodes[c.heads[(a & c.mask) as usize] as usize].next;
+                if m != NIL {
+                    prefetch(&self.nodes[m as usize]);
+                    prefetch_once(self.items.get(m));
+                }
+            }
+            None => c.near = c.near.max(c.first.saturating_add(NEAR_BUCKETS)).min(c.hi),
         }
         n
     }

@@ -169,10 +169,85 @@ proptest! {
         check(QueueOrder::Reorder, 1000, &ops)?;
     }
 
+    /// Pushes and pops in short runs, the pushes' times before everything
+    /// held, at the present, or far ahead, on a queue first filled deep
+    /// enough that the calendar holds frames: a frame just pushed leaves in
+    /// order and counts in the next release time, wherever it lands (a new
+    /// earliest frame, a tie, the calendar's window or past it), also when
+    /// the frames just pushed are the only ones held.
+    #[test]
+    fn reorder_with_frames_just_pushed_matches_the_sorted_model(
+        fill in 0usize..300,
+        runs in proptest::collection::vec((proptest::collection::vec(staged_push(), 0..7), 0usize..7, any::<bool>()), 0..80),
+    ) {
+        check(QueueOrder::Reorder, 2000, &runs_of(fill, &runs))?;
+    }
+
     #[test]
     fn fifo_matches_the_ordered_model(capacity in 1usize..40, ops in proptest::collection::vec(op(), 0..300)) {
         check(QueueOrder::Fifo, capacity, &ops)?;
     }
+}
+
+/// A push's time relative to what a queue of [`runs_of`] holds: before
+/// every frame (its fill starts at 10 ms), a tie with the fill's first
+/// frame, near the present, or far ahead.
+fn staged_push() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        3 => (0u64..10_000_000).prop_map(|offset_ns| Op::Push { base: Base::Zero, offset_ns, ingress_random: None }),
+        1 => Just(Op::Push { base: Base::Zero, offset_ns: 10_000_000, ingress_random: None }),
+        3 => (0u64..5_000).prop_map(|offset_ns| Op::Push { base: Base::Now, offset_ns, ingress_random: None }),
+        2 => (0u64..400_000_000).prop_map(|offset_ns| Op::Push { base: Base::Now, offset_ns, ingress_random: None }),
+    ]
+}
+
+/// `fill` frames 10 ms and more ahead (a delay spread of about 5 ms), then
+/// each run: its pushes, `pops` pops, and a due-pop at the present when
+/// the flag is set; time moves 3 µs a run.
+fn runs_of(fill: usize, runs: &[(Vec<Op>, usize, bool)]) -> Vec<Op> {
+    let mut ops: Vec<Op> = (0..fill as u64)
+        .map(|i| Op::Push { base: Base::Zero, offset_ns: 10_000_000 + netfi::scenario::splitmix64(i) % 5_000_000, ingress_random: None })
+        .collect();
+    for (pushes, pops, due) in runs {
+        ops.extend(pushes.iter().cloned());
+        ops.extend(std::iter::repeat_n(Op::Pop, *pops));
+        if *due {
+            ops.push(Op::PopDue { base: Base::Now, offset_ns: 0 });
+        }
+        ops.push(Op::Advance { step_ns: 3_000 });
+    }
+    ops
+}
+
+/// A frame just pushed, due before every frame a deep queue holds, leaves
+/// first and its time is the next release time; a tie with the earliest
+/// frame leaves in ingress order; frames pushed into an empty queue leave
+/// in order.
+#[test]
+fn frames_just_pushed_leave_in_order() {
+    let mut q = ReleaseQueue::<u64>::new(QueueOrder::Reorder, 1 << 12);
+    for i in 0..1000u64 {
+        q.push(1_000_000 + netfi::scenario::splitmix64(i) % 1_000_000, i, i).unwrap();
+    }
+    q.push(500, 1000, 1000).unwrap();
+    assert_eq!(q.next_release_ns(), Some(500));
+    assert_eq!(q.pop_due(499), None);
+    assert_eq!(q.pop_due(500).map(|r| (r.release_ns, r.item)), Some((500, 1000)));
+    // A tie with the earliest frame held: ingress order decides.
+    let first = q.next_release_ns().unwrap();
+    q.push(first, 1001, 1001).unwrap();
+    let r = q.pop().unwrap();
+    assert!(r.release_ns == first && r.ingress_index < 1000, "{r:?}");
+    let r = q.pop().unwrap();
+    assert_eq!((r.release_ns, r.ingress_index), (first, 1001));
+    while q.pop().is_some() {}
+    for (i, t) in [30u64, 10, 20].into_iter().enumerate() {
+        q.push(t, i as u64, i as u64).unwrap();
+    }
+    assert_eq!(q.next_release_ns(), Some(10));
+    let got: Vec<u64> = std::iter::from_fn(|| q.pop_due(u64::MAX)).map(|r| r.release_ns).collect();
+    assert_eq!(got, vec![10, 20, 30]);
+    assert_eq!(q.next_release_ns(), None);
 }
 
 /// Many frames on one nanosecond, pushed in shuffled ingress order and
