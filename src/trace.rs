@@ -635,6 +635,80 @@ pub fn write_csv(path: &Path, rows: &[Row], recv_ns: &[u64]) -> std::io::Result<
     w.flush()
 }
 
+/// A CSV written as its rows come, by the thread that has them (the
+/// simulator's `received.csv`, the console's `video_received.csv`):
+/// buffered, flushed at least once a second when rows keep coming
+/// ([`CsvLog::tick`]), so that memory stays flat however long the run and
+/// a killed process leaves its rows up to its last second. Nothing is
+/// allocated per row. The first failed write is kept, later rows are
+/// skipped, and [`CsvLog::finish`] reports it naming the file (a full disk
+/// is an error, not a cut file).
+pub struct CsvLog {
+    path: PathBuf,
+    w: std::io::BufWriter<std::fs::File>,
+    error: Option<std::io::Error>,
+    rows: u64,
+    last_flush_ns: u64,
+}
+
+impl CsvLog {
+    /// Creates `path` with its `header` line; an error names the file.
+    pub fn create(path: PathBuf, header: &str) -> anyhow::Result<CsvLog> {
+        let open = || -> std::io::Result<std::io::BufWriter<std::fs::File>> {
+            let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&path)?);
+            writeln!(w, "{header}")?;
+            Ok(w)
+        };
+        let w = open().with_context(|| format!("writing {}", path.display()))?;
+        Ok(CsvLog { path, w, error: None, rows: 0, last_flush_ns: 0 })
+    }
+
+    /// Appends one row, which `write` writes (its line's end included).
+    #[inline]
+    pub fn push(&mut self, write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>) {
+        if self.error.is_none() {
+            match write(&mut self.w) {
+                Ok(()) => self.rows += 1,
+                Err(e) => self.error = Some(e),
+            }
+        }
+    }
+
+    /// Flushes what is buffered if the last flush was a second or more
+    /// before `now_ns` (any clock, as long as the caller keeps to one).
+    #[inline]
+    pub fn tick(&mut self, now_ns: u64) {
+        if now_ns.saturating_sub(self.last_flush_ns) >= FLUSH_EVERY.as_nanos() as u64 {
+            self.last_flush_ns = now_ns;
+            if self.error.is_none() {
+                if let Err(e) = self.w.flush() {
+                    self.error = Some(e);
+                }
+            }
+        }
+    }
+
+    /// Rows written so far.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Writes what is buffered; the first failed write, naming the file.
+    pub fn finish(mut self) -> anyhow::Result<PathBuf> {
+        let result = match self.error.take() {
+            Some(e) => Err(e),
+            None => self.w.flush(),
+        };
+        result.with_context(|| format!("writing {}", self.path.display()))?;
+        Ok(self.path)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -686,6 +760,32 @@ mod tests {
             assert!(tags.iter().all(|t| t == tag), "{tags:?}");
         }
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_csv_log_streams_its_rows_and_names_its_file_when_a_write_fails() {
+        let path = std::env::temp_dir().join(format!("netfi-csvlog-{}.csv", std::process::id()));
+        let mut log = CsvLog::create(path.clone(), "a,b").unwrap();
+        log.push(|w| writeln!(w, "1,2"));
+        // Not yet a second since the last flush (none: at 0): nothing asked.
+        log.tick(1);
+        log.tick(FLUSH_EVERY.as_nanos() as u64);
+        // Flushed while the log is still open: a killed process keeps it.
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,b\n1,2\n");
+        log.push(|w| writeln!(w, "3,4"));
+        assert_eq!(log.rows(), 2);
+        assert_eq!(log.finish().unwrap(), path);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,b\n1,2\n3,4\n");
+        std::fs::remove_file(&path).ok();
+        // /dev/full takes the file but refuses every write.
+        if Path::new("/dev/full").exists() {
+            let mut log = CsvLog::create(PathBuf::from("/dev/full"), "a").unwrap();
+            log.push(|w| w.write_all(&[b'x'; 1 << 17]));
+            log.push(|w| writeln!(w, "never"));
+            assert_eq!(log.rows(), 0);
+            let e = format!("{:#}", log.finish().unwrap_err());
+            assert!(e.contains("/dev/full"), "{e}");
+        }
     }
 
     #[test]

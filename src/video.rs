@@ -112,23 +112,108 @@ impl Freezes {
         Freezes { threshold_ns: (2e9 / frame_hz) as u64, last_ns: None, count: 0, total_ns: 0, longest_ns: 0 }
     }
 
-    /// A frame displayed at `t_ns` (times do not decrease).
+    /// A frame displayed at `t_ns` (times do not decrease); the gap since
+    /// the frame displayed before it (none for the first), a freeze when
+    /// [`Freezes::is_freeze`].
     #[inline]
-    pub fn displayed(&mut self, t_ns: u64) {
-        if let Some(last) = self.last_ns {
-            let gap = t_ns.saturating_sub(last);
-            if gap > self.threshold_ns {
-                self.count += 1;
-                self.total_ns += gap;
-                self.longest_ns = self.longest_ns.max(gap);
-            }
+    pub fn displayed(&mut self, t_ns: u64) -> Option<u64> {
+        let gap = self.last_ns.map(|last| t_ns.saturating_sub(last));
+        if let Some(gap) = gap.filter(|g| self.is_freeze(*g)) {
+            self.count += 1;
+            self.total_ns += gap;
+            self.longest_ns = self.longest_ns.max(gap);
         }
         self.last_ns = Some(t_ns);
+        gap
+    }
+
+    /// Whether a gap between two displayed frames is a freeze.
+    #[inline]
+    pub fn is_freeze(&self, gap_ns: u64) -> bool {
+        gap_ns > self.threshold_ns
     }
 
     /// The threshold, ns.
     pub fn threshold_ns(&self) -> u64 {
         self.threshold_ns
+    }
+}
+
+/// The header line of `video_received.csv`, the console's record of each
+/// video frame it received (docs/spec.md §6).
+pub const RECEIVED_CSV_HEADER: &str =
+    "frame_index,gop_index,key,len,bytes,send_ns,ingress_index,ingress_ns,release_sched_ns,release_ns,recv_ns,delay_ns,fate,displayed,gap_ns,freeze";
+
+/// One video frame the console received: a row of `video_received.csv`.
+/// The header's fields as they arrived, the receive time, and what the
+/// console made of the frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReceivedRow {
+    pub frame_index: u64,
+    pub gop_index: u32,
+    pub key: bool,
+    /// The header's `len`.
+    pub len: u32,
+    /// The bytes that came (the slice's length).
+    pub bytes: u64,
+    pub send_ns: u64,
+    pub ingress_index: u64,
+    pub ingress_ns: u64,
+    pub release_sched_ns: u64,
+    pub release_ns: u64,
+    pub recv_ns: u64,
+    /// Every byte as sent (else damaged).
+    pub whole: bool,
+    /// Whole and newer than the last frame displayed.
+    pub displayed: bool,
+    /// For a displayed frame but the first: the time since the frame
+    /// displayed before it.
+    pub gap_ns: Option<u64>,
+    /// That gap is a freeze (over two frame periods).
+    pub freeze: bool,
+}
+
+impl ReceivedRow {
+    /// Camera send → console receive.
+    #[inline]
+    pub fn delay_ns(&self) -> u64 {
+        self.recv_ns.saturating_sub(self.send_ns)
+    }
+
+    /// Writes the row as a CSV line (nothing allocated).
+    pub fn write(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            self.frame_index,
+            self.gop_index,
+            u8::from(self.key),
+            self.len,
+            self.bytes,
+            self.send_ns,
+            self.ingress_index,
+            self.ingress_ns,
+            self.release_sched_ns,
+            self.release_ns,
+            self.recv_ns,
+            self.delay_ns(),
+            if self.whole { "whole" } else { "damaged" },
+            u8::from(self.displayed),
+            Cell(self.gap_ns),
+            u8::from(self.freeze),
+        )
+    }
+}
+
+/// A CSV cell: the number, or nothing.
+struct Cell(Option<u64>);
+
+impl std::fmt::Display for Cell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(v) => write!(f, "{v}"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -195,13 +280,43 @@ mod tests {
     fn freezes_are_gaps_over_two_periods() {
         let mut f = Freezes::new(50.0); // 20 ms a frame, threshold 40 ms
         assert_eq!(f.threshold_ns(), 40_000_000);
-        for t in [0, 20, 40, 80, 100, 200, 201] {
-            f.displayed(t * 1_000_000);
-        }
+        let gaps: Vec<Option<u64>> = [0, 20, 40, 80, 100, 200, 201].iter().map(|t| f.displayed(t * 1_000_000)).collect();
+        assert_eq!(gaps[0], None);
+        assert_eq!(gaps[3], Some(40_000_000));
+        assert!(!f.is_freeze(40_000_000) && f.is_freeze(40_000_001));
         // 40 → 80 is exactly two periods: no freeze; 100 → 200 is one.
         assert_eq!((f.count, f.total_ns, f.longest_ns), (1, 100_000_000, 100_000_000));
         f.displayed(500_000_000);
         assert_eq!((f.count, f.total_ns, f.longest_ns), (2, 399_000_000, 299_000_000));
+    }
+
+    #[test]
+    fn a_received_row_is_one_csv_line_under_the_header() {
+        let mut r = ReceivedRow {
+            frame_index: 7,
+            gop_index: 0,
+            key: true,
+            len: 1000,
+            bytes: 1000,
+            send_ns: 100,
+            ingress_index: 6,
+            ingress_ns: 110,
+            release_sched_ns: 150,
+            release_ns: 151,
+            recv_ns: 160,
+            whole: true,
+            displayed: true,
+            gap_ns: Some(50_000_000),
+            freeze: true,
+        };
+        let mut out = Vec::new();
+        r.write(&mut out).unwrap();
+        (r.whole, r.displayed, r.gap_ns, r.freeze) = (false, false, None, false);
+        r.write(&mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines, ["7,0,1,1000,1000,100,6,110,150,151,160,60,whole,1,50000000,1", "7,0,1,1000,1000,100,6,110,150,151,160,60,damaged,0,,0"]);
+        assert!(lines.iter().all(|l| l.split(',').count() == RECEIVED_CSV_HEADER.split(',').count()));
     }
 
     #[test]

@@ -109,6 +109,12 @@ pub struct Files {
     pub lateness_hlog: Option<PathBuf>,
     pub end_to_end_hlog: Option<PathBuf>,
     pub report_json: PathBuf,
+    /// The emulator's video trace (`trace_video.csv`), when the run has video.
+    #[serde(default)]
+    pub video_trace: Option<PathBuf>,
+    /// The console's record of the video it received (`video_received.csv`).
+    #[serde(default)]
+    pub video_received: Option<PathBuf>,
 }
 
 /// One quantile of the delay law: as the model gives it, as the emulator
@@ -496,6 +502,9 @@ impl RunReport {
         for h in [&self.files.decision_hlog, &self.files.lateness_hlog, &self.files.end_to_end_hlog].into_iter().flatten() {
             s += &format!("  histogram {}\n", h.display());
         }
+        for v in [&self.files.video_trace, &self.files.video_received].into_iter().flatten() {
+            s += &format!("  video     {}\n", v.display());
+        }
         s += &format!("  report    {}\n", self.files.report_json.display());
         if let Some(st) = &self.streams {
             s += &st.to_text();
@@ -652,6 +661,8 @@ impl RunReport {
                 lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
                 end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
                 report_json: out.join("report.json"),
+                video_trace: emulator.as_ref().and_then(|e| e.video.as_ref()).map(|v| v.trace_path.clone()),
+                video_received: console.as_ref().and_then(|c| c.video.as_ref()).and_then(|v| v.received_csv.clone()),
             },
             console,
             emulator,

@@ -104,6 +104,25 @@ impl Run {
         Witness(Some(child))
     }
 
+    /// The Python viewer of the run's `video_out`, subscribed: its JSON
+    /// summary goes to `viewer.json`, its rows to `viewer.csv`.
+    fn python_viewer(&self, hz: &str) -> Witness {
+        let ready = self.out.join("viewer.ready");
+        let child = python("examples/viewer.py", self)
+            .args(["--run-id", &self.id, "--hz", hz, "--timeout-s", "120", "--out"])
+            .arg(self.out.join("viewer.json"))
+            .arg("--csv")
+            .arg(self.out.join("viewer.csv"))
+            .arg("--ready")
+            .arg(&ready)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        wait_file(&ready);
+        Witness(Some(child))
+    }
+
     fn python_robot(&self) -> Witness {
         let ready = self.out.join("robot.ready");
         let child = python("examples/robot.py", self)
@@ -734,4 +753,217 @@ fn bad_input_is_counted_by_kind_and_its_sender_named() {
     let from: Vec<&str> = b["from"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
     assert!(from.iter().any(|w| w.starts_with("console") && w.contains("pid")), "{b}");
     assert_eq!(e["ended_by"], "end_marker");
+}
+
+/// `netfi::VideoHeader.v1` in Python is the Rust header: type name, size,
+/// alignment, every offset, the flags, the channels' limits; and the
+/// Python camera's group of pictures is the Rust camera's.
+#[test]
+fn the_python_video_header_is_the_rust_one() {
+    if !python_ready() {
+        return;
+    }
+    use netfi::sample::VideoHeader;
+    use netfi::transport::ipc::video::{DEFAULT_VIDEO_MAX_BYTES, VIDEO_BUFFER_FRAMES, VIDEO_HELD_FRAMES, VIDEO_INITIAL_SLICE_BYTES};
+    let gops = [(8e6, 60.0, 30u32, 8.0), (2e6, 5.0, 5, 8.0), (1e6, 60.0, 1, 1.0), (3.3e6, 59.94, 12, 5.5), (8e6, 10.0, 10, 8.0)];
+    let script = format!(
+        r#"
+import json, typing, iceoryx2, netfi_iox as n, netfi_iox.video as v
+l = n.video_header_layout()
+l["iceoryx2_type_name"] = iceoryx2.get_type_name(n.VideoHeader)
+l["flags"] = [n.FLAG_VIDEO_END, n.FLAG_KEY]
+l["limits"] = [v.VIDEO_BUFFER_FRAMES, v.VIDEO_HELD_FRAMES, v.VIDEO_INITIAL_SLICE_BYTES, v.DEFAULT_VIDEO_MAX_BYTES, list(v.channel_limits("video")), list(v.channel_limits("video_out"))]
+l["payload"] = iceoryx2.get_type_name(typing.get_args(v.VIDEO_PAYLOAD)[0])
+l["gops"] = [[g.key_bytes, g.delta_bytes] for g in (n.Gop(*p) for p in {gops})]
+print(json.dumps(l))
+"#,
+        gops = serde_json::to_string(&gops.iter().map(|g| serde_json::json!([g.0, g.1, g.2, g.3])).collect::<Vec<_>>()).unwrap()
+    );
+    let o = run_ok(
+        {
+            let mut c = Command::new("python3");
+            c.env("PYTHONPATH", root().join("clients/python")).args(["-c", &script]);
+            c
+        },
+        "python3 netfi_iox.video_header_layout",
+    );
+    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // SAFETY: type_name only returns the #[type_name] attribute's string.
+    let rust_name = unsafe { <VideoHeader as iceoryx2::prelude::ZeroCopySend>::type_name() };
+    assert_eq!(l["iceoryx2_type_name"], rust_name);
+    assert_eq!(l["type_name"], VideoHeader::TYPE_NAME);
+    // SAFETY: as above.
+    assert_eq!(l["payload"], unsafe { <u8 as iceoryx2::prelude::ZeroCopySend>::type_name() });
+    assert_eq!(u(&l["size"]), core::mem::size_of::<VideoHeader>() as u64);
+    assert_eq!(u(&l["alignment"]), core::mem::align_of::<VideoHeader>() as u64);
+    let off = &l["offsets"];
+    macro_rules! same_offset {
+        ($($f:ident),*) => {$(
+            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(VideoHeader, $f) as u64, stringify!($f));
+        )*};
+    }
+    same_offset!(send_ns, frame_index, ingress_index, ingress_ns, release_sched_ns, release_ns, len, flags, gop_index, _reserved);
+    assert_eq!(off.as_object().unwrap().len(), 10, "a field the Rust type lacks: {off}");
+    assert_eq!(l["flags"], serde_json::json!([VideoHeader::FLAG_END, VideoHeader::FLAG_KEY]));
+    assert_eq!(
+        l["limits"],
+        serde_json::json!([
+            VIDEO_BUFFER_FRAMES,
+            VIDEO_HELD_FRAMES,
+            VIDEO_INITIAL_SLICE_BYTES,
+            DEFAULT_VIDEO_MAX_BYTES,
+            [1, VIDEO_HELD_FRAMES],
+            [netfi::transport::MAX_SUBSCRIBERS_PER_CHANNEL, 1]
+        ])
+    );
+    for (g, py) in gops.iter().zip(l["gops"].as_array().unwrap()) {
+        let rust = netfi::video::Gop::new(g.0, g.1, g.2, g.3).unwrap();
+        assert_eq!(py, &serde_json::json!([rust.key_bytes, rust.delta_bytes]), "{g:?}");
+    }
+}
+
+/// A child's stderr, read on a thread of its own: waits for a line that
+/// starts with `prefix`, and keeps draining after it.
+fn wait_for_line(child: &mut Child, prefix: &str) {
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(std::io::BufReader::new(stderr)).map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut seen = Vec::new();
+    loop {
+        match rx.recv_timeout(Duration::from_secs(60)) {
+            Ok(l) if l.starts_with(prefix) => return,
+            Ok(l) => seen.push(l),
+            Err(e) => panic!("no line `{prefix}…` ({e}); stderr so far:\n{}", seen.join("\n")),
+        }
+    }
+}
+
+/// The rows of a `video_received.csv`-shaped file, by column name.
+fn video_rows(path: &Path) -> Vec<std::collections::BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    assert_eq!(header.join(","), netfi::video::RECEIVED_CSV_HEADER, "{}", path.display());
+    lines.map(|l| header.iter().cloned().zip(l.split(',').map(String::from)).collect()).collect()
+}
+
+/// The Python camera → netfi emulator (video path, Normal) → the Python
+/// viewer and netfi's console, side by side on `video_out`: every frame
+/// the camera sent entered, was released, and reached both whole; both
+/// recorded the same header of each frame; Rust checked the Python
+/// camera's bytes, Python the Rust emulator's copy.
+#[test]
+fn the_python_camera_through_the_emulator_to_the_python_viewer_and_netfis_console() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("video-py");
+    let viewer = run.python_viewer("60");
+    let video = ["--video-mbps", "2", "--video-hz", "60", "--video-gop", "30"];
+    let emu = run.emulator("Normal", &[&["--seed", "1", "--no-feedback"][..], &video].concat());
+    // netfi's console drives the forward stream (until told to stop) and
+    // receives the video too; it has subscribed once it streams.
+    let mut console = netfi()
+        .args(["console", "--run-id", &run.id, "--duration-s", "600", "--rate-hz", "1000", "--no-direct", "--seed", "2"])
+        .args(video)
+        .arg("--out")
+        .arg(&run.out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_line(&mut console, "console: ");
+    let console = Witness(Some(console));
+    let mut camera = python("examples/camera.py", &run);
+    camera.args(["--run-id", &run.id, "--mbps", "2", "--hz", "60", "--gop", "30", "--frames", "90", "--out"]).arg(run.out.join("camera.json"));
+    run_ok(camera, "python camera");
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(console.0.as_ref().unwrap().id() as i32, libc::SIGINT) }, 0);
+    console.finish("netfi console", Duration::from_secs(60));
+    emu.finish("emulator", Duration::from_secs(60));
+    viewer.finish("viewer", Duration::from_secs(60));
+    let (cam, e, w, c) = (run.json("camera.json"), run.json("emulator.json"), run.json("viewer.json"), run.json("console.json"));
+    assert_eq!((u(&cam["frames_sent"]), u(&cam["send_errors"]), u(&cam["sent_unsubscribed"])), (90, 0, 0), "{cam}");
+    let ev = &e["video"];
+    assert_eq!((u(&ev["sent_by_camera"]), u(&ev["entered"]), u(&ev["delivered"])), (90, 90, 90), "{ev:#}");
+    assert_eq!((u(&ev["delivered_unsubscribed"]), u(&ev["held_at_end"])), (0, 0), "{ev:#}");
+    assert_eq!(ev["balanced"], true);
+    assert_eq!(u(&ev["bytes_entered"]), u(&cam["bytes_sent"]));
+    // The Python viewer: every frame the emulator released, whole, in order.
+    assert_eq!((u(&w["received"]), u(&w["whole"]), u(&w["damaged"]), u(&w["late"])), (90, 90, 0, 0), "{w}");
+    assert_eq!(u(&w["released_by_emulator"]), 90, "{w}");
+    assert_eq!((&w["balanced"], &w["indices_increasing"], &w["ended_by"]), (&Value::Bool(true), &Value::Bool(true), &Value::from("end_marker")), "{w}");
+    assert_eq!((u(&w["key_frames"]), u(&w["last_frame_index"]), u(&w["bytes"])), (3, 89, u(&cam["bytes_sent"])), "{w}");
+    assert_eq!(u(&w["delay_ms"]["count"]), 90);
+    // netfi's console: the Python camera's bytes are whole to Rust too.
+    let cv = &c["video"];
+    assert_eq!((u(&cv["received"]), u(&cv["whole"]), u(&cv["damaged"])), (90, 90, 0), "{cv:#}");
+    assert_eq!(cv["released_by_emulator"], 90);
+    assert_eq!(c["ended_by"], "signal");
+    // Both records: one row per frame, 0 … 89, the same header of each.
+    let (rs, py) = (video_rows(&run.out.join("video_received.csv")), video_rows(&run.out.join("viewer.csv")));
+    assert_eq!((rs.len(), py.len()), (90, 90));
+    for (k, (a, b)) in rs.iter().zip(&py).enumerate() {
+        assert_eq!(a["frame_index"], k.to_string());
+        for col in ["frame_index", "gop_index", "key", "len", "bytes", "send_ns", "ingress_index", "ingress_ns", "release_sched_ns", "release_ns", "fate"] {
+            assert_eq!(a[col], b[col], "frame {k}, {col}");
+        }
+        assert_eq!(a["key"] == "1", k % 30 == 0, "frame {k}");
+    }
+}
+
+/// netfi's camera (in netfi's simulator) → netfi emulator → the Python
+/// viewer: every frame the Rust camera sent reaches the Python viewer
+/// whole, its sizes the Rust camera's group of pictures.
+#[test]
+fn netfis_camera_through_the_emulator_to_the_python_viewer() {
+    if !python_ready() {
+        return;
+    }
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("video-rs");
+    let viewer = run.python_viewer("60");
+    let video = ["--video-mbps", "4", "--video-hz", "60", "--video-gop", "30"];
+    let sim = netfi()
+        .args(["simulator", "--run-id", &run.id])
+        .args(video)
+        .arg("--out")
+        .arg(&run.out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let sim = Witness(Some(sim));
+    wait_file(&run.out.join("simulator.ready"));
+    let emu = run.emulator("Normal", &[&["--seed", "1"][..], &video].concat());
+    let mut console = netfi();
+    console.args(["console", "--run-id", &run.id, "--frames", "2000", "--rate-hz", "1000", "--seed", "2", "--out"]).arg(&run.out);
+    run_ok(console, "netfi console");
+    emu.finish("emulator", Duration::from_secs(60));
+    sim.finish("simulator", Duration::from_secs(60));
+    viewer.finish("viewer", Duration::from_secs(60));
+    let (s, e, w) = (run.json("simulator.json"), run.json("emulator.json"), run.json("viewer.json"));
+    let cam = &s["camera"];
+    let sent = u(&cam["frames_sent"]);
+    assert!(sent >= 60, "the camera ran while 2000 commands went through: {cam}");
+    assert_eq!((u(&cam["send_errors"]), u(&cam["sent_unsubscribed"])), (0, 0), "{cam}");
+    let ev = &e["video"];
+    assert_eq!((u(&ev["sent_by_camera"]), u(&ev["entered"]), u(&ev["delivered"])), (sent, sent, sent), "{ev:#}");
+    assert_eq!(ev["balanced"], true);
+    assert_eq!((u(&w["received"]), u(&w["whole"]), u(&w["damaged"]), u(&w["late"])), (sent, sent, 0, 0), "{w}");
+    assert_eq!(u(&w["released_by_emulator"]), sent, "{w}");
+    assert_eq!((&w["indices_increasing"], &w["ended_by"]), (&Value::Bool(true), &Value::from("end_marker")), "{w}");
+    assert_eq!(u(&w["key_frames"]), sent.div_ceil(30), "{w}");
+    assert_eq!(u(&w["bytes"]), u(&cam["bytes_sent"]), "{w}");
+    let rows = video_rows(&run.out.join("viewer.csv"));
+    assert_eq!(rows.len() as u64, sent);
+    for (k, r) in rows.iter().enumerate() {
+        let len = if k % 30 == 0 { &cam["key_bytes"] } else { &cam["delta_bytes"] };
+        assert_eq!((r["frame_index"].as_str(), r["len"].as_str(), r["fate"].as_str()), (k.to_string().as_str(), len.to_string().as_str(), "whole"), "{r:?}");
+    }
 }

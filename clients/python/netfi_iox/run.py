@@ -14,9 +14,9 @@ import iceoryx2 as iox
 from .payload import INTERFACE_VERSION, FeedbackSample, FrameSample
 
 #: The channels of a run: the last component of each service name. The
-#: video channels (``[u8]`` slices with a ``netfi::VideoHeader.v1`` header,
-#: docs/interface.md) are named here; this module has no payload type for
-#: them yet.
+#: video channels carry ``[u8]`` slices with a ``netfi::VideoHeader.v1``
+#: header (:mod:`netfi_iox.video`; :meth:`RunNode.video_publisher`,
+#: :meth:`RunNode.video_subscriber`).
 CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out", "video", "video_out")
 #: The roles a node may take: the last component of its node name.
 ROLES = ("console", "emulator", "simulator", "tool")
@@ -283,6 +283,73 @@ class RunNode:
         svc = self.service(channel, payload_type)
         port = svc.subscriber_builder().buffer_size(SUBSCRIBER_BUFFER_FRAMES).create()
         s = Subscriber(svc, port, payload_type)
+        self._ports.append(s)
+        return s
+
+    def video_service(self, channel: str):
+        """Opens (or creates) the video service of ``channel`` (``video`` or
+        ``video_out``) with every attribute of the interface stated: payload
+        ``[u8]``, user header ``netfi::VideoHeader.v1``, the channel's
+        limits (docs/interface.md, "Video")."""
+        from . import video as v
+
+        key = (channel, "video")
+        if key in self._services:
+            return self._services[key]
+        subscribers, borrowed = v.channel_limits(channel)
+        name = service_name(self.run_id, channel)
+        try:
+            svc = (
+                self.node.service_builder(iox.ServiceName.new(name))
+                .publish_subscribe(v.VIDEO_PAYLOAD)
+                .user_header(v.VideoHeader)
+                .max_publishers(MAX_PUBLISHERS_PER_CHANNEL)
+                .max_subscribers(subscribers)
+                .max_nodes(MAX_NODES_PER_CHANNEL)
+                .subscriber_max_buffer_size(v.VIDEO_BUFFER_FRAMES)
+                .subscriber_max_borrowed_samples(borrowed)
+                .history_size(HISTORY_FRAMES)
+                .enable_safe_overflow(False)
+                .open_or_create()
+            )
+        except iox.PublishSubscribeOpenOrCreateError as e:
+            raise InterfaceMismatch(
+                f"cannot open {name} as [u8] with user header {v.VIDEO_HEADER_TYPE_NAME} "
+                f"({v.VIDEO_HEADER_SIZE} bytes, aligned to {v.VIDEO_HEADER_ALIGNMENT}) and the attributes of "
+                f"interface v{INTERFACE_VERSION}: refused (iceoryx2: {e!r})"
+            ) from e
+        self._services[key] = svc
+        return svc
+
+    def video_publisher(self, max_len: int, channel: str = "video") -> "VideoPublisher":
+        """The publishing end of a video channel (a camera's: ``video``),
+        for frames of at most ``max_len`` bytes; its memory starts at
+        ``max_len`` bytes a sample (at most 256 KiB) and grows by powers of
+        two for larger frames, as netfi's publishers do."""
+        from . import video as v
+
+        if max_len < 1:
+            raise ValueError(f"a video publisher's largest frame must be at least 1 byte, got {max_len}")
+        svc = self.video_service(channel)
+        port = (
+            svc.publisher_builder()
+            .initial_max_slice_len(min(max_len, v.VIDEO_INITIAL_SLICE_BYTES))
+            .allocation_strategy(iox.AllocationStrategy.PowerOfTwo)
+            .max_loaned_samples(PUBLISHER_MAX_LOANED_SAMPLES)
+            .backpressure_strategy(iox.BackpressureStrategy.DiscardData)
+            .create()
+        )
+        p = v.VideoPublisher(svc, port, max_len)
+        self._ports.append(p)
+        return p
+
+    def video_subscriber(self, channel: str = "video_out") -> "VideoSubscriber":
+        """A subscribing end of a video channel (a viewer's: ``video_out``)."""
+        from . import video as v
+
+        svc = self.video_service(channel)
+        port = svc.subscriber_builder().buffer_size(v.VIDEO_BUFFER_FRAMES).create()
+        s = v.VideoSubscriber(svc, port)
         self._ports.append(s)
         return s
 
