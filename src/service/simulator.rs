@@ -104,47 +104,6 @@ fn robot_frame(s: &FrameSample) -> Result<(ItpFrame, bool), ()> {
     Ok((ItpFrame::parse_unverified(&view), view.verify_checksum()))
 }
 
-/// `received.csv`, written as frames arrive: the ingress index, receive
-/// time and scheduled release time of each frame that came through the
-/// emulator (a copy, docs/spec.md §3.8, has its original's ingress index;
-/// its scheduled release tells the two apart). Memory stays flat
-/// however long the run; the first failed write is kept and reported, with
-/// the file's name, when the run ends (a full disk is an error, not a cut
-/// file).
-struct ReceivedLog {
-    path: std::path::PathBuf,
-    w: std::io::BufWriter<std::fs::File>,
-    error: Option<std::io::Error>,
-}
-
-impl ReceivedLog {
-    fn create(path: std::path::PathBuf) -> Result<ReceivedLog> {
-        let open = || -> std::io::Result<std::io::BufWriter<std::fs::File>> {
-            let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&path)?);
-            writeln!(w, "ingress_index,recv_ns,release_sched_ns")?;
-            Ok(w)
-        };
-        let w = open().with_context(|| format!("writing {}", path.display()))?;
-        Ok(ReceivedLog { path, w, error: None })
-    }
-
-    fn push(&mut self, ingress_index: u64, recv_ns: u64, release_sched_ns: u64) {
-        if self.error.is_none() {
-            if let Err(e) = writeln!(self.w, "{ingress_index},{recv_ns},{release_sched_ns}") {
-                self.error = Some(e);
-            }
-        }
-    }
-
-    fn finish(mut self) -> Result<()> {
-        let result = match self.error.take() {
-            Some(e) => Err(e),
-            None => self.w.flush(),
-        };
-        result.with_context(|| format!("writing {}", self.path.display()))
-    }
-}
-
 /// What the robot side has seen and done so far: its kinematics, its
 /// latency histograms, `received.csv` and its counts.
 struct Robot {
@@ -155,7 +114,12 @@ struct Robot {
     hop: IntervalLog,
     seen: LatencyHistogram,
     received_csv: PathBuf,
-    received_log: ReceivedLog,
+    /// `received.csv`, written as frames arrive: the ingress index, receive
+    /// time and scheduled release time of each frame that came through the
+    /// emulator (a copy, docs/spec.md §3.8, has its original's ingress
+    /// index; its scheduled release tells the two apart), flushed at least
+    /// once a second ([`crate::trace::CsvLog`]).
+    received_log: crate::trace::CsvLog,
     received: u64,
     received_direct: u64,
     wrong_size: u64,
@@ -175,7 +139,7 @@ impl Robot {
         let kin = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, checksum_policy, ..Default::default() })
             .context("--stall-ms")?;
         let received_csv = args.out.join("received.csv");
-        let received_log = ReceivedLog::create(received_csv.clone())?;
+        let received_log = crate::trace::CsvLog::create(received_csv.clone(), "ingress_index,recv_ns,release_sched_ns")?;
         let origin_ns = now_ns();
         let hlog = |file: &str, tag: &str| {
             let path = args.out.join(file);
@@ -211,7 +175,8 @@ impl Robot {
             return;
         }
         self.received += 1;
-        self.received_log.push(s.ingress_index, t, s.release_sched_ns);
+        let (i, r) = (s.ingress_index, s.release_sched_ns);
+        self.received_log.push(|w| writeln!(w, "{i},{t},{r}"));
         self.e2e.record_signed(t as i64 - s.send_ns as i64 - s.injected_delay_ns as i64);
         self.seen.record(t.saturating_sub(s.send_ns));
         let sequence = match robot_frame(s) {
@@ -251,6 +216,7 @@ impl Robot {
     fn tick(&mut self, now: u64) {
         self.e2e.tick(now);
         self.hop.tick(now);
+        self.received_log.tick(now);
     }
 
     /// Writes `received.csv`'s end and the histogram logs' last
