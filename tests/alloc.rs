@@ -22,7 +22,12 @@ static GLOBAL: Counting = Counting;
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    // The test that held it has just ended: the harness now records its
+    // result and starts the next test's thread, which allocates. Let that
+    // pass before this test counts.
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    guard
 }
 
 /// Runs `frames` frames at 1 kHz (simulated time) through the emulator's
