@@ -247,10 +247,10 @@ pub struct LoopBusy {
     /// The time per frame of the busy turns but the long ones, over the
     /// frames taken and released in them, scaled to every frame: the cost
     /// with the time the core was lost for mostly left out, a better
-    /// estimate than `busy_ns_per_frame` where other work shares the core
-    /// (if shorter turns were the cheaper ones per frame, it is low; they
-    /// are not here: a long batch pays the turn's fixed work once for more
-    /// frames).
+    /// estimate than `busy_ns_per_frame` where other work shares the core.
+    /// A long turn that did not lose its core is a large batch, which pays
+    /// the turn's fixed work once for many frames, so leaving it out can
+    /// only raise this figure: it still leans towards the cost's high side.
     #[serde(default)]
     pub short_turns_ns_per_frame: Option<f64>,
     /// `1e9 / short_turns_ns_per_frame`.
