@@ -22,7 +22,12 @@ static GLOBAL: Counting = Counting;
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    // The test that held it has just ended: the harness now records its
+    // result and starts the next test's thread, which allocates. Let that
+    // pass before this test counts.
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    guard
 }
 
 /// Runs `frames` frames at 1 kHz (simulated time) through the emulator's
@@ -151,4 +156,42 @@ fn a_live_switch_and_a_pause_do_not_allocate_in_the_loop() {
     let made = allocations() - before;
     assert_eq!(made, 0, "{made} allocations across 20 switches");
     assert_eq!(inj.scenario().phases().len(), 21);
+}
+
+/// The whole turn of the loop, as the service runs it (clock, release,
+/// take, and the accounting of its busy turns), over in-memory ports: no
+/// allocation per frame either.
+#[test]
+fn the_loop_turn_does_not_allocate_per_frame() {
+    let _serial = one_at_a_time();
+    let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
+    let frames = 100_000u64;
+    let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 7).unwrap(), 1 << 16, frames).unwrap(), false);
+    let mut console = MemoryPort::with_capacity(4);
+    let mut simulator = MemoryPort::with_capacity(1 << 10);
+    let mut template = FrameSample::ZERO;
+    netfi::frame::ItpFrame::default().write_to_sample(&mut template);
+    let (mut before, mut released) = (0, 0u64);
+    for i in 0..frames {
+        if i == frames / 2 {
+            before = allocations();
+        }
+        released += simulator.queue.len() as u64;
+        simulator.queue.clear();
+        let mut sample = template;
+        sample.console_index = i;
+        sample.send_ns = netfi::clock::now_ns();
+        console.queue.push_back(sample);
+        // Spaced like 200 kHz: the 10–20 µs delays release in turn.
+        let t = netfi::clock::now_ns() + 5_000;
+        while netfi::clock::now_ns() < t {
+            fwd.turn(&mut console, &mut simulator, None);
+        }
+    }
+    let n = allocations() - before;
+    assert_eq!(n, 0, "{n} allocations in {} frames", frames / 2);
+    assert!(released > frames / 2, "only {released} frames released");
+    let busy = fwd.loop_busy();
+    assert!(busy.busy_turns > 0 && busy.busy_turns < busy.turns, "{busy:?}");
+    assert_eq!(busy.frames, frames);
 }

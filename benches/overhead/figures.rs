@@ -175,6 +175,12 @@ impl Figures {
         for (k, v) in &res.throughput_fps {
             bars.push(json!({"bar": format!("throughput, {k}"), "value_fps": v, "limit_fps": 200_000, "met": *v >= 200_000.0}));
         }
+        for (k, v) in &res.throughput {
+            let c = &v["emulator_capacity"];
+            if let (Some(cap), Some(bar)) = (c["capacity_fps"].as_f64(), c["bar_fps"].as_f64()) {
+                bars.push(json!({"bar": format!("emulator capacity (busy time a frame), {k}"), "value_fps": cap, "limit_fps": bar as u64, "met": cap >= bar}));
+            }
+        }
         for &rate in &s.rates_hz {
             let r = format!("{}", rate as u64);
             let ipc = self.chain.get("iceoryx2").and_then(|x| x.get(&r)).and_then(|v| v["median"]["p50"].as_i64());

@@ -39,7 +39,11 @@
 //!   per stream, for N = 1, 2, 8, 32 (`streams.json`).
 //! - **Throughput.** `netfi run --no-direct` at rising rates (doubling, then
 //!   bisection) for 10 s each; a rate is sustained when every frame is
-//!   delivered or dropped by the scenario, nothing else.
+//!   delivered or dropped by the scenario, nothing else. Each trial also
+//!   records the emulator loop's own time per frame (its busy turns, from
+//!   `emulator.json`) and the capacity it implies, set against the scale
+//!   bar (10⁶ frames/s with Normal, 7·10⁵ with PLM-2 + DLM-2) whatever rate
+//!   the console reached.
 //!
 //! Each interval records the host's steal time, its load average and the
 //! CPU that other processes used during it. Nothing

@@ -175,9 +175,28 @@ fn throughput(md: &mut String, s: &Settings, res: &Results) {
         return;
     }
     let _ = writeln!(md, "\n## Throughput ({} s per trial, `netfi run --no-direct`)\n", s.throughput_trial_s);
-    let _ = writeln!(md, "| scenario | sustained, frames/s | first rate not sustained, and why |\n|---|---|---|");
+    let _ = writeln!(
+        md,
+        "| scenario | sustained, frames/s | first rate not sustained, and why | emulator capacity, frames/s (busy ns a frame, at offered rate) | without busy turns over 200 µs | capacity range over the trials | capacity bar met (every busy turn counted) |\n|---|---|---|---|---|---|---|"
+    );
     for (k, v) in &res.throughput {
-        let _ = writeln!(md, "| {k} | {:.0} | {} |", v["best_fps"].as_f64().unwrap_or(0.0), v["first_failure"].as_str().unwrap_or("none up to the search's limit"));
+        let c = &v["emulator_capacity"];
+        let f = |x: &Value| x.as_f64().map_or("-".to_string(), |x| format!("{x:.0}"));
+        let _ = writeln!(
+            md,
+            "| {k} | {:.0} | {} | {} ({} ns at {}) | {} ({} ns) | {}–{} | {} (≥ {}) |",
+            v["best_fps"].as_f64().unwrap_or(0.0),
+            v["first_failure"].as_str().unwrap_or("none up to the search's limit"),
+            f(&c["capacity_fps"]),
+            f(&c["busy_ns_per_frame"]),
+            f(&c["at_rate_hz"]),
+            f(&c["short_turns_capacity_fps"]),
+            f(&c["short_turns_ns_per_frame"]),
+            f(&c["range_fps"][0]),
+            f(&c["range_fps"][1]),
+            if c["met"].as_bool() == Some(true) { "yes" } else { "**no**" },
+            f(&c["bar_fps"])
+        );
     }
 }
 

@@ -194,6 +194,157 @@ pub struct EmulatorProcess {
     /// The video path robot → console, when the run has video.
     #[serde(default)]
     pub video: Option<crate::service::video::VideoLinkReport>,
+    /// The loop's time on frames, and the rate it implies ([`LoopBusy`]).
+    #[serde(default)]
+    pub busy: Option<LoopBusy>,
+}
+
+/// The emulator loop's time on frames, measured in every run from the clock
+/// read each turn already makes ([`BusyClock`]), and the capacity it
+/// implies.
+///
+/// A turn is *busy* when it took at least one frame off the ingress or
+/// released at least one (the stream's own frames; feedback and video alone
+/// do not make a turn busy). A busy turn's time runs from its start to the
+/// start of the next turn (or the loop's end), so it holds everything the
+/// turn did: the iceoryx2 (or UDP) receive and send, the copies of the
+/// sample into the loop, the queue and the publisher's sample, the
+/// decision, the trace and histograms, the feedback and video polls of that
+/// turn, and the loop's own bookkeeping every 4096 turns when it falls in
+/// one. It leaves out every idle turn (polling an empty ingress with nothing
+/// due), and the wait of a release prepared ahead of its time
+/// ([`RELEASE_SPIN_NS`]; the preparation overlapping that wait, one pop and
+/// copy, is left out with it: this only happens on an idle loop, never on a
+/// busy stream). Anything that takes the core during a busy turn (another
+/// thread, an interrupt, the hypervisor) is counted in it, so the time is an
+/// upper bound on what the frames cost, and the capacity a lower bound on
+/// the rate this loop could carry with the core to itself. When one loop
+/// serves several streams, each stream's turn ends at the clock read right
+/// after it, and the releases made for every stream between turns are in
+/// no stream's time.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoopBusy {
+    /// Turns of the loop (of this stream, when one loop serves several).
+    pub turns: u64,
+    /// Of those, turns that took or released at least one frame.
+    pub busy_turns: u64,
+    /// Their time, ns.
+    pub busy_ns: u64,
+    /// Frames taken off the ingress (entered, rejected ones included).
+    pub frames: u64,
+    /// `busy_ns / frames`: the loop's time per frame, taking and releasing.
+    pub busy_ns_per_frame: Option<f64>,
+    /// `1e9 / busy_ns_per_frame`: the frames a second the loop could take
+    /// and release if it did nothing but busy turns.
+    pub capacity_frames_per_s: Option<f64>,
+    /// Of the busy turns, those longer than [`LONG_TURN_NS`], and their
+    /// time (also in `busy_turns` and `busy_ns`): the loop most likely lost
+    /// its core inside them (a turn's own work is far shorter).
+    #[serde(default)]
+    pub long_turns: u64,
+    #[serde(default)]
+    pub long_ns: u64,
+    /// The time per frame of the busy turns but the long ones, over the
+    /// frames taken and released in them, scaled to every frame: the cost
+    /// with the time the core was lost for mostly left out, a better
+    /// estimate than `busy_ns_per_frame` where other work shares the core.
+    /// A long turn that did not lose its core is a large batch, which pays
+    /// the turn's fixed work once for many frames, so leaving it out can
+    /// only raise this figure: it still leans towards the cost's high side.
+    #[serde(default)]
+    pub short_turns_ns_per_frame: Option<f64>,
+    /// `1e9 / short_turns_ns_per_frame`.
+    #[serde(default)]
+    pub short_turns_capacity_frames_per_s: Option<f64>,
+}
+
+/// A busy turn longer than this is taken to have lost its core
+/// ([`LoopBusy::long_turns`]): more than a full batch ([`TAKE_MAX`] frames
+/// at 3 µs each) takes, less than a scheduler's time slice (milliseconds)
+/// or a descheduled vCPU.
+pub const LONG_TURN_NS: u64 = 200_000;
+
+impl LoopBusy {
+    /// The figures of `clock` over `frames` frames taken, and `work`
+    /// frames taken and released in all.
+    pub fn of(clock: &BusyClock, frames: u64, work: u64) -> LoopBusy {
+        let per_frame = (frames > 0).then(|| clock.busy_ns as f64 / frames as f64);
+        let short_work = work.saturating_sub(clock.long_work);
+        let short = (frames > 0 && short_work > 0)
+            .then(|| (clock.busy_ns - clock.long_ns) as f64 / short_work as f64 * work as f64 / frames as f64);
+        let rate = |ns: Option<f64>| ns.filter(|&n| n > 0.0).map(|n| 1e9 / n);
+        LoopBusy {
+            turns: clock.turns,
+            busy_turns: clock.busy_turns,
+            busy_ns: clock.busy_ns,
+            frames,
+            busy_ns_per_frame: per_frame,
+            capacity_frames_per_s: rate(per_frame),
+            long_turns: clock.long_turns,
+            long_ns: clock.long_ns,
+            short_turns_ns_per_frame: short,
+            short_turns_capacity_frames_per_s: rate(short),
+        }
+    }
+}
+
+/// Counts the loop's busy turns and their time ([`LoopBusy`]) with the
+/// clock read each turn makes anyway: a turn's start closes the turn before
+/// it, whose work is told by a count of frames taken and released that the
+/// link keeps anyway. Per turn: one compare, and an add when it was busy; no
+/// clock read, allocation or lock of its own.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BusyClock {
+    /// Turns begun.
+    pub turns: u64,
+    /// Turns closed that took or released a frame.
+    pub busy_turns: u64,
+    /// Their time, ns.
+    pub busy_ns: u64,
+    /// Of those, the turns longer than [`LONG_TURN_NS`], their time, and
+    /// the frames they took and released.
+    pub long_turns: u64,
+    pub long_ns: u64,
+    long_work: u64,
+    /// The open turn's start (0: none open) and the work count then.
+    start_ns: u64,
+    work: u64,
+}
+
+impl BusyClock {
+    /// A turn begins at `now` with `work` frames taken and released so
+    /// far: the turn before it, if still open, ends here.
+    #[inline]
+    pub fn begin(&mut self, now: u64, work: u64) {
+        self.end(now, work);
+        self.start_ns = now;
+        self.work = work;
+        self.turns += 1;
+    }
+
+    /// The open turn, if any, ends at `now` with `work` frames taken and
+    /// released so far; it was busy if that count moved.
+    #[inline]
+    pub fn end(&mut self, now: u64, work: u64) {
+        if self.start_ns != 0 && work != self.work {
+            let ns = now.saturating_sub(self.start_ns);
+            self.busy_turns += 1;
+            self.busy_ns += ns;
+            if ns > LONG_TURN_NS {
+                self.long_turns += 1;
+                self.long_ns += ns;
+                self.long_work += work.wrapping_sub(self.work);
+            }
+        }
+        self.start_ns = 0;
+    }
+
+    /// The open turn waits `ns` for a release prepared ahead: that wait is
+    /// not the frames' cost.
+    #[inline]
+    fn waited(&mut self, ns: u64) {
+        self.start_ns += ns;
+    }
 }
 
 /// The most frames one turn takes in. A burst is taken whole up to this, so
@@ -254,6 +405,8 @@ pub struct Forward {
     pub release_spin_ns: u64,
     /// The last turn found nothing waiting at the ingress.
     idle: bool,
+    /// The loop's busy turns and their time.
+    pub busy: BusyClock,
 }
 
 impl Forward {
@@ -276,6 +429,7 @@ impl Forward {
             accept_raw: true,
             release_spin_ns: RELEASE_SPIN_NS,
             idle: false,
+            busy: BusyClock::default(),
         }
     }
 
@@ -291,8 +445,12 @@ impl Forward {
     #[inline]
     pub fn turn<S: FrameSource, K: FrameSink>(&mut self, source: &mut S, sink: &mut K, ret: Option<&mut ReturnPath>) {
         let now = now_ns();
+        self.busy.begin(now, self.work());
         match self.due_until(now) {
-            t if t > now => self.link.release_due(t, &mut OnTime(sink)),
+            t if t > now => {
+                self.busy.waited(t - now);
+                self.link.release_due(t, &mut OnTime(sink))
+            }
             _ => self.link.release_due(now, sink),
         }
         if let Some(r) = ret {
@@ -305,6 +463,25 @@ impl Forward {
             v.poll();
         }
         self.idle = self.take(source, now_ns);
+    }
+
+    /// Frames taken and released so far: a turn that moved it was busy.
+    #[inline]
+    fn work(&self) -> u64 {
+        self.link.next_ingress_index().wrapping_add(self.link.released())
+    }
+
+    /// Ends the loop's current turn at `now` (read after it by a loop that
+    /// does other work between turns, as one serving several streams does);
+    /// else the next turn's start ends it.
+    #[inline]
+    pub fn end_turn(&mut self, now: u64) {
+        self.busy.end(now, self.work());
+    }
+
+    /// The loop's busy turns so far and the capacity they imply.
+    pub fn loop_busy(&self) -> LoopBusy {
+        LoopBusy::of(&self.busy, self.link.next_ingress_index(), self.work())
     }
 
     /// The time up to which releases are due in this turn: `now`, or, when
@@ -596,7 +773,9 @@ fn spin<S: FrameSource, K: FrameSink>(
 /// Runs the emulator until the console's end marker has been seen and every
 /// held frame released, or until a stop is requested (SIGINT/SIGTERM). Then
 /// writes `trace_emulator.csv`, `decision.hlog`, `lateness.hlog` and
-/// `emulator.json` into `out_dir`, and returns the report. `ret`, the UDP
+/// `emulator.json` into `out_dir`, and returns the report. `emulator.ready`
+/// is written there once the loop is set up and placed, just before it
+/// starts. `ret`, the UDP
 /// return path, is polled once per turn. `stop_requested` is polled off the
 /// hot path (every 4096 iterations).
 pub fn run<S: FrameSource, K: FrameSink>(
@@ -608,6 +787,7 @@ pub fn run<S: FrameSource, K: FrameSink>(
     video: Option<crate::service::video::VideoPath>,
     look: impl FnMut() -> Look,
 ) -> anyhow::Result<EmulatorReport> {
+    use anyhow::Context;
     let mut fwd = forward(cfg, feedback)?;
     fwd.video = video.map(Box::new);
     let mut control = start_control(cfg, &mut fwd.link)?;
@@ -618,6 +798,11 @@ pub fn run<S: FrameSource, K: FrameSink>(
     if let (Some(core), Some(v)) = (cfg.core, fwd.video.as_deref()) {
         v.keep_trace_off_core(core);
     }
+    // Ready only now, set up and placed: a console started on it is taken
+    // in at once. Said before the set-up, frames queued at the ingress for
+    // its length (0.1–0.3 s with a cleared core and a queue and trace sized
+    // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
+    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").context("writing emulator.ready")?;
     let steal_timer = StealTimer::start();
     let end = spin(&mut fwd, source, sink, ret, look, control.as_mut().map(|(p, _)| p));
     let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
@@ -715,13 +900,15 @@ impl EmulatorReport {
     /// histograms.
     fn assemble(
         cfg: &EmulatorConfig,
-        fwd: Forward,
+        mut fwd: Forward,
         end: LoopEnd,
         isolation: Option<IsolationSummary>,
         realtime_priority: Option<i32>,
         steal: crate::host::Steal,
     ) -> anyhow::Result<EmulatorReport> {
         let duration_s = (end.t_end - end.t_start) as f64 / 1e9;
+        fwd.end_turn(end.t_end);
+        let busy = fwd.loop_busy();
         let (decision_hlog, lateness_hlog) = fwd.link.write_histograms(&cfg.out_dir, duration_s)?;
         let Forward { link, bad_checksum_passed, receive_errors, last_error, sent_by_console, feedback, video, bad_input, .. } = fwd;
         let l = link.finish(&cfg.out_dir.join("trace_emulator.csv"), end.t_end - end.t_start)?;
@@ -772,6 +959,7 @@ impl EmulatorReport {
             steal_fraction: steal.fraction,
             feedback,
             video,
+            busy: Some(busy),
         };
         Ok(EmulatorReport { shaping, process })
     }
@@ -816,7 +1004,6 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         let p = args.out.join("udp_endpoints.json");
         std::fs::write(&p, serde_json::to_vec_pretty(&bound)?).with_context(|| format!("writing {}", p.display()))?;
     }
-    std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
     // Polled every 4096 iterations; iceoryx2's own latch (once a node is
     // open, it may take SIGINT/SIGTERM for itself) every 256th time; the
     // run's dead peers every 200 ms when stand-alone (under `netfi run` the
@@ -943,4 +1130,86 @@ fn summary_line(r: &EmulatorReport, u: &udp::UdpReport) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::MemoryPort;
+
+    /// A Normal link's loop: every frame is due the moment it is taken.
+    fn normal_loop() -> Forward {
+        let spec = crate::scenario::parse_str("", "normal.toml", "normal").unwrap();
+        Forward::new(Link::new(Scenario::new(&spec, 1).unwrap(), 16, 16).unwrap(), false)
+    }
+
+    fn frames(port: &mut MemoryPort, n: u64) {
+        let mut s = FrameSample::ZERO;
+        crate::frame::ItpFrame::default().write_to_sample(&mut s);
+        for i in 0..n {
+            s.console_index = i;
+            port.queue.push_back(s);
+        }
+    }
+
+    /// One turn; whether it took or released a frame, seen from the ports.
+    fn turn(fwd: &mut Forward, console: &mut MemoryPort, robot: &mut MemoryPort) -> bool {
+        let before = (console.queue.len(), robot.queue.len());
+        fwd.turn(console, robot, None);
+        before != (console.queue.len(), robot.queue.len())
+    }
+
+    #[test]
+    fn busy_turns_are_the_turns_that_took_or_released_a_frame() {
+        let mut fwd = normal_loop();
+        let (mut console, mut robot) = (MemoryPort::with_capacity(8), MemoryPort::with_capacity(8));
+        let t0 = now_ns();
+        for _ in 0..10 {
+            assert!(!turn(&mut fwd, &mut console, &mut robot));
+        }
+        assert_eq!((fwd.busy.turns, fwd.busy.busy_turns, fwd.busy.busy_ns), (10, 0, 0));
+        frames(&mut console, 3);
+        let mut busy = 0;
+        while robot.queue.len() < 3 {
+            busy += u64::from(turn(&mut fwd, &mut console, &mut robot));
+            assert!(fwd.busy.turns < 1000, "three frames never came through");
+        }
+        // The last busy turn is closed by the next one, which is idle.
+        assert!(!turn(&mut fwd, &mut console, &mut robot));
+        let closed = fwd.busy;
+        assert!(busy >= 2, "a frame is taken in one turn and released in a later one");
+        assert_eq!(closed.busy_turns, busy);
+        assert!(closed.busy_ns > 0 && closed.busy_ns <= now_ns() - t0);
+        for _ in 0..100 {
+            assert!(!turn(&mut fwd, &mut console, &mut robot));
+        }
+        fwd.end_turn(now_ns());
+        assert_eq!((fwd.busy.turns, fwd.busy.busy_turns, fwd.busy.busy_ns), (closed.turns + 100, closed.busy_turns, closed.busy_ns));
+        let b = fwd.loop_busy();
+        assert_eq!((b.turns, b.busy_turns, b.busy_ns, b.frames), (closed.turns + 100, busy, closed.busy_ns, 3));
+        let per_frame = closed.busy_ns as f64 / 3.0;
+        assert_eq!(b.busy_ns_per_frame, Some(per_frame));
+        assert_eq!(b.capacity_frames_per_s, Some(1e9 / per_frame));
+    }
+
+    #[test]
+    fn a_turn_ended_by_the_loop_is_counted_once() {
+        let mut fwd = normal_loop();
+        let (mut console, mut robot) = (MemoryPort::with_capacity(8), MemoryPort::with_capacity(8));
+        frames(&mut console, 1);
+        // Taken in one turn, released in the next; each ended by the loop
+        // (as one serving several streams does), then the next turn begins.
+        let mut busy = 0;
+        for _ in 0..4 {
+            busy += u64::from(turn(&mut fwd, &mut console, &mut robot));
+            fwd.end_turn(now_ns());
+            let ns = fwd.busy.busy_ns;
+            fwd.end_turn(now_ns());
+            assert_eq!(fwd.busy.busy_ns, ns, "a turn ended twice");
+        }
+        assert_eq!(robot.queue.len(), 1);
+        assert_eq!((fwd.busy.turns, fwd.busy.busy_turns), (4, busy));
+        assert_eq!(busy, 2);
+        assert_eq!(fwd.loop_busy().frames, 1);
+    }
 }

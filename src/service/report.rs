@@ -459,6 +459,9 @@ impl RunReport {
                 s += "    (each a difference of the two lines above at that percentile, not a per-frame figure: negative\n     where the direct hop's own tail is longer; release lateness is the emulator's per-frame cost)\n";
             }
         }
+        if let Some(b) = self.emulator.as_ref().and_then(|e| e.busy.as_ref()) {
+            s += &busy_text(b);
+        }
         if let Some(dc) = &self.delay_check {
             s += &format!("delay law  {} frames; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames);
             for q in &dc.quantiles {
@@ -511,6 +514,29 @@ impl RunReport {
         }
         s
     }
+}
+
+/// The emulator loop's time on frames, as a line of the overhead part.
+fn busy_text(b: &crate::service::emulator::LoopBusy) -> String {
+    let (per, cap) = match (b.busy_ns_per_frame, b.capacity_frames_per_s) {
+        (Some(p), Some(c)) => (format!("{p:.0} ns a frame"), format!("{c:.0} frames/s")),
+        _ => ("-".into(), "-".into()),
+    };
+    let mut s = format!(
+        "  emulator loop     {} of {} turns busy, {:.3} ms on {} frames: {per}, capacity {cap} (busy time is an upper bound on the cost)\n",
+        b.busy_turns,
+        b.turns,
+        b.busy_ns as f64 / 1e6,
+        b.frames
+    );
+    if let (Some(p), Some(c)) = (b.short_turns_ns_per_frame, b.short_turns_capacity_frames_per_s) {
+        s += &format!(
+            "    without the {} turns over 200 µs ({:.3} ms; the core most likely lost): {p:.0} ns a frame, capacity {c:.0} frames/s\n",
+            b.long_turns,
+            b.long_ns as f64 / 1e6
+        );
+    }
+    s
 }
 
 /// The kinematics as lines: per arm, the motion length on each side and the

@@ -281,7 +281,11 @@ fn spin(lanes: &mut [Lane], mut look: impl FnMut() -> Look, mut control: Option<
             // A release of any stream that fell due (a frame just taken with
             // no delay, or another stream's) goes now, not a round later.
             due = due.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
-            if due <= now_ns() {
+            // The clock read that follows the turn ends it: its busy time is
+            // its own, not the other streams' turns after it.
+            let now = now_ns();
+            l.fwd.end_turn(now);
+            if due <= now {
                 due = release_all(lanes);
             }
         }

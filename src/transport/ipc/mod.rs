@@ -118,6 +118,16 @@ impl IpcPayload for crate::sample::FeedbackSample {
 
 /// Capacity of each subscriber's queue, in frames. A receiver can stall for
 /// `SUBSCRIBER_BUFFER_FRAMES / rate` (163 ms at 100 kHz) without loss.
+///
+/// Kept at 16 384 for the emulator's ingress at high rates too: a console
+/// that falls behind sends what it owes back to back, but its backlog is the
+/// rate times the time it lost its core (a few ms: hundreds to a few
+/// thousand frames), and the emulator takes faster than a console on a
+/// shared core sends. The losses once seen at this ingress at 375 000
+/// frames/s were frames queued while the emulator was still setting up after
+/// saying it was ready (0.1–0.3 s); it now says so only once its loop runs.
+/// A buffer covering that would have cost `2 × (B + 1)` samples of about
+/// 200 bytes in the publisher's pool: 0.3 s at 10⁶ frames/s is 120 MB.
 pub const SUBSCRIBER_BUFFER_FRAMES: usize = 16_384;
 /// Publishers per channel: one producer per run.
 pub const MAX_PUBLISHERS_PER_CHANNEL: usize = 1;
