@@ -210,7 +210,7 @@ fn write_scenarios(plan: &mut Plan) -> Result<()> {
     let own = plan.streams.iter().map(|s| write_run_scenario(&s.spec, &s.scenario_path, &s.out, &s.run_id)).collect::<Result<Vec<_>>>()?;
     plan.emulator.scenario = own[0].display().to_string();
     if own.len() > 1 {
-        plan.emulator.stream_scenario = own.iter().enumerate().skip(1).map(|(k, p)| format!("{k}={}", p.display())).collect();
+        plan.emulator.stream.stream_scenario = own.iter().enumerate().skip(1).map(|(k, p)| format!("{k}={}", p.display())).collect();
     }
     Ok(())
 }
@@ -218,9 +218,9 @@ fn write_scenarios(plan: &mut Plan) -> Result<()> {
 /// Each stream's scenario (`--stream-scenario K=...`, else `spec`), each
 /// checked with its seed, and each stream's run id checked.
 fn stream_specs(args: &RunArgs, spec: ScenarioSpec, seed: u64, run_id: &str) -> Result<Vec<ScenarioSpec>> {
-    let mut specs = vec![spec; args.streams as usize];
-    for text in &args.stream_scenario {
-        let (k, what) = parse_stream_scenario(text, args.streams)?;
+    let mut specs = vec![spec; args.stream.streams as usize];
+    for text in &args.stream.stream_scenario {
+        let (k, what) = parse_stream_scenario(text, args.stream.streams)?;
         specs[k] = crate::load::resolve(&what).with_context(|| format!("--stream-scenario {text}"))?;
     }
     for (k, s) in specs.iter().enumerate() {
@@ -457,7 +457,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
     let started = std::time::SystemTime::now();
     args.video.validate()?;
-    anyhow::ensure!(!args.video.on() || args.streams == 1, "--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", args.streams);
+    anyhow::ensure!(!args.video.on() || args.stream.streams == 1, "--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", args.stream.streams);
     let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps
