@@ -267,8 +267,9 @@ struct Reaper<'a> {
 impl<'a> Reaper<'a> {
     /// A reaper of the streams of `nodes`; one that never reaps unless `alone`.
     fn new(nodes: &'a [Option<IpcNode>], alone: bool) -> Self {
+        let dead = vec![Vec::new(); nodes.len()];
         let nodes = if alone { nodes.iter().map(Option::as_ref).collect() } else { Vec::new() };
-        Reaper { dead: vec![Vec::new(); nodes.len()], nodes, next: 0, next_ns: now_ns() }
+        Reaper { nodes, next: 0, next_ns: now_ns(), dead }
     }
 
     /// Reaps the next stream's run if its time has come; marks in
