@@ -58,6 +58,8 @@ fn three_streams_each_realize_their_own_scenario_and_balance() {
         }
         total_entered += u(&own["frames"]["entered"]);
         total_dropped += dropped.as_object().unwrap().values().map(u).sum::<u64>();
+        // Its console said it streams, as the runner asks of every console.
+        assert!(out.join(format!("stream-{k}/console.ready")).exists(), "stream {k}");
         let trace = std::fs::read_to_string(out.join(format!("stream-{k}/trace.csv"))).unwrap();
         assert_eq!(trace.lines().skip(1).count() as u64, FRAMES, "stream {k}");
     }
