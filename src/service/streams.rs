@@ -334,8 +334,13 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut reports = Vec::with_capacity(cfgs.len());
     for ((cfg, lane), dead) in cfgs.iter().zip(lanes).zip(dead) {
         let Lane { fwd, mut sink, peer_events, robot_died, .. } = lane;
-        // Each stream's own end: how the loop ended, unless its robot died.
-        let own = LoopEnd { ended_by: if robot_died { "peer_died" } else { end.ended_by }, peer_events, ..end.clone() };
+        // Each stream's own end: a stop, its robot's death, or its end marker.
+        let ended_by = match (end.ended_by, robot_died) {
+            ("signal", _) => "signal",
+            (_, true) => "peer_died",
+            _ => "end_marker",
+        };
+        let own = LoopEnd { ended_by, peer_events, ..end.clone() };
         let mut r = emulator::conclude(cfg, fwd, &mut sink, own, isolation.take(), placement.realtime_priority, steal, events.take().unwrap_or_default())?;
         if !dead.is_empty() {
             r.process.dead_peers = dead;

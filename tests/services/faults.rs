@@ -191,7 +191,7 @@ fn processes_naming(run_id: &str) -> Vec<String> {
 
 /// Files of the services of `streams` streams of run `run_id` in /dev/shm
 /// and under this user's iceoryx2 root (its node and service directories).
-fn iceoryx2_files_of(run_id: &str, streams: usize) -> Vec<PathBuf> {
+pub(super) fn iceoryx2_files_of(run_id: &str, streams: usize) -> Vec<PathBuf> {
     use netfi::transport::{IpcConfig, RunId};
     let prefixes: Vec<String> =
         (0..streams).map(|k| IpcConfig::new(RunId::new(&netfi::service::plan::stream_run_id(run_id, k)).unwrap()).prefix().to_string()).collect();
