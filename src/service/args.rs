@@ -552,3 +552,44 @@ impl RunArgs {
         self.isolate || !self.no_isolate
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{CommandFactory, Parser};
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: Cmd,
+    }
+
+    #[derive(clap::Subcommand)]
+    enum Cmd {
+        Run(RunArgs),
+        Emulator(EmulatorArgs),
+    }
+
+    #[test]
+    fn the_run_and_the_emulator_take_the_same_stream_flags_each_with_its_help() {
+        let want = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into()] };
+        let flags = ["--streams", "3", "--stream-scenario", "1=PLM-1"];
+        let Cmd::Run(r) = Cli::parse_from([&["netfi", "run", "Normal"][..], &flags].concat()).cmd else { unreachable!() };
+        assert_eq!(r.stream, want);
+        let Cmd::Emulator(e) = Cli::parse_from([&["netfi", "emulator", "--scenario", "Normal"][..], &flags].concat()).cmd else { unreachable!() };
+        assert_eq!(e.stream, want);
+        // What `netfi run` starts the emulator with says the same.
+        assert!(e.to_argv().windows(4).any(|w| w == flags), "{:?}", e.to_argv());
+        let Cmd::Run(one) = Cli::parse_from(["netfi", "run", "Normal"]).cmd else { unreachable!() };
+        assert_eq!(one.stream, StreamArgs::default());
+        let cmd = Cli::command();
+        let help = |sub: &str, arg: &str| {
+            let sub = cmd.find_subcommand(sub).unwrap();
+            sub.get_arguments().find(|a| a.get_id() == arg).and_then(|a| a.get_help()).map(|h| h.to_string()).unwrap()
+        };
+        assert_eq!(help("emulator", "streams"), EMULATOR_STREAMS_HELP[0]);
+        assert_eq!(help("emulator", "stream_scenario"), EMULATOR_STREAMS_HELP[1]);
+        assert!(help("run", "streams").starts_with("Console → robot pairs through the one emulator (1 to 64)"));
+        assert!(help("run", "stream_scenario").ends_with("Streams not named take the run's scenario"));
+    }
+}
