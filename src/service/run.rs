@@ -529,6 +529,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     // An emulator that died while its core was cleared could not put back
     // what it moved; its record lets the runner do it.
     restore_orphans(Some(std::process::id() as i32));
+    let run_ids: Vec<&str> = plan.streams.iter().map(|s| s.run_id.as_str()).collect();
+    remove_half_created_nodes(&crate::transport::ipc::user_root_dir().join("nodes"), &run_ids);
     // The emulator read its own copies at its start; the ones kept are scenario.toml.
     for s in &plan.streams {
         let _ = std::fs::remove_file(own_scenario(&s.out, &s.run_id));
@@ -548,6 +550,25 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     Ok(report)
 }
 
+/// Once every process of the run has ended: removes the nodes of the
+/// runs `run_ids` in iceoryx2's node directory `nodes` that a process left
+/// half created (its node's details written, its monitor not: killed, or
+/// stopped while iceoryx2 synced the details to a busy disk). iceoryx2
+/// neither lists nor cleans such a node; a node alive or killed later on
+/// has its monitor, and is left to the reaping of dead peers.
+fn remove_half_created_nodes(nodes: &Path, run_ids: &[&str]) {
+    use crate::transport::{IpcConfig, RunId};
+    let prefixes: Vec<String> = run_ids.iter().filter_map(|r| RunId::new(r).ok()).map(|r| IpcConfig::new(r).prefix().to_string()).collect();
+    let Ok(rd) = std::fs::read_dir(nodes) else { return };
+    for e in rd.filter_map(|e| e.ok()) {
+        let id = e.file_name().to_string_lossy().into_owned();
+        let half = |p: &String| e.path().join(format!("{p}node.details")).exists() && !nodes.join(format!("{p}{id}.node_monitor")).exists();
+        if e.file_type().is_ok_and(|t| t.is_dir()) && prefixes.iter().any(half) && std::fs::remove_dir_all(e.path()).is_ok() {
+            eprintln!("removed the half-created iceoryx2 node {id} of a process of this run");
+        }
+    }
+}
+
 /// Restores the host-wide records of cleared cores whose owners (but
 /// `except`) are all gone, saying what was done.
 fn restore_orphans(except: Option<i32>) {
@@ -558,5 +579,34 @@ fn restore_orphans(except: Option<i32>) {
             }
         }
         Err(e) => eprintln!("WARNING: could not look for cleared cores left by killed runs: {e}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_runs_half_created_nodes_are_removed() {
+        let nodes = std::env::temp_dir().join(format!("netfi-half-nodes-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&nodes);
+        let prefix = |run: &str| crate::transport::IpcConfig::new(crate::transport::RunId::new(run).unwrap()).prefix().to_string();
+        let node = |id: &str, run: &str, monitor: bool| {
+            std::fs::create_dir_all(nodes.join(id)).unwrap();
+            std::fs::write(nodes.join(id).join(format!("{}node.details", prefix(run))), b"").unwrap();
+            if monitor {
+                std::fs::write(nodes.join(format!("{}{id}.node_monitor", prefix(run))), b"").unwrap();
+            }
+        };
+        node("11", "r1", false);
+        node("12", "r1-s1", false);
+        node("13", "r1", true);
+        node("14", "r2", false);
+        remove_half_created_nodes(&nodes, &["r1", "r1-s1"]);
+        let left = |id: &str| nodes.join(id).exists();
+        assert!(!left("11") && !left("12"), "the run's half-created nodes stay");
+        assert!(left("13"), "a node with its monitor is not this function's");
+        assert!(left("14"), "another run's node was removed");
+        std::fs::remove_dir_all(&nodes).unwrap();
     }
 }
