@@ -46,8 +46,7 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         idle_end_ms: None,
         udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
         control: ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 },
-        streams: 1,
-        stream_scenario: Vec::new(),
+        stream: Default::default(),
         video: Default::default(),
     }
 }

@@ -40,7 +40,7 @@ fn point(s: &Settings, n: usize, rep: usize) -> Result<Value> {
     let run_id = fresh_run_id();
     let (_, slots) = slots_for(RATE_HZ, s.interval_s);
     let mut args = emulator::args(s, "Normal", &dir, slots / 2 + 16, Some(run_id.clone()));
-    args.streams = n as u32;
+    args.stream.streams = n as u32;
     let emu = Emulator::spawn(&dir, &emulator::argv(&args, &[]))?;
     let mut ends = (0..n).map(|k| IpcEnds::open(&stream_run_id(&run_id, k))).collect::<Result<Vec<_>>>()?;
     let host = HostTimer::start(s.quiet);

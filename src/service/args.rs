@@ -115,6 +115,10 @@ pub struct ConsoleArgs {
 }
 
 #[derive(Debug, Clone, Args)]
+#[command(
+    mut_arg("streams", |a| a.help(EMULATOR_STREAMS_HELP[0])),
+    mut_arg("stream_scenario", |a| a.help(EMULATOR_STREAMS_HELP[1]))
+)]
 pub struct EmulatorArgs {
     /// Run id shared with the console and simulator (needed when either side
     /// is iceoryx2).
@@ -208,18 +212,52 @@ pub struct EmulatorArgs {
     pub no_feedback: bool,
     #[command(flatten)]
     pub control: ControlArgs,
-    /// Serve this many console → robot streams in one loop (iceoryx2 on
-    /// both sides): stream K's services are those of run `<run-id>-s<K>`
-    /// (stream 0: the run's own), its files go to `<out>/stream-K/`.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=crate::service::plan::MAX_STREAMS as i64))]
-    pub streams: u32,
-    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
-    /// Streams not named take --scenario.
-    #[arg(long, value_name = "K=SCENARIO")]
-    pub stream_scenario: Vec<String>,
+    #[command(flatten)]
+    pub stream: StreamArgs,
     #[command(flatten)]
     pub video: crate::service::video::VideoArgs,
 }
+
+/// How many console → robot streams the one emulator serves, and their
+/// scenarios: the same two flags for `netfi run` and `netfi emulator`
+/// (whose help says what they mean to it, [`EMULATOR_STREAMS_HELP`]).
+#[derive(Debug, Clone, PartialEq, Eq, Args)]
+pub struct StreamArgs {
+    /// Console → robot pairs through the one emulator (1 to 64), each with
+    /// its own services, scenario, seed, accounting and files
+    /// (`<out>/stream-K/` when more than one).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=crate::service::plan::MAX_STREAMS as i64))]
+    pub streams: u32,
+    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
+    /// Streams not named take the run's scenario.
+    #[arg(long, value_name = "K=SCENARIO")]
+    pub stream_scenario: Vec<String>,
+}
+
+impl Default for StreamArgs {
+    /// One stream, its scenario the run's.
+    fn default() -> Self {
+        StreamArgs { streams: 1, stream_scenario: Vec::new() }
+    }
+}
+
+impl StreamArgs {
+    /// Whether more than one stream, or any stream's own scenario, is asked for.
+    pub fn several(&self) -> bool {
+        self.streams > 1 || !self.stream_scenario.is_empty()
+    }
+
+    fn argv(&self, a: Argv) -> Argv {
+        let a = a.opt("--streams", (self.streams > 1).then_some(self.streams));
+        self.stream_scenario.iter().fold(a, |a, k| a.val("--stream-scenario", k))
+    }
+}
+
+/// `netfi emulator`'s help of `--streams` and `--stream-scenario`.
+pub const EMULATOR_STREAMS_HELP: [&str; 2] = [
+    "Serve this many console → robot streams in one loop (iceoryx2 on both sides): stream K's services are those of run `<run-id>-s<K>` (stream 0: the run's own), its files go to `<out>/stream-K/`",
+    "Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable. Streams not named take --scenario",
+];
 
 /// The emulator's live control and telemetry (`netfi ctl`), as `netfi
 /// emulator` and `netfi run` take them.
@@ -351,15 +389,8 @@ pub struct RunArgs {
     pub no_direct: bool,
     #[command(flatten)]
     pub control: ControlArgs,
-    /// Console → robot pairs through the one emulator (1 to 64), each with
-    /// its own services, scenario, seed, accounting and files
-    /// (`<out>/stream-K/` when more than one).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=crate::service::plan::MAX_STREAMS as i64))]
-    pub streams: u32,
-    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
-    /// Streams not named take the run's scenario.
-    #[arg(long, value_name = "K=SCENARIO")]
-    pub stream_scenario: Vec<String>,
+    #[command(flatten)]
+    pub stream: StreamArgs,
     #[command(flatten)]
     pub video: crate::service::video::VideoArgs,
 }
@@ -402,12 +433,8 @@ impl EmulatorArgs {
             .opt("--return-scenario", self.return_scenario.as_ref())
             .opt("--return-seed", self.return_seed)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
-            .switch("--no-feedback", self.no_feedback)
-            .opt("--streams", (self.streams > 1).then_some(self.streams));
-        let mut a = self.control.argv(a);
-        for k in &self.stream_scenario {
-            a = a.val("--stream-scenario", k);
-        }
+            .switch("--no-feedback", self.no_feedback);
+        let a = self.stream.argv(self.control.argv(a));
         a.0.into_iter().chain(self.video.argv()).collect()
     }
 
@@ -415,15 +442,15 @@ impl EmulatorArgs {
     /// would be accepted.
     pub fn validate(&self) -> anyhow::Result<()> {
         let (i, e) = (self.ingress.is_udp(), self.egress.is_udp());
-        if (self.streams > 1 || !self.stream_scenario.is_empty()) && (i || e) {
+        if self.stream.several() && (i || e) {
             bail!("--streams and --stream-scenario need iceoryx2 on both sides");
         }
         self.video.validate()?;
         if self.video.on() && (i || e) {
             bail!("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's");
         }
-        if self.video.on() && self.streams > 1 {
-            bail!("--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", self.streams);
+        if self.video.on() && self.stream.streams > 1 {
+            bail!("--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", self.stream.streams);
         }
         if let Some(s) = self.wait_for_peer_s {
             if !(s.is_finite() && s >= 0.0) {
@@ -523,5 +550,46 @@ impl RunArgs {
     /// two wins).
     pub fn clears_core(&self) -> bool {
         self.isolate || !self.no_isolate
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{CommandFactory, Parser};
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        cmd: Cmd,
+    }
+
+    #[derive(clap::Subcommand)]
+    enum Cmd {
+        Run(RunArgs),
+        Emulator(EmulatorArgs),
+    }
+
+    #[test]
+    fn the_run_and_the_emulator_take_the_same_stream_flags_each_with_its_help() {
+        let want = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into()] };
+        let flags = ["--streams", "3", "--stream-scenario", "1=PLM-1"];
+        let Cmd::Run(r) = Cli::parse_from([&["netfi", "run", "Normal"][..], &flags].concat()).cmd else { unreachable!() };
+        assert_eq!(r.stream, want);
+        let Cmd::Emulator(e) = Cli::parse_from([&["netfi", "emulator", "--scenario", "Normal"][..], &flags].concat()).cmd else { unreachable!() };
+        assert_eq!(e.stream, want);
+        // What `netfi run` starts the emulator with says the same.
+        assert!(e.to_argv().windows(4).any(|w| w == flags), "{:?}", e.to_argv());
+        let Cmd::Run(one) = Cli::parse_from(["netfi", "run", "Normal"]).cmd else { unreachable!() };
+        assert_eq!(one.stream, StreamArgs::default());
+        let cmd = Cli::command();
+        let help = |sub: &str, arg: &str| {
+            let sub = cmd.find_subcommand(sub).unwrap();
+            sub.get_arguments().find(|a| a.get_id() == arg).and_then(|a| a.get_help()).map(|h| h.to_string()).unwrap()
+        };
+        assert_eq!(help("emulator", "streams"), EMULATOR_STREAMS_HELP[0]);
+        assert_eq!(help("emulator", "stream_scenario"), EMULATOR_STREAMS_HELP[1]);
+        assert!(help("run", "streams").starts_with("Console → robot pairs through the one emulator (1 to 64)"));
+        assert!(help("run", "stream_scenario").ends_with("Streams not named take the run's scenario"));
     }
 }

@@ -327,6 +327,8 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         None => "synthetic".into(),
     };
     eprintln!("console: {n} frames from {source}, seed {seed}");
+    // `netfi run` names a console that never gets here.
+    std::fs::write(args.out.join("console.ready"), b"").context("writing console.ready")?;
     let period_ns = match &script {
         Script::Synthetic { period_ns, .. } => *period_ns,
         Script::Replay { period_ns, .. } => period_ns.unwrap_or(1e9 / 517.0),

@@ -971,7 +971,7 @@ impl EmulatorReport {
 pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     use anyhow::Context;
     args.validate()?;
-    if args.streams > 1 || !args.stream_scenario.is_empty() {
+    if args.stream.several() {
         return crate::service::streams::main(args);
     }
     let cfg = config(args)?;

@@ -189,8 +189,7 @@ impl Plan {
             wait_for_peer_s: None,
             no_feedback: false,
             control: args.control.clone(),
-            streams: 1,
-            stream_scenario: Vec::new(),
+            stream: Default::default(),
             video: args.video.clone(),
         };
         let console = ConsoleArgs {
@@ -233,8 +232,8 @@ impl Plan {
             return self;
         }
         self.streams = specs.into_iter().enumerate().map(|(k, spec)| self.stream(n, k, spec)).collect();
-        self.emulator.streams = n as u32;
-        self.emulator.stream_scenario =
+        self.emulator.stream.streams = n as u32;
+        self.emulator.stream.stream_scenario =
             self.streams.iter().skip(1).map(|s| format!("{}={}", s.index, s.scenario_path.display())).collect();
         self.emulator.scenario = self.streams[0].scenario_path.display().to_string();
         self

@@ -19,7 +19,7 @@ use crate::service::args::RunArgs;
 use crate::service::plan::{parse_stream_scenario, stream_run_id, stream_seed, Plan};
 use crate::service::report::{ProcessEnd, RunReport};
 use crate::service::signals;
-use crate::service::supervise::{Seen, State, Supervisor};
+use crate::service::supervise::{Seen, State, Supervisor, CONSOLE_READY};
 use anyhow::{bail, Context, Result};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
@@ -34,6 +34,8 @@ struct Proc {
     core: Option<usize>,
     log: PathBuf,
     status: Option<std::process::ExitStatus>,
+    /// Why the runner stopped it, when it was stuck.
+    stuck: Option<String>,
 }
 
 impl Proc {
@@ -78,6 +80,29 @@ impl Proc {
         ProcessEnd { role: self.role.into(), pid: self.child.id(), core: self.core, status: self.status_text(), log: self.log.clone() }
     }
 
+    /// What went wrong with it: stuck, and how it ended.
+    fn faults(&self) -> impl Iterator<Item = String> + '_ {
+        self.stuck.clone().into_iter().chain(self.died())
+    }
+
+    /// Names a process stuck: what it is doing, as the kernel says (its
+    /// state and, when asleep in the kernel, where).
+    fn stuck(&mut self, what: &str) {
+        let pid = self.child.id();
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        // The state follows the command name, in parentheses.
+        let state = stat.rsplit_once(") ").and_then(|(_, rest)| rest.split(' ').next()).unwrap_or("?").to_string();
+        let wchan = std::fs::read_to_string(format!("/proc/{pid}/wchan")).unwrap_or_default();
+        let at = match (state.as_str(), wchan.trim()) {
+            ("D", w) if !w.is_empty() && w != "0" => format!(", waiting in the kernel at {w} (uninterruptibly: a busy disk?)"),
+            (_, w) if !w.is_empty() && w != "0" => format!(", asleep at {w}"),
+            _ => String::new(),
+        };
+        let line = format!("{} {what} (pid {pid}, state {state}{at}); see {}", self.role, self.log.display());
+        eprintln!("WARNING: {line}");
+        self.stuck = Some(line);
+    }
+
     fn died(&self) -> Option<String> {
         let s = self.status?;
         if s.success() {
@@ -105,7 +130,7 @@ fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path)
         .env(crate::host::isolate::RUNNER_PID_ENV, std::process::id().to_string())
         .spawn()
         .with_context(|| format!("starting the {role} ({})", exe.display()))?;
-    Ok(Proc { role, child, core, log, status: None })
+    Ok(Proc { role, child, core, log, status: None, stuck: None })
 }
 
 /// Waits for `<out>/<role>.ready`, failing early if the process ends.
@@ -210,7 +235,7 @@ fn write_scenarios(plan: &mut Plan) -> Result<()> {
     let own = plan.streams.iter().map(|s| write_run_scenario(&s.spec, &s.scenario_path, &s.out, &s.run_id)).collect::<Result<Vec<_>>>()?;
     plan.emulator.scenario = own[0].display().to_string();
     if own.len() > 1 {
-        plan.emulator.stream_scenario = own.iter().enumerate().skip(1).map(|(k, p)| format!("{k}={}", p.display())).collect();
+        plan.emulator.stream.stream_scenario = own.iter().enumerate().skip(1).map(|(k, p)| format!("{k}={}", p.display())).collect();
     }
     Ok(())
 }
@@ -218,9 +243,9 @@ fn write_scenarios(plan: &mut Plan) -> Result<()> {
 /// Each stream's scenario (`--stream-scenario K=...`, else `spec`), each
 /// checked with its seed, and each stream's run id checked.
 fn stream_specs(args: &RunArgs, spec: ScenarioSpec, seed: u64, run_id: &str) -> Result<Vec<ScenarioSpec>> {
-    let mut specs = vec![spec; args.streams as usize];
-    for text in &args.stream_scenario {
-        let (k, what) = parse_stream_scenario(text, args.streams)?;
+    let mut specs = vec![spec; args.stream.streams as usize];
+    for text in &args.stream.stream_scenario {
+        let (k, what) = parse_stream_scenario(text, args.stream.streams)?;
         specs[k] = crate::load::resolve(&what).with_context(|| format!("--stream-scenario {text}"))?;
     }
     for (k, s) in specs.iter().enumerate() {
@@ -358,7 +383,8 @@ fn reap(ipcs: &[crate::transport::IpcConfig]) {
 
 /// Watches the processes until they have ended, stopping them as the
 /// [`Supervisor`] says (each stream's console and robot as one role);
-/// reaps the run's dead iceoryx2 peers meanwhile. Returns whether the run
+/// reaps the run's dead iceoryx2 peers meanwhile; names each console not
+/// streaming ([`CONSOLE_READY`]) after its start. Returns whether the run
 /// was interrupted.
 fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
     let started = Instant::now();
@@ -369,6 +395,9 @@ fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
     let ipcs: Vec<_> =
         plan.streams.iter().filter_map(|s| crate::transport::RunId::new(&s.run_id).ok().map(crate::transport::IpcConfig::new)).collect();
     let mut last_reap = Instant::now();
+    // Each console's mark that it streams, and whether all have made it.
+    let ready: Vec<PathBuf> = plan.streams.iter().map(|s| s.out.join("console.ready")).collect();
+    let mut consoles_ready = false;
     loop {
         std::thread::sleep(Duration::from_millis(5));
         procs.all_mut().for_each(|p| {
@@ -381,10 +410,12 @@ fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
         if signals::ensure_installed() {
             eprintln!("WARNING: the Ctrl-C handler had been replaced; put back");
         }
+        consoles_ready = consoles_ready || procs.consoles.iter().zip(&ready).all(|(p, r)| p.status.is_some() || r.exists());
         let seen = Seen {
             now: started.elapsed(),
             stop_requested: signals::stop_requested(),
             console: State::of_group(procs.consoles.iter().map(Proc::state)),
+            consoles_ready,
             emulator: procs.emulator.state(),
             simulator: State::of_group(procs.simulators.iter().map(Proc::state)),
         };
@@ -393,28 +424,41 @@ fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
         if policy.interrupted() && !was_interrupted {
             eprintln!("stopping: console, then emulator, then simulator");
         }
-        if o.stop_console {
-            procs.consoles.iter_mut().for_each(Proc::terminate);
-        }
-        if o.stop_emulator {
-            procs.emulator.terminate();
-        }
-        if o.stop_simulator {
-            procs.simulators.iter_mut().for_each(Proc::terminate);
-        }
-        if o.kill_all {
-            for p in procs.all_mut() {
-                if !p.poll() {
-                    let _ = p.child.kill();
-                }
-            }
-            for p in procs.all_mut() {
-                let _ = p.child.wait();
-                p.poll();
-            }
-        }
+        obey(&o, procs, &ready);
         if o.done {
             return policy.interrupted();
+        }
+    }
+}
+
+/// Carries out the supervisor's orders `o`; `ready` is each console's
+/// mark that it streams.
+fn obey(o: &crate::service::supervise::Orders, procs: &mut Procs, ready: &[PathBuf]) {
+    if o.consoles_stalled {
+        let what = format!("was not streaming {} s after its start", CONSOLE_READY.as_secs());
+        procs.consoles.iter_mut().zip(ready).filter(|(p, r)| p.status.is_none() && !r.exists()).for_each(|(p, _)| p.stuck(&what));
+    }
+    if o.stop_console {
+        procs.consoles.iter_mut().for_each(Proc::terminate);
+    }
+    if o.stop_emulator {
+        procs.emulator.terminate();
+    }
+    if o.stop_simulator {
+        procs.simulators.iter_mut().for_each(Proc::terminate);
+    }
+    if o.kill_all {
+        for p in procs.all_mut() {
+            if !p.poll() {
+                if p.stuck.is_none() {
+                    p.stuck("was still running at the run's hard deadline, and was killed");
+                }
+                let _ = p.child.kill();
+            }
+        }
+        for p in procs.all_mut() {
+            let _ = p.child.wait();
+            p.poll();
         }
     }
 }
@@ -424,7 +468,7 @@ fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
 /// stream 0's.
 fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: crate::host::Steal, interrupted: bool) -> RunReport {
     if plan.streams.len() == 1 {
-        let faults = procs.all().filter_map(Proc::died).collect();
+        let faults = procs.all().flat_map(Proc::faults).collect();
         let processes = procs.all().map(Proc::end).collect();
         return RunReport::assemble(plan, duration_s, steal, processes, faults, interrupted);
     }
@@ -432,7 +476,7 @@ fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: crate::host::Ste
     let mut reports = Vec::new();
     for (k, s) in plan.streams.iter().enumerate() {
         let own = [&procs.consoles[k], &procs.emulator, &procs.simulators[k]];
-        let faults = own.iter().filter_map(|p| p.died()).collect();
+        let faults = own.iter().flat_map(|p| p.faults()).collect();
         let processes = own.iter().map(|p| p.end()).collect();
         let sp = Plan { run_id: s.run_id.clone(), out: s.out.clone(), spec: s.spec.clone(), seed: s.seed, scenario_path: s.scenario_path.clone(), ..plan.clone() };
         let mut r = RunReport::assemble(&sp, duration_s, steal, processes, faults, interrupted);
@@ -457,7 +501,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
     let started = std::time::SystemTime::now();
     args.video.validate()?;
-    anyhow::ensure!(!args.video.on() || args.streams == 1, "--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", args.streams);
+    anyhow::ensure!(!args.video.on() || args.stream.streams == 1, "--video-mbps goes with one stream: the video path is stream 0's, and --streams {} asks for more", args.stream.streams);
     let (plan, _lock) = prepare(args)?;
     let cores = plan.cores;
     // The runner itself wakes every few milliseconds to supervise and reaps
@@ -485,6 +529,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     // An emulator that died while its core was cleared could not put back
     // what it moved; its record lets the runner do it.
     restore_orphans(Some(std::process::id() as i32));
+    let run_ids: Vec<&str> = plan.streams.iter().map(|s| s.run_id.as_str()).collect();
+    remove_half_created_nodes(&crate::transport::ipc::user_root_dir().join("nodes"), &run_ids);
     // The emulator read its own copies at its start; the ones kept are scenario.toml.
     for s in &plan.streams {
         let _ = std::fs::remove_file(own_scenario(&s.out, &s.run_id));
@@ -504,6 +550,25 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     Ok(report)
 }
 
+/// Once every process of the run has ended: removes the nodes of the
+/// runs `run_ids` in iceoryx2's node directory `nodes` that a process left
+/// half created (its node's details written, its monitor not: killed, or
+/// stopped while iceoryx2 synced the details to a busy disk). iceoryx2
+/// neither lists nor cleans such a node; a node alive or killed later on
+/// has its monitor, and is left to the reaping of dead peers.
+fn remove_half_created_nodes(nodes: &Path, run_ids: &[&str]) {
+    use crate::transport::{IpcConfig, RunId};
+    let prefixes: Vec<String> = run_ids.iter().filter_map(|r| RunId::new(r).ok()).map(|r| IpcConfig::new(r).prefix().to_string()).collect();
+    let Ok(rd) = std::fs::read_dir(nodes) else { return };
+    for e in rd.filter_map(|e| e.ok()) {
+        let id = e.file_name().to_string_lossy().into_owned();
+        let half = |p: &String| e.path().join(format!("{p}node.details")).exists() && !nodes.join(format!("{p}{id}.node_monitor")).exists();
+        if e.file_type().is_ok_and(|t| t.is_dir()) && prefixes.iter().any(half) && std::fs::remove_dir_all(e.path()).is_ok() {
+            eprintln!("removed the half-created iceoryx2 node {id} of a process of this run");
+        }
+    }
+}
+
 /// Restores the host-wide records of cleared cores whose owners (but
 /// `except`) are all gone, saying what was done.
 fn restore_orphans(except: Option<i32>) {
@@ -514,5 +579,34 @@ fn restore_orphans(except: Option<i32>) {
             }
         }
         Err(e) => eprintln!("WARNING: could not look for cleared cores left by killed runs: {e}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_runs_half_created_nodes_are_removed() {
+        let nodes = std::env::temp_dir().join(format!("netfi-half-nodes-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&nodes);
+        let prefix = |run: &str| crate::transport::IpcConfig::new(crate::transport::RunId::new(run).unwrap()).prefix().to_string();
+        let node = |id: &str, run: &str, monitor: bool| {
+            std::fs::create_dir_all(nodes.join(id)).unwrap();
+            std::fs::write(nodes.join(id).join(format!("{}node.details", prefix(run))), b"").unwrap();
+            if monitor {
+                std::fs::write(nodes.join(format!("{}{id}.node_monitor", prefix(run))), b"").unwrap();
+            }
+        };
+        node("11", "r1", false);
+        node("12", "r1-s1", false);
+        node("13", "r1", true);
+        node("14", "r2", false);
+        remove_half_created_nodes(&nodes, &["r1", "r1-s1"]);
+        let left = |id: &str| nodes.join(id).exists();
+        assert!(!left("11") && !left("12"), "the run's half-created nodes stay");
+        assert!(left("13"), "a node with its monitor is not this function's");
+        assert!(left("14"), "another run's node was removed");
+        std::fs::remove_dir_all(&nodes).unwrap();
     }
 }

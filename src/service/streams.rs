@@ -9,9 +9,13 @@
 //! stream's due frames go out, so a release waits behind at most one
 //! stream's turn, not a round of N.
 //! Every 4096 rounds it looks at the stop flag and serves live control,
-//! which acts on stream 0 (its telemetry is stream 0's too). Nothing in a
-//! round allocates or locks: the streams are a slice fixed before the
-//! loop starts.
+//! which acts on stream 0 (its telemetry is stream 0's too). Standing
+//! alone (not under `netfi run`, whose runner reaps), it also reaps one
+//! stream's run for dead peers per look, each every 200 ms: a dead robot
+//! ends its stream's feedback early, so its console ends its stream, as
+//! with one stream; each stream's report names its dead peers. Nothing in
+//! a round ([`round`]) allocates or locks: the streams are a slice fixed
+//! before the loop starts.
 //!
 //! Besides each stream's own report, `<out>/emulator.json` holds every
 //! stream's account and figures and their total ([`EmulatorStreams`]).
@@ -19,11 +23,11 @@
 use crate::clock::now_ns;
 use crate::host::StealTimer;
 use crate::metrics::Summary;
-use crate::service::args::EmulatorArgs;
-use crate::service::emulator::{self, EmulatorFrames, EmulatorReport, Forward, Look, LoopEnd};
+use crate::service::args::{EmulatorArgs, StreamArgs};
+use crate::service::emulator::{self, EmulatorFrames, EmulatorReport, Forward, Look, LoopEnd, PeerEvent};
 use crate::service::plan::{parse_stream_scenario, stream_dir, stream_run_id, stream_seed};
 use crate::service::signals;
-use crate::transport::Transports;
+use crate::transport::{Egress, FrameSink, FrameSource, Ingress, IpcNode, Role};
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -142,11 +146,60 @@ impl EmulatorStreams {
     }
 }
 
-/// One stream in the loop: its loop state and its transports.
-struct Lane {
-    fwd: Forward,
-    t: Transports,
+/// One stream in the loop: its loop state, where its frames come from and
+/// where they go, and what the loop saw of its peers.
+pub struct Lane<S, K> {
+    pub fwd: Forward,
+    pub source: S,
+    pub sink: K,
+    /// Consoles and robots connected, as last seen.
+    peers: (Option<usize>, Option<usize>),
+    peer_events: Vec<PeerEvent>,
+    /// Its robot was found dead.
+    robot_died: bool,
 }
+
+impl<S: FrameSource, K: FrameSink> Lane<S, K> {
+    /// The stream of `fwd` between `source` and `sink`.
+    pub fn new(fwd: Forward, source: S, sink: K) -> Self {
+        Lane { fwd, source, sink, peers: (None, None), peer_events: Vec::new(), robot_died: false }
+    }
+
+    /// Its robot is gone: its console is told through the feedback path
+    /// (whose end marker comes early, so the console ends its stream) and
+    /// the stream drains as usual, every frame accounted for; without a
+    /// feedback path the stream has nothing left to wait for.
+    fn robot_died(&mut self) {
+        self.robot_died = true;
+        if let Some(f) = self.fwd.feedback.as_deref_mut() {
+            f.forward_end();
+        }
+    }
+
+    /// Off the hot path: whether the stream may end (once drained, its
+    /// robot is sent the end marker, once).
+    fn finished(&mut self) -> bool {
+        let done = self.fwd.finished(&mut self.sink);
+        done || (self.robot_died && self.fwd.feedback.is_none())
+    }
+
+    /// Notes a change in the consoles or robots connected, `t_s` seconds
+    /// into the loop.
+    fn watch_peers(&mut self, t_s: f64) {
+        let now = (self.source.peers(), self.sink.peers());
+        if now.0 != self.peers.0 {
+            self.peer_events.push(PeerEvent { t_s, peer: "console".into(), connected: now.0.unwrap_or(0) });
+        }
+        if now.1 != self.peers.1 {
+            self.peer_events.push(PeerEvent { t_s, peer: "simulator".into(), connected: now.1.unwrap_or(0) });
+        }
+        self.peers = now;
+    }
+}
+
+/// The iceoryx2 lanes, and each stream's node apart (the stop check and
+/// the reaper read them while the loop holds the lanes).
+type Opened = (Vec<emulator::EmulatorConfig>, Vec<Lane<Ingress, Egress>>, Vec<Option<IpcNode>>);
 
 /// Stream `k`'s own arguments: its run id, scenario, seed and directory;
 /// live control and the clearing of the core belong to stream 0.
@@ -158,25 +211,24 @@ fn stream_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u
         scenario: scenarios.get(&k).unwrap_or(&args.scenario).clone(),
         seed: Some(stream_seed(seed, k)),
         return_seed: args.return_seed.map(|s| stream_seed(s, k)),
-        out: stream_dir(&args.out, args.streams as usize, k),
+        out: stream_dir(&args.out, args.stream.streams as usize, k),
         isolate: args.isolate && k == 0,
         control,
-        streams: 1,
-        stream_scenario: Vec::new(),
+        stream: StreamArgs::default(),
         ..args.clone()
     }
 }
 
 /// Opens every stream's transports and sets up its loop state.
-fn lanes(args: &EmulatorArgs) -> anyhow::Result<(Vec<emulator::EmulatorConfig>, Vec<Lane>)> {
-    let n = args.streams as usize;
+fn lanes(args: &EmulatorArgs) -> anyhow::Result<Opened> {
+    let n = args.stream.streams as usize;
     let mut scenarios = BTreeMap::new();
-    for text in &args.stream_scenario {
-        let (k, what) = parse_stream_scenario(text, args.streams)?;
+    for text in &args.stream.stream_scenario {
+        let (k, what) = parse_stream_scenario(text, args.stream.streams)?;
         scenarios.insert(k, what);
     }
     let seed = emulator::config(args)?.seed;
-    let (mut cfgs, mut lanes) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut cfgs, mut lanes, mut nodes) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
     for k in 0..n {
         let a = stream_args(args, &scenarios, seed, k);
         let cfg = emulator::config(&a).with_context(|| format!("stream {k}"))?;
@@ -190,9 +242,55 @@ fn lanes(args: &EmulatorArgs) -> anyhow::Result<(Vec<emulator::EmulatorConfig>, 
         }
         eprintln!("emulator: stream {k}: run {} scenario {} seed {}", a.run_id.as_deref().unwrap_or("?"), cfg.scenario.name, cfg.seed);
         cfgs.push(cfg);
-        lanes.push(Lane { fwd, t });
+        lanes.push(Lane::new(fwd, t.ingress, t.egress));
+        nodes.push(t.node);
     }
-    Ok((cfgs, lanes))
+    Ok((cfgs, lanes, nodes))
+}
+
+/// How often each stream's run is searched for dead peers when the
+/// emulator stands alone, as the emulator of one stream does.
+const REAP_EVERY_NS: u64 = 200_000_000;
+
+/// Each stream's dead peers, found when the emulator stands alone (under
+/// `netfi run` the runner reaps, off the loop's core; two reapers may wait
+/// on each other). One stream's run is reaped per look, in turn, so a
+/// look costs one stream's scan and each stream is reaped every 200 ms.
+struct Reaper<'a> {
+    nodes: Vec<Option<&'a IpcNode>>,
+    next: usize,
+    next_ns: u64,
+    /// The dead peers found, per stream.
+    dead: Vec<Vec<String>>,
+}
+
+impl<'a> Reaper<'a> {
+    /// A reaper of the streams of `nodes`; one that never reaps unless `alone`.
+    fn new(nodes: &'a [Option<IpcNode>], alone: bool) -> Self {
+        let dead = vec![Vec::new(); nodes.len()];
+        let nodes = if alone { nodes.iter().map(Option::as_ref).collect() } else { Vec::new() };
+        Reaper { nodes, next: 0, next_ns: now_ns(), dead }
+    }
+
+    /// Reaps the next stream's run if its time has come; marks in
+    /// `robot_died` the stream whose robot was found dead. A dead console
+    /// is reported, and its stream goes on (a restarted console may take
+    /// over).
+    fn look(&mut self, robot_died: &mut [bool]) {
+        let now = now_ns();
+        if self.nodes.is_empty() || now < self.next_ns {
+            return;
+        }
+        let k = self.next;
+        self.next = (k + 1) % self.nodes.len();
+        self.next_ns = now + REAP_EVERY_NS / self.nodes.len() as u64;
+        let Some(Ok(r)) = self.nodes[k].map(IpcNode::reap_dead_peers) else { return };
+        for p in r.dead() {
+            eprintln!("emulator: stream {k}: a peer died: {p}");
+            self.dead[k].push(p.to_string());
+            robot_died[k] |= p.role == Some(Role::Simulator);
+        }
+    }
 }
 
 /// `netfi emulator --streams N`: sets up every stream, runs the one loop,
@@ -201,7 +299,7 @@ fn lanes(args: &EmulatorArgs) -> anyhow::Result<(Vec<emulator::EmulatorConfig>, 
 pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     anyhow::ensure!(args.run_id.is_some(), "--streams needs --run-id");
     crate::service::write_pid(&args.out, "emulator")?;
-    let (cfgs, mut lanes) = lanes(args)?;
+    let (cfgs, mut lanes, nodes) = lanes(args)?;
     let mut control = emulator::start_control(&cfgs[0], &mut lanes[0].fwd.link)?;
     let mut placement = emulator::place(&cfgs[0], &lanes[0].fwd.link, lanes[0].fwd.feedback.as_deref(), None)?;
     if let Some(core) = cfgs[0].core {
@@ -217,29 +315,52 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     }
     signals::install();
     std::fs::write(args.out.join("emulator.ready"), b"").context("writing emulator.ready")?;
-    // The nodes are kept apart from the lanes so that the stop check may
-    // read one while the loop holds the lanes; they outlive the ports.
-    let nodes: Vec<_> = lanes.iter_mut().map(|l| l.t.node.take()).collect();
     let term = nodes[0].as_ref();
     let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
-    let look = || if stop.requested() { Look::Stop } else { Look::Go };
+    let mut reaper = Reaper::new(&nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
+    let look = |died: &mut [bool]| {
+        if stop.requested() {
+            return Look::Stop;
+        }
+        reaper.look(died);
+        Look::Go
+    };
     let steal_timer = StealTimer::start();
     let end = spin(&mut lanes, look, control.as_mut().map(|(p, _)| p));
-    let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
-    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
+    let mut events = control.map(|(_, h)| h.finish());
+    let mut isolation = placement.isolation.as_mut().map(|iso| iso.restore());
     let steal = steal_timer.stop();
-    let (mut reports, mut run_ids, mut dirs) = (Vec::new(), Vec::new(), Vec::new());
-    let mut events = Some(events);
-    let mut isolation = Some(isolation);
-    for (k, (cfg, lane)) in cfgs.iter().zip(lanes).enumerate() {
-        let Lane { fwd, mut t } = lane;
-        let r = emulator::conclude(cfg, fwd, &mut t.egress, end.clone(), isolation.take().flatten(), placement.realtime_priority, steal, events.take().unwrap_or_default())?;
+    let dead = reaper.dead;
+    let mut reports = Vec::with_capacity(cfgs.len());
+    for ((cfg, lane), dead) in cfgs.iter().zip(lanes).zip(dead) {
+        let Lane { fwd, mut sink, peer_events, robot_died, .. } = lane;
+        // Each stream's own end: a stop, its robot's death, or its end marker.
+        let ended_by = match (end.ended_by, robot_died) {
+            ("signal", _) => "signal",
+            (_, true) => "peer_died",
+            _ => "end_marker",
+        };
+        let own = LoopEnd { ended_by, peer_events, ..end.clone() };
+        let mut r = emulator::conclude(cfg, fwd, &mut sink, own, isolation.take(), placement.realtime_priority, steal, events.take().unwrap_or_default())?;
+        if !dead.is_empty() {
+            r.process.dead_peers = dead;
+            let json = cfg.out_dir.join("emulator.json");
+            std::fs::write(&json, serde_json::to_vec_pretty(&r)?).with_context(|| format!("writing {}", json.display()))?;
+        }
         reports.push(r);
-        run_ids.push(stream_run_id(args.run_id.as_deref().unwrap_or_default(), k));
-        dirs.push(cfg.out_dir.clone());
     }
+    // The nodes outlive the ports.
     drop(nodes);
-    let joint = EmulatorStreams::of(&reports, &run_ids, &dirs);
+    write_joint(args, &cfgs, &reports, end.ended_by)?;
+    Ok(reports.swap_remove(0))
+}
+
+/// Writes `<out>/emulator.json`, every stream's account and their total.
+fn write_joint(args: &EmulatorArgs, cfgs: &[emulator::EmulatorConfig], reports: &[EmulatorReport], ended_by: &str) -> anyhow::Result<()> {
+    let run_ids: Vec<String> = (0..reports.len()).map(|k| stream_run_id(args.run_id.as_deref().unwrap_or_default(), k)).collect();
+    let dirs: Vec<PathBuf> = cfgs.iter().map(|c| c.out_dir.clone()).collect();
+    let mut joint = EmulatorStreams::of(reports, &run_ids, &dirs);
+    joint.ended_by = ended_by.to_string();
     let path = args.out.join("emulator.json");
     std::fs::write(&path, serde_json::to_vec_pretty(&joint)?).with_context(|| format!("writing {}", path.display()))?;
     eprintln!(
@@ -251,44 +372,62 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
         joint.balanced,
         joint.ended_by
     );
-    Ok(reports.swap_remove(0))
+    Ok(())
 }
 
 /// Releases every stream's due frames; the earliest release left.
 #[inline]
-fn release_all(lanes: &mut [Lane]) -> u64 {
+fn release_all<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>]) -> u64 {
     let now = now_ns();
     let mut next = u64::MAX;
     for l in lanes.iter_mut() {
-        l.fwd.link.release_due(now, &mut l.t.egress);
+        l.fwd.link.release_due(now, &mut l.sink);
         next = next.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
     }
     next
 }
 
-/// Turns every stream once per round until each has ended and drained, or
-/// a stop is requested; everything else happens every 4096 rounds.
-fn spin(lanes: &mut [Lane], mut look: impl FnMut() -> Look, mut control: Option<&mut crate::service::control::ControlPort>) -> LoopEnd {
-    let t_start = now_ns();
-    let mut rounds: u64 = 0;
-    let mut robot_died = false;
-    // The earliest release of any stream, as last seen.
-    let mut due = u64::MAX;
-    let ended_by = loop {
-        for k in 0..lanes.len() {
-            let l = &mut lanes[k];
-            l.fwd.turn(&mut l.t.ingress, &mut l.t.egress, None);
-            // A release of any stream that fell due (a frame just taken with
-            // no delay, or another stream's) goes now, not a round later.
-            due = due.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
-            // The clock read that follows the turn ends it: its busy time is
-            // its own, not the other streams' turns after it.
-            let now = now_ns();
-            l.fwd.end_turn(now);
-            if due <= now {
-                due = release_all(lanes);
-            }
+/// One round of the loop: each stream's turn, stream 0 first; after each
+/// turn, if any stream's earliest release is due (a frame just taken with
+/// no delay, or another stream's), every stream's due frames go out now,
+/// not a round later. `due` is the earliest release of any stream as last
+/// seen (`u64::MAX` at first); returns it as the round leaves it. Nothing
+/// in it allocates or locks.
+#[inline]
+pub fn round<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>], mut due: u64) -> u64 {
+    for k in 0..lanes.len() {
+        let l = &mut lanes[k];
+        l.fwd.turn(&mut l.source, &mut l.sink, None);
+        due = due.min(l.fwd.link.next_release_ns().unwrap_or(u64::MAX));
+        // The clock read that follows the turn ends it: its busy time is
+        // its own, not the other streams' turns after it.
+        let now = now_ns();
+        l.fwd.end_turn(now);
+        if due <= now {
+            due = release_all(lanes);
         }
+    }
+    due
+}
+
+/// Turns every stream once per round until each has ended and drained, or
+/// a stop is requested; everything else happens every 4096 rounds: live
+/// control, the `look` (a stop; each stream whose robot died, marked in
+/// the slice it is given), the streams' end, and every 65 536 rounds the
+/// peers connected.
+fn spin<S: FrameSource, K: FrameSink>(
+    lanes: &mut [Lane<S, K>],
+    mut look: impl FnMut(&mut [bool]) -> Look,
+    mut control: Option<&mut crate::service::control::ControlPort>,
+) -> LoopEnd {
+    let t_start = now_ns();
+    for l in lanes.iter_mut() {
+        l.peers = (l.source.peers(), l.sink.peers());
+    }
+    let mut died = vec![false; lanes.len()];
+    let (mut rounds, mut due) = (0u64, u64::MAX);
+    let ended_by = loop {
+        due = round(lanes, due);
         rounds = rounds.wrapping_add(1);
         if rounds % 4096 != 0 {
             continue;
@@ -296,25 +435,21 @@ fn spin(lanes: &mut [Lane], mut look: impl FnMut() -> Look, mut control: Option<
         if let Some(c) = control.as_deref_mut() {
             c.poll(&mut lanes[0].fwd.link);
         }
-        match look() {
-            Look::Go => {}
-            Look::Stop => break "signal",
-            Look::RobotDied => {
-                robot_died = true;
-                for l in lanes.iter_mut() {
-                    if let Some(f) = l.fwd.feedback.as_deref_mut() {
-                        f.forward_end();
-                    }
-                }
+        if look(&mut died) == Look::Stop {
+            break "signal";
+        }
+        for (l, d) in lanes.iter_mut().zip(died.iter_mut()) {
+            if std::mem::take(d) {
+                l.robot_died();
             }
         }
-        // Every stream is asked, so each sends its end marker once drained.
-        let mut all = true;
-        for l in lanes.iter_mut() {
-            all &= l.fwd.finished(&mut l.t.egress);
+        if rounds % (1 << 16) == 0 {
+            let t_s = (now_ns() - t_start) as f64 / 1e9;
+            lanes.iter_mut().for_each(|l| l.watch_peers(t_s));
         }
-        if all {
-            break if robot_died { "peer_died" } else { "end_marker" };
+        // Every stream is asked, so each sends its end marker once drained.
+        if lanes.iter_mut().fold(true, |all, l| l.finished() && all) {
+            break if lanes.iter().any(|l| l.robot_died) { "peer_died" } else { "end_marker" };
         }
     };
     LoopEnd { ended_by, iterations: rounds, t_start, t_end: now_ns(), peer_events: Vec::new() }

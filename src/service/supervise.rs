@@ -14,6 +14,12 @@
 //!   end marker; stop it.
 //! - The emulator is gone and the console still streams into nothing: stop
 //!   it at the planned end.
+//! - A console still running but not yet streaming (no `console.ready`)
+//!   [`CONSOLE_READY`] after its start is stuck: it is named as a fault
+//!   and the run is stopped as on Ctrl-C. (On a host whose disk is busy,
+//!   a process may wait minutes in the kernel as iceoryx2 syncs its node's
+//!   files to disk; without this the run would wait for the hard deadline
+//!   with nothing said.)
 //! - Past the hard deadline (planned + drain grace + 60 s): kill them all.
 
 use std::time::Duration;
@@ -58,6 +64,8 @@ pub struct Seen {
     /// A Ctrl-C / SIGTERM has reached the runner.
     pub stop_requested: bool,
     pub console: State,
+    /// Every console still running has said it streams (`console.ready`).
+    pub consoles_ready: bool,
     pub emulator: State,
     pub simulator: State,
 }
@@ -70,6 +78,8 @@ pub struct Orders {
     pub stop_simulator: bool,
     /// Kill whatever still runs, then reap: the run is over.
     pub kill_all: bool,
+    /// The consoles not yet streaming are stuck: name them (once).
+    pub consoles_stalled: bool,
     /// All three have ended (or were killed): stop supervising.
     pub done: bool,
 }
@@ -81,6 +91,7 @@ pub struct Supervisor {
     drain_grace: Duration,
     hard_deadline: Duration,
     interrupted: bool,
+    stalled: bool,
     console_ended_at: Option<Duration>,
     emulator_ended_at: Option<Duration>,
 }
@@ -93,6 +104,12 @@ pub const DRAIN_GRACE: Duration = Duration::from_secs(30);
 /// How long the simulator waits for an end marker after the emulator ended.
 pub const SIMULATOR_GRACE: Duration = Duration::from_secs(5);
 
+/// How long after its start a console may take to stream (its node and
+/// ports open, the emulator subscribed): a console gives up waiting for
+/// the emulator after 10 s by itself, so one still not streaming at 30 s
+/// is stuck.
+pub const CONSOLE_READY: Duration = Duration::from_secs(30);
+
 impl Supervisor {
     /// A run whose stream is planned to last `planned_s` seconds.
     pub fn new(planned_s: f64) -> Supervisor {
@@ -102,12 +119,13 @@ impl Supervisor {
             drain_grace: DRAIN_GRACE,
             hard_deadline: planned + DRAIN_GRACE + Duration::from_secs(60),
             interrupted: false,
+            stalled: false,
             console_ended_at: None,
             emulator_ended_at: None,
         }
     }
 
-    /// Whether the run was interrupted (Ctrl-C / SIGTERM).
+    /// Whether the run was interrupted (Ctrl-C / SIGTERM, or stuck consoles).
     pub fn interrupted(&self) -> bool {
         self.interrupted
     }
@@ -116,7 +134,12 @@ impl Supervisor {
     pub fn look(&mut self, s: Seen) -> Orders {
         let mut o = Orders::default();
         let (c, e, m) = (s.console.ended(), s.emulator.ended(), s.simulator.ended());
-        if s.stop_requested && !self.interrupted {
+        let stuck = !self.stalled && !s.consoles_ready && s.console == State::Running && s.now > CONSOLE_READY;
+        if stuck {
+            self.stalled = true;
+            o.consoles_stalled = true;
+        }
+        if (s.stop_requested || stuck) && !self.interrupted {
             self.interrupted = true;
             o.stop_console = true;
         }
@@ -167,7 +190,24 @@ mod tests {
     }
 
     fn seen(t: f64, console: State, emulator: State, simulator: State) -> Seen {
-        Seen { now: Duration::from_secs_f64(t), stop_requested: false, console, emulator, simulator }
+        Seen { now: Duration::from_secs_f64(t), stop_requested: false, console, consoles_ready: true, emulator, simulator }
+    }
+
+    #[test]
+    fn a_console_not_streaming_long_after_its_start_is_named_and_the_run_stopped() {
+        let mut s = Supervisor::new(100.0);
+        let waiting = |t| Seen { consoles_ready: false, ..seen(t, Running, Running, Running) };
+        assert_eq!(s.look(waiting(29.0)), Orders::default(), "a console may take its time to start");
+        let o = s.look(waiting(31.0));
+        assert_eq!(o, Orders { stop_console: true, consoles_stalled: true, ..Orders::default() });
+        assert!(s.interrupted());
+        assert_eq!(s.look(waiting(32.0)), Orders::default(), "named and stopped once");
+        // Stopped in order once the console has ended.
+        assert_eq!(s.look(seen(33.0, Succeeded, Running, Running)), Orders { stop_emulator: true, ..Orders::default() });
+        // Consoles that stream, or that ended, are not stuck.
+        let mut s = Supervisor::new(100.0);
+        assert_eq!(s.look(seen(40.0, Running, Running, Running)), Orders::default());
+        assert_eq!(s.look(Seen { consoles_ready: false, ..seen(41.0, Failed, Running, Running) }), Orders::default());
     }
 
     #[test]

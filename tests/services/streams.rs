@@ -1,8 +1,11 @@
 //! Several streams on one emulator (`netfi run --streams N`): each stream's
 //! own scenario, seed, accounting and files, and their total.
 
-use super::{assert_conserved, netfi, run, u};
+use super::{assert_conserved, netfi, out_dir, run, service, u, wait_file, ONE_RUN_AT_A_TIME};
 use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Child;
+use std::time::Duration;
 
 /// What `netfi scenario check` drops of `frames` frames of `scenario` with
 /// `seed`, in simulated time.
@@ -58,6 +61,8 @@ fn three_streams_each_realize_their_own_scenario_and_balance() {
         }
         total_entered += u(&own["frames"]["entered"]);
         total_dropped += dropped.as_object().unwrap().values().map(u).sum::<u64>();
+        // Its console said it streams, as the runner asks of every console.
+        assert!(out.join(format!("stream-{k}/console.ready")).exists(), "stream {k}");
         let trace = std::fs::read_to_string(out.join(format!("stream-{k}/trace.csv"))).unwrap();
         assert_eq!(trace.lines().skip(1).count() as u64, FRAMES, "stream {k}");
     }
@@ -73,4 +78,63 @@ fn three_streams_each_realize_their_own_scenario_and_balance() {
     assert_eq!(u(&e["total"]["entered"]), total_entered);
     assert_eq!(e["balanced"], true);
     assert_eq!(e["streams"].as_array().unwrap().len(), 3);
+}
+
+/// A stand-alone emulator of two streams notices a dead robot as the
+/// emulator of one does: it reaps each stream's run, ends that stream's
+/// feedback early so its console ends its stream, and names the dead peer
+/// in that stream's report; the other stream runs to its end.
+#[test]
+fn a_standalone_emulator_of_two_streams_notices_a_dead_robot() {
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("streams-dead-robot");
+    let run_id = format!("it-sdr-{}", std::process::id());
+    let ids = [run_id.clone(), netfi::service::plan::stream_run_id(&run_id, 1)];
+    let dirs = [out.join("stream-0"), out.join("stream-1")];
+    let nap = ["--nap-us", "200"];
+    let mut robots: Vec<Child> = (0..2).map(|k| service("simulator", &ids[k], &dirs[k], &nap)).collect();
+    dirs.iter().for_each(|d| wait_file(&d.join("simulator.ready")));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
+    let emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal", "--streams", "2"], pin.as_slice()].concat());
+    wait_file(&out.join("emulator.ready"));
+    let consoles: Vec<Child> = (0..2).map(|k| service("console", &ids[k], &dirs[k], &[&["--frames", "4000"], &nap[..]].concat())).collect();
+    wait_file(&dirs[1].join("console.ready"));
+    std::thread::sleep(Duration::from_millis(700));
+    robots[1].kill().unwrap();
+    robots[1].wait().unwrap();
+    for (k, c) in consoles.into_iter().enumerate() {
+        let o = c.wait_with_output().unwrap();
+        assert!(o.status.success(), "console {k}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let e = emu.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&e.stderr);
+    assert!(e.status.success(), "emulator: {stderr}");
+    assert!(robots[0].wait().unwrap().success());
+    let json = |path: PathBuf| -> Value { serde_json::from_slice(&std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap() };
+    // Stream 1: its console was told and ended its stream early; every
+    // frame that entered is accounted for; the dead robot is named.
+    let c1 = json(dirs[1].join("console.json"));
+    assert_eq!(c1["ended_by"], "emulator_ended", "{c1}");
+    assert!(u(&c1["frames_sent"]) < 4000, "{c1}");
+    let e1 = json(dirs[1].join("emulator.json"));
+    assert_eq!(e1["ended_by"], "peer_died", "{stderr}");
+    let dead = e1["dead_peers"].as_array().unwrap();
+    assert!(dead.iter().any(|d| d.as_str().is_some_and(|d| d.starts_with("simulator"))), "{dead:?}");
+    let f = &e1["frames"];
+    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
+    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]), "{f}");
+    assert_eq!(u(&f["entered"]), u(&c1["frames_sent"]), "{f}");
+    // Stream 0 ran to its end, untouched.
+    let c0 = json(dirs[0].join("console.json"));
+    assert_eq!(c0["ended_by"], "done", "{c0}");
+    let e0 = json(dirs[0].join("emulator.json"));
+    assert_eq!(e0["ended_by"], "end_marker");
+    assert_eq!(e0["dead_peers"].as_array().map(Vec::len), Some(0));
+    assert_eq!(u(&e0["frames"]["delivered"]), 4000);
+    // The joint report says how the loop ended.
+    assert_eq!(json(out.join("emulator.json"))["ended_by"], "peer_died");
+    let left = super::faults::iceoryx2_files_of(&run_id, 2);
+    assert!(left.is_empty(), "left {left:?}");
 }
