@@ -80,6 +80,16 @@ fn show(run: &str) -> Value {
     serde_json::from_str::<Value>(&stdout).unwrap()["state"].clone()
 }
 
+/// Until at least `n` frames have entered the run's emulator (as its
+/// control service last counted them).
+fn wait_entered(run: &str, n: u64) {
+    let t0 = Instant::now();
+    while show(run)["frames_entered"].as_u64().unwrap() < n {
+        assert!(t0.elapsed() < Duration::from_secs(30), "fewer than {n} frames entered in 30 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// The trace's rows: (ingress_ns, dropped, delay_ns).
 fn trace(out: &Path) -> Vec<(u64, bool, Option<u64>)> {
     let text = std::fs::read_to_string(out.join("trace.csv")).unwrap();
@@ -113,6 +123,9 @@ fn a_live_switch_from_plm2_to_dlm1_takes_effect_and_is_reported() {
     let s = show(&id);
     assert_eq!((s["scenario"].as_str(), s["phase"].as_u64()), (Some("PLM-2"), Some(1)), "{s}");
 
+    // Enough of PLM-2 for the frame-by-frame check below, however fast
+    // the calls above were.
+    wait_entered(&id, 500);
     let (ok, stdout, err) = ctl(&id, &["switch", "DLM-1"]);
     assert!(ok, "{err}");
     assert!(stdout.contains("switch to DLM-1: took effect at t = "), "{stdout}");
