@@ -15,10 +15,11 @@ them, so that either side may be Python or Rust.
 """
 
 import ctypes
-import time
 from typing import Callable, Optional
 
 import iceoryx2 as iox
+
+from .run import PublishingEnd, SubscribingEnd
 
 #: The iceoryx2 type name of the user header.
 VIDEO_HEADER_TYPE_NAME = "netfi::VideoHeader.v1"
@@ -219,17 +220,12 @@ class VideoFrame:
         self.release()
 
 
-class VideoPublisher:
+class VideoPublisher(PublishingEnd):
     """The publishing end of a video channel (``video`` for a camera)."""
 
     def __init__(self, service, port, max_len: int):
-        self.service = service
-        self.port = port
+        super().__init__(service, port)
         self.max_len = max_len
-
-    def peers_connected(self) -> int:
-        """Subscribers of the channel now."""
-        return self.service.dynamic_config.number_of_subscribers
 
     def send(self, header: VideoHeader, data, stamp: Optional[Callable[[VideoHeader], None]] = None) -> int:
         """Loans a sample of ``len(data)`` bytes, copies ``header`` and
@@ -252,46 +248,14 @@ class VideoPublisher:
         """Sends the end marker after ``count`` frames."""
         return self.send(video_end_marker(count), b"")
 
-    def wait_for_subscriber(self, timeout_s: float, node=None) -> None:
-        """Waits until the channel has a subscriber (the emulator)."""
-        from .run import NoPeer
 
-        deadline = time.monotonic() + timeout_s
-        while self.peers_connected() == 0:
-            if time.monotonic() > deadline:
-                raise NoPeer(f"no subscriber on {self.service.name} within {timeout_s} s")
-            if node is not None and node.termination_requested():
-                raise NoPeer(f"stopped while waiting for a subscriber on {self.service.name}")
-            time.sleep(0.001)
-
-    def close(self) -> None:
-        if self.port is not None:
-            self.port.delete()
-            self.port = None
-        self.service = None
-
-
-class VideoSubscriber:
+class VideoSubscriber(SubscribingEnd):
     """A subscribing end of a video channel (``video_out`` for a viewer)."""
-
-    def __init__(self, service, port):
-        self.service = service
-        self.port = port
-
-    def peers_connected(self) -> int:
-        """Publishers of the channel now (0 or 1)."""
-        return self.service.dynamic_config.number_of_publishers
 
     def receive(self) -> Optional[VideoFrame]:
         """The oldest queued frame (or end marker), or None."""
         sample = self.port.receive()
         return None if sample is None else VideoFrame(sample)
-
-    def close(self) -> None:
-        if self.port is not None:
-            self.port.delete()
-            self.port = None
-        self.service = None
 
 
 def channel_limits(channel: str):
