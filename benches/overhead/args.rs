@@ -5,7 +5,7 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// The parts of the benchmark, in the order they run within a repetition.
-pub const PARTS: [&str; 6] = ["latency", "delay", "product", "throughput", "sockperf", "streams"];
+pub const PARTS: [&str; 7] = ["latency", "delay", "product", "throughput", "capacity", "sockperf", "streams"];
 
 /// The benchmark's command line, after `cargo bench --bench overhead --`.
 #[derive(Debug, clap::Parser)]

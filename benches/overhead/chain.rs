@@ -3,7 +3,7 @@
 //! and delay parts built of them.
 
 use crate::args::Settings;
-use crate::drive::{drive, slots_for, Drive};
+use crate::drive::{drive, slots_for, Drive, Routes};
 use crate::emulator::{self, Emulator};
 use crate::ends::{loopback_port, IpcEnds, UdpEnds};
 use crate::figures::{ns, rate_label, KEYS};
@@ -12,7 +12,7 @@ use crate::host::{pin, HostTimer, HostWindow};
 use crate::{check_interrupted, write_hlog, Results, Transport, PLM2_DLM2};
 use anyhow::Result;
 use netfi::metrics::{difference, fmt_ns, Summary};
-use netfi::service::emulator::EmulatorReport;
+use netfi::service::emulator::{EmulatorReport, LoopBusy};
 use netfi::service::plan::fresh_run_id;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -28,6 +28,8 @@ pub struct ChainResult {
     pub scenario: String,
     pub rate_hz: f64,
     pub seconds: f64,
+    /// From the first recorded send to the last.
+    pub send_seconds: f64,
     pub host: HostWindow,
     pub chain_ns: Summary,
     pub direct_ns: Summary,
@@ -58,6 +60,10 @@ pub struct EmulatorFigures {
     pub ingress_wait_ns: Summary,
     pub steal_fraction: f64,
     pub realtime_priority: Option<i32>,
+    /// The loop's own time on frames (see [`LoopBusy`]).
+    pub busy: Option<LoopBusy>,
+    /// Trace rows the emulator could not hand to its writer.
+    pub trace_overflowed: u64,
     pub out_dir: PathBuf,
 }
 
@@ -73,6 +79,8 @@ impl EmulatorFigures {
             ingress_wait_ns: r.shaping.link.ingress_wait_ns,
             steal_fraction: r.process.steal_fraction,
             realtime_priority: r.process.realtime_priority,
+            busy: r.process.busy.clone(),
+            trace_overflowed: r.process.trace_overflowed,
             out_dir: dir.to_path_buf(),
         }
     }
@@ -89,6 +97,10 @@ struct Interval<'a> {
     /// A delay scenario: frames stay held after the last is sent, and the
     /// driving thread never sleeps.
     delayed: bool,
+    routes: Routes,
+    /// The emulator's release queue (`--queue-capacity`), when not its
+    /// default.
+    queue_capacity: Option<usize>,
 }
 
 impl Interval<'_> {
@@ -105,12 +117,39 @@ impl Interval<'_> {
 /// A chain interval: the emulator between the benchmark's two ends over
 /// `transport`, at `rate_hz` per route, for `seconds`.
 pub fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenario_label: &str, rate_hz: f64, seconds: f64, rep: usize) -> Result<ChainResult> {
-    check_interrupted()?;
     let name = format!("chain-{}-{}-{}-r{rep}", transport.name(), scenario_label, rate_label(rate_hz));
+    let delayed = scenario_label != "normal";
+    run_interval(s, transport, name, rep, scenario, rate_hz, seconds, delayed, Routes::Alternate, None)
+}
+
+/// A capacity trial: every frame through the emulator over iceoryx2 at
+/// `rate_hz`, for `seconds`, the release queue holding a second of frames
+/// (so a delay scenario tests the emulator's speed, not the queue's size).
+pub fn capacity_interval(s: &Settings, scenario: &str, scenario_label: &str, rate_hz: f64, seconds: f64) -> Result<ChainResult> {
+    let name = format!("capacity-{scenario_label}-{}", rate_label(rate_hz));
+    let queue = (rate_hz as usize).max(1 << 16);
+    run_interval(s, Transport::Iceoryx2, name, 0, scenario, rate_hz, seconds, scenario_label != "normal", Routes::ChainOnly, Some(queue))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_interval(
+    s: &Settings,
+    transport: Transport,
+    name: String,
+    rep: usize,
+    scenario: &str,
+    rate_hz: f64,
+    seconds: f64,
+    delayed: bool,
+    routes: Routes,
+    queue_capacity: Option<usize>,
+) -> Result<ChainResult> {
+    check_interrupted()?;
     let dir = s.out_dir.join("runs").join(&name);
     let _ = std::fs::remove_dir_all(&dir);
-    let (_, slots) = slots_for(rate_hz, seconds);
-    let iv = Interval { dir: &dir, scenario, rate_hz, seconds, expected: slots / 2 + 16, delayed: scenario_label != "normal" };
+    let (_, slots) = slots_for(rate_hz, seconds, routes);
+    let expected = slots / if routes == Routes::Alternate { 2 } else { 1 } + 16;
+    let iv = Interval { dir: &dir, scenario, rate_hz, seconds, expected, delayed, routes, queue_capacity };
     let host = HostTimer::start(s.quiet);
     let (drive, report) = match transport {
         Transport::Iceoryx2 => drive_ipc(s, &iv)?,
@@ -127,6 +166,7 @@ pub fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenar
         scenario: report.process.scenario.clone(),
         rate_hz,
         seconds: drive.seconds,
+        send_seconds: drive.send_seconds,
         host,
         added_ns: difference(&chain_ns, &direct_ns, &KEYS),
         chain_ns,
@@ -149,14 +189,15 @@ pub fn chain_interval(s: &Settings, transport: Transport, scenario: &str, scenar
 /// and a simulator node in the driving thread.
 fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
     let run_id = fresh_run_id();
-    let args = emulator::args(s, iv.scenario, iv.dir, iv.expected, Some(run_id.clone()));
+    let mut args = emulator::args(s, iv.scenario, iv.dir, iv.expected, Some(run_id.clone()));
+    args.queue_capacity = iv.queue_capacity;
     let emu = Emulator::spawn(iv.dir, &emulator::argv(&args, &[]))?;
     let (core, rt) = (s.driver_core, s.rt_priority);
-    let (rate_hz, seconds, drain_ns, may_sleep) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed);
+    let (rate_hz, seconds, drain_ns, may_sleep, routes) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed, iv.routes);
     let handle = std::thread::spawn(move || -> Result<Drive> {
         pin(core, rt);
         let mut ends = IpcEnds::open(&run_id)?;
-        let d = drive(&mut ends, rate_hz, seconds, drain_ns, may_sleep);
+        let d = drive(&mut ends, rate_hz, seconds, drain_ns, may_sleep, routes);
         ends.end(d.chain_sent);
         // Keep the ports open until the emulator has seen the end.
         std::thread::sleep(Duration::from_millis(50));
@@ -178,7 +219,8 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
 /// payloads, no return path), the ends non-blocking sockets.
 fn drive_udp(s: &Settings, iv: &Interval, slots: u64) -> Result<(Drive, EmulatorReport)> {
     let rx_chain = loopback_port()?;
-    let args = emulator::args(s, iv.scenario, iv.dir, iv.expected, None);
+    let mut args = emulator::args(s, iv.scenario, iv.dir, iv.expected, None);
+    args.queue_capacity = iv.queue_capacity;
     let udp: Vec<String> = vec![
         "--ingress".into(),
         "udp://127.0.0.1:0".into(),
@@ -193,11 +235,11 @@ fn drive_udp(s: &Settings, iv: &Interval, slots: u64) -> Result<(Drive, Emulator
     let emu = Emulator::spawn(iv.dir, &emulator::argv(&args, &udp))?;
     let ingress = emu.udp_ingress()?;
     let (core, rt) = (s.driver_core, s.rt_priority);
-    let (rate_hz, seconds, drain_ns, may_sleep) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed);
+    let (rate_hz, seconds, drain_ns, may_sleep, routes) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed, iv.routes);
     let handle = std::thread::spawn(move || -> Result<Drive> {
         pin(core, rt);
         let mut ends = UdpEnds::new(rx_chain, ingress, slots)?;
-        Ok(drive(&mut ends, rate_hz, seconds, drain_ns, may_sleep))
+        Ok(drive(&mut ends, rate_hz, seconds, drain_ns, may_sleep, routes))
     });
     let d = handle.join().map_err(|_| anyhow::anyhow!("the driving thread panicked"))??;
     check_interrupted()?;

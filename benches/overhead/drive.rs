@@ -36,6 +36,9 @@ pub struct Drive {
     pub direct_received: u64,
     pub refused: u64,
     pub seconds: f64,
+    /// From the first recorded send to the last send: the rate the driving
+    /// thread really offered is the frames sent over this.
+    pub send_seconds: f64,
 }
 
 impl Drive {
@@ -65,9 +68,9 @@ impl Drive {
         }
     }
 
-    /// Sends slot `slot` on its route (chain on even slots, direct on odd).
-    pub fn send(&mut self, ends: &mut impl Ends, slot: u64) {
-        let route = if slot % 2 == 0 { Route::Chain } else { Route::Direct };
+    /// Sends slot `slot` on its route (see [`Routes::of`]).
+    pub fn send(&mut self, ends: &mut impl Ends, slot: u64, routes: Routes) {
+        let route = routes.of(slot);
         let ok = ends.send(route, slot, &wire(slot));
         match (route, ok) {
             (Route::Chain, true) => self.chain_sent += 1,
@@ -77,19 +80,47 @@ impl Drive {
     }
 }
 
-/// Slots of an interval: `warmup + frames` per route, alternating chain
-/// (even slots) and direct (odd slots), half a period apart.
-pub fn slots_for(rate_hz: f64, seconds: f64) -> (u64, u64) {
+/// The routes an interval sends on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Routes {
+    /// Chain on even slots, direct on odd, half a period apart: the
+    /// latency intervals.
+    Alternate,
+    /// Every slot through the emulator, a period apart: the capacity
+    /// trials, where the driving thread's whole budget goes to the chain.
+    ChainOnly,
+}
+
+impl Routes {
+    fn count(self) -> u64 {
+        match self {
+            Routes::Alternate => 2,
+            Routes::ChainOnly => 1,
+        }
+    }
+
+    fn of(self, slot: u64) -> Route {
+        if self == Routes::ChainOnly || slot % 2 == 0 {
+            Route::Chain
+        } else {
+            Route::Direct
+        }
+    }
+}
+
+/// Slots of an interval: `warmup + frames` per route, `routes` of them
+/// sharing the period.
+pub fn slots_for(rate_hz: f64, seconds: f64, routes: Routes) -> (u64, u64) {
     let warmup = (rate_hz * WARMUP_S).ceil() as u64;
     let frames = (rate_hz * seconds).round() as u64;
-    (2 * warmup, 2 * (warmup + frames))
+    (routes.count() * warmup, routes.count() * (warmup + frames))
 }
 
 /// Sends every slot at its time and busy-polls both routes in between, in
 /// one thread; then waits up to `drain_ns` for the chain's last frames.
-pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, may_sleep: bool) -> Drive {
-    let (warm, slots) = slots_for(rate_hz, seconds);
-    let half_period_ns = 1e9 / rate_hz / 2.0;
+pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, may_sleep: bool, routes: Routes) -> Drive {
+    let (warm, slots) = slots_for(rate_hz, seconds, routes);
+    let slot_ns = 1e9 / rate_hz / routes.count() as f64;
     let mut d = Drive::default();
     let stamped = ends.stamped();
     let t0 = now_ns() + 1_000_000;
@@ -102,9 +133,9 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
             break;
         }
         if slot < slots {
-            let target = t0 + (slot as f64 * half_period_ns) as u64;
+            let target = t0 + (slot as f64 * slot_ns) as u64;
             if now >= target {
-                d.send(ends, slot);
+                d.send(ends, slot, routes);
                 if slot >= warm {
                     if slot == warm {
                         t_record = now;
@@ -113,6 +144,7 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
                 }
                 slot += 1;
                 if slot == slots {
+                    d.send_seconds = now.saturating_sub(t_record) as f64 / 1e9;
                     drain_until = now_ns() + drain_ns;
                 }
             }
@@ -123,7 +155,7 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
                 break;
             }
         } else if may_sleep && !d.in_flight() {
-            let target = t0 + (slot as f64 * half_period_ns) as u64;
+            let target = t0 + (slot as f64 * slot_ns) as u64;
             if target > now_ns() + 2 * SLEEP_SLACK_NS {
                 sleep_until_ns(target - SLEEP_SLACK_NS);
             }
@@ -138,7 +170,7 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
 /// consoles are not in step), and every stream's routes are polled between
 /// sends. The figures are of all streams together.
 pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns: u64) -> Drive {
-    let (warm, slots) = slots_for(rate_hz, seconds);
+    let (warm, slots) = slots_for(rate_hz, seconds, Routes::Alternate);
     let n = ends.len() as u64;
     let half_period_ns = 1e9 / rate_hz / 2.0;
     let at = |e: u64| (((e / n) as f64 + (e % n) as f64 / n as f64) * half_period_ns) as u64;
@@ -153,7 +185,7 @@ pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns:
         }
         if e < events && now >= t0 + at(e) {
             let slot = e / n;
-            d.send(&mut ends[(e % n) as usize], slot);
+            d.send(&mut ends[(e % n) as usize], slot, Routes::Alternate);
             if slot >= warm {
                 if e == warm * n {
                     t_record = now;

@@ -44,6 +44,12 @@
 //!   `emulator.json`) and the capacity it implies, set against the scale
 //!   bar (10⁶ frames/s with Normal, 7·10⁵ with PLM-2 + DLM-2) whatever rate
 //!   the console reached.
+//! - **Capacity.** The emulator alone at the scale bar's rates (10⁶ frames/s
+//!   with Normal, 7·10⁵ with PLM-2 + DLM-2) and up or down from them to 5%,
+//!   for the throughput trial's length: the benchmark plays console and
+//!   robot in one thread, every frame through the emulator, so the rate
+//!   stops where the emulator stops keeping up, not where the product's
+//!   console on a shared core does.
 //!
 //! Each interval records the host's steal time, its load average and the
 //! CPU that other processes used during it. Nothing
@@ -59,9 +65,9 @@
 //! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
 //! | `NETFI_BENCH_QUICK` | unset | `1`: every part briefly (as `--quick`): 1 s intervals, 1 repetition, 1 s throughput trials |
-//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `sockperf`, `streams` |
+//! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `capacity`, `sockperf`, `streams` |
 //! | `NETFI_BENCH_STREAMS` | `1,2,8,32` | stream counts of the streams part (1 kHz per route per stream) |
-//! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput trial |
+//! | `NETFI_BENCH_THROUGHPUT_S` | 10 | length of each throughput and capacity trial |
 //! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator and this benchmark's threads at this SCHED_FIFO priority |
 //! | `NETFI_BENCH_QUIET_CORES` | unset | before each interval, wait until other processes keep at most this many cores busy |
 //! | `NETFI_BENCH_QUIET_WAIT_S` | 600 | ... but for at most this long |
@@ -75,12 +81,13 @@
 //! The program follows the method: `args` (what to run), `host` (the host
 //! around each interval), `ends` and `drive` (the benchmark's ends and the
 //! loop that drives them), `emulator` (the process), `chain`, `floor`,
-//! `probe`, `sockperf`, `product` and `throughput` (the intervals and
+//! `probe`, `sockperf`, `product`, `throughput` and `capacity` (the intervals and
 //! parts), `figures` (medians over repetitions, the bars) and `report`
 //! (`overhead.json`, `overhead.md`).
 
 
 mod args;
+mod capacity;
 mod chain;
 mod drive;
 mod emulator;
@@ -160,6 +167,7 @@ struct Results {
     sockperfs: Vec<Value>,
     throughput: BTreeMap<String, Value>,
     throughput_fps: BTreeMap<String, f64>,
+    capacity: BTreeMap<String, Value>,
     streams: Vec<Value>,
 }
 
@@ -198,6 +206,9 @@ fn run(args: &Args) -> Result<()> {
     }
     if s.wants("throughput") {
         throughput::throughput_part(&s, &mut res)?;
+    }
+    if s.wants("capacity") {
+        capacity::capacity_part(&s, &mut res)?;
     }
     if s.wants("streams") {
         streams::streams_part(&s, &mut res)?;

@@ -11,7 +11,7 @@
 //! beside each.
 
 use crate::args::Settings;
-use crate::drive::{drive_many, slots_for};
+use crate::drive::{drive_many, slots_for, Routes};
 use crate::emulator::{self, Emulator};
 use crate::ends::IpcEnds;
 use crate::host::{pin, HostTimer};
@@ -38,7 +38,7 @@ fn point(s: &Settings, n: usize, rep: usize) -> Result<Value> {
     let dir = s.out_dir.join("runs").join(format!("streams-{n}-r{rep}"));
     let _ = std::fs::remove_dir_all(&dir);
     let run_id = fresh_run_id();
-    let (_, slots) = slots_for(RATE_HZ, s.interval_s);
+    let (_, slots) = slots_for(RATE_HZ, s.interval_s, Routes::Alternate);
     let mut args = emulator::args(s, "Normal", &dir, slots / 2 + 16, Some(run_id.clone()));
     args.stream.streams = n as u32;
     let emu = Emulator::spawn(&dir, &emulator::argv(&args, &[]))?;

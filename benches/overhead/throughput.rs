@@ -146,10 +146,20 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
         trials.push(t);
         Ok(ok)
     };
+    let best = search_rates(start_hz, max_hz, |rate| run(rate, &mut trials))?;
+    busy_shares(&mut trials);
+    Ok((best.unwrap_or(0.0), trials))
+}
+
+/// The highest rate `run` sustains: doubling from `start_hz` (at most
+/// `max_hz`) until a rate fails, or halving (down to 1 000/s) until one
+/// passes, then bisection to 5% (rates rounded to 1 000/s). `None` if no
+/// rate passed.
+pub fn search_rates(start_hz: f64, max_hz: f64, mut run: impl FnMut(f64) -> Result<bool>) -> Result<Option<f64>> {
     let (mut lo, mut hi): (Option<f64>, Option<f64>) = (None, None);
     let mut rate = start_hz;
     loop {
-        if run(rate, &mut trials)? {
+        if run(rate)? {
             lo = Some(rate);
             if rate >= max_hz {
                 break;
@@ -163,7 +173,7 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
     if lo.is_none() {
         let mut r = start_hz / 2.0;
         while r >= 1000.0 {
-            if run(r, &mut trials)? {
+            if run(r)? {
                 lo = Some(r);
                 break;
             }
@@ -179,14 +189,13 @@ fn search(s: &Settings, label: &str, scenario: &str, start_hz: f64, max_hz: f64)
         if mid <= l || mid >= h {
             break;
         }
-        if run(mid, &mut trials)? {
+        if run(mid)? {
             lo = Some(mid);
         } else {
             hi = Some(mid);
         }
     }
-    busy_shares(&mut trials);
-    Ok((lo.unwrap_or(0.0), trials))
+    Ok(lo)
 }
 
 /// Fills in each trial's emulator busy share (see [`Trial`]): with `turns`
