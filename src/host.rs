@@ -20,6 +20,24 @@ pub fn cores_except(core: usize) -> Option<libc::cpu_set_t> {
     any.then_some(set)
 }
 
+/// Moves `thread` off `core`: the CPUs it may use now, less `core`. Its own
+/// set, not the caller's: the caller is usually the loop, already pinned to
+/// `core`, whose set would leave nothing. `false` where `core` is the only
+/// CPU the thread may use, or the kernel refused.
+pub fn keep_thread_off_core(thread: libc::pthread_t, core: usize) -> bool {
+    let size = std::mem::size_of::<libc::cpu_set_t>();
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; the calls only read
+    // and write `set`, of the size given, for a thread the caller keeps alive.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        if libc::pthread_getaffinity_np(thread, size, &mut set) != 0 || core >= libc::CPU_SETSIZE as usize {
+            return false;
+        }
+        libc::CPU_CLR(core, &mut set);
+        libc::CPU_COUNT(&set) > 0 && libc::pthread_setaffinity_np(thread, size, &set) == 0
+    }
+}
+
 /// Cumulative CPU times from `/proc/stat`, in clock ticks (USER_HZ, 100/s on
 /// Linux).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -571,17 +571,12 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
 impl TraceWriter {
     /// Keeps the writer thread off `core`: a busy-polling loop pinned there
     /// would otherwise be preempted whenever the writer wakes on it (every
-    /// few milliseconds) and its releases would be late by as much. Nothing
-    /// changes where `core` is the only core the thread may use.
-    pub fn keep_off_core(&self, core: usize) {
+    /// few milliseconds, and for most of a millisecond at high rates) and
+    /// its releases would be late by as much. `false` where `core` is the
+    /// only core the thread may use.
+    pub fn keep_off_core(&self, core: usize) -> bool {
         use std::os::unix::thread::JoinHandleExt;
-        if let Some(set) = crate::host::cores_except(core) {
-            // SAFETY: `set` is a valid cpu_set_t and the pthread is alive
-            // (it is joined only in `finish`, which consumes `self`).
-            unsafe {
-                libc::pthread_setaffinity_np(self.thread.as_pthread_t(), std::mem::size_of::<libc::cpu_set_t>(), &set);
-            }
-        }
+        crate::host::keep_thread_off_core(self.thread.as_pthread_t(), core)
     }
 
     /// Streams the trace to `csv_path` from now on (and the histogram logs

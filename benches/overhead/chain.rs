@@ -194,9 +194,10 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
     let emu = Emulator::spawn(iv.dir, &emulator::argv(&args, &[]))?;
     let (core, rt) = (s.driver_core, s.rt_priority);
     let (rate_hz, seconds, drain_ns, may_sleep, routes) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed, iv.routes);
+    let rid = run_id.clone();
     let handle = std::thread::spawn(move || -> Result<Drive> {
         pin(core, rt);
-        let mut ends = IpcEnds::open(&run_id)?;
+        let mut ends = IpcEnds::open(&rid)?;
         let d = drive(&mut ends, rate_hz, seconds, drain_ns, may_sleep, routes);
         ends.end(d.chain_sent);
         // Keep the ports open until the emulator has seen the end.
@@ -209,10 +210,13 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
         Ok(d) => d,
         Err(e) => {
             let _ = emu.finish(Duration::ZERO);
+            emulator::forget_runs([run_id.as_str()]);
             return Err(e);
         }
     };
-    Ok((d, emu.finish(Duration::from_secs(10))?))
+    let report = emu.finish(Duration::from_secs(10));
+    emulator::forget_runs([run_id.as_str()]);
+    Ok((d, report?))
 }
 
 /// The UDP chain: the emulator between two loopback sockets (ITP

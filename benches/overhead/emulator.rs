@@ -60,6 +60,18 @@ pub fn argv(args: &EmulatorArgs, udp: &[String]) -> Vec<String> {
     a
 }
 
+/// Removes the management segments of runs `run_ids` once all their
+/// processes have ended: two processes that drop their nodes at the same
+/// moment (the emulator on its end marker, this benchmark's ends) each see
+/// the other's node and leave the segment in `/dev/shm`.
+pub fn forget_runs<'a>(run_ids: impl IntoIterator<Item = &'a str>) {
+    for id in run_ids {
+        if let Ok(run) = netfi::transport::RunId::new(id) {
+            netfi::transport::ipc::remove_run_segment_if_unused(&run);
+        }
+    }
+}
+
 /// A running emulator process, stopped when dropped.
 pub struct Emulator {
     child: Child,

@@ -74,6 +74,9 @@ impl IpcEnds {
         let cfg = IpcConfig::new(RunId::new(run_id)?);
         let console = IpcNode::open(&cfg, Role::Console)?;
         let simulator = IpcNode::open(&cfg, Role::Simulator)?;
+        // iceoryx2's nodes put their own SIGINT/SIGTERM handlers in place of
+        // the benchmark's: without this, Ctrl-C would go unseen.
+        netfi::service::signals::ensure_installed();
         let to_emulator = console.publisher(Channel::Console)?;
         let direct_tx = console.publisher(Channel::Direct)?;
         let from_emulator = simulator.subscriber(Channel::Emulator)?;

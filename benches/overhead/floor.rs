@@ -73,12 +73,14 @@ pub fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds:
 /// One iceoryx2 hop: the console's direct port to the simulator's.
 fn floor_ipc(f: Floor) -> Result<Measured> {
     let run_id = fresh_run_id();
+    let rid_end = run_id.clone();
     let done = Arc::new(AtomicBool::new(false));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<()>();
     let (rid, done_rx) = (run_id.clone(), done.clone());
     let receiver = std::thread::spawn(move || -> Result<(LatencyHistogram, u64)> {
         pin(f.rx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&rid)?), Role::Simulator)?;
+        netfi::service::signals::ensure_installed();
         let mut sub = node.subscriber(Channel::Direct)?;
         let _ = ready_tx.send(());
         let (mut h, mut n) = (LatencyHistogram::new(), 0u64);
@@ -101,6 +103,7 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
     let sender = std::thread::spawn(move || -> Result<(u64, f64)> {
         pin(f.tx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&run_id)?), Role::Console)?;
+        netfi::service::signals::ensure_installed();
         let mut publ = node.publisher(Channel::Direct)?;
         let t = Instant::now();
         while publ.peers_connected() == 0 {
@@ -124,6 +127,7 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
     let (sent, secs) = sender.join().map_err(|_| anyhow::anyhow!("the floor sender panicked"))??;
     done.store(true, Ordering::Release);
     let (h, n) = receiver.join().map_err(|_| anyhow::anyhow!("the floor receiver panicked"))??;
+    crate::emulator::forget_runs([rid_end.as_str()]);
     check_interrupted()?;
     Ok((sent, h, n, secs))
 }

@@ -49,8 +49,11 @@ fn point(s: &Settings, n: usize, rep: usize) -> Result<Value> {
     for e in ends.iter_mut() {
         e.end(slots / 2);
     }
-    let reports = emu.finish_streams(Duration::from_secs(10), n).context("the emulator's reports")?;
+    let reports = emu.finish_streams(Duration::from_secs(10), n).context("the emulator's reports");
     drop(ends);
+    let ids: Vec<String> = (0..n).map(|k| stream_run_id(&run_id, k)).collect();
+    emulator::forget_runs(ids.iter().map(String::as_str));
+    let reports = reports?;
     let (chain, direct, inside) = (d.chain.summary(), d.direct.summary(), d.inside.summary());
     let added = difference(&chain, &direct, &["p50", "p90", "p99", "p999"]);
     let (late_p50_median, late_p50_worst) = across(&reports, |x| x.p50);

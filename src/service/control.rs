@@ -192,15 +192,11 @@ pub struct ControlHandle {
 }
 
 impl ControlHandle {
-    /// Keeps the control thread off `core` (the loop's).
-    pub fn keep_off_core(&self, core: usize) {
+    /// Keeps the control thread off `core` (the loop's); `false` where it
+    /// cannot be.
+    pub fn keep_off_core(&self, core: usize) -> bool {
         use std::os::unix::thread::JoinHandleExt;
-        if let Some(set) = crate::host::cores_except(core) {
-            // SAFETY: `set` is a valid cpu_set_t and the thread is alive (joined only in `finish`).
-            unsafe {
-                libc::pthread_setaffinity_np(self.thread.as_pthread_t(), std::mem::size_of::<libc::cpu_set_t>(), &set);
-            }
-        }
+        crate::host::keep_thread_off_core(self.thread.as_pthread_t(), core)
     }
 
     /// The telemetry aggregator to hand to the trace writer, if telemetry is on.

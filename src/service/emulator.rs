@@ -632,12 +632,12 @@ pub(crate) fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&
     if let Some(core) = cfg.core {
         let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
         anyhow::ensure!(ok, "could not pin the emulator to core {core}");
-        link.keep_trace_off_core(core);
+        warn_unless_off(link.keep_trace_off_core(core), "the trace writer", core);
         if let Some(f) = fb {
-            f.keep_trace_off_core(core);
+            warn_unless_off(f.keep_trace_off_core(core), "the feedback trace writer", core);
         }
         if let Some(r) = ret {
-            r.keep_trace_off_core(core);
+            warn_unless_off(r.keep_trace_off_core(core), "the return path's trace writer", core);
         }
     }
     // After pinning: the loop's own threads are placed; everything else that
@@ -662,6 +662,15 @@ pub(crate) fn place(cfg: &EmulatorConfig, link: &Link<FrameSample>, fb: Option<&
     };
     let realtime_priority = cfg.rt_priority.and_then(realtime);
     Ok(Placement { isolation, realtime_priority })
+}
+
+/// Says loudly that one of the emulator's own threads (`what`) could not
+/// be kept off the loop's core: it may use no other core, so each time it
+/// runs it takes the core from the loop.
+pub(crate) fn warn_unless_off(kept: bool, what: &str, core: usize) {
+    if !kept {
+        eprintln!("emulator: WARNING: {what} could not be kept off core {core} (it may use no other): the loop loses its core whenever that thread runs");
+    }
 }
 
 /// Moves the loop to SCHED_FIFO `p`, warning of real-time throttling; the
@@ -793,10 +802,10 @@ pub fn run<S: FrameSource, K: FrameSink>(
     let mut control = start_control(cfg, &mut fwd.link)?;
     let mut placement = place(cfg, &fwd.link, fwd.feedback.as_deref(), ret.as_deref())?;
     if let (Some(core), Some((_, h))) = (cfg.core, control.as_ref()) {
-        h.keep_off_core(core);
+        warn_unless_off(h.keep_off_core(core), "the control thread", core);
     }
     if let (Some(core), Some(v)) = (cfg.core, fwd.video.as_deref()) {
-        v.keep_trace_off_core(core);
+        warn_unless_off(v.keep_trace_off_core(core), "the video trace writer", core);
     }
     // Ready only now, set up and placed: a console started on it is taken
     // in at once. Said before the set-up, frames queued at the ingress for

@@ -153,9 +153,10 @@ impl FeedbackPath {
         (&mut self.source, &mut self.sink)
     }
 
-    /// Keeps the trace's writer thread off `core`.
-    pub fn keep_trace_off_core(&self, core: usize) {
-        self.link.keep_trace_off_core(core);
+    /// Keeps the trace's writer thread off `core`; `false` where it may
+    /// use no other core.
+    pub fn keep_trace_off_core(&self, core: usize) -> bool {
+        self.link.keep_trace_off_core(core)
     }
 
     /// Stops the trace writer, writes `trace_feedback.csv` into `out_dir`,

@@ -185,9 +185,10 @@ impl<T: Carried> Link<T> {
         })
     }
 
-    /// Keeps the trace's writer thread off `core` (the loop's).
-    pub fn keep_trace_off_core(&self, core: usize) {
-        self.writer.keep_off_core(core);
+    /// Keeps the trace's writer thread off `core` (the loop's); `false`
+    /// where it may use no other core.
+    pub fn keep_trace_off_core(&self, core: usize) -> bool {
+        self.writer.keep_off_core(core)
     }
 
     /// The ingress index the next frame will get.

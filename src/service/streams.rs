@@ -304,12 +304,12 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut placement = emulator::place(&cfgs[0], &lanes[0].fwd.link, lanes[0].fwd.feedback.as_deref(), None)?;
     if let Some(core) = cfgs[0].core {
         if let Some((_, h)) = control.as_ref() {
-            h.keep_off_core(core);
+            emulator::warn_unless_off(h.keep_off_core(core), "the control thread", core);
         }
         for l in &lanes[1..] {
-            l.fwd.link.keep_trace_off_core(core);
+            emulator::warn_unless_off(l.fwd.link.keep_trace_off_core(core), "a stream's trace writer", core);
             if let Some(f) = l.fwd.feedback.as_deref() {
-                f.keep_trace_off_core(core);
+                emulator::warn_unless_off(f.keep_trace_off_core(core), "a stream's feedback trace writer", core);
             }
         }
     }

@@ -189,11 +189,10 @@ impl ReturnPath {
         })
     }
 
-    /// Keeps a shaped path's trace writer off `core` (the loop's).
-    pub fn keep_trace_off_core(&self, core: usize) {
-        if let Some(s) = &self.shaped {
-            s.link.keep_trace_off_core(core);
-        }
+    /// Keeps a shaped path's trace writer off `core` (the loop's); `false`
+    /// where it may use no other core.
+    pub fn keep_trace_off_core(&self, core: usize) -> bool {
+        self.shaped.as_ref().is_none_or(|s| s.link.keep_trace_off_core(core))
     }
 
     /// Releases what is due, then takes at most one datagram from the robot

@@ -233,6 +233,14 @@ fn run_of_monitor_file(file_name: &str, suffix: &str) -> Option<RunId> {
 /// The suffix iceoryx2 gives its per-prefix management segment.
 const MGMT_SUFFIX: &str = ".global_mgmt";
 
+/// Removes the management segment of run `run` when no node of it is left.
+/// For a process that watched a run's other processes end: each node's drop
+/// already tries, but nodes of two processes dropped at the same moment
+/// each see the other still there, and the segment stays.
+pub fn remove_run_segment_if_unused(run: &RunId) {
+    remove_mgmt_segment_if_unused(&IpcConfig::new(run.clone()));
+}
+
 /// Removes the management segment of the run of `config` when no node of
 /// the run is left (alive or undetermined).
 pub(super) fn remove_mgmt_segment_if_unused(config: &IpcConfig) {

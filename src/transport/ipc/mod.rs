@@ -88,7 +88,7 @@ use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
 
 pub use liveness::{
-    cleanup_dead_nodes, cleanup_dead_runs, CleanupError, CleanupReport, DeadPeer, FailedCleanup,
+    cleanup_dead_nodes, cleanup_dead_runs, remove_run_segment_if_unused, CleanupError, CleanupReport, DeadPeer, FailedCleanup,
 };
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
