@@ -445,6 +445,58 @@ impl Drop for Witness {
     }
 }
 
+/// Each thread of process `pid`: its name and the CPUs it may run on.
+fn threads_of(pid: i32) -> Vec<(i32, String, String)> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap().flatten() {
+        let Ok(tid) = e.file_name().to_string_lossy().parse::<i32>() else { continue };
+        let comm = std::fs::read_to_string(e.path().join("comm")).unwrap_or_default().trim().to_string();
+        let status = std::fs::read_to_string(e.path().join("status")).unwrap_or_default();
+        let cpus = status.lines().find_map(|l| l.strip_prefix("Cpus_allowed_list:")).unwrap_or("").trim().to_string();
+        out.push((tid, comm, cpus));
+    }
+    out
+}
+
+/// The emulator pinned to a core keeps its own other threads (the trace
+/// writer, the control server) off it: each time one of them ran there it
+/// would take the core from the loop for as long as it ran (milliseconds at
+/// high rates). Checked on a running `netfi emulator --core N` started as a
+/// user would start it by hand, its CPU mask the whole machine, the core
+/// not cleared (clearing it, as `netfi run` does by default, moves them too
+/// and would hide the emulator's own placement).
+#[test]
+fn the_emulators_own_threads_stay_off_its_core() {
+    let cores = core_affinity_count();
+    if cores < 2 {
+        eprintln!("skipped: one core only");
+        return;
+    }
+    let core = cores - 1;
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let out = out_dir("own-threads");
+    let run_id = format!("it-own-threads-{}", std::process::id());
+    let mut emu = service("emulator", &run_id, &out, &["--scenario", "Normal", "--core", &core.to_string()]);
+    wait_file(&out.join("emulator.ready"));
+    let threads = threads_of(emu.id() as i32);
+    // SAFETY: signalling the emulator this test started.
+    unsafe { libc::kill(emu.id() as i32, libc::SIGTERM) };
+    let status = emu.wait().unwrap();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut emu.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{stderr}");
+    let on = |cpus: &str| netfi::host::isolate::parse_list(cpus).unwrap();
+    let pid = emu.id() as i32;
+    let main = threads.iter().find(|t| t.0 == pid).expect("the loop's thread");
+    assert_eq!(on(&main.2).into_iter().collect::<Vec<_>>(), vec![core], "the loop is pinned: {threads:?}");
+    let others: Vec<_> = threads.iter().filter(|t| t.0 != pid).collect();
+    assert!(others.iter().any(|t| t.1 == "netfi-trace"), "a trace writer runs beside the loop: {threads:?}");
+    for (_, comm, cpus) in others {
+        assert!(!on(cpus).contains(&core), "{comm} may run on the loop's core {core} ({cpus})");
+    }
+    assert!(!stderr.contains("could not be kept off core"), "{stderr}");
+}
+
 /// The feedback loop robot → emulator → console through its own scenario
 /// (`--return-scenario`): one feedback per command the robot received,
 /// every one accounted for, the return scenario's fates those it gives its
