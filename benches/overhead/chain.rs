@@ -191,6 +191,7 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
     let run_id = fresh_run_id();
     let mut args = emulator::args(s, iv.scenario, iv.dir, iv.expected, Some(run_id.clone()));
     args.queue_capacity = iv.queue_capacity;
+    let _forget = emulator::ForgetRuns(vec![run_id.clone()]);
     let emu = Emulator::spawn(iv.dir, &emulator::argv(&args, &[]))?;
     let (core, rt) = (s.driver_core, s.rt_priority);
     let (rate_hz, seconds, drain_ns, may_sleep, routes) = (iv.rate_hz, iv.seconds, iv.drain_ns(), !iv.delayed, iv.routes);
@@ -210,13 +211,10 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
         Ok(d) => d,
         Err(e) => {
             let _ = emu.finish(Duration::ZERO);
-            emulator::forget_runs([run_id.as_str()]);
             return Err(e);
         }
     };
-    let report = emu.finish(Duration::from_secs(10));
-    emulator::forget_runs([run_id.as_str()]);
-    Ok((d, report?))
+    Ok((d, emu.finish(Duration::from_secs(10))?))
 }
 
 /// The UDP chain: the emulator between two loopback sockets (ITP

@@ -72,6 +72,17 @@ pub fn forget_runs<'a>(run_ids: impl IntoIterator<Item = &'a str>) {
     }
 }
 
+/// [`forget_runs`] of its runs when dropped: declared before the
+/// [`Emulator`] of those runs, it is dropped after it, however the
+/// interval ends (an interrupt included).
+pub struct ForgetRuns(pub Vec<String>);
+
+impl Drop for ForgetRuns {
+    fn drop(&mut self) {
+        forget_runs(self.0.iter().map(String::as_str));
+    }
+}
+
 /// A running emulator process, stopped when dropped.
 pub struct Emulator {
     child: Child,

@@ -165,3 +165,52 @@ pub fn pin(core: Option<usize>, rt_priority: Option<i32>) {
         }
     }
 }
+
+/// How fast the calling thread's core runs right now, in two fixed
+/// workloads, ns a step: a chain of dependent integer operations, and a
+/// pointer chase over 16 MiB (past a core's L2, within this machine's L3).
+/// The host of a virtual machine can slow both by half for minutes (clock
+/// frequency, other guests on the same caches and memory bus) with no
+/// steal time at all; a trial run in such a phase says so here.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Speed {
+    pub alu_ns: f64,
+    pub chase_ns: f64,
+}
+
+/// Measures [`Speed`] (about 60 ms; the chase's table is built once).
+pub fn speed() -> Speed {
+    static CYCLE: std::sync::OnceLock<Vec<u32>> = std::sync::OnceLock::new();
+    let cycle = CYCLE.get_or_init(|| {
+        // One cycle through every slot, in a seeded random order (Sattolo).
+        let n = 4 << 20;
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        for i in (1..n).rev() {
+            let j = (netfi::scenario::splitmix64(i as u64) % i as u64) as usize;
+            order.swap(i, j);
+        }
+        let mut next = vec![0u32; n];
+        for k in 0..n {
+            next[order[k] as usize] = order[(k + 1) % n];
+        }
+        next
+    });
+    const ALU: u64 = 20_000_000;
+    let t = Instant::now();
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    for _ in 0..ALU {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+    }
+    std::hint::black_box(x);
+    let alu_ns = t.elapsed().as_nanos() as f64 / ALU as f64;
+    const CHASE: usize = 500_000;
+    let t = Instant::now();
+    let mut at = 0u32;
+    for _ in 0..CHASE {
+        at = cycle[at as usize];
+    }
+    std::hint::black_box(at);
+    Speed { alu_ns, chase_ns: t.elapsed().as_nanos() as f64 / CHASE as f64 }
+}

@@ -37,6 +37,7 @@ pub fn document(s: &Settings, res: &Results, fig: &Figures, all: &Overall) -> Va
         "release_lateness_ns": fig.lateness,
         "throughput_fps": res.throughput_fps,
         "throughput": res.throughput,
+        "capacity": res.capacity,
         "product_run": res.products,
         "probe_intervals": res.probes,
         "sockperf": fig.sockperf,
@@ -64,6 +65,7 @@ pub fn write(s: &Settings, res: &Results, fig: &Figures, all: &Overall) -> Resul
     probes(&mut md, res);
     products(&mut md, res);
     throughput(&mut md, s, res);
+    capacity(&mut md, s, res);
     bars(&mut md, fig);
     let _ = writeln!(md, "\nHdrHistogram logs: `hlog/`; each run's files: `runs/`. Method: `docs/performance.md`.");
     let md_path = s.out_dir.join("overhead.md");
@@ -196,6 +198,39 @@ fn throughput(md: &mut String, s: &Settings, res: &Results) {
             f(&c["range_fps"][1]),
             if c["met"].as_bool() == Some(true) { "yes" } else { "**no**" },
             f(&c["bar_fps"])
+        );
+    }
+}
+
+fn capacity(md: &mut String, s: &Settings, res: &Results) {
+    if res.capacity.is_empty() {
+        return;
+    }
+    let _ = writeln!(md, "\n## Capacity: the emulator alone ({} s per trial, every frame through it)\n", s.throughput_trial_s);
+    let _ = writeln!(md, "| scenario | trial, frames/s | verdict | offered | emulator busy ns a frame | release lateness p99 | steal | host speed (ALU / memory ns a step, before) |\n|---|---|---|---|---|---|---|---|");
+    for (k, v) in &res.capacity {
+        for t in v["trials"].as_array().into_iter().flatten() {
+            let busy = &t["emulator"]["busy"];
+            let _ = writeln!(
+                md,
+                "| {k} | {:.0} | {} | {:.0} | {} | {} | {:.2}% | {:.2} / {:.0} |",
+                t["rate_hz"].as_f64().unwrap_or(0.0),
+                t["verdict"].as_str().unwrap_or("?"),
+                t["offered_fps"].as_f64().unwrap_or(0.0),
+                busy["busy_ns_per_frame"].as_f64().map_or("-".into(), |x| format!("{x:.0}")),
+                ns(t["emulator"]["release_lateness_ns"]["p99"].as_i64().unwrap_or(0)),
+                t["host"]["steal_fraction"].as_f64().unwrap_or(0.0) * 100.0,
+                t["host_speed_before"]["alu_ns"].as_f64().unwrap_or(f64::NAN),
+                t["host_speed_before"]["chase_ns"].as_f64().unwrap_or(f64::NAN),
+            );
+        }
+        let _ = writeln!(
+            md,
+            "\n{k}: {:.0} frames/s sustained; the bar ({:.0}) sustained in {} of {} trials.\n",
+            v["best_fps"].as_f64().unwrap_or(0.0),
+            v["bar_fps"].as_f64().unwrap_or(0.0),
+            v["at_bar_sustained"],
+            v["at_bar_trials"]
         );
     }
 }

@@ -41,6 +41,7 @@ fn point(s: &Settings, n: usize, rep: usize) -> Result<Value> {
     let (_, slots) = slots_for(RATE_HZ, s.interval_s, Routes::Alternate);
     let mut args = emulator::args(s, "Normal", &dir, slots / 2 + 16, Some(run_id.clone()));
     args.stream.streams = n as u32;
+    let _forget = emulator::ForgetRuns((0..n).map(|k| stream_run_id(&run_id, k)).collect());
     let emu = Emulator::spawn(&dir, &emulator::argv(&args, &[]))?;
     let mut ends = (0..n).map(|k| IpcEnds::open(&stream_run_id(&run_id, k))).collect::<Result<Vec<_>>>()?;
     let host = HostTimer::start(s.quiet);
@@ -49,11 +50,8 @@ fn point(s: &Settings, n: usize, rep: usize) -> Result<Value> {
     for e in ends.iter_mut() {
         e.end(slots / 2);
     }
-    let reports = emu.finish_streams(Duration::from_secs(10), n).context("the emulator's reports");
+    let reports = emu.finish_streams(Duration::from_secs(10), n).context("the emulator's reports")?;
     drop(ends);
-    let ids: Vec<String> = (0..n).map(|k| stream_run_id(&run_id, k)).collect();
-    emulator::forget_runs(ids.iter().map(String::as_str));
-    let reports = reports?;
     let (chain, direct, inside) = (d.chain.summary(), d.direct.summary(), d.inside.summary());
     let added = difference(&chain, &direct, &["p50", "p90", "p99", "p999"]);
     let (late_p50_median, late_p50_worst) = across(&reports, |x| x.p50);
