@@ -87,7 +87,8 @@ fn figure(axis: &str, title: &str, x_desc: &str, log: bool, series: &BTreeMap<St
         y_fmt: &plot::short,
         lines,
         bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperLeft,
+        // The rate's first points (the product's runs) sit at the top left.
+        legend: if axis == "rate" { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft },
     };
     plot::svg(&fig).map_err(|e| e.to_string())
 }
