@@ -288,6 +288,40 @@ impl LoopBusy {
     }
 }
 
+impl LoopBusy {
+    /// The figures of one loop that served several streams, from each
+    /// stream's: a stream's busy turns are its own turns of the loop
+    /// (`streams::round` closes each at the next clock read), so their
+    /// counts and times add up. The figure without the long turns is the
+    /// streams' own, weighted by their frames (each stream's frames in
+    /// long turns are not kept apart in its figures). `None` without
+    /// streams.
+    pub fn total<'a>(parts: impl IntoIterator<Item = &'a LoopBusy>) -> Option<LoopBusy> {
+        let mut t: Option<LoopBusy> = None;
+        let mut short_weighted = (0.0f64, 0u64);
+        for p in parts {
+            let s = t.get_or_insert_with(LoopBusy::default);
+            s.turns += p.turns;
+            s.busy_turns += p.busy_turns;
+            s.busy_ns += p.busy_ns;
+            s.frames += p.frames;
+            s.long_turns += p.long_turns;
+            s.long_ns += p.long_ns;
+            if let Some(short) = p.short_turns_ns_per_frame {
+                short_weighted.0 += short * p.frames as f64;
+                short_weighted.1 += p.frames;
+            }
+        }
+        let mut t = t?;
+        let rate = |ns: Option<f64>| ns.filter(|&n| n > 0.0).map(|n| 1e9 / n);
+        t.busy_ns_per_frame = (t.frames > 0).then(|| t.busy_ns as f64 / t.frames as f64);
+        t.capacity_frames_per_s = rate(t.busy_ns_per_frame);
+        t.short_turns_ns_per_frame = (short_weighted.1 > 0).then(|| short_weighted.0 / short_weighted.1 as f64);
+        t.short_turns_capacity_frames_per_s = rate(t.short_turns_ns_per_frame);
+        Some(t)
+    }
+}
+
 /// Counts the loop's busy turns and their time ([`LoopBusy`]) with the
 /// clock read each turn makes anyway: a turn's start closes the turn before
 /// it, whose work is told by a count of frames taken and released that the
@@ -1220,5 +1254,25 @@ mod tests {
         assert_eq!((fwd.busy.turns, fwd.busy.busy_turns), (4, busy));
         assert_eq!(busy, 2);
         assert_eq!(fwd.loop_busy().frames, 1);
+    }
+
+    #[test]
+    fn the_streams_busy_figures_add_up_in_the_total() {
+        let clock = |busy_ns, long_ns, long_work| BusyClock { turns: 100, busy_turns: 40, busy_ns, long_turns: u64::from(long_ns > 0), long_ns, long_work, ..BusyClock::default() };
+        // 1 000 frames in 2 ms, none in long turns; 3 000 in 9 ms, 1 ms of it
+        // one long turn that took 500 of 6 000 takes and releases.
+        let a = LoopBusy::of(&clock(2_000_000, 0, 0), 1_000, 2_000);
+        let b = LoopBusy::of(&clock(9_000_000, 1_000_000, 500), 3_000, 6_000);
+        let t = LoopBusy::total([&a, &b]).unwrap();
+        assert_eq!((t.turns, t.busy_turns, t.busy_ns, t.frames, t.long_turns, t.long_ns), (200, 80, 11_000_000, 4_000, 1, 1_000_000));
+        assert_eq!(t.busy_ns_per_frame, Some(2_750.0));
+        assert_eq!(t.capacity_frames_per_s, Some(1e9 / 2_750.0));
+        // a: 2 000 ns a frame; b: 8 ms over 5 500 short works, scaled by 2:
+        // 2 909.09 ns; weighted by frames (1 000, 3 000).
+        let b_short = 8_000_000.0 / 5_500.0 * 2.0;
+        assert!((b.short_turns_ns_per_frame.unwrap() - b_short).abs() < 1e-9);
+        let want = (2_000.0 * 1_000.0 + b_short * 3_000.0) / 4_000.0;
+        assert!((t.short_turns_ns_per_frame.unwrap() - want).abs() < 1e-9, "{t:?}");
+        assert_eq!(LoopBusy::total([]), None);
     }
 }

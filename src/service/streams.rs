@@ -68,6 +68,10 @@ pub struct EmulatorStreams {
     pub loop_rounds: u64,
     pub loop_round_ns_mean: f64,
     pub steal_fraction: f64,
+    /// The loop's time on frames, all streams together
+    /// ([`LoopBusy::total`] of the streams' own `busy`).
+    #[serde(default)]
+    pub busy: Option<emulator::LoopBusy>,
 }
 
 impl EmulatorFrames {
@@ -142,6 +146,7 @@ impl EmulatorStreams {
             loop_rounds: p.loop_iterations,
             loop_round_ns_mean,
             steal_fraction: p.steal_fraction,
+            busy: emulator::LoopBusy::total(reports.iter().filter_map(|r| r.process.busy.as_ref())),
         }
     }
 }

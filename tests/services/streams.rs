@@ -78,6 +78,17 @@ fn three_streams_each_realize_their_own_scenario_and_balance() {
     assert_eq!(u(&e["total"]["entered"]), total_entered);
     assert_eq!(e["balanced"], true);
     assert_eq!(e["streams"].as_array().unwrap().len(), 3);
+    // And the loop's time on frames, all streams together: each stream's
+    // own figures summed (one loop served them, each turn counted once).
+    let own_busy: Vec<Value> = (0..3)
+        .map(|k| serde_json::from_slice::<Value>(&std::fs::read(out.join(format!("stream-{k}/emulator.json"))).unwrap()).unwrap()["busy"].clone())
+        .collect();
+    for key in ["turns", "busy_turns", "busy_ns", "frames", "long_turns", "long_ns"] {
+        assert_eq!(u(&e["busy"][key]), own_busy.iter().map(|b| u(&b[key])).sum::<u64>(), "busy.{key}: {}", e["busy"]);
+    }
+    assert!(u(&e["busy"]["frames"]) >= 3 * FRAMES, "{}", e["busy"]);
+    let per_frame = e["busy"]["busy_ns_per_frame"].as_f64().unwrap();
+    assert!((per_frame - u(&e["busy"]["busy_ns"]) as f64 / u(&e["busy"]["frames"]) as f64).abs() < 1e-6, "{}", e["busy"]);
 }
 
 /// A stand-alone emulator of two streams notices a dead robot as the
