@@ -62,7 +62,7 @@
 //! |---|---|---|
 //! | `NETFI_BENCH_FULL` | unset | `1`: 60 s intervals, 5 repetitions |
 //! | `NETFI_BENCH_SECONDS` | 10 (60 full) | length of each chain interval (floor intervals: half) |
-//! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals |
+//! | `NETFI_BENCH_REPS` | 3 (5 full) | repetitions of the latency, delay and product intervals, and trials at each capacity bar |
 //! | `NETFI_BENCH_RATES` | `1000,100000` | frame rates of the latency intervals, Hz |
 //! | `NETFI_BENCH_QUICK` | unset | `1`: every part briefly (as `--quick`): 1 s intervals, 1 repetition, 1 s throughput trials |
 //! | `NETFI_BENCH_PARTS` | all | comma list of `latency`, `delay`, `product`, `throughput`, `capacity`, `sockperf`, `streams` |
