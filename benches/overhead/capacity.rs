@@ -10,7 +10,7 @@ use crate::args::Settings;
 use crate::chain::{capacity_interval, ChainResult};
 use crate::drive::WARMUP_S;
 use crate::host::{pin, speed, Speed};
-use crate::throughput::search_rates;
+use crate::throughput::{search_rates, unintended};
 use crate::{Results, PLM2_DLM2};
 use anyhow::Result;
 use netfi::metrics::fmt_ns;
@@ -22,8 +22,7 @@ use serde_json::{json, Value};
 /// and the thread really offered the rate.
 pub fn verdict(c: &ChainResult, trial_s: f64) -> String {
     let e = &c.emulator;
-    let unintended: Vec<String> =
-        e.dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect();
+    let unintended = unintended(&e.dropped);
     let offered = offered_fps(c, trial_s);
     if c.refused > 0 {
         format!("the emulator's port refused {} frames", c.refused)

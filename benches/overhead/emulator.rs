@@ -60,26 +60,21 @@ pub fn argv(args: &EmulatorArgs, udp: &[String]) -> Vec<String> {
     a
 }
 
-/// Removes the management segments of runs `run_ids` once all their
-/// processes have ended: two processes that drop their nodes at the same
-/// moment (the emulator on its end marker, this benchmark's ends) each see
-/// the other's node and leave the segment in `/dev/shm`.
-pub fn forget_runs<'a>(run_ids: impl IntoIterator<Item = &'a str>) {
-    for id in run_ids {
-        if let Ok(run) = netfi::transport::RunId::new(id) {
-            netfi::transport::ipc::remove_run_segment_if_unused(&run);
-        }
-    }
-}
-
-/// [`forget_runs`] of its runs when dropped: declared before the
-/// [`Emulator`] of those runs, it is dropped after it, however the
-/// interval ends (an interrupt included).
+/// Removes the management segments of its runs when dropped, once all
+/// their processes have ended: two processes that drop their nodes at the
+/// same moment (the emulator on its end marker, this benchmark's ends) each
+/// see the other's node and leave the segment in `/dev/shm`. Declared
+/// before the [`Emulator`] of those runs, it is dropped after it, however
+/// the interval ends (an interrupt included).
 pub struct ForgetRuns(pub Vec<String>);
 
 impl Drop for ForgetRuns {
     fn drop(&mut self) {
-        forget_runs(self.0.iter().map(String::as_str));
+        for id in &self.0 {
+            if let Ok(run) = netfi::transport::RunId::new(id) {
+                netfi::transport::ipc::remove_run_segment_if_unused(&run);
+            }
+        }
     }
 }
 

@@ -73,7 +73,7 @@ pub fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds:
 /// One iceoryx2 hop: the console's direct port to the simulator's.
 fn floor_ipc(f: Floor) -> Result<Measured> {
     let run_id = fresh_run_id();
-    let rid_end = run_id.clone();
+    let _forget = crate::emulator::ForgetRuns(vec![run_id.clone()]);
     let done = Arc::new(AtomicBool::new(false));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<()>();
     let (rid, done_rx) = (run_id.clone(), done.clone());
@@ -127,7 +127,6 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
     let (sent, secs) = sender.join().map_err(|_| anyhow::anyhow!("the floor sender panicked"))??;
     done.store(true, Ordering::Release);
     let (h, n) = receiver.join().map_err(|_| anyhow::anyhow!("the floor receiver panicked"))??;
-    crate::emulator::forget_runs([rid_end.as_str()]);
     check_interrupted()?;
     Ok((sent, h, n, secs))
 }

@@ -108,8 +108,7 @@ fn trial(s: &Settings, label: &str, scenario: &str, rate_hz: f64) -> Result<Tria
 fn verdict(r: &RunReport, rate_hz: f64) -> String {
     let f = &r.frames;
     let console_rate = r.console.as_ref().map(|c| c.rate_hz);
-    let unintended: Vec<String> =
-        f.dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect();
+    let unintended = unintended(&f.dropped);
     if !r.faults.is_empty() && !f.balanced {
         format!("lost frames: {}", r.faults.join("; "))
     } else if !r.faults.is_empty() {
@@ -123,6 +122,12 @@ fn verdict(r: &RunReport, rate_hz: f64) -> String {
     } else {
         "sustained".to_string()
     }
+}
+
+/// The drops no scenario asked for ("N reason" each): the queue full, or
+/// frames malformed on the way.
+pub fn unintended(dropped: &BTreeMap<String, u64>) -> Vec<String> {
+    dropped.iter().filter(|(k, _)| matches!(k.as_str(), "queue_full" | "wrong_size" | "bad_checksum")).map(|(k, v)| format!("{v} {k}")).collect()
 }
 
 /// Doubling from `start_hz` until a rate fails, then bisection to 5%.

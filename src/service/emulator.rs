@@ -268,23 +268,31 @@ impl LoopBusy {
     /// The figures of `clock` over `frames` frames taken, and `work`
     /// frames taken and released in all.
     pub fn of(clock: &BusyClock, frames: u64, work: u64) -> LoopBusy {
-        let per_frame = (frames > 0).then(|| clock.busy_ns as f64 / frames as f64);
         let short_work = work.saturating_sub(clock.long_work);
         let short = (frames > 0 && short_work > 0)
             .then(|| (clock.busy_ns - clock.long_ns) as f64 / short_work as f64 * work as f64 / frames as f64);
-        let rate = |ns: Option<f64>| ns.filter(|&n| n > 0.0).map(|n| 1e9 / n);
         LoopBusy {
             turns: clock.turns,
             busy_turns: clock.busy_turns,
             busy_ns: clock.busy_ns,
             frames,
-            busy_ns_per_frame: per_frame,
-            capacity_frames_per_s: rate(per_frame),
             long_turns: clock.long_turns,
             long_ns: clock.long_ns,
-            short_turns_ns_per_frame: short,
-            short_turns_capacity_frames_per_s: rate(short),
+            ..LoopBusy::default()
         }
+        .with_rates(short)
+    }
+
+    /// The figures derived from the counts: time a frame and the capacity
+    /// it implies, and `short` (the time a frame without the long turns)
+    /// with its own.
+    fn with_rates(mut self, short: Option<f64>) -> LoopBusy {
+        let rate = |ns: Option<f64>| ns.filter(|&n| n > 0.0).map(|n| 1e9 / n);
+        self.busy_ns_per_frame = (self.frames > 0).then(|| self.busy_ns as f64 / self.frames as f64);
+        self.capacity_frames_per_s = rate(self.busy_ns_per_frame);
+        self.short_turns_ns_per_frame = short;
+        self.short_turns_capacity_frames_per_s = rate(short);
+        self
     }
 }
 
@@ -312,13 +320,7 @@ impl LoopBusy {
                 short_weighted.1 += p.frames;
             }
         }
-        let mut t = t?;
-        let rate = |ns: Option<f64>| ns.filter(|&n| n > 0.0).map(|n| 1e9 / n);
-        t.busy_ns_per_frame = (t.frames > 0).then(|| t.busy_ns as f64 / t.frames as f64);
-        t.capacity_frames_per_s = rate(t.busy_ns_per_frame);
-        t.short_turns_ns_per_frame = (short_weighted.1 > 0).then(|| short_weighted.0 / short_weighted.1 as f64);
-        t.short_turns_capacity_frames_per_s = rate(t.short_turns_ns_per_frame);
-        Some(t)
+        Some(t?.with_rates((short_weighted.1 > 0).then(|| short_weighted.0 / short_weighted.1 as f64)))
     }
 }
 

@@ -107,33 +107,25 @@ impl Run {
     /// The Python viewer of the run's `video_out`, subscribed: its JSON
     /// summary goes to `viewer.json`, its rows to `viewer.csv`.
     fn python_viewer(&self, hz: &str) -> Witness {
-        let ready = self.out.join("viewer.ready");
-        let child = python("examples/viewer.py", self)
-            .args(["--run-id", &self.id, "--hz", hz, "--timeout-s", "120", "--out"])
-            .arg(self.out.join("viewer.json"))
-            .arg("--csv")
-            .arg(self.out.join("viewer.csv"))
-            .arg("--ready")
-            .arg(&ready)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        wait_file(&ready);
-        Witness(Some(child))
+        let csv = self.out.join("viewer.csv");
+        self.python_end("viewer", &["--hz", hz], Some(&csv))
     }
 
     fn python_robot(&self) -> Witness {
-        let ready = self.out.join("robot.ready");
-        let child = python("examples/robot.py", self)
-            .args(["--run-id", &self.id, "--timeout-s", "120", "--out"])
-            .arg(self.out.join("robot.json"))
-            .arg("--ready")
-            .arg(&ready)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+        self.python_end("robot", &[], None)
+    }
+
+    /// `examples/<name>.py` of the run, its JSON summary to `<name>.json`,
+    /// `extra` and then `--csv <csv>` when given; returns once it says it
+    /// is ready (`<name>.ready`).
+    fn python_end(&self, name: &str, extra: &[&str], csv: Option<&Path>) -> Witness {
+        let ready = self.out.join(format!("{name}.ready"));
+        let mut c = python(&format!("examples/{name}.py"), self);
+        c.args(["--run-id", &self.id]).args(extra).args(["--timeout-s", "120", "--out"]).arg(self.out.join(format!("{name}.json")));
+        if let Some(path) = csv {
+            c.arg("--csv").arg(path);
+        }
+        let child = c.arg("--ready").arg(&ready).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
         wait_file(&ready);
         Witness(Some(child))
     }
