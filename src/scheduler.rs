@@ -85,7 +85,7 @@ pub struct Released<T> {
 ///
 /// That holds 16 s of frames at 1 000 000 frames/s, or 56 s at 300 000 —
 /// far beyond any delay a scenario models (the deepest preset holds a few
-/// hundred milliseconds) — and it costs about 3.6 GB with the emulator's
+/// hundred milliseconds) — and it costs about 4.5 GB with the emulator's
 /// 192-byte samples, which a lab machine can spare. Beyond it, a typing slip
 /// (an extra digit) would silently reserve and touch tens of gigabytes.
 pub const MAX_CAPACITY: usize = 1 << 24;
@@ -127,44 +127,16 @@ fn human_bytes(bytes: u128) -> String {
 /// the capacity is at most [`MAX_CAPACITY`] < `u32::MAX`.
 const NIL: u32 = u32::MAX;
 
-/// A frame's place in the queue; its item lives at the same index of the
-/// item slab, which only a push and a pop touch.
-#[derive(Debug, Clone, Copy)]
-struct Node {
-    release_ns: u64,
-    ingress_index: u64,
-    /// The next frame in the same list, or the next free node.
-    next: u32,
-}
-
-impl Node {
-    #[inline]
-    fn key(&self) -> (u64, u64) {
-        (self.release_ns, self.ingress_index)
-    }
-}
-
 /// Issues a prefetch of the cache lines of `*p`: a hint, never a fault.
 #[inline(always)]
 fn prefetch<X>(p: *const X) {
     prefetch_hint::<{ HINT_KEEP }, X>(p)
 }
 
-/// [`prefetch`] for data read once (an item at its pop): brought close to
-/// the core without displacing what stays in use from the outer caches.
-#[inline(always)]
-fn prefetch_once<X>(p: *const X) {
-    prefetch_hint::<{ HINT_ONCE }, X>(p)
-}
-
 #[cfg(target_arch = "x86_64")]
 const HINT_KEEP: i32 = core::arch::x86_64::_MM_HINT_T0;
-#[cfg(target_arch = "x86_64")]
-const HINT_ONCE: i32 = core::arch::x86_64::_MM_HINT_NTA;
 #[cfg(not(target_arch = "x86_64"))]
 const HINT_KEEP: i32 = 0;
-#[cfg(not(target_arch = "x86_64"))]
-const HINT_ONCE: i32 = 0;
 
 #[inline(always)]
 fn prefetch_hint<const HINT: i32, X>(p: *const X) {
@@ -270,146 +242,386 @@ impl<T: Copy + Default> Items<T> {
 }
 
 // ---------------------------------------------------------------------------
-// The calendar: where nearly every frame lives.
+// The reorder queue: a sorted front, a row of buckets, and the far frames.
 
-/// The most frames a push walks past in a calendar bucket before it leaves
-/// the frame to the wheel: it bounds a push's cost whatever the times.
-const WALK_MAX: u32 = 8;
-/// How far ahead of the earliest frame, in buckets, pops prefetch the
-/// first frame of a bucket, and the second (whose place is known only once
-/// the first is in cache).
-const AHEAD_BUCKETS: u64 = 32;
-const NEAR_BUCKETS: u64 = 12;
-/// Frames moved from the wheel into the calendar at each push while the
-/// wheel holds frames the calendar's window covers.
-const MIGRATE_PER_PUSH: usize = 2;
+/// One held frame's place in the order: its key, and the slot of its item.
+#[derive(Debug, Clone, Copy, Default)]
+struct Entry {
+    release_ns: u64,
+    ingress_index: u64,
+    slot: u32,
+}
 
-/// One level of `2^bits` buckets of `2^shift` ns each: a frame due at `t`
-/// is in bucket `t >> shift` (absolute), stored at index `bucket & mask`.
-/// The first bucket's list is in `(release_ns, ingress_index)` order; any
-/// other is a bag, pushed at its front and put in order when it becomes the
-/// first, so a push touches no other frame.
-///
-/// Invariants: every frame's bucket is in `first..=hi`, and `hi - first ≤
-/// mask`, so the circular indices of held frames never collide and buckets
-/// in index order from `first` are in time order; `first` holds the
-/// earliest frame, whose release is `first_ns`. The bucket width is chosen
-/// only when the calendar is empty, from how far ahead of the earliest frame
-/// pushes reached on average since it was last chosen, so a window spans
-/// the delay spread of the stream and a bucket holds a few frames.
+impl Entry {
+    #[inline(always)]
+    fn key(&self) -> (u64, u64) {
+        (self.release_ns, self.ingress_index)
+    }
+}
+
+/// Entries in a chunk: 8 of 24 bytes, three cache lines.
+const CHUNK: usize = 8;
+
+#[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(64))]
+struct Chunk([Entry; CHUNK]);
+
+/// Entries in no order, in a list of chunks: `len` entries, the last chunk
+/// (`tail`) holding `len % CHUNK` of them (all `CHUNK` when that is 0).
+#[derive(Debug, Clone, Copy)]
+struct Bag {
+    head: u32,
+    tail: u32,
+    len: u32,
+}
+
+impl Bag {
+    const EMPTY: Bag = Bag { head: NIL, tail: NIL, len: 0 };
+}
+
+/// The chunks of every bag, and the free ones in a list through `next`.
+/// A bag of `n` entries takes `⌈n / 8⌉` chunks, so `capacity / 8` plus one
+/// a bag suffice whatever the entries' spread.
 #[derive(Debug, Clone)]
-struct Calendar {
-    heads: Vec<u32>,
-    /// Bit per bucket: occupied.
+struct Pool {
+    chunks: Vec<Chunk>,
+    next: Vec<u32>,
+    free: u32,
+}
+
+impl Pool {
+    fn new(n: usize) -> Self {
+        let mut next = resident_vec(n, NIL);
+        for (i, link) in next.iter_mut().enumerate().take(n - 1) {
+            *link = i as u32 + 1;
+        }
+        Pool { chunks: resident_vec(n, Chunk::default()), next, free: 0 }
+    }
+
+    #[inline(always)]
+    fn append(&mut self, bag: &mut Bag, e: Entry) {
+        let k = bag.len as usize % CHUNK;
+        if k == 0 {
+            let c = self.free;
+            debug_assert_ne!(c, NIL, "the pool holds a chunk for every bag");
+            self.free = self.next[c as usize];
+            self.next[c as usize] = NIL;
+            if bag.tail == NIL {
+                bag.head = c;
+            } else {
+                self.next[bag.tail as usize] = c;
+            }
+            bag.tail = c;
+        }
+        self.chunks[bag.tail as usize].0[k] = e;
+        bag.len += 1;
+    }
+
+    /// Takes the first chunk of `bag` out (freed: its entries are copied
+    /// out first), with how many entries it held; `None` when empty.
+    #[inline(always)]
+    fn take_chunk(&mut self, bag: &mut Bag) -> Option<([Entry; CHUNK], usize)> {
+        let c = bag.head;
+        if c == NIL {
+            return None;
+        }
+        let next = self.next[c as usize];
+        if next != NIL {
+            // The next chunk, cold since it was filled, arrives while this
+            // one is used.
+            prefetch(&self.chunks[next as usize]);
+        }
+        let k = if next == NIL { bag.len as usize - (bag.len as usize - 1) / CHUNK * CHUNK } else { CHUNK };
+        let out = self.chunks[c as usize].0;
+        (self.next[c as usize], self.free) = (self.free, c);
+        bag.head = next;
+        bag.len -= k as u32;
+        if next == NIL {
+            bag.tail = NIL;
+        }
+        Some((out, k))
+    }
+}
+
+/// The most buckets, and the fewest: a row spans four times the mean reach
+/// of the far frames it is built from, so a full queue of 2^24 frames puts
+/// about 1 000 in a bucket, and a shallow one a few.
+const MAX_BUCKETS: usize = 1 << 14;
+const MIN_BUCKETS: usize = 64;
+/// How many frames ahead of the first a pop prefetches the item of, and
+/// how many the front keeps when more are held.
+const AHEAD: usize = 16;
+/// Free entries kept before the front's first, for frames pushed ahead of
+/// it.
+const MARGIN: usize = 64;
+
+/// The buckets for a capacity: one per 8 frames, within the bounds above.
+fn bucket_count(capacity: usize) -> usize {
+    (capacity.next_power_of_two() / 8).clamp(MIN_BUCKETS, MAX_BUCKETS)
+}
+
+/// The reorder queue (a ladder queue in the manner of Tang, Goh and Thng,
+/// 2005, with one rung). Every held frame is an [`Entry`] in one of three
+/// places, by its release time against the front's bound `front_max_ns`:
+///
+/// - the **front**: every frame due at or before `front_max_ns`, sorted by
+///   `(release_ns, ingress_index)` in `entries[lo..hi]`. A pop takes
+///   `entries[lo]`; a push due that early is put in its place (the
+///   shorter side moved by one).
+/// - the **buckets**: one row of `2^k` buckets, `2^shift` ns each, from
+///   `row_start`; bags in no order. When the
+///   front runs short a pop moves the next occupied bucket into it and
+///   sorts it: its frames are then the earliest held, and `front_max_ns`
+///   becomes the bucket's last nanosecond.
+/// - the **far** bag: frames beyond the row. When the row is empty and the
+///   front needs frames, the row is built again from the far bag: it starts
+///   after the front and spans four times the far frames' mean reach, so a
+///   bucket holds a few frames whatever the rate and delay; frames beyond it
+///   stay far.
+///
+/// So a frame is written about four times (its push; to the row; to the
+/// front; the pop), each time among neighbours in memory, and never found
+/// by following links through the whole queue: a deep queue's cost is the
+/// item's own trip to memory, prefetched [`AHEAD`] pops before it is taken.
+#[derive(Debug, Clone)]
+struct Timeline<T> {
+    items: Items<T>,
+    /// Free item slots, a stack: a push takes the slot the last pop freed,
+    /// still in cache.
+    free: Vec<u32>,
+    pool: Pool,
+    entries: Vec<Entry>,
+    lo: usize,
+    hi: usize,
+    front_max_ns: u64,
+    buckets: Vec<Bag>,
+    /// Bit per bucket: occupied; bit per word of `words`: non-zero.
     words: Vec<u64>,
-    /// Bit per word of `words`: non-zero.
     summary: Vec<u64>,
-    bits: u32,
     mask: u64,
     shift: u32,
-    first: u64,
-    first_ns: u64,
-    hi: u64,
+    /// The row's first bucket (absolute: `release_ns >> shift`) and its
+    /// length (0: no row), the next bucket a pop may move to the front;
+    /// frames in the row.
+    row_start: u64,
+    row_buckets: u64,
+    next_bucket: u64,
+    in_row: usize,
+    far: Bag,
+    far_sum_ns: u128,
     len: usize,
-    /// Sum and count of how far ahead of the earliest frame pushes reached
-    /// since the width was chosen.
-    reach_sum_ns: u64,
-    reach_count: u64,
-    /// Pushes refused for a deep bucket, and taken, since then; too many
-    /// refusals close the calendar to pushes until it drains and starts over.
-    refusals: u64,
-    taken: u64,
-    closed: bool,
-    /// The prefetch cursors: the last buckets whose first frame (`ahead`)
-    /// and second frame (`near`) were prefetched.
-    ahead: u64,
-    near: u64,
 }
 
-/// The number of calendar buckets for a capacity: twice the power of two
-/// at or above it (at least 64). The window spans twice the pushes' mean
-/// reach, which is about the span of the frames held (a push is mostly the
-/// latest frame), so a full queue fills at most half the buckets: about one
-/// frame a bucket, whose place is known from the bucket's head alone and
-/// can be prefetched well before it is taken. The heads cost at most 16
-/// bytes a frame of capacity (4 bytes a bucket).
-fn calendar_bits(capacity: usize) -> u32 {
-    (capacity.max(1).next_power_of_two().trailing_zeros() + 1).max(6)
-}
-
-/// The next set bit at or after `start` in `bits`, circularly.
-#[inline]
-fn next_set(bits: &[u64], start: usize) -> usize {
-    let (w, b) = (start >> 6, start & 63);
-    let here = bits[w] & (!0u64 << b);
-    if here != 0 {
-        return w << 6 | here.trailing_zeros() as usize;
-    }
-    // Round the ring once; the last word looked at is `w` again, for the
-    // bits below `b`.
-    let n = bits.len();
-    let mut i = w;
-    for _ in 0..n {
-        i = if i + 1 == n { 0 } else { i + 1 };
-        if bits[i] != 0 {
-            return i << 6 | bits[i].trailing_zeros() as usize;
-        }
-    }
-    unreachable!("next_set on an empty bitmap")
-}
-
-impl Calendar {
+impl<T: Copy + Default> Timeline<T> {
     fn new(capacity: usize) -> Self {
-        let bits = calendar_bits(capacity);
-        let buckets = 1usize << bits;
-        let words = buckets / 64;
-        Calendar {
-            heads: resident_vec(buckets, NIL),
+        let count = bucket_count(capacity);
+        let words = count / 64;
+        let mut free = Vec::with_capacity(capacity);
+        free.extend((0..capacity as u32).rev());
+        Timeline {
+            items: Items::new(capacity),
+            free,
+            pool: Pool::new(capacity.div_ceil(CHUNK) + count + 2),
+            entries: resident_vec(2 * capacity + 2 * MARGIN, Entry::default()),
+            lo: MARGIN,
+            hi: MARGIN,
+            front_max_ns: 0,
+            buckets: vec![Bag::EMPTY; count],
             words: vec![0; words],
             summary: vec![0; words.div_ceil(64)],
-            bits,
-            mask: buckets as u64 - 1,
-            // Until a stream has shown its spread: a window of about 1 ms.
-            shift: 20u32.saturating_sub(bits),
-            first: 0,
-            first_ns: 0,
-            hi: 0,
+            mask: count as u64 - 1,
+            shift: 0,
+            row_start: 0,
+            row_buckets: 0,
+            next_bucket: 0,
+            in_row: 0,
+            far: Bag::EMPTY,
+            far_sum_ns: 0,
             len: 0,
-            reach_sum_ns: 0,
-            reach_count: 0,
-            refusals: 0,
-            taken: 0,
-            closed: false,
-            ahead: 0,
-            near: 0,
         }
     }
 
     #[inline]
-    fn head(&self) -> u32 {
-        self.heads[(self.first & self.mask) as usize]
+    fn next_release_ns(&self) -> Option<u64> {
+        (self.len > 0).then(|| self.entries[self.lo].release_ns)
     }
 
     #[inline]
-    fn mark(&mut self, idx: usize) {
-        let w = idx >> 6;
-        if self.words[w] == 0 {
-            self.summary[w >> 6] |= 1 << (w & 63);
+    fn push(&mut self, release_ns: u64, ingress_index: u64, item: T) -> Result<u64, Full<T>> {
+        let Some(slot) = self.free.pop() else { return Err(Full(item)) };
+        self.items.set(slot, item);
+        let e = Entry { release_ns, ingress_index, slot };
+        self.len += 1;
+        if self.len == 1 {
+            // An empty queue starts over: the frame is the front, the row
+            // empty until a pop builds it.
+            (self.lo, self.hi, self.front_max_ns) = (MARGIN, MARGIN + 1, release_ns);
+            self.entries[MARGIN] = e;
+            self.row_buckets = 0;
+            return Ok(release_ns);
         }
-        self.words[w] |= 1 << (idx & 63);
+        if release_ns <= self.front_max_ns {
+            self.insert_front(e);
+        } else if (release_ns >> self.shift).wrapping_sub(self.row_start) < self.row_buckets {
+            // Later than the front, so not before the row's next bucket.
+            self.add_to_row(e);
+        } else {
+            self.far_sum_ns += release_ns as u128;
+            self.pool.append(&mut self.far, e);
+        }
+        Ok(release_ns)
     }
 
+    #[inline(always)]
+    fn add_to_row(&mut self, e: Entry) {
+        let i = ((e.release_ns >> self.shift) & self.mask) as usize;
+        if self.buckets[i].len == 0 {
+            let w = i >> 6;
+            if self.words[w] == 0 {
+                self.summary[w >> 6] |= 1 << (w & 63);
+            }
+            self.words[w] |= 1 << (i & 63);
+        }
+        self.pool.append(&mut self.buckets[i], e);
+        self.in_row += 1;
+    }
+
+    /// Puts `e` into the sorted front: at an end (the usual case: the
+    /// frame is the earliest, or due with the last), else in its place, the
+    /// shorter side moved by one.
     #[inline]
-    fn unmark(&mut self, idx: usize) {
-        let w = idx >> 6;
-        self.words[w] &= !(1 << (idx & 63));
+    fn insert_front(&mut self, e: Entry) {
+        let key = e.key();
+        if self.lo == self.hi || key < self.entries[self.lo].key() {
+            if self.lo == 0 {
+                self.compact();
+            }
+            self.lo -= 1;
+            self.entries[self.lo] = e;
+        } else if self.entries[self.hi - 1].key() <= key {
+            if self.hi == self.entries.len() {
+                self.compact();
+            }
+            self.entries[self.hi] = e;
+            self.hi += 1;
+        } else {
+            let at = self.lo + self.entries[self.lo..self.hi].partition_point(|x| x.key() <= key);
+            if at - self.lo <= self.hi - at && self.lo > 0 {
+                self.entries.copy_within(self.lo..at, self.lo - 1);
+                self.lo -= 1;
+                self.entries[at - 1] = e;
+            } else {
+                if self.hi == self.entries.len() {
+                    self.compact();
+                    return self.insert_front(e);
+                }
+                self.entries.copy_within(at..self.hi, at + 1);
+                self.hi += 1;
+                self.entries[at] = e;
+            }
+        }
+    }
+
+    /// Moves the front to `MARGIN`: room at both ends (it holds at most
+    /// `capacity` of the `2 capacity + 2 MARGIN` entries).
+    #[cold]
+    fn compact(&mut self) {
+        let n = self.hi - self.lo;
+        self.entries.copy_within(self.lo..self.hi, MARGIN);
+        (self.lo, self.hi) = (MARGIN, MARGIN + n);
+    }
+
+    /// Takes the earliest frame out; its slot is free again (the item stays
+    /// in place until the next push).
+    #[inline]
+    fn pop(&mut self) -> Option<Entry> {
+        if self.len == 0 {
+            return None;
+        }
+        let e = self.entries[self.lo];
+        self.lo += 1;
+        self.len -= 1;
+        self.free.push(e.slot);
+        while self.hi - self.lo < AHEAD && (self.in_row > 0 || self.far.len > 0) {
+            self.load_bucket();
+        }
+        if self.lo + AHEAD <= self.hi {
+            prefetch(self.items.get(self.entries[self.lo + AHEAD - 1].slot));
+        }
+        Some(e)
+    }
+
+    /// Moves the next occupied bucket to the front's end, sorted (building
+    /// the row from the far bag first if it is empty).
+    #[inline(never)]
+    fn load_bucket(&mut self) {
+        if self.in_row == 0 {
+            self.build_row();
+        }
+        let a = self.next_occupied(self.next_bucket);
+        let i = (a & self.mask) as usize;
+        let mut bag = std::mem::replace(&mut self.buckets[i], Bag::EMPTY);
+        let w = i >> 6;
+        self.words[w] &= !(1 << (i & 63));
         if self.words[w] == 0 {
             self.summary[w >> 6] &= !(1 << (w & 63));
         }
+        self.in_row -= bag.len as usize;
+        self.next_bucket = a + 1;
+        self.front_max_ns = (a << self.shift) | ((1u64 << self.shift) - 1);
+        if self.lo == self.hi {
+            (self.lo, self.hi) = (MARGIN, MARGIN);
+        } else if self.hi + bag.len as usize > self.entries.len() || (self.lo > 8 * MARGIN && self.hi - self.lo <= MARGIN) {
+            // Out of room, or a short front far from the start: back to it,
+            // where its lines are still in cache.
+            self.compact();
+        }
+        let start = self.hi;
+        while let Some((chunk, k)) = self.pool.take_chunk(&mut bag) {
+            self.entries[self.hi..self.hi + k].copy_from_slice(&chunk[..k]);
+            self.hi += k;
+        }
+        let new = &mut self.entries[start..self.hi];
+        if new.len() > 1 {
+            new.sort_unstable_by_key(Entry::key);
+        }
+        // Items the rolling prefetch in `pop` has passed already.
+        for e in &self.entries[start..self.hi.min(self.lo + AHEAD)] {
+            prefetch(self.items.get(e.slot));
+        }
     }
 
-    /// The first occupied bucket at or after `from`; one must be within
-    /// `from..from + 2^bits`.
+    /// Builds the row from the far bag (the row is empty): from the bucket
+    /// after the front, four times the far frames' mean reach, buckets of a
+    /// power-of-two width. Frames beyond it stay far (at least three in four
+    /// join the row: no more than a quarter of the frames reach four times
+    /// the mean).
+    #[cold]
+    fn build_row(&mut self) {
+        let count = self.buckets.len() as u64;
+        let start_ns = self.front_max_ns + 1;
+        let mean_reach = (self.far_sum_ns / self.far.len as u128) as u64 - start_ns;
+        // Width 2^shift: the reach (twice the mean, and one more) in at most
+        // half the buckets, so the row covers four times the mean.
+        let span = mean_reach.saturating_mul(2).saturating_add(1);
+        self.shift = (64 - (span / (count / 2)).leading_zeros()).min(63);
+        (self.row_start, self.row_buckets) = (start_ns >> self.shift, count);
+        self.next_bucket = self.row_start;
+        let mut far = std::mem::replace(&mut self.far, Bag::EMPTY);
+        self.far_sum_ns = 0;
+        while let Some((chunk, k)) = self.pool.take_chunk(&mut far) {
+            for &e in &chunk[..k] {
+                if (e.release_ns >> self.shift) - self.row_start < count {
+                    self.add_to_row(e);
+                } else {
+                    self.far_sum_ns += e.release_ns as u128;
+                    self.pool.append(&mut self.far, e);
+                }
+            }
+        }
+    }
+
+    /// The first occupied bucket at or after `from` (one is in the row).
     #[inline]
     fn next_occupied(&self, from: u64) -> u64 {
         let i = (from & self.mask) as usize;
@@ -425,627 +637,30 @@ impl Calendar {
         from + ((j as u64).wrapping_sub(i as u64) & self.mask)
     }
 
-    /// An empty calendar starts over at `release_ns`, with buckets as wide
-    /// as the pushes since the last start ask: the window spans twice their
-    /// mean reach (rounded up to a power of two). Not their largest reach:
-    /// a delay law's tail (the largest of N exponential delays is ln N
-    /// means) would widen every bucket for a few frames, which the wheel
-    /// holds as well until the window reaches them.
-    fn rebase(&mut self, release_ns: u64) {
-        if self.reach_count > 0 {
-            let want_ns = (self.reach_sum_ns / self.reach_count).saturating_mul(2);
-            self.shift = 64 - (want_ns >> self.bits).leading_zeros();
-        }
-        (self.reach_sum_ns, self.reach_count, self.refusals, self.taken, self.closed) = (0, 0, 0, 0, false);
-        let a = release_ns >> self.shift;
-        (self.first, self.hi, self.ahead, self.near) = (a, a, a, a);
-    }
-
-    /// Puts node `n` into its bucket; `false` (nothing changed) when it
-    /// falls outside the window or deeper into a bucket than [`WALK_MAX`],
-    /// or the calendar is closed.
+    /// The frame `e` names, its item read in place.
     #[inline]
-    fn insert(&mut self, nodes: &mut [Node], n: u32) -> bool {
-        let key = nodes[n as usize].key();
-        if self.len == 0 {
-            self.rebase(key.0);
-        } else {
-            if key.0 > self.first_ns {
-                self.reach_sum_ns = self.reach_sum_ns.saturating_add(key.0 - self.first_ns);
-                self.reach_count += 1;
-            }
-            if self.closed {
-                return false;
-            }
-        }
-        let a = key.0 >> self.shift;
-        let fits = if a < self.first { self.hi - a <= self.mask } else { a - self.first <= self.mask };
-        if !fits {
-            self.refuse();
-            return false;
-        }
-        let idx = (a & self.mask) as usize;
-        let head = self.heads[idx];
-        if a != self.first || self.len == 0 || head == NIL || key < nodes[head as usize].key() {
-            // Any bucket but the first is a bag: the front touches no other
-            // frame (it is put in order when it becomes the first).
-            nodes[n as usize].next = head;
-            self.heads[idx] = n;
-            if head == NIL {
-                self.mark(idx);
-            }
-        } else {
-            let mut prev = head;
-            let mut walked = 0;
-            loop {
-                let next = nodes[prev as usize].next;
-                if next == NIL || nodes[next as usize].key() > key {
-                    break;
-                }
-                walked += 1;
-                if walked == WALK_MAX {
-                    self.refuse();
-                    return false;
-                }
-                prev = next;
-            }
-            nodes[n as usize].next = nodes[prev as usize].next;
-            nodes[prev as usize].next = n;
-        }
-        self.len += 1;
-        self.taken += 1;
-        if self.len == 1 || a <= self.first {
-            self.first = a;
-            self.first_ns = nodes[self.heads[idx] as usize].release_ns;
-        }
-        self.hi = self.hi.max(a);
-        true
-    }
-
-    /// A push refused: outside the window (buckets too narrow for the
-    /// stream's spread; the width chosen from its first frames, or its
-    /// delays grew) or deep in the first bucket (too wide: its delays
-    /// shrank). Past one refusal in 16 pushes, the calendar takes no more
-    /// until it drains, and then starts over with a width from the pushes
-    /// seen meanwhile.
-    #[cold]
-    fn refuse(&mut self) {
-        self.refusals += 1;
-        if self.refusals > 64 && self.refusals * 16 > self.taken {
-            self.closed = true;
-        }
-    }
-
-    /// Takes the earliest frame out (the calendar holds one).
-    #[inline]
-    fn remove_first(&mut self, nodes: &mut [Node]) -> u32 {
-        let idx = (self.first & self.mask) as usize;
-        let n = self.heads[idx];
-        let next = nodes[n as usize].next;
-        self.heads[idx] = next;
-        self.len -= 1;
-        if next == NIL {
-            self.unmark(idx);
-            if self.len > 0 {
-                self.first = self.next_occupied(self.first + 1);
-                self.sort_first(nodes);
-            }
-        }
-        if self.len > 0 {
-            self.first_ns = nodes[self.head() as usize].release_ns;
-        }
-        n
-    }
-
-    /// Puts the first bucket, a bag until now, in `(release_ns,
-    /// ingress_index)` order: an insertion sort that takes the bag from its
-    /// front, i.e. latest push first, so frames pushed in order (the usual
-    /// case) each go to the front at once. A few frames, as the width is
-    /// chosen; quadratic only in a bucket that gathered many frames in mixed
-    /// order.
-    #[inline]
-    fn sort_first(&mut self, nodes: &mut [Node]) {
-        let idx = (self.first & self.mask) as usize;
-        let mut n = self.heads[idx];
-        let mut sorted = NIL;
-        while n != NIL {
-            let next = nodes[n as usize].next;
-            let key = nodes[n as usize].key();
-            if sorted == NIL || key < nodes[sorted as usize].key() {
-                nodes[n as usize].next = sorted;
-                sorted = n;
-            } else {
-                let mut prev = sorted;
-                loop {
-                    let after = nodes[prev as usize].next;
-                    if after == NIL || nodes[after as usize].key() > key {
-                        break;
-                    }
-                    prev = after;
-                }
-                nodes[n as usize].next = nodes[prev as usize].next;
-                nodes[prev as usize].next = n;
-            }
-            n = next;
-        }
-        self.heads[idx] = sorted;
-    }
-
-    /// The next occupied bucket after `cursor` (or after the first, if
-    /// the cursor is behind it) within `dist` buckets of the first and not
-    /// past `hi`.
-    #[inline]
-    fn next_within(&self, cursor: u64, dist: u64) -> Option<u64> {
-        let from = cursor.max(self.first).saturating_add(1);
-        let end = self.hi.min(self.first.saturating_add(dist));
-        if self.len == 0 || from > end {
-            return None;
-        }
-        let a = self.next_occupied(from);
-        (a <= end).then_some(a)
+    fn released(&self, e: Entry) -> Released<&T> {
+        Released { release_ns: e.release_ns, ingress_index: e.ingress_index, item: self.items.get(e.slot) }
     }
 }
 
-// ---------------------------------------------------------------------------
-// The wheel: frames outside the calendar's window.
-
-/// Bits of the release time per wheel level, and slots per level.
-const LEVEL_BITS: u32 = 6;
-const SLOTS: usize = 1 << LEVEL_BITS;
-const SLOT_MASK: u64 = SLOTS as u64 - 1;
-/// ⌈64 / 6⌉: the top level holds the last 4 bits.
-const LEVELS: usize = 64_usize.div_ceil(LEVEL_BITS as usize);
-
-#[derive(Debug, Clone)]
-struct Level {
-    /// Bit `s` set ⇔ slot `s` holds a frame.
-    occupied: u64,
-    head: [u32; SLOTS],
-    tail: [u32; SLOTS],
-}
-
-impl Level {
-    const EMPTY: Level = Level { occupied: 0, head: [NIL; SLOTS], tail: [NIL; SLOTS] };
-}
-
-/// The level at which a frame due at `release_ns` sits while the cursor is
-/// at `cursor_ns`: that of the highest 6-bit digit in which they differ.
+/// The next set bit at or after `start` in `bits`, circularly.
 #[inline]
-fn level_for(cursor_ns: u64, release_ns: u64) -> usize {
-    let masked = (cursor_ns ^ release_ns) | SLOT_MASK;
-    ((63 - masked.leading_zeros()) / LEVEL_BITS) as usize
-}
-
-#[inline]
-fn digit(t_ns: u64, level: usize) -> usize {
-    ((t_ns >> (LEVEL_BITS as usize * level)) & SLOT_MASK) as usize
-}
-
-/// The first nanosecond of `slot` at `level`, in the cursor's window.
-#[inline]
-fn slot_start_ns(cursor_ns: u64, level: usize, slot: usize) -> u64 {
-    let shift = LEVEL_BITS as usize * level;
-    let window = shift + LEVEL_BITS as usize;
-    let above = if window >= 64 { 0 } else { cursor_ns >> window << window };
-    above | ((slot as u64) << shift)
-}
-
-/// The most frames the early list holds before it is merged into the wheel
-/// (see [`Wheel::insert`]): it bounds a sorted insertion's walk.
-const EARLY_MAX: u32 = 32;
-
-/// A hierarchical timing wheel over the slab's nodes, and a short sorted
-/// list of frames earlier than the wheel's cursor.
-///
-/// Invariants: every frame in the early list is due before `cursor_ns`,
-/// and the list is in `(release_ns, ingress_index)` order; every frame in
-/// the wheel is due at or after `cursor_ns`; a frame at
-/// level `L` agrees with the cursor in every digit above `L` and its digit
-/// `L` is its slot, later than the cursor's (at level 0, not earlier); each
-/// level-0 slot is in ingress order; level 0 is non-empty whenever a frame
-/// is held outside the early list, so it holds the earliest one there.
-#[derive(Debug, Clone)]
-struct Wheel {
-    levels: [Level; LEVELS],
-    cursor_ns: u64,
-    /// Frames held, in the wheel and in the early list.
-    len: usize,
-    early_head: u32,
-    early_tail: u32,
-    early_len: u32,
-}
-
-impl Wheel {
-    fn new() -> Self {
-        Wheel { levels: [Level::EMPTY; LEVELS], cursor_ns: 0, len: 0, early_head: NIL, early_tail: NIL, early_len: 0 }
+fn next_set(bits: &[u64], start: usize) -> usize {
+    let (w, b) = (start >> 6, start & 63);
+    let here = bits[w] & (!0u64 << b);
+    if here != 0 {
+        return w << 6 | here.trailing_zeros() as usize;
     }
-
-    /// The earliest frame (the wheel holds one).
-    #[inline]
-    fn first(&self) -> u32 {
-        if self.early_head != NIL {
-            return self.early_head;
-        }
-        self.levels[0].head[self.levels[0].occupied.trailing_zeros() as usize]
-    }
-
-    #[inline]
-    fn next_release_ns(&self, nodes: &[Node]) -> u64 {
-        if self.early_head != NIL {
-            return nodes[self.early_head as usize].release_ns;
-        }
-        (self.cursor_ns & !SLOT_MASK) | self.levels[0].occupied.trailing_zeros() as u64
-    }
-
-    /// Holds node `n`, whose time and ingress index are set.
-    fn insert(&mut self, nodes: &mut [Node], n: u32) {
-        let release_ns = nodes[n as usize].release_ns;
-        self.len += 1;
-        if self.len == 1 {
-            self.cursor_ns = release_ns;
-        } else if release_ns < self.cursor_ns {
-            // Earlier than every frame in the wheel: a new earliest frame.
-            // Moving the cursor back would undo the cascading of the frames
-            // near it (a deep queue whose pushes often become the earliest
-            // would move its frames up and down again and again), so such
-            // frames wait in a short sorted list; only when it is full is
-            // it merged into the wheel, once per `EARLY_MAX` frames.
-            self.early_insert(nodes, n);
-            if self.early_len == EARLY_MAX {
-                self.merge_early(nodes);
-            }
-            return;
-        }
-        self.place(nodes, n);
-    }
-
-    /// Takes the earliest frame out (the wheel holds one).
-    fn remove_first(&mut self, nodes: &mut [Node]) -> u32 {
-        self.len -= 1;
-        if self.early_head != NIL {
-            let n = self.early_head;
-            self.early_head = nodes[n as usize].next;
-            if self.early_head == NIL {
-                self.early_tail = NIL;
-            }
-            self.early_len -= 1;
-            return n;
-        }
-        let level0 = &mut self.levels[0];
-        let slot = level0.occupied.trailing_zeros() as usize;
-        let n = level0.head[slot];
-        let node = nodes[n as usize];
-        level0.head[slot] = node.next;
-        if node.next == NIL {
-            level0.tail[slot] = NIL;
-            level0.occupied &= !(1 << slot);
-        }
-        // Every frame left is due at or after this one.
-        self.cursor_ns = node.release_ns;
-        if self.levels[0].occupied == 0 && self.len > 0 {
-            debug_assert_eq!(self.early_len, 0);
-            self.refill(nodes);
-        }
-        n
-    }
-
-    /// Puts node `n` into its slot relative to the cursor.
-    #[inline]
-    fn place(&mut self, nodes: &mut [Node], n: u32) {
-        let Node { release_ns, ingress_index, .. } = nodes[n as usize];
-        let level = level_for(self.cursor_ns, release_ns);
-        let slot = digit(release_ns, level);
-        let lv = &mut self.levels[level];
-        let head = lv.head[slot];
-        if head == NIL {
-            nodes[n as usize].next = NIL;
-            lv.head[slot] = n;
-            lv.tail[slot] = n;
-            lv.occupied |= 1 << slot;
-            return;
-        }
-        if level > 0 {
-            // A bag: the front is cheapest (it touches no other node).
-            nodes[n as usize].next = head;
-            lv.head[slot] = n;
-            return;
-        }
-        // Level 0: one release time per slot, kept in ingress order. Frames
-        // come in ingress order (append) or, cascaded from a bag, often in
-        // reverse (prepend); anything else walks the ties.
-        let tail = lv.tail[slot];
-        if nodes[tail as usize].ingress_index <= ingress_index {
-            nodes[tail as usize].next = n;
-            nodes[n as usize].next = NIL;
-            lv.tail[slot] = n;
-        } else if ingress_index < nodes[head as usize].ingress_index {
-            nodes[n as usize].next = head;
-            lv.head[slot] = n;
-        } else {
-            let mut prev = head;
-            loop {
-                let next = nodes[prev as usize].next;
-                if nodes[next as usize].ingress_index > ingress_index {
-                    nodes[n as usize].next = next;
-                    nodes[prev as usize].next = n;
-                    break;
-                }
-                prev = next;
-            }
+    let n = bits.len();
+    let mut i = w;
+    for _ in 0..n {
+        i = if i + 1 == n { 0 } else { i + 1 };
+        if bits[i] != 0 {
+            return i << 6 | bits[i].trailing_zeros() as usize;
         }
     }
-
-    /// Level 0 ran empty with frames held: moves the earliest occupied slot
-    /// of the lowest occupied level down, until level 0 holds a frame. The
-    /// cursor moves to that slot's first nanosecond, not past any frame.
-    #[cold]
-    fn refill(&mut self, nodes: &mut [Node]) {
-        while self.levels[0].occupied == 0 {
-            let level = (1..LEVELS).find(|&l| self.levels[l].occupied != 0).expect("a held frame is in some level");
-            let lv = &mut self.levels[level];
-            let slot = lv.occupied.trailing_zeros() as usize;
-            let mut n = lv.head[slot];
-            let single = n == lv.tail[slot];
-            lv.head[slot] = NIL;
-            lv.tail[slot] = NIL;
-            lv.occupied &= !(1 << slot);
-            // A lone frame is the earliest one: the cursor goes straight to
-            // it, and it to level 0, rather than down one level at a time.
-            self.cursor_ns = if single { nodes[n as usize].release_ns } else { slot_start_ns(self.cursor_ns, level, slot) };
-            while n != NIL {
-                let next = nodes[n as usize].next;
-                self.place(nodes, n);
-                n = next;
-            }
-        }
-    }
-
-    /// Puts node `n` into the early list, in `(release_ns, ingress_index)`
-    /// order: appended or prepended when it belongs at an end (the usual
-    /// case), else after a walk of at most `EARLY_MAX` frames.
-    fn early_insert(&mut self, nodes: &mut [Node], n: u32) {
-        let k = nodes[n as usize].key();
-        self.early_len += 1;
-        if self.early_head == NIL {
-            nodes[n as usize].next = NIL;
-            self.early_head = n;
-            self.early_tail = n;
-        } else if nodes[self.early_tail as usize].key() <= k {
-            nodes[n as usize].next = NIL;
-            nodes[self.early_tail as usize].next = n;
-            self.early_tail = n;
-        } else if k < nodes[self.early_head as usize].key() {
-            nodes[n as usize].next = self.early_head;
-            self.early_head = n;
-        } else {
-            let mut prev = self.early_head;
-            loop {
-                let next = nodes[prev as usize].next;
-                if nodes[next as usize].key() > k {
-                    nodes[n as usize].next = next;
-                    nodes[prev as usize].next = n;
-                    break;
-                }
-                prev = next;
-            }
-        }
-    }
-
-    /// Moves the early list into the wheel: the cursor goes back to its
-    /// first frame, and every frame is placed relative to it.
-    #[cold]
-    fn merge_early(&mut self, nodes: &mut [Node]) {
-        let mut n = self.early_head;
-        self.rewind(nodes, nodes[n as usize].release_ns);
-        (self.early_head, self.early_tail, self.early_len) = (NIL, NIL, 0);
-        while n != NIL {
-            let next = nodes[n as usize].next;
-            self.place(nodes, n);
-            n = next;
-        }
-    }
-
-    /// Moves the cursor back to `release_ns`, earlier than it and so than
-    /// every frame held (a new earliest frame). Frames below the highest
-    /// digit in which the two times differ all share the cursor's digit
-    /// there, so they become one bag in that slot: list splices, one per
-    /// occupied slot, no frame is moved on its own.
-    #[cold]
-    fn rewind(&mut self, nodes: &mut [Node], release_ns: u64) {
-        let top = level_for(self.cursor_ns, release_ns);
-        if top > 0 {
-            let (mut head, mut tail) = (NIL, NIL);
-            for level in 0..top {
-                let lv = &mut self.levels[level];
-                let mut occupied = lv.occupied;
-                lv.occupied = 0;
-                while occupied != 0 {
-                    let slot = occupied.trailing_zeros() as usize;
-                    occupied &= occupied - 1;
-                    let (h, t) = (lv.head[slot], lv.tail[slot]);
-                    lv.head[slot] = NIL;
-                    lv.tail[slot] = NIL;
-                    if head == NIL {
-                        tail = t;
-                    } else {
-                        nodes[t as usize].next = head;
-                    }
-                    head = h;
-                }
-            }
-            if head != NIL {
-                // The cursor is later than `release_ns` in digit `top`, so
-                // the bag is still ahead of the new cursor; the slot was empty
-                // because frames at level `top` are later than the cursor there.
-                let slot = digit(self.cursor_ns, top);
-                let lv = &mut self.levels[top];
-                debug_assert_eq!(lv.head[slot], NIL);
-                lv.head[slot] = head;
-                lv.tail[slot] = tail;
-                lv.occupied |= 1 << slot;
-            }
-        }
-        self.cursor_ns = release_ns;
-    }
-}
-
-// ---------------------------------------------------------------------------
-// The reorder queue: a slab, the calendar and the wheel.
-
-/// The reorder queue: frames in a slab (nodes and items at the same index,
-/// free slots in an intrusive list), each held either by the calendar or,
-/// when outside its window, by the wheel. Both keep `(release_ns,
-/// ingress_index)` order, so the earliest frame is the earlier of their two
-/// first frames; which structure holds a frame changes only its cost.
-#[derive(Debug, Clone)]
-struct Timeline<T> {
-    nodes: Vec<Node>,
-    items: Items<T>,
-    free: u32,
-    /// Frames held, in both.
-    len: usize,
-    calendar: Calendar,
-    wheel: Wheel,
-    /// The last frame the calendar refused to take from the wheel.
-    refused: u32,
-}
-
-impl<T: Copy + Default> Timeline<T> {
-    fn new(capacity: usize) -> Self {
-        // Every node and item is written here (`resident_vec`), so the memory
-        // is resident before the first frame.
-        let mut nodes = resident_vec(capacity, Node { release_ns: 0, ingress_index: 0, next: NIL });
-        for (i, node) in nodes.iter_mut().enumerate().take(capacity - 1) {
-            node.next = i as u32 + 1;
-        }
-        Timeline { nodes, items: Items::new(capacity), free: 0, len: 0, calendar: Calendar::new(capacity), wheel: Wheel::new(), refused: NIL }
-    }
-
-    #[inline]
-    fn next_release_ns(&self) -> Option<u64> {
-        match (self.calendar.len, self.wheel.len) {
-            (0, 0) => None,
-            (_, 0) => Some(self.calendar.first_ns),
-            (0, _) => Some(self.wheel.next_release_ns(&self.nodes)),
-            _ => Some(self.calendar.first_ns.min(self.wheel.next_release_ns(&self.nodes))),
-        }
-    }
-
-    #[inline]
-    fn push(&mut self, release_ns: u64, ingress_index: u64, item: T) -> Result<u64, Full<T>> {
-        let n = self.free;
-        if n == NIL {
-            return Err(Full(item));
-        }
-        let node = &mut self.nodes[n as usize];
-        self.free = node.next;
-        *node = Node { release_ns, ingress_index, next: NIL };
-        self.items.set(n, item);
-        self.len += 1;
-        if !self.calendar.insert(&mut self.nodes, n) {
-            self.wheel.insert(&mut self.nodes, n);
-        }
-        if self.wheel.len > 0 && self.calendar.len > 0 {
-            self.migrate();
-        }
-        Ok(release_ns)
-    }
-
-    /// Moves the wheel's earliest frames into the calendar while its window
-    /// covers them: after the calendar starts over with wider buckets, the
-    /// frames that did not fit the old window join it, a few per push. A
-    /// frame the calendar refused (its bucket too deep) is not offered again
-    /// while it is the wheel's first.
-    fn migrate(&mut self) {
-        for _ in 0..MIGRATE_PER_PUSH {
-            if self.wheel.len == 0 {
-                return;
-            }
-            let n = self.wheel.first();
-            if n == self.refused || self.calendar.closed {
-                return;
-            }
-            let a = self.nodes[n as usize].release_ns >> self.calendar.shift;
-            let c = &self.calendar;
-            if if a < c.first { c.hi - a > c.mask } else { a - c.first > c.mask } {
-                return;
-            }
-            let n = self.wheel.remove_first(&mut self.nodes);
-            if !self.calendar.insert(&mut self.nodes, n) {
-                self.wheel.insert(&mut self.nodes, n);
-                self.refused = n;
-                return;
-            }
-        }
-    }
-
-    /// Takes the earliest frame out: its slab index, free again (its item
-    /// stays in place until the next push).
-    #[inline]
-    fn pop(&mut self) -> Option<u32> {
-        let n = if self.wheel.len == 0 {
-            if self.calendar.len == 0 {
-                return None;
-            }
-            self.pop_calendar()
-        } else if self.calendar.len == 0 || self.nodes[self.wheel.first() as usize].key() < self.nodes[self.calendar.head() as usize].key() {
-            self.wheel.remove_first(&mut self.nodes)
-        } else {
-            self.pop_calendar()
-        };
-        self.nodes[n as usize].next = self.free;
-        self.free = n;
-        self.len -= 1;
-        Some(n)
-    }
-
-    /// The frame at slab index `n`, its item read in place.
-    #[inline]
-    fn released(&self, n: u32) -> Released<&T> {
-        let node = &self.nodes[n as usize];
-        Released { release_ns: node.release_ns, ingress_index: node.ingress_index, item: self.items.get(n) }
-    }
-
-    /// The calendar's earliest frame. What the following pops take is
-    /// prefetched: the item of the new first frame (the next pop's, if the
-    /// wheel holds none earlier), and, a few buckets on, the node and item
-    /// of the first frame of the next occupied bucket and of the second of
-    /// the one after the `near` cursor, so that at depth their lines (cold
-    /// since their push) arrive before they are taken. One bucket per
-    /// cursor and pop: a pop takes at most one bucket's frame, so the
-    /// cursors keep their distance.
-    #[inline]
-    fn pop_calendar(&mut self) -> u32 {
-        let n = self.calendar.remove_first(&mut self.nodes);
-        let c = &mut self.calendar;
-        if c.len > 0 {
-            // Prefetched once already, a few buckets back; at depth the line
-            // is often gone again by now (the streaming items evict it), and
-            // from the outer caches it arrives within the caller's turn.
-            prefetch(self.items.get(c.head()));
-        }
-        match c.next_within(c.ahead, AHEAD_BUCKETS) {
-            Some(a) => {
-                c.ahead = a;
-                let m = c.heads[(a & c.mask) as usize];
-                prefetch(&self.nodes[m as usize]);
-                prefetch_once(self.items.get(m));
-            }
-            None => c.ahead = c.ahead.max(c.first.saturating_add(AHEAD_BUCKETS)).min(c.hi),
-        }
-        match c.next_within(c.near, NEAR_BUCKETS) {
-            Some(a) => {
-                c.near = a;
-                let m = self.nodes[c.heads[(a & c.mask) as usize] as usize].next;
-                if m != NIL {
-                    prefetch(&self.nodes[m as usize]);
-                    prefetch_once(self.items.get(m));
-                }
-            }
-            None => c.near = c.near.max(c.first.saturating_add(NEAR_BUCKETS)).min(c.hi),
-        }
-        n
-    }
+    unreachable!("next_set on an empty bitmap")
 }
 
 /// The FIFO order: frames in a ring, in push order. A pop leaves the
@@ -1118,7 +733,7 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),
-            QueueOrder::Reorder => size_of::<Node>() + Items::<T>::bytes(),
+            QueueOrder::Reorder => 3 * size_of::<Entry>() + size_of::<u32>() + Items::<T>::bytes(),
         }
     }
 
@@ -1232,8 +847,8 @@ impl<T: Copy + Default> ReleaseQueue<T> {
                 Some(ring.released(at))
             }
             Inner::Reorder(t) => {
-                let n = t.pop()?;
-                Some(t.released(n))
+                let e = t.pop()?;
+                Some(t.released(e))
             }
         }
     }
@@ -1312,10 +927,10 @@ mod tests {
                 }
             }
         }
-        // 4 294 967 295 frames of the emulator's 192-byte samples in a wheel
-        // (24-byte node each): 927.7 GB.
+        // 4 294 967 295 frames of the emulator's 192-byte samples, each with
+        // three 24-byte entries (front, twice; a chunk) and a free slot: 1.15 TB.
         let e = ReleaseQueue::<crate::sample::FrameSample>::try_new(QueueOrder::Reorder, u32::MAX as usize).unwrap_err();
-        assert!(e.to_string().contains("would need 927.7 GB of memory (216 bytes a frame)"), "{e}");
+        assert!(e.to_string().contains("would need 1.2 TB of memory (268 bytes a frame)"), "{e}");
     }
 
     #[test]
