@@ -1,7 +1,6 @@
 //! The reorder queue's push + pop cost against its depth: `ReleaseQueue`
-//! with `QueueOrder::Reorder` (a calendar, with a timing wheel for what
-//! falls outside it; labelled `wheel`) beside the binary heap it replaced,
-//! in the same run. Each case fills the queue to a depth once,
+//! with `QueueOrder::Reorder` (a ladder queue; labelled `ladder`) beside the
+//! binary heap the project started with, in the same run. Each case fills the queue to a depth once,
 //! then every iteration pushes one frame and takes the earliest out, so the
 //! depth stays constant.
 //!
@@ -18,8 +17,15 @@
 //! caches the other processes share are still theirs to disturb, so the
 //! load is printed).
 //!
-//! `cargo bench --bench queue` (about a minute); `-- wheel` or `-- heap`
-//! narrows it. Load and host steal are printed beside the results.
+//! Beside them, `floor`: no queue at all, only the item's own trip through
+//! memory that any queue holding that many frames makes: each iteration
+//! copies a 192-byte item out of a slot among `depth` (scattered, and
+//! prefetched 16 iterations ahead, as the queue's pops are) and a new one
+//! into it. What the floor grows by with the depth is the machine's caches
+//! and memory, not a queue's algorithm.
+//!
+//! `cargo bench --bench queue` (about a minute); `-- ladder`, `-- heap` or
+//! `-- floor` narrows it. Load and host steal are printed beside the results.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use netfi::host::CpuTimes;
@@ -77,7 +83,7 @@ fn uniform(depth: usize) -> Releases {
     Releases { spacing_ns: 1_000, delays_ns: std::sync::Arc::new(delays) }
 }
 
-/// The wheel, then the heap, at a constant `depth`.
+/// The queue, then the heap, at a constant `depth`.
 fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, name: &str, depth: usize, releases: &Releases, item: I) {
     let mut q = ReleaseQueue::<I>::new(QueueOrder::Reorder, depth + 1);
     let mut i = 0u64;
@@ -89,7 +95,7 @@ fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'
     // emulator's release copies it into the publisher's: the queue reads
     // it in place (`pop_ref`), the heap hands it out by value.
     let mut loan = item;
-    g.bench_function(format!("wheel {name}"), |b| {
+    g.bench_function(format!("ladder {name}"), |b| {
         b.iter(|| {
             q.push(releases.at(i), i, item).unwrap();
             i += 1;
@@ -119,6 +125,58 @@ fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'
     assert_eq!(q.len(), depth, "the depth stays constant");
 }
 
+/// The memory floor at `depth` (see the module's text): the items' slots
+/// on cache lines and huge pages, as the queue keeps them.
+fn floor(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, depth: usize) {
+    #[derive(Clone, Copy, Default)]
+    #[repr(C, align(64))]
+    struct Lined(Item);
+    let slots_n = depth.next_power_of_two();
+    let mut slots: Vec<Lined> = Vec::with_capacity(slots_n);
+    advise_huge_pages(&mut slots);
+    slots.resize(slots_n, Lined::default());
+    let mask = slots_n as u64 - 1;
+    // A fixed scatter over the slots (Fibonacci hashing of the iteration).
+    let slot = move |k: u64| ((k.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 20) & mask) as usize;
+    let item = Item::ZERO;
+    let mut loan = item;
+    let mut k = 0u64;
+    g.bench_function(format!("floor depth {depth}"), |b| {
+        b.iter(|| {
+            prefetch(&slots[slot(k + 16)]);
+            let s = slot(k);
+            loan = slots[s].0;
+            black_box(&mut loan);
+            slots[s].0 = item;
+            k += 1;
+        })
+    });
+}
+
+fn prefetch<X>(p: &X) {
+    #[cfg(target_arch = "x86_64")]
+    for off in (0..size_of::<X>()).step_by(64) {
+        // SAFETY: a prefetch is a hint; it cannot fault.
+        unsafe { core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_T0 }>((p as *const X).cast::<i8>().wrapping_add(off)) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+#[cfg(target_os = "linux")]
+fn advise_huge_pages<X>(v: &mut Vec<X>) {
+    const HUGE: usize = 2 << 20;
+    let start = v.as_mut_ptr() as usize;
+    let (from, to) = (start.next_multiple_of(HUGE), (start + v.capacity() * size_of::<X>()) / HUGE * HUGE);
+    if to > from {
+        // SAFETY: advice on memory this vector owns and has not written.
+        unsafe { libc::madvise(from as *mut libc::c_void, to - from, libc::MADV_HUGEPAGE) };
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn advise_huge_pages<X>(_v: &mut Vec<X>) {}
+
 fn queue_depths(c: &mut Criterion<ThreadCpu>) {
     let dlm2 = std::sync::Arc::new(dlm2_delays_ns());
     let mut g = c.benchmark_group("reorder push+pop");
@@ -131,6 +189,7 @@ fn queue_depths(c: &mut Criterion<ThreadCpu>) {
         for (dist, releases) in cases {
             pair(&mut g, &format!("{dist} depth {depth}"), depth, &releases, Item::ZERO);
         }
+        floor(&mut g, depth);
         // The same with an 8-byte item: what the 192-byte sample's own
         // cache misses (written at push, read at pop) add at depth.
         if depth >= 100_000 {
@@ -143,7 +202,7 @@ fn queue_depths(c: &mut Criterion<ThreadCpu>) {
     // shown once so a capacity's price is visible.
     let mut g = c.benchmark_group("reorder construction");
     g.sample_size(10);
-    g.bench_function("wheel capacity 1048576", |b| {
+    g.bench_function("ladder capacity 1048576", |b| {
         b.iter_batched(|| (), |_| ReleaseQueue::<Item>::new(QueueOrder::Reorder, 1 << 20), BatchSize::PerIteration)
     });
     g.finish();

@@ -153,8 +153,8 @@ pub struct Injector<T> {
 }
 
 impl<T: Copy + Default> Injector<T> {
-    /// The queue is a FIFO ring when no stage can reorder, else a timing
-    /// wheel; it holds at most `queue_capacity` frames
+    /// The queue is a FIFO ring when no stage can reorder, else a ladder
+    /// queue (see [`crate::scheduler`]); it holds at most `queue_capacity` frames
     /// (1..=[`crate::scheduler::MAX_CAPACITY`]), all allocated here.
     pub fn try_new(scenario: Scenario, queue_capacity: usize) -> Result<Self, BuildError> {
         let order = if scenario.may_reorder() { QueueOrder::Reorder } else { QueueOrder::Fifo };

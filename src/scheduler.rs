@@ -7,57 +7,48 @@
 //! does. `Reorder` leaves each frame at its own time, ties in ingress order:
 //! exactly the order of `(release_ns, ingress_index)`.
 //!
-//! `Reorder` keeps its frames in a slab (node and item at one index; links
-//! are `u32` indices; items on cache-line boundaries when a whole number of
-//! lines, as the emulator's 192-byte sample, and the large arrays advised
-//! onto huge pages, so that a deep queue's pops, scattered over the slab,
-//! neither straddle lines nor miss the TLB) and each frame in one of two
-//! structures, both in
-//! exact `(release_ns, ingress_index)` order; the earliest frame is the
-//! earlier of their two first ones, so which one holds a frame changes its
-//! cost, never the order.
+//! `Reorder` is a ladder queue (after Tang, Goh and Thng's, with one rung):
+//! items in a slab (on cache-line boundaries when a whole number of lines,
+//! as the emulator's 192-byte sample; the large arrays advised onto huge
+//! pages), and each frame's key and slot, an entry of 24 bytes, in one of
+//! three places:
 //!
-//! - The **calendar** holds nearly every frame: one level of `2^k` buckets
-//!   (`2^k` twice the power of two at or above the capacity), each `2^s` ns
-//!   wide.
-//!   A push puts a frame at the front of its bucket's list (a bag); a pop
-//!   takes the head of the first bucket, which is kept in exact order (a
-//!   bag is sorted when it becomes the first: a few frames), and finds the
-//!   next occupied bucket in a two-level bitmap. The bucket width is chosen
-//!   whenever the calendar runs empty, from how far ahead of the earliest
-//!   frame the pushes reached since the last choice: the window spans the
-//!   stream's delay spread (rate × delay frames over `2^k` buckets), so a
-//!   bucket holds about one frame at any depth, and a frame is moved once
-//!   in and once out, whatever the depth. Pops prefetch the node and item
-//!   of the first frame of each bucket up to 32 ahead, and of the second of
-//!   those up to 12 ahead (its place is known once the first is in cache):
-//!   at depth those lines were last touched at the frame's push, long out
-//!   of cache. A pop prefetches the next frame's item once more, from
-//!   whichever cache still holds it.
-//! - A hierarchical **timing wheel** takes what the calendar does not: a
-//!   frame outside its window (the first frames of a stream, before the
-//!   width fits; a frame due before everything held; an outlier far ahead)
-//!   or deeper than `WALK_MAX` (8) frames into the first bucket. Eleven levels of 64
-//!   slots each split a time into 6-bit digits; a frame sits at the level of
-//!   the highest digit in which its release time differs from the wheel's
-//!   cursor, in the slot named by that digit. Level 0 therefore holds exact
-//!   times, and higher slots are bags moved down a level (cascaded) when
-//!   level 0 runs empty; a frame is moved at most once per level. A frame
-//!   earlier than the cursor waits in a short sorted list (at most 32) that
-//!   is merged into the wheel when full. The wheel's frames move into the
-//!   calendar, a few per push, once its window covers them.
+//! - the **front**, every frame due up to a bound, sorted by
+//!   `(release_ns, ingress_index)`: a pop takes its first entry; a push due
+//!   that early goes to its place (at an end, the usual case, or moving the
+//!   shorter side by one);
+//! - one **row** of buckets, each a fixed span of time (a power of two of
+//!   nanoseconds) holding its entries in no order: a push is an append.
+//!   When the front runs short, a pop moves the next occupied bucket to
+//!   the front's end and sorts it (a few frames);
+//! - the **far** bag, frames beyond the row, appended in no order. When the
+//!   row is empty the front's next frames come from the far bag: the row is
+//!   built again from it, spanning four times the far frames' mean reach
+//!   past the front, so a bucket holds a few frames at any rate and delay;
+//!   frames beyond stay far.
 //!
-//! A push walks at most 8 frames of the first bucket (or 32 of the wheel's
-//! early list); a pop scans bitmap words and sorts the next bucket; the
-//! wheel's cascades move a frame at most once per level.
+//! A frame is written about four times (its push, into the row, into the
+//! front, its pop), each time next to the frames before it, and never
+//! found by following links through the queue; a pop prefetches the item
+//! it will take 16 pops later. What a deep queue costs beyond a shallow one
+//! is mostly the item's own trip through memory (the `floor` case of
+//! `benches/queue.rs`).
+//!
+//! Costs: a push appends or, due within the front, moves at most half the
+//! front by one entry (the front usually holds 16 frames and the bucket
+//! last moved into it); a pop sorts a bucket now and then (`n log n` in its
+//! size) and, when the row is empty, scans the far bag once; a frame stays
+//! far through at most one build in four (at most a quarter of the frames
+//! reach four times the mean).
 //!
 //! A pop can leave the item in place ([`ReleaseQueue::pop_ref`],
 //! [`ReleaseQueue::pop_due_ref`]): its slot is free again but not written
 //! before the next push, which the borrow holds off, so a caller that copies
 //! the item on (the emulator, into the publisher's loan) copies it once.
 //!
-//! Neither order allocates after construction: the reorder queue's frames
-//! live in a slab whose free slots and lists are intrusive `u32` links, and a push
+//! Neither order allocates after construction: the reorder queue's slots,
+//! entries and chunks are all reserved when it is built (the chunks of
+//! every bag together need `capacity / 8` plus one a bag), and a push
 //! onto a full queue hands the item back as [`Full`] so the caller records
 //! the fate. The capacity is bounded by [`MAX_CAPACITY`]; a larger one is a
 //! [`CapacityError`] that names the memory it would take.
@@ -728,8 +719,9 @@ pub struct ReleaseQueue<T> {
 
 impl<T: Copy + Default> ReleaseQueue<T> {
     /// The memory one frame of capacity takes in a queue of this order: for
-    /// `Reorder`, the slab's node and item (the calendar's bucket heads and
-    /// bitmaps add at most 16.5 bytes a frame, left out of this figure).
+    /// `Reorder`, the item, its free slot's index and three entries (two in
+    /// the front's room, one in a chunk; the buckets, at most 16 384, add
+    /// about 200 bytes each, left out of this figure).
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),

@@ -8,7 +8,7 @@
 //!   next release time.
 //! - Identical releases: the DLM-2 delays of a real scenario, pushed and
 //!   released in time as the emulator does, give the same sequence from the
-//!   timing wheel as from the binary heap it replaced.
+//!   queue as from a binary heap.
 
 #[path = "common/heap_queue.rs"]
 mod heap_queue;
@@ -48,7 +48,7 @@ fn offset() -> impl Strategy<Value = u64> {
         2 => 0u64..70_000,
         // DLM-like delays (up to seconds).
         2 => 0u64..2_000_000_000,
-        // Anywhere: far beyond any span the wheel's lower levels cover.
+        // Anywhere: far beyond any row of buckets.
         1 => any::<u64>(),
     ]
 }
@@ -171,9 +171,9 @@ proptest! {
 
     /// Pushes and pops in short runs, the pushes' times before everything
     /// held, at the present, or far ahead, on a queue first filled deep
-    /// enough that the calendar holds frames: a frame just pushed leaves in
+    /// enough that the row holds frames: a frame just pushed leaves in
     /// order and counts in the next release time, wherever it lands (a new
-    /// earliest frame, a tie, the calendar's window or past it), also when
+    /// earliest frame, a tie, the front, the row or past it), also when
     /// the frames just pushed are the only ones held.
     #[test]
     fn reorder_with_frames_just_pushed_matches_the_sorted_model(
@@ -268,17 +268,17 @@ fn ties_leave_in_ingress_order_whatever_the_push_order() {
 }
 
 /// Pushes and due-pops in simulated time, as the emulator's loop makes them,
-/// through the timing wheel and through the binary heap: the same releases.
+/// through the queue and through the binary heap: the same releases.
 fn same_as_the_heap(scenario_text: &str, spacing_ns: u64, frames: u64, seed: u64) -> u64 {
     let spec = scenario::parse_str(scenario_text, "queue.toml", "queue").unwrap();
     let mut sc = Scenario::new(&spec, seed).unwrap();
     let capacity = 1 << 18;
-    let mut wheel = ReleaseQueue::<u64>::new(QueueOrder::Reorder, capacity);
+    let mut queue = ReleaseQueue::<u64>::new(QueueOrder::Reorder, capacity);
     let mut heap = HeapQueue::<u64>::new(capacity);
     let mut released = 0u64;
-    let mut release = |now: u64, wheel: &mut ReleaseQueue<u64>, heap: &mut HeapQueue<u64>| {
-        assert_eq!(wheel.next_release_ns(), heap.next_release_ns(), "at {now} ns");
-        while let Some(r) = wheel.pop_due(now) {
+    let mut release = |now: u64, queue: &mut ReleaseQueue<u64>, heap: &mut HeapQueue<u64>| {
+        assert_eq!(queue.next_release_ns(), heap.next_release_ns(), "at {now} ns");
+        while let Some(r) = queue.pop_due(now) {
             let (t, ingress, item) = heap.pop().expect("the heap holds as many");
             assert_eq!((r.release_ns, r.ingress_index, r.item), (t, ingress, item), "release {released}");
             assert!(t <= now);
@@ -288,14 +288,14 @@ fn same_as_the_heap(scenario_text: &str, spacing_ns: u64, frames: u64, seed: u64
     };
     for i in 0..frames {
         let now = i * spacing_ns;
-        release(now, &mut wheel, &mut heap);
+        release(now, &mut queue, &mut heap);
         if let Decision::Pass { delay_ns } = sc.decide(now, now) {
             let t = now + delay_ns;
-            assert_eq!(wheel.push(t, i, i), heap.push(t, i, i).map_err(Full));
+            assert_eq!(queue.push(t, i, i), heap.push(t, i, i).map_err(Full));
         }
     }
-    release(u64::MAX, &mut wheel, &mut heap);
-    assert!(wheel.is_empty() && heap.len() == 0);
+    release(u64::MAX, &mut queue, &mut heap);
+    assert!(queue.is_empty() && heap.len() == 0);
     released
 }
 
@@ -310,7 +310,7 @@ fn dlm2_releases_are_the_heaps_at_1_khz_and_300_khz() {
 }
 
 /// A fast stream whose delay spread shrinks a thousandfold, then bursts on
-/// one release time: the calendar's width, chosen from the wide phase, no
+/// one release time: the row's width, chosen from the wide phase, no
 /// longer fits; the releases are still the heap's.
 #[test]
 fn releases_are_the_heaps_when_the_spread_changes() {

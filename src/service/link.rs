@@ -213,7 +213,7 @@ impl<T: Carried> Link<T> {
         &mut self.inj
     }
 
-    /// Rebuilds the (still unused) release queue as a timing wheel, so that
+    /// Rebuilds the (still unused) release queue as a reorder queue, so that
     /// the run can be switched to a scenario that reorders.
     pub fn reorder_queue(&mut self) -> anyhow::Result<()> {
         let (scenario, capacity) = (self.inj.scenario().clone(), self.inj.queue_capacity());

@@ -1,4 +1,4 @@
-//! The reorder queue as it was before the timing wheel: a binary min-heap
+//! The reorder queue as the project first had it: a binary min-heap
 //! on `(release_ns, ingress_index, slot)` over a slab of items. Kept as the
 //! baseline of `benches/queue.rs` and as a second reference in
 //! `tests/release_queue.rs` (identical release orders).
@@ -8,7 +8,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-/// The reorder queue before the timing wheel: a binary min-heap on
+/// The project's first reorder queue: a binary min-heap on
 /// `(release_ns, ingress_index, slot)` over a slab of items.
 pub struct HeapQueue<T> {
     heap: BinaryHeap<Reverse<(u64, u64, u32)>>,
