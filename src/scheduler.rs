@@ -558,7 +558,7 @@ impl<T: Copy + Default> Timeline<T> {
             self.summary[w >> 6] &= !(1 << (w & 63));
         }
         self.in_row -= bag.len as usize;
-        self.next_bucket = a + 1;
+        self.next_bucket = a.wrapping_add(1); // a = u64::MAX only when nothing can be later
         self.front_max_ns = (a << self.shift) | ((1u64 << self.shift) - 1);
         if self.lo == self.hi {
             (self.lo, self.hi) = (MARGIN, MARGIN);
