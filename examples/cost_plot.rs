@@ -25,7 +25,7 @@ const AXES: [(&str, &str, &str, bool); 4] = [
     ("payload", "Emulator's cost per payload against its size", "payload bytes", true),
 ];
 
-const COLORS: [plotters::style::RGBColor; 5] = [plot::BLUE, plot::ORANGE, plot::GREEN, plot::PURPLE, plot::GREY];
+const COLORS: [plotters::style::RGBColor; 7] = [plot::BLUE, plot::ORANGE, plot::GREEN, plot::PURPLE, plot::GREY, plot::VERMILLION, plot::SKY];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs");
