@@ -619,16 +619,15 @@ impl<T: Copy + Default> Timeline<T> {
         self.hi += n;
         let sorted = &mut self.entries[start..self.hi];
         let mut run = 0;
-        for i in 1..n {
-            if sorted[i].release_ns != sorted[run].release_ns {
-                run = i;
-            } else if sorted[i].ingress_index < sorted[i - 1].ingress_index {
-                // A tie out of ingress order: an insertion into the run.
-                let mut k = i;
-                while k > run && sorted[k].ingress_index < sorted[k - 1].ingress_index {
-                    sorted.swap(k, k - 1);
-                    k -= 1;
+        for i in 1..=n {
+            if i == n || sorted[i].release_ns != sorted[run].release_ns {
+                // A run of ties, in bag order: the emulator pushes in
+                // ingress order, so it is in order already.
+                let ties = &mut sorted[run..i];
+                if ties.len() > 1 && !ties.is_sorted_by_key(|e| e.ingress_index) {
+                    ties.sort_unstable_by_key(|e| e.ingress_index);
                 }
+                run = i;
             }
         }
     }
