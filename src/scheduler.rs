@@ -771,7 +771,8 @@ impl<T: Copy + Default> ReleaseQueue<T> {
     /// The memory one frame of capacity takes in a queue of this order: for
     /// `Reorder`, the item, its free slot's index and three entries (two in
     /// the front's room, one in a chunk; the buckets, at most 16 384, add
-    /// about 200 bytes each, left out of this figure).
+    /// about 200 bytes each, and the room to sort a bucket 128 kB, left out
+    /// of this figure).
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),
