@@ -37,9 +37,9 @@
 //! Costs: a push appends or, due within the front, moves at most half the
 //! front by one entry (the front usually holds 16 frames and the bucket
 //! last moved into it); a pop sorts a bucket now and then (`n log n` in its
-//! size) and, when the row is empty, scans the far bag once; a frame stays
-//! far through at most one build in four (at most a quarter of the frames
-//! reach four times the mean).
+//! size) and, when the row is empty, scans the far bag once, and at least
+//! three far frames in four join the row (no more than a quarter of them
+//! reach four times their mean).
 //!
 //! A pop can leave the item in place ([`ReleaseQueue::pop_ref`],
 //! [`ReleaseQueue::pop_due_ref`]): its slot is free again but not written
