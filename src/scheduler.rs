@@ -37,7 +37,7 @@
 //! Costs: a push appends or, due within the front, moves at most half the
 //! front by one entry (the front usually holds 16 frames and the bucket
 //! last moved into it); a pop sorts a bucket now and then (`n log n` in its
-//! size) and, when the row is empty, scans the far bag once, and at least
+//! size) and, when the row is empty, scans the far bag once, and about
 //! three far frames in four join the row (no more than a quarter of them
 //! reach four times their mean).
 //!
