@@ -634,7 +634,7 @@ impl<T: Copy + Default> Timeline<T> {
 
     /// Builds the row from the far bag (the row is empty): from the bucket
     /// after the front, four times the far frames' mean reach, buckets of a
-    /// power-of-two width. Frames beyond it stay far (at least three in four
+    /// power-of-two width. Frames beyond it stay far (about three in four
     /// join the row: no more than a quarter of the frames reach four times
     /// the mean).
     #[cold]
