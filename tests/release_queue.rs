@@ -254,17 +254,22 @@ fn frames_just_pushed_leave_in_order() {
 /// cascaded from higher levels: they leave in ingress order.
 #[test]
 fn ties_leave_in_ingress_order_whatever_the_push_order() {
-    let mut q = ReleaseQueue::<u64>::new(QueueOrder::Reorder, 4096);
-    let t = 5_000_000_000u64;
-    q.push(1, 0, 0).unwrap(); // keeps the cursor low, so the ties sit high
-    let mut ingress: Vec<u64> = (0..4000).map(|i| netfi::scenario::splitmix64(i) % 1_000_000).collect();
-    for (i, &g) in ingress.iter().enumerate() {
-        q.push(t, g, i as u64).unwrap();
+    // 4 000 ties fill one bucket sorted by keys; 10 000, one too large for
+    // that, sorted in place.
+    for ties in [4_000u64, 10_000] {
+        let mut q = ReleaseQueue::<u64>::new(QueueOrder::Reorder, 16_384);
+        let t = 5_000_000_000u64;
+        q.push(1, 0, 0).unwrap(); // keeps the front low, so the ties sit in one later bucket
+        let mut ingress: Vec<u64> = (0..ties).map(|i| netfi::scenario::splitmix64(i) % 1_000_000).collect();
+        for (i, &g) in ingress.iter().enumerate() {
+            q.push(t, g, i as u64).unwrap();
+        }
+        assert_eq!(q.pop().map(|r| r.release_ns), Some(1));
+        ingress.sort();
+        let got: Vec<u64> = std::iter::from_fn(|| q.pop_due(t)).map(|r| r.ingress_index).collect();
+        let first_wrong = got.iter().zip(&ingress).position(|(g, w)| g != w);
+        assert_eq!((got.len(), first_wrong), (ingress.len(), None), "{ties} ties: length, and the first frame out of ingress order");
     }
-    assert_eq!(q.pop().map(|r| r.release_ns), Some(1));
-    ingress.sort();
-    let got: Vec<u64> = std::iter::from_fn(|| q.pop_due(t)).map(|r| r.ingress_index).collect();
-    assert_eq!(got, ingress);
 }
 
 /// Pushes and due-pops in simulated time, as the emulator's loop makes them,
