@@ -324,3 +324,39 @@ fn releases_are_the_heaps_when_the_spread_changes() {
                 [[phase]]\nstart_s = 3\npreset = \"CLM-2\"\n";
     assert!(same_as_the_heap(text, 10_000, 450_000, 14) > 300_000);
 }
+
+/// A fast stream whose delays mix what the queue's parts handle apart: most
+/// a few hundred milliseconds (the row), some microseconds (the front, or
+/// earlier than everything held), some hours (far, through many rebuilds),
+/// and some the same nanosecond as the frame before (ties); released in
+/// time as the emulator does, the same releases as the binary heap's.
+#[test]
+fn mixed_delays_release_as_the_heap_does() {
+    let capacity = 1 << 16;
+    let mut queue = ReleaseQueue::<u64>::new(QueueOrder::Reorder, capacity);
+    let mut heap = HeapQueue::<u64>::new(capacity);
+    let (mut released, mut last_t) = (0u64, 0u64);
+    for i in 0..300_000u64 {
+        let now = i * 3_000;
+        assert_eq!(queue.next_release_ns(), heap.next_release_ns(), "at {now} ns");
+        while let Some(r) = queue.pop_due(now) {
+            assert_eq!(Some((r.release_ns, r.ingress_index, r.item)), heap.pop(), "release {released}");
+            released += 1;
+        }
+        let x = netfi::scenario::splitmix64(i);
+        let t = match x % 100 {
+            0..=89 => now + x / 100 % 300_000_000,
+            90..=94 => now + x / 100 % 10_000,
+            95..=98 => last_t,
+            _ => now + 3_600_000_000_000 + x / 100 % 3_600_000_000_000,
+        };
+        last_t = t;
+        assert_eq!(queue.push(t, i, i), heap.push(t, i, i).map_err(Full));
+    }
+    while let Some(r) = queue.pop() {
+        assert_eq!(Some((r.release_ns, r.ingress_index, r.item)), heap.pop(), "release {released}");
+        released += 1;
+    }
+    assert_eq!(heap.len(), 0);
+    assert!(released > 250_000);
+}
