@@ -322,7 +322,8 @@ impl Pool {
             // one is used.
             prefetch(&self.chunks[next as usize]);
         }
-        let k = if next == NIL { bag.len as usize - (bag.len as usize - 1) / CHUNK * CHUNK } else { CHUNK };
+        // Only the last chunk is part-filled: it holds what is left.
+        let k = if next == NIL { bag.len as usize } else { CHUNK };
         let out = self.chunks[c as usize].0;
         (self.next[c as usize], self.free) = (self.free, c);
         bag.head = next;
