@@ -308,10 +308,11 @@ impl Pool {
         bag.len += 1;
     }
 
-    /// Takes the first chunk of `bag` out (freed: its entries are copied
-    /// out first), with how many entries it held; `None` when empty.
+    /// Unlinks the first chunk of `bag`: its index and how many entries
+    /// it holds; `None` when empty. The chunk stays as it is until
+    /// [`Pool::free`] gives it back.
     #[inline(always)]
-    fn take_chunk(&mut self, bag: &mut Bag) -> Option<([Entry; CHUNK], usize)> {
+    fn take_chunk(&mut self, bag: &mut Bag) -> Option<(usize, usize)> {
         let c = bag.head;
         if c == NIL {
             return None;
@@ -324,21 +325,29 @@ impl Pool {
         }
         // Only the last chunk is part-filled: it holds what is left.
         let k = if next == NIL { bag.len as usize } else { CHUNK };
-        let out = self.chunks[c as usize].0;
-        (self.next[c as usize], self.free) = (self.free, c);
         bag.head = next;
         bag.len -= k as u32;
         if next == NIL {
             bag.tail = NIL;
         }
-        Some((out, k))
+        Some((c as usize, k))
+    }
+
+    /// Gives a taken chunk back.
+    #[inline(always)]
+    fn free(&mut self, c: usize) {
+        self.next[c] = self.free;
+        self.free = c as u32;
     }
 }
 
-/// The most buckets, and the fewest: a row spans four times the mean reach
-/// of the far frames it is built from, so a full queue of 2^24 frames puts
-/// about 1 000 in a bucket, and a shallow one a few.
-const MAX_BUCKETS: usize = 1 << 14;
+/// The most buckets, and the fewest. A push appends to one of them at
+/// random, so their bags' ends must stay in cache: 1 024 of them are about
+/// 200 kB, where one per 8 frames (16 384 at depth 10^5) missed it on
+/// nearly every push. A deep queue's buckets are larger instead: hundreds
+/// of frames at depth 10^5, thousands at 10^6, sorted in linear time (see
+/// [`Timeline::sort_bucket`]).
+const MAX_BUCKETS: usize = 1 << 10;
 const MIN_BUCKETS: usize = 64;
 /// How many frames ahead of the first a pop prefetches the item of, and
 /// how many the front keeps when more are held.
@@ -346,9 +355,11 @@ const AHEAD: usize = 16;
 /// Free entries kept before the front's first, for frames pushed ahead of
 /// it.
 const MARGIN: usize = 64;
-/// The largest bucket sorted by 8-byte keys (see
-/// [`Timeline::sort_by_keys`]); a larger one, rare, is sorted in place.
-const SORT_SCRATCH: usize = 4096;
+/// The largest bucket sorted by counting (see [`Timeline::sort_bucket`]);
+/// a larger one, rare, is sorted by comparison.
+const COUNTED: usize = 1 << 16;
+/// At most `2^SUB_BITS` sub-buckets when a bucket is sorted.
+const SUB_BITS: u32 = 14;
 
 /// The buckets for a capacity: one per 8 frames, within the bounds above.
 fn bucket_count(capacity: usize) -> usize {
@@ -363,16 +374,16 @@ fn bucket_count(capacity: usize) -> usize {
 ///   `(release_ns, ingress_index)` in `entries[lo..hi]`. A pop takes
 ///   `entries[lo]`; a push due that early is put in its place (the
 ///   shorter side moved by one).
-/// - the **buckets**: one row of `2^k` buckets, `2^shift` ns each, from
-///   `row_start`; bags in no order. When the
+/// - the **buckets**: one row of `2^k` buckets (at most [`MAX_BUCKETS`]),
+///   `2^shift` ns each, from `row_start`; bags in no order. When the
 ///   front runs short a pop moves the next occupied bucket into it and
 ///   sorts it: its frames are then the earliest held, and `front_max_ns`
 ///   becomes the bucket's last nanosecond.
 /// - the **far** bag: frames beyond the row. When the row is empty and the
 ///   front needs frames, the row is built again from the far bag: it starts
-///   after the front and spans four times the far frames' mean reach, so a
-///   bucket holds a few frames whatever the rate and delay; frames beyond it
-///   stay far.
+///   after the front and spans four times the far frames' mean reach, so
+///   the frames spread over its buckets whatever the rate and delay; frames
+///   beyond it stay far.
 ///
 /// So a frame is written about four times (its push; to the row; to the
 /// front; the pop), each time among neighbours in memory, and never found
@@ -405,9 +416,8 @@ struct Timeline<T> {
     far: Bag,
     far_sum_ns: u128,
     len: usize,
-    /// Room to sort a bucket by keys: each frame's key and entry.
-    keys: Vec<u64>,
-    scratch: Vec<Entry>,
+    /// A sub-bucket's count, then its next place, as a bucket is sorted.
+    counts: Vec<u32>,
 }
 
 impl<T: Copy + Default> Timeline<T> {
@@ -436,8 +446,7 @@ impl<T: Copy + Default> Timeline<T> {
             far: Bag::EMPTY,
             far_sum_ns: 0,
             len: 0,
-            keys: vec![0; SORT_SCRATCH],
-            scratch: vec![Entry::default(); SORT_SCRATCH],
+            counts: vec![0; (1 << SUB_BITS.min(usize::BITS - capacity.leading_zeros())) + 1],
         }
     }
 
@@ -578,11 +587,12 @@ impl<T: Copy + Default> Timeline<T> {
         }
         let start = self.hi;
         let n = bag.len as usize;
-        if n > 1 && n <= SORT_SCRATCH && self.shift <= 40 {
-            self.sort_by_keys(bag, a << self.shift);
+        if n > 1 && n <= COUNTED {
+            self.sort_bucket(bag, a << self.shift);
         } else {
-            while let Some((chunk, k)) = self.pool.take_chunk(&mut bag) {
-                self.entries[self.hi..self.hi + k].copy_from_slice(&chunk[..k]);
+            while let Some((c, k)) = self.pool.take_chunk(&mut bag) {
+                self.entries[self.hi..self.hi + k].copy_from_slice(&self.pool.chunks[c].0[..k]);
+                self.pool.free(c);
                 self.hi += k;
             }
             self.entries[start..self.hi].sort_unstable_by_key(Entry::key);
@@ -593,42 +603,67 @@ impl<T: Copy + Default> Timeline<T> {
         }
     }
 
-    /// Moves `bag` (a bucket starting at `base_ns`, at most [`SORT_SCRATCH`]
-    /// frames, `2^shift ≤ 2^40` ns wide) to the front's end in order. Each
-    /// frame's 8-byte key, its offset in the bucket above its place in the
-    /// bag, is sorted (primitive keys sort branch-free, several times
-    /// faster than 24-byte entries compared through a closure) and the
-    /// entries gathered in that order; frames due at the same nanosecond
-    /// are then put in ingress order (they are in bag order so far).
+    /// Moves `bag` (a bucket starting at `base_ns`, `2^shift` ns wide, at
+    /// most [`COUNTED`] frames) to the front's end in order. A first pass
+    /// counts its frames by sub-bucket (about one per frame, by offset in
+    /// the bucket: at most [`SUB_BITS`] bits of it); a second moves each to
+    /// its sub-bucket's next place, in bag order; an insertion sort then
+    /// orders each sub-bucket by `(release_ns, ingress_index)`. Linear in
+    /// the bucket, and no branch mispredicted per frame but the sub-buckets
+    /// that hold more than one. Should many frames share a sub-bucket out of
+    /// order (ties pushed against ingress order), the insertion sort gives
+    /// up after `4 n` moves and the bucket is sorted by comparison.
     #[inline]
-    fn sort_by_keys(&mut self, mut bag: Bag, base_ns: u64) {
+    fn sort_bucket(&mut self, mut bag: Bag, base_ns: u64) {
         let n = bag.len as usize;
-        let mut j = 0;
-        while let Some((chunk, k)) = self.pool.take_chunk(&mut bag) {
-            for e in &chunk[..k] {
-                self.scratch[j] = *e;
-                self.keys[j] = (e.release_ns - base_ns) << 24 | j as u64;
-                j += 1;
+        let bits = (usize::BITS - n.leading_zeros()).min(SUB_BITS).min(self.shift);
+        let down = self.shift - bits;
+        let counts = &mut self.counts[..(1 << bits) + 1];
+        counts.fill(0);
+        let last = (n - 1) % CHUNK + 1;
+        let mut c = bag.head;
+        while c != NIL {
+            let next = self.pool.next[c as usize];
+            if next != NIL {
+                prefetch(&self.pool.chunks[next as usize]);
             }
+            let k = if next == NIL { last } else { CHUNK };
+            for e in &self.pool.chunks[c as usize].0[..k] {
+                counts[((e.release_ns - base_ns) >> down) as usize + 1] += 1;
+            }
+            c = next;
         }
-        let keys = &mut self.keys[..n];
-        keys.sort_unstable();
+        for d in 1..counts.len() {
+            counts[d] += counts[d - 1];
+        }
         let start = self.hi;
-        for (to, key) in self.entries[start..start + n].iter_mut().zip(keys.iter()) {
-            *to = self.scratch[(key & 0xFF_FFFF) as usize];
+        let sorted = &mut self.entries[start..start + n];
+        while let Some((c, k)) = self.pool.take_chunk(&mut bag) {
+            for e in &self.pool.chunks[c].0[..k] {
+                let d = ((e.release_ns - base_ns) >> down) as usize;
+                sorted[counts[d] as usize] = *e;
+                counts[d] += 1;
+            }
+            self.pool.free(c);
         }
         self.hi += n;
-        let sorted = &mut self.entries[start..self.hi];
-        let mut run = 0;
-        for i in 1..=n {
-            if i == n || sorted[i].release_ns != sorted[run].release_ns {
-                // A run of ties, in bag order: the emulator pushes in
-                // ingress order, so it is in order already.
-                let ties = &mut sorted[run..i];
-                if ties.len() > 1 && !ties.is_sorted_by_key(|e| e.ingress_index) {
-                    ties.sort_unstable_by_key(|e| e.ingress_index);
+        let mut budget = 4 * n;
+        for i in 1..n {
+            let e = sorted[i];
+            let key = e.key();
+            if key < sorted[i - 1].key() {
+                let mut at = i;
+                while at > 0 && key < sorted[at - 1].key() {
+                    sorted[at] = sorted[at - 1];
+                    at -= 1;
                 }
-                run = i;
+                sorted[at] = e;
+                let moved = i - at;
+                if moved > budget {
+                    sorted.sort_unstable_by_key(Entry::key);
+                    return;
+                }
+                budget -= moved;
             }
         }
     }
@@ -645,14 +680,15 @@ impl<T: Copy + Default> Timeline<T> {
         let mean_reach = (self.far_sum_ns / self.far.len as u128) as u64 - start_ns;
         // Width 2^shift: the reach (twice the mean, and one more) in at most
         // half the buckets, so the row covers four times the mean.
-        let span = mean_reach.saturating_mul(2).saturating_add(1);
-        self.shift = (64 - (span / (count / 2)).leading_zeros()).min(63);
+        let span = mean_reach.saturating_mul(4).saturating_add(1);
+        self.shift = (64 - (span / count).leading_zeros()).min(63);
         (self.row_start, self.row_buckets) = (start_ns >> self.shift, count);
         self.next_bucket = self.row_start;
         let mut far = std::mem::replace(&mut self.far, Bag::EMPTY);
         self.far_sum_ns = 0;
-        while let Some((chunk, k)) = self.pool.take_chunk(&mut far) {
-            for &e in &chunk[..k] {
+        while let Some((c, k)) = self.pool.take_chunk(&mut far) {
+            for x in 0..k {
+                let e = self.pool.chunks[c].0[x];
                 if (e.release_ns >> self.shift) - self.row_start < count {
                     self.add_to_row(e);
                 } else {
@@ -660,6 +696,8 @@ impl<T: Copy + Default> Timeline<T> {
                     self.pool.append(&mut self.far, e);
                 }
             }
+            // Freed only now: the appends above must not take it.
+            self.pool.free(c);
         }
     }
 
