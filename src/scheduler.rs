@@ -128,6 +128,10 @@ fn prefetch<X>(p: *const X) {
 const HINT_KEEP: i32 = core::arch::x86_64::_MM_HINT_T0;
 #[cfg(not(target_arch = "x86_64"))]
 const HINT_KEEP: i32 = 0;
+#[cfg(target_arch = "x86_64")]
+const HINT_L2: i32 = core::arch::x86_64::_MM_HINT_T1;
+#[cfg(not(target_arch = "x86_64"))]
+const HINT_L2: i32 = 0;
 
 #[inline(always)]
 fn prefetch_hint<const HINT: i32, X>(p: *const X) {
@@ -600,6 +604,16 @@ impl<T: Copy + Default> Timeline<T> {
         // Items the rolling prefetch in `pop` has passed already.
         for e in &self.entries[start..self.hi.min(self.lo + AHEAD)] {
             prefetch(self.items.get(e.slot));
+        }
+        if self.in_row > 0 {
+            // The next bucket's chunks, cold since they were filled, arrive
+            // while this one's frames are popped.
+            let b = &self.buckets[(self.next_occupied(self.next_bucket) & self.mask) as usize];
+            let mut c = b.head;
+            while c != NIL {
+                prefetch_hint::<{ HINT_L2 }, _>(&self.pool.chunks[c as usize]);
+                c = self.pool.next[c as usize];
+            }
         }
     }
 
