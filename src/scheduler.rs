@@ -17,29 +17,33 @@
 //!   `(release_ns, ingress_index)`: a pop takes its first entry; a push due
 //!   that early goes to its place (at an end, the usual case, or moving the
 //!   shorter side by one);
-//! - one **row** of buckets, each a fixed span of time (a power of two of
-//!   nanoseconds) holding its entries in no order: a push is an append.
+//! - one **row** of at most 1 024 buckets (few enough that the ends of
+//!   their bags stay in cache), each a fixed span of time (a power of two
+//!   of nanoseconds) holding its entries in no order: a push is an append.
 //!   When the front runs short, a pop moves the next occupied bucket to
-//!   the front's end and sorts it (a few frames);
+//!   the front's end and sorts it: a counting pass by offset into
+//!   sub-buckets of about one frame, then an insertion sort;
 //! - the **far** bag, frames beyond the row, appended in no order. When the
 //!   row is empty the front's next frames come from the far bag: the row is
 //!   built again from it, spanning four times the far frames' mean reach
-//!   past the front, so a bucket holds a few frames at any rate and delay;
-//!   frames beyond stay far.
+//!   past the front, so its frames spread over its buckets at any rate and
+//!   delay; frames beyond stay far.
 //!
 //! A frame is written about four times (its push, into the row, into the
 //! front, its pop), each time next to the frames before it, and never
 //! found by following links through the queue; a pop prefetches the item
-//! it will take 16 pops later. What a deep queue costs beyond a shallow one
+//! it will take 16 pops later, and moving a bucket to the front prefetches
+//! the next one's chunks. What a deep queue costs beyond a shallow one
 //! is mostly the item's own trip through memory (the `floor` case of
 //! `benches/queue.rs`).
 //!
 //! Costs: a push appends or, due within the front, moves at most half the
 //! front by one entry (the front usually holds 16 frames and the bucket
-//! last moved into it); a pop sorts a bucket now and then (`n log n` in its
-//! size) and, when the row is empty, scans the far bag once, and about
-//! three far frames in four join the row (no more than a quarter of them
-//! reach four times their mean).
+//! last moved into it); a pop sorts a bucket now and then (linear in its
+//! size; by comparison, `n log n`, should many frames share one
+//! nanosecond out of ingress order) and, when the row is empty, scans the
+//! far bag once, and about three far frames in four join the row (no more
+//! than a quarter of them reach four times their mean).
 //!
 //! A pop can leave the item in place ([`ReleaseQueue::pop_ref`],
 //! [`ReleaseQueue::pop_due_ref`]): its slot is free again but not written
@@ -823,9 +827,9 @@ pub struct ReleaseQueue<T> {
 impl<T: Copy + Default> ReleaseQueue<T> {
     /// The memory one frame of capacity takes in a queue of this order: for
     /// `Reorder`, the item, its free slot's index and three entries (two in
-    /// the front's room, one in a chunk; the buckets, at most 16 384, add
-    /// about 200 bytes each, and the room to sort a bucket 128 kB, left out
-    /// of this figure).
+    /// the front's room, one in a chunk; the buckets, at most 1 024, add
+    /// about 200 bytes each, and the sort's counts up to 64 kB, left out of
+    /// this figure).
     pub const fn bytes_per_frame(order: QueueOrder) -> usize {
         match order {
             QueueOrder::Fifo => size_of::<Released<T>>(),

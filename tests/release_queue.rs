@@ -254,10 +254,11 @@ fn frames_just_pushed_leave_in_order() {
 /// cascaded from higher levels: they leave in ingress order.
 #[test]
 fn ties_leave_in_ingress_order_whatever_the_push_order() {
-    // 4 000 ties fill one bucket sorted by keys; 10 000, one too large for
-    // that, sorted in place.
-    for ties in [4_000u64, 10_000] {
-        let mut q = ReleaseQueue::<u64>::new(QueueOrder::Reorder, 16_384);
+    // 4 000 and 10 000 ties fill one bucket: counted into one sub-bucket,
+    // where the insertion sort gives up and sorts them by comparison;
+    // 70 000, more than a bucket is counted for, sorted by comparison.
+    for ties in [4_000u64, 10_000, 70_000] {
+        let mut q = ReleaseQueue::<u64>::new(QueueOrder::Reorder, 131_072);
         let t = 5_000_000_000u64;
         q.push(1, 0, 0).unwrap(); // keeps the front low, so the ties sit in one later bucket
         let mut ingress: Vec<u64> = (0..ties).map(|i| netfi::scenario::splitmix64(i) % 1_000_000).collect();
