@@ -698,8 +698,8 @@ impl<T: Copy + Default> Timeline<T> {
         let mean_reach = (self.far_sum_ns / self.far.len as u128) as u64 - start_ns;
         // Width 2^shift: the reach (twice the mean, and one more) in at most
         // half the buckets, so the row covers four times the mean.
-        let span = mean_reach.saturating_mul(4).saturating_add(1);
-        self.shift = (64 - (span / count).leading_zeros()).min(63);
+        let span = mean_reach.saturating_mul(2).saturating_add(1);
+        self.shift = (64 - (span / (count / 2)).leading_zeros()).min(63);
         (self.row_start, self.row_buckets) = (start_ns >> self.shift, count);
         self.next_bucket = self.row_start;
         let mut far = std::mem::replace(&mut self.far, Bag::EMPTY);
