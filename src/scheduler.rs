@@ -33,9 +33,9 @@
 //! front, its pop), each time next to the frames before it, and never
 //! found by following links through the queue; a pop prefetches the item
 //! it will take 16 pops later, and moving a bucket to the front prefetches
-//! the next one's chunks. What a deep queue costs beyond a shallow one
-//! is mostly the item's own trip through memory (the `floor` case of
-//! `benches/queue.rs`).
+//! the next one's chunks. What a deep queue costs beyond a shallow one is
+//! the item's own trip through memory (the `floor` case of
+//! `benches/queue.rs`) and the work on each frame's entry.
 //!
 //! Costs: a push appends or, due within the front, moves at most half the
 //! front by one entry (the front usually holds 16 frames and the bucket
@@ -341,6 +341,23 @@ impl Pool {
         Some((c as usize, k))
     }
 
+    /// The chunks of `bag`, first to last, left in it: each one's index and
+    /// how many entries it holds.
+    #[inline(always)]
+    fn chunks_of(&self, bag: &Bag) -> impl Iterator<Item = (usize, usize)> + '_ {
+        // Only the last chunk is part-filled.
+        let last = (bag.len as usize + CHUNK - 1) % CHUNK + 1;
+        let mut c = bag.head;
+        std::iter::from_fn(move || {
+            if c == NIL {
+                return None;
+            }
+            let at = c as usize;
+            c = self.next[at];
+            Some((at, if c == NIL { last } else { CHUNK }))
+        })
+    }
+
     /// Gives a taken chunk back.
     #[inline(always)]
     fn free(&mut self, c: usize) {
@@ -395,8 +412,9 @@ fn bucket_count(capacity: usize) -> usize {
 ///
 /// So a frame is written about four times (its push; to the row; to the
 /// front; the pop), each time among neighbours in memory, and never found
-/// by following links through the whole queue: a deep queue's cost is the
-/// item's own trip to memory, prefetched [`AHEAD`] pops before it is taken.
+/// by following links through the whole queue; the item, the one trip to
+/// memory a deep queue cannot avoid, is prefetched [`AHEAD`] pops before it
+/// is taken.
 #[derive(Debug, Clone)]
 struct Timeline<T> {
     items: Items<T>,
@@ -613,10 +631,8 @@ impl<T: Copy + Default> Timeline<T> {
             // The next bucket's chunks, cold since they were filled, arrive
             // while this one's frames are popped.
             let b = &self.buckets[(self.next_occupied(self.next_bucket) & self.mask) as usize];
-            let mut c = b.head;
-            while c != NIL {
-                prefetch_hint::<{ HINT_L2 }, _>(&self.pool.chunks[c as usize]);
-                c = self.pool.next[c as usize];
+            for (c, _) in self.pool.chunks_of(b) {
+                prefetch_hint::<{ HINT_L2 }, _>(&self.pool.chunks[c]);
             }
         }
     }
@@ -638,18 +654,14 @@ impl<T: Copy + Default> Timeline<T> {
         let down = self.shift - bits;
         let counts = &mut self.counts[..(1 << bits) + 1];
         counts.fill(0);
-        let last = (n - 1) % CHUNK + 1;
-        let mut c = bag.head;
-        while c != NIL {
-            let next = self.pool.next[c as usize];
+        for (c, k) in self.pool.chunks_of(&bag) {
+            let next = self.pool.next[c];
             if next != NIL {
                 prefetch(&self.pool.chunks[next as usize]);
             }
-            let k = if next == NIL { last } else { CHUNK };
-            for e in &self.pool.chunks[c as usize].0[..k] {
+            for e in &self.pool.chunks[c].0[..k] {
                 counts[((e.release_ns - base_ns) >> down) as usize + 1] += 1;
             }
-            c = next;
         }
         for d in 1..counts.len() {
             counts[d] += counts[d - 1];
