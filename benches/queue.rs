@@ -11,6 +11,13 @@
 //! rate and delay hold in flight, the frame taken out is simply the earliest
 //! held: the queue is measured, not the stream.
 //!
+//! `stream` cases are the emulator's own pattern instead: frame `i`
+//! arrives at `i × spacing`, and each iteration pushes it and takes out
+//! every frame due by its arrival, so the depth is what the rate and the
+//! delays hold in flight (printed after each case), in a queue of the
+//! capacity the emulator would have: its default (65 536) for shallow
+//! streams, far larger than what they hold.
+//!
 //! Times are the benchmark thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`),
 //! not wall time: on a shared machine the wall clock also counts the time
 //! the thread waited for a core, which says nothing about the queue (the
@@ -45,6 +52,9 @@ use heap_queue::HeapQueue;
 
 /// The emulator's item: a 192-byte shared-memory sample.
 type Item = netfi::sample::FrameSample;
+
+/// The emulator's release queue capacity when none is asked for.
+const DEFAULT_CAPACITY: usize = netfi::service::plan::DEFAULT_QUEUE_CAPACITY;
 
 /// Delays are drawn once (2^20 of them, cycled) so the model's cost is not
 /// in the measurement.
@@ -125,6 +135,41 @@ fn pair<I: Copy + Default + std::fmt::Debug>(g: &mut criterion::BenchmarkGroup<'
     assert_eq!(q.len(), depth, "the depth stays constant");
 }
 
+/// A stream through the queue, then through the heap (see the module's
+/// text): each iteration one arrival and every release due by then.
+fn stream(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, name: &str, capacity: usize, releases: &Releases) {
+    let item = Item::ZERO;
+    let mut loan = item;
+    let mut q = ReleaseQueue::<Item>::new(QueueOrder::Reorder, capacity);
+    let mut i = 0u64;
+    g.bench_function(format!("ladder stream {name}"), |b| {
+        b.iter(|| {
+            let now_ns = i * releases.spacing_ns;
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            while let Some(r) = q.pop_due_ref(now_ns) {
+                loan = *r.item;
+                black_box(&mut loan);
+            }
+        })
+    });
+    let held = q.len();
+    let mut q = HeapQueue::<Item>::new(capacity);
+    let mut i = 0u64;
+    g.bench_function(format!("heap stream {name}"), |b| {
+        b.iter(|| {
+            let now_ns = i * releases.spacing_ns;
+            q.push(releases.at(i), i, item).unwrap();
+            i += 1;
+            while q.next_release_ns().is_some_and(|t| t <= now_ns) {
+                loan = q.pop().unwrap().2;
+                black_box(&mut loan);
+            }
+        })
+    });
+    println!("stream {name}: {held} frames held at the end (heap {})", q.len());
+}
+
 /// The memory floor at `depth` (see the module's text): the items' slots
 /// on cache lines and huge pages, as the queue keeps them.
 fn floor(g: &mut criterion::BenchmarkGroup<'_, ThreadCpu>, depth: usize) {
@@ -195,6 +240,15 @@ fn queue_depths(c: &mut Criterion<ThreadCpu>) {
         let releases = Releases { spacing_ns: 3_333, delays_ns: dlm2.clone() };
         pair(&mut g, &format!("dlm2-300kHz depth {depth} u64 item"), depth, &releases, 0u64);
     }
+    let uniform_ms = |ms: u64| {
+        let spread_ns = ms * 1_000_000;
+        let delays = (0..DELAYS as u64).map(|i| netfi::scenario::splitmix64(i) % spread_ns).collect();
+        Releases { spacing_ns: 3_333, delays_ns: std::sync::Arc::new(delays) }
+    };
+    stream(&mut g, &format!("dlm2-1kHz capacity {DEFAULT_CAPACITY}"), DEFAULT_CAPACITY, &Releases { spacing_ns: 1_000_000, delays_ns: dlm2.clone() });
+    stream(&mut g, &format!("uniform-1ms-300kHz capacity {DEFAULT_CAPACITY}"), DEFAULT_CAPACITY, &uniform_ms(1));
+    stream(&mut g, &format!("uniform-10ms-300kHz capacity {DEFAULT_CAPACITY}"), DEFAULT_CAPACITY, &uniform_ms(10));
+    stream(&mut g, "dlm2-300kHz capacity 131072", 1 << 17, &Releases { spacing_ns: 3_333, delays_ns: dlm2.clone() });
     g.finish();
     // Construction (allocating and touching every slot) is start-up cost;
     // shown once so a capacity's price is visible.

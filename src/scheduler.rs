@@ -386,7 +386,8 @@ const COUNTED: usize = 1 << 16;
 /// At most `2^SUB_BITS` sub-buckets when a bucket is sorted.
 const SUB_BITS: u32 = 14;
 
-/// The buckets for a capacity: one per 8 frames, within the bounds above.
+/// The buckets a capacity allocates: one per 8 frames, within the bounds
+/// above. A row uses as many of them as the frames it is built from need.
 fn bucket_count(capacity: usize) -> usize {
     (capacity.next_power_of_two() / 8).clamp(MIN_BUCKETS, MAX_BUCKETS)
 }
@@ -399,8 +400,10 @@ fn bucket_count(capacity: usize) -> usize {
 ///   `(release_ns, ingress_index)` in `entries[lo..hi]`. A pop takes
 ///   `entries[lo]`; a push due that early is put in its place (the
 ///   shorter side moved by one).
-/// - the **buckets**: one row of `2^k` buckets (at most [`MAX_BUCKETS`]),
-///   `2^shift` ns each, from `row_start`; bags in no order. When the
+/// - the **buckets**: one row of `2^k` buckets (one per 8 frames it is
+///   built from, at least [`MIN_BUCKETS`], at most the capacity's
+///   [`bucket_count`]), `2^shift` ns each, from `row_start`; bags in no
+///   order. When the
 ///   front runs short a pop moves the next occupied bucket into it and
 ///   sorts it: its frames are then the earliest held, and `front_max_ns`
 ///   becomes the bucket's last nanosecond.
@@ -705,7 +708,12 @@ impl<T: Copy + Default> Timeline<T> {
     /// the mean).
     #[cold]
     fn build_row(&mut self) {
-        let count = self.buckets.len() as u64;
+        // One bucket per 8 frames to place, within the capacity's count: a
+        // shallow queue's buckets then hold several frames each, where one
+        // per 8 of the capacity would leave most pops moving a bucket of
+        // one (a row's fixed cost for a single frame).
+        let count = (self.far.len as usize / 8).next_power_of_two().clamp(MIN_BUCKETS, self.buckets.len()) as u64;
+        self.mask = count - 1;
         let start_ns = self.front_max_ns + 1;
         let mean_reach = (self.far_sum_ns / self.far.len as u128) as u64 - start_ns;
         // Width 2^shift: the reach (twice the mean, and one more) in at most
@@ -740,7 +748,7 @@ impl<T: Copy + Default> Timeline<T> {
         let j = if here != 0 {
             w << 6 | here.trailing_zeros() as usize
         } else {
-            let n = self.words.len();
+            let n = (self.mask as usize + 1) >> 6;
             let v = next_set(&self.summary, if w + 1 == n { 0 } else { w + 1 });
             v << 6 | self.words[v].trailing_zeros() as usize
         };
