@@ -92,7 +92,7 @@ fn queue_depths(c: &mut Criterion) {
     // lands anywhere in the queue and the reorder queue really reorders.
     let mut g = c.benchmark_group("release queue push+pop");
     for order in [QueueOrder::Fifo, QueueOrder::Reorder] {
-        for depth in [1usize, 1_000, 100_000] {
+        for depth in [1usize, 1_000, 100_000, 1_000_000] {
             let jitter_ns = 2 * depth as u64 * 1_000;
             let release = move |i: u64| i * 1_000 + netfi::scenario::splitmix64(i) % jitter_ns.max(1);
             let mut q = ReleaseQueue::<FrameSample>::new(order, depth + 1);
