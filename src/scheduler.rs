@@ -403,10 +403,9 @@ fn bucket_count(capacity: usize) -> usize {
 /// - the **buckets**: one row of `2^k` buckets (one per 8 frames it is
 ///   built from, at least [`MIN_BUCKETS`], at most the capacity's
 ///   [`bucket_count`]), `2^shift` ns each, from `row_start`; bags in no
-///   order. When the
-///   front runs short a pop moves the next occupied bucket into it and
-///   sorts it: its frames are then the earliest held, and `front_max_ns`
-///   becomes the bucket's last nanosecond.
+///   order. When the front runs short a pop moves the next occupied
+///   bucket into it and sorts it: its frames are then the earliest held,
+///   and `front_max_ns` becomes the bucket's last nanosecond.
 /// - the **far** bag: frames beyond the row. When the row is empty and the
 ///   front needs frames, the row is built again from the far bag: it starts
 ///   after the front and spans four times the far frames' mean reach, so
