@@ -18,8 +18,10 @@
 //!   that early goes to its place (at an end, the usual case, or moving the
 //!   shorter side by one);
 //! - one **row** of at most 1 024 buckets (few enough that the ends of
-//!   their bags stay in cache), each a fixed span of time (a power of two
-//!   of nanoseconds) holding its entries in no order: a push is an append.
+//!   their bags stay in cache; one per 8 of the frames the row is built
+//!   from, so a shallow queue's buckets hold several frames), each a fixed
+//!   span of time (a power of two of nanoseconds) holding its entries in no
+//!   order: a push is an append.
 //!   When the front runs short, a pop moves the next occupied bucket to
 //!   the front's end and sorts it: a counting pass by offset into
 //!   sub-buckets of about one frame, then an insertion sort;
