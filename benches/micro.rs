@@ -10,7 +10,7 @@ use netfi::model::{AnyModel, StageRng};
 use netfi::sample::FrameSample;
 use netfi::scenario::{self, ModelSpec, Scenario};
 use netfi::scheduler::{QueueOrder, ReleaseQueue};
-use netfi::service::emulator::Forward;
+use netfi::service::emulator::{lane::Lane, path::Path, Forward};
 use netfi::service::link::Link;
 use netfi::transport::MemoryPort;
 
@@ -129,7 +129,7 @@ fn codec(c: &mut Criterion) {
 }
 
 /// One frame through the emulator's forward loop over in-memory ports
-/// (`Forward::turn`: take, classify, decide, trace, queue, release), without
+/// (`Lane::turn`: take, classify, decide, trace, queue, release), without
 /// a transport: the emulator's own cost per frame. `batch 1` puts one frame
 /// at the ingress per turn (the loop as a slow stream sees it), `batch 64`
 /// puts 64 (a fast stream: the turn takes them all). Normal releases each
@@ -144,9 +144,8 @@ fn forward_frame(c: &mut Criterion<ThreadCpu>) {
     for (name, spec) in [("Normal", netfi::load::resolve("Normal").unwrap()), ("PLM-2 + DLM-2", plm2_dlm2)] {
         for batch in [1u64, 64] {
             let link = Link::new(Scenario::new(&spec, 1).unwrap(), 1 << 21, 1 << 22).unwrap();
-            let mut fwd = Forward::new(link, false);
-            let mut console = MemoryPort::with_capacity(64);
-            let mut robot = MemoryPort::with_capacity(1 << 16);
+            let chan = Forward::new(MemoryPort::with_capacity(64), MemoryPort::with_capacity(1 << 16), false, true);
+            let mut lane = Lane::new(Path::of(link, chan, 1, std::env::temp_dir().join("netfi-micro-unused.csv"), false), Vec::new());
             let mut i = 0u64;
             g.throughput(criterion::Throughput::Elements(batch));
             g.bench_function(format!("{name}, batch {batch}"), |b| {
@@ -155,11 +154,11 @@ fn forward_frame(c: &mut Criterion<ThreadCpu>) {
                         let mut s = template;
                         s.console_index = i;
                         s.send_ns = netfi::clock::now_ns();
-                        console.queue.push_back(s);
+                        lane.forward.chan.source.queue.push_back(s);
                         i += 1;
                     }
-                    fwd.turn(&mut console, &mut robot, None);
-                    robot.queue.clear();
+                    lane.turn();
+                    lane.forward.chan.sink.queue.clear();
                 })
             });
         }

@@ -2,7 +2,7 @@
 //! of 124 B, 1.5 kB, 64 kB and 1 MB taken off `video` (borrowed, not
 //! copied), decided by the video link (scenario Normal), released (copied
 //! once into a sample loaned on `video_out`) and sent — the emulator's two
-//! polls of [`netfi::service::video::VideoPath`], timed by the thread's CPU
+//! polls of [`netfi::service::emulator::video::path`], timed by the thread's CPU
 //! time. The camera's send and the console's receive are outside the
 //! timing. From the medians: ns per frame at 124 B (the per-packet cost) and
 //! ns per byte (the slope between 124 B and 1 MB: the copy).
@@ -10,7 +10,8 @@
 //! `cargo bench --bench video` (seconds); `-- --quick` takes fewer frames.
 
 use netfi::sample::VideoHeader;
-use netfi::service::video::{path, VideoArgs};
+use netfi::service::emulator::video::path;
+use netfi::service::video::VideoArgs;
 use netfi::transport::{open_node, Channel, Role};
 
 #[path = "common/cpu_time.rs"]
@@ -64,7 +65,7 @@ fn main() {
     }
     let per_byte = (medians[3] - medians[0]) / ((SIZES[3] - SIZES[0]) as f64);
     println!("per frame (124 B): {:.0} ns; per byte (124 B → 1 MB): {per_byte:.3} ns ({:.1} GB/s)", medians[0], 1.0 / per_byte);
-    let report = emulator.finish(&dir, 1).expect("the report");
+    let report = emulator.finish(1).expect("the report");
     assert!(report.balanced, "{report:?}");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -5,7 +5,9 @@
 
 use netfi::sample::FrameSample;
 use netfi::scenario::{self, Scenario};
-use netfi::service::emulator::Forward;
+use netfi::service::emulator::forward::Forward;
+use netfi::service::emulator::lane::Lane;
+use netfi::service::emulator::path::Path;
 use netfi::service::link::Link;
 use netfi::transport::MemoryPort;
 
@@ -20,6 +22,13 @@ static GLOBAL: Counting = Counting;
 /// their own: one test's set-up would land in another's measured window.
 /// Each test holds this for its whole length, so they run one at a time.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// The forward path of `link` between in-memory ports with room for
+/// `source` and `sink` frames (its trace is not written).
+fn forward(link: Link<FrameSample>, source: usize, sink: usize) -> Path<Forward<MemoryPort, MemoryPort>> {
+    let chan = Forward::new(MemoryPort::with_capacity(source), MemoryPort::with_capacity(sink), false, true);
+    Path::of(link, chan, 0, std::env::temp_dir().join("netfi-alloc-unused.csv"), false)
+}
 
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -36,9 +45,7 @@ fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
 fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) -> (u64, u64) {
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
     let link = Link::new(Scenario::new(&spec, 3).unwrap(), 1 << 16, frames).unwrap();
-    let mut fwd = Forward::new(link, false);
-    let mut console = MemoryPort::with_capacity(4);
-    let mut simulator = MemoryPort::with_capacity(1 << 17);
+    let mut fwd = forward(link, 4, 1 << 17);
     let mut template = FrameSample::ZERO;
     netfi::frame::ItpFrame::default().write_to_sample(&mut template);
     let mut before = 0;
@@ -49,14 +56,14 @@ fn allocations_in_steady_state(scenario_text: &str, frames: u64, measured: u64) 
             before = allocations();
         }
         let now = t0 + i * 1_000_000;
-        fwd.link.release_due(now, &mut simulator);
-        released += simulator.queue.len() as u64;
-        simulator.queue.clear();
+        fwd.release_due(now);
+        released += fwd.chan.sink.queue.len() as u64;
+        fwd.chan.sink.queue.clear();
         let mut sample = template;
         sample.console_index = i;
         sample.send_ns = now;
-        console.queue.push_back(sample);
-        fwd.take(&mut console, || now);
+        fwd.chan.source.queue.push_back(sample);
+        fwd.take(|| now);
     }
     (allocations() - before, released)
 }
@@ -95,23 +102,18 @@ fn the_feedback_path_does_not_allocate_per_sample() {
     let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
     let frames = 200_000u64;
     let link = Link::new(Scenario::new(&spec, 5).unwrap(), 1 << 16, frames).unwrap();
-    let path = netfi::service::feedback::FeedbackPath::new(
-        link,
-        5,
-        FeedbackIngress::Memory(VecDeque::with_capacity(4)),
-        FeedbackEgress::Memory(VecDeque::with_capacity(1 << 17)),
-    );
-    let mut fwd = Forward::new(Link::new(Scenario::new(&scenario::parse_str("", "n.toml", "n").unwrap(), 1).unwrap(), 16, 16).unwrap(), false)
-        .with_feedback(path);
-    let mut console = MemoryPort::with_capacity(4);
-    let mut simulator = MemoryPort::with_capacity(16);
+    use netfi::service::emulator::feedback::Feedback;
+    let chan = Feedback::new(FeedbackIngress::Memory(VecDeque::with_capacity(4)), FeedbackEgress::Memory(VecDeque::with_capacity(1 << 17)));
+    let path = Path::of(link, chan, 5, std::env::temp_dir().join("netfi-alloc-unused.csv"), false);
+    let normal = Link::new(Scenario::new(&scenario::parse_str("", "n.toml", "n").unwrap(), 1).unwrap(), 16, 16).unwrap();
+    let mut lane = Lane::new(forward(normal, 4, 16), vec![Box::new(path)]);
     let (mut before, mut released) = (0, 0u64);
     for i in 0..frames {
         if i == frames / 2 {
             before = allocations();
         }
-        let fb = fwd.feedback.as_deref_mut().unwrap();
-        let (inp, out) = fb.ports_mut();
+        let fb = lane.reverse[0].as_any_mut().downcast_mut::<Path<Feedback>>().unwrap();
+        let (inp, out) = fb.chan.ports_mut();
         if let FeedbackEgress::Memory(q) = out {
             released += q.len() as u64;
             q.clear();
@@ -122,7 +124,7 @@ fn the_feedback_path_does_not_allocate_per_sample() {
         // Spaced like 200 kHz feedback: the 10–20 µs delays release in turn.
         let t = netfi::clock::now_ns() + 5_000;
         while netfi::clock::now_ns() < t {
-            fwd.turn(&mut console, &mut simulator, None);
+            lane.turn();
         }
     }
     let n = allocations() - before;
@@ -166,9 +168,7 @@ fn the_loop_turn_does_not_allocate_per_frame() {
     let _serial = one_at_a_time();
     let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
     let frames = 100_000u64;
-    let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 7).unwrap(), 1 << 16, frames).unwrap(), false);
-    let mut console = MemoryPort::with_capacity(4);
-    let mut simulator = MemoryPort::with_capacity(1 << 10);
+    let mut lane = Lane::new(forward(Link::new(Scenario::new(&spec, 7).unwrap(), 1 << 16, frames).unwrap(), 4, 1 << 10), Vec::new());
     let mut template = FrameSample::ZERO;
     netfi::frame::ItpFrame::default().write_to_sample(&mut template);
     let (mut before, mut released) = (0, 0u64);
@@ -176,22 +176,23 @@ fn the_loop_turn_does_not_allocate_per_frame() {
         if i == frames / 2 {
             before = allocations();
         }
-        released += simulator.queue.len() as u64;
-        simulator.queue.clear();
+        let ports = &mut lane.forward.chan;
+        released += ports.sink.queue.len() as u64;
+        ports.sink.queue.clear();
         let mut sample = template;
         sample.console_index = i;
         sample.send_ns = netfi::clock::now_ns();
-        console.queue.push_back(sample);
+        ports.source.queue.push_back(sample);
         // Spaced like 200 kHz: the 10–20 µs delays release in turn.
         let t = netfi::clock::now_ns() + 5_000;
         while netfi::clock::now_ns() < t {
-            fwd.turn(&mut console, &mut simulator, None);
+            lane.turn();
         }
     }
     let n = allocations() - before;
     assert_eq!(n, 0, "{n} allocations in {} frames", frames / 2);
     assert!(released > frames / 2, "only {released} frames released");
-    let busy = fwd.loop_busy();
+    let busy = lane.loop_busy();
     assert!(busy.busy_turns > 0 && busy.busy_turns < busy.turns, "{busy:?}");
     assert_eq!(busy.frames, frames);
 }
@@ -203,7 +204,7 @@ fn the_loop_turn_does_not_allocate_per_frame() {
 #[test]
 fn the_loop_of_several_streams_does_not_allocate_per_frame() {
     let _serial = one_at_a_time();
-    use netfi::service::streams::{round, Lane};
+    use netfi::service::emulator::spin::round;
     let delay = "[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n";
     let texts = [
         format!("[[stage]]\npreset = \"PLM-2\"\n{delay}"),
@@ -216,10 +217,10 @@ fn the_loop_of_several_streams_does_not_allocate_per_frame() {
         .enumerate()
         .map(|(k, text)| {
             let spec = scenario::parse_str(text, "alloc.toml", "alloc").unwrap();
-            let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 3 + k as u64).unwrap(), 1 << 16, frames).unwrap(), false);
+            let mut lane = Lane::new(forward(Link::new(Scenario::new(&spec, 3 + k as u64).unwrap(), 1 << 16, frames).unwrap(), 4, 1 << 17), Vec::new());
             // As the loop of several streams sets it: no stream waits for a release.
-            fwd.release_spin_ns = 0;
-            Lane::new(fwd, MemoryPort::with_capacity(4), MemoryPort::with_capacity(1 << 17))
+            lane.release_spin_ns = 0;
+            lane
         })
         .collect();
     let mut template = FrameSample::ZERO;
@@ -230,12 +231,13 @@ fn the_loop_of_several_streams_does_not_allocate_per_frame() {
             before = allocations();
         }
         for (l, r) in lanes.iter_mut().zip(released.iter_mut()) {
-            *r += l.sink.queue.len() as u64;
-            l.sink.queue.clear();
+            let ports = &mut l.forward.chan;
+            *r += ports.sink.queue.len() as u64;
+            ports.sink.queue.clear();
             let mut sample = template;
             sample.console_index = i;
             sample.send_ns = netfi::clock::now_ns();
-            l.source.queue.push_back(sample);
+            ports.source.queue.push_back(sample);
         }
         // Spaced like 200 kHz per stream: the 10–20 µs delays release in turn.
         let t = netfi::clock::now_ns() + 5_000;

@@ -6,9 +6,11 @@
 //! allocator is process-wide; everything runs on one thread.
 
 use netfi::scenario::{self, Scenario};
-use netfi::service::emulator::Forward;
+use netfi::service::emulator::forward::{ConsoleAddr, Forward};
+use netfi::service::emulator::lane::Lane;
+use netfi::service::emulator::path::Path;
+use netfi::service::emulator::udp_return::UdpReturn;
 use netfi::service::link::Link;
-use netfi::service::udp::ReturnPath;
 use netfi::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -49,20 +51,21 @@ fn allocations_in_steady_state(
 ) -> (u64, u64) {
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
     let capacity = 256;
-    let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 3).unwrap(), capacity, datagrams).unwrap(), false);
     let arena = Rc::new(RefCell::new(Arena::new(capacity + 1)));
     let (console, robot, egress) = (bind(), bind(), bind());
-    let mut source = UdpSource::new(bind(), Some(arena.clone()));
+    let source = UdpSource::new(bind(), Some(arena.clone()));
     let (from_robot, to_console) = (egress.try_clone().unwrap(), source.port().try_clone().unwrap());
-    let mut ret = match return_scenario {
-        None => ReturnPath::untouched(from_robot, to_console, None),
-        Some(text) => {
-            let spec = scenario::parse_str(text, "return.toml", "return").unwrap();
-            ReturnPath::shaped(from_robot, to_console, None, Scenario::new(&spec, 4).unwrap(), 4, capacity, datagrams).unwrap()
-        }
-    };
-    let mut sink = UdpSink::new(egress, robot.local_addr(), Some(arena));
     let to_bridge = PeerAddr::new(source.local_addr());
+    let shared = ConsoleAddr::default();
+    let unused = std::env::temp_dir().join("netfi-udp-alloc-unused.csv");
+    let back = scenario::parse_str(return_scenario.unwrap_or(""), "return.toml", "return").unwrap();
+    let chan = UdpReturn::new(from_robot, to_console, None, shared.clone(), return_scenario.is_some(), capacity);
+    let ret = Path::of(Link::new(Scenario::new(&back, 4).unwrap(), capacity, datagrams).unwrap(), chan, 4, unused.clone(), false);
+    let sink = UdpSink::new(egress, robot.local_addr(), Some(arena));
+    let mut chan = Forward::new(source, sink, false, true);
+    chan.share_console(shared);
+    let fwd = Path::of(Link::new(Scenario::new(&spec, 3).unwrap(), capacity, datagrams).unwrap(), chan, 3, unused, false);
+    let mut lane = Lane::new(fwd, vec![Box::new(ret)]);
     let payload = [0x5au8; 300];
     let mut buf = vec![0u8; 1 << 16];
     let mut before = 0;
@@ -72,13 +75,15 @@ fn allocations_in_steady_state(
             before = allocations();
         }
         console.send_to(&payload, &to_bridge).unwrap();
-        let (entered, released) = (fwd.link.next_ingress_index(), fwd.link.released());
+        let link = &lane.forward.link;
+        let (entered, released) = (link.next_ingress_index(), link.released());
         // In, then out (PLM-2 delays nothing): released, or dropped.
         until(|| {
-            fwd.turn(&mut source, &mut sink, Some(&mut ret));
-            (fwd.link.next_ingress_index() > entered && fwd.link.held() == 0).then_some(())
+            lane.turn();
+            let link = &lane.forward.link;
+            (link.next_ingress_index() > entered && link.held() == 0).then_some(())
         });
-        if fwd.link.released() == released {
+        if lane.forward.link.released() == released {
             continue;
         }
         let d = until(|| robot.recv_from(&mut buf).unwrap());
@@ -86,7 +91,7 @@ fn allocations_in_steady_state(
         // The reply goes back (or is dropped, or held) in the loop's turns;
         // drain what reaches the console.
         for _ in 0..64 {
-            fwd.turn(&mut source, &mut sink, Some(&mut ret));
+            lane.turn();
             if console.recv_from(&mut buf).unwrap().is_some() {
                 replies += 1;
                 break;

@@ -70,10 +70,10 @@ pub struct EmulatorFigures {
 impl EmulatorFigures {
     fn from(r: &EmulatorReport, dir: &Path) -> EmulatorFigures {
         EmulatorFigures {
-            entered: r.process.frames.entered,
-            delivered: r.process.frames.delivered,
-            dropped: r.process.frames.dropped.clone(),
-            held_at_end: r.process.frames.held_at_end,
+            entered: r.process.frames.account.entered,
+            delivered: r.process.frames.account.delivered,
+            dropped: r.process.frames.account.dropped.clone(),
+            held_at_end: r.process.frames.account.held_at_end,
             decision_ns: r.shaping.link.decision_ns,
             release_lateness_ns: r.shaping.link.release_lateness_ns,
             ingress_wait_ns: r.shaping.link.ingress_wait_ns,

@@ -319,7 +319,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     signals::install();
     crate::service::place("console", args.core, args.avoid_core)?;
     // After the placement, whose CPU mask its thread inherits: off the emulator's core.
-    let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::video::VIDEO_GRACE_NS as f64 / 1e9)?;
+    let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
     let source = match &args.capture {

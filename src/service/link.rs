@@ -2,31 +2,32 @@
 //! sans-IO [`Injector`] that decides each frame's fate, the histograms of
 //! what the link costs (decision time, release lateness) and what it does
 //! (injected delay), the loss interval's batch means, and the per-frame
-//! trace. The forward path (console → simulator, [`super::emulator`]) and
-//! the UDP return path (robot → console, [`super::udp`]) are each one link.
+//! trace. Every direction of the emulator is a path around one link
+//! ([`super::emulator::path`]).
 //!
-//! A link never touches a transport itself: frames come in through
+//! A link never touches a transport itself: items come in through
 //! [`Link::ingress`] (or [`Link::reject`]) with the time they were taken,
-//! and leave through [`Link::release_due`] into a [`Release`], which a
-//! [`FrameSink`] is for the samples of the forward path. Nothing on that
+//! and leave through [`Link::release_due`] into a [`Release`]. Nothing on that
 //! path allocates, locks or makes a system call: the queue is fixed at
 //! start-up and the trace goes through a wait-free ring to a writer thread,
 //! which streams it (and the histograms' interval logs) to disk.
 
-use crate::check::{stage_reports, LinkSampler, StageReport};
+use crate::check::{stage_reports, LinkSampler};
 use crate::clock::now_ns;
 use crate::injector::{Entered, Fate, Injector, Invalid};
+use crate::metrics::LatencyHistogram;
 use crate::model::ModelKind;
-use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::FrameSample;
 use crate::scenario::Scenario;
+use crate::service::schema::{Account, LinkMeasures};
 use crate::stats::BatchMeans;
 use crate::trace::{self, TraceEvent, TraceSink, TraceWriter};
-use crate::transport::{FrameSink, PortError};
+use crate::transport::PortError;
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+
+/// Default release-queue capacity: 65,536 frames (65 s at 1 kHz).
+pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
 
 /// What a link holds in its queue: anything that remembers when it entered.
 pub trait Carried: Copy + Default {
@@ -70,44 +71,6 @@ pub trait Release<T> {
     /// Sends `item`, due at `scheduled_ns`. Returns the time it went out
     /// (taken as late as possible), or that time and the error.
     fn release(&mut self, item: &T, scheduled_ns: u64) -> Result<u64, (u64, PortError)>;
-}
-
-/// A frame sink releases samples stamped with their scheduled and actual
-/// release times and their injected delay.
-impl<K: FrameSink> Release<FrameSample> for K {
-    #[inline]
-    fn release(&mut self, item: &FrameSample, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
-        release_frame(self, item, scheduled_ns, now_ns)
-    }
-}
-
-/// A frame sink handed releases ahead of their time (`Forward::turn`
-/// prepares a release due within a few turns): each waits on the clock for
-/// its scheduled moment, the last thing before the send, so it is never
-/// sent early and is stamped within a clock read of its time.
-pub struct OnTime<'a, K>(pub &'a mut K);
-
-impl<K: FrameSink> Release<FrameSample> for OnTime<'_, K> {
-    #[inline]
-    fn release(&mut self, item: &FrameSample, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
-        release_frame(self.0, item, scheduled_ns, || crate::clock::now_from_ns(scheduled_ns))
-    }
-}
-
-/// Sends `item` into `sink`, stamped by `stamp_clock` as late as possible.
-#[inline]
-fn release_frame<K: FrameSink>(sink: &mut K, item: &FrameSample, scheduled_ns: u64, stamp_clock: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-    let mut release_ns = 0;
-    let sent = sink.send_with(item, |s| {
-        s.release_sched_ns = scheduled_ns;
-        s.injected_delay_ns = scheduled_ns - s.ingress_ns;
-        release_ns = stamp_clock();
-        s.release_ns = release_ns;
-    });
-    match sent {
-        Ok(_) => Ok(release_ns),
-        Err(e) => Err((now_ns(), e)),
-    }
 }
 
 /// What the trace keeps of a frame's arrival, besides the link's own times.
@@ -352,24 +315,26 @@ impl<T: Carried> Link<T> {
     /// Stops the trace writer, writes the trace to `trace_path`, checks
     /// that every item is accounted for, and reports. `duration_ns` is the
     /// time the link ran (for the stages' model rates).
-    pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkReport> {
+    pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkEnd> {
         let counts = self.inj.counts();
         assert!(counts.balanced(), "frame accounting broken: {counts:?}");
         let written = self.writer.finish(trace_path)?;
         let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
         let interval_ns = if counts.entered > 1 { duration_ns as f64 / counts.entered as f64 } else { 0.0 };
         let (stages, _) = stage_reports(self.inj.scenario(), interval_ns);
-        Ok(LinkReport {
+        Ok(LinkEnd {
             scenario: self.inj.scenario().name().to_string(),
             queue_order: format!("{:?}", self.inj.queue_order()).to_lowercase(),
             queue_capacity: self.inj.queue_capacity(),
-            entered: counts.entered,
-            delivered: counts.released,
-            duplicated: counts.duplicated,
-            corrupted: counts.corrupted,
-            corrupted_delivered: written.corrupted_released,
-            dropped: self.inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
-            held_at_end: counts.held,
+            account: Account {
+                entered: counts.entered,
+                delivered: counts.released,
+                duplicated: counts.duplicated,
+                corrupted: counts.corrupted,
+                corrupted_delivered: written.corrupted_released,
+                dropped: self.inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+                held_at_end: counts.held,
+            },
             measures: LinkMeasures {
                 loss_rate,
                 loss_rate_ci95,
@@ -388,49 +353,14 @@ impl<T: Carried> Link<T> {
     }
 }
 
-/// What a link measured: the loss it realized and the delays it injected,
-/// and what it cost. The emulator's report carries it as it is.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LinkMeasures {
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub stages: Vec<StageReport>,
-    /// Injected delay of released frames.
-    pub injected_delay_ns: Summary,
-    /// Sender's send → frame taken in (the first hop plus any time the
-    /// frame waited in the port for the emulator).
-    pub ingress_wait_ns: Summary,
-    /// Frame taken in → fate decided.
-    pub decision_ns: Summary,
-    /// Actual − scheduled release.
-    pub release_lateness_ns: Summary,
-    /// The link stages (`rate`, `trace`): utilisation, queue occupancy
-    /// second by second, queueing delay percentiles, as `netfi scenario
-    /// check` reports them (absent when none).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub links: Vec<crate::check::LinkReport>,
-}
-
-/// What a link did: `entered + duplicated = delivered + dropped +
-/// held_at_end` (without `duplicate` stages, `duplicated` is 0).
+/// What a link did, at its end: its account and measures, and what its
+/// sends and trace met.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LinkReport {
+pub struct LinkEnd {
     pub scenario: String,
     pub queue_order: String,
     pub queue_capacity: usize,
-    pub entered: u64,
-    /// Released (including those whose send failed); copies included.
-    pub delivered: u64,
-    /// Copies made by `duplicate` stages (each then delivered, dropped or
-    /// held like a frame).
-    pub duplicated: u64,
-    /// Frames and copies queued with bits flipped by `corrupt` stages.
-    pub corrupted: u64,
-    /// Of those, the ones released (counted by the trace writer: exact
-    /// unless `trace_overflowed` is not 0).
-    pub corrupted_delivered: u64,
-    pub dropped: BTreeMap<String, u64>,
-    pub held_at_end: u64,
+    pub account: Account,
     pub measures: LinkMeasures,
     pub send_errors: u64,
     /// The last send error, for the log.
@@ -494,8 +424,9 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("trace.csv");
         let r = link.finish(&path, n).unwrap();
-        let dropped: u64 = r.dropped.values().sum();
-        assert_eq!(r.entered + r.duplicated, r.delivered + dropped + r.held_at_end);
+        let r = r.account;
+        let dropped = r.dropped_total();
+        assert!(r.closes());
         assert_eq!(out.0.len() as u64, r.delivered);
         assert!(r.delivered > r.entered - dropped, "copies add releases: {r:?}");
         let flipped = out.0.iter().filter(|s| s.wire != clean.wire).count() as u64;

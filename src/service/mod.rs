@@ -8,12 +8,12 @@
 //! | file | what |
 //! |---|---|
 //! | `args` | the services' command-line arguments, and the argv each renders |
-//! | `link` | one direction of the emulator: injector, histograms, trace |
-//! | `emulator` | the forward loop around a link, and its wiring |
-//! | `udp` | the UDP return path (a link of its own) and `udp.json` |
+//! | `link` | the link: injector, histograms, trace, written once |
+//! | `emulator` | the emulator: one loop over lanes of paths around links, and its wiring |
+//! | `schema` | the JSON contracts between the processes |
+//! | `seeds` | every seed rule |
 //! | `control`, `telemetry` | live control of a running emulator, and its telemetry, off the loop |
-//! | `feedback` | the iceoryx2 feedback path robot → console (a link of its own) |
-//! | `video` | the video stream: the robot's camera, the emulator's video path (a link of its own), the console's receiver |
+//! | `video` | the video stream's flags, the robot's camera, the console's receiver |
 //! | `console`, `simulator` | the two ends of a local run |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
@@ -21,18 +21,17 @@ pub mod args;
 pub mod console;
 pub mod control;
 pub mod emulator;
-pub mod feedback;
 pub mod link;
 pub mod plan;
 pub mod report;
 pub mod run;
+pub mod schema;
+pub mod seeds;
 pub mod signals;
 pub mod simulator;
-pub mod streams;
 pub mod supervise;
-pub mod video;
 pub mod telemetry;
-pub mod udp;
+pub mod video;
 
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
 pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {

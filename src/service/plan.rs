@@ -3,14 +3,14 @@
 //! pure function of the run's arguments, the scenario and the host's
 //! cores, so it can be read and tested without starting anything.
 
-use crate::scenario::{self, ScenarioSpec};
+use crate::scenario::ScenarioSpec;
 use crate::service::args::{ConsoleArgs, EmulatorArgs, RunArgs, SimulatorArgs};
 use crate::transport::udp::DEFAULT_UDP_BUFFER_BYTES;
 use crate::transport::{Endpoint, Payload};
 use std::path::PathBuf;
 
-/// Default release-queue capacity: 65,536 frames (65 s at 1 kHz).
-pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
+pub use crate::service::link::DEFAULT_QUEUE_CAPACITY;
+pub use crate::service::seeds::{fresh as fresh_seed, fresh_run_id};
 
 /// Default frame rate of a run, Hz.
 pub const DEFAULT_RATE_HZ: f64 = 1000.0;
@@ -33,15 +33,7 @@ pub fn stream_run_id(run_id: &str, k: usize) -> String {
     }
 }
 
-/// The seed of stream `k`: the run's seed for stream 0 (so one stream is
-/// today's run), `splitmix64(seed ^ splitmix64(k))` for the others.
-pub fn stream_seed(seed: u64, k: usize) -> u64 {
-    if k == 0 {
-        seed
-    } else {
-        scenario::splitmix64(seed ^ scenario::splitmix64(k as u64))
-    }
-}
+pub use crate::service::seeds::stream as stream_seed;
 
 /// Where stream `k` of a run of `streams` writes: the run's directory for
 /// a single stream, `<out>/stream-<k>/` otherwise.
@@ -74,17 +66,6 @@ pub struct StreamPlan {
     pub scenario_path: PathBuf,
     pub console: ConsoleArgs,
     pub simulator: SimulatorArgs,
-}
-
-/// A seed for runs given none: from the time and the process id.
-pub fn fresh_seed() -> u64 {
-    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0);
-    scenario::splitmix64(t ^ (u64::from(std::process::id()) << 32))
-}
-
-/// A fresh run id: `r` + 10 hex digits.
-pub fn fresh_run_id() -> String {
-    format!("r{:010x}", fresh_seed() & 0xff_ffff_ffff)
 }
 
 /// Where each process runs: a core of its own, or (`None`) not pinned.

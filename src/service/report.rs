@@ -6,7 +6,9 @@ use crate::host::Steal;
 use crate::metrics::{fmt_ns, Summary};
 use crate::scenario::{self, Scenario};
 use crate::service::console::ConsoleReport;
-use crate::service::emulator::{EmulatorProcess, EmulatorReport, PeerEvent};
+use crate::service::emulator::feedback::FeedbackExtra;
+use crate::service::emulator::video::VideoExtra;
+use crate::service::schema::{EmulatorProcess, EmulatorReport, PathReport, PeerEvent, WithPaths};
 use crate::service::plan::Plan;
 use crate::service::simulator::SimulatorReport;
 use anyhow::{Context, Result};
@@ -14,6 +16,132 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
+
+/// One stream of a run of several, as the run report gives it (its full
+/// report is `report_json`, in its directory).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunStream {
+    pub stream: usize,
+    pub run_id: String,
+    pub scenario: String,
+    pub seed: u64,
+    pub frames: FrameAccount,
+    pub loss_rate: Option<f64>,
+    pub loss_rate_ci95: Option<[f64; 2]>,
+    pub release_lateness_ns: Option<Summary>,
+    pub end_to_end_extra_ns: Option<Summary>,
+    pub added_over_direct_ns: Option<BTreeMap<String, i64>>,
+    pub faults: Vec<String>,
+    pub report_json: PathBuf,
+}
+
+/// The streams' frames summed.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamsTotal {
+    pub sent: u64,
+    pub entered: u64,
+    pub delivered: u64,
+    pub received: u64,
+    pub duplicated: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub held_at_end: u64,
+    /// Every stream balanced.
+    pub balanced: bool,
+    /// Dropped over entered, all streams together.
+    pub loss_rate: f64,
+    /// The highest of the streams' release lateness p99, ns.
+    pub release_lateness_p99_max_ns: Option<u64>,
+}
+
+/// `streams` of the run report: each stream and the total.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunStreams {
+    pub streams: Vec<RunStream>,
+    pub total: StreamsTotal,
+}
+
+impl RunStream {
+    /// Stream `k`'s line of its own report.
+    pub fn of(k: usize, r: &RunReport) -> RunStream {
+        RunStream {
+            stream: k,
+            run_id: r.run_id.clone(),
+            scenario: r.scenario.clone(),
+            seed: r.seed,
+            frames: r.frames.clone(),
+            loss_rate: r.loss_rate,
+            loss_rate_ci95: r.loss_rate_ci95,
+            release_lateness_ns: r.overhead_ns.release_lateness,
+            end_to_end_extra_ns: r.overhead_ns.end_to_end_extra,
+            added_over_direct_ns: r.overhead_ns.added_over_direct.clone(),
+            faults: r.faults.clone(),
+            report_json: r.files.report_json.clone(),
+        }
+    }
+}
+
+impl RunStreams {
+    /// The streams' lines and their total.
+    pub fn of(streams: Vec<RunStream>) -> RunStreams {
+        let mut t = StreamsTotal { balanced: true, ..StreamsTotal::default() };
+        for s in &streams {
+            let f = &s.frames;
+            t.sent += f.sent.unwrap_or(0);
+            t.entered += f.entered.unwrap_or(0);
+            t.delivered += f.delivered.unwrap_or(0);
+            t.received += f.received.unwrap_or(0);
+            t.duplicated += f.duplicated.unwrap_or(0);
+            t.held_at_end += f.held_at_end.unwrap_or(0);
+            for (k, v) in &f.dropped {
+                *t.dropped.entry(k.clone()).or_default() += v;
+            }
+            t.balanced &= f.balanced;
+        }
+        let dropped: u64 = t.dropped.values().sum();
+        t.loss_rate = if t.entered > 0 { dropped as f64 / t.entered as f64 } else { 0.0 };
+        t.release_lateness_p99_max_ns = streams.iter().filter_map(|s| s.release_lateness_ns.map(|p| p.p99)).max();
+        RunStreams { streams, total: t }
+    }
+
+    /// The table of streams, for the text report.
+    pub fn to_text(&self) -> String {
+        let opt = |v: Option<u64>| v.map_or("?".to_string(), |x| x.to_string());
+        let mut s = format!("streams    {} (the figures above are stream 0's)\n", self.streams.len());
+        s += "  stream  scenario          sent  entered  delivered  received  dropped  held  loss     lateness p99  balanced\n";
+        for st in &self.streams {
+            let f = &st.frames;
+            s += &format!(
+                "  {:<6}  {:<16} {:>6} {:>8} {:>10} {:>9} {:>8} {:>5}  {:<7.4}  {:>12}  {}\n",
+                st.stream,
+                st.scenario,
+                opt(f.sent),
+                opt(f.entered),
+                opt(f.delivered),
+                opt(f.received),
+                f.dropped.values().sum::<u64>(),
+                opt(f.held_at_end),
+                st.loss_rate.unwrap_or(f64::NAN),
+                st.release_lateness_ns.map_or("?".into(), |p| crate::metrics::fmt_ns(p.p99)),
+                if f.balanced { "yes" } else { "NO" }
+            );
+        }
+        let t = &self.total;
+        s += &format!(
+            "  total   {:<16} {:>6} {:>8} {:>10} {:>9} {:>8} {:>5}  {:<7.4}  {:>12}  {}\n",
+            "",
+            t.sent,
+            t.entered,
+            t.delivered,
+            t.received,
+            t.dropped.values().sum::<u64>(),
+            t.held_at_end,
+            t.loss_rate,
+            t.release_lateness_p99_max_ns.map_or("?".into(), crate::metrics::fmt_ns),
+            if t.balanced { "yes" } else { "NO" }
+        );
+        s
+    }
+}
 
 /// Every frame, from the console's send to the simulator's receive.
 ///
@@ -182,30 +310,28 @@ impl FeedbackSection {
     /// report): that count stands where the robot's end marker did not
     /// reach the emulator before it stopped waiting for it.
     pub fn join(
-        e: &crate::service::feedback::FeedbackReport,
+        e: &PathReport<FeedbackExtra>,
         c: Option<&crate::service::console::ConsoleFeedback>,
         robot_sent: Option<u64>,
     ) -> FeedbackSection {
         let received_by_console = c.map(|c| c.received);
-        let dropped: u64 = e.dropped.values().sum();
-        let sent_by_robot = e.sent_by_robot.or(robot_sent);
-        let balanced = sent_by_robot == Some(e.entered)
-            && e.entered + e.duplicated == e.delivered + dropped + e.held_at_end
-            && received_by_console == Some(e.delivered);
+        let sent_by_robot = e.extra.sent_by_robot.or(robot_sent);
+        let a = &e.account;
+        let balanced = sent_by_robot == Some(a.entered) && a.closes() && received_by_console == Some(a.delivered);
         FeedbackSection {
             return_scenario: e.scenario.clone(),
             seed: e.seed,
             sent_by_robot,
-            entered: e.entered,
-            delivered: e.delivered,
-            duplicated: e.duplicated,
-            dropped: e.dropped.clone(),
-            held_at_end: e.held_at_end,
+            entered: a.entered,
+            delivered: a.delivered,
+            duplicated: a.duplicated,
+            dropped: a.dropped.clone(),
+            held_at_end: a.held_at_end,
             received_by_console,
             balanced,
-            loss_rate: e.loss_rate,
-            loss_rate_ci95: e.loss_rate_ci95,
-            injected_delay_ns: e.injected_delay_ns,
+            loss_rate: e.measures.loss_rate,
+            loss_rate_ci95: e.measures.loss_rate_ci95,
+            injected_delay_ns: e.measures.injected_delay_ns,
             round_trip_ns: c.map(|c| c.round_trip_ns).filter(|s| s.count > 0),
             emulator_share_ns: c.map(|c| c.emulator_share_ns).filter(|s| s.count > 0),
             divergence_final_mm: c.map(|c| c.divergence_final_mm),
@@ -340,23 +466,23 @@ pub struct RunReport {
     pub console: Option<ConsoleReport>,
     /// The emulator's report less what stands above (its shaping: loss,
     /// stages, delays, overhead, peer events, files).
-    pub emulator: Option<EmulatorProcess>,
+    pub emulator: Option<WithPaths<EmulatorProcess>>,
     pub simulator: Option<SimulatorReport>,
     /// A run of several streams (`--streams N`): each stream and the
     /// total; the fields above are then stream 0's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub streams: Option<crate::service::streams::RunStreams>,
+    pub streams: Option<RunStreams>,
 }
 
 /// Joins the services' reports.
 pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>, simulator: Option<&SimulatorReport>) -> FrameAccount {
     let sent = console.map(|c| c.frames_sent).or_else(|| emulator.and_then(|e| e.frames.sent_by_console));
-    let entered = emulator.map(|e| e.frames.entered);
-    let delivered = emulator.map(|e| e.frames.delivered);
+    let entered = emulator.map(|e| e.frames.account.entered);
+    let delivered = emulator.map(|e| e.frames.account.delivered);
     let received = simulator.map(|s| s.received);
-    let duplicated = emulator.map(|e| e.frames.duplicated);
-    let held_at_end = emulator.map(|e| e.frames.held_at_end);
-    let dropped = emulator.map(|e| e.frames.dropped.clone()).unwrap_or_default();
+    let duplicated = emulator.map(|e| e.frames.account.duplicated);
+    let held_at_end = emulator.map(|e| e.frames.account.held_at_end);
+    let dropped = emulator.map(|e| e.frames.account.dropped.clone()).unwrap_or_default();
     let lost_before_emulator = sent.zip(entered).map(|(s, e)| s.saturating_sub(e));
     let lost_after_emulator = delivered.zip(received).map(|(d, r)| d.saturating_sub(r));
     let emulator_closes = match (entered, delivered, held_at_end) {
@@ -364,10 +490,10 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProces
         _ => false,
     };
     let balanced = emulator_closes && lost_before_emulator == Some(0) && lost_after_emulator == Some(0) && sent == entered && delivered == received;
-    let corruption = emulator.filter(|e| e.frames.corrupted > 0).map(|e| {
-        let f = &e.frames;
-        let caught = simulator.map(|s| s.bad_checksum.saturating_sub(f.bad_checksum_passed).min(f.corrupted_delivered));
-        Corruption { corrupted: f.corrupted, delivered: f.corrupted_delivered, caught, passed: caught.map(|c| f.corrupted_delivered - c) }
+    let corruption = emulator.filter(|e| e.frames.account.corrupted > 0).map(|e| {
+        let (f, a) = (&e.frames, &e.frames.account);
+        let caught = simulator.map(|s| s.bad_checksum.saturating_sub(f.bad_checksum_passed).min(a.corrupted_delivered));
+        Corruption { corrupted: a.corrupted, delivered: a.corrupted_delivered, caught, passed: caught.map(|c| a.corrupted_delivered - c) }
     });
     FrameAccount { sent, entered, delivered, received, duplicated, dropped, held_at_end, lost_before_emulator, lost_after_emulator, balanced, corruption }
 }
@@ -517,7 +643,7 @@ impl RunReport {
 }
 
 /// The emulator loop's time on frames, as a line of the overhead part.
-fn busy_text(b: &crate::service::emulator::LoopBusy) -> String {
+fn busy_text(b: &crate::service::schema::LoopBusy) -> String {
     let (per, cap) = match (b.busy_ns_per_frame, b.capacity_frames_per_s) {
         (Some(p), Some(c)) => (format!("{p:.0} ns a frame"), format!("{c:.0} frames/s")),
         _ => ("-".into(), "-".into()),
@@ -612,11 +738,12 @@ impl RunReport {
             Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
             None => (None, None),
         };
-        let frames = account(console.as_ref(), emulator.as_ref(), simulator.as_ref());
+        let frames = account(console.as_ref(), emulator.as_deref(), simulator.as_ref());
         let feedback = emulator
             .as_ref()
-            .and_then(|e| e.feedback.as_ref())
-            .map(|f| FeedbackSection::join(f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent)));
+            .and_then(|e| e.path::<FeedbackExtra>("feedback"))
+            .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent)));
+        let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
         if let Some(f) = feedback.as_ref().filter(|f| !f.balanced) {
             faults.push(format!(
                 "feedback not balanced: robot sent {:?}, {} entered, {} delivered, console received {:?}",
@@ -624,7 +751,7 @@ impl RunReport {
             ));
         }
         let video = crate::service::video::VideoSection::join(
-            emulator.as_ref().and_then(|e| e.video.as_ref()),
+            video_path.as_ref(),
             console.as_ref().and_then(|c| c.video.as_ref()),
             simulator.as_ref().and_then(|s| s.camera.as_ref()),
         );
@@ -687,7 +814,7 @@ impl RunReport {
                 lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
                 end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
                 report_json: out.join("report.json"),
-                video_trace: emulator.as_ref().and_then(|e| e.video.as_ref()).map(|v| v.trace_path.clone()),
+                video_trace: video_path.as_ref().map(|v| v.trace_path.clone()),
                 video_received: console.as_ref().and_then(|c| c.video.as_ref()).and_then(|v| v.received_csv.clone()),
             },
             console,

@@ -483,14 +483,14 @@ fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: crate::host::Ste
         if let Err(e) = serde_json::to_vec_pretty(&r).map_err(anyhow::Error::from).and_then(|j| Ok(std::fs::write(&r.files.report_json, j)?)) {
             r.faults.push(format!("writing {}: {e}", r.files.report_json.display()));
         }
-        lines.push(crate::service::streams::RunStream::of(k, &r));
+        lines.push(crate::service::report::RunStream::of(k, &r));
         reports.push(r);
     }
     let mut top = reports.swap_remove(0);
     top.processes = procs.all().map(Proc::end).collect();
     top.faults = lines.iter().flat_map(|l| l.faults.iter().map(move |f| format!("stream {}: {f}", l.stream))).collect();
     top.files.report_json = plan.out.join("report.json");
-    top.streams = Some(crate::service::streams::RunStreams::of(lines));
+    top.streams = Some(crate::service::report::RunStreams::of(lines));
     top
 }
 

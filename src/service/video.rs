@@ -1,36 +1,21 @@
 //! The video stream of a run (`netfi run --video-mbps R`): a synthetic
 //! camera on the robot side (a thread of the simulator) publishes one
 //! variable-size frame every period on `netfi/<run>/video`; the emulator
-//! passes each through a [`Link`] of its own, shaped by `--video-scenario`
-//! (default `Normal`), and releases survivors on `netfi/<run>/video_out`,
-//! where the console (a thread of its own) measures each frame's delay,
-//! whether it arrived whole, and the freezes ([`crate::video`]).
-//!
-//! **No copy on the way in.** The emulator keeps the sample it took off
-//! `video` borrowed in a slot while the link holds the frame (the link
-//! queues only the slot's number), and copies the frame's bytes once, into
-//! a sample loaned on `video_out`, when it is released: one copy of each
-//! delivered byte, none of a dropped one. The link's queue holds one frame
-//! fewer than the channel lets the emulator borrow
-//! ([`VIDEO_HELD_FRAMES`]), so a slot is always free for the next frame;
-//! a frame beyond that is the drop `queue_full`. The link stages (`rate`,
-//! `trace`) see each frame's own size ([`Link::ingress_len`]); a frame
-//! larger than the run's maximum (`--video-max-bytes`) is the drop
-//! `too_large`.
-//!
-//! The path is polled by the emulator's loop once per turn, like the
-//! feedback path ([`super::feedback`]): every due release, then at most one
-//! frame in; nothing allocates or locks per frame.
+//! passes each through a path of its own ([`super::emulator::video`]),
+//! shaped by `--video-scenario` (default `Normal`), and releases survivors
+//! on `netfi/<run>/video_out`, where the console (a thread of its own)
+//! measures each frame's delay, whether it arrived whole, and the freezes
+//! ([`crate::video`]). Here: the flags, the camera, the receiver, and the
+//! run report's section.
 
 use crate::clock::now_ns;
-use crate::injector::{Fate, Invalid};
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::VideoHeader;
-use crate::scenario::Scenario;
-use crate::service::link::{Arrival, Carried, Link, Release};
-use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, DEFAULT_VIDEO_MAX_BYTES, VIDEO_HELD_FRAMES};
-use crate::transport::{Channel, PortError, Role};
-use crate::video::{drop_kind, DropKind, Freezes, Gop};
+use crate::service::emulator::video::VideoExtra;
+use crate::service::schema::PathReport;
+use crate::transport::ipc::video::{VideoSubscriber, DEFAULT_VIDEO_MAX_BYTES};
+use crate::transport::{Channel, Role};
+use crate::video::{Freezes, Gop};
 use anyhow::Context;
 use clap::Args;
 use serde::{Deserialize, Serialize};
@@ -140,267 +125,6 @@ impl VideoArgs {
         }
         a
     }
-}
-
-/// What the emulator's video link holds: the slot of the borrowed sample,
-/// and what the link and the release need of it.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct VideoItem {
-    pub slot: u32,
-    pub len: u32,
-    pub ingress_index: u64,
-    pub ingress_ns: u64,
-}
-
-impl Carried for VideoItem {
-    #[inline]
-    fn ingress_ns(&self) -> u64 {
-        self.ingress_ns
-    }
-}
-
-/// The release side: the slots of the borrowed samples and the port.
-struct Out<'a> {
-    slots: &'a mut [Option<VideoSample>],
-    free: &'a mut Vec<u32>,
-    sink: &'a mut VideoPublisher,
-    unsubscribed: &'a mut u64,
-    bytes_delivered: &'a mut u64,
-}
-
-impl Release<VideoItem> for Out<'_> {
-    /// Copies the frame once into a sample of `video_out`, stamped with its
-    /// ingress and release times, and returns the borrowed one.
-    #[inline]
-    fn release(&mut self, item: &VideoItem, scheduled_ns: u64) -> Result<u64, (u64, PortError)> {
-        let sample = self.slots[item.slot as usize].take().expect("a held frame keeps its sample");
-        self.free.push(item.slot);
-        let mut h = *sample.header();
-        h.ingress_index = item.ingress_index;
-        h.ingress_ns = item.ingress_ns;
-        h.release_sched_ns = scheduled_ns;
-        let mut release_ns = 0;
-        let sent = self.sink.send_copy(&h, sample.bytes(), |h| {
-            release_ns = now_ns();
-            h.release_ns = release_ns;
-        });
-        drop(sample);
-        *self.bytes_delivered += u64::from(item.len);
-        match sent {
-            Ok(n) => {
-                *self.unsubscribed += u64::from(n == 0);
-                Ok(release_ns)
-            }
-            Err(e) => Err((now_ns(), PortError { port: "video_out".into(), message: e.to_string() })),
-        }
-    }
-}
-
-/// How long the video path waits, once the forward stream has ended, for
-/// the camera's end marker while a camera still publishes: 2 s.
-pub const VIDEO_GRACE_NS: u64 = 2_000_000_000;
-
-/// The emulator's video direction: its link, its ports and the borrowed
-/// samples it holds.
-pub struct VideoPath {
-    pub link: Link<VideoItem>,
-    source: VideoSubscriber,
-    sink: VideoPublisher,
-    slots: Vec<Option<VideoSample>>,
-    free: Vec<u32>,
-    max_bytes: usize,
-    seed: u64,
-    sent_by_camera: Option<u64>,
-    end_forwarded: bool,
-    damaged: u64,
-    lost: u64,
-    bytes_entered: u64,
-    bytes_delivered: u64,
-    unsubscribed: u64,
-    receive_errors: u64,
-    last_rx_ns: u64,
-}
-
-impl VideoPath {
-    /// One turn: every due release, then at most one frame in.
-    #[inline]
-    pub fn poll(&mut self) {
-        let VideoPath { link, slots, free, sink, unsubscribed, bytes_delivered, .. } = self;
-        link.release_due(now_ns(), &mut Out { slots, free, sink, unsubscribed, bytes_delivered });
-        match self.source.try_recv() {
-            Ok(Some(s)) => self.take(s),
-            Ok(None) => {}
-            Err(_) => self.receive_errors += 1,
-        }
-    }
-
-    #[inline]
-    fn take(&mut self, s: VideoSample) {
-        let h = *s.header();
-        if h.is_end() {
-            self.sent_by_camera = Some(h.frame_index);
-            return;
-        }
-        let t = now_ns();
-        self.last_rx_ns = t;
-        let len = s.bytes().len();
-        self.bytes_entered += len as u64;
-        let arrival = Arrival { sequence: None, console_index: h.frame_index, send_ns: h.send_ns };
-        if len > self.max_bytes || len != h.len as usize {
-            let why = if len > self.max_bytes { Invalid::TooLarge } else { Invalid::WrongSize };
-            self.link.reject(t, why, arrival);
-            self.lost += 1;
-            return;
-        }
-        // A slot is always free: the link holds one frame fewer than there are slots.
-        let slot = self.free.pop().expect("a free slot");
-        let item = VideoItem { slot, len: len as u32, ingress_index: self.link.next_ingress_index(), ingress_ns: t };
-        self.slots[slot as usize] = Some(s);
-        let entered = self.link.ingress_len(t, item, Some(len as u64), arrival);
-        if let Fate::Dropped(cause) = entered.fate {
-            self.slots[slot as usize] = None;
-            self.free.push(slot);
-            match drop_kind(len as u64, cause.reason(), crate::model::backlog::DEFAULT_MTU_BYTES) {
-                DropKind::Damaged => self.damaged += 1,
-                DropKind::Lost => self.lost += 1,
-            }
-        }
-    }
-
-    /// Whether the path has ended, asked off the hot path once the forward
-    /// stream has ended (at `forward_end_ns`): the camera's end marker has
-    /// come and nothing is held; or no camera publishes and nothing is
-    /// held; or the grace has passed. Sends the console the end marker when
-    /// it ends.
-    pub fn finished(&mut self, now: u64, forward_end_ns: u64) -> bool {
-        if self.end_forwarded {
-            return true;
-        }
-        let held = self.link.held();
-        let camera_gone = self.source.peers_connected() == 0 && now.saturating_sub(self.last_rx_ns) > 50_000_000;
-        let done = (held == 0 && (self.sent_by_camera.is_some() || camera_gone)) || now.saturating_sub(forward_end_ns) > VIDEO_GRACE_NS;
-        if done {
-            self.forward_end();
-        }
-        done
-    }
-
-    /// Sends the console the end marker (best effort), once.
-    pub fn forward_end(&mut self) {
-        if !self.end_forwarded {
-            self.end_forwarded = true;
-            let _ = self.sink.send_end(self.link.released());
-        }
-    }
-
-    /// Keeps the trace's writer thread off `core`; `false` where it may
-    /// use no other core.
-    pub fn keep_trace_off_core(&self, core: usize) -> bool {
-        self.link.keep_trace_off_core(core)
-    }
-
-    /// Stops the trace writer, writes `trace_video.csv` into `out_dir`,
-    /// checks the account, and reports.
-    pub fn finish(mut self, out_dir: &Path, duration_ns: u64) -> anyhow::Result<VideoLinkReport> {
-        self.forward_end();
-        // What the link still holds goes back to the camera's channel.
-        self.slots.iter_mut().for_each(|s| drop(s.take()));
-        let l = self.link.finish(&out_dir.join("trace_video.csv"), duration_ns)?;
-        let dropped_total: u64 = l.dropped.values().sum();
-        Ok(VideoLinkReport {
-            scenario: l.scenario,
-            seed: self.seed,
-            max_bytes: self.max_bytes,
-            sent_by_camera: self.sent_by_camera,
-            entered: l.entered,
-            delivered: l.delivered,
-            delivered_unsubscribed: self.unsubscribed,
-            dropped: l.dropped,
-            dropped_damaged: self.damaged,
-            dropped_lost: self.lost,
-            held_at_end: l.held_at_end,
-            balanced: l.entered == l.delivered + dropped_total + l.held_at_end && self.damaged + self.lost == dropped_total,
-            bytes_entered: self.bytes_entered,
-            bytes_delivered: self.bytes_delivered,
-            injected_delay_ns: l.measures.injected_delay_ns,
-            release_lateness_ns: l.measures.release_lateness_ns,
-            stages: serde_json::to_value(&l.measures.stages).unwrap_or_default(),
-            send_errors: l.send_errors,
-            receive_errors: self.receive_errors,
-            trace_path: l.trace_path,
-        })
-    }
-}
-
-/// What the emulator's video path did: `entered = delivered + dropped +
-/// held_at_end`, and every drop is damaged or lost ([`crate::video`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct VideoLinkReport {
-    pub scenario: String,
-    pub seed: u64,
-    pub max_bytes: usize,
-    /// Frames the camera said it sent (from its end marker).
-    pub sent_by_camera: Option<u64>,
-    pub entered: u64,
-    pub delivered: u64,
-    /// Of those, released while no console was subscribed.
-    pub delivered_unsubscribed: u64,
-    pub dropped: BTreeMap<String, u64>,
-    /// Dropped frames of several packets taken by a loss stage.
-    pub dropped_damaged: u64,
-    /// Dropped frames lost whole.
-    pub dropped_lost: u64,
-    pub held_at_end: u64,
-    pub balanced: bool,
-    pub bytes_entered: u64,
-    pub bytes_delivered: u64,
-    pub injected_delay_ns: Summary,
-    pub release_lateness_ns: Summary,
-    /// The video scenario's stages (a link stage's utilisation and queue).
-    pub stages: serde_json::Value,
-    pub send_errors: u64,
-    pub receive_errors: u64,
-    pub trace_path: PathBuf,
-}
-
-/// The emulator's video path, when the arguments ask for one: through
-/// `--video-scenario` (default Normal), seeded from `--video-seed` or the
-/// run's seed.
-pub fn path(args: &VideoArgs, node: &crate::transport::IpcNode, seed: u64, out: &Path) -> anyhow::Result<Option<VideoPath>> {
-    if !args.on() {
-        return Ok(None);
-    }
-    args.validate()?;
-    let name = args.video_scenario.as_deref().unwrap_or("Normal");
-    let spec = crate::load::resolve(name).with_context(|| format!("--video-scenario {name}"))?;
-    let seed = args.video_seed.or(spec.seed).unwrap_or_else(|| crate::scenario::splitmix64(seed ^ 0x7669_6465_6f00_0000));
-    let scenario = Scenario::new(&spec, seed).with_context(|| format!("--video-scenario {name}"))?;
-    let source = node.video_subscriber(Channel::Video).context("opening the robot → emulator video port")?;
-    let sink = node.video_publisher(Channel::VideoOut, args.video_max_bytes).context("opening the emulator → console video port")?;
-    let expected = 3600 * 60;
-    let mut link = Link::new(scenario, VIDEO_HELD_FRAMES - 1, expected)?;
-    link.stream_to(&out.join("trace_video.csv"), None)?;
-    eprintln!("emulator: video path through scenario {} seed {seed}, at most {} bytes a frame", spec.name, args.video_max_bytes);
-    let mut free: Vec<u32> = Vec::with_capacity(VIDEO_HELD_FRAMES);
-    free.extend((0..VIDEO_HELD_FRAMES as u32).rev());
-    Ok(Some(VideoPath {
-        link,
-        source,
-        sink,
-        slots: (0..VIDEO_HELD_FRAMES).map(|_| None).collect(),
-        free,
-        max_bytes: args.video_max_bytes,
-        seed,
-        sent_by_camera: None,
-        end_forwarded: false,
-        damaged: 0,
-        lost: 0,
-        bytes_entered: 0,
-        bytes_delivered: 0,
-        unsubscribed: 0,
-        receive_errors: 0,
-        last_rx_ns: 0,
-    }))
 }
 
 /// What the camera did.
@@ -733,28 +457,29 @@ pub struct VideoSection {
 impl VideoSection {
     /// Joins the emulator's video path, the console's receiver and the
     /// camera's report; `None` without video.
-    pub fn join(e: Option<&VideoLinkReport>, c: Option<&ReceivedVideo>, camera: Option<&CameraReport>) -> Option<VideoSection> {
+    pub fn join(e: Option<&PathReport<VideoExtra>>, c: Option<&ReceivedVideo>, camera: Option<&CameraReport>) -> Option<VideoSection> {
         let e = e?;
-        let sent = e.entered.saturating_sub(e.delivered_unsubscribed);
+        let a = &e.account;
+        let sent = a.entered.saturating_sub(e.delivered_unsubscribed);
         let (whole, damaged_rx) = c.map_or((0, 0), |c| (c.whole, c.damaged));
-        let balanced = e.balanced && c.is_some_and(|c| c.received + e.delivered_unsubscribed == e.delivered);
+        let balanced = e.balanced && c.is_some_and(|c| c.received + e.delivered_unsubscribed == a.delivered);
         Some(VideoSection {
             scenario: e.scenario.clone(),
             seed: e.seed,
             camera: camera.cloned(),
-            frames: crate::video::FrameTally::new(sent, whole, damaged_rx, e.dropped_damaged),
-            dropped: e.dropped.clone(),
-            held_at_end: e.held_at_end,
+            frames: crate::video::FrameTally::new(sent, whole, damaged_rx, e.extra.dropped_damaged),
+            dropped: a.dropped.clone(),
+            held_at_end: a.held_at_end,
             late: c.map(|c| c.late),
             delay_ns: c.map(|c| c.delay_ns).filter(|d| d.count > 0),
-            injected_delay_ns: e.injected_delay_ns,
+            injected_delay_ns: e.measures.injected_delay_ns,
             freezes: c.map(|c| c.freezes),
             freeze_total_ms: c.map(|c| c.freeze_total_ms),
             freeze_longest_ms: c.map(|c| c.freeze_longest_ms),
             freeze_threshold_ms: c.map(|c| c.freeze_threshold_ms),
-            bytes_entered: e.bytes_entered,
-            bytes_delivered: e.bytes_delivered,
-            stages: e.stages.clone(),
+            bytes_entered: e.extra.bytes_entered,
+            bytes_delivered: e.extra.bytes_delivered,
+            stages: serde_json::to_value(&e.measures.stages).unwrap_or_default(),
             balanced,
         })
     }

@@ -1,0 +1,121 @@
+//! What the emulator runs, resolved once from its arguments: each lane's
+//! own arguments, scenario, seed and queue; where the loop runs; its live
+//! control. Nothing after this reads the arguments' defaults again.
+
+use crate::scenario::ScenarioSpec;
+use crate::service::args::{EmulatorArgs, StreamArgs};
+use crate::service::plan::{parse_stream_scenario, stream_dir, stream_run_id};
+use crate::transport::{IpcConfig, Payload, RunId};
+use anyhow::Context;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// One lane as resolved.
+#[derive(Debug, Clone)]
+pub struct LaneConfig {
+    /// The lane's own arguments: its run id, seed and directory (the
+    /// reverse paths read their flags here).
+    pub args: EmulatorArgs,
+    pub scenario: ScenarioSpec,
+    pub seed: u64,
+    pub queue_capacity: usize,
+    /// Where its trace, histograms and report go.
+    pub out_dir: PathBuf,
+}
+
+impl LaneConfig {
+    /// Whether a sample flagged raw may come (UDP raw payloads).
+    pub fn accept_raw(&self) -> bool {
+        self.args.payload == Payload::Raw
+    }
+}
+
+/// The emulator as resolved.
+#[derive(Debug, Clone)]
+pub struct EmulatorConfig {
+    pub lanes: Vec<LaneConfig>,
+    /// Core to pin the loop to (`None`: not pinned).
+    pub core: Option<usize>,
+    /// Run the loop at this SCHED_FIFO priority (needs root or CAP_SYS_NICE).
+    pub rt_priority: Option<i32>,
+    /// Clear the loop's core of other processes' threads, movable kernel
+    /// threads and device interrupts for the run.
+    pub isolate: bool,
+    /// Serve live control (and telemetry, every `telemetry_ms`; 0: none)
+    /// on lane 0.
+    pub control: Option<(IpcConfig, u64)>,
+    /// Use the reordering release queue whatever the scenario.
+    pub reorder_queue: bool,
+    /// Where the run's own files go (the joint report of several lanes).
+    pub out_dir: PathBuf,
+}
+
+/// Lane `k`'s own arguments: its run id, scenario, seed and directory.
+fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64, k: usize) -> EmulatorArgs {
+    let n = args.stream.streams as usize;
+    EmulatorArgs {
+        run_id: args.run_id.as_deref().map(|r| stream_run_id(r, k)),
+        scenario: scenarios.get(&k).unwrap_or(&args.scenario).clone(),
+        seed: Some(crate::service::seeds::stream(seed, k)),
+        return_seed: args.return_seed.map(|s| crate::service::seeds::stream(s, k)),
+        out: stream_dir(&args.out, n, k),
+        stream: StreamArgs::default(),
+        ..args.clone()
+    }
+}
+
+/// The lane of `args` (already its own).
+fn lane(args: EmulatorArgs) -> anyhow::Result<LaneConfig> {
+    let scenario = crate::load::resolve(&args.scenario)?;
+    let seed = crate::service::seeds::run(args.seed, &scenario);
+    let default_capacity = match args.payload {
+        Payload::Raw => crate::service::emulator::udp_return::RAW_DEFAULT_QUEUE_CAPACITY,
+        Payload::Itp => crate::service::link::DEFAULT_QUEUE_CAPACITY,
+    };
+    let queue_capacity = args.queue_capacity.or(scenario.queue_capacity).unwrap_or(default_capacity);
+    anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
+    Ok(LaneConfig { out_dir: args.out.clone(), scenario, seed, queue_capacity, args })
+}
+
+impl EmulatorConfig {
+    /// The emulator that `args` ask for (checked).
+    pub fn of(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
+        args.validate()?;
+        let lanes = if args.stream.several() {
+            anyhow::ensure!(args.run_id.is_some(), "--streams needs --run-id");
+            let mut scenarios = BTreeMap::new();
+            for text in &args.stream.stream_scenario {
+                let (k, what) = parse_stream_scenario(text, args.stream.streams)?;
+                scenarios.insert(k, what);
+            }
+            let seed = lane(args.clone())?.seed;
+            (0..args.stream.streams as usize)
+                .map(|k| lane(lane_args(args, &scenarios, seed, k)).with_context(|| format!("stream {k}")))
+                .collect::<anyhow::Result<Vec<_>>>()?
+        } else {
+            vec![lane(args.clone())?]
+        };
+        let core = match args.no_pin {
+            true => None,
+            false => args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
+        };
+        let control = match (&args.run_id, args.control.no_control) {
+            (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
+            _ => None,
+        };
+        Ok(EmulatorConfig {
+            lanes,
+            core,
+            rt_priority: args.rt_priority,
+            isolate: args.isolate,
+            control,
+            reorder_queue: args.control.reorder_queue,
+            out_dir: args.out.clone(),
+        })
+    }
+
+    /// Whether the emulator serves several lanes (streams).
+    pub fn several(&self) -> bool {
+        self.lanes.len() > 1
+    }
+}

@@ -1,0 +1,128 @@
+//! The feedback channel over iceoryx2: robot → emulator → console. The
+//! robot publishes one [`FeedbackSample`] per command it received (its
+//! integrated pose and which command that was) on `netfi/<run>/feedback`;
+//! the emulator passes each through a path of its own, shaped by the return
+//! scenario (`--return-scenario`, default `Normal`), and releases survivors
+//! on `netfi/<run>/feedback_out`, where the console measures the round
+//! trip. The robot ends its feedback with an end marker once it has the
+//! emulator's; a robot that publishes none (or is gone) does not hold the
+//! run ([`Ending::AfterForward`]).
+
+use crate::model::ModelKind;
+use crate::sample::FeedbackSample;
+use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
+use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::link::DEFAULT_QUEUE_CAPACITY;
+use crate::service::link::{Arrival, Carried};
+use crate::service::schema::Account;
+use crate::transport::{FeedbackEgress, FeedbackIngress, PortError};
+use serde::{Deserialize, Serialize};
+
+impl Carried for FeedbackSample {
+    /// A copy of feedback is a second release of the same sample; a flip
+    /// needs an ITP frame's bytes, which feedback is not.
+    const UNSUPPORTED: &'static [ModelKind] = &[ModelKind::Corrupt];
+
+    #[inline]
+    fn ingress_ns(&self) -> u64 {
+        self.ingress_ns
+    }
+}
+
+/// The feedback direction's ports.
+pub struct Feedback {
+    source: FeedbackIngress,
+    sink: FeedbackEgress,
+    sample: FeedbackSample,
+}
+
+impl Feedback {
+    /// The feedback channel from `source` to `sink`.
+    pub fn new(source: FeedbackIngress, sink: FeedbackEgress) -> Feedback {
+        Feedback { source, sink, sample: FeedbackSample::ZERO }
+    }
+
+    /// The two ports (tests drive in-memory ones).
+    pub fn ports_mut(&mut self) -> (&mut FeedbackIngress, &mut FeedbackEgress) {
+        (&mut self.source, &mut self.sink)
+    }
+}
+
+/// What the feedback channel adds to its path's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeedbackExtra {
+    /// Feedback samples the robot said it sent (from its end marker).
+    pub sent_by_robot: Option<u64>,
+}
+
+impl Channel for Feedback {
+    type Item = FeedbackSample;
+    type Extra = FeedbackExtra;
+    const NAME: &'static str = "feedback";
+    const TRACE_FILE: &'static str = "trace_feedback.csv";
+    const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
+
+    #[inline]
+    fn take(&mut self, next_ingress_index: u64, clock: &mut impl FnMut() -> u64) -> Take<FeedbackSample> {
+        let s = &mut self.sample;
+        match self.source.try_recv(s) {
+            Ok(true) if s.is_end() => Take::End(s.robot_index),
+            Ok(true) => {
+                s.ingress_index = next_ingress_index;
+                s.ingress_ns = clock();
+                Take::Item(*s, None, Arrival { sequence: Some(s.sequence), console_index: s.robot_index, send_ns: s.send_ns })
+            }
+            Ok(false) => Take::Nothing,
+            Err(e) => Take::Failed(e),
+        }
+    }
+
+    /// Feedback is released stamped with its scheduled and actual release
+    /// times and its injected delay.
+    #[inline]
+    fn release(&mut self, item: &FeedbackSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
+        let mut release_ns = 0;
+        let sent = self.sink.send_with(item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = stamp();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((crate::clock::now_ns(), e)),
+        }
+    }
+
+    fn send_end(&mut self, released: u64) {
+        let _ = self.sink.send_with(&FeedbackSample::end_marker(released), |_| {});
+    }
+
+    fn senders(&mut self) -> Option<usize> {
+        self.source.peers()
+    }
+
+    fn unsubscribed(&self) -> u64 {
+        self.sink.unsubscribed()
+    }
+
+    /// Balanced also asks that every feedback sample the robot said it sent
+    /// entered.
+    fn finish(&mut self, account: &Account, sent: Option<u64>) -> (FeedbackExtra, bool) {
+        (FeedbackExtra { sent_by_robot: sent }, sent.is_none_or(|n| n == account.entered))
+    }
+}
+
+/// The feedback path the arguments ask for: with iceoryx2 on both sides
+/// and unless `--no-feedback`, through `--return-scenario` (default Normal).
+pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
+    let a = o.args;
+    let Some(node) = o.t.node.as_ref().filter(|_| !a.ingress.is_udp() && !a.egress.is_udp() && !a.no_feedback) else { return Ok(None) };
+    let plan = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, o.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
+    let (source, sink) = crate::transport::open_feedback(node)?;
+    Ok(Some(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?)))
+}
+
+/// What the feedback path's seed is derived from, with the run's seed,
+/// when not given.
+pub const SEED_TAG: u64 = 0x6665_6564_6261_636b;

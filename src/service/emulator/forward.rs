@@ -1,0 +1,206 @@
+//! The forward channel: the console's frames, off the ingress (iceoryx2,
+//! UDP, memory), checked (size, flags, checksum) and released onto the
+//! egress towards the robot. The stream ends on the console's end marker;
+//! the robot is sent the emulator's own once every held frame is out.
+
+use crate::frame::ItpView;
+use crate::injector::{DropCause, Invalid};
+use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::service::emulator::path::{Channel, Ending, Take};
+use crate::service::link::Arrival;
+use crate::service::schema::{Account, BadInput};
+use crate::transport::{FrameSink, FrameSource, PortError};
+use serde::{Deserialize, Serialize};
+use std::cell::Cell;
+use std::net::SocketAddr;
+use std::rc::Rc;
+
+/// The most frames one poll of the forward stream takes in: a burst is
+/// taken whole up to this, so a fast stream pays the turn's fixed work (the
+/// release check, the reverse paths' polls, the loop's own bookkeeping)
+/// once per batch rather than per frame; the bound keeps those polls at
+/// least every 64 decisions (about 10 µs at 150 ns a frame), and releases
+/// do not wait for the batch at all: it ends as soon as one is due.
+pub const TAKE_MAX: usize = 64;
+
+/// Where a UDP console's address is shared with the return path, once
+/// known.
+pub type ConsoleAddr = Rc<Cell<Option<SocketAddr>>>;
+
+/// The console → robot direction's ports and checks.
+pub struct Forward<S, K> {
+    /// Where frames come from.
+    pub source: S,
+    /// Where released frames go.
+    pub sink: K,
+    sample: FrameSample,
+    drop_bad_checksum: bool,
+    accept_raw: bool,
+    bad_checksum_passed: u64,
+    /// Bad input by kind.
+    pub bad_input: BadInput,
+    /// Where the console's address goes once a UDP source knows it.
+    console: Option<ConsoleAddr>,
+}
+
+impl<S: FrameSource, K: FrameSink> Forward<S, K> {
+    /// The forward channel from `source` to `sink`: frames with a wrong
+    /// ITP checksum dropped when `drop_bad_checksum` (else counted and
+    /// passed); opaque datagrams accepted when `accept_raw`.
+    pub fn new(source: S, sink: K, drop_bad_checksum: bool, accept_raw: bool) -> Forward<S, K> {
+        Forward {
+            source,
+            sink,
+            sample: FrameSample::ZERO,
+            drop_bad_checksum,
+            accept_raw,
+            bad_checksum_passed: 0,
+            bad_input: BadInput::default(),
+            console: None,
+        }
+    }
+
+    /// Tells `console` the console's address once the source knows it.
+    pub fn share_console(&mut self, console: ConsoleAddr) {
+        self.console = Some(console);
+    }
+
+    /// Off the hot path: names the senders on the ingress in the bad input
+    /// seen, when there was some since the last look.
+    pub fn name_bad_senders(&mut self, seen: &mut u64) {
+        if self.bad_input.total() == *seen {
+            return;
+        }
+        *seen = self.bad_input.total();
+        for who in self.source.senders() {
+            if !self.bad_input.from.contains(&who) {
+                self.bad_input.from.push(who);
+            }
+        }
+    }
+}
+
+/// What the forward channel adds to its path's report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ForwardExtra {
+    pub sent_by_console: Option<u64>,
+    pub bad_checksum_passed: u64,
+    pub bad_input: BadInput,
+}
+
+impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
+    type Item = FrameSample;
+    type Extra = ForwardExtra;
+    const NAME: &'static str = "forward";
+    const TRACE_FILE: &'static str = "trace_emulator.csv";
+    const ENDING: Ending = Ending::OnMarker;
+    const TAKE_MAX: usize = TAKE_MAX;
+
+    #[inline]
+    fn take(&mut self, next_ingress_index: u64, clock: &mut impl FnMut() -> u64) -> Take<FrameSample> {
+        let sample = &mut self.sample;
+        match self.source.try_recv(sample) {
+            // An end marker is the flag alone, with no payload.
+            Ok(true) if sample.flags == FrameSample::FLAG_END && sample.len == 0 => Take::End(sample.console_index),
+            Ok(true) => {
+                let t = clock();
+                sample.ingress_index = next_ingress_index;
+                sample.ingress_ns = t;
+                if let Some(c) = self.console.as_ref().filter(|c| c.get().is_none()) {
+                    c.set(self.source.sender().map(|a| a.addr()));
+                }
+                let arrival = |sequence| Arrival { sequence, console_index: sample.console_index, send_ns: sample.send_ns };
+                match classify(sample, self.drop_bad_checksum, self.accept_raw, &mut self.bad_input) {
+                    Ok((seq, bad)) => {
+                        self.bad_checksum_passed += u64::from(bad);
+                        Take::Item(*sample, None, arrival(Some(seq)))
+                    }
+                    Err((why, seq)) => {
+                        let arrival = arrival(seq);
+                        self.source.dropped(sample);
+                        Take::Reject(t, why, arrival)
+                    }
+                }
+            }
+            Ok(false) => Take::Nothing,
+            Err(e) => Take::Failed(e),
+        }
+    }
+
+    #[inline]
+    fn dropped(&mut self, item: &FrameSample, _cause: DropCause) {
+        self.source.dropped(item);
+    }
+
+    /// Sends the sample stamped with its scheduled and actual release times
+    /// and its injected delay.
+    #[inline]
+    fn release(&mut self, item: &FrameSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
+        let mut release_ns = 0;
+        let sent = self.sink.send_with(item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = stamp();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((crate::clock::now_ns(), e)),
+        }
+    }
+
+    fn send_end(&mut self, released: u64) {
+        let _ = self.sink.send_with(&FrameSample::end_marker(released), |_| {});
+    }
+
+    fn senders(&mut self) -> Option<usize> {
+        self.source.peers()
+    }
+
+    fn receivers(&mut self) -> Option<usize> {
+        self.sink.peers()
+    }
+
+    fn unsubscribed(&self) -> u64 {
+        self.sink.unsubscribed()
+    }
+
+    fn finish(&mut self, _account: &Account, sent: Option<u64>) -> (ForwardExtra, bool) {
+        let extra = ForwardExtra { sent_by_console: sent, bad_checksum_passed: self.bad_checksum_passed, bad_input: std::mem::take(&mut self.bad_input) };
+        (extra, true)
+    }
+}
+
+/// The datagram classifier: checks size and checksum. `Ok((sequence,
+/// checksum_bad))` for a frame to decide; `Err` for one to reject, with
+/// its sequence if readable. Total over any sample (property-tested in
+/// `tests/input_prop.rs`).
+#[inline]
+pub fn classify(s: &FrameSample, drop_bad_checksum: bool, accept_raw: bool, bad: &mut BadInput) -> Result<(u32, bool), (Invalid, Option<u32>)> {
+    const KNOWN: u32 = FrameSample::FLAG_END | FrameSample::FLAG_RAW;
+    if s.flags & !KNOWN != 0 || s.is_end() || (s.is_raw() && !accept_raw) {
+        // Garbage control bits, an end marker with a payload, or an opaque
+        // datagram where none may come.
+        bad.bad_flags += 1;
+        return Err((Invalid::BadFlags, None));
+    }
+    if s.is_raw() {
+        // An opaque datagram: no protocol to check; its "sequence" is its console index.
+        return Ok((s.console_index as u32, false));
+    }
+    if s.len as usize != ITP_FRAME_LEN {
+        match s.len {
+            0 => bad.len_zero += 1,
+            n if (n as usize) < ITP_FRAME_LEN => bad.len_short += 1,
+            _ => bad.len_oversize += 1,
+        }
+        return Err((Invalid::WrongSize, None));
+    }
+    let view = ItpView::new_unchecked(&s.wire[..]);
+    let seq = view.sequence();
+    let bad = !view.verify_checksum();
+    if bad && drop_bad_checksum {
+        return Err((Invalid::BadChecksum, Some(seq)));
+    }
+    Ok((seq, bad))
+}

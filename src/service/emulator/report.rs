@@ -1,0 +1,189 @@
+//! The emulator's reports, assembled from what its paths and its loop
+//! return: each lane's `emulator.json` ([`EmulatorReport`]), the joint one
+//! of several lanes ([`EmulatorStreams`]), and the UDP side (`udp.json`).
+
+use crate::host::isolate::IsolationSummary;
+use crate::service::control::ControlEvent;
+use crate::service::emulator::forward::ForwardExtra;
+use crate::service::emulator::spin::LoopEnd;
+use crate::service::schema::{
+    BoundEndpoints, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, ForeignSender, LoopBusy, PathReport, PeerEvent, Shaping, UdpReport, WithPaths,
+};
+use crate::transport::{Egress, Ingress};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// What the loop and the process add to every lane's report.
+pub struct Run<'a> {
+    pub end: &'a LoopEnd,
+    pub core: Option<usize>,
+    pub realtime_priority: Option<i32>,
+    pub steal: crate::host::Steal,
+}
+
+/// What is a lane's own besides its paths: what the loop saw of it.
+pub struct LaneEnd {
+    pub busy: LoopBusy,
+    pub peer_events: Vec<PeerEvent>,
+    pub dead_peers: Vec<String>,
+    pub robot_died: bool,
+    /// Lane 0's: what clearing the core did, and the live control's events.
+    pub isolation: Option<IsolationSummary>,
+    pub events: Vec<ControlEvent>,
+}
+
+/// A lane's `emulator.json` of its forward path's report `fwd`, its
+/// reverse paths' reports `paths`, what the loop saw of it, and the run.
+pub fn lane_report(fwd: PathReport<ForwardExtra>, paths: BTreeMap<String, serde_json::Value>, lane: LaneEnd, run: &Run) -> EmulatorReport {
+    let (duration_ns, rounds) = (run.end.duration_ns(), run.end.rounds);
+    let (decision_hlog, lateness_hlog) = fwd.hlogs.clone().unzip();
+    let shaping = Shaping {
+        link: fwd.measures,
+        peer_events: lane.peer_events,
+        events: lane.events,
+        trace_path: Some(fwd.trace_path),
+        decision_hlog,
+        lateness_hlog,
+    };
+    let process = EmulatorProcess {
+        scenario: fwd.scenario,
+        seed: fwd.seed,
+        core: run.core,
+        realtime_priority: run.realtime_priority,
+        isolation: lane.isolation,
+        queue_order: fwd.queue_order,
+        queue_capacity: fwd.queue_capacity,
+        frames: EmulatorFrames {
+            account: fwd.account,
+            sent_by_console: fwd.extra.sent_by_console,
+            bad_checksum_passed: fwd.extra.bad_checksum_passed,
+            bad_input: fwd.extra.bad_input,
+            delivered_unsubscribed: fwd.delivered_unsubscribed,
+        },
+        ended_by: run.end.lane_ended_by(lane.robot_died).to_string(),
+        dead_peers: lane.dead_peers,
+        duration_s: duration_ns as f64 / 1e9,
+        loop_iterations: rounds,
+        loop_iteration_ns_mean: if rounds > 0 { duration_ns as f64 / rounds as f64 } else { 0.0 },
+        receive_errors: fwd.receive_errors,
+        send_errors: fwd.send_errors,
+        trace_overflowed: fwd.trace_overflowed,
+        steal_ms: run.steal.ms,
+        steal_fraction: run.steal.fraction,
+        busy: Some(lane.busy),
+    };
+    EmulatorReport { shaping, process: WithPaths { inner: process, paths } }
+}
+
+/// The joint report of the lanes' reports; their run ids and directories.
+pub fn joint(reports: &[EmulatorReport], run_ids: &[String], dirs: &[PathBuf], ended_by: &str) -> EmulatorStreams {
+    let mut total = EmulatorFrames { sent_by_console: Some(0), ..EmulatorFrames::default() };
+    let mut streams = Vec::new();
+    for (k, r) in reports.iter().enumerate() {
+        total.add(&r.process.frames);
+        let l = &r.shaping.link;
+        streams.push(EmulatorStream {
+            stream: k,
+            run_id: run_ids[k].clone(),
+            scenario: r.process.scenario.clone(),
+            seed: r.process.seed,
+            dir: dirs[k].clone(),
+            frames: r.process.frames.clone(),
+            loss_rate: l.loss_rate,
+            ingress_wait_ns: l.ingress_wait_ns,
+            decision_ns: l.decision_ns,
+            release_lateness_ns: l.release_lateness_ns,
+        });
+    }
+    let p = &reports[0].process;
+    EmulatorStreams {
+        streams,
+        total,
+        balanced: reports.iter().all(|r| r.process.frames.account.closes()),
+        core: p.core,
+        ended_by: ended_by.to_string(),
+        duration_s: p.duration_s,
+        loop_rounds: p.loop_iterations,
+        loop_round_ns_mean: p.loop_iteration_ns_mean,
+        steal_fraction: p.steal_fraction,
+        busy: LoopBusy::total(reports.iter().filter_map(|r| r.process.busy.as_ref())),
+    }
+}
+
+/// The endpoints of a lane's transports as bound.
+pub fn bound(ingress: &Ingress, egress: &Egress, egress_peer: Option<std::net::SocketAddr>) -> BoundEndpoints {
+    BoundEndpoints {
+        ingress: match ingress {
+            Ingress::Udp(s) => Some(s.port().local_addr()),
+            _ => None,
+        },
+        egress_local: match egress {
+            Egress::Udp(s) => Some(s.port().local_addr()),
+            _ => None,
+        },
+        egress_peer,
+    }
+}
+
+/// The UDP side of a lane that has ended: its sockets, what the ingress
+/// took and refused, the raw arena, the return path's report.
+pub fn udp_report(args: &crate::service::args::EmulatorArgs, ingress: &Ingress, arena: Option<&crate::transport::udp::Arena>, bound: &BoundEndpoints) -> UdpReport {
+    let source = match ingress {
+        Ingress::Udp(s) => Some(s),
+        _ => None,
+    };
+    UdpReport {
+        ingress: args.ingress.to_string(),
+        egress: args.egress.to_string(),
+        payload: args.payload,
+        ingress_local: bound.ingress,
+        egress_local: bound.egress_local,
+        datagrams_in: source.map(|s| s.taken()),
+        ingress_kernel_drops: source.and_then(|s| s.port().kernel_drops()),
+        ingress_buffer_bytes: source.and_then(|s| s.port().buffer_bytes().0),
+        console: source.and_then(|s| s.console()),
+        foreign_sender: source.map_or(0, |s| s.foreign().total),
+        foreign_senders: source.map(|s| s.foreign().named().map(|(addr, datagrams)| ForeignSender { addr, datagrams }).collect()).unwrap_or_default(),
+        foreign_unnamed: source.map_or(0, |s| s.foreign().unnamed),
+        arena_slots: arena.map(|a| a.slots()),
+        arena_high_water: arena.map(|a| a.high_water()),
+        return_path: None,
+    }
+}
+
+/// One line for the log: what came in, what went out, what the kernel and
+/// the return path did.
+pub fn summary_line(r: &EmulatorReport, u: &UdpReport) -> String {
+    let (f, p) = (&r.process.frames, &r.process);
+    let a = &f.account;
+    let mut s = format!(
+        "emulator: {} entered, {} delivered, {} dropped {:?}, {} held at end; ended by {}",
+        a.entered,
+        a.delivered,
+        a.dropped_total(),
+        a.dropped,
+        a.held_at_end,
+        p.ended_by
+    );
+    if let Some(k) = u.ingress_kernel_drops.filter(|k| *k > 0) {
+        s += &format!("; {k} datagrams dropped by the kernel before ingress");
+    }
+    if u.foreign_sender > 0 {
+        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
+        s += &format!("; {} datagrams from foreign senders dropped (foreign_sender): {}", u.foreign_sender, who.join(", "));
+    }
+    if let Some(rp) = &u.return_path {
+        let n = |k: &str| rp[k].as_u64().unwrap_or(0);
+        let dropped: u64 = rp["dropped"].as_object().map_or(0, |d| d.values().filter_map(|v| v.as_u64()).sum());
+        s += &format!(
+            "; return path ({}): {} received, {} delivered, {} dropped, {} held, {} unroutable",
+            rp["mode"].as_str().unwrap_or("?"),
+            n("received"),
+            n("delivered"),
+            dropped,
+            n("held_at_end"),
+            n("unroutable")
+        );
+    }
+    s
+}
