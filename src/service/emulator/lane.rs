@@ -23,6 +23,14 @@ use crate::transport::{FrameSink, FrameSource};
 /// later.
 pub const RELEASE_SPIN_NS: u64 = 1_000;
 
+/// How often a lane whose reverse paths were quiet at their last poll polls
+/// them again: every 4th turn. A poll of an empty iceoryx2 port costs about
+/// as much as the rest of an idle turn, and the reverse paths are not the
+/// command stream: while they are quiet, what comes on them waits at most
+/// three turns more (well under a microsecond); once one is busy, they are
+/// polled every turn again.
+pub const REVERSE_EVERY: u32 = 4;
+
 /// One stream of the emulator.
 pub struct Lane<S: FrameSource, K: FrameSink> {
     /// The console → robot path.
@@ -45,6 +53,10 @@ pub struct Lane<S: FrameSource, K: FrameSink> {
     pub robot_died: bool,
     /// Bad input seen at the last look.
     bad_seen: u64,
+    /// The reverse paths took or released something at their last poll.
+    reverse_busy: bool,
+    /// Turns since the reverse paths were last polled.
+    reverse_wait: u32,
 }
 
 impl<S: FrameSource, K: FrameSink> Lane<S, K> {
@@ -60,12 +72,15 @@ impl<S: FrameSource, K: FrameSink> Lane<S, K> {
             peer_events: Vec::new(),
             robot_died: false,
             bad_seen: 0,
+            reverse_busy: false,
+            reverse_wait: 0,
         }
     }
 
     /// One turn: every forward release that is due, oldest first (or, when
     /// idle with a release within `release_spin_ns`, that release prepared
-    /// and sent on its time); each reverse path's poll; every frame waiting
+    /// and sent on its time); each reverse path's poll (every
+    /// [`REVERSE_EVERY`]th turn while they are quiet); every frame waiting
     /// at the ingress, up to the forward channel's batch.
     #[inline]
     pub fn turn(&mut self) {
@@ -78,8 +93,14 @@ impl<S: FrameSource, K: FrameSink> Lane<S, K> {
             }
             _ => self.forward.release_due(now),
         }
-        for r in self.reverse.iter_mut() {
-            r.poll();
+        self.reverse_wait += 1;
+        if self.reverse_busy || self.reverse_wait >= REVERSE_EVERY {
+            self.reverse_wait = 0;
+            let mut busy = false;
+            for r in self.reverse.iter_mut() {
+                busy |= r.poll();
+            }
+            self.reverse_busy = busy;
         }
         self.idle = self.forward.take(now_ns);
     }

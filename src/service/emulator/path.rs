@@ -372,8 +372,8 @@ pub trait Reverse {
     fn name(&self) -> &'static str;
     /// How the path ends.
     fn ending(&self) -> Ending;
-    /// One poll ([`Path::poll`]).
-    fn poll(&mut self);
+    /// One poll ([`Path::poll`]); whether it took or released anything.
+    fn poll(&mut self) -> bool;
     /// Whether the path has ended ([`Path::finished`]).
     fn finished(&mut self, now: u64, forward_end_ns: Option<u64>) -> bool;
     /// Sends the end marker now ([`Path::end`]).
@@ -397,8 +397,9 @@ impl<C: Channel + 'static> Reverse for Path<C> {
     }
 
     #[inline]
-    fn poll(&mut self) {
-        Path::poll(self);
+    fn poll(&mut self) -> bool {
+        let released = self.link.released();
+        !Path::poll(self) || self.link.released() != released
     }
 
     fn finished(&mut self, now: u64, forward_end_ns: Option<u64>) -> bool {
