@@ -50,17 +50,18 @@ pub enum Ending {
     /// On its sender's end marker, once nothing is held: the forward stream.
     OnMarker,
     /// Once the forward stream has ended: on its sender's end marker, or
-    /// with no sender left, once nothing is held; or, without the marker,
-    /// `grace_ns` after the forward stream ended (what is held then is
-    /// held at the end). The robot's feedback and video.
+    /// with no sender left, once nothing is held; at the latest `grace_ns`
+    /// after the forward stream ended (what is held then is held at the
+    /// end: a queue that would take longer to drain does not hold the
+    /// run). The robot's feedback and video.
     AfterForward { grace_ns: u64 },
     /// With the forward stream, whatever it holds then: a transport
     /// without an end of stream (the UDP return).
     WithForward,
 }
 
-/// How long a path that ends after the forward stream waits for its
-/// sender's end marker while a sender is still there: 2 s.
+/// The longest a path that ends after the forward stream waits, once that
+/// stream has ended, for its sender's end marker and its queue: 2 s.
 pub const GRACE_NS: u64 = 2_000_000_000;
 
 /// A sender is gone when none is connected and nothing came from it for
@@ -296,7 +297,7 @@ impl<C: Channel> Path<C> {
             (Ending::OnMarker, _) => self.sent.is_some() && held == 0,
             (Ending::AfterForward { grace_ns }, Some(end)) => {
                 let gone = self.chan.senders() == Some(0) && now.saturating_sub(self.last_take_ns) > GONE_QUIET_NS;
-                (held == 0 && (self.sent.is_some() || gone)) || (self.sent.is_none() && now.saturating_sub(end) > grace_ns)
+                (held == 0 && (self.sent.is_some() || gone)) || now.saturating_sub(end) > grace_ns
             }
             (Ending::WithForward, Some(_)) => true,
             (_, None) => false,
