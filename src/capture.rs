@@ -1051,6 +1051,13 @@ mod tests {
     }
 
     #[test]
+    fn a_replayed_delay_capture_names_the_layout_read() {
+        // The replay stage (in the core, which does not read captures)
+        // describes its recording in this reader's words.
+        assert_eq!(crate::model::RecordingKind::DelayCapture.layout(), RecordLayout::Delay.describe());
+    }
+
+    #[test]
     fn errors_can_cross_threads() {
         fn send_sync<T: Send + Sync + 'static>() {}
         send_sync::<CaptureError>();
