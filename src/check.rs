@@ -123,10 +123,10 @@ pub struct DelayStats {
 
 impl DelayStats {
     /// The precision of `p50` and `p99` in words, for a text report.
-    pub fn precision(&self) -> &'static str {
+    pub fn precision(&self) -> String {
         match self.error_fraction_max {
-            None => "exact",
-            Some(_) => "p50, p99 each at most 0.098 % high",
+            None => "exact".into(),
+            Some(f) => format!("p50, p99 each at most {:.3} % high", f * 100.0),
         }
     }
 }
