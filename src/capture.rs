@@ -1,7 +1,8 @@
 //! Recorded ITP captures (docs/spec.md §7): reading, writing and summarising them.
 //!
-//! A capture is one standard LZ4 frame whose decompressed content is a
-//! sequence of records:
+//! A capture is a sequence of one or more complete standard LZ4 frames
+//! (what `lz4 -d` decodes as one stream); their decompressed content, read
+//! as one stream across the frames, is a sequence of records:
 //!
 //! ```text
 //! u64 BE time_ns | u16 BE length | u8 dropped | payload (length bytes)
@@ -29,9 +30,11 @@
 //! ends inside a record.
 //!
 //! [`CaptureReader`] streams records from any [`Read`] without allocating per
-//! record; [`CaptureWriter`] writes the same format, with the LZ4 frame's
-//! content checksum (xxHash32 of everything decompressed), so damage to a
-//! file written here is always found; [`load`] reads a whole file and derives
+//! record; [`CaptureWriter`] writes the same format, every LZ4 frame with
+//! its content checksum (xxHash32 of everything it decompresses to), so
+//! damage to a file written here is always found, and may close a frame
+//! and start the next as it goes ([`CaptureWriter::end_frame`], a recorder
+//! that flushes every batch); [`load`] reads a whole file and derives
 //! [`CaptureStats`]. This is I/O code: the sans-IO core never calls it, only
 //! the services and tools do.
 //!
@@ -41,14 +44,16 @@
 //! must not pass for one. [`load`] (and [`parse`]) refuse, with an error that
 //! says what was found:
 //!
-//! - anything that is not exactly one well-formed LZ4 frame of whole records:
-//!   not LZ4, a corrupt block, a content checksum that does not match, a
-//!   frame without its end mark, a record cut short or of a length other
-//!   than one ITP frame, no records;
-//! - bytes after the LZ4 frame ([`CaptureError::TrailingBytes`]): garbage
-//!   appended, or a second capture concatenated to the first (the decoder
-//!   would otherwise stop at the first frame's end and drop the rest
-//!   unseen);
+//! - anything that is not a sequence of complete, well-formed LZ4 frames of
+//!   whole records: not LZ4, a corrupt block, a content checksum that does
+//!   not match, a frame without its end mark (cut short, the last or any
+//!   other), a record cut short or of a length other than one ITP frame, no
+//!   records;
+//! - bytes after a frame that do not begin another
+//!   ([`CaptureError::TrailingBytes`]): garbage appended or between frames.
+//!   LZ4's skippable frames (magic `0x184D2A50`–`5F`, metadata) are
+//!   skipped, as `lz4 -d` skips them, when they are whole; the legacy LZ4
+//!   format, which has no end mark, is refused as cut short;
 //! - a time step backwards of more than [`MAX_STEP_BACKWARD_NS`] (1 s) or a
 //!   gap forwards of more than [`MAX_GAP_NS`] (60 s) between two records: a
 //!   wall clock steps back by milliseconds, not seconds, and a recording
@@ -56,9 +61,9 @@
 //!   likely a flipped bit in a time stamp or two files joined;
 //! - a frame whose ITP checksum is wrong, *unless* the file carries an LZ4
 //!   content checksum: without one the file's integrity is unknown and a
-//!   wrong frame checksum is read as damage to the file; with one the file
-//!   is known to be as written, so the frame was recorded that way (a
-//!   corrupted datagram) and is only counted.
+//!   wrong frame checksum is read as damage to the file; with one (in every
+//!   LZ4 frame of the file) the file is known to be as written, so the
+//!   frame was recorded that way (a corrupted datagram) and is only counted.
 //!
 //! Only counted, in [`CaptureStats`] (callers may print them): frames with a
 //! wrong checksum in a checksummed file, steps backwards up to 1 s, the
@@ -120,6 +125,9 @@ pub const MAX_GAP_NS: u64 = 60_000_000_000;
 
 /// The LZ4 frame format's magic number, little-endian on the wire.
 const LZ4_MAGIC: [u8; 4] = [0x04, 0x22, 0x4d, 0x18];
+/// The magic numbers of LZ4's skippable frames, `0x184D2A50`–`0x184D2A5F`,
+/// without their low four bits.
+const LZ4_SKIPPABLE_MAGIC: u32 = 0x184D_2A50;
 /// Bit of the frame descriptor's FLG byte (the fifth byte of a frame) that
 /// announces a content checksum.
 const LZ4_FLG_CONTENT_CHECKSUM: u8 = 0x04;
@@ -152,7 +160,7 @@ pub enum CaptureError {
     /// The bytes are not a valid LZ4 frame (wrong magic number, corrupt block,
     /// bad checksum): the file is not a capture, or it is damaged.
     #[error("{}: record {record} at byte {offset}: not a valid LZ4 frame ({source}); \
-             a capture is one standard LZ4 frame", Origin(.path))]
+             a capture is a sequence of standard LZ4 frames", Origin(.path))]
     Lz4 {
         path: Option<PathBuf>,
         record: u64,
@@ -197,23 +205,30 @@ pub enum CaptureError {
     /// The file holds no records at all.
     #[error("{}: contains no records", Origin(.path))]
     Empty { path: Option<PathBuf> },
-    /// The LZ4 frame ends without its end mark (and content checksum): the
-    /// file was cut short at a block boundary.
-    #[error("{}: the LZ4 frame ends after record {record} without its end mark: the file was cut short", Origin(.path))]
-    Unterminated { path: Option<PathBuf>, record: u64 },
-    /// Bytes follow the end of the LZ4 frame: garbage appended, or (when
-    /// they start with the LZ4 magic number) another capture concatenated.
-    #[error("{}: {bytes} byte(s) after the end of the capture's LZ4 frame, after record {record}{}; \
-             a capture is exactly one LZ4 frame",
-            Origin(.path), if *.lz4_frame { " (another LZ4 frame: two captures concatenated?)" } else { "" })]
+    /// An LZ4 frame ends without its end mark (and content checksum), or
+    /// a skippable frame without its announced bytes: the file was cut
+    /// short (or is in the legacy LZ4 format, which has no end mark).
+    #[error("{}: LZ4 frame {frame} (from 1) ends after record {record} without its end mark: \
+             the file was cut short", Origin(.path))]
+    Unterminated {
+        path: Option<PathBuf>,
+        record: u64,
+        /// The frame cut short, counted from 1.
+        frame: u64,
+    },
+    /// Bytes after a complete LZ4 frame that do not begin another: garbage
+    /// appended, or between frames.
+    #[error("{}: {bytes} byte(s) after the end of LZ4 frame {frame} (after record {record}) \
+             that are not an LZ4 frame; a capture is a sequence of complete LZ4 frames", Origin(.path))]
     TrailingBytes {
         path: Option<PathBuf>,
-        /// Records read before the end of the frame.
+        /// Records read before the garbage.
         record: u64,
-        /// Bytes after the frame.
+        /// Bytes from the garbage to the end of the file.
         bytes: u64,
-        /// Whether they begin with the LZ4 magic number.
-        lz4_frame: bool,
+        /// The complete frames before it (counted from 1: the last one's
+        /// number).
+        frame: u64,
     },
     /// The records are well formed but what they hold shows damage, by the
     /// rule in the module docs; `stats` has every count.
@@ -297,25 +312,64 @@ fn read_full<R: Read>(reader: &mut R, buf: &mut [u8]) -> io::Result<usize> {
     Ok(filled)
 }
 
-/// The compressed stream under the decoder: remembers the frame
-/// descriptor's FLG byte as it goes by.
+/// The compressed stream under the decoder: counts what the decoder has
+/// taken, hands back bytes the reader looked at ahead (the magic number of
+/// the next frame), and notes each frame's FLG byte as it goes by.
 struct Tap<R> {
     inner: R,
+    /// Compressed bytes handed to the decoder so far.
     consumed: u64,
-    flg: Option<u8>,
+    /// Bytes read ahead of the decoder, handed to it first.
+    back: [u8; 4],
+    back_len: u8,
+    back_pos: u8,
+    /// Where the current frame's FLG byte is (its fifth byte), until it has
+    /// gone by.
+    flg_at: Option<u64>,
+    /// LZ4 frames begun, and whether every one so far announces a content
+    /// checksum.
+    frames: u64,
+    all_checksummed: bool,
     /// The decoder met the end of the stream. It treats that as the end of
-    /// the frame even without the frame's end mark (a file cut at a block
+    /// a frame even without the frame's end mark (a file cut at a block
     /// boundary), so the reader checks it.
     eof: bool,
 }
 
+impl<R: Read> Tap<R> {
+    fn new(inner: R) -> Tap<R> {
+        Tap { inner, consumed: 0, back: [0; 4], back_len: 0, back_pos: 0, flg_at: None, frames: 0, all_checksummed: true, eof: false }
+    }
+
+    /// Hands `bytes` (read ahead from `inner`) to the decoder before
+    /// anything else; a frame starts with them when `frame`.
+    fn push_back(&mut self, bytes: &[u8], frame: bool) {
+        self.back[..bytes.len()].copy_from_slice(bytes);
+        self.back_len = bytes.len() as u8;
+        self.back_pos = 0;
+        if frame {
+            self.frames += 1;
+            self.flg_at = Some(self.consumed + 4);
+        }
+    }
+}
+
 impl<R: Read> Read for Tap<R> {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        self.eof |= n == 0 && !buf.is_empty();
-        // Byte 4 of the stream is the first frame's FLG byte.
-        if self.consumed <= 4 && self.consumed + n as u64 > 4 && self.flg.is_none() {
-            self.flg = Some(buf[(4 - self.consumed) as usize]);
+        let n = if self.back_pos < self.back_len {
+            let n = usize::from(self.back_len - self.back_pos).min(buf.len());
+            let from = usize::from(self.back_pos);
+            buf[..n].copy_from_slice(&self.back[from..from + n]);
+            self.back_pos += n as u8;
+            n
+        } else {
+            let n = self.inner.read(buf)?;
+            self.eof |= n == 0 && !buf.is_empty();
+            n
+        };
+        if let Some(at) = self.flg_at.filter(|&at| at >= self.consumed && at < self.consumed + n as u64) {
+            self.all_checksummed &= buf[(at - self.consumed) as usize] & LZ4_FLG_CONTENT_CHECKSUM != 0;
+            self.flg_at = None;
         }
         self.consumed += n as u64;
         Ok(n)
@@ -324,9 +378,9 @@ impl<R: Read> Read for Tap<R> {
 
 /// Streams the records of a capture. Yields `Err` once and then ends if the
 /// content is malformed, except for a record of the wrong length, which is
-/// skipped (its length field says how far) so reading can go on. Bytes after
-/// the LZ4 frame are an error ([`CaptureError::TrailingBytes`]) after the
-/// last record.
+/// skipped (its length field says how far) so reading can go on. Bytes
+/// after a frame that begin no other are an error
+/// ([`CaptureError::TrailingBytes`]) after the last record before them.
 pub struct CaptureReader<R: Read> {
     decoder: FrameDecoder<Tap<R>>,
     path: Option<PathBuf>,
@@ -339,9 +393,15 @@ pub struct CaptureReader<R: Read> {
     /// decoder's: the bytes and how many have been handed out.
     ahead: Vec<u8>,
     ahead_pos: usize,
-    /// The decoder has reported the end of the content once: it is not
-    /// asked again (it would look for a second frame).
+    /// Whether the first frame has been looked for.
+    started: bool,
+    /// The last frame has ended and nothing follows: the decoder is not
+    /// asked again.
     content_ended: bool,
+    /// What ended the content early (bytes that begin no frame, a frame cut
+    /// short), found when the content read ahead reached it: given once
+    /// the records before it have been read.
+    boundary_error: Option<CaptureError>,
 }
 
 impl CaptureReader<BufReader<File>> {
@@ -357,9 +417,8 @@ impl CaptureReader<BufReader<File>> {
 impl<R: Read> CaptureReader<R> {
     /// Reads a capture from an LZ4-compressed stream.
     pub fn new(reader: R) -> Self {
-        let tap = Tap { inner: reader, consumed: 0, flg: None, eof: false };
         CaptureReader {
-            decoder: FrameDecoder::new(tap),
+            decoder: FrameDecoder::new(Tap::new(reader)),
             path: None,
             record: 0,
             offset: 0,
@@ -367,7 +426,9 @@ impl<R: Read> CaptureReader<R> {
             layout: None,
             ahead: Vec::new(),
             ahead_pos: 0,
+            started: false,
             content_ended: false,
+            boundary_error: None,
         }
     }
 
@@ -387,33 +448,73 @@ impl<R: Read> CaptureReader<R> {
         self.offset
     }
 
-    /// Whether the LZ4 frame announces a content checksum (known once the
-    /// first record has been read). The decoder verifies it at the frame's
-    /// end: a capture read to its end without error matched it.
+    /// Whether every LZ4 frame read so far announces a content checksum
+    /// (known once the first record has been read). The decoder verifies
+    /// each at its frame's end: a capture read to its end without error
+    /// matched them all.
     pub fn has_content_checksum(&self) -> bool {
-        self.decoder.get_ref().flg.is_some_and(|f| f & LZ4_FLG_CONTENT_CHECKSUM != 0)
+        let tap = self.decoder.get_ref();
+        tap.frames > 0 && tap.flg_at.is_none() && tap.all_checksummed
     }
 
-    /// At the end of the LZ4 frame: anything left in the stream is an error.
-    fn check_trailing(&mut self) -> Result<(), CaptureError> {
-        let tap = self.decoder.get_ref();
-        if tap.eof && tap.consumed > 0 {
-            return Err(CaptureError::Unterminated { path: self.path.clone(), record: self.record });
+    /// LZ4 frames begun so far.
+    pub fn lz4_frames(&self) -> u64 {
+        self.decoder.get_ref().frames
+    }
+
+    /// Where the decoder stopped (the end of a frame, or of the input):
+    /// finds the next frame and hands its magic number back to the
+    /// decoder, skipping whole skippable frames; at the end of the input
+    /// the content ends. A frame cut short, or bytes that begin no frame,
+    /// are errors. Before the first frame, bytes that begin none are left
+    /// to the decoder, whose error says what they are.
+    fn next_frame(&mut self) -> Result<(), CaptureError> {
+        let first = !self.started;
+        self.started = true;
+        if !first && self.decoder.get_ref().eof {
+            let tap = self.decoder.get_ref();
+            return Err(CaptureError::Unterminated { path: self.path.clone(), record: self.record, frame: tap.frames });
         }
-        let tap = self.decoder.get_mut();
-        let mut head = [0u8; 4];
-        let got = read_full(&mut tap.inner, &mut head).map_err(|e| self.read_error(e))?;
-        if got == 0 {
-            return Ok(());
+        loop {
+            let mut head = [0u8; 4];
+            let got = read_full(&mut self.decoder.get_mut().inner, &mut head).map_err(|e| self.read_error(e))?;
+            let magic = u32::from_le_bytes(head);
+            if got == 0 {
+                self.content_ended = true;
+                return Ok(());
+            } else if got == 4 && head == LZ4_MAGIC {
+                self.decoder.get_mut().push_back(&head, true);
+                return Ok(());
+            } else if got == 4 && magic & !0xF == LZ4_SKIPPABLE_MAGIC {
+                self.skip_skippable()?;
+            } else if first {
+                self.decoder.get_mut().push_back(&head[..got], false);
+                return Ok(());
+            } else {
+                let tap = self.decoder.get_mut();
+                let rest = io::copy(&mut tap.inner, &mut io::sink()).map_err(|e| self.read_error(e))?;
+                let frame = self.decoder.get_ref().frames;
+                return Err(CaptureError::TrailingBytes { path: self.path.clone(), record: self.record, bytes: got as u64 + rest, frame });
+            }
         }
+    }
+
+    /// Skips a skippable frame whose magic number has been read: its
+    /// length (u32, little-endian) and that many bytes.
+    fn skip_skippable(&mut self) -> Result<(), CaptureError> {
+        let cut = |r: &Self| CaptureError::Unterminated { path: r.path.clone(), record: r.record, frame: r.decoder.get_ref().frames + 1 };
         let tap = self.decoder.get_mut();
-        let rest = io::copy(&mut tap.inner, &mut io::sink()).map_err(|e| self.read_error(e))?;
-        Err(CaptureError::TrailingBytes {
-            path: self.path.clone(),
-            record: self.record,
-            bytes: got as u64 + rest,
-            lz4_frame: got == 4 && head == LZ4_MAGIC,
-        })
+        let mut len = [0u8; 4];
+        if read_full(&mut tap.inner, &mut len).map_err(|e| self.read_error(e))? < 4 {
+            return Err(cut(self));
+        }
+        let want = u64::from(u32::from_le_bytes(len));
+        let tap = self.decoder.get_mut();
+        let skipped = io::copy(&mut (&mut tap.inner).take(want), &mut io::sink()).map_err(|e| self.read_error(e))?;
+        if skipped < want {
+            return Err(cut(self));
+        }
+        Ok(())
     }
 
     fn read_error(&self, e: io::Error) -> CaptureError {
@@ -433,22 +534,50 @@ impl<R: Read> CaptureReader<R> {
         self.layout
     }
 
+    /// Fills `buf` from the decompressed content of the frames in turn (one
+    /// stream across their boundaries); fewer bytes only at the end of the
+    /// last frame.
+    fn read_decoded(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
+        if !self.started {
+            self.next_frame()?;
+        }
+        let mut filled = 0;
+        while filled < buf.len() && !self.content_ended {
+            filled += read_full(&mut self.decoder, &mut buf[filled..]).map_err(|e| self.read_error(e))?;
+            if filled < buf.len() {
+                if let Err(e) = self.next_frame() {
+                    self.boundary_error = Some(e);
+                    self.content_ended = true;
+                }
+            }
+        }
+        Ok(filled)
+    }
+
     /// Fills `buf` from the content: first what was read ahead, then the
     /// decoder.
-    fn read_content(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+    fn read_content(&mut self, buf: &mut [u8]) -> Result<usize, CaptureError> {
         let from_ahead = (self.ahead.len() - self.ahead_pos).min(buf.len());
         buf[..from_ahead].copy_from_slice(&self.ahead[self.ahead_pos..self.ahead_pos + from_ahead]);
         self.ahead_pos += from_ahead;
-        if from_ahead == buf.len() || self.content_ended {
+        if from_ahead == buf.len() {
             return Ok(from_ahead);
         }
-        let got = read_full(&mut self.decoder, &mut buf[from_ahead..])?;
-        self.content_ended = from_ahead + got < buf.len();
-        Ok(from_ahead + got)
+        let got = from_ahead + self.read_decoded(&mut buf[from_ahead..])?;
+        if got < buf.len() {
+            if let Some(mut e) = self.boundary_error.take() {
+                // Counted now: the records before it have all been read.
+                if let CaptureError::TrailingBytes { record, .. } | CaptureError::Unterminated { record, .. } = &mut e {
+                    *record = self.record;
+                }
+                return Err(e);
+            }
+        }
+        Ok(got)
     }
 
     /// Skips up to `n` bytes of content; returns how many there were.
-    fn skip_content(&mut self, n: usize) -> io::Result<usize> {
+    fn skip_content(&mut self, n: usize) -> Result<usize, CaptureError> {
         let mut scratch = [0u8; 512];
         let mut skipped = 0;
         while skipped < n {
@@ -464,10 +593,9 @@ impl<R: Read> CaptureReader<R> {
 
     /// Reads the first two records' worth of content ahead and decides the
     /// layout (see the module docs).
-    fn detect_layout(&mut self) -> io::Result<RecordLayout> {
+    fn detect_layout(&mut self) -> Result<RecordLayout, CaptureError> {
         let mut ahead = vec![0u8; 2 * (DELAY_RECORD_HEADER_LEN + FRAME_LEN)];
-        let got = read_full(&mut self.decoder, &mut ahead)?;
-        self.content_ended = got < ahead.len();
+        let got = self.read_decoded(&mut ahead)?;
         ahead.truncate(got);
         let layout = guess_layout(&ahead);
         self.ahead = ahead;
@@ -480,16 +608,15 @@ impl<R: Read> CaptureReader<R> {
         let layout = match self.layout {
             Some(l) => l,
             None => {
-                let l = self.detect_layout().map_err(|e| self.read_error(e))?;
+                let l = self.detect_layout()?;
                 self.layout = Some(l);
                 l
             }
         };
         let header_len = layout.header_len();
         let mut header = [0u8; DELAY_RECORD_HEADER_LEN];
-        let got = self.read_content(&mut header[..header_len]).map_err(|e| self.read_error(e))?;
+        let got = self.read_content(&mut header[..header_len])?;
         if got == 0 {
-            self.check_trailing()?;
             return Ok(None);
         }
         if got < header_len {
@@ -505,7 +632,7 @@ impl<R: Read> CaptureReader<R> {
 
         if length as usize != FRAME_LEN {
             // Skip the payload so a reader may carry on past this record.
-            let skipped = self.skip_content(length as usize).map_err(|e| self.read_error(e))?;
+            let skipped = self.skip_content(length as usize)?;
             if skipped < length as usize {
                 return Err(self.truncated(needed, header_len + skipped));
             }
@@ -522,7 +649,7 @@ impl<R: Read> CaptureReader<R> {
         }
 
         let mut payload = [0u8; FRAME_LEN];
-        let got = self.read_content(&mut payload).map_err(|e| self.read_error(e))?;
+        let got = self.read_content(&mut payload)?;
         if got < FRAME_LEN {
             return Err(self.truncated(needed, header_len + got));
         }
@@ -581,10 +708,14 @@ impl<R: Read> Iterator for CaptureReader<R> {
     }
 }
 
-/// Writes a capture: records into one LZ4 frame. Call [`CaptureWriter::finish`]
-/// to close the frame; a writer dropped without it leaves a truncated file.
+/// Writes a capture: records into an LZ4 frame, and into a new one after
+/// each [`CaptureWriter::end_frame`]. Call [`CaptureWriter::finish`] to
+/// close the last frame; a writer dropped without it leaves a truncated
+/// file.
 pub struct CaptureWriter<W: Write> {
-    encoder: FrameEncoder<W>,
+    /// Always present but while [`CaptureWriter::end_frame`] swaps frames
+    /// (and after it failed).
+    encoder: Option<FrameEncoder<W>>,
     path: Option<PathBuf>,
     record: u64,
 }
@@ -602,8 +733,32 @@ impl CaptureWriter<BufWriter<File>> {
 impl<W: Write> CaptureWriter<W> {
     /// Writes a capture into a stream, with the LZ4 content checksum.
     pub fn new(writer: W) -> Self {
-        let info = lz4_flex::frame::FrameInfo::new().content_checksum(true);
-        CaptureWriter { encoder: FrameEncoder::with_frame_info(info, writer), path: None, record: 0 }
+        CaptureWriter { encoder: Some(Self::frame(writer)), path: None, record: 0 }
+    }
+
+    fn frame(writer: W) -> FrameEncoder<W> {
+        FrameEncoder::with_frame_info(lz4_flex::frame::FrameInfo::new().content_checksum(true), writer)
+    }
+
+    /// Closes the current LZ4 frame (its end mark and content checksum),
+    /// flushes it to the stream, and starts the next: what is written up to
+    /// here is a complete capture on its own, as a recorder that flushes
+    /// every batch of records leaves it.
+    pub fn end_frame(&mut self) -> Result<(), CaptureError> {
+        let encoder = self.encoder.take().ok_or_else(|| self.write_error(io::Error::other("an earlier end_frame failed")))?;
+        let mut inner = encoder.finish().map_err(|e| self.write_error(e.into()))?;
+        inner.flush().map_err(|e| self.write_error(e))?;
+        self.encoder = Some(Self::frame(inner));
+        Ok(())
+    }
+
+    /// Writes `bytes` into the current frame.
+    fn put(&mut self, bytes: &[u8]) -> Result<(), CaptureError> {
+        let written = match self.encoder.as_mut() {
+            Some(e) => e.write_all(bytes),
+            None => Err(io::Error::other("an earlier end_frame failed")),
+        };
+        written.map_err(|e| self.write_error(e))
     }
 
     /// Names the stream's file in error messages.
@@ -628,7 +783,7 @@ impl<W: Write> CaptureWriter<W> {
         bytes[8..10].copy_from_slice(&(FRAME_LEN as u16).to_be_bytes());
         bytes[10] = record.dropped;
         bytes[RECORD_HEADER_LEN..].copy_from_slice(&record.payload);
-        self.encoder.write_all(&bytes).map_err(|e| self.write_error(e))?;
+        self.put(&bytes)?;
         self.record += 1;
         Ok(())
     }
@@ -651,8 +806,8 @@ impl<W: Write> CaptureWriter<W> {
         header[0..8].copy_from_slice(&time_ns.to_be_bytes());
         header[8..10].copy_from_slice(&length.to_be_bytes());
         header[10] = dropped;
-        self.encoder.write_all(&header).map_err(|e| self.write_error(e))?;
-        self.encoder.write_all(payload).map_err(|e| self.write_error(e))?;
+        self.put(&header)?;
+        self.put(payload)?;
         self.record += 1;
         Ok(())
     }
@@ -665,19 +820,19 @@ impl<W: Write> CaptureWriter<W> {
         bytes[8..10].copy_from_slice(&(FRAME_LEN as u16).to_be_bytes());
         bytes[10..14].copy_from_slice(&delay_s.to_be_bytes());
         bytes[DELAY_RECORD_HEADER_LEN..].copy_from_slice(payload);
-        self.encoder.write_all(&bytes).map_err(|e| self.write_error(e))?;
+        self.put(&bytes)?;
         self.record += 1;
         Ok(())
     }
 
-    /// Closes the LZ4 frame, flushes, and returns the underlying writer.
+    /// Closes the last LZ4 frame, flushes, and returns the underlying writer.
     pub fn finish(self) -> Result<W, CaptureError> {
         let path = self.path;
         let record = self.record;
-        let mut inner = self
+        let encoder = self
             .encoder
-            .finish()
-            .map_err(|e| CaptureError::Write { path: path.clone(), record, source: e.into() })?;
+            .ok_or_else(|| CaptureError::Write { path: path.clone(), record, source: io::Error::other("an earlier end_frame failed") })?;
+        let mut inner = encoder.finish().map_err(|e| CaptureError::Write { path: path.clone(), record, source: e.into() })?;
         inner.flush().map_err(|source| CaptureError::Write { path, record, source })?;
         Ok(inner)
     }
@@ -713,10 +868,14 @@ pub struct CaptureStats {
     /// Gaps forwards longer than [`MAX_GAP_NS`].
     #[serde(default)]
     pub gaps_over_limit: u64,
-    /// Whether the file carries an LZ4 content checksum (set by [`load`]
-    /// and [`parse`]; a loaded capture matched it).
+    /// Whether every LZ4 frame of the file carries a content checksum (set
+    /// by [`load`] and [`parse`]; a loaded capture matched them).
     #[serde(default)]
     pub content_checksum: bool,
+    /// The LZ4 frames the file holds (set by [`load`] and [`parse`]; a
+    /// recorder that flushes every batch writes one per batch).
+    #[serde(default)]
+    pub lz4_frames: u64,
 }
 
 impl CaptureStats {
@@ -835,7 +994,8 @@ pub struct Capture {
 }
 
 /// Reads a whole capture file and checks it by the rule in the module docs:
-/// any malformed record, bytes after the LZ4 frame, a file without records,
+/// any malformed record or LZ4 frame, bytes after a frame that begin no
+/// other, a file without records,
 /// or damage ([`CaptureStats::refusal`]) is an error.
 pub fn load(path: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     let path = path.as_ref();
@@ -859,6 +1019,7 @@ fn read_checked<R: Read>(mut reader: CaptureReader<R>, path: Option<&Path>) -> R
         return Err(CaptureError::Empty { path: path.map(Path::to_path_buf) });
     }
     stats.content_checksum = reader.has_content_checksum();
+    stats.lz4_frames = reader.lz4_frames();
     if let Some(why) = stats.refusal() {
         return Err(CaptureError::Damaged { path: path.map(Path::to_path_buf), why, stats: Box::new(stats) });
     }
@@ -887,6 +1048,13 @@ mod tests {
         let mut enc = FrameEncoder::new(Vec::new());
         enc.write_all(content).unwrap();
         enc.finish().unwrap()
+    }
+
+    #[test]
+    fn a_replayed_delay_capture_names_the_layout_read() {
+        // The replay stage (in the core, which does not read captures)
+        // describes its recording in this reader's words.
+        assert_eq!(crate::model::RecordingKind::DelayCapture.layout(), RecordLayout::Delay.describe());
     }
 
     #[test]
@@ -1040,6 +1208,110 @@ mod tests {
         let err = load(&missing).unwrap_err();
         assert!(matches!(err, CaptureError::Open { .. }) && err.to_string().contains("missing.bin"));
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `n` records written in frames of `batch` records, each frame closed
+    /// with its end mark and content checksum.
+    fn batched(n: u32, batch: u32) -> (Vec<CaptureRecord>, Vec<u8>) {
+        let records: Vec<_> = (0..n).map(|i| CaptureRecord::new(1_000 + u64::from(i) * 2_000_000, &frame(i, 1))).collect();
+        let mut w = CaptureWriter::new(Vec::new());
+        for (i, r) in records.iter().enumerate() {
+            if i > 0 && i as u32 % batch == 0 {
+                w.end_frame().unwrap();
+            }
+            w.write_record(r).unwrap();
+        }
+        (records, w.finish().unwrap())
+    }
+
+    #[test]
+    fn a_capture_written_in_batches_is_one_stream_of_records() {
+        // 2 500 records in frames of 1 000 (and of 7, and of 1: records
+        // never span a frame here, but may below): every record, in order.
+        for batch in [1_000, 7, 1] {
+            let (records, bytes) = batched(2_500, batch);
+            let cap = parse(&bytes).unwrap();
+            assert_eq!(cap.records, records, "batches of {batch}");
+            assert_eq!(cap.stats.lz4_frames, u64::from(2_500u32.div_ceil(batch)));
+            assert!(cap.stats.content_checksum);
+            // `lz4 -d` decodes the same bytes as one stream; the LZ4
+            // decoder stops at each frame's end and goes on when asked again.
+            let (mut content, mut decoder) = (Vec::new(), FrameDecoder::new(&bytes[..]));
+            while decoder.read_to_end(&mut content).unwrap() > 0 {}
+            assert_eq!(content.len(), 2_500 * RECORD_LEN);
+        }
+        // A record cut across two frames, and an empty frame between: the
+        // content is one stream.
+        let (records, _) = batched(3, 3);
+        let mut content = Vec::new();
+        for r in &records {
+            let mut w = CaptureWriter::new(Vec::new());
+            w.write_record(r).unwrap();
+            let one = w.finish().unwrap();
+            FrameDecoder::new(&one[..]).read_to_end(&mut content).unwrap();
+        }
+        let mut bytes = lz4(&content[..RECORD_LEN + 50]);
+        bytes.extend(lz4(&[]));
+        bytes.extend(lz4(&content[RECORD_LEN + 50..]));
+        let cap = parse(&bytes).unwrap();
+        assert_eq!(cap.records, records);
+        assert_eq!(cap.stats.lz4_frames, 3);
+        assert!(!cap.stats.content_checksum, "frames without a content checksum");
+    }
+
+    #[test]
+    fn only_complete_frames_are_a_capture() {
+        let (_, bytes) = batched(30, 10);
+        let frame_len = batched(10, 10).1.len();
+        // Garbage between two frames, and after the last.
+        let mut between = bytes[..frame_len].to_vec();
+        between.extend_from_slice(b"garbage!");
+        between.extend_from_slice(&bytes[frame_len..]);
+        match parse(&between) {
+            Err(e @ CaptureError::TrailingBytes { record: 10, frame: 1, .. }) => {
+                assert!(e.to_string().contains("after the end of LZ4 frame 1 (after record 10)"), "{e}")
+            }
+            other => panic!("expected TrailingBytes, got {other:?}"),
+        }
+        let mut after = bytes.clone();
+        after.extend_from_slice(&[0, 1, 2]);
+        assert!(matches!(parse(&after), Err(CaptureError::TrailingBytes { record: 30, frame: 3, bytes: 3, .. })));
+        // The first frame cut short (at its end mark), the others whole: the
+        // second frame's magic number is not the first's end mark.
+        let mut cut = bytes[..frame_len - 8].to_vec();
+        cut.extend_from_slice(&bytes[frame_len..]);
+        assert!(parse(&cut).is_err());
+        // The last frame cut short at a block boundary (its end mark gone),
+        // and a lone magic number after a whole frame.
+        assert!(matches!(parse(&bytes[..bytes.len() - 8]), Err(CaptureError::Unterminated { record: 30, frame: 3, .. })));
+        let mut magic = bytes[..frame_len].to_vec();
+        magic.extend_from_slice(&LZ4_MAGIC);
+        assert!(matches!(parse(&magic), Err(CaptureError::Unterminated { record: 10, frame: 2, .. })));
+        // A bad content checksum in the middle frame.
+        let mut bad = bytes.clone();
+        bad[2 * frame_len - 1] ^= 1;
+        assert!(matches!(parse(&bad), Err(CaptureError::Lz4 { .. })), "{:?}", parse(&bad).map(|c| c.stats));
+    }
+
+    #[test]
+    fn skippable_frames_are_skipped_when_whole() {
+        let (records, bytes) = batched(20, 10);
+        let frame_len = batched(10, 10).1.len();
+        let skippable = |len: u32| {
+            let mut s = vec![0x5a, 0x2a, 0x4d, 0x18];
+            s.extend_from_slice(&len.to_le_bytes());
+            s.extend(std::iter::repeat_n(7u8, len as usize));
+            s
+        };
+        let mut with = skippable(5);
+        with.extend_from_slice(&bytes[..frame_len]);
+        with.extend(skippable(0));
+        with.extend_from_slice(&bytes[frame_len..]);
+        with.extend(skippable(3));
+        assert_eq!(parse(&with).unwrap().records, records);
+        let mut cut = bytes.clone();
+        cut.extend_from_slice(&skippable(9)[..12]);
+        assert!(matches!(parse(&cut), Err(CaptureError::Unterminated { record: 20, .. })));
     }
 
     #[test]

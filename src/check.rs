@@ -7,8 +7,11 @@
 //! - `loss_run_mean`: mean length of maximal runs of consecutive dropped
 //!   frames, in ingress order.
 //! - `delay_ms`: the injected delay of delivered frames (release − ingress);
-//!   mean and max exact, quantiles from an HDR histogram (3 significant
-//!   digits).
+//!   mean, max and quantiles exact (the quantile `q` of `n` delays is the
+//!   one of rank `max(1, ⌈q·n⌉)`). Beyond [`crate::stats::EXACT_VALUES_MAX`]
+//!   delivered frames the quantiles come from an HDR histogram over every
+//!   `u64`, and `delay_ms.error_fraction_max` says how far above the exact
+//!   value they may be.
 //! - `reordered_fraction`: delivered frames released after a frame that
 //!   entered later (RFC 4737's reordered packets), over delivered frames.
 //! - `outages`: windows opened by `outage` stages, and their mean length.
@@ -22,12 +25,17 @@
 //!   catches or passes, found by applying the flips to a synthetic sealed
 //!   frame ([`synthetic_frame`]) with [`crate::frame::checksum_catches`]
 //!   (only when the scenario corrupts).
+//! - `links`: each link stage's frames: admitted, dropped for its queue,
+//!   and of the admitted those dropped after it (by a later stage or the
+//!   release queue), so the section agrees with the frames' fates; its
+//!   time-at-stage percentiles are HDR (`error_fraction_max`).
+//! - `stages[].recording`: what a `replay` stage replays, and in which
+//!   layout it was read.
 
 use crate::injector::{Entered, Fate, Injector};
 use crate::scenario::Scenario;
 use crate::scheduler::Released;
-use crate::stats::BatchMeans;
-use hdrhistogram::Histogram;
+use crate::stats::{BatchMeans, Quantiles, HDR_ERROR_FRACTION_MAX};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -106,6 +114,21 @@ pub struct DelayStats {
     pub p50: f64,
     pub p99: f64,
     pub max: f64,
+    /// Absent when `p50` and `p99` are exact; else (a check of more
+    /// delivered frames than are kept) the most each lies above the exact
+    /// value, as a fraction of it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_fraction_max: Option<f64>,
+}
+
+impl DelayStats {
+    /// The precision of `p50` and `p99` in words, for a text report.
+    pub fn precision(&self) -> String {
+        match self.error_fraction_max {
+            None => "exact".into(),
+            Some(f) => format!("p50, p99 each at most {:.3} % high", f * 100.0),
+        }
+    }
 }
 
 /// Corrupted frames and what the ITP checksum makes of them.
@@ -202,6 +225,43 @@ pub struct StageReport {
     pub duplicated: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub duplicate_rate_model: Option<f64>,
+    /// What the stage replays and the layout it was read in (replay
+    /// stages).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recording: Option<RecordingReport>,
+}
+
+/// A replay stage's recording (docs/spec.md §3.14).
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct RecordingReport {
+    /// The file, as the scenario names it.
+    pub file: String,
+    /// `trace.csv` or `delay capture`.
+    pub kind: String,
+    /// The layout the fates were read from: a trace's columns, or a
+    /// capture's records (`time | length | delay (s) | frame`).
+    pub layout: String,
+    /// Fates recorded, and times the recording ran out and started again.
+    pub fates: u64,
+    pub wraps: u64,
+}
+
+impl RecordingReport {
+    fn of(m: &crate::model::Replay) -> RecordingReport {
+        let r = m.recording();
+        RecordingReport {
+            file: m.file().to_string(),
+            kind: r.kind().name().to_string(),
+            layout: r.kind().layout().to_string(),
+            fates: r.len() as u64,
+            wraps: m.wraps(),
+        }
+    }
+
+    /// One line for a text report.
+    pub fn text(&self) -> String {
+        format!("replays `{}`: {} ({}), {} fates, started again {} times", self.file, self.kind, self.layout, self.fates, self.wraps)
+    }
 }
 
 /// A slot stage's slots.
@@ -267,6 +327,11 @@ pub struct LinkReport {
     /// and the packets they went as.
     pub frames: u64,
     pub frames_dropped: u64,
+    /// Of the frames admitted, those dropped after the link (by a later
+    /// stage, or because the release queue was full): the link passed on
+    /// `frames − frames_dropped_after`.
+    #[serde(default)]
+    pub frames_dropped_after: u64,
     pub packets: u64,
     pub packets_dropped: u64,
     /// Wire bytes admitted.
@@ -290,13 +355,35 @@ pub struct LinkReport {
     pub occupancy: Vec<Occupancy>,
 }
 
-/// Percentiles of a link stage's time at the stage, ms.
+impl LinkReport {
+    /// The link's frames in words: admitted, dropped for its queue, dropped
+    /// after it, passed on.
+    pub fn frames_text(&self) -> String {
+        let mut s = format!("{} of {} frames dropped for the queue", self.frames_dropped, self.frames + self.frames_dropped);
+        if self.frames_dropped_after > 0 {
+            s += &format!(
+                "; of the {} admitted, {} dropped after the link (later stage or queue_full), {} passed on",
+                self.frames,
+                self.frames_dropped_after,
+                self.frames - self.frames_dropped_after
+            );
+        }
+        s
+    }
+}
+
+/// Percentiles of a link stage's time at the stage, ms, from an HDR
+/// histogram over every `u64` of ns.
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct LinkDelay {
     pub p50: f64,
     pub p90: f64,
     pub p99: f64,
     pub max: f64,
+    /// The most each figure lies above the exact value, as a fraction of
+    /// it (`null` in reports written before it was said).
+    #[serde(default)]
+    pub error_fraction_max: Option<f64>,
 }
 
 /// One second of a link's queue.
@@ -414,6 +501,7 @@ fn link_report(st: &crate::scenario::Stage, p: u16, occupancy: Vec<Occupancy>) -
         model: st.kind().name().to_string(),
         frames: stats.frames,
         frames_dropped: stats.frames_dropped,
+        frames_dropped_after: stats.frames_dropped_after,
         packets: stats.packets,
         packets_dropped: stats.packets_dropped,
         bytes: stats.bytes,
@@ -425,6 +513,7 @@ fn link_report(st: &crate::scenario::Stage, p: u16, occupancy: Vec<Occupancy>) -
             p90: stats.delay_ms_quantile(0.9),
             p99: stats.delay_ms_quantile(0.99),
             max: stats.delay_ns.max() as f64 / 1e6,
+            error_fraction_max: Some(HDR_ERROR_FRACTION_MAX),
         },
         queue_packets_max: stats.queue_packets_max,
         queue_bytes_max: stats.queue_bytes_max,
@@ -452,49 +541,17 @@ pub fn run_observed(
     mut observe: impl FnMut(u64, u64, &Entered),
 ) -> CheckReport {
     let frames = arrivals.len();
-    let corrupts_any = scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt);
+    let mut tally = Tally::new(&scenario, frames);
     let mut links = LinkSampler::new(&scenario, 64);
     let mut inj: Injector<()> = Injector::new(scenario, queue_capacity);
-    let mut batches = BatchMeans::new(frames);
-    let mut delays = Histogram::<u64>::new_with_bounds(1, 24 * 3_600 * 1_000_000_000, 3).expect("static bounds are valid");
-    let mut delay_sum_ns: u128 = 0;
-    let mut delay_max_ns = 0u64;
-    let mut runs = 0u64;
-    let mut in_run = false;
-    let mut depth_max = 0usize;
-    let mut release = ReleaseTally::default();
-    let frame = synthetic_frame();
-    let mut corruption = CorruptionStats { corrupted: 0, caught: 0, passed: 0 };
-
     for i in 0..frames {
         let t = arrivals.at(i);
         while let Some(r) = inj.pop_due(t) {
-            release.record(&r);
+            tally.release.record(&r);
         }
-        let e = inj.ingress_with(t, (), |_, flips| {
-            corruption.corrupted += 1;
-            if crate::frame::checksum_catches(&frame, flips.bits()) {
-                corruption.caught += 1;
-            } else {
-                corruption.passed += 1;
-            }
-        });
+        let e = inj.ingress_with(t, (), |_, flips| tally.corruption.record(&tally.frame, flips.bits()));
         observe(i, t, &e);
-        let dropped = match e.fate {
-            Fate::Scheduled { delay_ns, .. } => {
-                delays.saturating_record(delay_ns);
-                delay_sum_ns += u128::from(delay_ns);
-                delay_max_ns = delay_max_ns.max(delay_ns);
-                false
-            }
-            Fate::Dropped(_) => true,
-        };
-        if dropped && !in_run {
-            runs += 1;
-        }
-        in_run = dropped;
-        batches.record(dropped);
-        depth_max = depth_max.max(inj.held());
+        tally.decided(&e, inj.held());
         if !links.is_empty() {
             links.sample(inj.scenario(), t);
         }
@@ -504,50 +561,128 @@ pub fn run_observed(
     }
     // Drain: every scheduled frame is released in simulated time.
     while let Some(r) = inj.pop_due(u64::MAX) {
-        release.record(&r);
+        tally.release.record(&r);
     }
     progress(frames);
+    tally.report(&inj, &links, arrivals)
+}
 
-    let counts = inj.counts();
-    debug_assert!(counts.balanced() && counts.held == 0);
-    let delivered = counts.released;
-    // Runs of drops are counted over the originals' fates, copies apart.
-    let dropped_total = batches.events();
-    let (loss_rate, loss_rate_ci95) = batches.rate_ci95();
-    let ms = |ns: f64| ns / 1e6;
-    let delay_ms = if delivered > 0 {
-        DelayStats {
-            mean: ms(delay_sum_ns as f64 / delivered as f64),
-            p50: ms(delays.value_at_quantile(0.5) as f64),
-            p99: ms(delays.value_at_quantile(0.99) as f64),
-            max: ms(delay_max_ns as f64),
+/// What [`run_observed`] counts frame by frame, and the report it makes of
+/// it at the end.
+struct Tally {
+    frames: u64,
+    corrupts_any: bool,
+    batches: BatchMeans,
+    delays: Quantiles,
+    delay_sum_ns: u128,
+    delay_max_ns: u64,
+    /// Runs of drops (over the originals' fates), and whether the last
+    /// frame was dropped.
+    runs: u64,
+    in_run: bool,
+    depth_max: usize,
+    release: ReleaseTally,
+    /// The frame flips are applied to, to see what the checksum catches.
+    frame: [u8; crate::frame::FRAME_LEN],
+    corruption: CorruptionStats,
+}
+
+impl CorruptionStats {
+    #[inline]
+    fn record(&mut self, frame: &[u8; crate::frame::FRAME_LEN], bits: &[u16]) {
+        self.corrupted += 1;
+        if crate::frame::checksum_catches(frame, bits) {
+            self.caught += 1;
+        } else {
+            self.passed += 1;
         }
-    } else {
-        DelayStats { mean: 0.0, p50: 0.0, p99: 0.0, max: 0.0 }
-    };
-    let interval_ns = arrivals.mean_interval_ns();
-    let scenario = inj.scenario();
-    let (stages, outages) = stage_reports(scenario, interval_ns);
-    let links = links.reports(scenario);
-    CheckReport {
-        scenario: scenario.name().to_string(),
-        seed: scenario.seed(),
-        frames,
-        rate_hz: if interval_ns > 0.0 { 1e9 / interval_ns } else { 0.0 },
-        delivered,
-        duplicated: counts.duplicated,
-        dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
-        loss_rate,
-        loss_rate_ci95,
-        loss_run_mean: if runs > 0 { dropped_total as f64 / runs as f64 } else { 0.0 },
-        delay_ms,
-        reordered_fraction: if delivered > 0 { release.reordered as f64 / delivered as f64 } else { 0.0 },
-        outages,
-        corruption: corrupts_any.then_some(corruption),
-        queue_capacity: inj.queue_capacity(),
-        queue_depth_max: depth_max,
-        stages,
-        links,
+    }
+}
+
+impl Tally {
+    fn new(scenario: &Scenario, frames: u64) -> Tally {
+        Tally {
+            frames,
+            corrupts_any: scenario.phases().iter().flat_map(|p| p.stages()).any(|s| s.kind() == crate::model::ModelKind::Corrupt),
+            batches: BatchMeans::new(frames),
+            delays: Quantiles::new(frames),
+            delay_sum_ns: 0,
+            delay_max_ns: 0,
+            runs: 0,
+            in_run: false,
+            depth_max: 0,
+            release: ReleaseTally::default(),
+            frame: synthetic_frame(),
+            corruption: CorruptionStats { corrupted: 0, caught: 0, passed: 0 },
+        }
+    }
+
+    /// The original frame's fate, with `held` frames in the queue after it.
+    #[inline]
+    fn decided(&mut self, e: &Entered, held: usize) {
+        let dropped = match e.fate {
+            Fate::Scheduled { delay_ns, .. } => {
+                self.delays.record(delay_ns);
+                self.delay_sum_ns += u128::from(delay_ns);
+                self.delay_max_ns = self.delay_max_ns.max(delay_ns);
+                false
+            }
+            Fate::Dropped(_) => true,
+        };
+        if dropped && !self.in_run {
+            self.runs += 1;
+        }
+        self.in_run = dropped;
+        self.batches.record(dropped);
+        self.depth_max = self.depth_max.max(held);
+    }
+
+    fn delay_ms(&mut self, delivered: u64) -> DelayStats {
+        let ms = |ns: f64| ns / 1e6;
+        if delivered == 0 {
+            return DelayStats { mean: 0.0, p50: 0.0, p99: 0.0, max: 0.0, error_fraction_max: None };
+        }
+        let q = self.delays.quantiles(&[0.5, 0.99]);
+        DelayStats {
+            mean: ms(self.delay_sum_ns as f64 / delivered as f64),
+            p50: ms(q[0] as f64),
+            p99: ms(q[1] as f64),
+            max: ms(self.delay_max_ns as f64),
+            error_fraction_max: self.delays.error_fraction_max(),
+        }
+    }
+
+    fn report(mut self, inj: &Injector<()>, links: &LinkSampler, arrivals: &Arrivals) -> CheckReport {
+        let counts = inj.counts();
+        debug_assert!(counts.balanced() && counts.held == 0);
+        let delivered = counts.released;
+        // Runs of drops are counted over the originals' fates, copies apart.
+        let dropped_total = self.batches.events();
+        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
+        let delay_ms = self.delay_ms(delivered);
+        let interval_ns = arrivals.mean_interval_ns();
+        let scenario = inj.scenario();
+        let (stages, outages) = stage_reports(scenario, interval_ns);
+        CheckReport {
+            scenario: scenario.name().to_string(),
+            seed: scenario.seed(),
+            frames: self.frames,
+            rate_hz: if interval_ns > 0.0 { 1e9 / interval_ns } else { 0.0 },
+            delivered,
+            duplicated: counts.duplicated,
+            dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+            loss_rate,
+            loss_rate_ci95,
+            loss_run_mean: if self.runs > 0 { dropped_total as f64 / self.runs as f64 } else { 0.0 },
+            delay_ms,
+            reordered_fraction: if delivered > 0 { self.release.reordered as f64 / delivered as f64 } else { 0.0 },
+            outages,
+            corruption: self.corrupts_any.then_some(self.corruption),
+            queue_capacity: inj.queue_capacity(),
+            queue_depth_max: self.depth_max,
+            stages,
+            links: links.reports(scenario),
+        }
     }
 }
 
@@ -605,6 +740,10 @@ pub fn stage_reports(scenario: &Scenario, interval_ns: f64) -> (Vec<StageReport>
                 },
                 duplicated: (st.kind() == crate::model::ModelKind::Duplicate).then(|| st.duplicated()),
                 duplicate_rate_model: st.model().duplicate_rate_exact(),
+                recording: match st.model() {
+                    crate::model::AnyModel::Replay(m) => Some(RecordingReport::of(m)),
+                    _ => None,
+                },
             });
         }
     }

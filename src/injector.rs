@@ -263,6 +263,7 @@ impl<T: Copy + Default> Injector<T> {
                     }
                     Err(_) => {
                         self.counts.dropped_queue_full += 1;
+                        self.scenario.dropped_after_pipeline(None);
                         Fate::Dropped(DropCause::QueueFull)
                     }
                 }
@@ -273,7 +274,11 @@ impl<T: Copy + Default> Injector<T> {
         if copies.made() > 0 {
             self.counts.duplicated += copies.made();
             self.counts.dropped_by_stage += copies.dropped();
-            for (&delay_ns, flips) in copies.delays_ns().iter().zip(copies.flips()) {
+            // The copies the queue refused, one bit each (at most
+            // MAX_COPIES = 15), told to the scenario once the copies are
+            // no longer borrowed.
+            let mut refused = 0u16;
+            for (k, (&delay_ns, flips)) in copies.delays_ns().iter().zip(copies.flips()).enumerate() {
                 let mut copy = item;
                 if !flips.is_empty() {
                     apply(&mut copy, flips);
@@ -283,8 +288,15 @@ impl<T: Copy + Default> Injector<T> {
                         scheduled += 1;
                         self.counts.corrupted += u64::from(!flips.is_empty());
                     }
-                    Err(_) => self.counts.dropped_queue_full += 1,
+                    Err(_) => {
+                        self.counts.dropped_queue_full += 1;
+                        refused |= 1 << k;
+                    }
                 }
+            }
+            while refused != 0 {
+                self.scenario.dropped_after_pipeline(Some(refused.trailing_zeros() as usize));
+                refused &= refused - 1;
             }
         }
         Entered { ingress_index, fate, copies: scheduled, corrupted }
@@ -449,7 +461,7 @@ mod tests {
             }
         }
         let mut inj: Injector<Bytes> = Injector::new(sc, 1 << 10);
-        let clean = Bytes(crate::check::synthetic_frame());
+        let clean = Bytes(crate::frame::ItpFrame { sequence: 7, delx: [3, -1], qw: [1.0, 1.0], surgeon_mode: 1, ..Default::default() }.with_checksum().to_bytes());
         let (mut corrupted_seen, mut released) = (0u64, 0u64);
         for i in 0..2_000u64 {
             let e = inj.ingress_with(i, clean, |b, flips| crate::frame::flip_bits(&mut b.0, flips.bits()));

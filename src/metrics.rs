@@ -1,7 +1,11 @@
 //! Latency histograms (HDR) and their summaries, as every report shows them.
 //!
-//! Values are nanoseconds, 1 ns to 60 s, 3 significant digits. Recording
-//! never allocates; a value beyond the range is clamped to it and counted.
+//! Values are nanoseconds, every `u64` (0 ns to 584 years: nothing a run
+//! can measure or a scenario can inject is out of range), 3 significant
+//! digits: each percentile and the maximum is the top of the histogram's
+//! bucket holding it, at most [`ERROR_FRACTION_MAX`] (2^-10, under 0.1 %)
+//! above the exact value and never below; [`Summary`] says so where it is
+//! written. Recording never allocates.
 //! Histograms are saved in HdrHistogram's interval-log format (V2, deflate),
 //! which HdrHistogram's own plotting tools and `hdr-plot` read.
 
@@ -12,8 +16,15 @@ use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
 
-/// Largest value recorded exactly: 60 s.
-pub const MAX_NS: u64 = 60_000_000_000;
+/// Largest value recorded: any `u64` of ns. (Kept for its users: no value
+/// is ever beyond the range.)
+pub const MAX_NS: u64 = u64::MAX;
+
+/// The most a percentile or maximum of a [`LatencyHistogram`] lies above
+/// the exact value, as a fraction of it: with 3 significant digits
+/// HdrHistogram's buckets are at most 2^-10 of their values wide, and it
+/// reports a bucket's top.
+pub const ERROR_FRACTION_MAX: f64 = crate::stats::HDR_ERROR_FRACTION_MAX;
 
 /// A latency histogram in ns.
 #[derive(Debug, Clone)]
@@ -33,6 +44,9 @@ impl Default for LatencyHistogram {
 
 impl LatencyHistogram {
     pub fn new() -> Self {
+        // The whole u64 range costs about 450 KiB of counts (60 s took
+        // half): a trace link's wait may be days, and a figure must not
+        // be clamped without a word.
         let mut h = Histogram::new_with_bounds(1, MAX_NS, 3).expect("static bounds are valid");
         // Writing every counter once makes the counts resident now rather
         // than page by page on the hot path, as values reach new buckets.
@@ -42,9 +56,7 @@ impl LatencyHistogram {
 
     #[inline]
     pub fn record(&mut self, ns: u64) {
-        if ns > MAX_NS {
-            self.clamped += 1;
-        }
+        // Every u64 is in range: nothing saturates.
         self.h.saturating_record(ns);
     }
 
@@ -97,6 +109,7 @@ impl LatencyHistogram {
             max: self.h.max(),
             clamped: self.clamped,
             negative: self.negative,
+            error_fraction_max: Some(ERROR_FRACTION_MAX),
         }
     }
 
@@ -290,10 +303,17 @@ pub struct Summary {
     pub p999: u64,
     pub p9999: u64,
     pub max: u64,
-    /// Values above the histogram's range (recorded as its maximum).
+    /// Values above the histogram's range (recorded as its maximum): 0
+    /// since the range is every u64.
     pub clamped: u64,
     /// Negative values (recorded as 0).
     pub negative: u64,
+    /// The precision of the percentiles and the maximum: each is at most
+    /// this fraction above the exact value, never below
+    /// ([`ERROR_FRACTION_MAX`]; `null` in files written before it was
+    /// said).
+    #[serde(default)]
+    pub error_fraction_max: Option<f64>,
 }
 
 impl Summary {
@@ -311,18 +331,34 @@ impl Summary {
         })
     }
 
-    /// One line: `p50 1.2 µs  p90 …  max …` in readable units.
+    /// One line: `p50 1.2 µs  p90 …  max …` in readable units, with the
+    /// count and the precision ([`Summary::precision`]).
     pub fn line(&self) -> String {
         format!(
-            "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}  (n={})",
+            "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}  (n={}{})",
             fmt_ns(self.p50),
             fmt_ns(self.p90),
             fmt_ns(self.p99),
             fmt_ns(self.p999),
             fmt_ns(self.p9999),
             fmt_ns(self.max),
-            self.count
+            self.count,
+            self.precision().map(|p| format!("; {p}")).unwrap_or_default()
         )
+    }
+
+    /// The precision in words, for a text report: `each at most 0.1 %
+    /// high` (and what was clamped or negative, if anything was); `None`
+    /// when unknown (a file written before it was said).
+    pub fn precision(&self) -> Option<String> {
+        let mut words = vec![format!("each at most {} high", fmt_fraction(self.error_fraction_max?))];
+        if self.clamped > 0 {
+            words.push(format!("{} values above the range counted at its top", self.clamped));
+        }
+        if self.negative > 0 {
+            words.push(format!("{} negative values counted as 0", self.negative));
+        }
+        Some(words.join(", "))
     }
 }
 
@@ -334,6 +370,13 @@ pub fn fmt_ns(ns: u64) -> String {
         1_000_000..=999_999_999 => format!("{:.3} ms", ns as f64 / 1e6),
         _ => format!("{:.3} s", ns as f64 / 1e9),
     }
+}
+
+/// A fraction as a percentage to two significant digits (`0.098 %`).
+pub fn fmt_fraction(f: f64) -> String {
+    let pct = f * 100.0;
+    let digits = (1 - pct.abs().log10().floor() as i32).max(0) as usize;
+    format!("{pct:.digits$} %")
 }
 
 /// `a − b` at each of `keys` (see [`Summary::get`]; an unknown key is left
@@ -363,6 +406,27 @@ mod tests {
             assert!((got as f64 - want as f64).abs() <= want as f64 * 1e-3, "{got} vs {want}");
         }
         assert!((s.max as f64 - 1e6).abs() <= 1e3);
+    }
+
+    #[test]
+    fn values_of_years_are_recorded_within_the_stated_precision() {
+        // A trace link's frames may wait days or years: nothing clamps.
+        let mut h = LatencyHistogram::new();
+        let year_ns = 31_557_600_000_000_000u64;
+        for k in 1..=1_000u64 {
+            h.record(k * (year_ns / 100));
+        }
+        h.record(u64::MAX);
+        let s = h.summary();
+        assert_eq!(s.clamped, 0);
+        for (got, want) in [(s.p50, 501 * (year_ns / 100)), (s.p99, 991 * (year_ns / 100)), (s.max, u64::MAX)] {
+            assert!(got >= want && (got - want) as f64 <= want as f64 * ERROR_FRACTION_MAX, "{got} vs {want}");
+        }
+        assert_eq!(s.error_fraction_max, Some(ERROR_FRACTION_MAX));
+        assert!(s.line().ends_with("(n=1001; each at most 0.098 % high)"), "{}", s.line());
+        // A summary read from an older file says nothing of its precision.
+        let old: Summary = serde_json::from_str(r#"{"count":1,"mean":1.0,"p50":1,"p90":1,"p99":1,"p999":1,"p9999":1,"max":1,"clamped":0,"negative":0}"#).unwrap();
+        assert_eq!((old.error_fraction_max, old.precision()), (None, None));
     }
 
     #[test]

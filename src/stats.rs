@@ -115,9 +115,142 @@ impl BatchMeans {
     }
 }
 
+/// The most a percentile or maximum read from an HDR histogram of 3
+/// significant digits lies above the exact value, as a fraction of it:
+/// its buckets are at most 2^-10 of their values wide, and it reports a
+/// bucket's top.
+pub const HDR_ERROR_FRACTION_MAX: f64 = 1.0 / 1024.0;
+
+/// The most values [`Quantiles`] keeps to give exact quantiles: 2^25
+/// (256 MiB); beyond them it goes on in an HDR histogram.
+pub const EXACT_VALUES_MAX: usize = 1 << 25;
+
+/// Quantiles of a sample of `u64` values (delays in ns): exact while the
+/// values fit in [`EXACT_VALUES_MAX`], then from an HDR histogram over every
+/// `u64` (3 significant digits), which says so. The quantile `q` of `n`
+/// values is the value of rank `max(1, ⌈q·n⌉)` in increasing order, the
+/// rank HdrHistogram reads too.
+#[derive(Debug, Clone)]
+pub struct Quantiles {
+    values: Vec<u64>,
+    /// The most values kept ([`EXACT_VALUES_MAX`] but in tests).
+    cap: usize,
+    histogram: Option<Box<hdrhistogram::Histogram<u64>>>,
+}
+
+impl Quantiles {
+    /// For about `expected` values (room for them is reserved, up to
+    /// [`EXACT_VALUES_MAX`]).
+    pub fn new(expected: u64) -> Quantiles {
+        Quantiles::with_cap(expected, EXACT_VALUES_MAX)
+    }
+
+    fn with_cap(expected: u64, cap: usize) -> Quantiles {
+        Quantiles { values: Vec::with_capacity(expected.min(cap as u64) as usize), cap, histogram: None }
+    }
+
+    #[inline]
+    pub fn record(&mut self, v: u64) {
+        match &mut self.histogram {
+            Some(h) => h.saturating_record(v),
+            None if self.values.len() < self.cap => self.values.push(v),
+            None => self.spill(v),
+        }
+    }
+
+    /// The values no longer fit: they go into a histogram, and so does
+    /// every value from here on.
+    #[cold]
+    fn spill(&mut self, v: u64) {
+        let mut h = hdrhistogram::Histogram::new_with_bounds(1, u64::MAX, 3).expect("static bounds are valid");
+        for &x in self.values.iter().chain([&v]) {
+            h.saturating_record(x);
+        }
+        self.values = Vec::new();
+        self.histogram = Some(Box::new(h));
+    }
+
+    /// The values recorded.
+    pub fn len(&self) -> u64 {
+        self.histogram.as_ref().map_or(self.values.len() as u64, |h| h.len())
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Whether the quantiles are exact (the values all fitted).
+    pub fn is_exact(&self) -> bool {
+        self.histogram.is_none()
+    }
+
+    /// The quantiles `qs` (each in [0, 1], in increasing order), 0 for no
+    /// values. Reorders the values kept (a selection, not a sort).
+    pub fn quantiles(&mut self, qs: &[f64]) -> Vec<u64> {
+        let n = self.len();
+        if n == 0 {
+            return vec![0; qs.len()];
+        }
+        if let Some(h) = &self.histogram {
+            return qs.iter().map(|&q| h.value_at_quantile(q)).collect();
+        }
+        let mut out = Vec::with_capacity(qs.len());
+        // Each selection leaves the values at or above its rank to its
+        // right: the next (higher) rank is selected there.
+        let mut from = 0usize;
+        for &q in qs {
+            let rank = ((q.clamp(0.0, 1.0) * n as f64).ceil() as u64).clamp(1, n) as usize - 1;
+            let rank = rank.max(from);
+            let (_, v, _) = self.values[from..].select_nth_unstable(rank - from);
+            out.push(*v);
+            from = rank;
+        }
+        out
+    }
+
+    /// The precision of [`Quantiles::quantiles`]: `None` when exact, else
+    /// the most each lies above the exact value, as a fraction of it.
+    pub fn error_fraction_max(&self) -> Option<f64> {
+        (!self.is_exact()).then_some(HDR_ERROR_FRACTION_MAX)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn exact_quantiles_are_the_values_at_their_ranks() {
+        let mut q = Quantiles::new(1000);
+        // 1..=1000 in a scrambled order: the p50 is the 500th, the p99 the
+        // 990th, as HdrHistogram ranks them.
+        for i in 0..1000u64 {
+            q.record((i * 7919) % 1000 + 1);
+        }
+        assert!(q.is_exact() && q.error_fraction_max().is_none());
+        assert_eq!(q.quantiles(&[0.0, 0.5, 0.99, 1.0]), [1, 500, 990, 1000]);
+        let mut one = Quantiles::new(0);
+        one.record(u64::MAX);
+        assert_eq!(one.quantiles(&[0.5, 0.99]), [u64::MAX, u64::MAX]);
+        assert_eq!(Quantiles::new(0).quantiles(&[0.5]), [0]);
+    }
+
+    #[test]
+    fn beyond_the_values_kept_the_quantiles_say_their_precision() {
+        let cap = 100_000usize;
+        let mut q = Quantiles::with_cap(0, cap);
+        for v in 1..=cap as u64 {
+            q.record(v * 1_000_000);
+        }
+        assert!(q.is_exact());
+        q.record(3 * 31_557_600_000_000_000);
+        assert!(!q.is_exact());
+        assert_eq!(q.error_fraction_max(), Some(HDR_ERROR_FRACTION_MAX));
+        assert_eq!(q.len(), cap as u64 + 1);
+        let p50 = q.quantiles(&[0.5])[0];
+        let exact = (cap as u64 + 1).div_ceil(2) * 1_000_000;
+        assert!(p50 >= exact && (p50 - exact) as f64 <= exact as f64 * HDR_ERROR_FRACTION_MAX, "{p50} vs {exact}");
+    }
     use rand::{RngExt, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
 

@@ -1,8 +1,9 @@
 //! Property-based tests of the capture reader (`netfi::capture::parse`, the
-//! same path as `load`): whatever the bytes, reading never panics, and a
-//! damaged capture is classified by the rule in `src/capture.rs`'s docs.
+//! same path as `load`): whatever the bytes, reading never panics, a
+//! damaged capture is classified by the rule in `src/capture.rs`'s docs,
+//! and captures concatenated (a sequence of LZ4 frames) are one capture.
 //!
-//! Each property runs 1,000 cases by default (5,000 in all); set
+//! Each property runs 1,000 cases by default (6,000 in all); set
 //! `PROPTEST_CASES` for a longer run, as in the README.
 
 use lz4_flex::frame::FrameEncoder;
@@ -98,30 +99,50 @@ proptest! {
         }
     }
 
-    /// Garbage after the LZ4 frame is refused and counted.
+    /// Garbage after the last LZ4 frame, or between two, is refused and
+    /// counted (an LZ4 magic number is another frame, not garbage).
     #[test]
-    fn appended_garbage_is_refused(n in 1usize..20, garbage in proptest::collection::vec(any::<u8>(), 1..300)) {
+    fn garbage_after_or_between_frames_is_refused(n in 1usize..20, garbage in proptest::collection::vec(any::<u8>(), 1..300), between in any::<bool>()) {
+        prop_assume!(!garbage.starts_with(&[0x04, 0x22, 0x4d, 0x18]));
+        prop_assume!(!(garbage.len() >= 4 && u32::from_le_bytes([garbage[0], garbage[1], garbage[2], garbage[3]]) & !0xF == 0x184D_2A50));
         let recs = records(n, 5_000_000_000, 7);
         let mut bytes = checksummed(&recs);
         bytes.extend_from_slice(&garbage);
+        if between {
+            bytes.extend_from_slice(&checksummed(&records(3, 5_000_000_000 + n as u64 * 1_000_000, 8)));
+        }
         match capture::parse(&bytes) {
-            Err(CaptureError::TrailingBytes { bytes: b, record, .. }) => {
-                prop_assert_eq!(b, garbage.len() as u64);
+            Err(CaptureError::TrailingBytes { bytes: b, record, frame, .. }) => {
+                prop_assert_eq!(b, (bytes.len() - checksummed(&recs).len()) as u64);
                 prop_assert_eq!(record, n as u64);
+                prop_assert_eq!(frame, 1);
             }
             other => prop_assert!(false, "expected TrailingBytes, got {:?}", other.map(|c| c.stats)),
         }
     }
 
-    /// Two captures concatenated are refused as such, whatever their times.
+    /// Captures concatenated (with or without a content checksum each) are
+    /// one capture: every record of both, in order, when their times
+    /// follow on; refused by the time rule when the second starts more than
+    /// 60 s after, or more than 1 s before, the first ends.
     #[test]
-    fn concatenated_captures_are_refused(a in 1usize..20, b in 1usize..20, t_a in 0u64..1u64 << 62, t_b in 0u64..1u64 << 62, check_b in any::<bool>()) {
-        let mut bytes = checksummed(&records(a, t_a, 1));
+    fn concatenated_captures_are_one_stream(a in 1usize..20, b in 1usize..20, t_a in 0u64..1u64 << 62, step_ns in -2_000_000_000i64..70_000_000_000, check_b in any::<bool>()) {
+        let first = records(a, t_a, 1);
+        let last_a = first[a - 1].time_ns;
+        let t_b = last_a.saturating_add_signed(step_ns);
         let second = records(b, t_b, 2);
+        let mut bytes = checksummed(&first);
         bytes.extend_from_slice(&if check_b { checksummed(&second) } else { unchecksummed(&content(&second)) });
+        let step = t_b as i128 - last_a as i128;
         match capture::parse(&bytes) {
-            Err(CaptureError::TrailingBytes { lz4_frame: true, record, .. }) => prop_assert_eq!(record, a as u64),
-            other => prop_assert!(false, "expected TrailingBytes of an LZ4 frame, got {:?}", other.map(|c| c.stats)),
+            Ok(cap) => {
+                prop_assert!(step >= -1_000_000_000 && step <= 60_000_000_000, "step {} accepted", step);
+                prop_assert_eq!(cap.records, [first, second].concat());
+                prop_assert_eq!(cap.stats.lz4_frames, 2);
+                prop_assert_eq!(cap.stats.content_checksum, check_b);
+            }
+            Err(CaptureError::Damaged { .. }) => prop_assert!(!(-1_000_000_000..=60_000_000_000).contains(&step), "step {} refused", step),
+            Err(e) => prop_assert!(false, "{}", e),
         }
     }
 

@@ -153,3 +153,45 @@ fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
         assert!(String::from_utf8_lossy(&o.stderr).contains("looked in"));
     }
 }
+
+/// What tc cannot take is refused, naming the flag or field and the range
+/// it accepts: a frame rate beyond the physical range (`--rate-hz 1e12`
+/// once wrote `limit 1593117369386`, `1e300` wrote `limit 1000`), a queue
+/// limit beyond tc's 32-bit `limit`, and a slot budget beyond tc's signed
+/// 32-bit fields. Values just inside are accepted.
+#[test]
+fn what_tc_cannot_take_is_refused_with_the_range() {
+    let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    for rate in ["1e12", "1e300", "0", "-5", "NaN", "inf", "0.01"] {
+        let out = netfi(&["export", "netem", "DLM-2", &format!("--rate-hz={rate}")]);
+        assert!(!out.status.success(), "--rate-hz {rate} accepted: {}", String::from_utf8_lossy(&out.stdout));
+        assert!(stderr(&out).contains("expected a frame rate from 0.1 to 1000000 Hz"), "{rate}: {}", stderr(&out));
+    }
+    let d = scratch("limits");
+    let write = |name: &str, text: &str| {
+        let p = d.0.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_owned()
+    };
+    // One hour of delay at 1 MHz holds 3.6·10⁹ packets, 4.5·10⁹ with the
+    // spare: beyond 2^32 − 1.
+    let hour = write("hour.toml", "[[stage]]\nmodel = \"delay\"\nmin_ms = 3600000\n");
+    let out = netfi(&["export", "netem", &hour, "--rate-hz", "1e6"]);
+    assert!(!out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(stderr(&out).contains("--rate-hz 1000000") && stderr(&out).contains("32-bit `limit` takes (at most 4294967295)"), "{}", stderr(&out));
+    let out = netfi(&["export", "netem", &hour, "--rate-hz", "9e5"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("netem limit 4050000001 delay 3600000000us\n"));
+    let slot = write("slot.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 2147483648\n");
+    let out = netfi(&["export", "netem", &slot]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("`packets` 2147483648: tc keeps it in a signed 32-bit field, so netem takes 0 to 2147483647"), "{}", stderr(&out));
+    let bytes = write("bytes.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\nbytes = 2000000000\n");
+    let out = netfi(&["export", "netem", &bytes]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("`bytes` 2000000000") && stderr(&out).contains("netem takes 0 to 2147483647"), "{}", stderr(&out));
+    let ok = write("ok.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 2147483647\nbytes = 1604000000\n");
+    let out = netfi(&["export", "netem", &ok]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("slot 1000us 2000us packets 2147483647 bytes 2147290323"), "{}", String::from_utf8_lossy(&out.stdout));
+}

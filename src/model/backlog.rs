@@ -250,8 +250,15 @@ pub struct LinkStats {
     pub queue_packets_max: u64,
     pub queue_bytes_max: u64,
     /// Each admitted frame's time at the stage (arrival to its last packet's
-    /// departure: queueing and serialization), ns.
+    /// departure: queueing and serialization), ns: every u64, each
+    /// percentile at most [`crate::metrics::ERROR_FRACTION_MAX`] above the
+    /// exact value.
     pub delay_ns: Histogram<u64>,
+    /// Admitted frames that did not go on: dropped after the link, by a
+    /// later stage or because the release queue was full. They crossed the
+    /// link (its bytes, delays and queue count them), but the link passed
+    /// on `frames − frames_dropped_after`.
+    pub frames_dropped_after: u64,
 }
 
 impl Default for LinkStats {
@@ -266,9 +273,11 @@ impl Default for LinkStats {
             last_departure_ns: 0,
             queue_packets_max: 0,
             queue_bytes_max: 0,
-            // Up to one hour at three significant digits: about 300 KiB per
-            // link stage, allocated here, never on a decision.
-            delay_ns: Histogram::new_with_bounds(1, 3_600 * 1_000_000_000, 3).expect("static bounds are valid"),
+            // Every u64 at three significant digits (a trace link's frames
+            // may wait days): about 450 KiB per link stage, allocated here,
+            // never on a decision.
+            delay_ns: Histogram::new_with_bounds(1, u64::MAX, 3).expect("static bounds are valid"),
+            frames_dropped_after: 0,
         }
     }
 }
@@ -293,6 +302,17 @@ impl LinkStats {
         self.first_ns.get_or_insert(t_ns);
         self.frames_dropped += 1;
         self.packets_dropped += packets;
+    }
+
+    /// Records that a frame this link admitted was dropped after it.
+    #[inline]
+    pub fn dropped_after(&mut self) {
+        self.frames_dropped_after += 1;
+    }
+
+    /// Frames the link admitted that went on (not dropped after it).
+    pub fn frames_passed(&self) -> u64 {
+        self.frames - self.frames_dropped_after
     }
 
     /// The `q`-quantile of the frames' time at the stage, ms.

@@ -72,13 +72,15 @@ impl Schedule {
             if s.is_empty() {
                 return Err(err(line, "blank line: every line is one time in ms".into()));
             }
-            let v: u64 = s.parse().map_err(|_| err(line, format!("`{s}` is not a time: expected a whole number of ms")))?;
+            // The line itself is not repeated: the file may not be a trace
+            // at all, and its content is no business of an error message.
+            let v: u64 = s.parse().map_err(|_| err(line, "not a time: expected a whole number of ms".into()))?;
             if v > MAX_PERIOD_MS {
-                return Err(err(line, format!("{v} ms is beyond one year ({MAX_PERIOD_MS} ms)")));
+                return Err(err(line, format!("a time beyond one year: expected at most {MAX_PERIOD_MS} ms")));
             }
             if let Some(&prev) = ms.last() {
                 if v < prev {
-                    return Err(err(line, format!("{v} ms comes after {prev} ms: times must not decrease")));
+                    return Err(err(line, "earlier than the line before: times must not decrease".into()));
                 }
             }
             if ms.len() == MAX_LINES {
@@ -255,6 +257,10 @@ impl LinkTrace {
         &self.stats
     }
 
+    pub(crate) fn stats_mut(&mut self) -> &mut LinkStats {
+        &mut self.stats
+    }
+
     /// The trace's time 0, once a frame has come.
     pub fn base_ns(&self) -> Option<u64> {
         self.base_ns
@@ -357,7 +363,7 @@ mod tests {
     fn malformed_traces_name_their_line() {
         let cases: [(&str, Option<usize>, &str); 6] = [
             ("", None, "empty"),
-            ("1\n2\nx\n", Some(3), "`x` is not a time"),
+            ("1\n2\nx\n", Some(3), "not a time: expected a whole number of ms"),
             ("1\n\n2\n", Some(2), "blank line"),
             ("5\n7\n6\n", Some(3), "must not decrease"),
             ("0\n0\n0\n", Some(3), "every time is 0"),

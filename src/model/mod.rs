@@ -45,7 +45,7 @@ pub use markov4::{Markov4, Markov4Params};
 pub use outage::{Outage, OutageParams, OutageUnit, OutageWindows};
 pub use rate::{Rate, RateParams};
 pub use reorder::{Reorder, ReorderParams};
-pub use replay::{Recording, Replay, ReplayParams};
+pub use replay::{Recording, RecordingKind, Replay, ReplayParams};
 pub use slot::{Slot, SlotParams};
 pub use spec::ModelSpec;
 pub use units::{parse_duration, Millis, Probability, TimeUnit};
@@ -282,6 +282,17 @@ impl AnyModel {
             AnyModel::Rate(m) => Some(m.stats()),
             AnyModel::LinkTrace(m) => Some(m.stats()),
             _ => None,
+        }
+    }
+
+    /// A frame this link stage admitted was dropped after it (by a later
+    /// stage, or the release queue); nothing for other stages.
+    #[inline]
+    pub fn note_dropped_after(&mut self) {
+        match self {
+            AnyModel::Rate(m) => m.stats_mut().dropped_after(),
+            AnyModel::LinkTrace(m) => m.stats_mut().dropped_after(),
+            _ => {}
         }
     }
 

@@ -157,6 +157,10 @@ impl Rate {
         &self.stats
     }
 
+    pub(crate) fn stats_mut(&mut self) -> &mut LinkStats {
+        &mut self.stats
+    }
+
     /// The queue now (as of the last frame): packets and wire bytes.
     pub fn queued(&self) -> (u64, u64) {
         (self.backlog.packets(), self.backlog.bytes())

@@ -48,6 +48,16 @@ impl RecordingKind {
             RecordingKind::DelayCapture => "delay capture",
         }
     }
+
+    /// The layout the fates were read from, in words: a trace's columns, or
+    /// a capture's records (the words of
+    /// `crate::capture::RecordLayout::describe`, which the reader checks).
+    pub fn layout(self) -> &'static str {
+        match self {
+            RecordingKind::TraceCsv => "columns fate, reason, delay_ns",
+            RecordingKind::DelayCapture => "time | length | delay (s) | frame",
+        }
+    }
 }
 
 /// Recorded fates, in order: a delay in ns, or dropped.
@@ -93,13 +103,14 @@ impl Recording {
                 ("dropped", _) => DROPPED,
                 ("delivered" | "held", _) => {
                     let d = cells[delay_col].trim();
-                    let delay: u64 = d.parse().map_err(|_| err(line, format!("`delay_ns` is `{d}`: expected a whole number of ns")))?;
+                    let delay: u64 = d.parse().map_err(|_| err(line, "`delay_ns` is not a whole number of ns".into()))?;
                     if delay > MAX_DELAY_NS {
-                        return Err(err(line, format!("`delay_ns` {delay} is beyond one hour")));
+                        return Err(err(line, format!("`delay_ns` is beyond one hour: expected at most {MAX_DELAY_NS} ns")));
                     }
                     delay
                 }
-                (other, _) => return Err(err(line, format!("`fate` is `{other}`: expected delivered, dropped or held"))),
+                // The cell is not repeated: the file may not be a trace.
+                _ => return Err(err(line, "`fate` is none of delivered, dropped or held".into())),
             };
             if fates.len() == MAX_FATES {
                 return Err(err(line, format!("more than {MAX_FATES} frames")));
@@ -180,6 +191,8 @@ impl ReplayParams {
 /// A validated `replay` stage.
 #[derive(Debug, Clone)]
 pub struct Replay {
+    /// The file, as the scenario names it.
+    file: String,
     recording: Arc<Recording>,
     next: usize,
     /// Times the recording ran out and started again.
@@ -191,11 +204,16 @@ impl Replay {
         let Some(recording) = p.recording.clone() else {
             return Err(ParamError::new("file", format!("the recording `{}` was not read: load the scenario from its file", p.file)));
         };
-        Ok(Replay { recording, next: 0, wraps: 0 })
+        Ok(Replay { file: p.file.clone(), recording, next: 0, wraps: 0 })
     }
 
     pub fn recording(&self) -> &Recording {
         &self.recording
+    }
+
+    /// The recording's file, as the scenario names it.
+    pub fn file(&self) -> &str {
+        &self.file
     }
 
     /// Times the recording ran out and started again.
@@ -260,7 +278,7 @@ mod tests {
         let e = Recording::parse_trace_csv(&format!("{HEAD}0,1,0,0,10,delivered,,,,x,5010,5011,\n")).unwrap_err();
         assert_eq!(e.at.as_deref(), Some("line 2"), "{e}");
         let e = Recording::parse_trace_csv(&format!("{HEAD}0,1,0,0,10,lost,,,,1,5010,5011,\n")).unwrap_err();
-        assert!(e.problem.contains("`fate` is `lost`"), "{e}");
+        assert!(e.problem.contains("`fate` is none of delivered, dropped or held") && !e.problem.contains("lost"), "{e}");
         let e = Recording::from_delays_s(&[0.1, -0.5]).unwrap_err();
         assert_eq!(e.at.as_deref(), Some("record 1"));
         assert_eq!(Recording::from_delays_s(&[0.25]).unwrap().fate(0), Some(250_000_000));

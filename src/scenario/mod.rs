@@ -97,6 +97,8 @@ impl Flips {
 pub struct Copies {
     delays_ns: [u64; MAX_COPIES],
     flips: [Flips; MAX_COPIES],
+    /// The first stage each copy that passed went through.
+    starts: [u16; MAX_COPIES],
     passed: u8,
     dropped: u8,
 }
@@ -199,6 +201,9 @@ pub struct Scenario {
     pending: [(usize, u64, Flips); MAX_COPIES],
     /// Every frame passes untouched and no stage draws ([`Scenario::set_paused`]).
     paused: bool,
+    /// The phase that decided the last frame (`None` while paused: no
+    /// stage saw it).
+    last_phase: Option<usize>,
 }
 
 impl Scenario {
@@ -280,6 +285,7 @@ impl Scenario {
             flips: Flips::default(),
             pending: [(0, 0, Flips::default()); MAX_COPIES],
             paused: false,
+            last_phase: None,
         })
     }
 
@@ -330,8 +336,10 @@ impl Scenario {
         }
         let phase = self.current;
         if self.paused {
+            self.last_phase = None;
             return self.pass_untouched();
         }
+        self.last_phase = Some(phase);
         // The copy arrays live in the scenario and are not cleared per frame:
         // only their counts are reset, so a frame without copies or flips
         // costs no more than before.
@@ -354,6 +362,8 @@ impl Scenario {
                 Ok(end) => {
                     copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
                     copies.flips[usize::from(copies.passed)] = copy_flips;
+                    // `new` caps a phase's stages at u16::MAX.
+                    copies.starts[usize::from(copies.passed)] = from as u16;
                     copies.passed += 1;
                 }
                 Err(_) => copies.dropped += 1,
@@ -373,6 +383,17 @@ impl Scenario {
     #[inline]
     pub fn copies(&self) -> &Copies {
         &self.copies
+    }
+
+    /// The frame last decided passed every stage, and was then dropped
+    /// after them (the release queue was full): `copy` `None` for the
+    /// original, `Some(k)` for its `k`-th copy that passed (in the order of
+    /// [`Copies::delays_ns`]). The link stages it crossed count it as
+    /// dropped after them, so their reports agree with the frame's fate.
+    pub fn dropped_after_pipeline(&mut self, copy: Option<usize>) {
+        let Some(phase) = self.last_phase else { return };
+        let from = copy.map_or(0, |k| usize::from(self.copies.starts[k]));
+        note_dropped_after(&mut self.phases[phase].stages[from..]);
     }
 
     /// The stage that dropped a frame, by the indices of [`Decision::Drop`].
@@ -395,6 +416,7 @@ fn run_stages(
     queued: &mut usize,
 ) -> Result<u64, usize> {
     let mut t = t_ns;
+    let mut dropped_at = None;
     for (si, st) in stages.iter_mut().enumerate().skip(from) {
         st.reached += 1;
         let verdict = match len {
@@ -405,7 +427,8 @@ fn run_stages(
             Verdict::Pass { delay_ns } => t = t.saturating_add(delay_ns),
             Verdict::Drop => {
                 st.dropped += 1;
-                return Err(si);
+                dropped_at = Some(si);
+                break;
             }
             Verdict::Duplicate => {
                 st.duplicated += 1;
@@ -422,7 +445,22 @@ fn run_stages(
             }
         }
     }
-    Ok(t)
+    match dropped_at {
+        Some(si) => {
+            note_dropped_after(&mut stages[from..si]);
+            Err(si)
+        }
+        None => Ok(t),
+    }
+}
+
+/// A frame that crossed `stages` was dropped after them: each link stage
+/// among them counts it (their reports then agree with its fate).
+#[inline]
+fn note_dropped_after(stages: &mut [Stage]) {
+    for st in stages.iter_mut().filter(|st| st.kind().is_link()) {
+        st.model.note_dropped_after();
+    }
 }
 
 #[cfg(test)]

@@ -726,7 +726,7 @@ mod tests {
             ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_bytes = 100\n", 4, "queue_bytes", "at least one packet"),
             ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_packets = 0\n", 4, "queue_packets", "from 1"),
             ("[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nrate = 5\n", 4, "rate", "unknown field"),
-            ("[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n", 3, "file", "`bad.up` line 3: 2 ms comes after 3 ms"),
+            ("[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n", 3, "file", "`bad.up` line 3: earlier than the line before: times must not decrease"),
             ("[[stage]]\nmodel = \"trace\"\nfile = \"zeros.up\"\n", 3, "file", "`zeros.up` line 2: every time is 0"),
             ("[[stage]]\nmodel = \"trace\"\nfile = \"empty.up\"\n", 3, "file", "`empty.up`: the trace is empty"),
             ("[[stage]]\nmodel = \"trace\"\nfile = \"ok.up\"\nqueue_bytes = 10\n", 4, "queue_bytes", "at least one packet"),

@@ -5,7 +5,7 @@
 //! the crate and skip, saying so, when it is absent.
 
 use lz4_flex::frame::{FrameDecoder, FrameEncoder};
-use netfi::capture::{self, CaptureError, CaptureReader, CaptureRecord, CaptureWriter, RECORD_LEN};
+use netfi::capture::{self, CaptureError, CaptureReader, CaptureRecord, CaptureStats, CaptureWriter, RECORD_LEN};
 use netfi::frame::ItpFrame;
 use netfi::kinematics::{Integrator, KinematicsConfig};
 use netfi::motion::{MotionGenerator, MotionParams};
@@ -215,5 +215,58 @@ fn not_lz4_is_reported_with_the_path() {
     assert!(matches!(err, CaptureError::Lz4 { record: 0, offset: 0, .. }), "{err:?}");
     let msg = err.to_string();
     assert!(msg.contains("raw-records.bin") && msg.contains("LZ4"), "{msg}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The shipped recording re-packed as a recorder that flushes every 1 000
+/// records writes it (42 LZ4 frames, in a scratch directory): the same
+/// records, the same statistics, and `netfi scenario check --capture`
+/// takes its arrival times; garbage between two of its frames is refused.
+#[test]
+fn the_real_recording_written_in_batches_is_the_same_capture() {
+    let Some(path) = real_capture() else { return };
+    let cap = capture::load(&path).unwrap();
+    let dir = std::env::temp_dir().join(format!("netfi-it-batches-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let batched = dir.join("batched.bin");
+    let mut w = CaptureWriter::create(&batched).unwrap();
+    for (i, r) in cap.records.iter().enumerate() {
+        if i > 0 && i % 1_000 == 0 {
+            w.end_frame().unwrap();
+        }
+        w.write_record(r).unwrap();
+    }
+    w.finish().unwrap();
+    let again = capture::load(&batched).unwrap();
+    assert_eq!(again.stats.lz4_frames, 42);
+    assert_eq!(again.records, cap.records);
+    assert_eq!(CaptureStats { lz4_frames: 1, content_checksum: false, ..again.stats }, cap.stats);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_netfi"))
+        .args(["scenario", "check", "Normal", "--json", "--capture"])
+        .arg(&batched)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["frames"], 41_508);
+    // Garbage between frames 21 and 22.
+    let bytes = std::fs::read(&batched).unwrap();
+    let first_21: usize = {
+        let mut w = CaptureWriter::new(Vec::new());
+        for (i, r) in cap.records[..21_000].iter().enumerate() {
+            if i > 0 && i % 1_000 == 0 {
+                w.end_frame().unwrap();
+            }
+            w.write_record(r).unwrap();
+        }
+        w.finish().unwrap().len()
+    };
+    let mut spliced = bytes[..first_21].to_vec();
+    spliced.extend_from_slice(b"\n\0garbage");
+    spliced.extend_from_slice(&bytes[first_21..]);
+    match capture::parse(&spliced) {
+        Err(CaptureError::TrailingBytes { record: 21_000, frame: 21, .. }) => {}
+        other => panic!("expected TrailingBytes after frame 21, got {:?}", other.map(|c| c.stats)),
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -225,3 +225,38 @@ fn check_trace_writes_every_fate_in_a_runs_columns() {
     assert!(!bad.status.success() && err.contains("/nonexistent-dir/trace.csv"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The delay percentiles of `scenario check` are exact: the delays of the
+/// frames its own `--trace` lists, at ranks `⌈q·n⌉` (they were an HDR
+/// histogram's, up to 0.1 % high); the JSON then carries no error bound.
+#[test]
+fn check_delay_percentiles_are_the_exact_ones() {
+    let dir = std::env::temp_dir().join(format!("netfi-cli-exact-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("trace.csv");
+    let out = netfi()
+        .args(["scenario", "check", "config/scenarios/plm2_dlm2.toml", "--frames", "50000", "--seed", "7", "--json", "--trace"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let cols: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let (fate, delay) = (cols.iter().position(|c| *c == "fate").unwrap(), cols.iter().position(|c| *c == "delay_ns").unwrap());
+    let mut delays: Vec<u64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|c| c[fate] == "delivered")
+        .map(|c| c[delay].parse().unwrap())
+        .collect();
+    delays.sort_unstable();
+    assert_eq!(delays.len() as u64, v["delivered"].as_u64().unwrap());
+    for (key, q) in [("p50", 0.5), ("p99", 0.99)] {
+        let rank = ((q * delays.len() as f64).ceil() as usize).max(1);
+        assert_eq!(v["delay_ms"][key].as_f64(), Some(delays[rank - 1] as f64 / 1e6), "{key}");
+    }
+    assert!(v["delay_ms"].get("error_fraction_max").is_none());
+    std::fs::remove_dir_all(&dir).ok();
+}

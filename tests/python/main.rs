@@ -959,3 +959,153 @@ fn netfis_camera_through_the_emulator_to_the_python_viewer() {
         assert_eq!((r["frame_index"].as_str(), r["len"].as_str(), r["fate"].as_str()), (k.to_string().as_str(), len.to_string().as_str(), "whole"), "{r:?}");
     }
 }
+
+/// `netfi_iox.capture` reads a capture written in batches (one LZ4 frame
+/// per 1 000 records, as the study's recorder writes them) as every record
+/// of it, and refuses garbage after or between its frames; the shipped
+/// recording re-packed so (when present) reads as its 41 508 records.
+#[test]
+fn the_python_capture_reader_reads_every_frame_and_refuses_garbage() {
+    if !python_ready() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("netfi-py-capture-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, records: &[netfi::capture::CaptureRecord]| {
+        let path = dir.join(name);
+        let mut w = netfi::capture::CaptureWriter::create(&path).unwrap();
+        for (i, r) in records.iter().enumerate() {
+            if i > 0 && i % 1_000 == 0 {
+                w.end_frame().unwrap();
+            }
+            w.write_record(r).unwrap();
+        }
+        w.finish().unwrap();
+        path
+    };
+    let records: Vec<_> = (0..2_500u32)
+        .map(|i| {
+            let f = netfi::frame::ItpFrame { sequence: i, delx: [1, -1], qw: [1.0, 1.0], surgeon_mode: 1, ..Default::default() };
+            netfi::capture::CaptureRecord::new(u64::from(i) * 2_000_000, &f.with_checksum())
+        })
+        .collect();
+    let load = |path: &Path| {
+        let mut c = Command::new("python3");
+        c.args(["-c", "import sys; from netfi_iox import capture; r = capture.load(sys.argv[1]); print(len(r), r[-1][0])"])
+            .arg(path)
+            .env("PYTHONPATH", root().join("clients/python"));
+        c.output().unwrap()
+    };
+    let batched = write("batched.bin", &records);
+    let o = load(&batched);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), format!("2500 {}", 2_499u64 * 2_000_000));
+    let bytes = std::fs::read(&batched).unwrap();
+    let first = std::fs::read(write("first.bin", &records[..1_000])).unwrap().len();
+    for (name, bad) in [("after", [&bytes[..], &b"junk"[..]].concat()), ("between", [&bytes[..first], &b"junk"[..], &bytes[first..]].concat())] {
+        let path = dir.join(name);
+        std::fs::write(&path, bad).unwrap();
+        let o = load(&path);
+        assert!(!o.status.success(), "garbage {name} accepted: {}", String::from_utf8_lossy(&o.stdout));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("that are not an LZ4 frame"), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let real = root().join("../shared/data/itp/dvtrainer_peg_transfer.bin");
+    if real.exists() {
+        let cap = netfi::capture::load(&real).unwrap();
+        let o = load(&write("real.bin", &cap.records));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stdout).starts_with("41508 "), "{}", String::from_utf8_lossy(&o.stdout));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A console and a robot written from docs/interface.md alone
+/// (`tests/python/doc_client.py`: iceoryx2's bindings and ctypes, nothing
+/// of netfi's Python module) take part in a run of the stand-alone
+/// emulator: every frame is accounted for, the robot receives exactly what
+/// the emulator released and the fates the scenario gives the seed, the
+/// run's management segment is private to the user, and the last process
+/// to close (the robot, held open until the others have gone) removes it.
+#[test]
+fn a_client_written_from_the_document_alone_takes_part_in_a_run() {
+    if !python_ready() {
+        return;
+    }
+    let script = root().join("tests/python/doc_client.py");
+    let text = std::fs::read_to_string(&script).unwrap();
+    assert!(!text.contains("import netfi_iox") && !text.contains("from netfi_iox"), "the client imports netfi's module");
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::new("doc");
+    assert_eq!(rust_layout(&run.config), "per-user", "the document's layout is per-user");
+    let doc = |args: &[&str]| {
+        let mut c = Command::new("python3");
+        c.arg(&script).args(args).env_remove("PYTHONPATH");
+        c
+    };
+    let path = |name: &str| run.out.join(name).to_str().unwrap().to_owned();
+    let robot = doc(&["robot", &run.id, &path("robot.json"), &path("robot.ready"), &path("robot.close")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let robot = Witness(Some(robot));
+    wait_file(&run.out.join("robot.ready"));
+    let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "3000"]);
+    run_ok(doc(&["console", &run.id, "3000", &path("console.json")]), "the document's console");
+    emu.finish("emulator", Duration::from_secs(60));
+    std::fs::write(run.out.join("robot.close"), "").unwrap();
+    robot.finish("the document's robot", Duration::from_secs(60));
+    let (c, e, r) = (run.json("console.json"), run.json("emulator.json"), run.json("robot.json"));
+    assert_eq!((u(&c["sent"]), u(&c["unsubscribed"])), (3000, 0), "{c}");
+    assert_emulator_balanced(&e, 3000);
+    let delivered = u(&e["frames"]["delivered"]);
+    assert_eq!((u(&r["received"]), u(&r["marker"]), u(&r["bad"])), (delivered, delivered, 0), "{r}");
+    let check = netfi().args(["scenario", "check", "PLM-2", "--frames", "3000", "--seed", "3", "--json"]).output().unwrap();
+    let check: Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(check["delivered"].as_u64(), Some(delivered));
+    assert_eq!(r["mgmt_modes"], serde_json::json!(["0o600"]), "{r}");
+    assert_eq!(r["removed_segment"], true, "{r}");
+    let prefix = run.config.prefix().to_string();
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with(&prefix))
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+}
+
+/// The configuration table of docs/interface.md, key by key, is this
+/// build's: what a client written from the document sets is what netfi's
+/// processes set.
+#[test]
+fn the_documents_configuration_table_is_the_rust_one() {
+    let doc = std::fs::read_to_string(root().join("docs/interface.md")).unwrap();
+    let rows: std::collections::BTreeMap<String, String> = doc
+        .lines()
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            let key = cells.get(1)?.strip_prefix("`defaults.publish_subscribe.")?.strip_suffix('`')?;
+            let value = cells.get(2)?.split_whitespace().next()?.trim_matches('`');
+            Some((key.to_string(), value.to_string()))
+        })
+        .collect();
+    let config = IpcConfig::new(RunId::new("doc-table").unwrap());
+    let ps = &config.iceoryx2().defaults.publish_subscribe;
+    let rust: std::collections::BTreeMap<String, String> = [
+        ("max_publishers", ps.max_publishers.to_string()),
+        ("max_subscribers", ps.max_subscribers.to_string()),
+        ("max_nodes", ps.max_nodes.to_string()),
+        ("subscriber_max_buffer_size", ps.subscriber_max_buffer_size.to_string()),
+        ("subscriber_max_borrowed_samples", ps.subscriber_max_borrowed_samples.to_string()),
+        ("publisher_max_loaned_samples", ps.publisher_max_loaned_samples.to_string()),
+        ("publisher_history_size", ps.publisher_history_size.to_string()),
+        ("enable_safe_overflow", ps.enable_safe_overflow.to_string()),
+        ("backpressure_strategy", format!("{:?}", ps.backpressure_strategy)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    assert_eq!(rows, rust);
+    let g = &config.iceoryx2().global;
+    assert!(!g.node.cleanup_dead_nodes_on_creation && !g.node.cleanup_dead_nodes_on_destruction && !g.service.cleanup_dead_nodes_on_open);
+}

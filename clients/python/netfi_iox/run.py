@@ -172,6 +172,9 @@ class RunNode:
             .signal_handling_mode(iox.SignalHandlingMode.HandleTerminationRequests)
             .create(iox.ServiceType.Ipc)
         )
+        # iceoryx2 creates the run's management segment 0666: the run's
+        # processes are all this user's, so nobody else needs it.
+        make_private(self.prefix)
         # Installs iceoryx2's signal capture now: from here on SIGINT and
         # SIGTERM are seen through termination_requested(), not as
         # KeyboardInterrupt.
@@ -366,6 +369,26 @@ class RunNode:
             self.node = None
             gc.collect()
             remove_mgmt_segment_if_unused(self.config, self.prefix)
+
+
+def make_private(prefix: str) -> None:
+    """Takes group and other permissions off this user's files in
+    ``/dev/shm`` whose names start with ``prefix``, as netfi's own
+    processes do."""
+    uid = os.geteuid()
+    try:
+        names = os.listdir("/dev/shm")
+    except OSError:
+        return
+    for n in names:
+        if n.startswith(prefix):
+            p = os.path.join("/dev/shm", n)
+            try:
+                st = os.lstat(p)
+                if stat.S_ISREG(st.st_mode) and st.st_uid == uid and st.st_mode & 0o077:
+                    os.chmod(p, st.st_mode & 0o700)
+            except OSError:
+                pass
 
 
 def remove_mgmt_segment_if_unused(config, prefix: str) -> None:

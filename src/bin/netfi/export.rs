@@ -92,6 +92,12 @@ pub fn run(cmd: ExportCmd) -> Result<()> {
     }
 }
 
+/// The largest value of tc's unsigned 32-bit fields (`limit`, `gap`).
+const TC_U32_MAX: u64 = u32::MAX as u64;
+/// The largest value of tc's signed 32-bit fields (`slot`'s `packets` and
+/// `bytes`).
+const TC_S32_MAX: u64 = i32::MAX as u64;
+
 fn netem(args: &ExportNetemArgs) -> Result<String> {
     let spec = netfi::load::resolve(&args.scenario)?;
     if spec.phases.len() > 1 {
@@ -101,29 +107,59 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
             spec.phases.len()
         );
     }
-    if !(args.rate_hz.is_finite() && args.rate_hz > 0.0) {
-        bail!("--rate-hz must be a positive frame rate, got {}", args.rate_hz);
-    }
+    check_rate_hz(args.rate_hz)?;
     let stages = &spec.phases[0].stages;
-    let mut notes = Vec::new();
-    let mut loss: Option<(usize, String)> = None;
-    let mut delay: Option<(usize, String)> = None;
-    let mut dup: Option<(usize, String)> = None;
-    let mut corrupt: Option<(usize, String)> = None;
-    let mut slot: Option<(usize, String)> = None;
-    let mut rate: Option<(usize, String)> = None;
-    let mut rate_limit: Option<u64> = None;
-    let mut table: Option<(String, String)> = None;
-    let mut longest_delay_ms = 0.0f64;
+    let mut netem = Netem::default();
     for (i, st) in stages.iter().enumerate() {
+        netem.add(i, st)?;
+    }
+    let limit = netem.queue_limit(args.rate_hz)?;
+    if stages.is_empty() {
+        netem.notes.push("nothing to inject: the qdisc passes every packet".into());
+    }
+    write_script(args, &spec.name, &netem, limit)
+}
+
+/// `--rate-hz`: a frame rate the simulated time accepts (it sizes the
+/// queue limit, which tc keeps in 32 bits).
+fn check_rate_hz(rate_hz: f64) -> Result<()> {
+    use netfi::check::{MAX_RATE_HZ, MIN_RATE_HZ};
+    if !(rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&rate_hz)) {
+        bail!("--rate-hz {}: expected a frame rate from {MIN_RATE_HZ} to {MAX_RATE_HZ} Hz", netfi::model::units::show(rate_hz));
+    }
+    Ok(())
+}
+
+/// One netem qdisc being built from a scenario's stages: the clause each
+/// of its parts took (with the stage that gave it), the notes, and what
+/// sizes its queue.
+#[derive(Default)]
+struct Netem {
+    loss: Option<(usize, String)>,
+    delay: Option<(usize, String)>,
+    dup: Option<(usize, String)>,
+    corrupt: Option<(usize, String)>,
+    slot: Option<(usize, String)>,
+    rate: Option<(usize, String)>,
+    notes: Vec<String>,
+    /// A `rate` stage's queue, in packets.
+    rate_limit: Option<u64>,
+    /// A generated distribution table: its name and its file.
+    table: Option<(String, String)>,
+    longest_delay_ms: f64,
+}
+
+impl Netem {
+    /// Maps stage `i`, or refuses it (a stage netem cannot express, or a
+    /// part of the qdisc an earlier stage already took).
+    fn add(&mut self, i: usize, st: &StageSpec) -> Result<()> {
         let label = stage_label(i, st);
-        let model = st.model.kind().name();
-        let slot = match &st.model {
-            ModelSpec::Delay(_) | ModelSpec::Jitter(_) | ModelSpec::Reorder(_) => &mut delay,
-            ModelSpec::Slot(_) => &mut slot,
-            ModelSpec::Duplicate(_) => &mut dup,
-            ModelSpec::Corrupt(_) => &mut corrupt,
-            ModelSpec::Rate(_) => &mut rate,
+        let (part, what) = match &st.model {
+            ModelSpec::Delay(_) | ModelSpec::Jitter(_) | ModelSpec::Reorder(_) => (&self.delay, "delay"),
+            ModelSpec::Slot(_) => (&self.slot, "slot"),
+            ModelSpec::Duplicate(_) => (&self.dup, "duplication"),
+            ModelSpec::Corrupt(_) => (&self.corrupt, "corruption"),
+            ModelSpec::Rate(_) => (&self.rate, "rate"),
             ModelSpec::LinkTrace(_) => bail!(
                 "{label}: netem cannot follow a link trace (its `rate` is fixed); netfi export refuses `trace` stages: run Mahimahi's mm-link with the same trace file instead"
             ),
@@ -133,182 +169,218 @@ fn netem(args: &ExportNetemArgs) -> Result<String> {
             ModelSpec::Outage(_) => bail!(
                 "{label}: netem cannot express outage windows with a cooldown (it has no state that drops every packet for a drawn time and then none for another); netfi export refuses it"
             ),
-            _ => &mut loss,
+            _ => (&self.loss, "loss model"),
         };
-        if let Some((j, _)) = slot {
-            bail!(
-                "{label}: netem takes one {} per qdisc and stage {} already uses it",
-                match model {
-                    "delay" | "jitter" | "reorder" => "delay",
-                    "slot" => "slot",
-                    "rate" => "rate",
-                    "duplicate" => "duplication",
-                    "corrupt" => "corruption",
-                    _ => "loss model",
-                },
-                *j + 1
-            );
+        if let Some((j, _)) = part {
+            bail!("{label}: netem takes one {what} per qdisc and stage {} already uses it", *j + 1);
         }
-        let text = match &st.model {
+        let text = self.clause(i, st, &label)?;
+        let part = match &st.model {
+            ModelSpec::Delay(_) | ModelSpec::Jitter(_) | ModelSpec::Reorder(_) => &mut self.delay,
+            ModelSpec::Slot(_) => &mut self.slot,
+            ModelSpec::Duplicate(_) => &mut self.dup,
+            ModelSpec::Corrupt(_) => &mut self.corrupt,
+            ModelSpec::Rate(_) => &mut self.rate,
+            _ => &mut self.loss,
+        };
+        *part = Some((i, text));
+        Ok(())
+    }
+
+    /// The netem words for stage `i` (a model `add` accepts), noting how
+    /// exact they are.
+    fn clause(&mut self, i: usize, st: &StageSpec, label: &str) -> Result<String> {
+        let note = |notes: &mut Vec<String>, n: String| notes.push(format!("{label}: {n}"));
+        Ok(match &st.model {
             ModelSpec::Bernoulli(p) => {
-                notes.push(format!("{label}: exact (loss random)"));
+                note(&mut self.notes, "exact (loss random)".into());
                 format!("loss random {}", pct(p.p.get()))
             }
             ModelSpec::Markov4(p) => {
-                notes.push(format!("{label}: exact (loss state)"));
+                note(&mut self.notes, "exact (loss state)".into());
                 let g = |v: Option<netfi::model::Probability>, d: f64| pct(v.map_or(d, |x| x.get()));
-                format!(
-                    "loss state {} {} {} {} {}",
-                    pct(p.p13.get()),
-                    g(p.p31, 1.0 - p.p13.get()),
-                    g(p.p32, 0.0),
-                    g(p.p23, 1.0),
-                    g(p.p14, 0.0)
-                )
+                format!("loss state {} {} {} {} {}", pct(p.p13.get()), g(p.p31, 1.0 - p.p13.get()), g(p.p32, 0.0), g(p.p23, 1.0), g(p.p14, 0.0))
             }
             ModelSpec::GilbertElliott(p) => {
-                notes.push(format!("{label}: exact (loss gemodel)"));
+                note(&mut self.notes, "exact (loss gemodel)".into());
                 let pv = p.p.get();
-                format!(
-                    "loss gemodel {} {} {} {}",
-                    pct(pv),
-                    pct(p.r.map_or(1.0 - pv, |x| x.get())),
-                    pct(p.loss_bad.map_or(1.0, |x| x.get())),
-                    pct(p.loss_good.map_or(0.0, |x| x.get()))
-                )
+                let (r, bad, good) = (p.r.map_or(1.0 - pv, |x| x.get()), p.loss_bad.map_or(1.0, |x| x.get()), p.loss_good.map_or(0.0, |x| x.get()));
+                format!("loss gemodel {} {} {} {}", pct(pv), pct(r), pct(bad), pct(good))
             }
             ModelSpec::GeLomax(p) => {
-                let (text, note) = ge_lomax_as_gilbert(p)?;
-                notes.push(format!("{label}: approximated: {note}"));
+                let (text, n) = ge_lomax_as_gilbert(p)?;
+                note(&mut self.notes, format!("approximated: {n}"));
                 text
             }
             ModelSpec::Delay(p) => {
-                let (text, note, longest, dist) = delay_as_netem(p, &label)?;
-                notes.push(format!("{label}: {note}"));
-                longest_delay_ms = longest_delay_ms.max(longest);
-                table = dist;
+                let (text, n, longest, dist) = delay_as_netem(p, label)?;
+                note(&mut self.notes, n);
+                self.longest_delay_ms = self.longest_delay_ms.max(longest);
+                self.table = dist;
                 text
             }
             ModelSpec::Jitter(p) => {
-                let (text, note, longest) = jitter_as_netem(p)?;
-                notes.push(format!("{label}: {note}"));
-                longest_delay_ms = longest_delay_ms.max(longest);
+                let (text, n, longest) = jitter_as_netem(p)?;
+                note(&mut self.notes, n);
+                self.longest_delay_ms = self.longest_delay_ms.max(longest);
                 text
             }
             ModelSpec::Duplicate(p) => {
-                if i == 0 {
-                    notes.push(format!("{label}: exact (duplicate; netem sends the copy through its loss and delay again, as netfi sends it through the later stages)"));
+                note(&mut self.notes, if i == 0 {
+                    "exact (duplicate; netem sends the copy through its loss and delay again, as netfi sends it through the later stages)".into()
                 } else {
-                    notes.push(format!(
-                        "{label}: approximated: netem duplicates before anything else, so the {i} stage(s) before this one apply to the copy afresh in netem but once to both in netfi"
-                    ));
-                }
+                    format!("approximated: netem duplicates before anything else, so the {i} stage(s) before this one apply to the copy afresh in netem but once to both in netfi")
+                });
                 format!("duplicate {}", pct(p.p.get()))
             }
-            ModelSpec::Corrupt(p) => corrupt_line(p, &label, &mut notes),
+            ModelSpec::Corrupt(p) => corrupt_line(p, label, &mut self.notes),
             ModelSpec::Reorder(p) => {
-                notes.push(format!("{label}: exact (delay … reorder … gap …)"));
-                longest_delay_ms = longest_delay_ms.max(p.delay_ms.get());
+                tc_field(label, "gap", p.gap, TC_U32_MAX)?;
+                note(&mut self.notes, "exact (delay … reorder … gap …)".into());
+                self.longest_delay_ms = self.longest_delay_ms.max(p.delay_ms.get());
                 format!("delay {} reorder {} gap {}", time_us(p.delay_ms.get()), pct(p.p.get()), p.gap)
             }
-            ModelSpec::Slot(p) => {
-                let mut text = format!("slot {} {}", time_us(p.min_ms.get()), time_us(p.max_ms.get()));
-                if let Some(n) = p.packets {
-                    text.push_str(&format!(" packets {n}"));
-                }
-                if let Some(b) = p.bytes {
-                    text.push_str(&format!(" bytes {}", (b as f64 * 166.0 / 124.0).ceil() as u64));
-                    notes.push(format!("{label}: approximated: bytes scaled by 166/124 (netem counts the UDP/IPv4/Ethernet headers too)"));
-                } else {
-                    notes.push(format!("{label}: exact (slot)"));
-                }
-                text
-            }
+            ModelSpec::Slot(p) => slot_line(p, label, &mut self.notes)?,
             ModelSpec::Rate(p) => {
-                let (text, note, limit) = rate_as_netem(p, &label)?;
-                notes.push(format!("{label}: {note}"));
-                rate_limit = Some(limit);
+                let (text, n, limit) = rate_as_netem(p, label)?;
+                note(&mut self.notes, n);
+                self.rate_limit = Some(limit);
                 text
             }
-            ModelSpec::Outage(_) | ModelSpec::LinkTrace(_) | ModelSpec::Replay(_) => unreachable!("refused above"),
-        };
-        *slot = Some((i, text));
+            ModelSpec::Outage(_) | ModelSpec::LinkTrace(_) | ModelSpec::Replay(_) => unreachable!("refused by `add`"),
+        })
     }
 
-    let needed = (args.rate_hz * longest_delay_ms / 1e3 * 1.25).ceil() as u64 + 1;
-    let limit = match rate_limit {
-        // The rate stage's queue is netem's limit; a delay's hold shares it.
-        Some(l) if needed > l => {
-            notes.push(format!("queue: the rate stage's limit {l} is raised to {needed} to hold the delayed packets too (netem has one queue for both)"));
-            needed
+    /// netem's `limit`: enough for the packets held over the longest delay
+    /// at `rate_hz`, with 25% spare, at least netem's default or the rate
+    /// stage's queue; refused beyond tc's 32-bit field.
+    fn queue_limit(&mut self, rate_hz: f64) -> Result<u64> {
+        let needed_f = (rate_hz * self.longest_delay_ms / 1e3 * 1.25).ceil() + 1.0;
+        if needed_f > TC_U32_MAX as f64 {
+            bail!(
+                "--rate-hz {}: a delay of up to {:.1} ms holds about {:.0} packets at this rate, beyond what tc's 32-bit `limit` takes (at most {TC_U32_MAX}); lower --rate-hz or the delay",
+                netfi::model::units::show(rate_hz),
+                self.longest_delay_ms,
+                needed_f
+            );
         }
-        Some(l) => l,
-        None => needed.max(NETEM_DEFAULT_LIMIT),
-    };
-    if needed > NETEM_DEFAULT_LIMIT && rate_limit.is_none() {
-        notes.push(format!(
-            "queue: at {} Hz a delay of up to {longest_delay_ms:.1} ms holds about {} packets, more than netem's default limit of {NETEM_DEFAULT_LIMIT}; limit raised to {limit} (packets beyond the limit are dropped)",
-            args.rate_hz,
-            (args.rate_hz * longest_delay_ms / 1e3).ceil()
-        ));
-    }
-    if stages.is_empty() {
-        notes.push("nothing to inject: the qdisc passes every packet".into());
+        let needed = needed_f as u64;
+        let limit = match self.rate_limit {
+            // The rate stage's queue is netem's limit; a delay's hold shares it.
+            Some(l) if needed > l => {
+                self.notes.push(format!("queue: the rate stage's limit {l} is raised to {needed} to hold the delayed packets too (netem has one queue for both)"));
+                needed
+            }
+            Some(l) => l,
+            None => needed.max(NETEM_DEFAULT_LIMIT),
+        };
+        if needed > NETEM_DEFAULT_LIMIT && self.rate_limit.is_none() {
+            self.notes.push(format!(
+                "queue: at {rate_hz} Hz a delay of up to {:.1} ms holds about {} packets, more than netem's default limit of {NETEM_DEFAULT_LIMIT}; limit raised to {limit} (packets beyond the limit are dropped)",
+                self.longest_delay_ms,
+                (rate_hz * self.longest_delay_ms / 1e3).ceil()
+            ));
+        }
+        Ok(limit)
     }
 
-    // Everything taken from the user or a file goes into the script quoted
-    // (words) or with its line breaks escaped (comments): the script is
-    // meant to run as root.
+    /// The qdisc's words after `limit`, in tc's order.
+    fn clauses(&self) -> impl Iterator<Item = &str> {
+        [&self.loss, &self.delay, &self.dup, &self.corrupt, &self.slot, &self.rate].into_iter().flatten().map(|(_, t)| t.as_str())
+    }
+}
+
+/// A value of stage field `field` that tc keeps in a field of at most `max`.
+fn tc_field(label: &str, field: &str, value: u64, max: u64) -> Result<()> {
+    if value > max {
+        bail!("{label}: `{field}` {value}: tc keeps it in a {}-bit field, so netem takes 0 to {max}", if max == TC_U32_MAX { "32" } else { "signed 32" });
+    }
+    Ok(())
+}
+
+/// `slot` as netem's `slot MIN MAX [packets N] [bytes B]`, noting how
+/// exact it is; refused where tc's signed 32-bit budgets cannot hold it.
+fn slot_line(p: &netfi::model::SlotParams, label: &str, notes: &mut Vec<String>) -> Result<String> {
+    let mut text = format!("slot {} {}", time_us(p.min_ms.get()), time_us(p.max_ms.get()));
+    if let Some(n) = p.packets {
+        tc_field(label, "packets", n, TC_S32_MAX)?;
+        text.push_str(&format!(" packets {n}"));
+    }
+    if let Some(b) = p.bytes {
+        let scaled = (b as f64 * 166.0 / 124.0).ceil();
+        if scaled > TC_S32_MAX as f64 {
+            bail!(
+                "{label}: `bytes` {b}: netem counts 166 bytes per frame where netfi counts 124, so it becomes {scaled:.0}, beyond tc's signed 32-bit field (netem takes 0 to {TC_S32_MAX}); at most {} here",
+                (TC_S32_MAX as f64 * 124.0 / 166.0).floor()
+            );
+        }
+        text.push_str(&format!(" bytes {}", scaled as u64));
+        notes.push(format!("{label}: approximated: bytes scaled by 166/124 (netem counts the UDP/IPv4/Ethernet headers too)"));
+    } else {
+        notes.push(format!("{label}: exact (slot)"));
+    }
+    Ok(text)
+}
+
+/// The script: notes as comments, the distribution table if one is
+/// needed, and the `tc` command. Everything taken from the user or a file
+/// goes in quoted (words) or with its line breaks escaped (comments): the
+/// script is meant to run as root.
+fn write_script(args: &ExportNetemArgs, name: &str, netem: &Netem, limit: u64) -> Result<String> {
     validate_dev(&args.dev)?;
     let dev = quote(&args.dev)?;
     let mut out = String::new();
     writeln!(out, "#!/bin/sh").unwrap();
-    writeln!(out, "# netem equivalent of netfi scenario {} (netfi {}).", comment(&format!("{:?}", spec.name)), netfi::fit::TOOL_VERSION)
-        .unwrap();
-    for n in &notes {
+    writeln!(out, "# netem equivalent of netfi scenario {} (netfi {}).", comment(&format!("{name:?}")), netfi::fit::TOOL_VERSION).unwrap();
+    for n in &netem.notes {
         writeln!(out, "# - {}", comment(n)).unwrap();
     }
-    writeln!(out, "# Randomness differs: netem draws from the kernel's generator, not netfi's seeded streams.")
-        .unwrap();
+    writeln!(out, "# Randomness differs: netem draws from the kernel's generator, not netfi's seeded streams.").unwrap();
     writeln!(out, "# To remove it: tc qdisc del dev {dev} root").unwrap();
     writeln!(out, "set -e").unwrap();
-    if let Some((name, body)) = &table {
-        // tc reads tables from $TC_LIB_DIR when set, else from the directory
-        // it was built with, which differs between distributions: the
-        // script looks for it where it runs.
-        let dirs = match &args.table_dir {
-            Some(d) => vec![path_text(d)?],
-            None => table_dir_candidates(),
-        };
-        let quoted: Vec<String> = dirs.iter().map(|d| quote(d)).collect::<Result<_>>()?;
-        writeln!(out, "if [ -z \"${{TC_LIB_DIR:-}}\" ]; then").unwrap();
-        writeln!(out, "  for d in {}; do", quoted.join(" ")).unwrap();
-        if args.table_dir.is_some() {
-            writeln!(out, "    TC_LIB_DIR=\"$d\"").unwrap();
-        } else {
-            writeln!(out, "    if [ -f \"$d/normal.dist\" ]; then TC_LIB_DIR=\"$d\"; break; fi").unwrap();
-        }
-        writeln!(out, "  done").unwrap();
-        writeln!(out, "fi").unwrap();
-        writeln!(
-            out,
-            "if [ ! -d \"${{TC_LIB_DIR:-}}\" ]; then echo \"tc's distribution table directory was not found (looked in: {}); set TC_LIB_DIR\" >&2; exit 1; fi",
-            comment(&dirs.join(" ")).replace(['"', '$', '`', '\\'], "?")
-        )
-        .unwrap();
-        writeln!(out, "export TC_LIB_DIR").unwrap();
-        writeln!(out, "cat > \"$TC_LIB_DIR/{name}.dist\" <<'NETFI_TABLE'").unwrap();
-        out.push_str(body);
-        writeln!(out, "NETFI_TABLE").unwrap();
-        writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
+    if let Some((name, body)) = &netem.table {
+        write_table(&mut out, args, name, body)?;
     }
     let mut cmd = format!("tc qdisc replace dev {dev} root netem limit {limit}");
-    for (_, text) in [&loss, &delay, &dup, &corrupt, &slot, &rate].into_iter().flatten() {
+    for text in netem.clauses() {
         cmd.push(' ');
         cmd.push_str(text);
     }
     writeln!(out, "{cmd}").unwrap();
     Ok(out)
+}
+
+/// The lines that put distribution table `name` where tc looks for it.
+fn write_table(out: &mut String, args: &ExportNetemArgs, name: &str, body: &str) -> Result<()> {
+    // tc reads tables from $TC_LIB_DIR when set, else from the directory
+    // it was built with, which differs between distributions: the script
+    // looks for it where it runs.
+    let dirs = match &args.table_dir {
+        Some(d) => vec![path_text(d)?],
+        None => table_dir_candidates(),
+    };
+    let quoted: Vec<String> = dirs.iter().map(|d| quote(d)).collect::<Result<_>>()?;
+    writeln!(out, "if [ -z \"${{TC_LIB_DIR:-}}\" ]; then").unwrap();
+    writeln!(out, "  for d in {}; do", quoted.join(" ")).unwrap();
+    if args.table_dir.is_some() {
+        writeln!(out, "    TC_LIB_DIR=\"$d\"").unwrap();
+    } else {
+        writeln!(out, "    if [ -f \"$d/normal.dist\" ]; then TC_LIB_DIR=\"$d\"; break; fi").unwrap();
+    }
+    writeln!(out, "  done").unwrap();
+    writeln!(out, "fi").unwrap();
+    writeln!(
+        out,
+        "if [ ! -d \"${{TC_LIB_DIR:-}}\" ]; then echo \"tc's distribution table directory was not found (looked in: {}); set TC_LIB_DIR\" >&2; exit 1; fi",
+        comment(&dirs.join(" ")).replace(['"', '$', '`', '\\'], "?")
+    )
+    .unwrap();
+    writeln!(out, "export TC_LIB_DIR").unwrap();
+    writeln!(out, "cat > \"$TC_LIB_DIR/{name}.dist\" <<'NETFI_TABLE'").unwrap();
+    out.push_str(body);
+    writeln!(out, "NETFI_TABLE").unwrap();
+    writeln!(out, "# To remove the table too: rm -f \"$TC_LIB_DIR/{name}.dist\"").unwrap();
+    Ok(())
 }
 
 /// Where iproute2 installs tc's distribution tables: Debian and Ubuntu

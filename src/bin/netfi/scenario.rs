@@ -2,7 +2,7 @@
 
 use crate::cli::{CheckArgs, ScenarioCmd};
 use anyhow::{bail, Context, Result};
-use netfi::check::{self, Arrivals, CheckReport};
+use netfi::check::{self, Arrivals, CheckReport, StageReport};
 use netfi::load;
 use netfi::scenario::{self, Scenario, PRESET_NAMES};
 
@@ -111,9 +111,10 @@ fn file_stage_notes(scenario: &Scenario) -> Vec<String> {
                 AnyModel::Replay(m) => {
                     let r = m.recording();
                     out.push(format!(
-                        "{at}: replay of {} recorded fates ({}): loss {:.5}, mean delay {:.3} ms, repeated",
+                        "{at}: replay of {} recorded fates ({}, read as {}): loss {:.5}, mean delay {:.3} ms, repeated",
                         r.len(),
                         r.kind().name(),
+                        r.kind().layout(),
                         r.loss_rate(),
                         r.mean_delay_ms()
                     ))
@@ -134,13 +135,21 @@ fn print_links(r: &CheckReport) {
             l.capacity_bit_s / 1e6,
             l.utilisation
         );
+        println!("  frames          {} admitted ({} packets), {} dropped by link_queue ({} packets)", l.frames, l.packets, l.frames_dropped, l.packets_dropped);
+        if l.frames_dropped_after > 0 {
+            println!(
+                "                  of the admitted, {} dropped after the link (later stage or queue_full), {} passed on",
+                l.frames_dropped_after,
+                l.frames - l.frames_dropped_after
+            );
+        }
         println!(
-            "  frames          {} ({} packets), {} dropped by link_queue ({} packets)",
-            l.frames, l.packets, l.frames_dropped, l.packets_dropped
-        );
-        println!(
-            "  time at link ms p50 {:.3}  p90 {:.3}  p99 {:.3}  max {:.3}",
-            l.delay_ms.p50, l.delay_ms.p90, l.delay_ms.p99, l.delay_ms.max
+            "  time at link ms p50 {:.3}  p90 {:.3}  p99 {:.3}  max {:.3}  (each at most {} high)",
+            l.delay_ms.p50,
+            l.delay_ms.p90,
+            l.delay_ms.p99,
+            l.delay_ms.max,
+            netfi::metrics::fmt_fraction(l.delay_ms.error_fraction_max.unwrap_or(netfi::metrics::ERROR_FRACTION_MAX))
         );
         println!("  queue max       {} packets, {} bytes", l.queue_packets_max, l.queue_bytes_max);
         // Occupancy over time: ten evenly spaced seconds (all of them in --json).
@@ -151,6 +160,20 @@ fn print_links(r: &CheckReport) {
 }
 
 fn print_table(r: &CheckReport) {
+    print_outcome(r);
+    print_links(r);
+    if !r.stages.is_empty() {
+        println!("stages:");
+        println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
+        for s in &r.stages {
+            print_stage(s);
+        }
+    }
+}
+
+/// The whole run: frames, fates, loss, delay, order, outages, corruption,
+/// the queue.
+fn print_outcome(r: &CheckReport) {
     println!("scenario          {}", r.scenario);
     println!("seed              {}", r.seed);
     println!("frames            {} at {:.1} Hz", r.frames, r.rate_hz);
@@ -166,10 +189,9 @@ fn print_table(r: &CheckReport) {
         r.loss_rate, r.loss_rate_ci95[0], r.loss_rate_ci95[1]
     );
     println!("mean loss run     {:.3} frames", r.loss_run_mean);
-    println!(
-        "delay ms          mean {:.3}  p50 {:.3}  p99 {:.3}  max {:.3}",
-        r.delay_ms.mean, r.delay_ms.p50, r.delay_ms.p99, r.delay_ms.max
-    );
+    let d = &r.delay_ms;
+    let precision = d.error_fraction_max.map(|_| format!("  ({})", d.precision())).unwrap_or_default();
+    println!("delay ms          mean {:.3}  p50 {:.3}  p99 {:.3}  max {:.3}{precision}", d.mean, d.p50, d.p99, d.max);
     println!("reordered         {:.5} of delivered", r.reordered_fraction);
     println!("outages           {} windows, mean {:.1} ms", r.outages.count, r.outages.mean_ms);
     if let Some(c) = &r.corruption {
@@ -179,71 +201,50 @@ fn print_table(r: &CheckReport) {
         );
     }
     println!("queue             depth max {} of {}", r.queue_depth_max, r.queue_capacity);
-    print_links(r);
-    if !r.stages.is_empty() {
-        println!("stages:");
-        println!("  {:>5}  {:<16} {:>12} {:>12} {:>9} {:>9}", "phase", "label", "reached", "dropped", "loss", "model");
-        for s in &r.stages {
-            let model = match (s.loss_rate_model, s.delay_ms_model) {
-                _ if s.corrupt_rate_model.is_some() => format!("{:.5} bad", s.corrupt_rate_model.unwrap_or(0.0)),
-                _ if s.duplicate_rate_model.is_some() => format!("{:.5} dup", s.duplicate_rate_model.unwrap_or(0.0)),
-                (_, Some(d)) => format!("{d:.3} ms"),
-                (Some(l), None) => format!("{l:.5}"),
-                (None, None) => "-".into(),
-            };
-            println!(
-                "  {:>5}  {:<16} {:>12} {:>12} {:>9.5} {:>9}",
-                s.phase,
-                s.label,
-                s.reached,
-                s.dropped,
-                s.loss_rate,
-                model
-            );
-            if let Some(n) = s.corrupted {
-                // Per byte (`ber_per_byte`), several flips in a frame can
-                // cancel in the checksum: what it catches is measured above.
-                let caught = s.caught_fraction_model.map_or("checksum's catch measured above (several flips a frame)".to_string(), |c| {
-                    format!("checksum catches {c:.5} of them")
-                });
-                println!(
-                    "  {:>5}  {:<16} corrupted {n} ({:.5} per frame reaching it); model: {caught}",
-                    "",
-                    "",
-                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
-                );
-            }
-            if let Some(f) = s.early_fraction_model {
-                println!("  {:>5}  {:<16} model: {f:.5} of frames sent at once", "", "");
-            }
-            if let Some(sl) = &s.slots {
-                println!(
-                    "  {:>5}  {:<16} slots {} (model spacing {:.3} ms, at most {} frames each)",
-                    "",
-                    "",
-                    sl.opened,
-                    sl.spacing_ms_mean_model,
-                    sl.frames_per_slot_max.map_or("any".to_string(), |n| n.to_string())
-                );
-            }
-            if let Some(n) = s.duplicated {
-                println!(
-                    "  {:>5}  {:<16} copies {n} ({:.5} per frame reaching it)",
-                    "",
-                    "",
-                    if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 }
-                );
-            }
-            if let Some(p99) = s.delay_ms_p99_model {
-                println!("  {:>5}  {:<16} model delay p99 {p99:.3} ms", "", "");
-            }
-            if let Some(c) = &s.correlation_model {
-                println!(
-                    "  {:>5}  {:<16} model lag-1 correlation {:.4} (normal scores), {:.4} (ranks)",
-                    "", "", c.normal_scores_lag1, c.rank_lag1
-                );
-            }
-        }
+}
+
+/// The model column of a stage's row: its long-run figure.
+fn model_column(s: &StageReport) -> String {
+    match (s.loss_rate_model, s.delay_ms_model) {
+        _ if s.corrupt_rate_model.is_some() => format!("{:.5} bad", s.corrupt_rate_model.unwrap_or(0.0)),
+        _ if s.duplicate_rate_model.is_some() => format!("{:.5} dup", s.duplicate_rate_model.unwrap_or(0.0)),
+        (_, Some(d)) => format!("{d:.3} ms"),
+        (Some(l), None) => format!("{l:.5}"),
+        (None, None) => "-".into(),
+    }
+}
+
+/// A stage's row, and the lines under it that only some models have.
+fn print_stage(s: &StageReport) {
+    println!("  {:>5}  {:<16} {:>12} {:>12} {:>9.5} {:>9}", s.phase, s.label, s.reached, s.dropped, s.loss_rate, model_column(s));
+    let per_reached = |n: u64| if s.reached > 0 { n as f64 / s.reached as f64 } else { 0.0 };
+    let note = |text: String| println!("  {:>5}  {:<16} {text}", "", "");
+    if let Some(n) = s.corrupted {
+        // Per byte (`ber_per_byte`), several flips in a frame can cancel in
+        // the checksum: what it catches is measured above.
+        let caught = s
+            .caught_fraction_model
+            .map_or("checksum's catch measured above (several flips a frame)".to_string(), |c| format!("checksum catches {c:.5} of them"));
+        note(format!("corrupted {n} ({:.5} per frame reaching it); model: {caught}", per_reached(n)));
+    }
+    if let Some(f) = s.early_fraction_model {
+        note(format!("model: {f:.5} of frames sent at once"));
+    }
+    if let Some(sl) = &s.slots {
+        let most = sl.frames_per_slot_max.map_or("any".to_string(), |n| n.to_string());
+        note(format!("slots {} (model spacing {:.3} ms, at most {most} frames each)", sl.opened, sl.spacing_ms_mean_model));
+    }
+    if let Some(n) = s.duplicated {
+        note(format!("copies {n} ({:.5} per frame reaching it)", per_reached(n)));
+    }
+    if let Some(p99) = s.delay_ms_p99_model {
+        note(format!("model delay p99 {p99:.3} ms"));
+    }
+    if let Some(c) = &s.correlation_model {
+        note(format!("model lag-1 correlation {:.4} (normal scores), {:.4} (ranks)", c.normal_scores_lag1, c.rank_lag1));
+    }
+    if let Some(rec) = &s.recording {
+        note(rec.text());
     }
 }
 
