@@ -212,7 +212,7 @@ fn the_loop_of_several_streams_does_not_allocate_per_frame() {
         format!("[[stage]]\nmodel = \"duplicate\"\np = 0.05\n[[stage]]\nmodel = \"corrupt\"\np = 0.1\n{delay}"),
     ];
     let frames = 200_000u64;
-    let mut lanes: Vec<Lane<MemoryPort, MemoryPort>> = texts
+    let mut lanes: Vec<Lane<Forward<MemoryPort, MemoryPort>>> = texts
         .iter()
         .enumerate()
         .map(|(k, text)| {

@@ -6,6 +6,7 @@
 use crate::frame::ItpView;
 use crate::injector::{DropCause, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
+use crate::service::emulator::lane::ForwardChannel;
 use crate::service::emulator::path::{Channel, Ending, Take};
 use crate::service::link::Arrival;
 use crate::service::schema::{Account, BadInput};
@@ -65,9 +66,12 @@ impl<S: FrameSource, K: FrameSink> Forward<S, K> {
         self.console = Some(console);
     }
 
-    /// Off the hot path: names the senders on the ingress in the bad input
-    /// seen, when there was some since the last look.
-    pub fn name_bad_senders(&mut self, seen: &mut u64) {
+}
+
+impl<S: FrameSource, K: FrameSink> ForwardChannel for Forward<S, K> {
+    /// Names the senders on the ingress in the bad input seen, when there
+    /// was some since the last look.
+    fn name_bad_senders(&mut self, seen: &mut u64) {
         if self.bad_input.total() == *seen {
             return;
         }

@@ -6,10 +6,8 @@
 
 use crate::clock::now_ns;
 use crate::service::emulator::busy::BusyClock;
-use crate::service::emulator::forward::Forward;
-use crate::service::emulator::path::{Ending, Path, Reverse};
+use crate::service::emulator::path::{Channel, Ending, Path, Reverse};
 use crate::service::schema::{LoopBusy, PeerEvent};
-use crate::transport::{FrameSink, FrameSource};
 
 /// How close a release must be for an idle loop of one stream to prepare
 /// it now and wait for its moment on the clock alone rather than poll its
@@ -31,10 +29,18 @@ pub const RELEASE_SPIN_NS: u64 = 1_000;
 /// polled every turn again.
 pub const REVERSE_EVERY: u32 = 4;
 
+/// What a lane asks of its forward channel beyond what every channel
+/// gives.
+pub trait ForwardChannel: Channel {
+    /// Off the hot path: names who sent the bad input seen since the count
+    /// `seen` (which it updates).
+    fn name_bad_senders(&mut self, _seen: &mut u64) {}
+}
+
 /// One stream of the emulator.
-pub struct Lane<S: FrameSource, K: FrameSink> {
+pub struct Lane<F: ForwardChannel> {
     /// The console → robot path.
-    pub forward: Path<Forward<S, K>>,
+    pub forward: Path<F>,
     /// The reverse paths, polled once per turn in this order.
     pub reverse: Vec<Box<dyn Reverse>>,
     /// How near a release an idle turn waits for it on the clock
@@ -59,9 +65,9 @@ pub struct Lane<S: FrameSource, K: FrameSink> {
     reverse_wait: u32,
 }
 
-impl<S: FrameSource, K: FrameSink> Lane<S, K> {
+impl<F: ForwardChannel> Lane<F> {
     /// The stream of `forward` and its `reverse` paths.
-    pub fn new(forward: Path<Forward<S, K>>, reverse: Vec<Box<dyn Reverse>>) -> Self {
+    pub fn new(forward: Path<F>, reverse: Vec<Box<dyn Reverse>>) -> Self {
         Lane {
             forward,
             reverse,
@@ -173,7 +179,6 @@ impl<S: FrameSource, K: FrameSink> Lane<S, K> {
     /// Notes a change in the consoles or robots connected, `t_s` seconds
     /// into the loop (at the first look, only what is there).
     pub fn watch_peers(&mut self, t_s: Option<f64>) {
-        use crate::service::emulator::path::Channel;
         let now = (self.forward.chan.senders(), self.forward.chan.receivers());
         if let Some(t_s) = t_s {
             if now.0 != self.peers.0 {
@@ -203,7 +208,8 @@ mod tests {
     use super::*;
     use crate::sample::FrameSample;
     use crate::scenario::Scenario;
-    use crate::service::emulator::path::{Channel, Take};
+    use crate::service::emulator::forward::Forward;
+    use crate::service::emulator::path::Take;
     use crate::service::link::{Arrival, Carried, Link};
     use crate::service::schema::{Account, PathReport};
     use crate::transport::{MemoryPort, PortError};
@@ -280,7 +286,7 @@ mod tests {
 
     /// A lane of a Normal forward stream of `frames` frames (their end
     /// marker last) between ports in memory.
-    fn lane(frames: u64, dir: &std::path::Path) -> Lane<MemoryPort, MemoryPort> {
+    fn lane(frames: u64, dir: &std::path::Path) -> Lane<Forward<MemoryPort, MemoryPort>> {
         let mut source = MemoryPort::with_capacity(frames as usize + 1);
         let mut s = FrameSample::ZERO;
         crate::frame::ItpFrame::default().write_to_sample(&mut s);
@@ -295,7 +301,7 @@ mod tests {
 
     /// Turns `lane` until it has finished, asking as the loop does; the
     /// turns it took.
-    fn run(lane: &mut Lane<MemoryPort, MemoryPort>) -> u64 {
+    fn run(lane: &mut Lane<Forward<MemoryPort, MemoryPort>>) -> u64 {
         let mut turns = 0u64;
         loop {
             lane.turn();
@@ -360,7 +366,7 @@ mod tests {
     }
 
     /// A Normal lane: every frame is due the moment it is taken.
-    fn normal_loop() -> Lane<MemoryPort, MemoryPort> {
+    fn normal_loop() -> Lane<Forward<MemoryPort, MemoryPort>> {
         let chan = Forward::new(MemoryPort::with_capacity(8), MemoryPort::with_capacity(8), false, true);
         let link = Link::new(scenario("", 1), 16, 16).unwrap();
         Lane::new(Path::of(link, chan, 1, std::env::temp_dir().join("netfi-lane-unused.csv"), false), Vec::new())
@@ -376,8 +382,8 @@ mod tests {
     }
 
     /// One turn; whether it took or released a frame, seen from the ports.
-    fn turn(fwd: &mut Lane<MemoryPort, MemoryPort>) -> bool {
-        let ports = |l: &Lane<MemoryPort, MemoryPort>| (l.forward.chan.source.queue.len(), l.forward.chan.sink.queue.len());
+    fn turn(fwd: &mut Lane<Forward<MemoryPort, MemoryPort>>) -> bool {
+        let ports = |l: &Lane<Forward<MemoryPort, MemoryPort>>| (l.forward.chan.source.queue.len(), l.forward.chan.sink.queue.len());
         let before = ports(fwd);
         fwd.turn();
         before != ports(fwd)

@@ -55,7 +55,7 @@ const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::D
 
 /// A lane as opened, and what its end needs of its transports.
 struct Opened {
-    lane: Lane<Ingress, Egress>,
+    lane: Lane<Forward<Ingress, Egress>>,
     node: Option<IpcNode>,
     arena: Option<Rc<RefCell<crate::transport::udp::Arena>>>,
     bound: BoundEndpoints,
@@ -160,7 +160,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
 
 /// The lanes as opened, apart from what their ends need.
 #[allow(clippy::type_complexity)]
-fn split(opened: Vec<Opened>) -> (Vec<Lane<Ingress, Egress>>, Vec<Option<IpcNode>>, Vec<Option<Rc<RefCell<crate::transport::udp::Arena>>>>, Vec<BoundEndpoints>) {
+fn split(opened: Vec<Opened>) -> (Vec<Lane<Forward<Ingress, Egress>>>, Vec<Option<IpcNode>>, Vec<Option<Rc<RefCell<crate::transport::udp::Arena>>>>, Vec<BoundEndpoints>) {
     let mut out = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for o in opened {
         out.0.push(o.lane);
@@ -198,7 +198,7 @@ fn say_lane(cfg: &EmulatorConfig, k: usize, o: &Opened) {
 /// A lane after the loop: its paths finished (traces and histograms
 /// written), its report assembled.
 fn conclude(
-    mut lane: Lane<Ingress, Egress>,
+    mut lane: Lane<Forward<Ingress, Egress>>,
     dead_peers: Vec<String>,
     isolation: Option<crate::host::isolate::IsolationSummary>,
     events: Vec<crate::service::control::ControlEvent>,
@@ -270,7 +270,7 @@ fn start_control(cfg: &EmulatorConfig, link: &mut crate::service::link::Link<cra
 mod place {
     use super::{ControlHandle, EmulatorConfig, Lane};
     use crate::host::isolate::{self, Isolation};
-    use crate::transport::{FrameSink, FrameSource};
+    use crate::service::emulator::lane::ForwardChannel;
 
     /// How the loop's thread was placed.
     pub(super) struct Placement {
@@ -281,7 +281,7 @@ mod place {
     /// Pins the loop's thread (keeping every trace writer and the control
     /// thread off its core), clears the core if asked, and raises the
     /// thread's priority if asked.
-    pub(super) fn place<S: FrameSource, K: FrameSink>(cfg: &EmulatorConfig, lanes: &[Lane<S, K>], control: Option<&ControlHandle>) -> anyhow::Result<Placement> {
+    pub(super) fn place<F: ForwardChannel>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> anyhow::Result<Placement> {
         if let Some(core) = cfg.core {
             let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
             anyhow::ensure!(ok, "could not pin the emulator to core {core}");

@@ -11,8 +11,8 @@
 
 use crate::clock::now_ns;
 use crate::service::control::ControlPort;
-use crate::service::emulator::lane::Lane;
-use crate::transport::{FrameSink, FrameSource, IpcNode, Role};
+use crate::service::emulator::lane::{ForwardChannel, Lane};
+use crate::transport::{IpcNode, Role};
 
 /// What the loop's look off the hot path (every 4096 rounds) found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,7 +53,7 @@ impl LoopEnd {
 
 /// Releases every lane's due frames; the earliest release left.
 #[inline]
-fn release_all<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>]) -> u64 {
+fn release_all<F: ForwardChannel>(lanes: &mut [Lane<F>]) -> u64 {
     let now = now_ns();
     let mut next = u64::MAX;
     for l in lanes.iter_mut() {
@@ -69,7 +69,7 @@ fn release_all<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>]) -> u64 {
 /// out now, not a round later; `due` is the earliest release of any lane as
 /// last seen (`u64::MAX` at first), returned as the round leaves it.
 #[inline]
-pub fn round<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>], mut due: u64) -> u64 {
+pub fn round<F: ForwardChannel>(lanes: &mut [Lane<F>], mut due: u64) -> u64 {
     if let [lane] = lanes {
         lane.turn();
         return due;
@@ -93,8 +93,8 @@ pub fn round<S: FrameSource, K: FrameSink>(lanes: &mut [Lane<S, K>], mut due: u6
 /// requested. Every 4096 rounds: live control, the `look` (a stop; each
 /// lane whose robot died, marked in the slice it is given), who sent bad
 /// input, the lanes' end; every 65 536 rounds, the peers connected.
-pub fn spin<S: FrameSource, K: FrameSink>(
-    lanes: &mut [Lane<S, K>],
+pub fn spin<F: ForwardChannel>(
+    lanes: &mut [Lane<F>],
     mut look: impl FnMut(&mut [bool]) -> Look,
     mut control: Option<&mut ControlPort>,
 ) -> LoopEnd {
