@@ -30,8 +30,8 @@ pub const RELEASE_SPIN_NS: u64 = 1_000;
 pub const REVERSE_EVERY: u32 = 4;
 
 /// What a lane asks of its forward channel beyond what every channel
-/// gives.
-pub trait ForwardChannel: Channel {
+/// gives: its report is the forward stream's (`emulator.json`'s frames).
+pub trait ForwardChannel: Channel<Extra = crate::service::emulator::forward::ForwardExtra> {
     /// Off the hot path: names who sent the bad input seen since the count
     /// `seen` (which it updates).
     fn name_bad_senders(&mut self, _seen: &mut u64) {}

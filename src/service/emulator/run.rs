@@ -1,0 +1,235 @@
+//! Running the lanes, whatever they carry: live control on lane 0, the
+//! loop placed on its core, `emulator.ready`, the loop until its end, then
+//! each lane's paths finished and its `emulator.json` written (and the
+//! joint report of several lanes).
+
+use crate::host::StealTimer;
+use crate::service::control::{self, ControlHandle, ControlPort};
+use crate::service::emulator::config::EmulatorConfig;
+use crate::service::emulator::lane::{ForwardChannel, Lane};
+use crate::service::emulator::{report, spin};
+use crate::service::link::{Carried, Link};
+use crate::service::schema::EmulatorReport;
+use crate::service::signals;
+use crate::transport::IpcNode;
+use anyhow::Context;
+
+/// What a kind of lane does once its report is written (its transport's
+/// own report).
+pub type After = Box<dyn FnOnce(&EmulatorReport) -> anyhow::Result<()>>;
+
+/// Runs `lanes` (with the iceoryx2 nodes they were opened on, which must
+/// outlive their ports) as `cfg` says. `before_finish` is asked, for each
+/// lane after the loop and before its paths finish, what to do once its
+/// report is written. Returns the lanes' reports.
+pub fn run<F: ForwardChannel + 'static>(
+    cfg: &EmulatorConfig,
+    mut lanes: Vec<Lane<F>>,
+    nodes: Vec<Option<IpcNode>>,
+    mut before_finish: impl FnMut(usize, &Lane<F>) -> After,
+) -> anyhow::Result<Vec<EmulatorReport>> {
+    let several = cfg.several();
+    for l in lanes.iter_mut() {
+        // One stream's wait for its release would hold up the others.
+        if several {
+            l.release_spin_ns = 0;
+        }
+        if cfg.reorder_queue {
+            l.forward.link.reorder_queue()?;
+        }
+    }
+    let mut control = start_control(cfg, &mut lanes[0].forward.link)?;
+    let mut placement = place::place(cfg, &lanes, control.as_ref().map(|(_, h)| h))?;
+    signals::install();
+    // Ready only now, set up and placed: a console started on it is taken
+    // in at once. Said before the set-up, frames queued at the ingress for
+    // its length (0.1–0.3 s with a cleared core and a queue and trace sized
+    // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
+    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").context("writing emulator.ready")?;
+    let term = nodes.first().and_then(Option::as_ref);
+    let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
+    let mut reaper = spin::Reaper::new(&nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
+    let look = |died: &mut [bool]| {
+        if stop.requested() {
+            return spin::Look::Stop;
+        }
+        reaper.look(died);
+        spin::Look::Go
+    };
+    let steal_timer = StealTimer::start();
+    let end = spin::spin(&mut lanes, look, control.as_mut().map(|(p, _)| p));
+    let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
+    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
+    let run = report::Run { end: &end, core: cfg.core, realtime_priority: placement.realtime_priority, steal: steal_timer.stop() };
+    let dead = std::mem::take(&mut reaper.dead);
+    let mut lane0 = Some((isolation, events));
+    let mut reports = Vec::with_capacity(lanes.len());
+    for (k, ((lane, dead), l)) in lanes.into_iter().zip(dead).zip(&cfg.lanes).enumerate() {
+        let (isolation, events) = lane0.take().unwrap_or_default();
+        let after = before_finish(k, &lane);
+        let r = conclude(lane, dead, isolation, events, &run)?;
+        write_json(&l.out_dir.join("emulator.json"), &r)?;
+        after(&r)?;
+        reports.push(r);
+    }
+    // The nodes outlive the ports.
+    drop(nodes);
+    if several {
+        write_joint(cfg, &reports, end.ended_by)?;
+    }
+    Ok(reports)
+}
+
+/// A lane after the loop: its paths finished (traces and histograms
+/// written), its report assembled.
+fn conclude<F: ForwardChannel + 'static>(
+    mut lane: Lane<F>,
+    dead_peers: Vec<String>,
+    isolation: Option<crate::host::isolate::IsolationSummary>,
+    events: Vec<crate::service::control::ControlEvent>,
+    run: &report::Run,
+) -> anyhow::Result<EmulatorReport> {
+    let duration_ns = run.end.duration_ns();
+    lane.end_turn(run.end.t_end);
+    let busy = lane.loop_busy();
+    let Lane { forward, reverse, peer_events, robot_died, .. } = lane;
+    let fwd = forward.finish(duration_ns)?;
+    let mut paths = std::collections::BTreeMap::new();
+    for r in reverse {
+        let name = r.name();
+        paths.insert(name.to_string(), r.finish(duration_ns)?);
+    }
+    let end = report::LaneEnd { busy, peer_events, dead_peers, robot_died, isolation, events };
+    Ok(report::lane_report(fwd, paths, end, run))
+}
+
+/// Writes `value` as pretty JSON to `path`.
+pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_vec_pretty(value)?).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes `<out>/emulator.json` of several lanes: every lane's account and
+/// their total.
+fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: &str) -> anyhow::Result<()> {
+    let run_ids: Vec<String> = cfg.lanes.iter().map(|l| l.args.run_id.clone().unwrap_or_default()).collect();
+    let dirs: Vec<_> = cfg.lanes.iter().map(|l| l.out_dir.clone()).collect();
+    let joint = report::joint(reports, &run_ids, &dirs, ended_by);
+    write_json(&cfg.out_dir.join("emulator.json"), &joint)?;
+    let t = &joint.total.account;
+    eprintln!(
+        "emulator: {} streams: {} entered, {} delivered, {} held at end; balanced {}; ended by {}",
+        reports.len(),
+        t.entered,
+        t.delivered,
+        t.held_at_end,
+        joint.balanced,
+        joint.ended_by
+    );
+    Ok(())
+}
+
+/// The live control of the run, when it has one: room for switched phases,
+/// the control thread started and its telemetry tapped from lane 0's trace
+/// (before the loop's core is pinned).
+fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> anyhow::Result<Option<(ControlPort, ControlHandle)>> {
+    let Some((run, telemetry_ms)) = cfg.control.clone() else { return Ok(None) };
+    link.injector_mut().reserve_phases(control::PHASE_ROOM);
+    let interval_ns = (telemetry_ms > 0).then(|| telemetry_ms.saturating_mul(1_000_000));
+    let lane0 = &cfg.lanes[0];
+    let settings = control::Settings {
+        run,
+        spec: lane0.scenario.clone(),
+        queue_order: link.injector_mut().queue_order(),
+        out_dir: lane0.out_dir.clone(),
+        telemetry_interval_ns: interval_ns,
+        unsupported: if lane0.accept_raw() { crate::service::emulator::itp::RAW_UNSUPPORTED } else { T::UNSUPPORTED },
+    };
+    let (port, handle) = control::start(settings)?;
+    if let Some(tap) = interval_ns.and_then(|ns| handle.aggregator(ns)) {
+        link.tap_trace(tap);
+    }
+    Ok(Some((port, handle)))
+}
+
+
+/// Where the loop runs.
+mod place {
+    use super::{ControlHandle, EmulatorConfig, ForwardChannel, Lane};
+    use crate::host::isolate::{self, Isolation};
+
+    /// How the loop's thread was placed.
+    pub(super) struct Placement {
+        pub(super) isolation: Option<Isolation>,
+        pub(super) realtime_priority: Option<i32>,
+    }
+
+    /// Pins the loop's thread (keeping every trace writer and the control
+    /// thread off its core), clears the core if asked, and raises the
+    /// thread's priority if asked.
+    pub(super) fn place<F: ForwardChannel>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> anyhow::Result<Placement> {
+        if let Some(core) = cfg.core {
+            let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
+            anyhow::ensure!(ok, "could not pin the emulator to core {core}");
+            for l in lanes {
+                for what in l.keep_traces_off_core(core) {
+                    warn_unless_off(false, &format!("the {what} trace writer"), core);
+                }
+            }
+            if let Some(h) = control {
+                warn_unless_off(h.keep_off_core(core), "the control thread", core);
+            }
+        }
+        // After pinning: the loop's own threads are placed; everything else
+        // that may run elsewhere leaves the core until the run ends.
+        let isolation = match (cfg.isolate, cfg.core) {
+            (true, Some(core)) => match isolate::isolate(core) {
+                Ok(iso) => {
+                    eprintln!("emulator: {}", iso.summary());
+                    Some(iso)
+                }
+                Err(e) => {
+                    eprintln!("emulator: WARNING: could not clear core {core}: {e}");
+                    Some(Isolation::not_cleared(core, format!("could not clear core {core}: {e}")))
+                }
+            },
+            (true, None) => {
+                let why = isolate::pin_problem().unwrap_or_else(|| "--isolate needs a pinned core; nothing cleared".into());
+                eprintln!("emulator: WARNING: {why}");
+                Some(Isolation::not_cleared(0, why))
+            }
+            _ => None,
+        };
+        let realtime_priority = cfg.rt_priority.and_then(realtime);
+        Ok(Placement { isolation, realtime_priority })
+    }
+
+    /// Says loudly that one of the emulator's own threads (`what`) could
+    /// not be kept off the loop's core: it may use no other core, so each
+    /// time it runs it takes the core from the loop.
+    fn warn_unless_off(kept: bool, what: &str, core: usize) {
+        if !kept {
+            eprintln!("emulator: WARNING: {what} could not be kept off core {core} (it may use no other): the loop loses its core whenever that thread runs");
+        }
+    }
+
+    /// Moves the loop to SCHED_FIFO `p`, warning of real-time throttling;
+    /// the priority it got, if any.
+    fn realtime(p: i32) -> Option<i32> {
+        match crate::service::set_realtime(p) {
+            Ok(()) => {
+                if let Some((runtime, period)) = crate::service::rt_throttling() {
+                    eprintln!(
+                        "emulator: WARNING: real-time throttling is on (kernel.sched_rt_runtime_us = {runtime} of {period}): this busy loop at SCHED_FIFO will be stopped for {} ms of every {} ms; set it to -1, or use --isolate without --rt-priority",
+                        (period - runtime) / 1000,
+                        period / 1000
+                    );
+                }
+                Some(p)
+            }
+            Err(e) => {
+                eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
+                None
+            }
+        }
+    }
+}
