@@ -4,6 +4,10 @@
 //! (an account closes, a report finds its paths); no process writes or
 //! reads a file here.
 
+mod paths;
+
+pub use paths::{FeedbackExtra, ForwardExtra, ReturnExtra, VideoExtra};
+
 use crate::host::isolate::IsolationSummary;
 use crate::metrics::Summary;
 use serde::de::DeserializeOwned;

@@ -11,12 +11,11 @@
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::DEFAULT_QUEUE_CAPACITY;
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, FeedbackExtra};
 use crate::transport::{FeedbackEgress, FeedbackIngress, PortError};
-use serde::{Deserialize, Serialize};
 
 impl Carried for FeedbackSample {
     /// A copy of feedback is a second release of the same sample; a flip
@@ -46,13 +45,6 @@ impl Feedback {
     pub fn ports_mut(&mut self) -> (&mut FeedbackIngress, &mut FeedbackEgress) {
         (&mut self.source, &mut self.sink)
     }
-}
-
-/// What the feedback channel adds to its path's report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeedbackExtra {
-    /// Feedback samples the robot said it sent (from its end marker).
-    pub sent_by_robot: Option<u64>,
 }
 
 impl Channel for Feedback {

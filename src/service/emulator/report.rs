@@ -4,7 +4,7 @@
 
 use crate::host::isolate::IsolationSummary;
 use crate::service::control::ControlEvent;
-use crate::service::emulator::forward::ForwardExtra;
+use crate::service::schema::ForwardExtra;
 use crate::service::emulator::spin::LoopEnd;
 use crate::service::schema::{
     BoundEndpoints, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, ForeignSender, LoopBusy, PathReport, PeerEvent, Shaping, UdpReport, WithPaths,

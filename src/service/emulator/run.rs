@@ -6,7 +6,7 @@
 use crate::host::StealTimer;
 use crate::service::control::{self, ControlHandle, ControlPort};
 use crate::service::emulator::config::EmulatorConfig;
-use crate::service::emulator::lane::{ForwardChannel, Lane};
+use crate::service::emulator::{lane::Lane, path::ForwardChannel};
 use crate::service::emulator::{report, spin};
 use crate::service::link::{Carried, Link};
 use crate::service::schema::EmulatorReport;

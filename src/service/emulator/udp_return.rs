@@ -16,13 +16,12 @@
 use crate::injector::DropCause;
 use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, ReturnExtra};
 use crate::transport::udp::{Arena, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
 use crate::transport::{Endpoint, PortError};
 use anyhow::{bail, Context};
-use serde::{Deserialize, Serialize};
 
 /// Default release-queue capacity of the return path (and of the forward
 /// stream in raw mode): 4096 datagrams. Each needs an arena slot of 64 KiB
@@ -77,22 +76,6 @@ impl UdpReturn {
             unroutable: 0,
         }
     }
-}
-
-/// What the return channel adds to its path's report: `received = entered
-/// + unroutable`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReturnExtra {
-    /// `untouched` (no return scenario) or `scenario`.
-    pub mode: String,
-    /// Where return datagrams go.
-    pub destination: String,
-    /// Datagrams taken off the egress socket.
-    pub received: u64,
-    /// Received before any console was known: not relayed.
-    pub unroutable: u64,
-    /// Return datagrams the kernel dropped before the emulator took them.
-    pub kernel_drops: Option<u64>,
 }
 
 impl Channel for UdpReturn {

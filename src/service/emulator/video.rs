@@ -17,15 +17,14 @@
 
 use crate::injector::{DropCause, Invalid};
 use crate::service::emulator::path::{Channel, Ending, Path, Reverse, Take, GRACE_NS};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, VideoExtra};
 use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO_HELD_FRAMES};
 use crate::service::video::VideoArgs;
 use crate::transport::{Channel as Port, IpcNode, PortError};
 use crate::video::{drop_kind, DropKind};
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
 
 /// What the emulator's video link holds: the slot of the borrowed sample,
 /// and what the link and the release need of it.
@@ -56,21 +55,6 @@ pub struct Video {
     bytes_entered: u64,
     bytes_delivered: u64,
     unsubscribed: u64,
-}
-
-/// What the video channel adds to its path's report: `entered = delivered
-/// + dropped + held_at_end`, and every drop is damaged or lost.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct VideoExtra {
-    pub max_bytes: usize,
-    /// Frames the camera said it sent (from its end marker).
-    pub sent_by_camera: Option<u64>,
-    /// Dropped frames of several packets taken by a loss stage.
-    pub dropped_damaged: u64,
-    /// Dropped frames lost whole.
-    pub dropped_lost: u64,
-    pub bytes_entered: u64,
-    pub bytes_delivered: u64,
 }
 
 impl Channel for Video {
