@@ -9,7 +9,7 @@ use netfi::scenario::{self, Scenario};
 use netfi::service::emulator::Forward;
 use netfi::service::link::Link;
 use netfi::service::udp::ReturnPath;
-use netfi::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
+use netfi::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Instant;
@@ -51,8 +51,11 @@ fn allocations_in_steady_state(
     let capacity = 256;
     let mut fwd = Forward::new(Link::new(Scenario::new(&spec, 3).unwrap(), capacity, datagrams).unwrap(), false);
     let arena = Rc::new(RefCell::new(Arena::new(capacity + 1)));
-    let (console, robot, egress) = (bind(), bind(), bind());
-    let mut source = UdpSource::new(bind(), Some(arena.clone()));
+    let (console, robot, mut egress) = (bind(), bind(), bind());
+    // As `transport::open` sets them up: each side takes datagrams from its
+    // one peer (the filter is on the receive path the loop turns).
+    egress.accept_only(robot.local_addr());
+    let mut source = UdpSource::new(bind(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()));
     let (from_robot, to_console) = (egress.try_clone().unwrap(), source.port().try_clone().unwrap());
     let mut ret = match return_scenario {
         None => ReturnPath::untouched(from_robot, to_console, None),
