@@ -25,6 +25,7 @@ pub mod stats;
 pub mod video;
 
 pub mod clock;
+pub mod durable;
 pub mod host;
 pub mod html;
 pub mod load;

@@ -34,6 +34,7 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         payload: Payload::Itp,
         egress_bind: None,
         console_from: None,
+        robot_from: None,
         // The benchmark measures the forward path, as it always has (the
         // flag names the iceoryx2 feedback loop: a UDP chain, which has no
         // run id, refuses it).

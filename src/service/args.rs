@@ -173,11 +173,17 @@ pub struct EmulatorArgs {
     /// on loopback when the robot is on loopback).
     #[arg(long, value_name = "ADDR:PORT")]
     pub egress_bind: Option<SocketAddr>,
-    /// The console's address: a UDP ingress takes datagrams from it only
-    /// (default: the first sender, then locked). Others are counted and
-    /// dropped as `foreign_sender`.
+    /// With a UDP ingress (required there): the console's address, the
+    /// only sender whose datagrams are taken; or `first`: pair with the
+    /// first sender, trusted from then on (said on stderr). Datagrams from
+    /// anyone else are refused and counted (`foreign_sender` in udp.json).
+    #[arg(long, value_name = "ADDR:PORT|first")]
+    pub console_from: Option<crate::transport::udp::ConsolePolicy>,
+    /// With UDP on both sides: the address the robot answers from, where it
+    /// is not the --egress address. Return datagrams from anyone else are
+    /// refused and counted (`refused` of the return path in udp.json).
     #[arg(long, value_name = "ADDR:PORT")]
-    pub console_from: Option<SocketAddr>,
+    pub robot_from: Option<SocketAddr>,
     /// Pass datagrams coming back from the robot side through this scenario
     /// (file or preset) instead of relaying them untouched.
     #[arg(long, value_name = "SCENARIO")]
@@ -495,6 +501,9 @@ impl EmulatorArgs {
         }
         if self.egress_bind.is_some() && !e {
             bail!("--egress-bind applies to a UDP egress");
+        }
+        if self.robot_from.is_some() && !(i && e) {
+            bail!("--robot-from applies to the return path, which needs UDP on both sides");
         }
         if self.console_from.is_some() && !i {
             bail!("--console-from applies to a UDP ingress");

@@ -161,6 +161,7 @@ impl Plan {
             payload: Payload::Itp,
             egress_bind: None,
             console_from: None,
+            robot_from: None,
             return_scenario: args.return_scenario.clone(),
             return_seed: args.return_seed,
             return_to: None,

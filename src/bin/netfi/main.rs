@@ -68,5 +68,7 @@ fn ui(a: cli::UiArgs) -> anyhow::Result<()> {
         out_dir: a.out,
         netfi: std::env::current_exe()?,
         emulator_core: a.emulator_core.unwrap_or(last_core),
+        no_token: a.no_token,
+        allow_hosts: a.allow_host,
     })
 }

@@ -103,9 +103,9 @@ fn conclude<F: ForwardChannel + 'static>(
     Ok(report::lane_report(fwd, paths, end, run))
 }
 
-/// Writes `value` as pretty JSON to `path`.
+/// Writes `value` as pretty JSON to `path`, whole or not at all.
 pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_vec_pretty(value)?).with_context(|| format!("writing {}", path.display()))
+    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Writes `<out>/emulator.json` of several lanes: every lane's account and

@@ -147,6 +147,7 @@ impl Channel for UdpReturn {
             received: self.received,
             unroutable: self.unroutable,
             kernel_drops: self.from_robot.kernel_drops(),
+            refused: self.from_robot.refused().report(),
         };
         (extra, self.received == account.entered + self.unroutable)
     }
@@ -169,7 +170,10 @@ pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
         None => None,
     };
     let plan = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, o.seed, SEED_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
-    let from_robot = egress.try_clone().context("opening the return path")?;
+    let mut from_robot = egress.try_clone().context("opening the return path")?;
+    if let Some(robot) = a.robot_from {
+        from_robot.accept_only(robot);
+    }
     let to_console = ingress.try_clone().context("opening the return path")?;
     let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_scenario.is_some(), plan.queue_capacity);
     Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))

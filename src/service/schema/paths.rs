@@ -49,5 +49,8 @@ pub struct ReturnExtra {
     pub unroutable: u64,
     /// Return datagrams the kernel dropped before the emulator took them.
     pub kernel_drops: Option<u64>,
+    /// Datagrams at the egress socket from others than the robot: refused.
+    #[serde(default)]
+    pub refused: crate::transport::udp::Refused,
 }
 
