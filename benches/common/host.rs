@@ -1,35 +1,70 @@
-//! The host: steal time, load average and other processes' CPU around
-//! every interval; the facts the report opens with; thread placement.
+//! The host: what machine it is ([`HostFacts`]), its state over a
+//! measurement ([`HostTimer`]: steal time, load average, the CPU other
+//! processes used), how fast its core runs right now ([`speed`]), and
+//! thread placement ([`pin`]).
 
-use crate::args::Settings;
+use crate::common::args::stopped;
 use netfi::host::{CpuTimes, StealTimer};
-use netfi::service::signals::stop_requested;
 use serde::Serialize;
-use serde_json::{json, Value};
 use std::time::{Duration, Instant};
 
-/// The host's state over one interval.
+/// The machine.
+#[derive(Debug, Clone, Serialize)]
+pub struct HostFacts {
+    pub cores: usize,
+    pub cpu_model: String,
+    pub kernel: String,
+    pub clocksource: String,
+}
+
+impl HostFacts {
+    pub fn read() -> HostFacts {
+        let read = |p: &str| std::fs::read_to_string(p).map(|t| t.trim().to_string()).unwrap_or_default();
+        let cpuinfo = read("/proc/cpuinfo");
+        let model = cpuinfo.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).unwrap_or("").trim();
+        HostFacts {
+            cores: core_affinity::get_core_ids().map_or(0, |c| c.len()),
+            cpu_model: model.to_string(),
+            kernel: read("/proc/sys/kernel/osrelease"),
+            clocksource: read("/sys/devices/system/clocksource/clocksource0/current_clocksource"),
+        }
+    }
+
+    /// One line: "2 cores (MODEL), kernel K, clock source C".
+    pub fn line(&self) -> String {
+        format!("{} cores ({}), kernel {}, clock source {}", self.cores, self.cpu_model, self.kernel, self.clocksource)
+    }
+}
+
+/// The host's state over one measurement.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct HostWindow {
+    pub seconds: f64,
     pub steal_ms: u64,
     pub steal_fraction: f64,
-    /// 1-minute load average at the start and at the end. It counts this
-    /// benchmark's own busy threads too (up to 2 during an interval) and
-    /// lags by about a minute.
+    /// 1-minute load average at the start and at the end. It counts the
+    /// benchmark's own busy threads too and lags by about a minute.
     pub load_start: f64,
     pub load_end: f64,
-    /// Cores kept busy by other processes over the half second before the
-    /// interval, while this benchmark was idle: the background load.
+    /// Cores other processes kept busy over the half second before the
+    /// measurement, while the benchmark was idle.
     pub background_busy_cores: f64,
-    /// Cores kept busy by other processes during the interval: all busy
-    /// CPU time less this benchmark's and its children's, over the
-    /// interval's length (10 ms resolution).
+    /// Cores other processes kept busy during it: all busy CPU time less
+    /// the benchmark's and its children's, over its length (10 ms
+    /// resolution).
     pub others_busy_cores: f64,
-    /// Seconds spent waiting for a quiet host before the interval.
+    /// Seconds spent waiting for a quiet host first (`--quiet-cores`).
     pub waited_for_quiet_s: f64,
 }
 
-/// Started before an interval, stopped after it: its [`HostWindow`].
+impl HostWindow {
+    /// "steal 0.12%, load 1.0→1.2, others 0.01 cores".
+    pub fn line(&self) -> String {
+        format!("steal {:.2}%, load {:.1}→{:.1}, others {:.2} cores", self.steal_fraction * 100.0, self.load_start, self.load_end, self.others_busy_cores)
+    }
+}
+
+/// Started before a measurement, stopped after it: its [`HostWindow`].
 pub struct HostTimer {
     steal: StealTimer,
     load: f64,
@@ -41,52 +76,53 @@ pub struct HostTimer {
 }
 
 impl HostTimer {
-    /// Starts an interval: first waits (up to the configured time) for the
-    /// background load to fall to the configured level, if one is set.
+    /// Starts a measurement; with `quiet` (`cores`, `wait_s`), first waits
+    /// up to `wait_s` for other processes to keep at most `cores` busy.
     pub fn start(quiet: Option<(f64, f64)>) -> HostTimer {
         let t_wait = Instant::now();
         let mut background = busy_cores(Duration::from_millis(500));
-        if let Some((cores, max_wait_s)) = quiet {
-            let mut said = false;
-            while background > cores && t_wait.elapsed().as_secs_f64() < max_wait_s && !stop_requested() {
-                if !said {
-                    println!("  (waiting for a quiet host: other processes keep {background:.2} cores busy, more than {cores})");
-                    said = true;
-                }
+        if let Some((cores, wait_s)) = quiet {
+            while background > cores && t_wait.elapsed().as_secs_f64() < wait_s && !stopped() {
                 std::thread::sleep(Duration::from_secs(5));
                 background = busy_cores(Duration::from_millis(500));
             }
         }
-        let waited_s = t_wait.elapsed().as_secs_f64() - 0.5;
         HostTimer {
             steal: StealTimer::start(),
             load: load_average(),
             background,
-            waited_s,
+            waited_s: (t_wait.elapsed().as_secs_f64() - 0.5).max(0.0),
             busy: CpuTimes::read(),
             own_s: own_cpu_s(),
             t0: Instant::now(),
         }
     }
 
+    /// Starts a window without the half-second look at the background
+    /// (for a whole program, or windows back to back).
+    pub fn now() -> HostTimer {
+        HostTimer { steal: StealTimer::start(), load: load_average(), background: f64::NAN, waited_s: 0.0, busy: CpuTimes::read(), own_s: own_cpu_s(), t0: Instant::now() }
+    }
+
     pub fn stop(&self) -> HostWindow {
         let steal = self.steal.stop();
-        let elapsed = self.t0.elapsed().as_secs_f64();
+        let seconds = self.t0.elapsed().as_secs_f64();
         let others = match (self.busy, CpuTimes::read()) {
-            (Some(a), Some(b)) if elapsed > 0.0 => {
+            (Some(a), Some(b)) if seconds > 0.0 => {
                 let busy_s = (b.busy - a.busy) as f64 / ticks_per_s();
-                ((busy_s - (own_cpu_s() - self.own_s)) / elapsed).max(0.0)
+                ((busy_s - (own_cpu_s() - self.own_s)) / seconds).max(0.0)
             }
             _ => f64::NAN,
         };
         HostWindow {
+            seconds,
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
             load_start: self.load,
             load_end: load_average(),
             background_busy_cores: self.background,
             others_busy_cores: others,
-            waited_for_quiet_s: self.waited_s.max(0.0),
+            waited_for_quiet_s: self.waited_s,
         }
     }
 }
@@ -101,8 +137,8 @@ fn ticks_per_s() -> f64 {
     }
 }
 
-/// CPU seconds used by this process and by its children that have been
-/// waited for (the emulator, `netfi run` and its services).
+/// CPU seconds of this process and of its children that have been waited
+/// for (the emulators, `netfi run` and its services).
 fn own_cpu_s() -> f64 {
     let secs = |who: libc::c_int| {
         // SAFETY: a zeroed rusage is a valid output buffer for getrusage.
@@ -118,9 +154,8 @@ fn own_cpu_s() -> f64 {
 }
 
 /// Cores busy on average over `window` (NaN where `/proc/stat` is
-/// unreadable). Busy is time running tasks ([`CpuTimes::busy`]): interrupt
-/// and softirq time is left out, as the kernel bills it to no process (UDP
-/// loopback delivery runs there), and steal is reported on its own.
+/// unreadable). Interrupt time is left out ([`CpuTimes::busy`]): the kernel
+/// bills it to no process; steal is reported on its own.
 fn busy_cores(window: Duration) -> f64 {
     let cores = core_affinity::get_core_ids().map_or(1, |c| c.len()) as f64;
     let a = CpuTimes::read();
@@ -131,47 +166,30 @@ fn busy_cores(window: Duration) -> f64 {
     }
 }
 
-fn load_average() -> f64 {
+pub fn load_average() -> f64 {
     std::fs::read_to_string("/proc/loadavg").ok().and_then(|s| s.split_whitespace().next().and_then(|x| x.parse().ok())).unwrap_or(f64::NAN)
 }
 
-/// The machine: cores, CPU model, kernel, clock source, and where the
-/// benchmark placed the emulator and its own ends.
-pub fn host_facts(s: &Settings) -> Value {
-    let read = |p: &str| std::fs::read_to_string(p).map(|t| t.trim().to_string()).unwrap_or_default();
-    let cpuinfo = read("/proc/cpuinfo");
-    let model = cpuinfo.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).unwrap_or("").trim().to_string();
-    json!({
-        "cores": core_affinity::get_core_ids().map_or(0, |c| c.len()),
-        "cpu_model": model,
-        "kernel": read("/proc/sys/kernel/osrelease"),
-        "clocksource": read("/sys/devices/system/clocksource/clocksource0/current_clocksource"),
-        "emulator_core": s.emulator_core,
-        "driver_core": s.driver_core,
-    })
-}
-
 /// Pins the calling thread to `core` and, when asked, moves it to
-/// SCHED_FIFO at `rt_priority`.
+/// SCHED_FIFO at `rt_priority`; says so where either is refused.
 pub fn pin(core: Option<usize>, rt_priority: Option<i32>) {
     if let Some(c) = core {
         if !core_affinity::set_for_current(core_affinity::CoreId { id: c }) {
-            eprintln!("overhead: could not pin a thread to core {c}");
+            eprintln!("could not pin a thread to core {c}");
         }
     }
     if let Some(p) = rt_priority {
         if let Err(e) = netfi::service::set_realtime(p) {
-            eprintln!("overhead: SCHED_FIFO {p} refused ({e}); staying at normal priority");
+            eprintln!("SCHED_FIFO {p} refused ({e}); staying at normal priority");
         }
     }
 }
 
 /// How fast the calling thread's core runs right now, in two fixed
 /// workloads, ns a step: a chain of dependent integer operations, and a
-/// pointer chase over 16 MiB (past a core's L2, within this machine's L3).
-/// The host of a virtual machine can slow both by half for minutes (clock
-/// frequency, other guests on the same caches and memory bus) with no
-/// steal time at all; a trial run in such a phase says so here.
+/// pointer chase over 16 MiB (past a core's L2). A virtual machine's host
+/// can slow both by half for minutes with no steal time at all; a
+/// measurement taken in such a phase says so here.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Speed {
     pub alu_ns: f64,
@@ -186,8 +204,7 @@ pub fn speed() -> Speed {
         let n = 4 << 20;
         let mut order: Vec<u32> = (0..n as u32).collect();
         for i in (1..n).rev() {
-            let j = (netfi::scenario::splitmix64(i as u64) % i as u64) as usize;
-            order.swap(i, j);
+            order.swap(i, (netfi::scenario::splitmix64(i as u64) % i as u64) as usize);
         }
         let mut next = vec![0u32; n];
         for k in 0..n {
@@ -213,4 +230,16 @@ pub fn speed() -> Speed {
     }
     std::hint::black_box(at);
     Speed { alu_ns, chase_ns: t.elapsed().as_nanos() as f64 / CHASE as f64 }
+}
+
+/// [`speed`] measured on `core`.
+pub fn speed_on(core: Option<usize>) -> Speed {
+    std::thread::scope(|sc| {
+        sc.spawn(|| {
+            pin(core, None);
+            speed()
+        })
+        .join()
+        .unwrap_or(Speed { alu_ns: f64::NAN, chase_ns: f64::NAN })
+    })
 }

@@ -1,10 +1,10 @@
 //! Driving an interval: every frame sent at its time, both routes
 //! busy-polled in between (chain intervals), or one route paced (floors).
 
-use crate::ends::{wire, Ends, Route};
+use crate::common::args::stopped;
+use crate::common::ends::{wire, Ends, Route};
 use netfi::clock::{now_ns, sleep_until_ns};
 use netfi::metrics::LatencyHistogram;
-use netfi::service::signals::stop_requested;
 
 /// Frames sent before recording starts, in seconds of the interval's rate:
 /// page faults of fresh shared memory, cold caches and the first
@@ -134,7 +134,7 @@ pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, ma
     let mut drain_until = u64::MAX;
     loop {
         let now = now_ns();
-        if stop_requested() {
+        if stopped() {
             break;
         }
         if slot < slots {
@@ -185,7 +185,7 @@ pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns:
     let (mut t_record, mut drain_until) = (0u64, u64::MAX);
     loop {
         let now = now_ns();
-        if stop_requested() {
+        if stopped() {
             break;
         }
         if e < events && now >= t0 + at(e) {
@@ -225,7 +225,7 @@ pub fn pace(frames: u64, period_ns: f64, warm: u64, mut send: impl FnMut(u64) ->
     let mut sent = 0;
     let mut t_record = t0;
     for i in 0..frames {
-        if stop_requested() {
+        if stopped() {
             break;
         }
         let target = t0 + (i as f64 * period_ns) as u64;
