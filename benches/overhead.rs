@@ -229,16 +229,20 @@ fn markdown(a: &Args, scenarios: &[String], cells: &[Cell], runs: &[RunFigures])
             let _ = writeln!(md, "{}", c.md_row());
         }
         if let [new, old] = mine[..] {
+            // Lateness is positive: a ratio reads well. Added latency is a
+            // difference of two distributions and may be negative: the
+            // difference of the medians says more.
             let r = |x: Option<Spread>, y: Option<Spread>| x.zip(y).map_or("–".into(), |(x, y)| format!("{:.2}×", x.median / y.median.max(1.0)));
+            let d = |x: Option<Spread>, y: Option<Spread>| x.zip(y).map_or("–".into(), |(x, y)| format!("{:+} ns", (x.median - y.median).round()));
             let _ = writeln!(
                 md,
-                "| {} / {} (medians) | | {} | {} | {} | {} | |",
+                "| {} against {} (medians) | | {} | {} | {} | {} | |",
                 new.build,
                 old.build,
                 r(new.release_lateness_p50_ns, old.release_lateness_p50_ns),
                 r(new.release_lateness_p99_ns, old.release_lateness_p99_ns),
-                r(new.added_p50_ns, old.added_p50_ns),
-                r(new.added_p99_ns, old.added_p99_ns)
+                d(new.added_p50_ns, old.added_p50_ns),
+                d(new.added_p99_ns, old.added_p99_ns)
             );
         }
         md.push('\n');

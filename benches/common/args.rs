@@ -64,8 +64,8 @@ pub struct Cores {
     /// priority
     #[arg(long, value_name = "PRIORITY")]
     pub rt_priority: Option<i32>,
-    /// Leave the emulator's core as it is (by default each emulator clears
-    /// it for its run, as `netfi run` does)
+    /// Leave the emulator's core as it is (by default the program clears
+    /// it of other threads and interrupts, as `netfi run` does for a run)
     #[arg(long)]
     pub no_isolate: bool,
 }
@@ -86,11 +86,10 @@ pub struct Placement {
 }
 
 impl Placement {
-    /// "emulator on core 1 (cleared for each run), the benchmark on core 0".
+    /// "emulator on core 1, the benchmark on core 0".
     pub fn line(&self) -> String {
         let core = |c: Option<usize>| c.map_or("no core of its own".to_string(), |c| format!("core {c}"));
-        let cleared = if self.isolate { " (cleared for each run)" } else { "" };
-        format!("emulator on {}{cleared}, the benchmark on {}", core(self.emulator_core), core(self.bench_core))
+        format!("emulator on {}, the benchmark on {}", core(self.emulator_core), core(self.bench_core))
     }
 }
 

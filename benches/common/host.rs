@@ -1,9 +1,10 @@
 //! The host: what machine it is ([`HostFacts`]), its state over a
 //! measurement ([`HostTimer`]: steal time, load average, the CPU other
-//! processes used), how fast its core runs right now ([`speed`]), and
-//! thread placement ([`pin`]).
+//! processes used), how fast its core runs right now ([`speed`]), thread
+//! placement ([`pin`]) and the emulator's core cleared ([`clear_core`]).
 
-use crate::common::args::stopped;
+use crate::common::args::{stopped, Placement};
+use netfi::host::isolate::Isolation;
 use netfi::host::{CpuTimes, StealTimer};
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -182,6 +183,43 @@ pub fn pin(core: Option<usize>, rt_priority: Option<i32>) {
         if let Err(e) = netfi::service::set_realtime(p) {
             eprintln!("SCHED_FIFO {p} refused ({e}); staying at normal priority");
         }
+    }
+}
+
+/// Clears the emulator's core for the program, when `p.isolate`: every
+/// thread of other processes that may run elsewhere and every device
+/// interrupt moved off it (`netfi::host::isolate`, what `netfi run` does
+/// for a run), all put back when the value is dropped. The floors and
+/// probes run on the cleared core too. First puts back what an interrupted
+/// earlier program left moved.
+pub fn clear_core(p: &Placement) -> Option<Isolation> {
+    if let Ok(done) = netfi::host::record::restore_orphans(None) {
+        for (path, r) in done {
+            println!("  (restored {} placement(s) left moved by an interrupted earlier run, from {})", r.undone, path.display());
+        }
+    }
+    let core = p.emulator_core.filter(|_| p.isolate)?;
+    match netfi::host::isolate::isolate(core) {
+        Ok(iso) => {
+            println!("  {} (for the benchmark)", iso.summary());
+            Some(iso)
+        }
+        Err(e) => {
+            println!("  (could not clear core {core}: {e}; measuring without)");
+            None
+        }
+    }
+}
+
+/// Puts back what [`clear_core`] moved; what it had done, in words and as
+/// JSON.
+pub fn restore_core(iso: Option<Isolation>) -> (String, serde_json::Value) {
+    match iso {
+        Some(mut i) => {
+            let s = i.restore();
+            (format!("The emulator's core was cleared for the benchmark and put back after: {s}."), serde_json::json!(s))
+        }
+        None => ("The emulator's core was not cleared: other threads could run on it.".into(), serde_json::Value::Null),
     }
 }
 

@@ -164,9 +164,6 @@ impl EmulatorSpec<'_> {
             Some(c) => a.extend(["--core".to_string(), c.to_string()]),
             None => a.push("--no-pin".into()),
         }
-        if p.isolate && p.emulator_core.is_some() {
-            a.push("--isolate".into());
-        }
         if let Some(r) = p.rt_priority {
             a.extend(["--rt-priority".to_string(), r.to_string()]);
         }

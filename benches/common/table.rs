@@ -29,9 +29,13 @@ impl Spread {
         (n > 0).then(|| Spread { min: v[0], median: if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 }, max: v[n - 1], n })
     }
 
-    /// "1.20 µs (0.98–1.49 µs)": the median, then the range, of durations.
+    /// "1.20 µs (0.98 µs – 1.49 µs)": the median, then the range, of
+    /// durations; one value alone where there is one.
     pub fn ns(&self) -> String {
-        format!("{} ({}–{})", ns(self.median as i64), ns(self.min as i64), ns(self.max as i64))
+        if self.n == 1 {
+            return ns(self.median as i64);
+        }
+        format!("{} ({} – {})", ns(self.median as i64), ns(self.min as i64), ns(self.max as i64))
     }
 }
 
