@@ -98,10 +98,10 @@ impl Cores {
     /// first (the placement of `netfi run` on a small machine), unless the
     /// flags say otherwise.
     pub fn placement(&self, common: &Common) -> Result<Placement> {
-        let cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+        let cores = online_cores();
         for c in [self.emulator_core, self.bench_core].into_iter().flatten() {
             if !cores.contains(&c) {
-                bail!("core {c} is not one this process may run on (cores {cores:?})");
+                bail!("core {c} is not online (cores {cores:?})");
             }
         }
         let (first, last) = (cores.first().copied(), cores.last().copied().filter(|_| cores.len() > 1));
@@ -115,6 +115,12 @@ impl Cores {
             quiet: common.quiet(),
         })
     }
+}
+
+/// The cores online, whatever this process's own mask (which a `netfi
+/// run` clearing a core elsewhere on the host narrows meanwhile).
+pub fn online_cores() -> Vec<usize> {
+    netfi::host::isolate::online_cpus().into_iter().collect()
 }
 
 /// Runs `run` with the parsed arguments when started by `cargo bench`

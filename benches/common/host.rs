@@ -3,7 +3,7 @@
 //! processes used), how fast its core runs right now ([`speed`]), thread
 //! placement ([`pin`]) and the emulator's core cleared ([`clear_core`]).
 
-use crate::common::args::{stopped, Placement};
+use crate::common::args::{online_cores, stopped, Placement};
 use netfi::host::isolate::Isolation;
 use netfi::host::{CpuTimes, StealTimer};
 use serde::Serialize;
@@ -24,7 +24,7 @@ impl HostFacts {
         let cpuinfo = read("/proc/cpuinfo");
         let model = cpuinfo.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).unwrap_or("").trim();
         HostFacts {
-            cores: core_affinity::get_core_ids().map_or(0, |c| c.len()),
+            cores: online_cores().len(),
             cpu_model: model.to_string(),
             kernel: read("/proc/sys/kernel/osrelease"),
             clocksource: read("/sys/devices/system/clocksource/clocksource0/current_clocksource"),
@@ -158,7 +158,7 @@ fn own_cpu_s() -> f64 {
 /// unreadable). Interrupt time is left out ([`CpuTimes::busy`]): the kernel
 /// bills it to no process; steal is reported on its own.
 fn busy_cores(window: Duration) -> f64 {
-    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len()) as f64;
+    let cores = online_cores().len().max(1) as f64;
     let a = CpuTimes::read();
     std::thread::sleep(window);
     match (a, CpuTimes::read()) {
