@@ -25,12 +25,12 @@ use common::chain::{run_chain, ChainResult, Interval, Transport};
 use common::drive::Routes;
 use common::host::{clear_core, restore_core, speed_on, Speed};
 use common::out::{CostRow, Out};
-use common::process::Build;
+use common::process::{scenario_label, Build};
 use common::table::{ns, rate_label};
 use serde::Serialize;
 use serde_json::json;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// `cargo bench --bench capacity -- [FLAGS]`.
 #[derive(Debug, clap::Parser, Serialize)]
@@ -106,7 +106,7 @@ fn run(a: Args) -> Result<()> {
         }
         if a.search {
             let found = search_rates(a.rates_hz[0], 2.0 * a.rates_hz[0], &mut run_at)?;
-            best.insert(label(sc), json!(found));
+            best.insert(scenario_label(sc), json!(found));
         }
     }
     let (cleared, isolation) = restore_core(cleared);
@@ -120,13 +120,9 @@ fn run(a: Args) -> Result<()> {
     out.finish(&a, json!({"placement": p, "isolation": isolation, "build": build, "best_sustained_fps": best, "trials": trials}), &md)
 }
 
-fn label(scenario: &str) -> String {
-    Path::new(scenario).file_stem().map_or(scenario.to_string(), |s| s.to_string_lossy().into_owned())
-}
-
 fn trial(a: &Args, p: &Placement, build: &Build, out: &Out, scenario: &str, rate_hz: f64, k: usize) -> Result<Trial> {
     let speed_before = speed_on(p.bench_core);
-    let name = format!("{k}-{}-{}", label(scenario), rate_label(rate_hz));
+    let name = format!("{k}-{}-{}", scenario_label(scenario), rate_label(rate_hz));
     // The release queue holds a second of frames, so a delay scenario tests
     // the emulator's speed, not the queue's size.
     let queue = Some((rate_hz as usize).max(1 << 16));
@@ -138,7 +134,7 @@ fn trial(a: &Args, p: &Placement, build: &Build, out: &Out, scenario: &str, rate
     let busy = c.emulator.busy_ns_per_frame();
     println!(
         "  {:<10} {:>9.0} frames/s: {verdict} (offered {offered_fps:.0}/s; busy {} ns a frame; release lateness p99 {}; {}; core speed {:.2}/{:.2} ns a step)",
-        label(scenario),
+        scenario_label(scenario),
         rate_hz,
         busy.map_or("-".into(), |b| format!("{b:.0}")),
         c.emulator.release_lateness_ns.map_or("–".into(), |s| ns(s.p99 as i64)),
@@ -146,7 +142,7 @@ fn trial(a: &Args, p: &Placement, build: &Build, out: &Out, scenario: &str, rate
         speed_before.alu_ns,
         speed_after.alu_ns
     );
-    Ok(Trial { scenario: label(scenario), rate_hz, sustained: verdict == "sustained", verdict, offered_fps, busy_ns_per_frame: busy, speed_before, speed_after, chain: c })
+    Ok(Trial { scenario: scenario_label(scenario), rate_hz, sustained: verdict == "sustained", verdict, offered_fps, busy_ns_per_frame: busy, speed_before, speed_after, chain: c })
 }
 
 /// Why a trial was not sustained, or "sustained".

@@ -15,7 +15,8 @@ use anyhow::{ensure, Context, Result};
 use common::args::{check_interrupted, Common, PLM2_DLM2};
 use common::host::{HostTimer, HostWindow};
 use common::out::Out;
-use common::process::{wait, Build};
+use common::host::cpu_s;
+use common::process::{alternate, scenario_label, wait, Build};
 use common::table::Spread;
 use serde::Serialize;
 use serde_json::json;
@@ -67,58 +68,31 @@ fn main() {
 fn run(a: Args) -> Result<()> {
     ensure!(a.runs >= 1 && a.frames >= 1, "--runs and --frames must be positive");
     let out = Out::create(&a.common, "check")?;
-    let mut builds = vec![Build::new("netfi", a.netfi.as_deref())?];
-    if let Some(b) = &a.baseline {
-        builds.push(Build::new("baseline", Some(b))?);
-    }
+    let builds = Build::pair(a.netfi.as_deref(), a.baseline.as_deref())?;
     let scenarios = if a.scenarios.is_empty() { vec!["PLM-2".to_string(), PLM2_DLM2.to_string()] } else { a.scenarios.clone() };
-    let mut runs = Vec::new();
-    for round in 0..a.runs {
-        for sc in &scenarios {
-            let order: Vec<&Build> = if round % 2 == 0 { builds.iter().collect() } else { builds.iter().rev().collect() };
-            for b in order {
-                runs.push(one_run(&a, &out, b, sc, round)?);
-            }
-        }
-    }
+    let runs = alternate(&builds, &scenarios, a.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
     let mut md = format!("{} frames a run; median (least – largest) over {} runs.\n\n| scenario | build | wall, s | CPU, s | ns a frame (CPU) | steal per run | JSON the same as the first build's |\n|---|---|---|---|---|---|---|\n", a.frames, a.runs);
     let mut cells = Vec::new();
     for sc in &scenarios {
         let first = std::fs::read(json_path(&out.dir, &builds[0].label, sc)).unwrap_or_default();
         for b in &builds {
-            let mine: Vec<&Run> = runs.iter().filter(|r| r.build == b.label && r.scenario == label(sc)).collect();
+            let mine: Vec<&Run> = runs.iter().filter(|r| r.build == b.label && r.scenario == scenario_label(sc)).collect();
             let spread = |f: fn(&Run) -> f64| Spread::of(mine.iter().map(|r| f(r)));
             let (wall, cpu, steal) = (spread(|r| r.wall_s), spread(|r| r.cpu_s), spread(|r| r.host.steal_fraction));
             let same = std::fs::read(json_path(&out.dir, &b.label, sc)).map(|j| j == first).unwrap_or(false);
             let s = |x: Option<Spread>| x.map_or("–".into(), |x| format!("{:.3} ({:.3} – {:.3})", x.median, x.min, x.max));
             let per_frame = cpu.map_or("–".into(), |c| format!("{:.0}", c.median * 1e9 / a.frames as f64));
-            let steal_s = steal.map_or("–".into(), |s| format!("{:.2}–{:.2}%", s.min * 100.0, s.max * 100.0));
-            let _ = writeln!(md, "| {} | {} | {} | {} | {per_frame} | {steal_s} | {} |", label(sc), b.label, s(wall), s(cpu), if same { "yes" } else { "**no**" });
-            cells.push(json!({"scenario": label(sc), "build": b.label, "wall_s": wall, "cpu_s": cpu, "steal_fraction": steal, "json_same_as_first_build": same}));
+            let steal_s = steal.map_or("–".into(), |s| s.percent());
+            let _ = writeln!(md, "| {} | {} | {} | {} | {per_frame} | {steal_s} | {} |", scenario_label(sc), b.label, s(wall), s(cpu), if same { "yes" } else { "**no**" });
+            cells.push(json!({"scenario": scenario_label(sc), "build": b.label, "wall_s": wall, "cpu_s": cpu, "steal_fraction": steal, "json_same_as_first_build": same}));
         }
     }
     out.finish(&a, json!({"builds": builds, "cells": cells, "runs": runs}), &md)
 }
 
-fn label(scenario: &str) -> String {
-    Path::new(scenario).file_stem().map_or(scenario.to_string(), |s| s.to_string_lossy().into_owned())
-}
-
 /// Where a build's JSON of a scenario is kept (the last run's).
 fn json_path(dir: &Path, build: &str, scenario: &str) -> PathBuf {
-    dir.join("runs").join(format!("{}-{build}.json", label(scenario)))
-}
-
-/// CPU seconds of the children waited for so far.
-fn children_cpu_s() -> f64 {
-    // SAFETY: a zeroed rusage is a valid output buffer for getrusage.
-    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `u` is a valid, writable rusage.
-    if unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut u) } != 0 {
-        return f64::NAN;
-    }
-    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
-    tv(u.ru_utime) + tv(u.ru_stime)
+    dir.join("runs").join(format!("{}-{build}.json", scenario_label(scenario)))
 }
 
 fn one_run(a: &Args, out: &Out, b: &Build, scenario: &str, round: usize) -> Result<Run> {
@@ -131,11 +105,11 @@ fn one_run(a: &Args, out: &Out, b: &Build, scenario: &str, round: usize) -> Resu
     let json = std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?;
     let log = std::fs::File::create(path.with_extension("log"))?;
     cmd.stdin(Stdio::null()).stdout(json).stderr(log);
-    let (host, cpu0, t0) = (HostTimer::now(), children_cpu_s(), Instant::now());
+    let (host, cpu0, t0) = (HostTimer::now(), cpu_s(libc::RUSAGE_CHILDREN), Instant::now());
     let status = wait(cmd.spawn().with_context(|| format!("starting {}", b.netfi.display()))?)?;
-    let (wall_s, cpu_s, host) = (t0.elapsed().as_secs_f64(), children_cpu_s() - cpu0, host.stop());
+    let (wall_s, cpu_s, host) = (t0.elapsed().as_secs_f64(), cpu_s(libc::RUSAGE_CHILDREN) - cpu0, host.stop());
     check_interrupted()?;
     ensure!(status.success(), "{} scenario check {scenario}: {status}; see {}", b.label, path.display());
-    println!("  round {round} {:<10} {:<12} {wall_s:.3} s wall, {cpu_s:.3} s CPU; {}", b.label, label(scenario), host.line());
-    Ok(Run { build: b.label.clone(), scenario: label(scenario), round, wall_s, cpu_s, host })
+    println!("  round {round} {:<10} {:<12} {wall_s:.3} s wall, {cpu_s:.3} s CPU; {}", b.label, scenario_label(scenario), host.line());
+    Ok(Run { build: b.label.clone(), scenario: scenario_label(scenario), round, wall_s, cpu_s, host })
 }

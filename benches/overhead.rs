@@ -25,7 +25,7 @@ use anyhow::{ensure, Result};
 use common::args::{Common, PLM2_DLM2};
 use common::host::{HostTimer, HostWindow};
 use common::out::Out;
-use common::process::{at, num, summary, Build};
+use common::process::{alternate, at, num, scenario_label, summary, Build};
 use common::table::{ns, spread_ns, Map, Spread};
 use netfi::metrics::{difference, Summary};
 use serde::Serialize;
@@ -148,7 +148,7 @@ impl Cell {
     }
 
     fn md_row(&self) -> String {
-        let steal = self.steal_fraction.map_or("–".into(), |s| format!("{:.2}–{:.2}%", s.min * 100.0, s.max * 100.0));
+        let steal = self.steal_fraction.map_or("–".into(), |s| s.percent());
         format!(
             "| {} | {} | {} | {} | {} | {} | {steal} |",
             self.build,
@@ -168,40 +168,23 @@ fn main() {
 fn run(a: Args) -> Result<()> {
     ensure!(a.runs >= 1 && a.seconds > 0.0 && a.rate_hz > 0.0, "--runs, --seconds and --rate-hz must be positive");
     let out = Out::create(&a.common, "overhead")?;
-    let mut builds = vec![Build::new("netfi", a.netfi.as_deref())?];
-    if let Some(b) = &a.baseline {
-        builds.push(Build::new("baseline", Some(b))?);
-    }
+    let builds = Build::pair(a.netfi.as_deref(), a.baseline.as_deref())?;
     let scenarios = if a.scenarios.is_empty() { vec!["Normal".to_string(), PLM2_DLM2.to_string()] } else { a.scenarios.clone() };
-    let mut runs = Vec::new();
-    for round in 0..a.runs {
-        for sc in &scenarios {
-            // A B, then B A: neither build always runs first.
-            let order: Vec<&Build> = if round % 2 == 0 { builds.iter().collect() } else { builds.iter().rev().collect() };
-            for b in order {
-                runs.push(one_run(&a, &out, b, sc, round)?);
-            }
-        }
-    }
+    let runs = alternate(&builds, &scenarios, a.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
     let cells: Vec<Cell> = scenarios
         .iter()
         .flat_map(|sc| builds.iter().map(move |b| (sc, b)))
-        .map(|(sc, b)| Cell::of(&b.label, &label(sc), &runs.iter().filter(|r| r.build == b.label && r.scenario == label(sc)).collect::<Vec<_>>()))
+        .map(|(sc, b)| Cell::of(&b.label, &scenario_label(sc), &runs.iter().filter(|r| r.build == b.label && r.scenario == scenario_label(sc)).collect::<Vec<_>>()))
         .collect();
     let md = markdown(&a, &scenarios, &cells, &runs);
     out.finish(&a, json!({"builds": builds, "cells": cells, "runs": runs}), &md)
 }
 
-/// A scenario's name: a preset's own, a file's stem.
-fn label(scenario: &str) -> String {
-    Path::new(scenario).file_stem().map_or(scenario.to_string(), |s| s.to_string_lossy().into_owned())
-}
-
 fn one_run(a: &Args, out: &Out, b: &Build, scenario: &str, round: usize) -> Result<RunFigures> {
-    let dir = out.run_dir(&format!("{}-{}-r{round}", label(scenario), b.label))?;
+    let dir = out.run_dir(&format!("{}-{}-r{round}", scenario_label(scenario), b.label))?;
     let host = HostTimer::start(a.common.quiet());
     let r = b.run(&dir, scenario, a.rate_hz, a.seconds, &a.run_args)?;
-    let f = RunFigures::of(&b.label, &label(scenario), round, &r, host.stop(), &dir);
+    let f = RunFigures::of(&b.label, &scenario_label(scenario), round, &r, host.stop(), &dir);
     let p = |s: &Option<Summary>, k: fn(&Summary) -> u64| s.as_ref().map_or("–".into(), |s| ns(k(s) as i64));
     let added = |k: &str| f.added(k).map_or("–".into(), |v| ns(v as i64));
     println!(
@@ -220,9 +203,9 @@ fn one_run(a: &Args, out: &Out, b: &Build, scenario: &str, round: usize) -> Resu
 
 fn markdown(a: &Args, scenarios: &[String], cells: &[Cell], runs: &[RunFigures]) -> String {
     let mut md = String::new();
-    for sc in scenarios.iter().map(|s| label(s)) {
+    for sc in scenarios.iter().map(|s| scenario_label(s)) {
         let _ = writeln!(md, "## {sc} at {} frames/s, {} s runs\n", a.rate_hz, a.seconds);
-        let _ = writeln!(md, "Median (least–largest) over the runs.\n");
+        let _ = writeln!(md, "Median (least – largest) over the runs.\n");
         let _ = writeln!(md, "| build | runs | release lateness p50 | p99 | added latency p50 | p99 | steal per run |\n|---|---|---|---|---|---|---|");
         let mine: Vec<&Cell> = cells.iter().filter(|c| c.scenario == sc).collect();
         for c in &mine {
@@ -233,7 +216,12 @@ fn markdown(a: &Args, scenarios: &[String], cells: &[Cell], runs: &[RunFigures])
             // difference of two distributions and may be negative: the
             // difference of the medians says more.
             let r = |x: Option<Spread>, y: Option<Spread>| x.zip(y).map_or("–".into(), |(x, y)| format!("{:.2}×", x.median / y.median.max(1.0)));
-            let d = |x: Option<Spread>, y: Option<Spread>| x.zip(y).map_or("–".into(), |(x, y)| format!("{:+} ns", (x.median - y.median).round()));
+            let d = |x: Option<Spread>, y: Option<Spread>| {
+                x.zip(y).map_or("–".into(), |(x, y)| {
+                    let v = (x.median - y.median).round() as i64;
+                    format!("{}{}", if v >= 0 { "+" } else { "" }, ns(v))
+                })
+            };
             let _ = writeln!(
                 md,
                 "| {} against {} (medians) | | {} | {} | {} | {} | |",

@@ -17,7 +17,7 @@ mod common;
 
 use anyhow::{ensure, Context, Result};
 use common::args::{check_interrupted, Common, Cores, Placement};
-use common::drive::{drive_many, slots_for, Routes};
+use common::drive::{drive, slots_for, Routes};
 use common::ends::IpcEnds;
 use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::{CostRow, Out};
@@ -82,7 +82,7 @@ fn run(a: Args) -> Result<()> {
         let at = |path: &str| Spread::of(points.iter().filter(|p| p["streams"] == n).filter_map(|p| common::process::num(p, path)));
         let (p99, steal) = (at("release_lateness_ns.p99_median"), at("host.steal_fraction"));
         let s = |x: Option<Spread>| x.map_or("–".into(), |x| x.ns());
-        let steal = steal.map_or("–".into(), |s| format!("{:.2}–{:.2}%", s.min * 100.0, s.max * 100.0));
+        let steal = steal.map_or("–".into(), |s| s.percent());
         let _ = writeln!(md, "| {n} | {} | {} | {} | {} | {} | {steal} |", s(at("release_lateness_ns.p50_median")), s(p99), s(at("release_lateness_ns.p99_worst")), s(at("added_ns.p50")), s(at("added_ns.p99")));
         if let Some(p99) = p99 {
             rows.push(CostRow { axis: "streams", x: n as f64, series: "release lateness p99 (median stream; streams benchmark)".into(), ns: p99.median });
@@ -103,7 +103,7 @@ fn point(a: &Args, p: &Placement, build: &Build, out: &Out, n: usize, rep: usize
     let emu = build.emulator(&spec, p)?;
     let mut ends = (0..n).map(|k| IpcEnds::open(&stream_run_id(&run_id, k))).collect::<Result<Vec<_>>>()?;
     let host = HostTimer::start(p.quiet);
-    let d = drive_many(&mut ends, RATE_HZ, a.seconds, 200_000_000);
+    let d = drive(&mut ends, RATE_HZ, a.seconds, 200_000_000, true, Routes::Alternate);
     let host = host.stop();
     for e in ends.iter_mut() {
         e.end(slots / 2);

@@ -128,6 +128,11 @@ pub fn online_cores() -> Vec<usize> {
 /// without it; then the program only says how to run it. An error is
 /// printed and the process exits with 1.
 pub fn main<A: clap::Parser>(name: &str, what: &str, run: impl FnOnce(A) -> Result<()>) {
+    // `--list` asks a benchmark binary for its cases (libtest's flag).
+    if std::env::args().any(|a| a == "--list") {
+        println!("{name}: benchmark");
+        return;
+    }
     if !std::env::args().skip(1).any(|a| a == "--bench") {
         println!("{name}: {what}; run it with `cargo bench --bench {name}` (`-- --help` lists its flags)");
         return;

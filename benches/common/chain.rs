@@ -191,7 +191,7 @@ fn drive_ipc(build: &Build, p: &Placement, iv: &Interval, spec: EmulatorSpec) ->
     let handle = std::thread::spawn(move || -> Result<Drive> {
         pin(core, rt);
         let mut ends = IpcEnds::open(&rid)?;
-        let d = drive(&mut ends, rate_hz, seconds, drain, may_sleep, routes);
+        let d = drive(std::slice::from_mut(&mut ends), rate_hz, seconds, drain, may_sleep, routes);
         ends.end(d.chain_sent);
         // Keep the ports open until the emulator has seen the end.
         std::thread::sleep(Duration::from_millis(50));
@@ -216,7 +216,7 @@ fn drive_udp(build: &Build, p: &Placement, iv: &Interval, mut spec: EmulatorSpec
     let handle = std::thread::spawn(move || -> Result<Drive> {
         pin(core, rt);
         let mut ends = UdpEnds::new(rx_chain, ingress, slots)?;
-        Ok(drive(&mut ends, rate_hz, seconds, drain, may_sleep, routes))
+        Ok(drive(std::slice::from_mut(&mut ends), rate_hz, seconds, drain, may_sleep, routes))
     });
     let d = handle.join().map_err(|_| anyhow::anyhow!("the driving thread panicked"))??;
     check_interrupted()?;

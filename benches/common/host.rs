@@ -141,17 +141,20 @@ fn ticks_per_s() -> f64 {
 /// CPU seconds of this process and of its children that have been waited
 /// for (the emulators, `netfi run` and its services).
 fn own_cpu_s() -> f64 {
-    let secs = |who: libc::c_int| {
-        // SAFETY: a zeroed rusage is a valid output buffer for getrusage.
-        let mut u: libc::rusage = unsafe { std::mem::zeroed() };
-        // SAFETY: `u` is a valid, writable rusage.
-        if unsafe { libc::getrusage(who, &mut u) } != 0 {
-            return 0.0;
-        }
-        let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
-        tv(u.ru_utime) + tv(u.ru_stime)
-    };
-    secs(libc::RUSAGE_SELF) + secs(libc::RUSAGE_CHILDREN)
+    cpu_s(libc::RUSAGE_SELF) + cpu_s(libc::RUSAGE_CHILDREN)
+}
+
+/// User and system CPU seconds of `who` (`RUSAGE_SELF`, or the children
+/// waited for so far: `RUSAGE_CHILDREN`).
+pub fn cpu_s(who: libc::c_int) -> f64 {
+    // SAFETY: a zeroed rusage is a valid output buffer for getrusage.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `u` is a valid, writable rusage.
+    if unsafe { libc::getrusage(who, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
+    tv(u.ru_utime) + tv(u.ru_stime)
 }
 
 /// Cores busy on average over `window` (NaN where `/proc/stat` is

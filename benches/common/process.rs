@@ -58,10 +58,42 @@ impl Build {
         Ok(report)
     }
 
+    /// This package's build (or `netfi`'s), and `baseline` beside it when
+    /// given: the builds a before/after program times.
+    pub fn pair(netfi: Option<&Path>, baseline: Option<&Path>) -> Result<Vec<Build>> {
+        let mut builds = vec![Build::new("netfi", netfi)?];
+        if let Some(b) = baseline {
+            builds.push(Build::new("baseline", Some(b))?);
+        }
+        Ok(builds)
+    }
+
     /// Starts `netfi emulator` as `spec` says, and waits until it is ready.
     pub fn emulator(&self, spec: &EmulatorSpec, p: &Placement) -> Result<Emulator> {
         Emulator::spawn(&self.netfi, spec.dir, &spec.argv(p))
     }
+}
+
+/// Calls `f(build, scenario, round)` for each of `rounds` rounds, each
+/// scenario and each build, the builds' order turned round every round
+/// (A B, then B A): every build meets the same phases of the host, and
+/// none always runs first.
+pub fn alternate<T>(builds: &[Build], scenarios: &[String], rounds: usize, mut f: impl FnMut(&Build, &str, usize) -> Result<T>) -> Result<Vec<T>> {
+    let mut out = Vec::new();
+    for round in 0..rounds {
+        for sc in scenarios {
+            let order: Vec<&Build> = if round % 2 == 0 { builds.iter().collect() } else { builds.iter().rev().collect() };
+            for b in order {
+                out.push(f(b, sc, round)?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// A scenario's short name: a preset's own, a file's stem.
+pub fn scenario_label(scenario: &str) -> String {
+    Path::new(scenario).file_stem().map_or(scenario.to_string(), |s| s.to_string_lossy().into_owned())
 }
 
 /// Starts `cmd` with its output in `log`.

@@ -39,6 +39,13 @@ impl Spread {
     }
 }
 
+impl Spread {
+    /// "0.01–0.12%": the range of fractions, in per cent.
+    pub fn percent(&self) -> String {
+        format!("{:.2}–{:.2}%", self.min * 100.0, self.max * 100.0)
+    }
+}
+
 /// [`Spread::ns`] of an optional spread ("–" where there is none).
 pub fn spread_ns(s: Option<Spread>) -> String {
     s.map_or("–".to_string(), |s| s.ns())
