@@ -8,7 +8,9 @@
 //! A program takes it in with `#[path = "common/mod.rs"] mod common;`. The
 //! modules here use one another only in that order (a module names only
 //! those before it) and nothing of a program, so there is no circle; each
-//! program uses a part of them.
+//! program uses a part of them. `cpu_time.rs` (the thread's CPU time, and
+//! criterion's measurement by it) stands apart: the criterion benchmarks
+//! take it in alone.
 #![allow(dead_code)]
 
 pub mod args;

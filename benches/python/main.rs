@@ -18,61 +18,22 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+mod args;
 mod figures;
 mod parts;
 mod windows;
 
 use anyhow::{ensure, Result};
-use common::args::{check_interrupted, Common, Cores, Placement};
+use args::Args;
+use common::args::{check_interrupted, Placement};
 use common::host::{clear_core, restore_core};
 use common::out::Out;
 use common::process::Build;
 use figures::{Figures, Selection};
 use netfi::metrics::fmt_ns;
 use parts::Part;
-use serde::Serialize;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
-use std::path::PathBuf;
-
-/// `cargo bench --bench python -- [FLAGS]`.
-#[derive(Debug, clap::Parser, Serialize)]
-#[command(name = "python", bin_name = "cargo bench --bench python --", about = "What the netfi emulator adds between Python processes, over iceoryx2 and the UDP bridge")]
-pub struct Args {
-    #[command(flatten)]
-    common: Common,
-    #[command(flatten)]
-    cores: Cores,
-    /// The netfi binary whose emulator is measured [default: this
-    /// package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
-    /// Parts to run
-    #[arg(long, value_delimiter = ',', default_value = "iceoryx2,udp", value_parser = ["iceoryx2", "udp"])]
-    parts: Vec<String>,
-    /// Length of each part after a 0.5 s warm-up
-    #[arg(long, default_value_t = 20.0)]
-    pub seconds: f64,
-    /// Frames a second on each route
-    #[arg(long, default_value_t = 1000.0)]
-    pub rate_hz: f64,
-    /// Length of the windows the host is sampled in
-    #[arg(long, default_value_t = 1.0)]
-    pub window_s: f64,
-    /// A quiet window's largest steal fraction
-    #[arg(long, default_value_t = 0.01)]
-    pub quiet_steal: f64,
-    /// … and, for a calm one, the most cores other processes keep busy
-    #[arg(long, default_value_t = 0.25)]
-    pub quiet_others: f64,
-    /// The interpreter
-    #[arg(long, default_value = "python3")]
-    pub python: String,
-    /// Run the Python console and robot at this nice value (e.g. -10, with
-    /// root: ahead of other work on their core)
-    #[arg(long, allow_hyphen_values = true)]
-    pub python_nice: Option<i32>,
-}
 
 fn main() {
     common::args::main("python", "what the emulator adds between Python processes (a minute)", run);

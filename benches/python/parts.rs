@@ -7,7 +7,7 @@ use crate::common::host::{HostTimer, HostWindow};
 use crate::common::out::Out;
 use crate::common::process::{fresh_run_id, read_json, Build, Emulator, EmulatorSpec};
 use crate::windows::{Sampler, Window};
-use crate::Args;
+use crate::args::Args;
 use anyhow::{bail, Context, Result};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
