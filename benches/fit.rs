@@ -40,8 +40,11 @@ struct Args {
     no_database: bool,
 }
 
-/// The single fits: a name, and the request for a seed.
-fn cases() -> Vec<(&'static str, Box<dyn Fn(u64) -> FitRequest>)> {
+/// A single fit: its name, and its request for a seed.
+type Case = (&'static str, Box<dyn Fn(u64) -> FitRequest>);
+
+/// The single fits.
+fn cases() -> Vec<Case> {
     vec![
         ("loss 1% (the slowest entry)", Box::new(|s| FitRequest::new(Kind::Loss, 0.01, s))),
         ("loss 30%", Box::new(|s| FitRequest::new(Kind::Loss, 0.3, s))),

@@ -105,7 +105,7 @@ impl Routes {
     }
 
     fn of(self, slot: u64) -> Route {
-        if self == Routes::ChainOnly || slot % 2 == 0 {
+        if self == Routes::ChainOnly || slot.is_multiple_of(2) {
             Route::Chain
         } else {
             Route::Direct
