@@ -2,21 +2,19 @@
 //! receiver spinning on the emulator's core exchange frames over one
 //! transport: the physical cost of one cross-core hop.
 
-use crate::args::Settings;
-use crate::drive::{pace, WARMUP_S};
-use crate::ends::{loopback_port, wire};
-use crate::figures::rate_label;
-use crate::host::{pin, HostTimer, HostWindow};
-use crate::{check_interrupted, write_hlog, Transport};
+use crate::common::args::{check_interrupted, keep_signals, Placement};
+use crate::common::chain::Transport;
+use crate::common::drive::{pace, WARMUP_S};
+use crate::common::ends::{loopback_port, wire};
+use crate::common::host::{pin, HostTimer, HostWindow};
+use crate::common::process::{fresh_run_id, ForgetRuns};
 use anyhow::{Context, Result};
 use netfi::clock::now_ns;
 use netfi::metrics::{LatencyHistogram, Summary};
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
-use netfi::service::plan::fresh_run_id;
 use netfi::transport::udp::PeerAddr;
 use netfi::transport::{Channel, IpcConfig, IpcNode, Role, RunId};
 use serde::Serialize;
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -24,7 +22,6 @@ use std::time::{Duration, Instant};
 /// One floor interval's results.
 #[derive(Debug, Clone, Serialize)]
 pub struct FloorResult {
-    pub name: String,
     pub repetition: usize,
     pub transport: Transport,
     pub rate_hz: f64,
@@ -33,7 +30,6 @@ pub struct FloorResult {
     pub hop_ns: Summary,
     pub sent: u64,
     pub received: u64,
-    pub hlog: PathBuf,
 }
 
 /// The pacing of a floor interval and the placement of its two threads.
@@ -54,33 +50,31 @@ type Measured = (u64, LatencyHistogram, u64, f64);
 
 /// A floor interval: a sender on the driving core, a receiver spinning on
 /// the emulator's core, one hop of `transport`, no emulator.
-pub fn floor_interval(s: &Settings, transport: Transport, rate_hz: f64, seconds: f64, rep: usize) -> Result<FloorResult> {
+pub fn floor_interval(p: &Placement, transport: Transport, rate_hz: f64, seconds: f64, rep: usize) -> Result<FloorResult> {
     check_interrupted()?;
-    let name = format!("floor-{}-{}-r{rep}", transport.name(), rate_label(rate_hz));
     let warm = (rate_hz * WARMUP_S).ceil() as u64;
     let frames = warm + (rate_hz * seconds).round() as u64;
-    let f = Floor { frames, warm, period_ns: 1e9 / rate_hz, tx_core: s.driver_core, rx_core: s.emulator_core, rt: s.rt_priority };
-    let host = HostTimer::start(s.quiet);
+    let f = Floor { frames, warm, period_ns: 1e9 / rate_hz, tx_core: p.bench_core, rx_core: p.emulator_core, rt: p.rt_priority };
+    let host = HostTimer::start(p.quiet);
     let (sent, hist, received, secs) = match transport {
         Transport::Iceoryx2 => floor_ipc(f)?,
         Transport::Udp => floor_udp(f)?,
     };
     let host = host.stop();
-    let hlog = write_hlog(&hist, &s.out_dir.join("hlog"), &name, "floor", secs)?;
-    Ok(FloorResult { name, repetition: rep, transport, rate_hz, seconds: secs, host, hop_ns: hist.summary(), sent, received, hlog })
+    Ok(FloorResult { repetition: rep, transport, rate_hz, seconds: secs, host, hop_ns: hist.summary(), sent, received })
 }
 
 /// One iceoryx2 hop: the console's direct port to the simulator's.
 fn floor_ipc(f: Floor) -> Result<Measured> {
     let run_id = fresh_run_id();
-    let _forget = crate::emulator::ForgetRuns(vec![run_id.clone()]);
+    let _forget = ForgetRuns(vec![run_id.clone()]);
     let done = Arc::new(AtomicBool::new(false));
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<()>();
     let (rid, done_rx) = (run_id.clone(), done.clone());
     let receiver = std::thread::spawn(move || -> Result<(LatencyHistogram, u64)> {
         pin(f.rx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&rid)?), Role::Simulator)?;
-        netfi::service::signals::ensure_installed();
+        keep_signals();
         let mut sub = node.subscriber(Channel::Direct)?;
         let _ = ready_tx.send(());
         let (mut h, mut n) = (LatencyHistogram::new(), 0u64);
@@ -103,7 +97,7 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
     let sender = std::thread::spawn(move || -> Result<(u64, f64)> {
         pin(f.tx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&run_id)?), Role::Console)?;
-        netfi::service::signals::ensure_installed();
+        keep_signals();
         let mut publ = node.publisher(Channel::Direct)?;
         let t = Instant::now();
         while publ.peers_connected() == 0 {

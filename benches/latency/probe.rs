@@ -2,15 +2,12 @@
 //! clock reads: what interrupts, the hypervisor and other tasks take from
 //! any busy loop there, the emulator's included.
 
-use crate::args::Settings;
-use crate::host::{pin, HostTimer, HostWindow};
-use crate::{check_interrupted, write_hlog, Results};
+use crate::common::args::{check_interrupted, stopped, Placement};
+use crate::common::host::{pin, HostTimer, HostWindow};
 use anyhow::Result;
 use netfi::clock::now_ns;
 use netfi::metrics::{LatencyHistogram, Summary};
-use netfi::service::signals::stop_requested;
 use serde::Serialize;
-use std::path::PathBuf;
 
 /// What a thread spinning on one core (with nothing else to do) loses to
 /// the machine: the gaps between consecutive clock reads.
@@ -28,7 +25,6 @@ pub struct ProbeResult {
     pub gaps_over_1ms_per_s: f64,
     /// Share of the time spent in gaps longer than 10 µs.
     pub lost_fraction: f64,
-    pub hlog: PathBuf,
 }
 
 /// One core's spin: its gaps over 2 µs, the time lost in gaps over 10 µs,
@@ -60,7 +56,7 @@ fn spin(core: Option<usize>, rt: Option<i32>, seconds: f64) -> Spin {
             sp.over[1] += u64::from(gap > 100_000);
             sp.over[2] += u64::from(gap > 1_000_000);
         }
-        if t >= end || (gap > 2_000 && stop_requested()) {
+        if t >= end || (gap > 2_000 && stopped()) {
             break;
         }
     }
@@ -72,13 +68,13 @@ fn spin(core: Option<usize>, rt: Option<i32>, seconds: f64) -> Spin {
 /// two reads longer than 2 µs: the interruptions (interrupts, the
 /// hypervisor, other tasks) that any busy loop there suffers, the
 /// emulator's and the benchmark's included.
-pub fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<ProbeResult>> {
+pub fn probe_interval(p: &Placement, seconds: f64, rep: usize) -> Result<Vec<ProbeResult>> {
     check_interrupted()?;
-    let host = HostTimer::start(s.quiet);
-    let rt = s.rt_priority;
-    let mut cores = vec![s.emulator_core];
-    if s.driver_core != s.emulator_core {
-        cores.push(s.driver_core);
+    let host = HostTimer::start(p.quiet);
+    let rt = p.rt_priority;
+    let mut cores = vec![p.emulator_core];
+    if p.bench_core != p.emulator_core {
+        cores.push(p.bench_core);
     }
     let threads: Vec<_> = cores.iter().map(|&core| std::thread::spawn(move || spin(core, rt, seconds))).collect();
     let mut done = Vec::new();
@@ -87,11 +83,9 @@ pub fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<Prob
     }
     check_interrupted()?;
     let host = host.stop();
-    let mut out = Vec::new();
-    for sp in done {
-        let name = format!("probe-core{}-r{rep}", sp.core.map_or("-".into(), |c| c.to_string()));
-        let hlog = write_hlog(&sp.gaps, &s.out_dir.join("hlog"), &name, "gap", seconds)?;
-        out.push(ProbeResult {
+    Ok(done
+        .into_iter()
+        .map(|sp| ProbeResult {
             repetition: rep,
             core: sp.core,
             seconds,
@@ -101,26 +95,6 @@ pub fn probe_interval(s: &Settings, seconds: f64, rep: usize) -> Result<Vec<Prob
             gaps_over_100us_per_s: sp.over[1] as f64 / seconds,
             gaps_over_1ms_per_s: sp.over[2] as f64 / seconds,
             lost_fraction: sp.lost_ns as f64 / (seconds * 1e9),
-            hlog,
-        });
-    }
-    Ok(out)
-}
-
-/// The probe of repetition `rep` (with the latency and delay parts).
-pub fn probe_part(s: &Settings, rep: usize, res: &mut Results) -> Result<()> {
-    for p in probe_interval(s, s.floor_s, rep)? {
-        println!(
-            "  rep {rep} probe on core {:?}: {:.1} gaps/s over 10 µs, {:.2}/s over 100 µs, {:.2}/s over 1 ms; {:.3}% of the time lost in gaps over 10 µs; steal {:.2}%  others {:.2} cores",
-            p.core,
-            p.gaps_over_10us_per_s,
-            p.gaps_over_100us_per_s,
-            p.gaps_over_1ms_per_s,
-            p.lost_fraction * 100.0,
-            p.host.steal_fraction * 100.0,
-            p.host.others_busy_cores
-        );
-        res.probes.push(p);
-    }
-    Ok(())
+        })
+        .collect())
 }

@@ -1,5 +1,8 @@
-//! The benchmark's ends of a chain: send on a route, poll a route.
+//! The benchmark's own ends of a chain, played in one thread: send a frame
+//! on a route (through the emulator, or straight to the other end), poll a
+//! route. Over iceoryx2 the ports of a run; over UDP loopback sockets.
 
+use crate::common::args::keep_signals;
 use anyhow::Result;
 use netfi::clock::now_ns;
 use netfi::frame::ItpFrame;
@@ -74,9 +77,7 @@ impl IpcEnds {
         let cfg = IpcConfig::new(RunId::new(run_id)?);
         let console = IpcNode::open(&cfg, Role::Console)?;
         let simulator = IpcNode::open(&cfg, Role::Simulator)?;
-        // iceoryx2's nodes put their own SIGINT/SIGTERM handlers in place of
-        // the benchmark's: without this, Ctrl-C would go unseen.
-        netfi::service::signals::ensure_installed();
+        keep_signals();
         let to_emulator = console.publisher(Channel::Console)?;
         let direct_tx = console.publisher(Channel::Direct)?;
         let from_emulator = simulator.subscriber(Channel::Emulator)?;

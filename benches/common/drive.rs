@@ -1,10 +1,10 @@
 //! Driving an interval: every frame sent at its time, both routes
 //! busy-polled in between (chain intervals), or one route paced (floors).
 
-use crate::ends::{wire, Ends, Route};
+use crate::common::args::stopped;
+use crate::common::ends::{wire, Ends, Route};
 use netfi::clock::{now_ns, sleep_until_ns};
 use netfi::metrics::LatencyHistogram;
-use netfi::service::signals::stop_requested;
 
 /// Frames sent before recording starts, in seconds of the interval's rate:
 /// page faults of fresh shared memory, cold caches and the first
@@ -105,7 +105,7 @@ impl Routes {
     }
 
     fn of(self, slot: u64) -> Route {
-        if self == Routes::ChainOnly || slot % 2 == 0 {
+        if self == Routes::ChainOnly || slot.is_multiple_of(2) {
             Route::Chain
         } else {
             Route::Direct
@@ -121,76 +121,26 @@ pub fn slots_for(rate_hz: f64, seconds: f64, routes: Routes) -> (u64, u64) {
     (routes.count() * warmup, routes.count() * (warmup + frames))
 }
 
-/// Sends every slot at its time and busy-polls both routes in between, in
-/// one thread; then waits up to `drain_ns` for the chain's last frames.
-pub fn drive(ends: &mut impl Ends, rate_hz: f64, seconds: f64, drain_ns: u64, may_sleep: bool, routes: Routes) -> Drive {
+/// Sends every slot at its time on each of `ends` and busy-polls every
+/// route in between, in one thread; then waits up to `drain_ns` for the
+/// chain's last frames. With several ends (one per stream), end k's slots
+/// come k/n of a slot after end 0's (the consoles are not in step); the
+/// figures are of all of them together. With `may_sleep` the thread sleeps
+/// ahead of a slot while nothing is in flight.
+pub fn drive<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns: u64, may_sleep: bool, routes: Routes) -> Drive {
     let (warm, slots) = slots_for(rate_hz, seconds, routes);
-    let slot_ns = 1e9 / rate_hz / routes.count() as f64;
-    let mut d = Drive::default();
-    let stamped = ends.stamped();
-    let t0 = now_ns() + 1_000_000;
-    let mut slot = 0u64;
-    let mut t_record = 0u64;
-    let mut drain_until = u64::MAX;
-    loop {
-        let now = now_ns();
-        if stop_requested() {
-            break;
-        }
-        if slot < slots {
-            let target = t0 + (slot as f64 * slot_ns) as u64;
-            if now >= target {
-                d.send(ends, slot, routes);
-                if slot >= warm {
-                    if slot == warm {
-                        t_record = now;
-                    }
-                    d.send_lateness.record(now - target);
-                }
-                slot += 1;
-                if slot == slots {
-                    d.send_seconds = now.saturating_sub(t_record) as f64 / 1e9;
-                    drain_until = now_ns() + drain_ns;
-                }
-            }
-        }
-        d.poll_routes(ends, warm, stamped);
-        if slot == slots {
-            if !d.in_flight() || now_ns() > drain_until {
-                break;
-            }
-        } else if may_sleep && !d.in_flight() {
-            let target = t0 + (slot as f64 * slot_ns) as u64;
-            if target > now_ns() + 2 * SLEEP_SLACK_NS {
-                sleep_until_ns(target - SLEEP_SLACK_NS);
-            }
-        }
-    }
-    d.seconds = (now_ns().saturating_sub(t_record)) as f64 / 1e9;
-    d
-}
-
-/// [`drive`] over `ends.len()` streams at `rate_hz` per route each, in one
-/// thread: stream k's slots come `k / n` of a slot after stream 0's (the
-/// consoles are not in step), and every stream's routes are polled between
-/// sends. The figures are of all streams together.
-pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns: u64) -> Drive {
-    let (warm, slots) = slots_for(rate_hz, seconds, Routes::Alternate);
     let n = ends.len() as u64;
-    let half_period_ns = 1e9 / rate_hz / 2.0;
-    let at = |e: u64| (((e / n) as f64 + (e % n) as f64 / n as f64) * half_period_ns) as u64;
+    let slot_ns = 1e9 / rate_hz / routes.count() as f64;
+    let at = |e: u64| (((e / n) as f64 + (e % n) as f64 / n as f64) * slot_ns) as u64;
     let mut d = Drive::default();
     let t0 = now_ns() + 1_000_000;
     let (mut e, events) = (0u64, slots * n);
     let (mut t_record, mut drain_until) = (0u64, u64::MAX);
-    loop {
+    while !stopped() {
         let now = now_ns();
-        if stop_requested() {
-            break;
-        }
         if e < events && now >= t0 + at(e) {
             let slot = e / n;
-            d.send(&mut ends[(e % n) as usize], slot, Routes::Alternate);
+            d.send(&mut ends[(e % n) as usize], slot, routes);
             if slot >= warm {
                 if e == warm * n {
                     t_record = now;
@@ -199,17 +149,19 @@ pub fn drive_many<E: Ends>(ends: &mut [E], rate_hz: f64, seconds: f64, drain_ns:
             }
             e += 1;
             if e == events {
+                d.send_seconds = now.saturating_sub(t_record) as f64 / 1e9;
                 drain_until = now_ns() + drain_ns;
             }
         }
         for end in ends.iter_mut() {
-            d.poll_routes(end, warm, true);
+            let stamped = end.stamped();
+            d.poll_routes(end, warm, stamped);
         }
         if e == events {
             if !d.in_flight() || now_ns() > drain_until {
                 break;
             }
-        } else if !d.in_flight() && t0 + at(e) > now_ns() + 2 * SLEEP_SLACK_NS {
+        } else if may_sleep && !d.in_flight() && t0 + at(e) > now_ns() + 2 * SLEEP_SLACK_NS {
             sleep_until_ns(t0 + at(e) - SLEEP_SLACK_NS);
         }
     }
@@ -225,7 +177,7 @@ pub fn pace(frames: u64, period_ns: f64, warm: u64, mut send: impl FnMut(u64) ->
     let mut sent = 0;
     let mut t_record = t0;
     for i in 0..frames {
-        if stop_requested() {
+        if stopped() {
             break;
         }
         let target = t0 + (i as f64 * period_ns) as u64;
