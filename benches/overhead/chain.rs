@@ -190,7 +190,7 @@ fn run_interval(
 fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
     let run_id = fresh_run_id();
     let mut args = emulator::args(s, iv.scenario, iv.dir, iv.expected, Some(run_id.clone()));
-    args.queue_capacity = iv.queue_capacity;
+    args.scenario.queue_capacity = iv.queue_capacity;
     let _forget = emulator::ForgetRuns(vec![run_id.clone()]);
     let emu = Emulator::spawn(iv.dir, &emulator::argv(&args, &[]))?;
     let (core, rt) = (s.driver_core, s.rt_priority);
@@ -222,7 +222,7 @@ fn drive_ipc(s: &Settings, iv: &Interval) -> Result<(Drive, EmulatorReport)> {
 fn drive_udp(s: &Settings, iv: &Interval, slots: u64) -> Result<(Drive, EmulatorReport)> {
     let rx_chain = loopback_port()?;
     let mut args = emulator::args(s, iv.scenario, iv.dir, iv.expected, None);
-    args.queue_capacity = iv.queue_capacity;
+    args.scenario.queue_capacity = iv.queue_capacity;
     let udp: Vec<String> = vec![
         "--ingress".into(),
         "udp://127.0.0.1:0".into(),

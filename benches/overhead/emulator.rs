@@ -4,10 +4,8 @@
 use crate::args::Settings;
 use crate::NETFI;
 use anyhow::{bail, Context, Result};
-use netfi::service::args::{ControlArgs, EmulatorArgs};
+use netfi::service::args::{ControlArgs, EmulatorArgs, EmulatorPlacement};
 use netfi::service::emulator::EmulatorReport;
-use netfi::transport::udp::DEFAULT_UDP_BUFFER_BYTES;
-use netfi::transport::{Endpoint, Payload};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -17,38 +15,17 @@ use std::time::{Duration, Instant};
 /// when one is set). The transports' flags go after [`argv`]'s.
 pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_id: Option<String>) -> EmulatorArgs {
     let iceoryx2 = run_id.is_some();
-    EmulatorArgs {
-        run_id,
-        scenario: scenario.into(),
-        seed: Some(1),
-        queue_capacity: None,
-        core: s.emulator_core,
-        no_pin: s.emulator_core.is_none(),
-        rt_priority: s.rt_priority,
-        isolate: false,
-        drop_bad_checksum: false,
-        expected_frames,
-        out: dir.to_path_buf(),
-        ingress: Endpoint::Iceoryx2,
-        egress: Endpoint::Iceoryx2,
-        payload: Payload::Itp,
-        egress_bind: None,
-        console_from: None,
-        // The benchmark measures the forward path, as it always has (the
-        // flag names the iceoryx2 feedback loop: a UDP chain, which has no
-        // run id, refuses it).
-        no_feedback: iceoryx2,
-        wait_for_peer_s: None,
-        return_scenario: None,
-        return_seed: None,
-        return_to: None,
-        no_return: false,
-        idle_end_ms: None,
-        udp_buffer_bytes: DEFAULT_UDP_BUFFER_BYTES,
-        control: ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 },
-        stream: Default::default(),
-        video: Default::default(),
-    }
+    let mut a = EmulatorArgs::new(run_id, scenario);
+    a.scenario.seed = Some(1);
+    a.placement = EmulatorPlacement { core: s.emulator_core, no_pin: s.emulator_core.is_none(), rt_priority: s.rt_priority, isolate: false };
+    a.expected_frames = expected_frames;
+    a.out = dir.to_path_buf();
+    // The benchmark measures the forward path, as it always has (the
+    // flag names the iceoryx2 feedback loop: a UDP chain, which has no
+    // run id, refuses it).
+    a.return_path.no_feedback = iceoryx2;
+    a.control = ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 };
+    a
 }
 
 /// `netfi emulator` and `args` (the iceoryx2 flags), then `udp`: the UDP

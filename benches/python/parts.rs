@@ -155,9 +155,9 @@ pub fn run(s: &Settings, transport: &'static str) -> Result<Part> {
 fn start_emulator(s: &Settings, dir: &Path, run_id: Option<String>, udp: &[String]) -> Result<Emulator> {
     let expected = (s.rate_hz * (s.seconds + 1.0)) as u64 + 16;
     let mut a = emulator::args(s, "Normal", &dir.join("emulator"), expected, run_id);
-    a.no_feedback = false;
-    a.isolate = s.isolate && s.emulator_core.is_some();
-    a.return_scenario = Some("Normal".into());
+    a.return_path.no_feedback = false;
+    a.placement.isolate = s.isolate && s.emulator_core.is_some();
+    a.return_path.return_scenario = Some("Normal".into());
     Emulator::spawn(&dir.join("emulator"), &emulator::argv(&a, udp))
 }
 

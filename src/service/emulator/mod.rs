@@ -66,7 +66,7 @@ struct Opened {
 fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
     let a = &l.args;
-    let t = crate::transport::open(&a.ingress, &a.egress, &a.wiring(l.queue_capacity))?;
+    let t = crate::transport::open(&a.udp.ingress, &a.udp.egress, &a.wiring(l.queue_capacity))?;
     let console = ConsoleAddr::default();
     let o = reverse::Opening { args: a, t: &t, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir, console: &console };
     let reverse = reverse::open_all(&o)?;
@@ -74,7 +74,7 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, RAW_UNSUPPORTED).filter(|_| l.accept_raw()) {
         anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
     }
-    let bound = report::bound(&t.ingress, &t.egress, a.egress.udp());
+    let bound = report::bound(&t.ingress, &t.egress, a.udp.egress.udp());
     let crate::transport::Transports { ingress, egress, node, arena } = t;
     let udp_in = matches!(ingress, Ingress::Udp(_));
     let mut chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
@@ -110,7 +110,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut control = start_control(&cfg, &mut lanes[0].forward.link)?;
     let mut placement = place::place(&cfg, &lanes, control.as_ref().map(|(_, h)| h))?;
     signals::install();
-    for (l, b) in cfg.lanes.iter().zip(&bounds).filter(|(l, _)| l.args.ingress.is_udp() || l.args.egress.is_udp()) {
+    for (l, b) in cfg.lanes.iter().zip(&bounds).filter(|(l, _)| l.args.udp.ingress.is_udp() || l.args.udp.egress.is_udp()) {
         let p = l.out_dir.join("udp_endpoints.json");
         std::fs::write(&p, serde_json::to_vec_pretty(b)?).with_context(|| format!("writing {}", p.display()))?;
     }
@@ -139,7 +139,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
     let mut reports = Vec::with_capacity(lanes.len());
     for (k, ((lane, dead), l)) in lanes.into_iter().zip(dead).zip(&cfg.lanes).enumerate() {
         let (isolation, events) = lane0.take().unwrap_or_default();
-        let udp = (l.args.ingress.is_udp() || l.args.egress.is_udp())
+        let udp = (l.args.udp.ingress.is_udp() || l.args.udp.egress.is_udp())
             .then(|| report::udp_report(&l.args, &lane.forward.chan.source, arenas[k].as_ref().map(|a| a.borrow()).as_deref(), &bounds[k]));
         let r = conclude(lane, dead, isolation, events, &run)?;
         write_json(&l.out_dir.join("emulator.json"), &r)?;
@@ -177,18 +177,18 @@ fn say_lane(cfg: &EmulatorConfig, k: usize, o: &Opened) {
     let a = &l.args;
     if cfg.several() {
         eprintln!("emulator: stream {k}: run {} scenario {} seed {}", a.run_id.as_deref().unwrap_or("?"), l.scenario.name, l.seed);
-    } else if a.ingress.is_udp() || a.egress.is_udp() {
+    } else if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
         eprintln!(
             "emulator: scenario {} seed {}, queue {}, core {:?}; ingress {}{}, egress {}{}, payload {:?}",
             l.scenario.name,
             l.seed,
             l.queue_capacity,
             cfg.core,
-            a.ingress,
+            a.udp.ingress,
             o.bound.ingress.map_or(String::new(), |x| format!(" (bound {x})")),
-            a.egress,
+            a.udp.egress,
             o.bound.egress_local.map_or(String::new(), |x| format!(" (from {x})")),
-            a.payload,
+            a.udp.payload,
         );
     } else {
         eprintln!("emulator: scenario {} seed {}, queue {}, core {:?}", l.scenario.name, l.seed, l.queue_capacity, cfg.core);
