@@ -441,7 +441,7 @@ impl Streamer<'_> {
 /// Runs the console with `args`; returns its report (also `console.json`).
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     args.source.planned()?;
-    let seed = crate::service::seeds::motion(args.seed);
+    let seed = crate::service::seeds::given_or_fresh(args.seed);
     let mut script = Script::from_args(args, seed)?;
     let n = script.len(args.source.frames, args.source.duration_s);
     crate::service::write_pid(&args.out, "console")?;

@@ -59,9 +59,9 @@ pub fn video(given: Option<u64>, spec: &ScenarioSpec, seed: u64) -> u64 {
     derived(given, spec, seed, VIDEO_TAG)
 }
 
-/// The seed of a console's synthetic motion: `given` (by `netfi run`, the
-/// stream's), else a fresh one.
-pub fn motion(given: Option<u64>) -> u64 {
+/// A seed with no scenario to take one from (a console's synthetic
+/// motion, a fit): `given` (by `netfi run`: the stream's), else a fresh one.
+pub fn given_or_fresh(given: Option<u64>) -> u64 {
     given.unwrap_or_else(fresh)
 }
 
@@ -81,7 +81,7 @@ mod tests {
         assert_eq!(stream(42, 0), 42);
         assert_eq!(stream(42, 3), splitmix64(42 ^ splitmix64(3)));
         assert_ne!(stream(42, 1), stream(42, 2));
-        assert_eq!(motion(Some(3)), 3);
+        assert_eq!(given_or_fresh(Some(3)), 3);
         spec.seed = None;
         assert_eq!(feedback(None, &spec, 1), splitmix64(1 ^ FEEDBACK_TAG));
         assert_eq!(video(None, &spec, 1), splitmix64(1 ^ VIDEO_TAG));

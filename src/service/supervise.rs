@@ -254,9 +254,8 @@ impl Supervisor {
         if s.simulator == State::Running && (s.emulator == State::Failed || marker_late) {
             o.stop.simulator = true;
         }
-        let running = [s.console, s.emulator, s.simulator].map(|r| r == State::Running);
-        for k in 0..3 {
-            if running[k] && self.stopped_at[k].is_some_and(|t| s.now.saturating_sub(t) >= KILL_GRACE) {
+        for (k, state) in [s.console, s.emulator, s.simulator].into_iter().enumerate() {
+            if state == State::Running && self.stopped_at[k].is_some_and(|t| s.now.saturating_sub(t) >= KILL_GRACE) {
                 *o.kill.get_mut(k) = true;
             }
         }

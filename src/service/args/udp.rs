@@ -103,7 +103,9 @@ impl UdpArgs {
                 return Err(ArgsError::EgressAddress { egress: self.egress });
             }
         }
-        if !(i && e) && !run_id {
+        // An iceoryx2 side needs the run's id to find its services.
+        let iceoryx2_side = !(i && e);
+        if iceoryx2_side && !run_id {
             return Err(ArgsError::RunIdNeeded { ingress: self.ingress, egress: self.egress });
         }
         Ok(())
