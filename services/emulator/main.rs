@@ -11,6 +11,7 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    netfi::service::signals::die_with_runner();
     netfi::service::emulator::main(&cli.args)?;
     Ok(())
 }

@@ -19,6 +19,9 @@ fn main() -> std::process::ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let args = cli::Cli::parse();
+    if matches!(args.command, cli::Command::Console(_) | cli::Command::Emulator(_) | cli::Command::Simulator(_)) {
+        netfi::service::signals::die_with_runner();
+    }
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
         cli::Command::Run(a) => run(&a),

@@ -153,28 +153,24 @@ impl Channel for UdpReturn {
     }
 }
 
-/// What the return path's seed is derived from, with the run's seed, when
-/// not given.
-pub const SEED_TAG: u64 = 0x7265_7475_726e;
-
 /// The return path, with UDP on both sides and unless `--no-return`.
 pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
     let a = o.args;
     let (Some(ingress), Some(egress)) = (o.t.udp_ingress(), o.t.udp_egress()) else { return Ok(None) };
-    if a.no_return {
+    if a.udp.no_return {
         return Ok(None);
     }
-    let to = match &a.return_to {
+    let to = match &a.udp.return_to {
         Some(Endpoint::Udp(addr)) => Some(*addr),
         Some(Endpoint::Iceoryx2) => bail!("--return-to takes udp://ADDR:PORT"),
         None => None,
     };
-    let plan = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, o.seed, SEED_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
+    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::RETURN_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
     let mut from_robot = egress.try_clone().context("opening the return path")?;
-    if let Some(robot) = a.robot_from {
+    if let Some(robot) = a.udp.robot_from {
         from_robot.accept_only(robot);
     }
     let to_console = ingress.try_clone().context("opening the return path")?;
-    let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_scenario.is_some(), plan.queue_capacity);
+    let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_path.return_scenario.is_some(), plan.queue_capacity);
     Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))
 }

@@ -152,10 +152,6 @@ impl Channel for Video {
     }
 }
 
-/// What the video path's seed is derived from, with the run's seed, when
-/// not given.
-pub const SEED_TAG: u64 = 0x7669_6465_6f00_0000;
-
 /// The video path, when the run has video (`--video-mbps`) and an iceoryx2
 /// node.
 pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
@@ -171,7 +167,7 @@ pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path)
         return Ok(None);
     }
     v.validate()?;
-    let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, SEED_TAG, VIDEO_HELD_FRAMES - 1)?;
+    let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, crate::service::seeds::VIDEO_TAG, VIDEO_HELD_FRAMES - 1)?;
     plan.queue_capacity = VIDEO_HELD_FRAMES - 1;
     let source = node.video_subscriber(Port::Video).context("opening the robot → emulator video port")?;
     let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).context("opening the emulator → console video port")?;
