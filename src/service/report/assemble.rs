@@ -5,7 +5,7 @@
 
 use super::delay::delay_check;
 use super::trace_merge::{merge_trace, Source};
-use super::{files, join, FeedbackSection, Files, ProcessEnd, RunReport};
+use super::{files, join, FeedbackSection, Files, ProcessEnd, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
 use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
@@ -227,6 +227,22 @@ impl RunReport {
         assemble(facts, parts, runner, Source::Consume)
     }
 
+    /// The report of a run of several streams from each stream's own
+    /// (stream 0's first, each already written to its directory): stream
+    /// 0's figures, every process of the run, each stream's faults (named
+    /// by stream) and the files cut in the run's directory `out` itself,
+    /// and the streams' table and total.
+    pub fn join_streams(mut reports: Vec<RunReport>, processes: Vec<ProcessEnd>, out: &Path) -> RunReport {
+        let lines: Vec<RunStream> = reports.iter().enumerate().map(|(k, r)| RunStream::of(k, r)).collect();
+        let mut top = reports.swap_remove(0);
+        top.processes = processes;
+        top.faults = lines.iter().flat_map(|l| l.faults.iter().map(move |f| format!("stream {}: {f}", l.stream))).collect();
+        top.faults.extend(files::cut_faults_here(out));
+        top.files.report_json = out.join("report.json");
+        top.streams = Some(RunStreams::of(lines));
+        top
+    }
+
     /// The report of the run in `dir`: its `report.json` (what `netfi run`
     /// wrote), or else assembled from the services' reports
     /// ([`RunReport::from_dir`]).
@@ -367,6 +383,36 @@ mod tests {
         std::fs::write(d.join("report.json"), b"{\"run_id\": ").unwrap();
         let e = RunReport::of_dir(&d).unwrap_err().to_string();
         assert!(e.contains(&d.join("report.json").display().to_string()) && e.contains("not a run report"), "{e}");
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn a_run_of_several_streams_is_stream_0s_figures_every_fault_and_the_table() {
+        let d = dir("streams");
+        let stream = |k: usize, faults: &[&str]| {
+            let out = d.join(format!("stream-{k}"));
+            std::fs::create_dir_all(&out).unwrap();
+            write(&out.join("emulator.json"), &emulator_json(Some(10)));
+            let facts = RunFacts { run_id: "r", out: &out, scenario: "PLM-2", spec: None, seed: k as u64, scenario_path: None };
+            RunReport::assemble_run(&facts, RunnerView { faults: faults.iter().map(|f| f.to_string()).collect(), ..RunnerView::default() })
+        };
+        let reports = vec![stream(0, &[]), stream(1, &["console ended abnormally (signal 9)"])];
+        std::fs::write(d.join("emulator.json.partial"), b"{").unwrap();
+        let top = RunReport::join_streams(reports, vec![], &d);
+        assert_eq!(top.seed, 0, "stream 0's figures");
+        assert_eq!(top.files.report_json, d.join("report.json"));
+        let cut = format!("cut file: {} (its writer stopped before it was whole)", d.join("emulator.json.partial").display());
+        let want = [
+            "stream 0: no report from the console",
+            "stream 0: no report from the simulator",
+            "stream 1: console ended abnormally (signal 9)",
+            "stream 1: no report from the console",
+            "stream 1: no report from the simulator",
+            cut.as_str(),
+        ];
+        assert_eq!(top.faults, want);
+        let s = top.streams.unwrap();
+        assert_eq!((s.streams.len(), s.total.entered, s.total.balanced), (2, 20, false));
         std::fs::remove_dir_all(&d).ok();
     }
 

@@ -43,16 +43,22 @@ pub fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 /// every `NAME.partial`, sorted. Symbolic links are not followed; a
 /// directory that cannot be read is an error naming it.
 pub fn cut_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    cut_files_to(dir, usize::MAX)
+}
+
+/// The cut files in `dir` and in its subdirectories down to `depth` (0:
+/// `dir` alone).
+fn cut_files_to(dir: &Path, depth: usize) -> std::io::Result<Vec<PathBuf>> {
     let mut found = Vec::new();
-    let mut dirs = vec![dir.to_path_buf()];
+    let mut dirs = vec![(dir.to_path_buf(), 0)];
     let named = |d: &Path, e: std::io::Error| std::io::Error::new(e.kind(), format!("reading {}: {e}", d.display()));
-    while let Some(d) = dirs.pop() {
+    while let Some((d, below)) = dirs.pop() {
         for entry in std::fs::read_dir(&d).map_err(|e| named(&d, e))? {
             let entry = entry.map_err(|e| named(&d, e))?;
             let kind = entry.file_type().map_err(|e| named(&d, e))?;
             let path = entry.path();
-            if kind.is_dir() {
-                dirs.push(path);
+            if kind.is_dir() && below < depth {
+                dirs.push((path, below + 1));
             } else if kind.is_file() && is_partial(&path) {
                 found.push(path);
             }
@@ -70,7 +76,17 @@ pub fn is_partial(path: &Path) -> bool {
 /// The faults a run's report gives for the cut files under `dir`, one
 /// each, or one saying the directory could not be searched.
 pub fn cut_faults(dir: &Path) -> Vec<String> {
-    match cut_files(dir) {
+    faults_of(cut_files(dir))
+}
+
+/// The faults for the cut files in `dir` itself (a run of several
+/// streams: each stream's report names those in its directory).
+pub fn cut_faults_here(dir: &Path) -> Vec<String> {
+    faults_of(cut_files_to(dir, 0))
+}
+
+fn faults_of(cut: std::io::Result<Vec<PathBuf>>) -> Vec<String> {
+    match cut {
         Ok(cut) => cut.iter().map(|p| format!("cut file: {} (its writer stopped before it was whole)", p.display())).collect(),
         Err(e) => vec![format!("cut files not looked for: {e}")],
     }
@@ -99,6 +115,7 @@ mod tests {
         let faults = cut_faults(&d);
         assert_eq!(faults.len(), 2);
         assert!(faults[0].starts_with(&format!("cut file: {}", d.join("stream-1/received.csv.partial").display())), "{faults:?}");
+        assert_eq!(cut_faults_here(&d).len(), 1, "the streams' own are theirs");
         let gone = d.join("not-there");
         assert!(cut_faults(&gone)[0].contains(&gone.display().to_string()));
         std::fs::remove_dir_all(&d).ok();
