@@ -14,7 +14,7 @@
 //! `provenance` (and `prov-version`, `prov-command`, `prov-started`,
 //! `prov-seed`, `prov-host`), `realized-loss` (its `data-value` is the
 //! report's figure), `balanced`, `faults`, `missing` (the services'
-//! reports not in the directory), `latency`, `delay-law`, `over-time`,
+//! reports not in the directory), `udp` (a run with a UDP side), `latency`, `delay-law`, `over-time`,
 //! `loss-runs`, `kinematics`, `events`; every plot is an `<svg class="plot">` with its
 //! own id.
 

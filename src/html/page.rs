@@ -104,6 +104,9 @@ fn summary(r: &RunReport) -> Markup {
             @if !r.faults.is_empty() {
                 ul #faults { @for fault in &r.faults { li.fault { (fault) } } }
             }
+            @if let Some(u) = &r.udp {
+                p #udp { "UDP: " (crate::service::report::udp_line(u)) "." }
+            }
             @if !r.missing.is_empty() {
                 p #missing.none { "Not in the run's directory: " (r.missing.join(", ")) " (the figures that need them are unknown)." }
             }

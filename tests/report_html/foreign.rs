@@ -180,3 +180,79 @@ fn a_directory_of_no_run_is_an_error_naming_what_would_do() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A valid ITP frame with sequence `seq`.
+fn itp(seq: u32) -> [u8; 124] {
+    let mut b = [0u8; 124];
+    let mut v = netfi::frame::ItpView::new_unchecked(&mut b[..]);
+    v.set_sequence(seq);
+    v.set_delx([(seq % 7) as i32, 1]);
+    v.set_qw([1.0, 1.0]);
+    v.set_surgeon_mode(1);
+    v.fill_checksum();
+    b
+}
+
+/// A UDP run: the emulator between two sockets this test holds, as a
+/// console and a robot of another make would (docs/udp.md); no process
+/// writes a report but the emulator.
+#[test]
+fn a_udp_run_started_by_hand_is_reported_with_its_sockets() {
+    use std::net::UdpSocket;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = temp_dir("foreign-udp");
+    let console = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    robot.set_read_timeout(Some(Duration::from_millis(100))).unwrap();
+    let robot_addr = robot.local_addr().unwrap();
+    let ingress = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    let emulator = service("emulator")
+        .args(["--scenario", "PLM-2", "--seed", "5", "--expected-frames", "500", "--idle-end-ms", "1000", "--no-pin"])
+        .args(["--ingress", &format!("udp://{ingress}"), "--egress", &format!("udp://{robot_addr}")])
+        .args(["--console-from", &console.local_addr().unwrap().to_string(), "--out"])
+        .arg(&dir)
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !dir.join("emulator.ready").exists() {
+        assert!(Instant::now() < deadline, "the emulator never got ready");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let done = Arc::new(AtomicBool::new(false));
+    let receiving = {
+        let done = done.clone();
+        std::thread::spawn(move || {
+            let (mut n, mut buf) = (0u64, [0u8; 256]);
+            while !done.load(Ordering::Relaxed) {
+                n += u64::from(robot.recv(&mut buf).is_ok());
+            }
+            n
+        })
+    };
+    for seq in 0..500 {
+        console.send_to(&itp(seq), ingress).unwrap();
+        // Paced, so that no socket buffer overflows on a loaded host.
+        if seq % 20 == 19 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    finish(emulator, "emulator");
+    done.store(true, Ordering::Relaxed);
+    let received = receiving.join().unwrap();
+    let text = report_text(&dir);
+    let e: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("emulator.json")).unwrap()).unwrap();
+    let delivered = e["frames"]["delivered"].as_u64().unwrap();
+    assert_eq!(received, delivered, "the robot got every frame released");
+    assert!(text.contains(&format!("udp        ingress udp://{ingress} (bound {ingress}), egress udp://{robot_addr}")), "{text}");
+    assert!(text.contains("500 datagrams in, 0 dropped by the kernel before ingress"), "{text}");
+    assert!(text.contains(&format!("entered 500  delivered {delivered}  received ?")), "{text}");
+    assert!(text.contains("missing    console.json, simulator.json"), "{text}");
+    assert!(!text.contains("FAULT"), "{text}");
+    let o = netfi().arg("report").arg(&dir).arg("--html").output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(text_of(&html, "udp").contains("500 datagrams in"), "{}", text_of(&html, "udp"));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -11,7 +11,7 @@ use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
 use crate::service::emulator::feedback::FeedbackExtra;
 use crate::service::emulator::video::VideoExtra;
-use crate::service::schema::EmulatorReport;
+use crate::service::schema::{EmulatorReport, UdpReport};
 use crate::service::simulator::SimulatorReport;
 use crate::service::video::VideoSection;
 use serde::de::DeserializeOwned;
@@ -71,6 +71,8 @@ pub(super) struct Parts {
     pub console: Option<ConsoleReport>,
     pub emulator: Option<EmulatorReport>,
     pub simulator: Option<SimulatorReport>,
+    /// Written only where a side is UDP: not missing where absent.
+    pub udp: Option<UdpReport>,
     pub missing: Vec<(&'static str, &'static str, Option<String>)>,
 }
 
@@ -81,7 +83,11 @@ impl Parts {
         let console = take(Found::read(&out.join("console.json")), ("console.json", "console"), &mut missing);
         let emulator = take(emulator.unwrap_or_else(|| Found::read(&out.join("emulator.json"))), ("emulator.json", "emulator"), &mut missing);
         let simulator = take(Found::read(&out.join("simulator.json")), ("simulator.json", "simulator"), &mut missing);
-        Parts { console, emulator, simulator, missing }
+        let udp = match Found::read(&out.join("udp.json")) {
+            Found::Absent => None,
+            found => take(found, ("udp.json", "emulator's UDP side"), &mut missing),
+        };
+        Parts { console, emulator, simulator, udp, missing }
     }
 
     /// A fault for each report the runner expected and did not find.
@@ -136,7 +142,7 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>) -> RunReport {
-    let Parts { console, emulator, simulator, missing } = parts;
+    let Parts { console, emulator, simulator, udp, missing } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
@@ -148,7 +154,8 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent)));
     let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
     let video = VideoSection::join(video_path.as_ref(), console.as_ref().and_then(|c| c.video.as_ref()), simulator.as_ref().and_then(|s| s.camera.as_ref()));
-    let faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
+    let mut faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
+    faults.extend(udp.as_ref().and_then(join::udp_fault));
     let e = shaping.as_ref();
     let files = Files {
         out_dir: facts.out.to_path_buf(),
@@ -188,6 +195,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         console,
         emulator,
         simulator,
+        udp,
         streams: None,
     }
 }
@@ -364,6 +372,38 @@ mod tests {
         assert!(r.frames.balanced, "{:?}", r.frames);
         assert_eq!(r.faults.len(), 1);
         assert!(r.faults[0].starts_with(&format!("no report from the console: {}", d.join("console.json").display())), "{:?}", r.faults);
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn a_udp_run_reports_its_sockets_and_what_the_kernel_dropped_before_the_emulator() {
+        let d = dir("udp");
+        write(&d.join("emulator.json"), &emulator_json(None));
+        write(
+            &d.join("udp.json"),
+            &json!({
+                "ingress": "udp://127.0.0.1:5000", "egress": "udp://127.0.0.1:6000", "payload": "itp",
+                "ingress_local": "127.0.0.1:5000", "egress_local": "127.0.0.1:40000", "datagrams_in": 10,
+                "ingress_kernel_drops": 3, "ingress_buffer_bytes": 212992, "console": "127.0.0.1:4000",
+                "foreign_sender": 2, "foreign_senders": [{"addr": "127.0.0.1:4444", "datagrams": 2}], "foreign_unnamed": 0,
+                "arena_slots": null, "arena_high_water": null, "return_path": null
+            }),
+        );
+        let r = RunReport::of_dir(&d).unwrap();
+        assert_eq!(r.udp.as_ref().and_then(|u| u.ingress_kernel_drops), Some(3));
+        assert_eq!(r.missing, ["console.json", "simulator.json"], "udp.json is not missing where a run has none");
+        assert_eq!(
+            r.faults,
+            ["3 datagrams dropped by the kernel at the emulator's ingress socket udp://127.0.0.1:5000 (its receive buffer full): they never entered"]
+        );
+        let text = r.to_text();
+        let udp = "udp        ingress udp://127.0.0.1:5000 (bound 127.0.0.1:5000), egress udp://127.0.0.1:6000 (from 127.0.0.1:40000), payload itp: \
+                   10 datagrams in, 3 dropped by the kernel before ingress; console 127.0.0.1:4000; 2 datagrams from other senders refused: 127.0.0.1:4444 (2)\n";
+        assert!(text.contains(udp), "{text}");
+        std::fs::write(d.join("udp.json"), b"[").unwrap();
+        let r = RunReport::of_dir(&d).unwrap();
+        assert!(r.udp.is_none() && r.missing.contains(&"udp.json".to_string()));
+        assert!(r.faults[0].starts_with("no report from the emulator's UDP side: "), "{:?}", r.faults);
         std::fs::remove_dir_all(&d).ok();
     }
 

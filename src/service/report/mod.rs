@@ -28,6 +28,7 @@ pub use crate::service::schema::run::*;
 pub use assemble::{DirError, RunFacts, RunnerView};
 pub use files::{cut_files, write_whole, WriteError};
 pub use join::{account, corruption, difference, overhead};
+pub use text::udp_line;
 pub use emulator_text::emulator_text;
 
 use crate::host::Steal;
