@@ -150,18 +150,23 @@ pub fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), DurableError> {
 /// `stream-K/`): every `NAME.partial`, as it is on disk, sorted. A
 /// directory that cannot be read is an error naming it.
 pub fn cut_files(dir: &Path) -> io::Result<Vec<PathBuf>> {
+    cut_files_to(dir, usize::MAX)
+}
+
+/// The cut files in `dir` and its subdirectories down to `depth` (0: `dir`
+/// alone). Symbolic links are not followed: a run's directory holds its
+/// own files only.
+pub fn cut_files_to(dir: &Path, depth: usize) -> io::Result<Vec<PathBuf>> {
+    let named = |d: &Path, e: io::Error| io::Error::new(e.kind(), format!("reading {}: {e}", d.display()));
     let mut found = Vec::new();
-    let mut dirs = vec![dir.to_path_buf()];
-    while let Some(d) = dirs.pop() {
-        let entries = std::fs::read_dir(&d).map_err(|e| io::Error::new(e.kind(), format!("reading {}: {e}", d.display())))?;
-        for entry in entries {
-            let entry = entry.map_err(|e| io::Error::new(e.kind(), format!("reading {}: {e}", d.display())))?;
-            // Not followed through symbolic links: a run's directory holds
-            // its own files only.
-            let kind = entry.file_type()?;
+    let mut dirs = vec![(dir.to_path_buf(), 0)];
+    while let Some((d, below)) = dirs.pop() {
+        for entry in std::fs::read_dir(&d).map_err(|e| named(&d, e))? {
+            let entry = entry.map_err(|e| named(&d, e))?;
+            let kind = entry.file_type().map_err(|e| named(&d, e))?;
             let path = entry.path();
-            if kind.is_dir() {
-                dirs.push(path);
+            if kind.is_dir() && below < depth {
+                dirs.push((path, below + 1));
             } else if kind.is_file() && is_partial(&path) {
                 found.push(path);
             }

@@ -12,6 +12,7 @@ struct Cli {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     netfi::service::signals::die_with_runner();
-    netfi::service::emulator::main(&cli.args)?;
+    let report = netfi::service::emulator::main(&cli.args)?;
+    print!("{}", netfi::service::report::emulator_text(&report));
     Ok(())
 }

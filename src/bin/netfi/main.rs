@@ -26,7 +26,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
         cli::Command::Run(a) => run(&a),
         cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()),
-        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|_| ()),
+        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r))),
         cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),

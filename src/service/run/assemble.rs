@@ -4,7 +4,7 @@
 use super::procs::{Proc, Procs};
 use crate::host::Steal;
 use crate::service::plan::Plan;
-use crate::service::report::{RunReport, RunStream, RunStreams};
+use crate::service::report::RunReport;
 use std::path::PathBuf;
 
 /// The run's report: the services' reports joined; with several streams,
@@ -16,7 +16,6 @@ pub fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: Steal, inter
         let processes = procs.all().map(Proc::end).collect();
         return RunReport::assemble(plan, duration_s, steal, processes, faults, interrupted);
     }
-    let mut lines = Vec::new();
     let mut reports = Vec::new();
     for (k, s) in plan.streams.iter().enumerate() {
         let own = [&procs.consoles[k], &procs.emulator, &procs.simulators[k]];
@@ -26,15 +25,9 @@ pub fn assemble(plan: &Plan, procs: &Procs, duration_s: f64, steal: Steal, inter
         let mut r = RunReport::assemble(&sp, duration_s, steal, processes, faults, interrupted);
         let path = r.files.report_json.clone();
         write(&mut r, &[path]);
-        lines.push(RunStream::of(k, &r));
         reports.push(r);
     }
-    let mut top = reports.swap_remove(0);
-    top.processes = procs.all().map(Proc::end).collect();
-    top.faults = lines.iter().flat_map(|l| l.faults.iter().map(move |f| format!("stream {}: {f}", l.stream))).collect();
-    top.files.report_json = plan.out.join("report.json");
-    top.streams = Some(RunStreams::of(lines));
-    top
+    RunReport::join_streams(reports, procs.all().map(Proc::end).collect(), &plan.out)
 }
 
 /// Writes `report` as JSON to each of `paths`. A report that cannot be
@@ -46,7 +39,7 @@ pub fn write(report: &mut RunReport, paths: &[PathBuf]) {
         Err(e) => return report.faults.push(format!("the report could not be serialized: {e}")),
     };
     for path in paths {
-        if let Err(e) = std::fs::write(path, &json) {
+        if let Err(e) = crate::service::report::write_whole(path, &json) {
             report.faults.push(format!("writing {}: {e}", path.display()));
         }
     }
