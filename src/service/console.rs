@@ -475,6 +475,6 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
         eprintln!("{}", s.fb.live_line());
     }
     let path = args.out.join("console.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)
 }

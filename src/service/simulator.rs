@@ -323,6 +323,6 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
     report.camera = camera.map(|c| c.finish()).transpose()?;
     let path = args.out.join("simulator.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)
 }
