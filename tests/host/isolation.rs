@@ -2,7 +2,7 @@
 
 use super::*;
 use std::collections::BTreeMap;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 
 /// What a run may change on the host and must put back.
 #[derive(Debug, PartialEq)]
@@ -67,7 +67,7 @@ fn differences(before: &HostState, after: &HostState) -> Vec<String> {
 }
 
 fn last_core() -> usize {
-    *netfi::host::isolate::online_cpus().iter().next_back().unwrap()
+    *netfi::host::affinity::online_cpus().iter().next_back().unwrap()
 }
 
 /// The record of the clearing done by the emulator `pid`, if any.
@@ -82,16 +82,6 @@ fn guardian_of(record: &Path) -> Option<i32> {
     numeric("/proc").into_iter().find(|pid| {
         std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| String::from_utf8_lossy(&c).contains(&want))
     })
-}
-
-/// A child process, killed and reaped however the test ends.
-struct Reaped(Child);
-
-impl Drop for Reaped {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -148,9 +138,14 @@ fn kill_matrix_case(kill: Kill) {
     let mid_run = Reaped(Command::new("sleep").arg("120").spawn().unwrap());
     let mid_pid = mid_run.0.id() as i32;
     let narrowed = allowed(&format!("/proc/{mid_pid}/status")).unwrap();
-    assert!(!netfi::host::isolate::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
+    assert!(!netfi::host::affinity::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
 
     let runner_pid = runner.0.id() as i32;
+    let mut others = Vec::new();
+    wait_for("the console's and the simulator's pids", Duration::from_secs(60), || {
+        others = ["console", "simulator"].iter().filter_map(|r| read_pid(&out, r)).collect();
+        others.len() == 2
+    });
     match kill {
         Kill::Emulator => sigkill(emulator),
         Kill::Runner => sigkill(runner_pid),
@@ -160,10 +155,35 @@ fn kill_matrix_case(kill: Kill) {
         }
         Kill::Guardian => sigkill(guardian),
         Kill::All => {
+            // The run's own guardian too, else it would end the run and
+            // restore; the emulator before the runner, else the runner's
+            // death could let it restore itself first.
+            super::orphans::guardians_of_run(runner_pid).into_iter().for_each(sigkill);
             sigkill(guardian);
-            sigkill(runner_pid);
             sigkill(emulator);
+            sigkill(runner_pid);
         }
+    }
+    if let Kill::Runner | Kill::RunnerAndEmulator | Kill::All = kill {
+        // No process of the run outlives its runner.
+        let run: Vec<i32> = others.iter().copied().chain([emulator]).collect();
+        wait_for(&format!("{kill:?}: no process of the run left (console, simulator, emulator: {run:?})"), Duration::from_millis(2500), || {
+            run.iter().all(|&p| !alive(p))
+        });
+    }
+    if let Kill::RunnerAndEmulator = kill {
+        // The guardian that ended the run removed its shared memory.
+        let mut left = Vec::new();
+        let deadline = Duration::from_secs(10);
+        let t0 = Instant::now();
+        while t0.elapsed() < deadline {
+            left = ipc_files_of(&run_id);
+            if left.is_empty() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        assert!(left.is_empty(), "{kill:?}: the run's shared memory is left after its processes ended: {left:?}");
     }
     if let Kill::All = kill {
         wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(emulator));
@@ -188,10 +208,8 @@ fn kill_matrix_case(kill: Kill) {
     std::thread::sleep(Duration::from_millis(200));
     restore();
 
-    let shm: Vec<String> = std::fs::read_dir("/dev/shm")
-        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.contains(&run_id)).collect())
-        .unwrap_or_default();
-    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm after `netfi restore`: {shm:?}");
+    let shm = ipc_files_of(&run_id);
+    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm or iceoryx2's directory after `netfi restore`: {shm:?}");
     let after = snapshot();
     let d = differences(&before, &after);
     let stderr = std::fs::read_to_string(out.join("runner.stderr")).unwrap_or_default();
@@ -204,11 +222,10 @@ fn kill_matrix_case(kill: Kill) {
 }
 
 fn skip() -> bool {
-    if !is_root() {
-        eprintln!("skipped: moving other processes' threads, interrupts and the workqueue mask needs root");
+    if skip_unless_root("moving other processes' threads, interrupts and the workqueue mask") {
         return true;
     }
-    if netfi::host::isolate::online_cpus().len() < 2 {
+    if netfi::host::affinity::online_cpus().len() < 2 {
         eprintln!("skipped: one core only");
         return true;
     }
@@ -255,12 +272,12 @@ fn kill_9_of_everything_is_undone_by_netfi_restore() {
 /// unpinned with a warning in the report's isolation line.
 #[test]
 fn a_pin_that_cannot_be_honoured_is_an_error_or_a_warning_in_the_report() {
-    if netfi::host::isolate::online_cpus().len() < 2 {
+    if netfi::host::affinity::online_cpus().len() < 2 {
         eprintln!("skipped: one core only");
         return;
     }
     let _guard = lock();
-    let first = *netfi::host::isolate::online_cpus().iter().next().unwrap();
+    let first = *netfi::host::affinity::online_cpus().iter().next().unwrap();
     let other = last_core();
     let on_one_core = |args: &[&str], out: &Path| {
         use std::os::unix::process::CommandExt;
