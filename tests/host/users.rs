@@ -14,19 +14,21 @@ fn shm_with(needle: &str) -> Vec<String> {
 
 /// The netfi binary where the user nobody may run it: the build's own
 /// path may pass through a directory only its owner can enter (a checkout
-/// under `mktemp -d`), so a copy is made once in a directory of its own.
-fn netfi_for_nobody() -> &'static str {
-    static COPY: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    COPY.get_or_init(|| {
-        use std::os::unix::fs::PermissionsExt;
-        let dir = std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id()));
+/// under `mktemp -d`), so a copy is made in a directory of its own (again
+/// if a test that finished removed it).
+fn netfi_for_nobody() -> String {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id()));
+    let exe = dir.join("netfi");
+    if !exe.exists() {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
-        let exe = dir.join("netfi");
-        std::fs::copy(netfi_exe(), &exe).unwrap();
-        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
-        exe.to_str().unwrap().to_string()
-    })
+        let tmp = dir.join("netfi.tmp");
+        std::fs::copy(netfi_exe(), &tmp).unwrap();
+        std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o755)).unwrap();
+        std::fs::rename(&tmp, &exe).unwrap();
+    }
+    exe.to_str().unwrap().to_string()
 }
 
 /// Removes the copy [`netfi_for_nobody`] made, if any.
@@ -42,7 +44,7 @@ fn as_nobody(args: &[&str]) -> Command {
 /// `netfi …` as user `uid` (group `uid`), without `$XDG_RUNTIME_DIR`.
 fn as_user(uid: u32, args: &[&str]) -> Command {
     let mut c = Command::new("setpriv");
-    c.args([&format!("--reuid={uid}"), &format!("--regid={uid}"), "--clear-groups", netfi_for_nobody()])
+    c.args([&format!("--reuid={uid}"), &format!("--regid={uid}"), "--clear-groups", &netfi_for_nobody()])
         .args(args)
         .current_dir("/tmp")
         .env_remove("XDG_RUNTIME_DIR");

@@ -50,18 +50,19 @@ pub fn run(args: RestoreArgs) -> Result<()> {
     Ok(())
 }
 
-/// Removes the iceoryx2 resources of dead processes, then every file of the
-/// runs `select` picks whose processes are all dead; says what it removed.
-/// Whether anything was.
+/// Removes every file of the runs `select` picks whose processes are all
+/// dead, then the iceoryx2 resources of dead processes of the others; says
+/// what it removed. Whether anything was.
 fn remove_shared_memory(mut select: impl FnMut(&ipc::RunId) -> bool) -> Result<bool> {
+    // First: the clean-up of dead nodes is how a run is seen to have died.
+    let swept = ipc::remove_dead_run_files(&mut select).context("removing the files of dead runs")?;
+    for (run, files) in &swept {
+        println!("removed {files} shared-memory and iceoryx2 file(s) of the dead run {run}");
+    }
     let cleaned = ipc::cleanup_dead_runs(&mut select).context("removing iceoryx2 resources of dead processes")?;
     let removed: usize = cleaned.iter().map(|(_, r)| r.removed.len()).sum();
     if removed > 0 {
         println!("removed the iceoryx2 resources of {removed} dead process(es)");
-    }
-    let swept = ipc::remove_dead_run_files(&mut select).context("removing the files of dead runs")?;
-    for (run, files) in &swept {
-        println!("removed {files} shared-memory and iceoryx2 file(s) of the dead run {run}");
     }
     Ok(removed > 0 || !swept.is_empty())
 }

@@ -326,9 +326,11 @@ const UNSEEN_RUN_AGE: std::time::Duration = std::time::Duration::from_secs(10);
 /// dead nodes first ([`cleanup_dead_nodes`]), then every file of theirs
 /// that iceoryx2 does not remove (segments of no node, half-created nodes,
 /// services whose nodes are gone). A run counts as dead when no node of it
-/// is alive or undetermined, none is half created in the last 10 s, and
-/// either dead nodes of it were found now or none of its files changed in
-/// the last 10 s. Returns each run swept with the files removed.
+/// is alive or undetermined, and either dead nodes of it were found now or
+/// none of its files changed in the last 10 s (a process of the run may be
+/// creating its node). Call it before any other clean-up of dead nodes,
+/// which would hide that the run's processes died. Returns each run swept
+/// with the files removed.
 pub fn remove_dead_run_files(mut select: impl FnMut(&RunId) -> bool) -> Result<Vec<(RunId, usize)>, CleanupError> {
     init_log_level();
     let any = IpcConfig::new(RunId::new("any").expect("a valid run id"));
@@ -350,8 +352,7 @@ pub fn remove_dead_run_files(mut select: impl FnMut(&RunId) -> bool) -> Result<V
         let report = cleanup_dead_nodes(&config)?;
         let mine: Vec<&std::path::PathBuf> = files.iter().filter(|f| f.exists() && owned_member(f, config.prefix())).collect();
         let young = |f: &std::path::Path| std::fs::symlink_metadata(f).ok().and_then(|m| m.modified().ok()?.elapsed().ok()).is_none_or(|age| age < UNSEEN_RUN_AGE);
-        let half_created_young = mine.iter().any(|f| f.ends_with(format!("{}node.details", config.prefix())) && young(f));
-        if report.alive > 0 || report.undetermined > 0 || half_created_young || (report.is_clean() && mine.iter().any(|f| young(f))) {
+        if report.alive > 0 || report.undetermined > 0 || (report.is_clean() && mine.iter().any(|f| young(f))) {
             continue;
         }
         let removed = mine.iter().filter(|f| remove_member(f, &nodes)).count();
