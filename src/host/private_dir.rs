@@ -119,6 +119,29 @@ pub fn resolve(preferred: &[PathBuf], parent: &Path, stem: &str) -> Result<Priva
     Ok(PrivateDir { path, passed_over })
 }
 
+/// [`resolve`], but `named` first, taken as it is when it is a private
+/// directory of this user (a directory a parent process resolved and named
+/// to its children), passed over otherwise.
+pub fn resolve_named(named: Option<PathBuf>, preferred: &[PathBuf], parent: &Path, stem: &str) -> Result<PrivateDir, PrivateDirError> {
+    let mut passed_over = Vec::new();
+    if let Some(dir) = named {
+        if is_private(&dir) {
+            return Ok(PrivateDir { path: dir, passed_over });
+        }
+        let m = std::fs::symlink_metadata(&dir).ok();
+        passed_over.push(Squatted {
+            uid: m.as_ref().map_or(uid(), MetadataExt::uid),
+            mode: m.as_ref().map_or(0, |m| m.mode() & 0o7777),
+            is_dir: m.is_some_and(|m| m.is_dir()),
+            path: dir,
+        });
+    }
+    let mut dir = resolve(preferred, parent, stem)?;
+    passed_over.append(&mut dir.passed_over);
+    dir.passed_over = passed_over;
+    Ok(dir)
+}
+
 /// The first private directory of this user named `<stem>-*` in `parent`.
 fn found_again(parent: &Path, stem: &str) -> Option<PathBuf> {
     let want = format!("{stem}-");
@@ -201,6 +224,23 @@ mod tests {
         std::fs::set_permissions(&first.path, std::fs::Permissions::from_mode(0o755)).unwrap();
         let third = resolve(std::slice::from_ref(&want), &base, "netfi-1").unwrap();
         assert_ne!(third.path, first.path);
+        std::fs::remove_dir_all(&base).unwrap();
+    }
+
+    /// The directory a parent named is taken as it is; one that is not a
+    /// private directory of this user is passed over, and said.
+    #[test]
+    fn a_named_directory_is_taken_only_when_private() {
+        let base = scratch("named");
+        let (named, usual) = (base.join("named"), base.join("netfi-1"));
+        std::fs::create_dir(&named).unwrap();
+        std::fs::set_permissions(&named, std::fs::Permissions::from_mode(0o700)).unwrap();
+        let got = resolve_named(Some(named.clone()), std::slice::from_ref(&usual), &base, "netfi-1").unwrap();
+        assert_eq!(got, PrivateDir { path: named.clone(), passed_over: vec![] });
+        std::fs::set_permissions(&named, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let got = resolve_named(Some(named.clone()), std::slice::from_ref(&usual), &base, "netfi-1").unwrap();
+        assert_eq!(got.path, usual);
+        assert_eq!(got.passed_over, vec![Squatted { path: named, uid: uid(), mode: 0o755, is_dir: true }]);
         std::fs::remove_dir_all(&base).unwrap();
     }
 

@@ -90,6 +90,9 @@ use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use std::path::{Path, PathBuf};
+
+use crate::host::private_dir::{self, PrivateDir, PrivateDirError};
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
 
@@ -173,8 +176,8 @@ const ROOT_MAX_LEN: usize = 96;
 /// This user's iceoryx2 root directory, with a trailing `/` (see
 /// [`user_root_dir_resolved`]); where none can be had, the usual name,
 /// which opening a node then reports.
-pub fn user_root_dir() -> std::path::PathBuf {
-    let dir = ensure_user_root_dir().unwrap_or_else(|_| usual_root_dirs(crate::host::private_dir::xdg_runtime_dir()).pop().unwrap_or_default());
+pub fn user_root_dir() -> PathBuf {
+    let dir = ensure_user_root_dir().unwrap_or_else(|_| usual_root_dirs().pop().unwrap_or_default());
     let mut text = dir.into_os_string();
     text.push("/");
     text.into()
@@ -191,45 +194,31 @@ pub fn user_root_dir() -> std::path::PathBuf {
 ///    others): the first `/tmp/netfi-iceoryx2-<uid>-XXXXXX` of this user,
 ///    made if none exists, with a warning naming the owner of the taken
 ///    one.
-pub fn user_root_dir_resolved() -> Result<crate::host::private_dir::PrivateDir, crate::host::private_dir::PrivateDirError> {
-    resolve_root(std::env::var_os(IPC_ROOT_ENV), usual_root_dirs(crate::host::private_dir::xdg_runtime_dir()), std::path::Path::new("/tmp"))
+pub fn user_root_dir_resolved() -> Result<PrivateDir, PrivateDirError> {
+    let named = std::env::var_os(IPC_ROOT_ENV).filter(|e| !e.is_empty()).map(PathBuf::from).filter(|p| usable_root(p));
+    private_dir::resolve_named(named, &usual_root_dirs(), Path::new("/tmp"), &format!("netfi-iceoryx2-{}", private_dir::uid()))
 }
 
-/// The usual places of the root, in order of preference.
-fn usual_root_dirs(xdg: Option<std::path::PathBuf>) -> Vec<std::path::PathBuf> {
-    let uid = crate::host::private_dir::uid();
-    let mut dirs: Vec<std::path::PathBuf> = xdg.map(|d| d.join("netfi-iceoryx2")).into_iter().collect();
-    dirs.push(std::path::PathBuf::from(format!("/tmp/netfi-iceoryx2-{uid}")));
-    dirs
+/// The usual places of the root that iceoryx2 can use, in order of
+/// preference.
+fn usual_root_dirs() -> Vec<PathBuf> {
+    let tmp = PathBuf::from(format!("/tmp/netfi-iceoryx2-{}", private_dir::uid()));
+    private_dir::xdg_runtime_dir().map(|d| d.join("netfi-iceoryx2")).into_iter().chain([tmp]).filter(|p| usable_root(p)).collect()
 }
 
-/// The root named by `env` when it is a private directory of this user,
-/// else the first of `preferred` that is, else a replacement in `tmp`.
-fn resolve_root(
-    env: Option<std::ffi::OsString>,
-    mut preferred: Vec<std::path::PathBuf>,
-    tmp: &std::path::Path,
-) -> Result<crate::host::private_dir::PrivateDir, crate::host::private_dir::PrivateDirError> {
-    use crate::host::private_dir::{is_private, resolve, uid, PrivateDir};
-    let usable = |p: &std::path::Path| p.is_absolute() && p.as_os_str().len() <= ROOT_MAX_LEN && iceoryx2::prelude::Path::new(p.as_os_str().as_encoded_bytes()).is_ok();
-    if let Some(dir) = env.filter(|e| !e.is_empty()).map(std::path::PathBuf::from) {
-        if usable(&dir) && is_private(&dir) {
-            return Ok(PrivateDir { path: dir, passed_over: Vec::new() });
-        }
-        eprintln!("WARNING: {IPC_ROOT_ENV}={} is not a private directory of uid {}: ignored", dir.display(), uid());
-    }
-    preferred.retain(|p| usable(p));
-    resolve(&preferred, tmp, &format!("netfi-iceoryx2-{}", uid()))
+/// Whether iceoryx2 can have its files under `dir`.
+fn usable_root(dir: &Path) -> bool {
+    dir.is_absolute() && dir.as_os_str().len() <= ROOT_MAX_LEN && iceoryx2::prelude::Path::new(dir.as_os_str().as_encoded_bytes()).is_ok()
 }
 
 /// The root this process resolved, while it stays private.
-static ROOT: std::sync::Mutex<Option<std::path::PathBuf>> = std::sync::Mutex::new(None);
+static ROOT: std::sync::Mutex<Option<PathBuf>> = std::sync::Mutex::new(None);
 
 /// This user's root directory, resolved once per process (again only if it
 /// was removed meanwhile); a taken usual name is warned of once.
-fn ensure_user_root_dir() -> Result<std::path::PathBuf, crate::host::private_dir::PrivateDirError> {
+fn ensure_user_root_dir() -> Result<PathBuf, PrivateDirError> {
     let mut root = ROOT.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(dir) = root.as_ref().filter(|d| crate::host::private_dir::is_private(d)) {
+    if let Some(dir) = root.as_ref().filter(|d| private_dir::is_private(d)) {
         return Ok(dir.clone());
     }
     let dir = user_root_dir_resolved()?;
@@ -613,7 +602,7 @@ mod tests {
         assert_eq!(config.prefix(), format!("netfi_u{uid}_r1_"));
         let root = user_root_dir();
         assert_eq!(config.iceoryx2().global.root_path().to_string(), root.to_string_lossy());
-        assert!(crate::host::private_dir::is_private(&root));
+        assert!(private_dir::is_private(&root));
         assert_eq!(config.service_name(Channel::Console), "netfi/r1/console");
         assert_eq!(config.node_name(Role::Simulator), "netfi/r1/simulator");
         assert_eq!(
@@ -628,35 +617,6 @@ mod tests {
             SUBSCRIBER_BUFFER_FRAMES
         );
         assert!(!iox.global.node.cleanup_dead_nodes_on_creation);
-    }
-
-    /// The root a parent names is taken as it is; one that is not a private
-    /// directory of this user is ignored; a taken usual name is passed over
-    /// for a replacement that is found again.
-    #[test]
-    fn the_root_is_the_parents_or_a_private_one() {
-        use std::os::unix::fs::PermissionsExt;
-        let base = std::env::temp_dir().join(format!("netfi-root-test-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&base);
-        std::fs::create_dir_all(&base).unwrap();
-        let uid = crate::host::private_dir::uid();
-        let usual = base.join(format!("netfi-iceoryx2-{uid}"));
-        let resolve = |env: Option<std::path::PathBuf>| resolve_root(env.map(Into::into), vec![usual.clone()], &base).unwrap();
-        let plain = resolve(None);
-        assert_eq!(plain.path, usual);
-        assert!(plain.passed_over.is_empty());
-        let named = base.join("named");
-        std::fs::create_dir(&named).unwrap();
-        std::fs::set_permissions(&named, std::fs::Permissions::from_mode(0o700)).unwrap();
-        assert_eq!(resolve(Some(named.clone())).path, named);
-        std::fs::set_permissions(&named, std::fs::Permissions::from_mode(0o755)).unwrap();
-        assert_eq!(resolve(Some(named)).path, usual);
-        std::fs::set_permissions(&usual, std::fs::Permissions::from_mode(0o777)).unwrap();
-        let replaced = resolve(None);
-        assert_ne!(replaced.path, usual);
-        assert!(replaced.warning().unwrap().contains(&usual.display().to_string()));
-        assert_eq!(resolve(None).path, replaced.path);
-        std::fs::remove_dir_all(&base).unwrap();
     }
 
     #[test]
