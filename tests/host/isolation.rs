@@ -94,41 +94,108 @@ enum Kill {
     All,
 }
 
+/// A run whose emulator cleared its core, as the kill matrix finds it
+/// once everything is up.
+struct ClearedRun {
+    runner: Reaped,
+    out: PathBuf,
+    run_id: String,
+    emulator: i32,
+    /// The console and the simulator.
+    others: Vec<i32>,
+    record: PathBuf,
+    guardian: i32,
+}
+
+impl ClearedRun {
+    fn start(kill: Kill, core: usize) -> ClearedRun {
+        let out = out_dir(&format!("kill-{kill:?}"));
+        let run_id = format!("kill{kill:?}{}", std::process::id());
+        std::fs::create_dir_all(&out).unwrap();
+        let runner = Reaped(
+            netfi()
+                .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
+                .arg(&out)
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
+                .spawn()
+                .unwrap(),
+        );
+        let mut found = None;
+        wait_for("the emulator's pid", Duration::from_secs(60), || {
+            found = read_pid(&out, "emulator");
+            found.is_some()
+        });
+        let emulator = found.unwrap();
+        let mut record = None;
+        wait_for("the record of the cleared core", Duration::from_secs(60), || {
+            record = record_of(emulator);
+            record.is_some()
+        });
+        let record = record.unwrap();
+        let mut guardian = None;
+        wait_for("the guardian", Duration::from_secs(10), || {
+            guardian = guardian_of(&record);
+            guardian.is_some()
+        });
+        let mut others = Vec::new();
+        wait_for("the console's and the simulator's pids", Duration::from_secs(60), || {
+            others = ["console", "simulator"].iter().filter_map(|r| read_pid(&out, r)).collect();
+            others.len() == 2
+        });
+        ClearedRun { runner, out, run_id, emulator, others, record, guardian: guardian.unwrap() }
+    }
+
+    fn kill(&self, kill: Kill) {
+        let runner = self.runner.0.id() as i32;
+        match kill {
+            Kill::Emulator => sigkill(self.emulator),
+            Kill::Runner => sigkill(runner),
+            Kill::RunnerAndEmulator => {
+                sigkill(runner);
+                sigkill(self.emulator);
+            }
+            Kill::Guardian => sigkill(self.guardian),
+            Kill::All => {
+                // The run's own guardian too, else it would end the run and
+                // restore; the emulator before the runner, else the runner's
+                // death could let it restore itself first.
+                super::orphans::guardians_of_run(runner).into_iter().for_each(sigkill);
+                sigkill(self.guardian);
+                sigkill(self.emulator);
+                sigkill(runner);
+            }
+        }
+    }
+
+    /// With the runner killed: no process of the run is left after about
+    /// 2 s; with the emulator killed too, the guardian that ended the run
+    /// removed its shared memory.
+    fn check_nothing_outlives_the_runner(&self, kill: Kill) {
+        if let Kill::Runner | Kill::RunnerAndEmulator | Kill::All = kill {
+            let run: Vec<i32> = self.others.iter().copied().chain([self.emulator]).collect();
+            wait_for(&format!("{kill:?}: no process of the run left (console, simulator, emulator: {run:?})"), Duration::from_millis(2500), || {
+                run.iter().all(|&p| !alive(p))
+            });
+        }
+        if let Kill::RunnerAndEmulator = kill {
+            let mut left = ipc_files_of(&self.run_id);
+            let t0 = Instant::now();
+            while !left.is_empty() && t0.elapsed() < Duration::from_secs(10) {
+                std::thread::sleep(Duration::from_millis(100));
+                left = ipc_files_of(&self.run_id);
+            }
+            assert!(left.is_empty(), "{kill:?}: the run's shared memory is left after its processes ended: {left:?}");
+        }
+    }
+}
+
 fn kill_matrix_case(kill: Kill) {
     let _guard = lock();
     let core = last_core();
     let before = snapshot();
     let own_mask = allowed("/proc/self/status").unwrap();
-    let out = out_dir(&format!("kill-{kill:?}"));
-    let run_id = format!("kill{kill:?}{}", std::process::id());
-    std::fs::create_dir_all(&out).unwrap();
-    let runner = Reaped(
-        netfi()
-            .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
-            .arg(&out)
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
-            .spawn()
-            .unwrap(),
-    );
-    let mut emulator = None;
-    wait_for("the emulator's pid", Duration::from_secs(60), || {
-        emulator = read_pid(&out, "emulator");
-        emulator.is_some()
-    });
-    let emulator = emulator.unwrap();
-    let mut record = None;
-    wait_for("the record of the cleared core", Duration::from_secs(60), || {
-        record = record_of(emulator);
-        record.is_some()
-    });
-    let record = record.unwrap();
-    let mut guardian = None;
-    wait_for("the guardian", Duration::from_secs(10), || {
-        guardian = guardian_of(&record);
-        guardian.is_some()
-    });
-    let guardian = guardian.unwrap();
+    let run = ClearedRun::start(kill, core);
     std::thread::sleep(Duration::from_millis(500));
     // The run did change the host (else the comparison below proves nothing).
     let during = snapshot();
@@ -140,53 +207,11 @@ fn kill_matrix_case(kill: Kill) {
     let narrowed = allowed(&format!("/proc/{mid_pid}/status")).unwrap();
     assert!(!netfi::host::affinity::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
 
-    let runner_pid = runner.0.id() as i32;
-    let mut others = Vec::new();
-    wait_for("the console's and the simulator's pids", Duration::from_secs(60), || {
-        others = ["console", "simulator"].iter().filter_map(|r| read_pid(&out, r)).collect();
-        others.len() == 2
-    });
-    match kill {
-        Kill::Emulator => sigkill(emulator),
-        Kill::Runner => sigkill(runner_pid),
-        Kill::RunnerAndEmulator => {
-            sigkill(runner_pid);
-            sigkill(emulator);
-        }
-        Kill::Guardian => sigkill(guardian),
-        Kill::All => {
-            // The run's own guardian too, else it would end the run and
-            // restore; the emulator before the runner, else the runner's
-            // death could let it restore itself first.
-            super::orphans::guardians_of_run(runner_pid).into_iter().for_each(sigkill);
-            sigkill(guardian);
-            sigkill(emulator);
-            sigkill(runner_pid);
-        }
-    }
-    if let Kill::Runner | Kill::RunnerAndEmulator | Kill::All = kill {
-        // No process of the run outlives its runner.
-        let run: Vec<i32> = others.iter().copied().chain([emulator]).collect();
-        wait_for(&format!("{kill:?}: no process of the run left (console, simulator, emulator: {run:?})"), Duration::from_millis(2500), || {
-            run.iter().all(|&p| !alive(p))
-        });
-    }
-    if let Kill::RunnerAndEmulator = kill {
-        // The guardian that ended the run removed its shared memory.
-        let mut left = Vec::new();
-        let deadline = Duration::from_secs(10);
-        let t0 = Instant::now();
-        while t0.elapsed() < deadline {
-            left = ipc_files_of(&run_id);
-            if left.is_empty() {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        assert!(left.is_empty(), "{kill:?}: the run's shared memory is left after its processes ended: {left:?}");
-    }
+    run.kill(kill);
+    run.check_nothing_outlives_the_runner(kill);
+    let (record, guardian) = (&run.record, run.guardian);
     if let Kill::All = kill {
-        wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(emulator));
+        wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(run.emulator));
         std::thread::sleep(Duration::from_millis(500));
         assert!(record.exists(), "with every owner and the guardian killed, nothing should have restored yet");
         let said = restore();
@@ -200,11 +225,12 @@ fn kill_matrix_case(kill: Kill) {
     // Whatever of the run is left is stopped; `netfi restore` removes the
     // iceoryx2 resources of the killed processes.
     for role in ["console", "emulator", "simulator"] {
-        if let Some(pid) = read_pid(&out, role).filter(|p| alive(*p)) {
+        if let Some(pid) = read_pid(&run.out, role).filter(|p| alive(*p)) {
             sigkill(pid);
         }
     }
-    drop(runner);
+    let (out, run_id) = (run.out.clone(), run.run_id.clone());
+    drop(run);
     std::thread::sleep(Duration::from_millis(200));
     restore();
 
