@@ -15,7 +15,7 @@
 //! something else changed it meanwhile. Threads bound to that core alone
 //! (per-CPU kernel threads, the timer interrupt) stay: nothing can move
 //! them. Threads created while isolated inherit their parent's narrowed
-//! mask; restoring widens them again (see [`super::record`]). This is what
+//! mask; restoring widens them again (see [`super::changes`]). This is what
 //! `tuna --isolate` or a `cpuset` partition does, for one run, without a
 //! reboot (`isolcpus=` and `nohz_full=` do it for good, and better).
 //!

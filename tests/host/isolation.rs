@@ -190,6 +190,19 @@ impl ClearedRun {
     }
 }
 
+impl Drop for ClearedRun {
+    /// A failed check must not leave the run going, or the host changed,
+    /// for the cases after it.
+    fn drop(&mut self) {
+        self.others.iter().chain([&self.emulator]).filter(|&&p| alive(p)).for_each(|&p| sigkill(p));
+        if std::thread::panicking() {
+            let _ = self.runner.0.kill();
+            let _ = self.runner.0.wait();
+            let _ = netfi().arg("restore").output();
+        }
+    }
+}
+
 fn kill_matrix_case(kill: Kill) {
     let _guard = lock();
     let core = last_core();

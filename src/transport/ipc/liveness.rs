@@ -338,7 +338,7 @@ pub fn remove_dead_run_files(mut select: impl FnMut(&RunId) -> bool) -> Result<V
     let files: Vec<std::path::PathBuf> = [std::path::Path::new(SHM_DIR), &services, &nodes]
         .iter()
         .flat_map(|d| std::fs::read_dir(d).into_iter().flatten().filter_map(|e| e.ok().map(|e| e.path())))
-        .chain(node_details(&nodes))
+        .chain(node_files(&nodes))
         .collect();
     let mut runs = std::collections::BTreeMap::new();
     for f in &files {
@@ -363,13 +363,12 @@ pub fn remove_dead_run_files(mut select: impl FnMut(&RunId) -> bool) -> Result<V
     Ok(swept)
 }
 
-/// The details file of each node directory under `nodes`.
-fn node_details(nodes: &std::path::Path) -> Vec<std::path::PathBuf> {
+/// The files in each node directory under `nodes`.
+fn node_files(nodes: &std::path::Path) -> Vec<std::path::PathBuf> {
     let Ok(rd) = std::fs::read_dir(nodes) else { return Vec::new() };
     rd.filter_map(|e| e.ok())
         .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
         .flat_map(|e| std::fs::read_dir(e.path()).into_iter().flatten().filter_map(|f| f.ok().map(|f| f.path())))
-        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with("node.details")))
         .collect()
 }
 
@@ -400,14 +399,18 @@ fn owned_member(path: &std::path::Path, prefix: &str) -> bool {
     name.strip_prefix(prefix).is_some_and(member_rest) && std::fs::symlink_metadata(path).is_ok_and(|m| m.uid() == uid)
 }
 
-/// Removes one file of a dead run; a node's details go with the node's
-/// whole directory. Whether it went.
+/// Removes one file of a dead run, and the node directory it leaves
+/// empty; a node's details go with the node's whole directory (one node's,
+/// so one run's). Whether it went.
 fn remove_member(path: &std::path::Path, nodes: &std::path::Path) -> bool {
-    let node_dir = path.parent().filter(|d| d.parent() == Some(nodes));
-    match node_dir {
-        Some(dir) if path.to_str().is_some_and(|p| p.ends_with("node.details")) => std::fs::remove_dir_all(dir).is_ok(),
-        _ => std::fs::remove_file(path).is_ok(),
+    let Some(dir) = path.parent().filter(|d| d.parent() == Some(nodes)) else { return std::fs::remove_file(path).is_ok() };
+    if path.to_str().is_some_and(|p| p.ends_with("node.details")) {
+        return std::fs::remove_dir_all(dir).is_ok();
     }
+    let removed = std::fs::remove_file(path).is_ok();
+    // Fails, as it should, while anything is left in it.
+    let _ = std::fs::remove_dir(dir);
+    removed
 }
 
 fn list_error(run: &str, e: &std::io::Error) -> CleanupError {
