@@ -41,7 +41,6 @@ pub fn guardian_program() -> Option<PathBuf> {
 /// Starts the guardian of the record at `path` in a session of its own.
 pub fn spawn(path: &Path) -> std::io::Result<Child> {
     let program = guardian_program().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "no `netfi` executable found to guard the record"))?;
-    use std::os::unix::process::CommandExt;
     let mut cmd = Command::new(program);
     cmd.arg("restore")
         .arg("--guard")
@@ -52,14 +51,11 @@ pub fn spawn(path: &Path) -> std::io::Result<Child> {
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::null());
-    // SAFETY: setsid is async-signal-safe; it only detaches the child from
-    // the run's session and process group.
-    unsafe {
-        cmd.pre_exec(|| {
-            libc::setsid();
-            Ok(())
-        });
-    }
+    // No `pre_exec`: with one the standard library must fork, and the fork
+    // makes every private page of its starter (the emulator's trace rings
+    // and queue, already written) copy-on-write, so the loop then takes a
+    // page fault at the first write to each; without one it spawns by
+    // vfork. The guardian leaves the run's session itself ([`guard`]).
     cmd.spawn()
 }
 
@@ -113,6 +109,10 @@ fn read<R: for<'de> serde::Deserialize<'de>>(path: &Path) -> Result<Option<R>, G
 /// The guardian's loop (`netfi restore --guard RECORD`): waits until the
 /// record is gone or its owners have ended, then acts on it.
 pub fn guard(path: &Path) -> Result<Guarded, GuardError> {
+    // A session of its own: the run's Ctrl-C (sent to its process group)
+    // and the end of its session do not reach the guardian.
+    // SAFETY: setsid takes no arguments and touches no memory.
+    unsafe { libc::setsid() };
     if record::is_run_record(path) {
         return guard_run(path);
     }

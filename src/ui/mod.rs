@@ -124,5 +124,5 @@ fn keep_off_core(emulator_core: usize) -> anyhow::Result<()> {
         eprintln!("WARNING: netfi ui shares core {emulator_core} with the runs' emulators: there is no other core");
         return Ok(());
     }
-    crate::service::place("ui", None, Some(emulator_core))
+    Ok(crate::host::placement::place("ui", None, Some(emulator_core))?)
 }

@@ -20,7 +20,10 @@ fn main() -> std::process::ExitCode {
     }
     let args = cli::Cli::parse();
     if matches!(args.command, cli::Command::Console(_) | cli::Command::Emulator(_) | cli::Command::Simulator(_)) {
-        netfi::service::signals::die_with_runner();
+        if let Err(e) = netfi::host::process::die_with_runner() {
+            eprintln!("netfi: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
     }
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
