@@ -14,6 +14,8 @@
 //! - [`trials`] runs a trial: a `netfi run` child process in
 //!   `DATA/P/trial-NN-CONDITION/`; its figures ([`metrics`], pure) come
 //!   from the run's report and trace.
+//! - [`view`]: a participant's progress, for `netfi study status` and the
+//!   experimenter's page.
 //! - [`questionnaire`] scores and stores the SUS and NASA-TLX answers.
 //! - [`report`] writes the study's table (CSV), the comparison
 //!   ([`summary`], [`stats`]: pure) as JSON and a self-contained HTML page.
@@ -28,6 +30,7 @@ pub mod stats;
 pub mod store;
 pub mod summary;
 pub mod trials;
+pub mod view;
 
 pub use file::{parse_study, Study, StudyFileError};
 pub use schedule::{schedule, Schedule};

@@ -14,7 +14,7 @@
 use super::schedule::Due;
 use super::store::{now_utc, read_json, write_json, OpenStudy, StudyError};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The TLX's scales, in the order they are given.
 pub const TLX_SCALES: [&str; 6] = ["mental_demand", "physical_demand", "temporal_demand", "performance", "effort", "frustration"];
@@ -146,9 +146,4 @@ pub fn record(s: &OpenStudy, p: usize, due: &Due, values: &[u32], missing: Optio
     let path = dir.join(format!("{}.json", due.key()));
     write_json(&path, &answer)?;
     Ok(path)
-}
-
-/// The answers' file of `key` for participant folder `dir`.
-pub fn path_of(dir: &Path, key: &str) -> PathBuf {
-    dir.join("questionnaires").join(format!("{key}.json"))
 }
