@@ -336,6 +336,10 @@ impl Ctx<'_> {
     fn toml_error(&self, e: &toml::de::Error) -> StudyFileError {
         let line = e.span().map(|s| self.line_of(s.start));
         let mut message = e.message().trim().to_string();
+        // serde names Rust's types; a person wrote a number or text.
+        for (rust, words) in [("expected i64", "expected an integer"), ("expected f64", "expected a number"), ("expected a string", "expected text in quotes")] {
+            message = message.replace(rust, words);
+        }
         let mut field = line.and_then(|l| self.key_on_line(l));
         for prefix in ["unknown field `", "missing field `"] {
             if let Some(rest) = message.strip_prefix(prefix) {

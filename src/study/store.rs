@@ -180,6 +180,9 @@ impl OpenStudy {
         std::fs::create_dir_all(&self.data).map_err(io(&self.data))?;
         let path = self.data.join("schedule.json");
         let copy = self.data.join("study.toml");
+        // Two participants' trials may start at once: one writer at a time
+        // (waiting, as this is short), and nothing written when nothing changed.
+        let _guard = StudyLock::take(&self.data.join("schedule.lock"))?;
         if path.exists() {
             let old: Vec<ScheduleRecord> = read_json(&path)?;
             for (p, part) in self.study.participants.iter().enumerate() {
@@ -195,8 +198,13 @@ impl OpenStudy {
             }
         }
         let records: Vec<ScheduleRecord> = (0..self.study.participants.len()).map(|p| ScheduleRecord::of(self, p)).collect();
-        write_json(&path, &records)?;
-        write_whole(&copy, self.text.as_bytes())?;
+        let unchanged = path.exists() && read_json::<Vec<ScheduleRecord>>(&path).is_ok_and(|old| old == records);
+        if !unchanged {
+            write_json(&path, &records)?;
+        }
+        if std::fs::read_to_string(&copy).ok().as_deref() != Some(self.text.as_str()) {
+            write_whole(&copy, self.text.as_bytes())?;
+        }
         Ok(path)
     }
 }
@@ -458,6 +466,23 @@ impl ParticipantLock {
     /// Lets the lock go and empties its file.
     pub fn release(self) {
         let _ = self.file.set_len(0);
+    }
+}
+
+/// A short exclusive claim on a whole study's shared files, waited for.
+struct StudyLock {
+    _file: std::fs::File,
+}
+
+impl StudyLock {
+    fn take(path: &Path) -> Result<StudyLock, StudyError> {
+        use std::os::fd::AsRawFd;
+        let file = std::fs::OpenOptions::new().write(true).create(true).truncate(false).open(path).map_err(io(path))?;
+        // SAFETY: flock on a descriptor this function owns.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) } != 0 {
+            return Err(io(path)(std::io::Error::last_os_error()));
+        }
+        Ok(StudyLock { _file: file })
     }
 }
 

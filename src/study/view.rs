@@ -3,7 +3,7 @@
 
 use super::questionnaire;
 use super::schedule::Due;
-use super::store::{claim, load_state, Next, OpenStudy, ParticipantState, StudyError};
+use super::store::{claim, load_state, AttemptState, Next, OpenStudy, ParticipantState, StudyError};
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -61,17 +61,20 @@ pub struct ParticipantView {
 /// `interrupted` on the way, when nobody holds the participant.
 pub fn participant(s: &OpenStudy, p: usize) -> Result<ParticipantView, StudyError> {
     let dir = s.participant_dir(p);
-    let (state, busy) = if dir.exists() {
+    let stored = load_state(&dir)?.unwrap_or_default();
+    // Only a trial left `running` needs the lock (to be found interrupted);
+    // otherwise reading is enough, and takes nobody's lock from under them.
+    let (state, busy) = if stored.attempts.iter().any(|a| a.state == AttemptState::Running) {
         match claim(s, p, "netfi study status") {
             Ok((lock, state)) => {
                 lock.release();
                 (state, None)
             }
-            Err(StudyError::Busy { holder, .. }) => (load_state(&dir)?.unwrap_or_default(), Some(holder)),
+            Err(StudyError::Busy { holder, .. }) => (stored, Some(holder)),
             Err(e) => return Err(e),
         }
     } else {
-        (ParticipantState::default(), None)
+        (stored, None)
     };
     let answered = questionnaire::answered(s, p);
     let next = super::store::next_step(s, p, &state, &answered);

@@ -241,39 +241,39 @@ pub struct Action {
 /// `POST /api/study/start`: starts the participant's next trial (a
 /// `netfi study next` child).
 pub async fn start(State(ui): State<Arc<super::Ui>>, Json(a): Json<Action>) -> Response {
-    let s = match open(Some(&a.file)) {
-        Ok(s) => s,
-        Err(e) => return unprocessable(e),
-    };
-    let p = match s.participant(&a.participant) {
-        Ok(p) => p,
-        Err(e) => return unprocessable(e),
-    };
+    let (file, who) = (a.file.clone(), a.participant.clone());
     // Refused here with the command line's own words (a questionnaire due,
     // a trial unmarked, someone else on it) rather than in a child's log.
-    match trials::peek(&s, p) {
-        Ok(crate::study::store::Next::Trial { .. }) => {}
-        Ok(_) | Err(_) => {
-            let v = view::participant(&s, p);
-            let why = match v {
-                Ok(v) if v.busy.is_some() => format!("`{}` is busy: {}", a.participant, v.busy.unwrap_or_default()),
-                Ok(v) => format!("no trial to start: {}", v.next.kind),
-                Err(e) => e.to_string(),
-            };
-            return (StatusCode::CONFLICT, why).into_response();
+    let checked = tokio::task::spawn_blocking(move || -> Result<(OpenStudy, PathBuf), (StatusCode, String)> {
+        let bad = |e: String| (StatusCode::UNPROCESSABLE_ENTITY, e);
+        let s = open(Some(&file)).map_err(bad)?;
+        let p = s.participant(&who).map_err(|e| bad(e.to_string()))?;
+        let v = view::participant(&s, p).map_err(|e| bad(e.to_string()))?;
+        if let Some(holder) = v.busy {
+            return Err((StatusCode::CONFLICT, format!("`{who}` is busy: {holder}")));
         }
-    }
+        if v.next.kind != "trial" {
+            return Err((StatusCode::CONFLICT, format!("no trial of `{who}` to start: {}", v.next.kind)));
+        }
+        let dir = s.participant_dir(p);
+        std::fs::create_dir_all(&dir).map_err(|e| bad(format!("{}: {e}", dir.display())))?;
+        Ok((s, dir))
+    })
+    .await;
+    let (s, dir) = match checked {
+        Ok(Ok(x)) => x,
+        Ok(Err((code, why))) => return (code, why).into_response(),
+        Err(e) => return (StatusCode::INTERNAL_SERVER_ERROR, e.to_string()).into_response(),
+    };
     if reap(&s.data, &a.participant) {
         return (StatusCode::CONFLICT, "this page is already running a trial of this participant").into_response();
-    }
-    let dir = s.participant_dir(p);
-    if let Err(e) = std::fs::create_dir_all(&dir) {
-        return unprocessable(format!("{}: {e}", dir.display()));
     }
     let log = match std::fs::File::create(dir.join("ui-next.log")) {
         Ok(f) => f,
         Err(e) => return unprocessable(format!("{}: {e}", dir.join("ui-next.log").display())),
     };
+    // Spawned on the server's own thread, not the blocking pool's: the
+    // child's parent-death signal follows the thread that forked it.
     let mut cmd = Command::new(&ui.opts.netfi);
     cmd.args(["study", "next"]).arg(&s.file).args(["--participant", &a.participant]);
     cmd.stdin(Stdio::null()).stdout(log.try_clone().map(Stdio::from).unwrap_or(Stdio::null())).stderr(log);
