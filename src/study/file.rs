@@ -316,13 +316,16 @@ impl Ctx<'_> {
     }
 
     /// The byte span of `key = …` inside the table written at `table`, if
-    /// the key is written there.
+    /// the key is written there. A table's span may be its header alone:
+    /// its keys are the lines after it, up to the next header.
     fn key_span(&self, table: &Range<usize>, key: &str) -> Option<Range<usize>> {
         let start = table.start.min(self.text.len());
-        let end = table.end.min(self.text.len());
         let mut offset = start;
-        for line in self.text[start..end].split_inclusive('\n') {
+        for (k, line) in self.text[start..].split_inclusive('\n').enumerate() {
             let t = line.trim_start();
+            if k > 0 && t.starts_with('[') && offset >= table.end {
+                return None;
+            }
             let rest = t.strip_prefix(key).or_else(|| t.strip_prefix(&format!("\"{key}\"")));
             if rest.is_some_and(|r| r.trim_start().starts_with('=')) {
                 return Some(offset..offset + line.len());
@@ -471,7 +474,7 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
                 "--duration-s" | "--duration" => "write it as `trial.duration_s`",
                 _ => "the study sets it for each trial",
             };
-            return Err(ctx.err(Some(a.span()), format!("trial.run_args[{i}]"), format!("`{flag}`: {own} (the study decides {})", RESERVED_RUN_ARGS.join(", "))));
+            return Err(ctx.err(Some(a.span()), format!("trial.run_args[{}]", i + 1), format!("`{flag}`: {own} (the study decides {})", RESERVED_RUN_ARGS.join(", "))));
         }
     }
     if let Some(c) = &raw.capture {

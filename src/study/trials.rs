@@ -82,15 +82,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
     let name = s.trial_dir_name(&trial, attempt);
     let out = dir.join(&name);
     std::fs::create_dir_all(&out).map_err(|source| StudyError::Io { path: out.clone(), source })?;
-    let scenario = match &condition.source {
-        ConditionSource::Preset(p) => p.to_string(),
-        ConditionSource::File(f) => absolute(&s.file.parent().unwrap_or(Path::new(".")).join(f)).display().to_string(),
-        ConditionSource::Inline(text) => {
-            let path = out.join("condition.toml");
-            crate::durable::write_whole(&path, text.as_bytes())?;
-            absolute(&path).display().to_string()
-        }
-    };
+    let scenario = scenario_arg(s, &condition.source, &out)?;
     let mut a = Attempt {
         trial: trial.number,
         attempt,
@@ -110,9 +102,51 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
     };
     state.attempts.push(a.clone());
     save_state(&dir, &state)?;
+    let mut cmd = run_command(s, netfi, &scenario, &out, trial.seed, &run_id(s, p, trial.number, attempt))?;
+    let mut child = match cmd.spawn() {
+        Ok(c) => c,
+        Err(e) => {
+            let last = state.attempts.last_mut().expect("pushed above");
+            last.state = AttemptState::Ran;
+            last.faults = vec![format!("starting {}: {e}", netfi.display())];
+            last.ended_utc = Some(now_utc());
+            last.runner_pid = None;
+            save_state(&dir, &state)?;
+            return Err(StudyError::State(format!("starting {}: {e}", netfi.display())));
+        }
+    };
+    a.run_pid = Some(child.id());
+    *state.attempts.last_mut().expect("pushed above") = a.clone();
+    save_state(&dir, &state)?;
+    started(&a);
+    let (status, asked) = wait(&mut child, &out, stop)?;
+    finish(&mut a, &out, status, asked);
+    *state.attempts.last_mut().expect("pushed above") = a.clone();
+    save_state(&dir, &state)?;
+    lock.release();
+    Ok(a)
+}
+
+/// What `netfi run` is given as the condition's scenario: a preset's name,
+/// a file's absolute path, or inline stages written into the trial's folder.
+fn scenario_arg(s: &OpenStudy, source: &ConditionSource, out: &Path) -> Result<String, StudyError> {
+    Ok(match source {
+        ConditionSource::Preset(p) => p.to_string(),
+        ConditionSource::File(f) => absolute(&s.file.parent().unwrap_or(Path::new(".")).join(f)).display().to_string(),
+        ConditionSource::Inline(text) => {
+            let path = out.join("condition.toml");
+            crate::durable::write_whole(&path, text.as_bytes())?;
+            absolute(&path).display().to_string()
+        }
+    })
+}
+
+/// The trial's `netfi run`: its own process group, its output in `out`,
+/// stopped (SIGTERM) if its runner dies.
+fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u64, run_id: &str) -> Result<Command, StudyError> {
     let mut cmd = Command::new(netfi);
-    cmd.arg("run").arg(&scenario).arg("--out").arg(absolute(&out)).arg("--seed").arg(trial.seed.to_string());
-    cmd.args(["--run-id", &run_id(s, p, trial.number, attempt), "--json"]);
+    cmd.arg("run").arg(scenario).arg("--out").arg(absolute(out)).arg("--seed").arg(seed.to_string());
+    cmd.args(["--run-id", run_id, "--json"]);
     if let Some(d) = s.study.trial.duration_s {
         cmd.arg("--duration-s").arg(d.to_string());
     }
@@ -134,28 +168,18 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
             Ok(())
         });
     }
-    let mut child = match cmd.spawn() {
-        Ok(c) => c,
-        Err(e) => {
-            let last = state.attempts.last_mut().expect("pushed above");
-            last.state = AttemptState::Ran;
-            last.faults = vec![format!("starting {}: {e}", netfi.display())];
-            last.ended_utc = Some(now_utc());
-            last.runner_pid = None;
-            save_state(&dir, &state)?;
-            return Err(StudyError::State(format!("starting {}: {e}", netfi.display())));
-        }
-    };
-    a.run_pid = Some(child.id());
-    *state.attempts.last_mut().expect("pushed above") = a.clone();
-    save_state(&dir, &state)?;
-    started(&a);
+    Ok(cmd)
+}
+
+/// Waits for the run to end, passing one SIGINT on once `stop()` turns
+/// true; how it ended, and whether it was asked to stop.
+fn wait(child: &mut std::process::Child, out: &Path, stop: impl Fn() -> bool) -> Result<(std::process::ExitStatus, bool), StudyError> {
     let mut asked = false;
-    let status = loop {
+    loop {
         match child.try_wait() {
-            Ok(Some(st)) => break st,
+            Ok(Some(status)) => return Ok((status, asked)),
             Ok(None) => {}
-            Err(e) => return Err(StudyError::Io { path: out.clone(), source: e }),
+            Err(e) => return Err(StudyError::Io { path: out.to_path_buf(), source: e }),
         }
         if stop() && !asked {
             asked = true;
@@ -163,12 +187,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
             unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
         }
         std::thread::sleep(Duration::from_millis(20));
-    };
-    finish(&mut a, &out, status, asked);
-    *state.attempts.last_mut().expect("pushed above") = a.clone();
-    save_state(&dir, &state)?;
-    lock.release();
-    Ok(a)
+    }
 }
 
 /// Records how the run ended: its report and figures if it left one;

@@ -132,29 +132,32 @@ fn an_explicit_table_gives_each_participant_their_line() {
 /// A bad study file is refused with its file, line and field.
 #[test]
 fn bad_study_files_are_refused_naming_the_line_and_field() {
-    let base = "seed = 1\n[[block]]\nname = \"a\"\nconditions = [\"Normal\", \"PLM-2\"]\n[[participant]]\nid = \"P1\"\n";
+    let tables = "[[block]]\nname = \"a\"\nconditions = [\"Normal\", \"PLM-2\"]\n[[participant]]\nid = \"P1\"\n";
+    let base = format!("seed = 1\n{tables}");
     let cases: &[(&str, &str, &str)] = &[
-        // (file, expected "file:line:", expected words)
-        ("seed = 1\n[[block]]\nname = \"a\"\nconditions = [\"Normal\", \"PLM-9\"]\n[[participant]]\nid = \"P1\"\n", "s.toml:4: `block[1].conditions[2]`", "neither a `[[condition]]`"),
-        ("seed = \"x\"\n", "s.toml:1: `seed`", "integer"),
-        ("name = \"n\"\n[[block]]\nname = \"a\"\nconditions = [\"Normal\"]\n[[participant]]\nid = \"P1\"\n", "s.toml: `seed`", "missing"),
-        (&format!("{base}colour = 3\n"), "s.toml:7: `colour`", ""),
+        // (file, expected "file:line: `field`", expected words)
+        (&base.replace("\"PLM-2\"]", "\"PLM-9\"]"), "s.toml:4: `block[1].conditions[2]`", "neither a `[[condition]]`"),
+        ("seed = \"x\"\n", "s.toml:1: `seed`", "expected an integer"),
+        (&format!("name = \"n\"\n{tables}"), "s.toml: `seed`", "missing"),
+        (&format!("colour = 3\n{base}"), "s.toml:1: `colour`", "unknown field"),
+        (&format!("{base}colour = [3]\n"), "s.toml:7: `participant[1].colour`", "a string, a number or a boolean"),
         (&format!("{base}[[participant]]\nid = \"P1\"\n"), "s.toml:8: `participant[2].id`", "two participants"),
-        (&format!("{base}[trial]\nrun_args = [\"--no-isolate\", \"--seed\", \"3\"]\n"), "s.toml:8: `trial.run_args[1]`", "--seed"),
+        (&format!("{base}[trial]\nrun_args = [\"--no-isolate\", \"--seed\", \"3\"]\n"), "s.toml:8: `trial.run_args[2]`", "--seed"),
         (&format!("{base}[trial]\nduration_s = -1\n"), "s.toml:8: `trial.duration_s`", "more than 0"),
-        (&format!("[[condition]]\nname = \"x\"\nstage = [{{ model = \"bernoulli\", p = 2 }}]\n{base}"), "s.toml:3: `condition[1].stage`", "`p`"),
-        (&format!("[order]\nblocks = \"table\"\n{base}"), "s.toml:7: `participant[1].blocks`", "missing"),
-        (&format!("[order]\nblocks = \"zigzag\"\n{base}"), "s.toml:2: `order.blocks`", "latin"),
-        (&format!("{base}[[block]]\nname = \"a\"\nconditions = [\"DLM-1\"]\n"), "s.toml:9: `block[2].name`", "two blocks"),
-        ("seed = 1\n[[block]]\nname = \"a/b\"\nconditions = [\"Normal\"]\n[[participant]]\nid = \"P1\"\n", "s.toml:3: `block[1].name`", "folder"),
-        (&format!("{base}baseline = \"DLM-3\"\n"), "s.toml:", "not a condition"),
+        (&format!("{base}[[condition]]\nname = \"x\"\nstage = [{{ model = \"bernoulli\", p = 2 }}]\n"), "s.toml:9: `condition[1].stage`", "`p`"),
+        (&format!("seed = 1\n[order]\nblocks = \"table\"\n{tables}"), "s.toml:7: `participant[1].blocks`", "missing"),
+        (&format!("seed = 1\n[order]\nblocks = \"zigzag\"\n{tables}"), "s.toml:3: `order.blocks`", "latin"),
+        (&format!("{base}[[block]]\nname = \"a\"\nconditions = [\"DLM-1\"]\n"), "s.toml:8: `block[2].name`", "two blocks"),
+        (&base.replace("name = \"a\"", "name = \"a/b\""), "s.toml:3: `block[1].name`", "folder"),
+        (&format!("seed = 1\nbaseline = \"DLM-3\"\n{tables}"), "s.toml:2: `baseline`", "not a condition"),
+        (&format!("seed = 1\ntrials = 0\n{tables}"), "s.toml:2: `trials`", "1 to 100"),
     ];
     for (text, at, words) in cases {
         let e = parse_study(text, "s.toml", "s").expect_err(text).to_string();
         assert!(e.starts_with(at), "expected `{at}…`, got: {e}\n--- file:\n{text}");
         assert!(e.contains(words), "expected `{words}` in: {e}");
     }
-    assert!(parse_study(base, "s.toml", "s").is_ok());
+    assert!(parse_study(&base, "s.toml", "s").is_ok());
 }
 
 /// Student's sleep data (Cushny and Peebles, 1905), as R ships it
