@@ -269,10 +269,24 @@ pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&s
 fn fmt(v: Option<f64>) -> String {
     match v {
         None => "–".into(),
-        Some(x) if x == 0.0 => "0".into(),
+        Some(0.0) => "0".into(),
         Some(x) if x.abs() >= 1000.0 => format!("{x:.0}"),
         Some(x) if x.abs() >= 1.0 => format!("{x:.2}"),
         Some(x) => format!("{x:.4}"),
+    }
+}
+
+/// A mean and its sd, both to the mean's precision.
+fn fmt_mean_sd(mean: Option<f64>, sd: Option<f64>) -> String {
+    let Some(m) = mean else { return "–".into() };
+    let decimals = match m.abs() {
+        a if a >= 1000.0 => 0,
+        a if a >= 1.0 || a == 0.0 => 2,
+        _ => 4,
+    };
+    match sd {
+        Some(s) => format!("{m:.decimals$} ± {s:.decimals$}"),
+        None => format!("{m:.decimals$} (one value)"),
     }
 }
 
@@ -303,19 +317,23 @@ pub fn page(r: &ReportFile) -> Markup {
                 h1 { "Study report: " (r.study) }
                 p { "Generated " (r.generated_utc) ". Baseline: " b { (r.baseline.as_deref().unwrap_or("none (no tests)")) } "." }
                 p class="method" { (r.method) }
+                @if r.sus.n + r.sus.missing > 0 || !r.tlx.is_empty() {
                 section id="questionnaires" {
                     h2 { "Questionnaires" }
-                    p id="sus" { "System Usability Scale: n = " (r.sus.n) ", mean " (fmt(r.sus.mean)) " ± " (fmt(r.sus.sd)) " (sd)"
-                        @if r.sus.missing > 0 { ", " (r.sus.missing) " missing" } "." }
+                    @if r.sus.n + r.sus.missing > 0 {
+                        p id="sus" { "System Usability Scale: n = " (r.sus.n) ", mean ± sd " (fmt_mean_sd(r.sus.mean, r.sus.sd))
+                            @if r.sus.missing > 0 { ", " (r.sus.missing) " missing" } "." }
+                    }
                     @if !r.tlx.is_empty() {
                         table id="tlx" {
                             tr { th { "NASA-TLX after" } th { "n" } th { "raw TLX" } @for s in TLX_SCALES { th { (s.replace('_', " ")) } } }
                             @for t in &r.tlx {
-                                tr { td { (t.block) } td { (t.raw.n) } td { (fmt(t.raw.mean)) " ± " (fmt(t.raw.sd)) }
-                                     @for s in &t.scales { td { (fmt(s.mean)) " ± " (fmt(s.sd)) } } }
+                                tr { td { (t.block) } td { (t.raw.n) } td { (fmt_mean_sd(t.raw.mean, t.raw.sd)) }
+                                     @for s in &t.scales { td { (fmt_mean_sd(s.mean, s.sd)) } } }
                             }
                         }
                     }
+                }
                 }
                 @for summary in &r.summaries {
                     section class="summary" {
@@ -347,7 +365,7 @@ fn metric_section(r: &ReportFile, summary: &Summary, m: &super::summary::MetricS
                     @let w = v.and_then(|v| v.wilcoxon);
                     tr {
                         td { (c.condition) } td { (c.participants) } td { (c.trials) }
-                        td { (fmt(c.mean)) " ± " (fmt(c.sd)) }
+                        td { (fmt_mean_sd(c.mean, c.sd)) }
                         td { (fmt(t.map(|t| t.mean_difference))) }
                         td { @if let Some(t) = t { (format!("{:.3} ({})", t.t, t.df)) } @else { "–" } }
                         td { (fmt_p(t.map(|t| t.p))) }

@@ -47,7 +47,7 @@ pub enum StudyError {
         condition: String,
         /// The scenario parser's error (file, line, field).
         #[source]
-        source: crate::scenario::ScenarioError,
+        source: Box<crate::scenario::ScenarioError>,
     },
     /// No participant of this id.
     #[error("no participant `{id}` in the study (participants: {known})")]
@@ -134,7 +134,7 @@ impl OpenStudy {
         let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
         for c in &study.conditions {
             if let ConditionSource::File(f) = &c.source {
-                crate::load::parse_file(&dir.join(f)).map_err(|source| StudyError::Scenario { condition: c.name.clone(), source })?;
+                crate::load::parse_file(&dir.join(f)).map_err(|source| StudyError::Scenario { condition: c.name.clone(), source: Box::new(source) })?;
             }
         }
         let capture = study.trial.capture.as_ref().map(|c| dir.join(c));
