@@ -8,6 +8,7 @@ mod fit;
 mod report;
 mod restore;
 mod scenario;
+mod study;
 
 use clap::Parser;
 
@@ -39,6 +40,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
         cli::Command::Report(a) => report::run(&a),
         cli::Command::Ctl(a) => ctl::run(a),
+        cli::Command::Study(a) => study::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
