@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 import iceoryx2 as iox
 
-from .run import PublishingEnd, SubscribingEnd
+from .ports import PublishingEnd, SubscribingEnd
 
 #: The iceoryx2 type name of the user header.
 VIDEO_HEADER_TYPE_NAME = "netfi::VideoHeader.v1"
