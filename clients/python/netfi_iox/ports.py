@@ -4,7 +4,15 @@ iceoryx2's ports, and waiting for a peer. Used by :mod:`netfi_iox.run`
 
 import ctypes
 import time
-from typing import Optional
+
+#: Every subscriber's queue, in frames; also the service's maximum.
+SUBSCRIBER_BUFFER_FRAMES = 16_384
+MAX_PUBLISHERS_PER_CHANNEL = 1
+MAX_SUBSCRIBERS_PER_CHANNEL = 2
+MAX_NODES_PER_CHANNEL = 8
+PUBLISHER_MAX_LOANED_SAMPLES = 1
+SUBSCRIBER_MAX_BORROWED_SAMPLES = 1
+HISTORY_FRAMES = 0
 
 
 class NoPeer(RuntimeError):

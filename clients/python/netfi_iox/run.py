@@ -11,7 +11,11 @@ from typing import Optional, Tuple, Type
 import iceoryx2 as iox
 
 from .payload import INTERFACE_VERSION, FeedbackSample, FrameSample
-from .ports import NoPeer, Publisher, Subscriber, PublishingEnd, SubscribingEnd  # noqa: F401 (re-exported)
+from .ports import (  # noqa: F401 (re-exported)
+    HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL,
+    PUBLISHER_MAX_LOANED_SAMPLES, SUBSCRIBER_BUFFER_FRAMES, SUBSCRIBER_MAX_BORROWED_SAMPLES,
+    NoPeer, Publisher, PublishingEnd, Subscriber, SubscribingEnd,
+)
 
 #: The channels of a run: the last component of each service name. The
 #: video channels carry ``[u8]`` slices with a ``netfi::VideoHeader.v1``
@@ -21,14 +25,6 @@ CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out", "video"
 #: The roles a node may take: the last component of its node name.
 ROLES = ("console", "emulator", "simulator", "tool")
 
-#: Every subscriber's queue, in frames; also the service's maximum.
-SUBSCRIBER_BUFFER_FRAMES = 16_384
-MAX_PUBLISHERS_PER_CHANNEL = 1
-MAX_SUBSCRIBERS_PER_CHANNEL = 2
-MAX_NODES_PER_CHANNEL = 8
-PUBLISHER_MAX_LOANED_SAMPLES = 1
-SUBSCRIBER_MAX_BORROWED_SAMPLES = 1
-HISTORY_FRAMES = 0
 
 #: Where a run's iceoryx2 files live, and under which names.
 #:
