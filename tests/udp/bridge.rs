@@ -149,6 +149,15 @@ impl Emulator {
         Emulator::start_command(cmd, out, args)
     }
 
+    /// Starts a UDP bridge: `netfi emulator` applying `scenario` with
+    /// `seed`, taking the console's datagrams from `console_from` on an
+    /// ephemeral port and sending to `egress`, with `extra` flags.
+    pub(crate) fn bridge(out: &Path, scenario: &str, seed: &str, console_from: &str, egress: &str, extra: &[&str]) -> Emulator {
+        let mut args = vec!["--scenario", scenario, "--seed", seed, "--ingress", "udp://127.0.0.1:0", "--console-from", console_from, "--egress", egress];
+        args.extend_from_slice(extra);
+        Emulator::start(out, &args)
+    }
+
     /// Starts `cmd` (which runs `netfi emulator`, perhaps through a wrapper
     /// such as `ip netns exec`) with `args`, and waits until it is ready.
     pub(crate) fn start_command(mut cmd: Command, out: &Path, args: &[&str]) -> Emulator {
@@ -257,25 +266,7 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     let egress = format!("udp://{robot_addr}");
     let from = console.local_addr().to_string();
     let n = 3000u32;
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "PLM-2",
-            "--seed",
-            "3",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-            "--expected-frames",
-            "3000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "PLM-2", "3", &from, &egress, &["--idle-end-ms", "1000", "--expected-frames", "3000"]);
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
     let sent = send_paced(&console, emu.ingress(), (0..n).map(|i| itp(i).to_vec()), 20);
@@ -340,25 +331,7 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     }
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--run-id",
-            &run_id,
-            "--scenario",
-            "PLM-1",
-            "--seed",
-            "8",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            "iceoryx2",
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "PLM-1", "8", &from, "iceoryx2", &["--run-id", &run_id, "--idle-end-ms", "1000"]);
     let sent = send_paced(&console, emu.ingress(), (0..1500).map(|i| itp(i).to_vec()), 20);
     let (e, udp) = emu.finish(Duration::from_secs(30));
     let t0 = Instant::now();
@@ -449,24 +422,8 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
         let rx = receiver(robot, stop.clone(), None);
         let console = socket();
         let from = console.local_addr().to_string();
-        let mut args = vec![
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-        ];
-        if drop_bad {
-            args.push("--drop-bad-checksum");
-        }
-        let emu = Emulator::start(&out, &args);
+        let extra: &[&str] = if drop_bad { &["--idle-end-ms", "1000", "--drop-bad-checksum"] } else { &["--idle-end-ms", "1000"] };
+        let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, extra);
         let sent = send_paced(&console, emu.ingress(), datagrams.clone(), 5);
         let (e, udp) = emu.finish(Duration::from_secs(30));
         stop.store(true, Ordering::Release);
@@ -501,24 +458,7 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let rx = receiver(robot, stop.clone(), None);
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--drop-bad-checksum",
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--drop-bad-checksum", "--idle-end-ms", "1000"]);
     // 20,000 datagrams of random bytes and sizes (0..=1500), as fast as the
     // socket takes them: the kernel may drop some at the emulator's ingress,
     // and must count them.
@@ -563,25 +503,7 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let egress = format!("udp://{}", robot.local_addr());
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--payload",
-            "raw",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--payload", "raw", "--idle-end-ms", "1000"]);
     // The robot answers each datagram with a 52-byte feedback frame.
     let feedback: Vec<u8> = (0..52u8).collect();
     let stop = Arc::new(AtomicBool::new(false));
@@ -630,27 +552,7 @@ fn a_return_scenario_shapes_the_way_back() {
     let egress = format!("udp://{}", robot.local_addr());
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--return-scenario",
-            scenario.to_str().unwrap(),
-            "--return-seed",
-            "11",
-            "--idle-end-ms",
-            "400",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--return-scenario", scenario.to_str().unwrap(), "--return-seed", "11", "--idle-end-ms", "400"]);
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), Some(vec![9u8; 52]));
     let console_stop = Arc::new(AtomicBool::new(false));
@@ -696,10 +598,7 @@ fn a_stopped_bridge_reports_what_it_held() {
     let rx = receiver(robot, stop.clone(), None);
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &["--scenario", "DLM-2", "--seed", "2", "--ingress", "udp://127.0.0.1:0", "--console-from", &from, "--egress", &egress],
-    );
+    let emu = Emulator::bridge(&out, "DLM-2", "2", &from, &egress, &[]);
     let sent = send_paced(&console, emu.ingress(), (0..200).map(|i| itp(i).to_vec()), 20);
     std::thread::sleep(Duration::from_millis(50));
     // DLM-2 holds every frame 210 ms or more: stopped now, all are held.
