@@ -15,6 +15,11 @@ use std::cell::Cell;
 use std::net::SocketAddr;
 use std::rc::Rc;
 
+/// What a raw sample (`--payload raw`) cannot go through: its bytes live
+/// in the UDP source's arena, freed at its release, so a copy would be sent
+/// from a freed slot, and a flip would miss.
+pub const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
+
 /// The most frames one poll of the forward stream takes in: a burst is
 /// taken whole up to this, so a fast stream pays the turn's fixed work (the
 /// release check, the reverse paths' polls, the loop's own bookkeeping)

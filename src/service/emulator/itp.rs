@@ -5,7 +5,7 @@
 
 use crate::scenario::Scenario;
 use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
-use crate::service::emulator::forward::{ConsoleAddr, Forward};
+use crate::service::emulator::forward::{ConsoleAddr, Forward, RAW_UNSUPPORTED};
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::path::{Channel, Path};
 use crate::service::emulator::{report, reverse, run, udp_return};
@@ -15,11 +15,6 @@ use crate::transport::{Egress, Ingress, IpcNode};
 use anyhow::Context;
 use std::cell::RefCell;
 use std::rc::Rc;
-
-/// What a raw sample (`--payload raw`) cannot go through: its bytes live
-/// in the UDP source's arena, freed at its release, so a copy would be sent
-/// from a freed slot, and a flip would miss.
-pub const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
 
 /// A lane of ITP frames.
 pub type ItpLane = Lane<Forward<Ingress, Egress>>;
