@@ -8,6 +8,7 @@
 //! the kernel dropped: `sent = entered + kernel drops at the ingress`, and
 //! `delivered = received by the robot + kernel drops at the robot`.
 
+use crate::netfi_bin::netfi;
 use crate::ONE_RUN_AT_A_TIME;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
@@ -19,10 +20,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
 
 pub(crate) fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-udp-{}-{name}", std::process::id()));
