@@ -121,6 +121,29 @@ pub(crate) fn receiver(port: UdpPort, stop: Arc<AtomicBool>, reply: Option<Vec<u
     })
 }
 
+/// The two ends of a bridge on loopback: the robot, collecting what
+/// reaches it (`robot`) until `stop` is set, and the console's socket.
+pub(crate) struct Ends {
+    pub(crate) console: UdpPort,
+    /// The console's address, for `--console-from`.
+    pub(crate) from: String,
+    /// The robot's address, for `--egress`.
+    pub(crate) egress: String,
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) robot: JoinHandle<(Vec<Vec<u8>>, UdpPort)>,
+}
+
+/// A robot that collects what reaches it, and a console socket.
+pub(crate) fn ends() -> Ends {
+    let robot = socket();
+    let egress = format!("udp://{}", robot.local_addr());
+    let stop = Arc::new(AtomicBool::new(false));
+    let robot = receiver(robot, stop.clone(), None);
+    let console = socket();
+    let from = console.local_addr().to_string();
+    Ends { console, from, egress, stop, robot }
+}
+
 /// A child process killed (if still running) when dropped, so a failing
 /// test leaves nothing behind.
 pub(crate) struct Reaped(pub(crate) Child);
@@ -413,12 +436,7 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
     datagrams.extend((10..14).map(bad));
     for drop_bad in [true, false] {
         let out = out_dir(if drop_bad { "bad-drop" } else { "bad-pass" });
-        let robot = socket();
-        let egress = format!("udp://{}", robot.local_addr());
-        let stop = Arc::new(AtomicBool::new(false));
-        let rx = receiver(robot, stop.clone(), None);
-        let console = socket();
-        let from = console.local_addr().to_string();
+        let Ends { console, from, egress, stop, robot: rx } = ends();
         let extra: &[&str] = if drop_bad { &["--idle-end-ms", "1000", "--drop-bad-checksum"] } else { &["--idle-end-ms", "1000"] };
         let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, extra);
         let sent = send_paced(&console, emu.ingress(), datagrams.clone(), 5);
@@ -449,12 +467,7 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
 fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let out = out_dir("flood");
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), None);
-    let console = socket();
-    let from = console.local_addr().to_string();
+    let Ends { console, from, egress, stop, robot: rx } = ends();
     let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--drop-bad-checksum", "--idle-end-ms", "1000"]);
     // 20,000 datagrams of random bytes and sizes (0..=1500), as fast as the
     // socket takes them: the kernel may drop some at the emulator's ingress,
@@ -589,12 +602,7 @@ fn a_return_scenario_shapes_the_way_back() {
 fn a_stopped_bridge_reports_what_it_held() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let out = out_dir("held");
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), None);
-    let console = socket();
-    let from = console.local_addr().to_string();
+    let Ends { console, from, egress, stop, robot: rx } = ends();
     let emu = Emulator::bridge(&out, "DLM-2", "2", &from, &egress, &[]);
     let sent = send_paced(&console, emu.ingress(), (0..200).map(|i| itp(i).to_vec()), 20);
     std::thread::sleep(Duration::from_millis(50));
