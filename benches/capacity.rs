@@ -20,30 +20,24 @@
 mod common;
 
 use anyhow::{ensure, Result};
-use common::args::{Common, Cores, Placement, PLM2_DLM2};
+use common::args::{Placement, PLM2_DLM2};
 use common::chain::{run_chain, ChainResult, Interval, Transport};
 use common::drive::Routes;
 use common::host::{clear_core, restore_core, speed_on, Speed};
 use common::out::{CostRow, Out};
-use common::process::{scenario_label, Build};
+use common::process::{scenario_label, Build, OneBuild};
 use common::table::{ns, rate_label};
 use serde::Serialize;
 use serde_json::json;
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 /// `cargo bench --bench capacity -- [FLAGS]`.
 #[derive(Debug, clap::Parser, Serialize)]
 #[command(name = "capacity", bin_name = "cargo bench --bench capacity --", about = "What the emulator alone sustains, and its time a frame against the rate")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    #[command(flatten)]
-    cores: Cores,
-    /// The netfi binary whose emulator is measured [default: this
-    /// package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
+    #[serde(flatten)]
+    build: OneBuild,
     /// Rates tried, frames a second
     #[arg(long, value_delimiter = ',', default_value = "700000,1000000")]
     rates_hz: Vec<f64>,
@@ -84,9 +78,7 @@ fn main() {
 
 fn run(a: Args) -> Result<()> {
     ensure!(a.seconds > 0.0 && a.repetitions >= 1 && !a.rates_hz.is_empty() && a.rates_hz.iter().all(|r| *r >= 1000.0), "--seconds and --repetitions must be positive, --rates-hz at least 1000");
-    let p = a.cores.placement(&a.common)?;
-    let out = Out::create(&a.common, "capacity")?;
-    let build = Build::new("netfi", a.netfi.as_deref())?;
+    let (p, out, build) = a.build.start("capacity")?;
     let _ = netfi::transport::cleanup_stale();
     let cleared = clear_core(&p);
     let scenarios = if a.scenarios.is_empty() { vec!["Normal".to_string(), PLM2_DLM2.to_string()] } else { a.scenarios.clone() };

@@ -12,11 +12,11 @@
 mod common;
 
 use anyhow::{ensure, Context, Result};
-use common::args::{check_interrupted, Common, PLM2_DLM2};
+use common::args::{check_interrupted, PLM2_DLM2};
 use common::host::{HostTimer, HostWindow};
 use common::out::Out;
 use common::host::cpu_s;
-use common::process::{alternate, scenario_label, wait, Build};
+use common::process::{alternate, scenario_label, wait, Build, TwoBuilds};
 use common::table::Spread;
 use serde::Serialize;
 use serde_json::json;
@@ -30,16 +30,8 @@ use std::time::Instant;
 #[command(name = "check", bin_name = "cargo bench --bench check --", about = "netfi scenario check's speed, one build or two alternated")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    /// The netfi binary to time [default: this package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
-    /// A second build, timed alternately with the first
-    #[arg(long, value_name = "PATH")]
-    baseline: Option<PathBuf>,
-    /// Runs of each scenario by each build
-    #[arg(long, default_value_t = 5)]
-    runs: usize,
+    #[serde(flatten)]
+    builds: TwoBuilds,
     /// Frames simulated a run
     #[arg(long, default_value_t = 10_000_000)]
     frames: u64,
@@ -66,12 +58,11 @@ fn main() {
 }
 
 fn run(a: Args) -> Result<()> {
-    ensure!(a.runs >= 1 && a.frames >= 1, "--runs and --frames must be positive");
-    let out = Out::create(&a.common, "check")?;
-    let builds = Build::pair(a.netfi.as_deref(), a.baseline.as_deref())?;
+    ensure!(a.builds.runs >= 1 && a.frames >= 1, "--runs and --frames must be positive");
+    let (out, builds) = a.builds.start("check")?;
     let scenarios = if a.scenarios.is_empty() { vec!["PLM-2".to_string(), PLM2_DLM2.to_string()] } else { a.scenarios.clone() };
-    let runs = alternate(&builds, &scenarios, a.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
-    let mut md = format!("{} frames a run; median (least – largest) over {} runs.\n\n| scenario | build | wall, s | CPU, s | ns a frame (CPU) | steal per run | JSON the same as the first build's |\n|---|---|---|---|---|---|---|\n", a.frames, a.runs);
+    let runs = alternate(&builds, &scenarios, a.builds.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
+    let mut md = format!("{} frames a run; median (least – largest) over {} runs.\n\n| scenario | build | wall, s | CPU, s | ns a frame (CPU) | steal per run | JSON the same as the first build's |\n|---|---|---|---|---|---|---|\n", a.frames, a.builds.runs);
     let mut cells = Vec::new();
     for sc in &scenarios {
         let first = std::fs::read(json_path(&out.dir, &builds[0].label, sc)).unwrap_or_default();

@@ -22,10 +22,10 @@
 mod common;
 
 use anyhow::{ensure, Result};
-use common::args::{Common, PLM2_DLM2};
+use common::args::PLM2_DLM2;
 use common::host::{HostTimer, HostWindow};
 use common::out::Out;
-use common::process::{alternate, at, num, scenario_label, summary, Build};
+use common::process::{alternate, at, num, scenario_label, summary, Build, TwoBuilds};
 use common::table::{ns, spread_ns, Map, Spread};
 use netfi::metrics::{difference, Summary};
 use serde::Serialize;
@@ -38,16 +38,8 @@ use std::path::{Path, PathBuf};
 #[command(name = "overhead", bin_name = "cargo bench --bench overhead --", about = "What netfi run adds: release lateness and added latency, one build or two alternated")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    /// The netfi binary to measure [default: this package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
-    /// A second build, timed alternately with the first
-    #[arg(long, value_name = "PATH")]
-    baseline: Option<PathBuf>,
-    /// Runs of each scenario by each build
-    #[arg(long, default_value_t = 5)]
-    runs: usize,
+    #[serde(flatten)]
+    builds: TwoBuilds,
     /// Length of each run
     #[arg(long, default_value_t = 10.0)]
     seconds: f64,
@@ -166,11 +158,10 @@ fn main() {
 }
 
 fn run(a: Args) -> Result<()> {
-    ensure!(a.runs >= 1 && a.seconds > 0.0 && a.rate_hz > 0.0, "--runs, --seconds and --rate-hz must be positive");
-    let out = Out::create(&a.common, "overhead")?;
-    let builds = Build::pair(a.netfi.as_deref(), a.baseline.as_deref())?;
+    ensure!(a.builds.runs >= 1 && a.seconds > 0.0 && a.rate_hz > 0.0, "--runs, --seconds and --rate-hz must be positive");
+    let (out, builds) = a.builds.start("overhead")?;
     let scenarios = if a.scenarios.is_empty() { vec!["Normal".to_string(), PLM2_DLM2.to_string()] } else { a.scenarios.clone() };
-    let runs = alternate(&builds, &scenarios, a.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
+    let runs = alternate(&builds, &scenarios, a.builds.runs, |b, sc, round| one_run(&a, &out, b, sc, round))?;
     let cells: Vec<Cell> = scenarios
         .iter()
         .flat_map(|sc| builds.iter().map(move |b| (sc, b)))
@@ -182,7 +173,7 @@ fn run(a: Args) -> Result<()> {
 
 fn one_run(a: &Args, out: &Out, b: &Build, scenario: &str, round: usize) -> Result<RunFigures> {
     let dir = out.run_dir(&format!("{}-{}-r{round}", scenario_label(scenario), b.label))?;
-    let host = HostTimer::start(a.common.quiet());
+    let host = HostTimer::start(a.builds.common.quiet());
     let r = b.run(&dir, scenario, a.rate_hz, a.seconds, &a.run_args)?;
     let f = RunFigures::of(&b.label, &scenario_label(scenario), round, &r, host.stop(), &dir);
     let p = |s: &Option<Summary>, k: fn(&Summary) -> u64| s.as_ref().map_or("–".into(), |s| ns(k(s) as i64));

@@ -18,14 +18,14 @@
 mod common;
 
 use anyhow::{bail, ensure, Context, Result};
-use common::args::{check_interrupted, stopped, Common, Cores, Placement};
+use common::args::{check_interrupted, stopped, Placement};
 use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::Out;
-use common::process::{read_json, Build, EmulatorSpec};
+use common::process::{read_json, Build, EmulatorSpec, OneBuild};
 use common::table::{header, median_map, row, Map};
 use serde::Serialize;
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
@@ -36,13 +36,8 @@ const HALT_POLL_NS: &str = "/sys/module/haltpoll/parameters/guest_halt_poll_ns";
 #[command(name = "sockperf", bin_name = "cargo bench --bench sockperf --", about = "sockperf ping-pong through the UDP bridge, against a direct run")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    #[command(flatten)]
-    cores: Cores,
-    /// The netfi binary whose emulator is measured [default: this
-    /// package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
+    #[serde(flatten)]
+    build: OneBuild,
     /// Length of each ping-pong
     #[arg(long, default_value_t = 10)]
     seconds: u64,
@@ -62,9 +57,7 @@ fn run(a: Args) -> Result<()> {
     if Command::new("sockperf").arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_err() {
         bail!("sockperf is not installed (Debian: apt install sockperf)");
     }
-    let p = a.cores.placement(&a.common)?;
-    let out = Out::create(&a.common, "sockperf")?;
-    let build = Build::new("netfi", a.netfi.as_deref())?;
+    let (p, out, build) = a.build.start("sockperf")?;
     let before = std::fs::read_to_string(HALT_POLL_NS).ok();
     if let Some(ns) = a.halt_poll_ns {
         std::fs::write(HALT_POLL_NS, ns.to_string()).with_context(|| format!("setting {HALT_POLL_NS}"))?;

@@ -16,18 +16,17 @@
 mod common;
 
 use anyhow::{ensure, Context, Result};
-use common::args::{check_interrupted, Common, Cores, Placement};
+use common::args::{check_interrupted, Placement};
 use common::drive::{drive, slots_for, Routes};
 use common::ends::IpcEnds;
 use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::{CostRow, Out};
-use common::process::{fresh_run_id, stream_run_id, summary, Build, EmulatorSpec, ForgetRuns};
+use common::process::{fresh_run_id, stream_run_id, summary, Build, EmulatorSpec, ForgetRuns, OneBuild};
 use common::table::{ns, Spread};
 use netfi::metrics::difference;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// Frames a second on each route of each stream.
@@ -38,13 +37,8 @@ const RATE_HZ: f64 = 1000.0;
 #[command(name = "streams", bin_name = "cargo bench --bench streams --", about = "Release lateness and added latency against the number of streams one emulator serves")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    #[command(flatten)]
-    cores: Cores,
-    /// The netfi binary whose emulator is measured [default: this
-    /// package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
+    #[serde(flatten)]
+    build: OneBuild,
     /// Stream counts (1 to 64)
     #[arg(long, value_delimiter = ',', default_value = "1,2,8,32")]
     counts: Vec<usize>,
@@ -62,9 +56,7 @@ fn main() {
 fn run(a: Args) -> Result<()> {
     ensure!(a.seconds > 0.0 && a.repetitions >= 1, "--seconds and --repetitions must be positive");
     ensure!(a.counts.iter().all(|n| (1..=64).contains(n)), "--counts: from 1 to 64 streams");
-    let p = a.cores.placement(&a.common)?;
-    let out = Out::create(&a.common, "streams")?;
-    let build = Build::new("netfi", a.netfi.as_deref())?;
+    let (p, out, build) = a.build.start("streams")?;
     let _ = netfi::transport::cleanup_stale();
     let cleared = clear_core(&p);
     pin(p.bench_core, p.rt_priority);

@@ -24,6 +24,32 @@
 
 use serde::{Deserialize, Serialize};
 
+/// Why a group of pictures makes no stream; each says what is accepted.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum GopError {
+    /// A bit rate not above 0, or over 100 Gbit/s.
+    #[error("the video's bit rate must be above 0 and at most 100 Gbit/s, got {bit_s} bit/s")]
+    BitRate {
+        /// What was given, bit/s.
+        bit_s: f64,
+    },
+    /// A frame rate outside 0.1–10 000 Hz.
+    #[error("the video's frame rate must be from 0.1 to 10000 Hz, got {hz}")]
+    FrameRate {
+        /// What was given, Hz.
+        hz: f64,
+    },
+    /// A group of no frames.
+    #[error("a group of pictures has at least one frame")]
+    NoFrames,
+    /// A key frame ratio outside 1–1000.
+    #[error("the key frame ratio must be from 1 to 1000, got {ratio}")]
+    KeyRatio {
+        /// What was given.
+        ratio: f64,
+    },
+}
+
 /// The sizes of a group of pictures at a bit rate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gop {
@@ -37,18 +63,18 @@ impl Gop {
     /// The group for `bit_rate_bit_s` at `frame_hz` frames a second, with
     /// `frames` frames a group and key frames `key_ratio` times a delta
     /// frame. Every frame has at least one byte.
-    pub fn new(bit_rate_bit_s: f64, frame_hz: f64, frames: u32, key_ratio: f64) -> Result<Gop, String> {
+    pub fn new(bit_rate_bit_s: f64, frame_hz: f64, frames: u32, key_ratio: f64) -> Result<Gop, GopError> {
         if !(bit_rate_bit_s.is_finite() && bit_rate_bit_s > 0.0 && bit_rate_bit_s <= 1e11) {
-            return Err(format!("the video's bit rate must be above 0 and at most 100 Gbit/s, got {bit_rate_bit_s} bit/s"));
+            return Err(GopError::BitRate { bit_s: bit_rate_bit_s });
         }
         if !(frame_hz.is_finite() && (0.1..=10_000.0).contains(&frame_hz)) {
-            return Err(format!("the video's frame rate must be from 0.1 to 10000 Hz, got {frame_hz}"));
+            return Err(GopError::FrameRate { hz: frame_hz });
         }
         if frames == 0 {
-            return Err("a group of pictures has at least one frame".into());
+            return Err(GopError::NoFrames);
         }
         if !(key_ratio.is_finite() && (1.0..=1000.0).contains(&key_ratio)) {
-            return Err(format!("the key frame ratio must be from 1 to 1000, got {key_ratio}"));
+            return Err(GopError::KeyRatio { ratio: key_ratio });
         }
         let mean = bit_rate_bit_s / 8.0 / frame_hz;
         let delta = mean * f64::from(frames) / (f64::from(frames) - 1.0 + key_ratio);
@@ -259,10 +285,10 @@ mod tests {
 
     #[test]
     fn bad_gop_parameters_are_refused() {
-        assert!(Gop::new(0.0, 60.0, 30, 8.0).unwrap_err().contains("bit rate"));
-        assert!(Gop::new(8e6, 0.0, 30, 8.0).unwrap_err().contains("frame rate"));
+        assert!(Gop::new(0.0, 60.0, 30, 8.0).unwrap_err().to_string().contains("bit rate"));
+        assert!(Gop::new(8e6, 0.0, 30, 8.0).unwrap_err().to_string().contains("frame rate"));
         assert!(Gop::new(8e6, 60.0, 0, 8.0).is_err());
-        assert!(Gop::new(8e6, 60.0, 30, 0.5).unwrap_err().contains("key frame"));
+        assert!(Gop::new(8e6, 60.0, 30, 0.5).unwrap_err().to_string().contains("key frame"));
         assert!(Gop::new(f64::NAN, 60.0, 30, 8.0).is_err());
     }
 

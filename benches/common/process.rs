@@ -6,7 +6,8 @@
 //! writes, not through the library: a benchmark can time a build of
 //! another commit beside this one.
 
-use crate::common::args::{check_interrupted, stopped, Placement, NETFI};
+use crate::common::args::{check_interrupted, stopped, Common, Cores, Placement, NETFI};
+use crate::common::out::Out;
 use anyhow::{bail, Context, Result};
 use netfi::metrics::Summary;
 use serde::Serialize;
@@ -71,6 +72,57 @@ impl Build {
     /// Starts `netfi emulator` as `spec` says, and waits until it is ready.
     pub fn emulator(&self, spec: &EmulatorSpec, p: &Placement) -> Result<Emulator> {
         Emulator::spawn(&self.netfi, spec.dir, &spec.argv(p))
+    }
+}
+
+/// The flags of a program that measures one build's emulator, started by
+/// the program itself: the common flags, the cores and the build.
+#[derive(Debug, Clone, clap::Args, Serialize)]
+pub struct OneBuild {
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub common: Common,
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub cores: Cores,
+    /// The netfi binary whose emulator is measured [default: this
+    /// package's build]
+    #[arg(long, value_name = "PATH")]
+    pub netfi: Option<PathBuf>,
+}
+
+impl OneBuild {
+    /// The placement, the results directory of `program` and the build.
+    pub fn start(&self, program: &'static str) -> Result<(Placement, Out, Build)> {
+        let p = self.cores.placement(&self.common)?;
+        let out = Out::create(&self.common, program)?;
+        Ok((p, out, Build::new("netfi", self.netfi.as_deref())?))
+    }
+}
+
+/// The flags of a program that times one build, or two alternated: the
+/// common flags, the builds and the runs of each.
+#[derive(Debug, Clone, clap::Args, Serialize)]
+pub struct TwoBuilds {
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub common: Common,
+    /// The netfi binary to measure [default: this package's build]
+    #[arg(long, value_name = "PATH")]
+    pub netfi: Option<PathBuf>,
+    /// A second build, timed alternately with the first
+    #[arg(long, value_name = "PATH")]
+    pub baseline: Option<PathBuf>,
+    /// Runs of each scenario by each build
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+}
+
+impl TwoBuilds {
+    /// The results directory of `program` and the builds it times.
+    pub fn start(&self, program: &'static str) -> Result<(Out, Vec<Build>)> {
+        let out = Out::create(&self.common, program)?;
+        Ok((out, Build::pair(self.netfi.as_deref(), self.baseline.as_deref())?))
     }
 }
 

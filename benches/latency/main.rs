@@ -20,12 +20,12 @@ mod floor;
 mod probe;
 
 use anyhow::{ensure, Result};
-use common::args::{Common, Cores, Placement, PLM2_DLM2};
+use common::args::{Placement, PLM2_DLM2};
 use common::chain::{run_chain, ChainResult, Interval, Transport};
 use common::drive::Routes;
 use common::host::{clear_core, restore_core};
 use common::out::Out;
-use common::process::Build;
+use common::process::{Build, OneBuild};
 use common::table::{header, median_map, rate_label, row, spread_map, summary_map, Map};
 use floor::FloorResult;
 use netfi::metrics::Summary;
@@ -33,20 +33,14 @@ use probe::ProbeResult;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 /// `cargo bench --bench latency -- [FLAGS]`.
 #[derive(Debug, clap::Parser, Serialize)]
 #[command(name = "latency", bin_name = "cargo bench --bench latency --", about = "What the emulator adds to a frame's one-way latency, against a direct hop in the same run")]
 struct Args {
     #[command(flatten)]
-    common: Common,
-    #[command(flatten)]
-    cores: Cores,
-    /// The netfi binary whose emulator is measured [default: this
-    /// package's build]
-    #[arg(long, value_name = "PATH")]
-    netfi: Option<PathBuf>,
+    #[serde(flatten)]
+    build: OneBuild,
     /// Frame rates on each route
     #[arg(long, value_delimiter = ',', default_value = "1000,100000")]
     rates_hz: Vec<f64>,
@@ -79,9 +73,7 @@ fn main() {
 
 fn run(a: Args) -> Result<()> {
     ensure!(a.seconds > 0.0 && a.repetitions >= 1 && a.rates_hz.iter().all(|r| *r > 0.0), "--seconds, --repetitions and --rates-hz must be positive");
-    let p = a.cores.placement(&a.common)?;
-    let out = Out::create(&a.common, "latency")?;
-    let build = Build::new("netfi", a.netfi.as_deref())?;
+    let (p, out, build) = a.build.start("latency")?;
     let _ = netfi::transport::cleanup_stale();
     println!("latency: {}; {} s intervals, {} repetition(s)", p.line(), a.seconds, a.repetitions);
     let cleared = clear_core(&p);

@@ -10,13 +10,13 @@
 //! stamped separately: the simulator measures the bare hop beside the
 //! emulated one, in the same run, and integrates it as the console's pose.
 
-use crate::capture;
+use crate::capture::{self, CaptureError};
 use crate::clock::{now_ns, wait_until_ns, Wait};
 use crate::host::StealTimer;
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::motion::{MotionGenerator, MotionParams};
+use crate::motion::{MotionGenerator, MotionParamError, MotionParams};
 use crate::frame::{ItpFrame, ItpView};
-use crate::kinematics::{Integrator, KinematicsConfig};
+use crate::kinematics::{Integrator, KinematicsConfig, KinematicsConfigError};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
 use crate::transport::{FramePublisher, FrameSubscriber};
 use crate::service::args::ConsoleArgs;
@@ -24,8 +24,35 @@ use crate::transport::open_node;
 use crate::transport::FrameSink;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
+
+/// Why the console's frames could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum ScriptError {
+    /// The capture could not be read, or was refused.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// The synthetic motion's parameters were refused.
+    #[error(transparent)]
+    Motion(#[from] MotionParamError),
+}
+
+/// Why the console did not start streaming.
+#[derive(Debug, thiserror::Error)]
+pub enum WaitError {
+    /// No emulator subscribed in time.
+    #[error("no emulator subscribed to netfi/{run_id}/console within {wait_s} s")]
+    NoEmulator {
+        /// The run.
+        run_id: String,
+        /// How long the console waited (`--wait-for-peer-s`).
+        wait_s: f64,
+    },
+    /// Told to stop while waiting.
+    #[error("stopped before streaming")]
+    Stopped,
+}
 
 /// The console's report, written as `console.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -103,7 +130,7 @@ struct FeedbackIn {
 }
 
 impl FeedbackIn {
-    fn new(port: FrameSubscriber<FeedbackSample>) -> Result<FeedbackIn> {
+    fn new(port: FrameSubscriber<FeedbackSample>) -> Result<FeedbackIn, KinematicsConfigError> {
         let cfg = KinematicsConfig::default();
         Ok(FeedbackIn {
             port,
@@ -113,7 +140,7 @@ impl FeedbackIn {
             received: 0,
             sent_by_emulator: None,
             unknown_command: 0,
-            own: Integrator::new(cfg).context("console kinematics")?,
+            own: Integrator::new(cfg)?,
             poses: vec![[[0; 3]; 2]; POSE_RING],
             unit_mm: cfg.unit_mm,
             div_final: [0.0; 2],
@@ -231,10 +258,10 @@ impl Script {
 
 impl Script {
     /// The capture given, or synthetic motion at the given rate.
-    fn from_args(args: &ConsoleArgs, seed: u64) -> Result<Script> {
+    fn from_args(args: &ConsoleArgs, seed: u64) -> Result<Script, ScriptError> {
         Ok(match &args.source.capture {
             Some(path) => {
-                let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+                let cap = capture::load(path)?;
                 let t0 = cap.records.first().map_or(0, |r| r.time_ns);
                 let mut last = 0;
                 let records = cap
@@ -259,14 +286,14 @@ impl Script {
 }
 
 /// Waits for the emulator to subscribe to the console port.
-fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::transport::IpcNode, args: &ConsoleArgs) -> Result<()> {
+fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::transport::IpcNode, args: &ConsoleArgs) -> Result<(), WaitError> {
     let deadline = now_ns() + (args.wait_for_peer_s * 1e9) as u64;
     while port.peers_connected() == 0 {
         if now_ns() > deadline {
-            bail!("no emulator subscribed to netfi/{}/console within {} s", args.run_id, args.wait_for_peer_s);
+            return Err(WaitError::NoEmulator { run_id: args.run_id.clone(), wait_s: args.wait_for_peer_s });
         }
         if signals::stop_requested() || node.termination_requested() {
-            bail!("stopped before streaming");
+            return Err(WaitError::Stopped);
         }
         std::thread::sleep(std::time::Duration::from_millis(1));
     }

@@ -14,20 +14,49 @@
 
 use crate::check::{stage_reports, LinkSampler};
 use crate::clock::now_ns;
-use crate::injector::{Entered, Fate, Injector, Invalid};
+use crate::durable::DurableError;
+use crate::injector::{BuildError, Entered, Fate, Injector, Invalid};
 use crate::metrics::LatencyHistogram;
 use crate::model::ModelKind;
 use crate::sample::FrameSample;
 use crate::scenario::Scenario;
 use crate::service::schema::path::{Account, LinkMeasures};
 use crate::stats::BatchMeans;
-use crate::trace::{self, TraceEvent, TraceSink, TraceWriter};
+use crate::trace::{self, TraceError, TraceEvent, TraceSink, TraceWriter};
 use crate::transport::PortError;
-use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 /// Default release-queue capacity: 65,536 frames (65 s at 1 kHz).
 pub const DEFAULT_QUEUE_CAPACITY: usize = 1 << 16;
+
+/// Why a link could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// A stage the link's items cannot carry ([`Carried::UNSUPPORTED`]).
+    #[error(
+        "scenario `{scenario}`: the `{stage}` stage is simulated by `netfi scenario check` but not applied on this path (a copy is a second release of the same item, a corruption needs the frame's bytes in the item); remove it from this path's scenario"
+    )]
+    Unsupported {
+        /// The scenario's name.
+        scenario: String,
+        /// The stage's model.
+        stage: &'static str,
+    },
+    /// The release queue could not be built (its capacity).
+    #[error(transparent)]
+    Queue(#[from] BuildError),
+}
+
+/// A histogram log of a link that could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("writing {}: {source}", .path.display())]
+pub struct HistogramWriteError {
+    /// The log.
+    pub path: PathBuf,
+    /// The kernel's error.
+    #[source]
+    pub source: std::io::Error,
+}
 
 /// What a link holds in its queue: anything that remembers when it entered.
 pub trait Carried: Copy + Default {
@@ -117,13 +146,9 @@ impl<T: Carried> Link<T> {
     /// A capacity out of range is an error that names the field and the
     /// memory it would need; so is a stage this link's items cannot carry
     /// ([`Carried::UNSUPPORTED`]).
-    pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> anyhow::Result<Link<T>> {
+    pub fn new(scenario: Scenario, queue_capacity: usize, expected_frames: u64) -> Result<Link<T>, LinkError> {
         if let Some(kind) = unsupported_stage(&scenario, T::UNSUPPORTED) {
-            anyhow::bail!(
-                "scenario `{}`: the `{}` stage is simulated by `netfi scenario check` but not applied on this path (a copy is a second release of the same item, a corruption needs the frame's bytes in the item); remove it from this path's scenario",
-                scenario.name(),
-                kind.name()
-            );
+            return Err(LinkError::Unsupported { scenario: scenario.name().to_string(), stage: kind.name() });
         }
         let rows = expected_frames.min(50_000_000) as usize;
         let copies = if unsupported_stage(&scenario, &[ModelKind::Duplicate]).is_some() { rows } else { 0 };
@@ -178,7 +203,7 @@ impl<T: Carried> Link<T> {
 
     /// Rebuilds the (still unused) release queue as a reorder queue, so that
     /// the run can be switched to a scenario that reorders.
-    pub fn reorder_queue(&mut self) -> anyhow::Result<()> {
+    pub fn reorder_queue(&mut self) -> Result<(), BuildError> {
         let (scenario, capacity) = (self.inj.scenario().clone(), self.inj.queue_capacity());
         self.inj = Injector::try_with_order(scenario, capacity, crate::scheduler::QueueOrder::Reorder)?;
         Ok(())
@@ -293,7 +318,7 @@ impl<T: Carried> Link<T> {
     /// `hlog_dir`, the decision-time and release-lateness histograms as
     /// interval logs `decision.hlog` and `lateness.hlog` there (one
     /// interval per second). Call once, before the loop starts.
-    pub fn stream_to(&mut self, trace_path: &Path, hlog_dir: Option<&Path>) -> anyhow::Result<()> {
+    pub fn stream_to(&mut self, trace_path: &Path, hlog_dir: Option<&Path>) -> Result<(), DurableError> {
         self.hlogs = self.writer.stream_to(trace_path, hlog_dir)?;
         Ok(())
     }
@@ -302,20 +327,21 @@ impl<T: Carried> Link<T> {
     /// `decision.hlog` and `lateness.hlog` in `out_dir`: the interval logs
     /// streamed there, or else the run's totals written now as one
     /// interval each. Returns their paths.
-    pub fn write_histograms(&self, out_dir: &Path, duration_s: f64) -> anyhow::Result<(PathBuf, PathBuf)> {
+    pub fn write_histograms(&self, out_dir: &Path, duration_s: f64) -> Result<(PathBuf, PathBuf), HistogramWriteError> {
         if let Some([d, l]) = &self.hlogs {
             return Ok((d.clone(), l.clone()));
         }
         let (decision, lateness) = (out_dir.join("decision.hlog"), out_dir.join("lateness.hlog"));
-        self.decision.write_log(&decision, "decision", 0.0, duration_s).with_context(|| format!("writing {}", decision.display()))?;
-        self.lateness.write_log(&lateness, "release_lateness", 0.0, duration_s).with_context(|| format!("writing {}", lateness.display()))?;
+        for (h, path, tag) in [(&self.decision, &decision, "decision"), (&self.lateness, &lateness, "release_lateness")] {
+            h.write_log(path, tag, 0.0, duration_s).map_err(|source| HistogramWriteError { path: path.clone(), source })?;
+        }
         Ok((decision, lateness))
     }
 
     /// Stops the trace writer, writes the trace to `trace_path`, checks
     /// that every item is accounted for, and reports. `duration_ns` is the
     /// time the link ran (for the stages' model rates).
-    pub fn finish(self, trace_path: &Path, duration_ns: u64) -> anyhow::Result<LinkEnd> {
+    pub fn finish(self, trace_path: &Path, duration_ns: u64) -> Result<LinkEnd, TraceError> {
         let counts = self.inj.counts();
         assert!(counts.balanced(), "frame accounting broken: {counts:?}");
         let written = self.writer.finish(trace_path)?;

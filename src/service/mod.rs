@@ -33,10 +33,22 @@ pub mod supervise;
 pub mod telemetry;
 pub mod video;
 
+/// Why `<out>/<role>.pid` could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{what} {}: {source}", .path.display())]
+pub struct PidError {
+    /// `creating` (the directory) or `writing` (the file).
+    pub what: &'static str,
+    /// The directory or the file.
+    pub path: std::path::PathBuf,
+    /// The kernel's error.
+    #[source]
+    pub source: std::io::Error,
+}
+
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
-pub fn write_pid(out: &std::path::Path, role: &str) -> anyhow::Result<()> {
-    use anyhow::Context;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+pub fn write_pid(out: &std::path::Path, role: &str) -> Result<(), PidError> {
+    std::fs::create_dir_all(out).map_err(|source| PidError { what: "creating", path: out.to_path_buf(), source })?;
     let path = out.join(format!("{role}.pid"));
-    std::fs::write(&path, std::process::id().to_string()).with_context(|| format!("writing {}", path.display()))
+    std::fs::write(&path, std::process::id().to_string()).map_err(|source| PidError { what: "writing", path, source })
 }

@@ -14,8 +14,9 @@ use crate::clock::{now_ns, Wait};
 use crate::frame::ItpView;
 use crate::host::StealTimer;
 use crate::frame::ItpFrame;
-use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
-use crate::metrics::{IntervalLog, LatencyHistogram, Summary};
+use crate::durable::DurableError;
+use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig, KinematicsConfigError};
+use crate::metrics::{IntervalLog, IntervalLogError, LatencyHistogram, Summary};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
@@ -26,6 +27,20 @@ use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
+
+/// Why the simulator's robot could not be set up or end whole.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// `--stall-ms` out of the kinematics' range.
+    #[error("--stall-ms: {0}")]
+    StallMs(#[source] KinematicsConfigError),
+    /// `received.csv` could not be written whole.
+    #[error(transparent)]
+    Received(#[from] DurableError),
+    /// A histogram log could not be written.
+    #[error(transparent)]
+    Histogram(#[from] IntervalLogError),
+}
 
 /// The simulator's report, written as `simulator.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,18 +148,15 @@ struct Robot {
 }
 
 impl Robot {
-    fn new(args: &SimulatorArgs) -> Result<Robot> {
+    fn new(args: &SimulatorArgs) -> Result<Robot, RobotError> {
         let stall_ns = (args.stall_ms * 1e6) as u64;
         let checksum_policy = if args.drop_bad_checksum { ChecksumPolicy::Discard } else { ChecksumPolicy::Apply };
         let kin = Kinematics::new(KinematicsConfig { stall_threshold_ns: stall_ns, checksum_policy, ..Default::default() })
-            .context("--stall-ms")?;
+            .map_err(RobotError::StallMs)?;
         let received_csv = args.out.join("received.csv");
         let received_log = crate::trace::CsvLog::create(received_csv.clone(), "ingress_index,recv_ns,release_sched_ns")?;
         let origin_ns = now_ns();
-        let hlog = |file: &str, tag: &str| {
-            let path = args.out.join(file);
-            IntervalLog::create(&path, tag, origin_ns).with_context(|| format!("writing {}", path.display()))
-        };
+        let hlog = |file: &str, tag: &str| IntervalLog::create(&args.out.join(file), tag, origin_ns);
         Ok(Robot {
             kin,
             e2e: hlog("end_to_end.hlog", "end_to_end_extra")?,
@@ -221,7 +233,7 @@ impl Robot {
 
     /// Writes `received.csv`'s end and the histogram logs' last
     /// intervals, and reports.
-    fn finish(mut self, args: &SimulatorArgs, ended_by: &str, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport> {
+    fn finish(mut self, args: &SimulatorArgs, ended_by: &str, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport, RobotError> {
         self.received_log.finish()?;
         let duration_s = (t_end - t_start) as f64 / 1e9;
         let e2e_hlog = args.out.join("end_to_end.hlog");

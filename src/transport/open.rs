@@ -8,8 +8,11 @@ use std::collections::VecDeque;
 use crate::transport::endpoint::{Endpoint, Payload};
 use crate::transport::ports::{FrameSink, FrameSource, MemoryPort, PortError};
 use crate::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
-use crate::transport::{Channel, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
-use anyhow::{Context, Result};
+use crate::transport::udp::UdpOpenError;
+use crate::transport::{
+    Channel, CleanupError, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, NodeOpenError, PublisherOpenError, Role, RunId, RunIdError,
+    SubscriberOpenError,
+};
 use std::cell::RefCell;
 use std::net::SocketAddr;
 use std::rc::Rc;
@@ -182,10 +185,21 @@ impl FeedbackEgress {
 
 /// Opens the feedback loop's two ports on `node`: the robot's `feedback`
 /// (subscriber) and the console's `feedback_out` (publisher).
-pub fn open_feedback(node: &IpcNode) -> Result<(FeedbackIngress, FeedbackEgress)> {
-    let out = node.publisher_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
-    let inp = node.subscriber_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
+pub fn open_feedback(node: &IpcNode) -> Result<(FeedbackIngress, FeedbackEgress), FeedbackOpenError> {
+    let out = node.publisher_of::<FeedbackSample>(Channel::FeedbackOut).map_err(FeedbackOpenError::Egress)?;
+    let inp = node.subscriber_of::<FeedbackSample>(Channel::Feedback).map_err(FeedbackOpenError::Ingress)?;
     Ok((FeedbackIngress::Iceoryx2(inp), FeedbackEgress::Iceoryx2(out)))
+}
+
+/// Why the feedback loop's ports could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum FeedbackOpenError {
+    /// The emulator → console port.
+    #[error("opening the emulator → console feedback port: {0}")]
+    Egress(#[source] PublisherOpenError),
+    /// The robot → emulator port.
+    #[error("opening the robot → emulator feedback port: {0}")]
+    Ingress(#[source] SubscriberOpenError),
 }
 
 /// How to open the emulator's transports, besides the endpoints.
@@ -227,6 +241,74 @@ pub struct ConsoleUnnamed {
     pub ingress: SocketAddr,
 }
 
+/// Why the emulator's transports could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// A UDP ingress without a console.
+    #[error(transparent)]
+    ConsoleUnnamed(#[from] ConsoleUnnamed),
+    /// A UDP socket could not be opened.
+    #[error("opening the UDP {side} socket: {source}")]
+    Udp {
+        /// `ingress` or `egress`.
+        side: &'static str,
+        /// Why.
+        #[source]
+        source: UdpOpenError,
+    },
+    /// An iceoryx2 side without a run to open it in.
+    #[error("an iceoryx2 endpoint needs a run id (ingress {ingress}, egress {egress})")]
+    RunIdNeeded {
+        /// Where frames come from.
+        ingress: Endpoint,
+        /// Where they go.
+        egress: Endpoint,
+    },
+    /// The iceoryx2 node could not be opened.
+    #[error(transparent)]
+    Node(#[from] NodeError),
+    /// The emulator → simulator port could not be opened.
+    #[error("opening the emulator → simulator port: {0}")]
+    Egress(#[source] PublisherOpenError),
+    /// The console → emulator port could not be opened.
+    #[error("opening the console → emulator port: {0}")]
+    Ingress(#[source] SubscriberOpenError),
+    /// No robot subscribed in time (`--wait-for-peer-s`).
+    #[error("no robot subscribed to the emulator → simulator port within {wait_s} s")]
+    NoRobot {
+        /// How long it waited, s.
+        wait_s: f64,
+    },
+    /// Told to stop while waiting for a robot.
+    #[error("stopped while waiting for a robot")]
+    Stopped,
+}
+
+/// Why this process's iceoryx2 node could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    /// The run id is not one netfi accepts.
+    #[error("run id `{run_id}`: {source}")]
+    RunId {
+        /// What was given.
+        run_id: String,
+        /// What is wrong with it.
+        #[source]
+        source: RunIdError,
+    },
+    /// iceoryx2 refused the node.
+    #[error("opening the {role} node of run `{run_id}`: {source}")]
+    Open {
+        /// The process's role.
+        role: Role,
+        /// The run.
+        run_id: String,
+        /// Why.
+        #[source]
+        source: NodeOpenError,
+    },
+}
+
 /// The emulator's transports, open.
 pub struct Transports {
     /// Where frames come from.
@@ -266,7 +348,7 @@ impl Transports {
 /// [`UdpPort::try_clone`] keeps that, and [`UdpPort::accept_only`] on it
 /// names another robot address). What either refuses is counted per
 /// sender ([`UdpPort::refused`], [`UdpSource::foreign`]).
-pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transports> {
+pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transports, OpenError> {
     // `Into`: the field may hold an address or a whole policy.
     let console: Option<ConsolePolicy> = w.console_from.map(Into::into);
     let console = match (ingress.udp(), console) {
@@ -281,7 +363,7 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
                 Some(local) => UdpPort::bind(local, &opts),
                 None => UdpPort::bind_towards(peer, &opts),
             }
-            .context("opening the UDP egress socket")?;
+            .map_err(|source| OpenError::Udp { side: "egress", source })?;
             // Only the robot answers on the way back.
             port.accept_only(peer);
             Some(UdpSink::new(port, peer, arena.clone()))
@@ -290,7 +372,7 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
     };
     let source = match ingress.udp() {
         Some(addr) => {
-            let port = UdpPort::bind(addr, &w.udp).context("opening the UDP ingress socket")?;
+            let port = UdpPort::bind(addr, &w.udp).map_err(|source| OpenError::Udp { side: "ingress", source })?;
             if console == ConsolePolicy::FirstDatagram {
                 eprintln!(
                     "emulator: WARNING: the UDP ingress udp://{} will take the first sender as its console (--console-from first): \
@@ -309,11 +391,11 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
     let node = match (source.is_some() && sink.is_some(), &w.run_id) {
         (true, _) => None,
         (false, Some(run_id)) => Some(open_node(run_id, Role::Emulator)?),
-        (false, None) => anyhow::bail!("an iceoryx2 endpoint needs a run id (ingress {ingress}, egress {egress})"),
+        (false, None) => return Err(OpenError::RunIdNeeded { ingress: *ingress, egress: *egress }),
     };
     let mut egress = match (sink, &node) {
         (Some(s), _) => Egress::Udp(s),
-        (None, Some(n)) => Egress::Iceoryx2(n.publisher(Channel::Emulator).context("opening the emulator → simulator port")?),
+        (None, Some(n)) => Egress::Iceoryx2(n.publisher(Channel::Emulator).map_err(OpenError::Egress)?),
         (None, None) => unreachable!("a node is open when a side is iceoryx2"),
     };
     if let (Some(wait_ns), Egress::Iceoryx2(_)) = (w.wait_for_peer_ns, &egress) {
@@ -322,32 +404,31 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
         let deadline = crate::clock::now_ns() + wait_ns;
         while egress.peers() == Some(0) {
             if crate::clock::now_ns() > deadline {
-                anyhow::bail!("no robot subscribed to the emulator → simulator port within {} s", wait_ns as f64 / 1e9);
+                return Err(OpenError::NoRobot { wait_s: wait_ns as f64 / 1e9 });
             }
             if node.as_ref().is_some_and(|n| n.termination_requested()) {
-                anyhow::bail!("stopped while waiting for a robot");
+                return Err(OpenError::Stopped);
             }
             std::thread::sleep(std::time::Duration::from_millis(1));
         }
     }
     let ingress = match (source, &node) {
         (Some(s), _) => Ingress::Udp(s),
-        (None, Some(n)) => Ingress::Iceoryx2(n.subscriber(Channel::Console).context("opening the console → emulator port")?),
+        (None, Some(n)) => Ingress::Iceoryx2(n.subscriber(Channel::Console).map_err(OpenError::Ingress)?),
         (None, None) => unreachable!("a node is open when a side is iceoryx2"),
     };
     Ok(Transports { ingress, egress, node, arena })
 }
 
 /// Opens this process's node in run `run_id`.
-pub fn open_node(run_id: &str, role: Role) -> Result<IpcNode> {
-    let run = RunId::new(run_id).with_context(|| format!("run id `{run_id}`"))?;
-    let node = IpcNode::open(&IpcConfig::new(run), role).with_context(|| format!("opening the {role} node of run `{run_id}`"))?;
-    Ok(node)
+pub fn open_node(run_id: &str, role: Role) -> Result<IpcNode, NodeError> {
+    let run = RunId::new(run_id).map_err(|source| NodeError::RunId { run_id: run_id.to_string(), source })?;
+    IpcNode::open(&IpcConfig::new(run), role).map_err(|source| NodeError::Open { role, run_id: run_id.to_string(), source })
 }
 
 /// Removes what killed processes of earlier runs left on this host; returns
 /// how many dead nodes were removed.
-pub fn cleanup_stale() -> Result<usize> {
-    let reports = crate::transport::cleanup_dead_runs(|_| true).context("cleaning up after earlier runs")?;
+pub fn cleanup_stale() -> Result<usize, CleanupError> {
+    let reports = crate::transport::cleanup_dead_runs(|_| true)?;
     Ok(reports.iter().map(|(_, r)| r.removed.len()).sum())
 }

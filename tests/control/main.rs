@@ -4,17 +4,16 @@
 //! The runs are serialized: each has a busy-waiting emulator pinned to a
 //! core, and a 2-core machine has room for one at a time.
 
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
+use netfi_bin::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
 
 fn run_id(name: &str) -> String {
     format!("ctl-{}-{name}", std::process::id())

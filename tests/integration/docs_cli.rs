@@ -1,11 +1,7 @@
 //! What a user gets from `netfi completions`, `netfi man`, and times with
 //! units on the command line and in scenario files.
 
-use std::process::Command;
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
+use crate::netfi_bin::netfi;
 
 #[test]
 fn completions_cover_the_commands_and_their_flags() {

@@ -1,3 +1,5 @@
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
 mod capture;
 mod core;
 mod docs_cli;

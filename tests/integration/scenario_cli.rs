@@ -1,10 +1,6 @@
 //! The `netfi scenario` command as a user runs it.
 
-use std::process::Command;
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
+use crate::netfi_bin::netfi;
 
 #[test]
 fn check_json_has_the_documented_fields() {

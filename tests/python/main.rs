@@ -10,6 +10,9 @@
 //!
 //! The runs are serialized: each has a busy-waiting emulator pinned to a core.
 
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
+use netfi_bin::netfi;
 use netfi::sample::FrameSample;
 use netfi::transport::{Channel, IpcConfig, Role, RunId};
 use serde_json::Value;
@@ -22,10 +25,6 @@ static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
 }
 
 /// Whether python3 can import the bindings; prints why not when it cannot.

@@ -6,19 +6,18 @@
 //! test that changes the run's files works on its own copy. `foreign`: a
 //! run started by hand, without `netfi run`.
 
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
+use netfi_bin::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::{Mutex, OnceLock};
 
 mod foreign;
 
 /// Each run has a busy-waiting emulator pinned to a core: one at a time.
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
 
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-html-{}-{name}", std::process::id()));

@@ -5,6 +5,9 @@
 //! The runs are serialized: each has a busy-waiting emulator pinned to a
 //! core, and a 2-core machine has room for one at a time.
 
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
+use netfi_bin::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -18,10 +21,6 @@ mod streams;
 mod video;
 
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
 
 fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-it-{}-{name}", std::process::id()));

@@ -8,6 +8,7 @@
 //! the kernel dropped: `sent = entered + kernel drops at the ingress`, and
 //! `delivered = received by the robot + kernel drops at the robot`.
 
+use crate::netfi_bin::netfi;
 use crate::ONE_RUN_AT_A_TIME;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
@@ -19,10 +20,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-
-fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
 
 pub(crate) fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-udp-{}-{name}", std::process::id()));
@@ -124,6 +121,29 @@ pub(crate) fn receiver(port: UdpPort, stop: Arc<AtomicBool>, reply: Option<Vec<u
     })
 }
 
+/// The two ends of a bridge on loopback: the robot, collecting what
+/// reaches it (`robot`) until `stop` is set, and the console's socket.
+pub(crate) struct Ends {
+    pub(crate) console: UdpPort,
+    /// The console's address, for `--console-from`.
+    pub(crate) from: String,
+    /// The robot's address, for `--egress`.
+    pub(crate) egress: String,
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) robot: JoinHandle<(Vec<Vec<u8>>, UdpPort)>,
+}
+
+/// A robot that collects what reaches it, and a console socket.
+pub(crate) fn ends() -> Ends {
+    let robot = socket();
+    let egress = format!("udp://{}", robot.local_addr());
+    let stop = Arc::new(AtomicBool::new(false));
+    let robot = receiver(robot, stop.clone(), None);
+    let console = socket();
+    let from = console.local_addr().to_string();
+    Ends { console, from, egress, stop, robot }
+}
+
 /// A child process killed (if still running) when dropped, so a failing
 /// test leaves nothing behind.
 pub(crate) struct Reaped(pub(crate) Child);
@@ -147,6 +167,15 @@ impl Emulator {
         let mut cmd = netfi();
         cmd.arg("emulator");
         Emulator::start_command(cmd, out, args)
+    }
+
+    /// Starts a UDP bridge: `netfi emulator` applying `scenario` with
+    /// `seed`, taking the console's datagrams from `console_from` on an
+    /// ephemeral port and sending to `egress`, with `extra` flags.
+    pub(crate) fn bridge(out: &Path, scenario: &str, seed: &str, console_from: &str, egress: &str, extra: &[&str]) -> Emulator {
+        let mut args = vec!["--scenario", scenario, "--seed", seed, "--ingress", "udp://127.0.0.1:0", "--console-from", console_from, "--egress", egress];
+        args.extend_from_slice(extra);
+        Emulator::start(out, &args)
     }
 
     /// Starts `cmd` (which runs `netfi emulator`, perhaps through a wrapper
@@ -257,25 +286,7 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     let egress = format!("udp://{robot_addr}");
     let from = console.local_addr().to_string();
     let n = 3000u32;
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "PLM-2",
-            "--seed",
-            "3",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-            "--expected-frames",
-            "3000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "PLM-2", "3", &from, &egress, &["--idle-end-ms", "1000", "--expected-frames", "3000"]);
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), None);
     let sent = send_paced(&console, emu.ingress(), (0..n).map(|i| itp(i).to_vec()), 20);
@@ -340,25 +351,7 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     }
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--run-id",
-            &run_id,
-            "--scenario",
-            "PLM-1",
-            "--seed",
-            "8",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            "iceoryx2",
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "PLM-1", "8", &from, "iceoryx2", &["--run-id", &run_id, "--idle-end-ms", "1000"]);
     let sent = send_paced(&console, emu.ingress(), (0..1500).map(|i| itp(i).to_vec()), 20);
     let (e, udp) = emu.finish(Duration::from_secs(30));
     let t0 = Instant::now();
@@ -443,30 +436,9 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
     datagrams.extend((10..14).map(bad));
     for drop_bad in [true, false] {
         let out = out_dir(if drop_bad { "bad-drop" } else { "bad-pass" });
-        let robot = socket();
-        let egress = format!("udp://{}", robot.local_addr());
-        let stop = Arc::new(AtomicBool::new(false));
-        let rx = receiver(robot, stop.clone(), None);
-        let console = socket();
-        let from = console.local_addr().to_string();
-        let mut args = vec![
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-        ];
-        if drop_bad {
-            args.push("--drop-bad-checksum");
-        }
-        let emu = Emulator::start(&out, &args);
+        let Ends { console, from, egress, stop, robot: rx } = ends();
+        let extra: &[&str] = if drop_bad { &["--idle-end-ms", "1000", "--drop-bad-checksum"] } else { &["--idle-end-ms", "1000"] };
+        let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, extra);
         let sent = send_paced(&console, emu.ingress(), datagrams.clone(), 5);
         let (e, udp) = emu.finish(Duration::from_secs(30));
         stop.store(true, Ordering::Release);
@@ -495,30 +467,8 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
 fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let out = out_dir("flood");
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), None);
-    let console = socket();
-    let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--drop-bad-checksum",
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let Ends { console, from, egress, stop, robot: rx } = ends();
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--drop-bad-checksum", "--idle-end-ms", "1000"]);
     // 20,000 datagrams of random bytes and sizes (0..=1500), as fast as the
     // socket takes them: the kernel may drop some at the emulator's ingress,
     // and must count them.
@@ -563,25 +513,7 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let egress = format!("udp://{}", robot.local_addr());
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--payload",
-            "raw",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--idle-end-ms",
-            "1000",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--payload", "raw", "--idle-end-ms", "1000"]);
     // The robot answers each datagram with a 52-byte feedback frame.
     let feedback: Vec<u8> = (0..52u8).collect();
     let stop = Arc::new(AtomicBool::new(false));
@@ -630,27 +562,7 @@ fn a_return_scenario_shapes_the_way_back() {
     let egress = format!("udp://{}", robot.local_addr());
     let console = socket();
     let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &from,
-            "--egress",
-            &egress,
-            "--return-scenario",
-            scenario.to_str().unwrap(),
-            "--return-seed",
-            "11",
-            "--idle-end-ms",
-            "400",
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--return-scenario", scenario.to_str().unwrap(), "--return-seed", "11", "--idle-end-ms", "400"]);
     let stop = Arc::new(AtomicBool::new(false));
     let rx = receiver(robot, stop.clone(), Some(vec![9u8; 52]));
     let console_stop = Arc::new(AtomicBool::new(false));
@@ -690,16 +602,8 @@ fn a_return_scenario_shapes_the_way_back() {
 fn a_stopped_bridge_reports_what_it_held() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let out = out_dir("held");
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), None);
-    let console = socket();
-    let from = console.local_addr().to_string();
-    let emu = Emulator::start(
-        &out,
-        &["--scenario", "DLM-2", "--seed", "2", "--ingress", "udp://127.0.0.1:0", "--console-from", &from, "--egress", &egress],
-    );
+    let Ends { console, from, egress, stop, robot: rx } = ends();
+    let emu = Emulator::bridge(&out, "DLM-2", "2", &from, &egress, &[]);
     let sent = send_paced(&console, emu.ingress(), (0..200).map(|i| itp(i).to_vec()), 20);
     std::thread::sleep(Duration::from_millis(50));
     // DLM-2 holds every frame 210 ms or more: stopped now, all are held.

@@ -53,21 +53,7 @@ fn run(name: &str, console_from: Option<&str>, h: Hostile) -> Outcome {
     let (robot, console, intruder, stranger) = (socket(), socket(), socket(), socket());
     let egress = format!("udp://{}", robot.local_addr());
     let from = console_from.map_or_else(|| console.local_addr().to_string(), str::to_string);
-    let args = [
-        "--scenario",
-        "Normal",
-        "--seed",
-        "1",
-        "--ingress",
-        "udp://127.0.0.1:0",
-        "--console-from",
-        &from,
-        "--egress",
-        &egress,
-        "--idle-end-ms",
-        "1000",
-    ];
-    let emu = Emulator::start(&out, &args);
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--idle-end-ms", "1000"]);
     let feedback: Vec<u8> = (0..52u8).collect();
     let stop = Arc::new(AtomicBool::new(false));
     let robot_rx = receiver(robot, stop.clone(), Some(feedback.clone()));
@@ -162,12 +148,8 @@ fn a_robot_answering_from_another_port_is_refused_unless_named_with_robot_from()
         let (robot_in, robot_out, console) = (socket(), socket(), socket());
         let (egress, from) = (format!("udp://{}", robot_in.local_addr()), console.local_addr().to_string());
         let robot_from = robot_out.local_addr().to_string();
-        let mut args = vec!["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--console-from", &from];
-        args.extend(["--egress", &egress, "--idle-end-ms", "1000"]);
-        if named {
-            args.extend(["--robot-from", &robot_from]);
-        }
-        let emu = Emulator::start(&out, &args);
+        let extra: &[&str] = if named { &["--idle-end-ms", "1000", "--robot-from", &robot_from] } else { &["--idle-end-ms", "1000"] };
+        let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, extra);
         let egress_local = emu.egress_local();
         let stop = Arc::new(AtomicBool::new(false));
         let robot = {

@@ -6,6 +6,8 @@
 //! Every test that runs an emulator holds [`ONE_RUN_AT_A_TIME`]: a 2-core
 //! machine has room for one pinned, busy-waiting emulator at a time.
 
+#[path = "../common/netfi.rs"]
+mod netfi_bin;
 use std::sync::Mutex;
 
 mod bridge;

@@ -138,23 +138,7 @@ fn sockperf_ping_pong_through_the_bridge() {
     let direct = ping(server_port);
     let egress = format!("udp://127.0.0.1:{server_port}");
     let console = format!("127.0.0.1:{client_port}");
-    let emu = Emulator::start(
-        &out,
-        &[
-            "--scenario",
-            "Normal",
-            "--seed",
-            "1",
-            "--payload",
-            "raw",
-            "--ingress",
-            "udp://127.0.0.1:0",
-            "--console-from",
-            &console,
-            "--egress",
-            &egress,
-        ],
-    );
+    let emu = Emulator::bridge(&out, "Normal", "1", &console, &egress, &["--payload", "raw"]);
     let through = ping(emu.ingress().port());
     let (e, udp) = emu.stop();
     eprintln!(

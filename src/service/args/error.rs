@@ -18,8 +18,8 @@ pub enum ArgsError {
         why: String,
     },
     /// The video flags, as [`VideoArgs::validate`](crate::service::video::VideoArgs::validate) says.
-    #[error("{0:#}")]
-    Video(anyhow::Error),
+    #[error(transparent)]
+    Video(#[from] crate::service::video::VideoArgsError),
     /// Video over UDP.
     #[error("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's")]
     VideoNeedsIceoryx2,

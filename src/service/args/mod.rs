@@ -39,4 +39,4 @@ pub use udp::UdpArgs;
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -95,7 +95,7 @@ impl RunArgs {
     /// Checks what the flags' own parsers cannot: the video flags, video
     /// with one stream, and a stream that fits in a run.
     pub fn validate(&self) -> Result<(), ArgsError> {
-        self.video.validate().map_err(ArgsError::Video)?;
+        self.video.validate()?;
         if self.video.on() && self.stream.streams > 1 {
             return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
         }

@@ -166,7 +166,7 @@ impl EmulatorArgs {
         if self.stream.several() && udp {
             return Err(ArgsError::StreamsNeedIceoryx2);
         }
-        self.video.validate().map_err(ArgsError::Video)?;
+        self.video.validate()?;
         if self.video.on() && udp {
             return Err(ArgsError::VideoNeedsIceoryx2);
         }

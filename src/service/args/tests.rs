@@ -1,14 +1,16 @@
 use super::*;
 use clap::{CommandFactory, Parser};
 
+/// The four commands that take these arguments, as the `netfi` command
+/// line declares them (the plan's tests parse what it renders with it).
 #[derive(Parser)]
-struct Cli {
+pub(crate) struct Cli {
     #[command(subcommand)]
-    cmd: Cmd,
+    pub(crate) cmd: Cmd,
 }
 
 #[derive(clap::Subcommand)]
-enum Cmd {
+pub(crate) enum Cmd {
     Run(RunArgs),
     Console(ConsoleArgs),
     Emulator(EmulatorArgs),

@@ -15,6 +15,7 @@ use std::cell::Cell;
 use std::net::SocketAddr;
 use std::rc::Rc;
 
+
 /// The most frames one poll of the forward stream takes in: a burst is
 /// taken whole up to this, so a fast stream pays the turn's fixed work (the
 /// release check, the reverse paths' polls, the loop's own bookkeeping)

@@ -1,19 +1,6 @@
 use super::*;
+use crate::service::args::tests::{Cli, Cmd};
 use clap::Parser;
-
-#[derive(Parser)]
-struct Cli {
-    #[command(subcommand)]
-    cmd: Cmd,
-}
-
-#[derive(clap::Subcommand)]
-enum Cmd {
-    Run(RunArgs),
-    Console(ConsoleArgs),
-    Emulator(EmulatorArgs),
-    Simulator(SimulatorArgs),
-}
 
 fn run_args(argv: &[&str]) -> RunArgs {
     match Cli::parse_from([&["netfi", "run"], argv].concat()).cmd {

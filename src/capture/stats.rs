@@ -1,0 +1,146 @@
+//! What a capture holds, counted record by record, and when it is refused.
+
+use super::{CaptureRecord, MAX_GAP_NS, MAX_STEP_BACKWARD_NS};
+use crate::frame::SURGEON_ENGAGED;
+
+/// Summary of a capture, built record by record with [`CaptureStats::push`].
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct CaptureStats {
+    /// Records (frames).
+    pub frames: u64,
+    /// Time of the first record, ns.
+    pub first_ns: u64,
+    /// Time of the last record, ns.
+    pub last_ns: u64,
+    /// Longest interval between consecutive records, ns.
+    pub gap_ns_max: u64,
+    /// Records stamped earlier than the one before them (a wall clock may step
+    /// back); such intervals count as zero in `gap_ns_max`.
+    pub time_steps_backward: u64,
+    /// Frames whose carried checksum disagrees with their fields.
+    pub checksum_failures: u64,
+    /// Frames whose `surgeon_mode` is not engaged (1): their increments do
+    /// not apply.
+    pub clutch_released_frames: u64,
+    /// Records whose dropped flag is set.
+    pub dropped_flagged: u64,
+    /// Longest step backwards in time, ns.
+    #[serde(default)]
+    pub step_backward_ns_max: u64,
+    /// Steps backwards longer than [`MAX_STEP_BACKWARD_NS`].
+    #[serde(default)]
+    pub steps_backward_over_limit: u64,
+    /// Gaps forwards longer than [`MAX_GAP_NS`].
+    #[serde(default)]
+    pub gaps_over_limit: u64,
+    /// Whether every LZ4 frame of the file carries a content checksum (set
+    /// by [`load`] and [`parse`]; a loaded capture matched them).
+    #[serde(default)]
+    pub content_checksum: bool,
+    /// The LZ4 frames the file holds (set by [`load`] and [`parse`]; a
+    /// recorder that flushes every batch writes one per batch).
+    #[serde(default)]
+    pub lz4_frames: u64,
+}
+
+impl CaptureStats {
+    /// Accounts for one more record.
+    pub fn push(&mut self, record: &CaptureRecord) {
+        if self.frames == 0 {
+            self.first_ns = record.time_ns;
+        } else if record.time_ns < self.last_ns {
+            let back = self.last_ns - record.time_ns;
+            self.time_steps_backward += 1;
+            self.step_backward_ns_max = self.step_backward_ns_max.max(back);
+            self.steps_backward_over_limit += u64::from(back > MAX_STEP_BACKWARD_NS);
+        } else {
+            let gap = record.time_ns - self.last_ns;
+            self.gap_ns_max = self.gap_ns_max.max(gap);
+            self.gaps_over_limit += u64::from(gap > MAX_GAP_NS);
+        }
+        self.last_ns = record.time_ns;
+        self.frames += 1;
+        let view = record.view();
+        if !view.verify_checksum() {
+            self.checksum_failures += 1;
+        }
+        if view.surgeon_mode() != SURGEON_ENGAGED {
+            self.clutch_released_frames += 1;
+        }
+        if record.is_dropped() {
+            self.dropped_flagged += 1;
+        }
+    }
+
+    /// Statistics of a slice of records.
+    pub fn from_records(records: &[CaptureRecord]) -> CaptureStats {
+        let mut stats = CaptureStats::default();
+        records.iter().for_each(|r| stats.push(r));
+        stats
+    }
+
+    /// Why a capture with these counts is refused, by the rule in the
+    /// module docs; `None` when it is accepted.
+    pub fn refusal(&self) -> Option<String> {
+        let mut why = Vec::new();
+        if self.checksum_failures > 0 && !self.content_checksum {
+            why.push(format!(
+                "{} of {} frames have a wrong ITP checksum and the file has no LZ4 content checksum to show it is intact",
+                self.checksum_failures, self.frames
+            ));
+        }
+        if self.steps_backward_over_limit > 0 {
+            why.push(format!(
+                "{} time step(s) backwards of more than {} s (longest {:.3} s)",
+                self.steps_backward_over_limit,
+                MAX_STEP_BACKWARD_NS / 1_000_000_000,
+                self.step_backward_ns_max as f64 * 1e-9
+            ));
+        }
+        if self.gaps_over_limit > 0 {
+            why.push(format!(
+                "{} gap(s) of more than {} s between records (longest {:.3} s)",
+                self.gaps_over_limit,
+                MAX_GAP_NS / 1_000_000_000,
+                self.gap_ns_max as f64 * 1e-9
+            ));
+        }
+        (!why.is_empty()).then(|| why.join("; "))
+    }
+
+    /// What is accepted but worth saying, one line each.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if self.checksum_failures > 0 && self.content_checksum {
+            w.push(format!("{} frames were recorded with a wrong ITP checksum", self.checksum_failures));
+        }
+        if self.time_steps_backward > 0 && self.steps_backward_over_limit == 0 {
+            w.push(format!(
+                "{} time step(s) backwards (longest {:.6} s); replayed as no wait",
+                self.time_steps_backward,
+                self.step_backward_ns_max as f64 * 1e-9
+            ));
+        }
+        w
+    }
+
+    /// Time from the first record to the last, ns.
+    pub fn duration_ns(&self) -> u64 {
+        self.last_ns.saturating_sub(self.first_ns)
+    }
+
+    /// Time from the first record to the last, s.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_ns() as f64 * 1e-9
+    }
+
+    /// Mean frame rate, Hz: intervals per second, `(frames − 1) / duration`;
+    /// 0 with fewer than two frames or no elapsed time.
+    pub fn rate_hz_mean(&self) -> f64 {
+        if self.frames < 2 || self.duration_ns() == 0 {
+            0.0
+        } else {
+            (self.frames - 1) as f64 / self.duration_s()
+        }
+    }
+}
