@@ -46,6 +46,6 @@ pub use ipc::{
     cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,
     DeadPeer, FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber,
     IpcConfig, IpcLogLevel, IpcNode, IpcPayload, NodeOpenError, PublisherOpenError, PublisherStats, Role,
-    RunId, RunIdError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
+    RunId, RunIdError, ServiceOpenError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,
     MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };

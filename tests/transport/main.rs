@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::{
     cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode,
-    PublisherOpenError, Role, RunId, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL,
+    PublisherOpenError, Role, RunId, ServiceOpenError, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL,
     SUBSCRIBER_BUFFER_FRAMES,
 };
 
@@ -317,7 +317,7 @@ fn a_channel_of_another_sample_type_is_refused() {
     let node = IpcNode::open(&config, Role::Console).unwrap();
     let err = node.publisher(Channel::Console).unwrap_err();
     assert!(
-        matches!(err, PublisherOpenError::Incompatible { .. }),
+        matches!(err, PublisherOpenError::Open(ServiceOpenError::Incompatible { .. })),
         "{err:?}"
     );
     assert!(err
@@ -325,7 +325,7 @@ fn a_channel_of_another_sample_type_is_refused() {
         .contains(&config.service_name(Channel::Console)));
     let err = node.subscriber(Channel::Console).unwrap_err();
     assert!(
-        matches!(err, SubscriberOpenError::Incompatible { .. }),
+        matches!(err, SubscriberOpenError::Open(ServiceOpenError::Incompatible { .. })),
         "{err:?}"
     );
     // The other channel is unaffected.

@@ -102,6 +102,7 @@ pub use liveness::{
 };
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
+pub use service::ServiceOpenError;
 pub use subscriber::{FrameRecvError, FrameSubscriber, SubscriberOpenError, SubscriberStats};
 
 /// The iceoryx2 service type of every port (see the module docs).

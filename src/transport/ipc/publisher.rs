@@ -5,11 +5,10 @@ use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, LoanError, SendError};
 use iceoryx2::prelude::{BackpressureStrategy, PortFactory as _};
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use std::mem::MaybeUninit;
 
-use super::service::{is_incompatible, mismatch, open_service};
+use super::service::{open_checked, ServiceOpenError};
 use super::IpcPayload;
 use super::{
     Channel, Ipc, IpcConfig, RunId, MAX_PUBLISHERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES,
@@ -60,35 +59,10 @@ pub struct PublisherStats {
 /// Why [`IpcNode::publisher`](super::IpcNode::publisher) failed.
 #[derive(Debug, thiserror::Error)]
 pub enum PublisherOpenError {
-    /// The channel exists with another sample type or layout, other limits,
-    /// or from another iceoryx2 version: the processes of the run were not
-    /// built from the same netfi.
-    #[error(
-        "service `{service}` of run `{run}` exists but is incompatible: {detail} (iceoryx2: {source}); every process of a run must speak the same interface version"
-    )]
-    Incompatible {
-        /// The service name.
-        service: String,
-        /// Both sides' payload types: the existing service's and this build's.
-        detail: String,
-        /// The run.
-        run: String,
-        /// The iceoryx2 failure.
-        #[source]
-        source: PublishSubscribeOpenOrCreateError,
-    },
-    /// The channel could not be opened or created for another reason
-    /// (permissions, too many processes attached, a corrupted service).
-    #[error("cannot open or create service `{service}` of run `{run}` (iceoryx2: {source})")]
-    Service {
-        /// The service name.
-        service: String,
-        /// The run.
-        run: String,
-        /// The iceoryx2 failure.
-        #[source]
-        source: PublishSubscribeOpenOrCreateError,
-    },
+    /// The channel's service could not be opened (incompatible, or another
+    /// cause).
+    #[error(transparent)]
+    Open(#[from] ServiceOpenError),
     /// The channel already has its one publisher: another process with the
     /// same role is running in this run, or died and was not yet cleaned up.
     #[error(
@@ -179,23 +153,7 @@ impl<T: IpcPayload> FramePublisher<T> {
     ) -> Result<Self, PublisherOpenError> {
         let service_name = config.service_name(channel);
         let run = config.run_id();
-        let service = open_service(node, config, channel).map_err(|source| {
-            let (service, run) = (service_name.clone(), run.to_string());
-            if is_incompatible(&source) {
-                PublisherOpenError::Incompatible {
-                    detail: mismatch::<T>(config, channel),
-                    service,
-                    run,
-                    source,
-                }
-            } else {
-                PublisherOpenError::Service {
-                    service,
-                    run,
-                    source,
-                }
-            }
-        })?;
+        let service = open_checked::<T>(node, config, channel)?;
         let port = service
             .publisher_builder()
             .max_loaned_samples(PUBLISHER_MAX_LOANED_SAMPLES)

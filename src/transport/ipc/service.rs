@@ -37,6 +37,57 @@ pub(super) fn open_service<T: IpcPayload>(
         .open_or_create()
 }
 
+/// Why a channel's service could not be opened, for either end.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceOpenError {
+    /// The channel exists with another sample type or layout, other limits,
+    /// or from another iceoryx2 version: the processes of the run were not
+    /// built from the same netfi.
+    #[error(
+        "service `{service}` of run `{run}` exists but is incompatible: {detail} (iceoryx2: {source}); every process of a run must speak the same interface version"
+    )]
+    Incompatible {
+        /// The service name.
+        service: String,
+        /// Both sides' payload types: the existing service's and this build's.
+        detail: String,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// The channel could not be opened or created for another reason
+    /// (permissions, too many processes attached, a corrupted service).
+    #[error("cannot open or create service `{service}` of run `{run}` (iceoryx2: {source})")]
+    Service {
+        /// The service name.
+        service: String,
+        /// The run.
+        run: String,
+        /// The iceoryx2 failure.
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+}
+
+/// [`open_service`], its failure told apart: an incompatible service (with
+/// both sides' payload types) or another cause.
+pub(super) fn open_checked<T: IpcPayload>(
+    node: &Node<Ipc>,
+    config: &IpcConfig,
+    channel: Channel,
+) -> Result<PortFactory<Ipc, T, ()>, ServiceOpenError> {
+    open_service(node, config, channel).map_err(|source| {
+        let (service, run) = (config.service_name(channel), config.run_id().to_string());
+        if is_incompatible(&source) {
+            ServiceOpenError::Incompatible { detail: mismatch::<T>(config, channel), service, run, source }
+        } else {
+            ServiceOpenError::Service { service, run, source }
+        }
+    })
+}
+
 /// Whether an open-or-create failure means the existing service does not
 /// match what this build expects.
 pub(super) fn is_incompatible(e: &PublishSubscribeOpenOrCreateError) -> bool {

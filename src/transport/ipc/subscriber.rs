@@ -5,10 +5,9 @@ use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections as _};
 use iceoryx2::port::ReceiveError;
 use iceoryx2::prelude::PortFactory as _;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use super::service::{is_incompatible, mismatch, open_service};
+use super::service::{open_checked, ServiceOpenError};
 use super::IpcPayload;
 use super::{
     Channel, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
@@ -38,35 +37,10 @@ pub struct SubscriberStats {
 /// Why [`IpcNode::subscriber`](super::IpcNode::subscriber) failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SubscriberOpenError {
-    /// The channel exists with another sample type or layout, other limits,
-    /// or from another iceoryx2 version: the processes of the run were not
-    /// built from the same netfi.
-    #[error(
-        "service `{service}` of run `{run}` exists but is incompatible: {detail} (iceoryx2: {source}); every process of a run must speak the same interface version"
-    )]
-    Incompatible {
-        /// The service name.
-        service: String,
-        /// Both sides' payload types: the existing service's and this build's.
-        detail: String,
-        /// The run.
-        run: String,
-        /// The iceoryx2 failure.
-        #[source]
-        source: PublishSubscribeOpenOrCreateError,
-    },
-    /// The channel could not be opened or created for another reason
-    /// (permissions, too many processes attached, a corrupted service).
-    #[error("cannot open or create service `{service}` of run `{run}` (iceoryx2: {source})")]
-    Service {
-        /// The service name.
-        service: String,
-        /// The run.
-        run: String,
-        /// The iceoryx2 failure.
-        #[source]
-        source: PublishSubscribeOpenOrCreateError,
-    },
+    /// The channel's service could not be opened (incompatible, or another
+    /// cause).
+    #[error(transparent)]
+    Open(#[from] ServiceOpenError),
     /// The channel already has its maximum number of subscribers.
     #[error(
         "service `{service}` of run `{run}` already has {max} subscribers: is another {consumer} of this run running?"
@@ -136,23 +110,7 @@ impl<T: IpcPayload> FrameSubscriber<T> {
     ) -> Result<Self, SubscriberOpenError> {
         let service_name = config.service_name(channel);
         let run = config.run_id();
-        let service = open_service(node, config, channel).map_err(|source| {
-            let (service, run) = (service_name.clone(), run.to_string());
-            if is_incompatible(&source) {
-                SubscriberOpenError::Incompatible {
-                    detail: mismatch::<T>(config, channel),
-                    service,
-                    run,
-                    source,
-                }
-            } else {
-                SubscriberOpenError::Service {
-                    service,
-                    run,
-                    source,
-                }
-            }
-        })?;
+        let service = open_checked::<T>(node, config, channel)?;
         let port = service
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER_FRAMES)
