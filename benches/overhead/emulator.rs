@@ -48,6 +48,7 @@ pub fn args(s: &Settings, scenario: &str, dir: &Path, expected_frames: u64, run_
         control: ControlArgs { telemetry_ms: s.telemetry_ms, reorder_queue: false, no_control: s.telemetry_ms == 0 || !iceoryx2 },
         stream: Default::default(),
         video: Default::default(),
+        ros2: Default::default(),
     }
 }
 

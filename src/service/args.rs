@@ -216,6 +216,8 @@ pub struct EmulatorArgs {
     pub stream: StreamArgs,
     #[command(flatten)]
     pub video: crate::service::video::VideoArgs,
+    #[command(flatten)]
+    pub ros2: crate::service::emulator::ros2::Ros2Args,
 }
 
 /// How many console → robot streams the one emulator serves, and their

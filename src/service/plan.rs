@@ -172,6 +172,7 @@ impl Plan {
             control: args.control.clone(),
             stream: Default::default(),
             video: args.video.clone(),
+            ros2: Default::default(),
         };
         let console = ConsoleArgs {
             run_id: run_id.clone(),

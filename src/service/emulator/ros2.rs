@@ -1,0 +1,672 @@
+//! The emulator's lanes of ROS 2 topics (`--ros2-topic IN=OUT`, one lane
+//! each): the emulator joins the ROS 2 domain as one DDS participant, and
+//! each lane relays the messages of one topic to another through its own
+//! scenario, seed and account, with, where `--ros2-return` names one, a
+//! return topic through `--return-scenario`. The type and QoS of each topic
+//! are the publisher's as discovered, or given (`--ros2-type`,
+//! `--ros2-qos`); a publisher or subscriber that cannot match them is an
+//! error at start, and a logged event later. Beside each lane's
+//! `emulator.json`, `ros2.json` says what the lane relayed with which QoS,
+//! who came and left, and why its stream ended.
+
+use crate::scenario::Scenario;
+use crate::service::args::{millis, seconds, EmulatorArgs};
+use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
+use crate::service::emulator::lane::Lane;
+use crate::service::emulator::path::{Path, Reverse};
+use crate::service::emulator::reverse::PathPlan;
+use crate::service::emulator::ros2_topic::{Forward, Return, StreamEnd, Topic, TopicPorts};
+use crate::service::emulator::run;
+use crate::service::schema::EmulatorReport;
+use crate::transport::ros2::qos::{self, Summary};
+use crate::transport::ros2::{Happened, Remote, Role, Ros2Node, TopicName, TypeName};
+use crate::transport::{IpcConfig, RunId};
+use anyhow::{bail, Context};
+use clap::Args;
+use rustdds::QosPolicies;
+use serde::Serialize;
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::rc::Rc;
+
+/// The emulator's ROS 2 flags (`netfi emulator --ros2-topic …`).
+#[derive(Debug, Clone, Default, PartialEq, Args)]
+pub struct Ros2Args {
+    /// Relay the messages of ROS 2 topic IN to topic OUT (any message type,
+    /// byte for byte) through the scenario; repeatable: each pair is a lane
+    /// of its own (scenario: `--stream-scenario K=…`, seed derived from
+    /// --seed, files in `<out>/stream-K/` when more than one).
+    #[arg(long, value_name = "IN=OUT")]
+    pub ros2_topic: Vec<String>,
+    /// Lane K's return topic, the K-th given: messages on IN (the robot's
+    /// state) go to OUT (the console's) through --return-scenario.
+    #[arg(long, value_name = "IN=OUT")]
+    pub ros2_return: Vec<String>,
+    /// The message type on TOPIC (a topic the emulator reads), e.g.
+    /// `/MTMR/measured_cp=geometry_msgs/msg/PoseStamped`; a publisher of
+    /// another type is an error. Default: the publisher's.
+    #[arg(long, value_name = "TOPIC=TYPE")]
+    pub ros2_type: Vec<String>,
+    /// The QoS on TOPIC: on a topic the emulator reads, what its reader
+    /// requests; on one it writes, what its writer offers. A list of
+    /// `reliable`/`best_effort`, `volatile`/`transient_local`,
+    /// `depth=N`/`keep_all`. Default: the publisher's.
+    #[arg(long, value_name = "TOPIC=QOS")]
+    pub ros2_qos: Vec<String>,
+    /// The ROS 2 domain (default: $ROS_DOMAIN_ID, else 0).
+    #[arg(long, value_name = "ID")]
+    pub ros2_domain: Option<u16>,
+    /// The largest serialized message relayed, bytes; a larger one is the
+    /// drop `too_large`. Each lane holds its queue's worth of slots of this
+    /// size.
+    #[arg(long, default_value_t = DEFAULT_MAX_BYTES, value_name = "BYTES")]
+    pub ros2_max_bytes: usize,
+    /// How long to wait at start for the publisher of each topic read, to
+    /// learn its type and QoS (with `--ros2-type` given, the lane opens
+    /// without one after this).
+    #[arg(long, default_value = "10", value_parser = seconds, value_name = "S")]
+    pub ros2_discovery_s: f64,
+    /// How long a lane's publishers may all be gone before its stream ends
+    /// (a node restarted within it continues the run).
+    #[arg(long, default_value = "1000", value_parser = millis, value_name = "MS")]
+    pub ros2_linger_ms: f64,
+}
+
+/// Default `--ros2-max-bytes`: 64 KiB.
+pub const DEFAULT_MAX_BYTES: usize = 1 << 16;
+
+/// Default release-queue capacity of a ROS 2 lane: 4096 messages (4 s at
+/// 1 kHz; 256 MiB of address space at 64 KiB a slot, of which only what
+/// messages touch becomes resident).
+pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
+
+/// The most memory a lane's slots may reserve: 64 GiB.
+const SLOTS_BYTES_MAX: usize = 64 << 30;
+
+/// What the return path's seed is derived from, with the lane's seed, when
+/// not given.
+pub const SEED_TAG: u64 = 0x726f_7332_7265_7475;
+
+impl Ros2Args {
+    /// Whether the emulator relays ROS 2 topics.
+    pub fn on(&self) -> bool {
+        !self.ros2_topic.is_empty()
+    }
+}
+
+/// One lane's topics, as the arguments name them.
+#[derive(Debug, Clone, PartialEq)]
+struct LaneTopics {
+    forward: (TopicName, TopicName),
+    ret: Option<(TopicName, TopicName)>,
+}
+
+/// `IN=OUT`.
+fn pair(flag: &str, text: &str) -> anyhow::Result<(TopicName, TopicName)> {
+    let (a, b) = text.split_once('=').with_context(|| format!("{flag} {text}: expected IN=OUT, two topic names"))?;
+    Ok((TopicName::parse(a.trim()).with_context(|| format!("{flag} {text}"))?, TopicName::parse(b.trim()).with_context(|| format!("{flag} {text}"))?))
+}
+
+/// `TOPIC=VALUE` flags, by topic.
+fn by_topic(flag: &str, texts: &[String]) -> anyhow::Result<BTreeMap<TopicName, String>> {
+    let mut m = BTreeMap::new();
+    for text in texts {
+        let (t, v) = text.split_once('=').with_context(|| format!("{flag} {text}: expected TOPIC=VALUE"))?;
+        let t = TopicName::parse(t.trim()).with_context(|| format!("{flag} {text}"))?;
+        anyhow::ensure!(m.insert(t.clone(), v.trim().to_string()).is_none(), "{flag}: {t} given twice");
+    }
+    Ok(m)
+}
+
+/// The ROS 2 arguments resolved: each lane's topics, the given types and
+/// QoS by topic, and the domain.
+#[derive(Debug, Clone)]
+struct Plan {
+    lanes: Vec<LaneTopics>,
+    types: BTreeMap<TopicName, TypeName>,
+    qos: BTreeMap<TopicName, String>,
+    domain: u16,
+    max_bytes: usize,
+    discovery_ns: u64,
+    linger_ns: u64,
+}
+
+impl Plan {
+    fn of(a: &EmulatorArgs) -> anyhow::Result<Plan> {
+        let r = &a.ros2;
+        if a.ingress.is_udp() || a.egress.is_udp() {
+            bail!("--ros2-topic relays ROS 2 topics: --ingress and --egress (iceoryx2 or UDP endpoints) do not apply");
+        }
+        if a.stream.streams > 1 {
+            bail!("--ros2-topic makes a lane of each pair; --streams does not apply (give --ros2-topic once per lane)");
+        }
+        if a.video.on() || a.no_feedback || a.return_to.is_some() || a.no_return || a.payload == crate::transport::Payload::Raw {
+            bail!("--video-mbps, --no-feedback, --return-to, --no-return and --payload apply to iceoryx2 and UDP lanes, not to ROS 2 topics");
+        }
+        if r.ros2_return.len() > r.ros2_topic.len() {
+            bail!("--ros2-return given {} times for {} lanes (--ros2-topic): the K-th return topic is lane K's", r.ros2_return.len(), r.ros2_topic.len());
+        }
+        anyhow::ensure!(r.ros2_max_bytes >= 1, "--ros2-max-bytes must be at least 1");
+        let mut lanes = Vec::new();
+        for (k, text) in r.ros2_topic.iter().enumerate() {
+            let forward = pair("--ros2-topic", text)?;
+            let ret = r.ros2_return.get(k).map(|t| pair("--ros2-return", t)).transpose()?;
+            lanes.push(LaneTopics { forward, ret });
+        }
+        // A topic is read by one lane only: two readers of one topic would
+        // each relay every message.
+        let mut read = std::collections::BTreeSet::new();
+        for l in &lanes {
+            for (from, to) in std::iter::once(&l.forward).chain(&l.ret) {
+                anyhow::ensure!(from != to, "{from} relayed onto itself: a lane's output would be its own input");
+                anyhow::ensure!(read.insert(from.clone()), "{from} is read by two lanes (or a lane and a return)");
+            }
+        }
+        let types = by_topic("--ros2-type", &r.ros2_type)?
+            .into_iter()
+            .map(|(t, v)| Ok((t.clone(), TypeName::parse(&v).with_context(|| format!("--ros2-type {t}={v}"))?)))
+            .collect::<anyhow::Result<BTreeMap<_, _>>>()?;
+        let qos = by_topic("--ros2-qos", &r.ros2_qos)?;
+        for (t, text) in &qos {
+            qos::parse(text, &qos::ros_default()).with_context(|| format!("--ros2-qos {t}"))?;
+        }
+        let domain = match r.ros2_domain {
+            Some(d) => d,
+            None => match std::env::var("ROS_DOMAIN_ID") {
+                Ok(v) if !v.trim().is_empty() => v.trim().parse().with_context(|| format!("ROS_DOMAIN_ID={v}: not a domain id"))?,
+                _ => 0,
+            },
+        };
+        // DDS's default port mapping leaves room for domains 0 to 232.
+        anyhow::ensure!(domain <= 232, "ROS 2 domain {domain}: domain ids go from 0 to 232");
+        Ok(Plan {
+            lanes,
+            types,
+            qos,
+            domain,
+            max_bytes: r.ros2_max_bytes,
+            discovery_ns: (r.ros2_discovery_s * 1e9) as u64,
+            linger_ns: (r.ros2_linger_ms * 1e6) as u64,
+        })
+    }
+}
+
+/// The emulator of `args`' ROS 2 lanes: each lane's own arguments,
+/// scenario, seed, queue and directory (by the rules of several streams:
+/// `--stream-scenario K=…`, the seed derived for lane K), the loop's place
+/// and live control.
+fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfig> {
+    let mut scenarios = BTreeMap::new();
+    for text in &args.stream.stream_scenario {
+        let (k, what) = crate::service::plan::parse_stream_scenario(text, lanes as u32)?;
+        scenarios.insert(k, what);
+    }
+    let spec = crate::load::resolve(&args.scenario)?;
+    let seed = crate::service::seeds::run(args.seed, &spec);
+    let mut out = Vec::new();
+    for k in 0..lanes {
+        let name = scenarios.get(&k).unwrap_or(&args.scenario).clone();
+        let scenario = crate::load::resolve(&name).with_context(|| format!("lane {k}"))?;
+        let lane_seed = crate::service::seeds::stream(seed, k);
+        let queue_capacity = args.queue_capacity.or(scenario.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
+        anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 message");
+        let bytes = (queue_capacity + 1).checked_mul(args.ros2.ros2_max_bytes).filter(|b| *b <= SLOTS_BYTES_MAX);
+        anyhow::ensure!(
+            bytes.is_some(),
+            "lane {k}: {} slots of --ros2-max-bytes {} exceed {} GiB; lower --queue-capacity or --ros2-max-bytes",
+            queue_capacity + 1,
+            args.ros2.ros2_max_bytes,
+            SLOTS_BYTES_MAX >> 30
+        );
+        let out_dir = crate::service::plan::stream_dir(&args.out, lanes, k);
+        let lane_args = EmulatorArgs {
+            scenario: name,
+            seed: Some(lane_seed),
+            return_seed: args.return_seed.map(|s| crate::service::seeds::stream(s, k)),
+            out: out_dir.clone(),
+            stream: crate::service::args::StreamArgs::default(),
+            ..args.clone()
+        };
+        out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
+    }
+    let core = match args.no_pin {
+        true => None,
+        false => args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
+    };
+    let control = match (&args.run_id, args.control.no_control) {
+        (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
+        _ => None,
+    };
+    Ok(EmulatorConfig {
+        lanes: out,
+        core,
+        rt_priority: args.rt_priority,
+        isolate: args.isolate,
+        control,
+        reorder_queue: args.control.reorder_queue,
+        out_dir: args.out.clone(),
+    })
+}
+
+/// What a topic relayed, and how, for `ros2.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct TopicReport {
+    pub from: String,
+    pub to: String,
+    #[serde(rename = "type")]
+    pub type_name: String,
+    /// The publishers' type hash as they announced it, if they did.
+    pub type_hash: Option<String>,
+    /// `command_line` or `publisher`.
+    pub type_from: &'static str,
+    /// `command_line`, `publisher` or `default` (ROS 2's: reliable,
+    /// volatile, depth 10).
+    pub qos_from: &'static str,
+    pub reader_qos: Summary,
+    pub writer_qos: Summary,
+    pub max_bytes: usize,
+    pub slots: usize,
+    pub slots_high_water: usize,
+    /// Messages missing from the publishers' sequences before the emulator
+    /// (the forward stream's; the return path's are in its report).
+    pub lost_before_ingress: u64,
+    /// Messages the publishers sent before the emulator heard from them.
+    pub sent_before_emulator: u64,
+    /// Messages of publishers beyond those followed.
+    pub writers_untracked: u64,
+    /// Releases refused because a reliable subscriber's window was full.
+    pub window_full: u64,
+    /// The encapsulation of the last message refused for it.
+    pub bad_encoding: Option<&'static str>,
+    /// Why the stream ended, if it ended by itself.
+    pub ended: Option<StreamEnd>,
+    /// Every publisher of `from` and subscriber of `to` seen, with when it
+    /// came and left.
+    pub endpoints: Vec<EndpointSeen>,
+    /// What happened on the two topics, in order.
+    pub events: Vec<EventRow>,
+}
+
+/// A remote publisher or subscriber, as seen over the run.
+#[derive(Debug, Clone, Serialize)]
+pub struct EndpointSeen {
+    pub role: Role,
+    pub topic: String,
+    /// Its ROS 2 node, else its DDS GUID.
+    pub node: String,
+    #[serde(rename = "type")]
+    pub type_name: String,
+    pub type_hash: Option<String>,
+    /// Seconds since the emulator joined the domain (`None`: already there).
+    pub joined_s: Option<f64>,
+    pub left_s: Option<f64>,
+    /// `disposed` (its node said so) or `lease_expired` (it stopped
+    /// announcing itself: killed, or cut off).
+    pub left: Option<&'static str>,
+}
+
+/// One event of a lane's topics.
+#[derive(Debug, Clone, Serialize)]
+pub struct EventRow {
+    pub t_s: f64,
+    pub role: Role,
+    pub topic: String,
+    pub node: String,
+    /// `joined`, `left`, `type_mismatch` or `qos_incompatible`.
+    pub what: &'static str,
+    pub detail: String,
+}
+
+/// `ros2.json`: a lane's topics.
+#[derive(Debug, Clone, Serialize)]
+pub struct Ros2Report {
+    pub domain_id: u16,
+    pub forward: TopicReport,
+    pub return_path: Option<TopicReport>,
+    /// Graph events past those kept.
+    pub events_dropped: u64,
+}
+
+/// How a topic was opened: its type and QoS and where they came from.
+#[derive(Debug, Clone)]
+struct Opened {
+    type_name: TypeName,
+    type_hash: Option<String>,
+    type_from: &'static str,
+    qos_from: &'static str,
+    reader_qos: QosPolicies,
+    writer_qos: QosPolicies,
+}
+
+/// Polls the graph until `topic` has a publisher or `wait_ns` passes; then
+/// a little longer, so that the others there are seen too. Its publishers.
+fn discover(node: &mut Ros2Node, topic: &TopicName, wait_ns: u64) -> Vec<Remote> {
+    let t0 = crate::clock::now_ns();
+    let mut found_at = None;
+    loop {
+        let now = crate::clock::now_ns();
+        node.poll(now);
+        let found = node.remotes(topic, Role::Publisher).next().is_some();
+        if found {
+            found_at.get_or_insert(now);
+        }
+        // Discovery of one participant's endpoints comes in a burst; others'
+        // (the subscribers of the topic written) soon after.
+        if found_at.is_some_and(|t| now - t >= 500_000_000) || (!found && now - t0 >= wait_ns) {
+            return node.remotes(topic, Role::Publisher).cloned().collect();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// Decides the type and QoS of a lane's `from` → `to`, from what is given
+/// and what is discovered, and checks every publisher of `from` and
+/// subscriber of `to` against them. A mismatch is an error that names both
+/// sides.
+fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) -> anyhow::Result<Opened> {
+    let given = plan.types.get(from);
+    eprintln!("emulator: looking for the publisher of {from} (up to {:.0} s)", plan.discovery_ns as f64 / 1e9);
+    let pubs = discover(node, from, plan.discovery_ns);
+    let mut types: Vec<&str> = pubs.iter().map(|p| p.dds_type.as_str()).collect();
+    types.sort_unstable();
+    types.dedup();
+    let (type_name, type_from) = match (given, &types[..]) {
+        (Some(t), _) => {
+            if let Some(p) = pubs.iter().find(|p| p.dds_type != t.dds()) {
+                bail!(
+                    "type mismatch on {from}: --ros2-type gives {t}, but the publisher {} publishes {} (DDS matches by type name: nothing would be relayed)",
+                    node.name(p.guid),
+                    TypeName::parse(&p.dds_type).map_or(p.dds_type.clone(), |t| t.to_string())
+                );
+            }
+            (t.clone(), "command_line")
+        }
+        (None, [one]) => (TypeName::parse(one).with_context(|| format!("the publisher of {from} announces type `{one}`, which is not a ROS 2 message type"))?, "publisher"),
+        (None, []) => bail!(
+            "no publisher of {from} found within {:.0} s in ROS 2 domain {}: start it first, or give its type (--ros2-type {from}=package/msg/Type)",
+            plan.discovery_ns as f64 / 1e9,
+            plan.domain
+        ),
+        (None, many) => bail!("the publishers of {from} disagree on its type ({}): give the one to relay with --ros2-type {from}=…", many.join(", ")),
+    };
+    if pubs.is_empty() {
+        eprintln!("emulator: WARNING: no publisher of {from} yet; relaying {type_name} as given");
+    }
+    let offered = qos::weakest(pubs.iter().map(|p| &p.qos));
+    let (requested, qos_from) = match (plan.qos.get(from), &offered) {
+        (Some(text), _) => (qos::parse(text, &qos::ros_default())?, "command_line"),
+        (None, Some(o)) => (o.clone(), "publisher"),
+        (None, None) => (qos::ros_default(), "default"),
+    };
+    let reader_qos = qos::reader(&requested);
+    for p in &pubs {
+        qos::check(&p.qos, &reader_qos, &format!("the publisher {} of {from}", node.name(p.guid)), &format!("the emulator's reader (--ros2-qos {from}=…)"))
+            .map_err(|m| anyhow::anyhow!("QoS mismatch on {from}: {m}"))?;
+    }
+    // The writer offers what the publishers offered (their subscribers
+    // were configured for it), or what is given.
+    let base = qos::relay(offered.as_ref());
+    let writer_qos = match plan.qos.get(to) {
+        Some(text) => qos::parse(text, &base)?,
+        None => base,
+    };
+    for s in node.remotes(to, Role::Subscriber) {
+        let name = node.name(s.guid);
+        if s.dds_type != type_name.dds() {
+            bail!("type mismatch on {to}: the subscriber {name} expects {}, the lane relays {type_name} from {from}", TypeName::parse(&s.dds_type).map_or(s.dds_type.clone(), |t| t.to_string()));
+        }
+        qos::check(&qos::writer(&writer_qos), &s.qos, &format!("the emulator's writer (the QoS of {from}'s publisher, or --ros2-qos {to}=…)"), &format!("the subscriber {name} of {to}"))
+            .map_err(|m| anyhow::anyhow!("QoS mismatch on {to}: {m}"))?;
+    }
+    let type_hash = pubs.iter().find_map(|p| p.type_hash.clone());
+    Ok(Opened { type_name, type_hash, type_from, qos_from, reader_qos, writer_qos })
+}
+
+/// Opens the channel of `from` → `to` as `o` decided.
+fn ports(node: &Ros2Node, plan: &Plan, o: &Opened, from: &TopicName, to: &TopicName, slots: usize, idle_end_ns: Option<u64>) -> anyhow::Result<TopicPorts> {
+    Ok(TopicPorts {
+        reader: node.reader(from, &o.type_name, &o.reader_qos)?,
+        writer: node.writer(to, &o.type_name, &o.writer_qos)?,
+        from: from.clone(),
+        to: to.clone(),
+        type_name: o.type_name.clone(),
+        slots,
+        max_bytes: plan.max_bytes,
+        linger_ns: plan.linger_ns,
+        idle_end_ns,
+    })
+}
+
+/// A lane of ROS 2 topics.
+pub type Ros2Lane = Lane<Topic<Forward>>;
+
+/// What the end of a lane needs: how its topics were opened.
+struct LaneEnd {
+    forward: Opened,
+    ret: Option<Opened>,
+}
+
+/// Opens lane `k`: its topics settled, its channels, its forward path and
+/// its return path (before the loop is pinned: each path starts its trace
+/// writer).
+fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: &LaneTopics) -> anyhow::Result<(Ros2Lane, LaneEnd)> {
+    std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
+    let a = &l.args;
+    let (from, to) = &topics.forward;
+    let fwd = settle(&mut node.borrow_mut(), plan, from, to)?;
+    let idle_end_ns = a.idle_end_ms.map(|ms| (ms * 1e6) as u64);
+    let chan = Topic::<Forward>::new(ports(&node.borrow(), plan, &fwd, from, to, l.queue_capacity + 1, idle_end_ns)?, node.clone());
+    let scenario = Scenario::new(&l.scenario, l.seed)?;
+    let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
+    let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
+    let ret = match &topics.ret {
+        Some((from, to)) => {
+            let o = settle(&mut node.borrow_mut(), plan, from, to)?;
+            let rp = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, l.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
+            let chan = Topic::<Return>::new(ports(&node.borrow(), plan, &o, from, to, rp.queue_capacity + 1, None)?, node.clone());
+            reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
+            Some(o)
+        }
+        None => None,
+    };
+    Ok((Lane::new(forward, reverse), LaneEnd { forward: fwd, ret }))
+}
+
+/// What `node` saw of `from`'s publishers and `to`'s subscribers, `t0_ns`
+/// being the time it joined.
+fn seen(node: &Ros2Node, from: &TopicName, to: &TopicName, t0_ns: u64) -> (Vec<EndpointSeen>, Vec<EventRow>) {
+    let mine = |role: Role, topic: &TopicName| (role == Role::Publisher && topic == from) || (role == Role::Subscriber && topic == to);
+    let t_s = |t: u64| t.saturating_sub(t0_ns) as f64 / 1e9;
+    let mut endpoints: Vec<EndpointSeen> = Vec::new();
+    let mut events = Vec::new();
+    for e in node.events.iter().filter(|e| mine(e.role, &e.topic)) {
+        let name = node.name(e.guid);
+        let (what, detail) = match &e.happened {
+            Happened::Joined => {
+                endpoints.push(EndpointSeen {
+                    role: e.role,
+                    topic: e.topic.to_string(),
+                    node: name.clone(),
+                    type_name: TypeName::parse(&e.dds_type).map_or(e.dds_type.clone(), |t| t.to_string()),
+                    type_hash: None,
+                    joined_s: Some(t_s(e.t_ns)),
+                    left_s: None,
+                    left: None,
+                });
+                ("joined", format!("{}", e.dds_type))
+            }
+            Happened::Left { reason } => {
+                let guid = crate::transport::ros2::node::guid_hex(e.guid);
+                if let Some(p) = endpoints.iter_mut().rev().find(|p| p.node == name && p.left.is_none() && p.role == e.role) {
+                    p.left_s = Some(t_s(e.t_ns));
+                    p.left = Some(reason);
+                }
+                ("left", format!("{reason} ({guid})"))
+            }
+            Happened::QosIncompatible(m) => ("qos_incompatible", m.to_string()),
+        };
+        events.push(EventRow { t_s: t_s(e.t_ns), role: e.role, topic: e.topic.to_string(), node: name, what, detail });
+    }
+    for p in endpoints.iter_mut() {
+        p.type_hash = node.remotes(&TopicName::parse(&p.topic).expect("a topic name"), p.role).find(|r| node.name(r.guid) == p.node).and_then(|r| r.type_hash.clone());
+    }
+    (endpoints, events)
+}
+
+/// `ros2.json`'s part of one direction.
+fn topic_report<D: crate::service::emulator::ros2_topic::Direction>(node: &Ros2Node, o: &Opened, chan: Option<&Topic<D>>, from: &TopicName, to: &TopicName, max_bytes: usize, t0_ns: u64) -> TopicReport {
+    let (endpoints, events) = seen(node, from, to, t0_ns);
+    let (slots, _, high) = chan.map_or((0, 0, 0), |c| c.slots());
+    TopicReport {
+        from: from.to_string(),
+        to: to.to_string(),
+        type_name: o.type_name.to_string(),
+        type_hash: o.type_hash.clone(),
+        type_from: o.type_from,
+        qos_from: o.qos_from,
+        reader_qos: Summary::of(&o.reader_qos),
+        writer_qos: Summary::of(&qos::writer(&o.writer_qos)),
+        max_bytes,
+        slots,
+        slots_high_water: high,
+        lost_before_ingress: chan.map_or(0, |c| c.counts.lost_before_ingress),
+        sent_before_emulator: chan.map_or(0, |c| c.sent_before_first()),
+        writers_untracked: chan.map_or(0, |c| c.counts.writers_untracked),
+        window_full: chan.map_or(0, |c| c.counts.window_full),
+        bad_encoding: chan.and_then(|c| c.counts.last_bad_encoding),
+        ended: chan.and_then(|c| c.end.clone()),
+        endpoints,
+        events,
+    }
+}
+
+/// Runs the emulator of `args`' ROS 2 lanes; their reports.
+pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
+    let plan = Plan::of(args)?;
+    let cfg = config(args, plan.lanes.len())?;
+    crate::service::write_pid(&cfg.out_dir, "emulator")?;
+    // The participant's threads (receive, discovery, send) start now and
+    // keep the mask of the thread that starts them: off the loop's core.
+    crate::service::place("ROS 2 participant", None, cfg.core)?;
+    let t0_ns = crate::clock::now_ns();
+    let node = Rc::new(RefCell::new(Ros2Node::open(plan.domain)?));
+    eprintln!("emulator: ROS 2 domain {}; {} lane(s)", plan.domain, plan.lanes.len());
+    let (mut lanes, mut ends) = (Vec::new(), Vec::new());
+    for (k, (l, topics)) in cfg.lanes.iter().zip(&plan.lanes).enumerate() {
+        let (lane, end) = open_lane(&node, &plan, l, topics).with_context(|| format!("lane {k} ({} → {})", topics.forward.0, topics.forward.1))?;
+        let o = &end.forward;
+        eprintln!(
+            "emulator: lane {k}: {} → {} ({}, {} QoS {}), scenario {} seed {}, queue {}",
+            topics.forward.0,
+            topics.forward.1,
+            o.type_name,
+            o.qos_from,
+            serde_json::to_string(&Summary::of(&o.reader_qos)).unwrap_or_default(),
+            l.scenario.name,
+            l.seed,
+            l.queue_capacity
+        );
+        lanes.push(lane);
+        ends.push(end);
+    }
+    let nodes = (0..lanes.len()).map(|_| None).collect();
+    let before_finish = |k: usize, lane: &Ros2Lane| {
+        let topics = &plan.lanes[k];
+        let end = &ends[k];
+        let n = node.borrow();
+        let (from, to) = &topics.forward;
+        let report = Ros2Report {
+            domain_id: plan.domain,
+            forward: topic_report(&n, &end.forward, Some(&lane.forward.chan), from, to, plan.max_bytes, t0_ns),
+            return_path: topics.ret.as_ref().zip(end.ret.as_ref()).map(|((f, t), o)| topic_report::<Return>(&n, o, None, f, t, plan.max_bytes, t0_ns)),
+            events_dropped: n.events_dropped,
+        };
+        let dir = cfg.lanes[k].out_dir.clone();
+        let after: run::After = Box::new(move |r: &EmulatorReport| {
+            run::write_json(&dir.join("ros2.json"), &report)?;
+            let a = &r.process.frames.account;
+            eprintln!(
+                "emulator: {} → {}: {} entered, {} delivered, {} dropped {:?}, {} held at end, {} lost before ingress; ended by {}{}",
+                report.forward.from,
+                report.forward.to,
+                a.entered,
+                a.delivered,
+                a.dropped_total(),
+                a.dropped,
+                a.held_at_end,
+                report.forward.lost_before_ingress,
+                r.process.ended_by,
+                report.forward.ended.as_ref().map_or(String::new(), |e| format!(" ({})", e.detail))
+            );
+            Ok(())
+        });
+        after
+    };
+    run::run(&cfg, lanes, nodes, before_finish)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        e: EmulatorArgs,
+    }
+
+    fn args(extra: &[&str]) -> EmulatorArgs {
+        let mut v = vec!["emulator", "--scenario", "PLM-2", "--seed", "5"];
+        v.extend_from_slice(extra);
+        Cli::parse_from(v).e
+    }
+
+    #[test]
+    fn lanes_come_from_the_topic_pairs_with_their_returns_types_and_qos() {
+        let a = args(&[
+            "--ros2-topic",
+            "/MTMR/measured_cp=/PSM1/servo_cp",
+            "--ros2-topic",
+            "/MTML/measured_cp=/PSM2/servo_cp",
+            "--ros2-return",
+            "/PSM1/measured_cp=/MTMR/feedback",
+            "--ros2-type",
+            "/MTMR/measured_cp=geometry_msgs/msg/PoseStamped",
+            "--ros2-qos",
+            "/PSM1/servo_cp=best_effort",
+            "--ros2-domain",
+            "7",
+        ]);
+        let p = Plan::of(&a).unwrap();
+        assert_eq!(p.lanes.len(), 2);
+        assert_eq!(p.lanes[0].forward.1.as_str(), "/PSM1/servo_cp");
+        assert_eq!(p.lanes[0].ret.as_ref().unwrap().0.as_str(), "/PSM1/measured_cp");
+        assert!(p.lanes[1].ret.is_none());
+        assert_eq!(p.types[&TopicName::parse("/MTMR/measured_cp").unwrap()].dds(), "geometry_msgs::msg::dds_::PoseStamped_");
+        assert_eq!(p.domain, 7);
+        let cfg = config(&a, 2).unwrap();
+        // Lane 0 keeps the run's seed; lane 1 gets its own; each its directory.
+        assert_eq!((cfg.lanes[0].seed, cfg.lanes[1].seed), (5, crate::service::seeds::stream(5, 1)));
+        assert!(cfg.lanes[1].out_dir.ends_with("stream-1"));
+        assert_eq!(cfg.lanes[0].queue_capacity, DEFAULT_QUEUE_CAPACITY);
+    }
+
+    #[test]
+    fn bad_ros2_arguments_say_what_is_wrong() {
+        for (extra, says) in [
+            (&["--ros2-topic", "/a"][..], "expected IN=OUT"),
+            (&["--ros2-topic", "/a=/a"], "onto itself"),
+            (&["--ros2-topic", "/a=/b", "--ros2-topic", "/a=/c"], "read by two lanes"),
+            (&["--ros2-topic", "/a=/b", "--ros2-return", "/c=/d", "--ros2-return", "/e=/f"], "the K-th return topic"),
+            (&["--ros2-topic", "/a=/b", "--ros2-type", "/a=PoseStamped"], "package/msg/Type"),
+            (&["--ros2-topic", "/a=/b", "--ros2-qos", "/a=fast"], "is not a policy"),
+            (&["--ros2-topic", "/a=/b", "--ros2-domain", "300"], "0 to 232"),
+            (&["--ros2-topic", "/a=/b", "--ingress", "udp://127.0.0.1:9"], "do not apply"),
+            (&["--ros2-topic", "/1a=/b"], "digit"),
+        ] {
+            let e = Plan::of(&args(extra)).map(|_| ()).unwrap_err();
+            assert!(format!("{e:#}").contains(says), "{extra:?}: {e:#}");
+        }
+    }
+}
