@@ -19,7 +19,7 @@ from talker import msg_type
 
 
 def index_of(kind, m):
-    return int(m.data) if kind == "string" else int(m.header.frame_id)
+    return int(m.data.split(" ")[0]) if kind == "string" else int(m.header.frame_id)
 
 
 def main():

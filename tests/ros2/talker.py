@@ -6,6 +6,7 @@ cleanly (or, with --hang, stays until killed).
 
 usage: talker.py TOPIC COUNT [--rate-hz R] [--type string|pose] [--qos reliable|best_effort]
                  [--wait-subs N] [--linger-s S] [--hang] [--name NODE] [--ready FILE]
+                 [--first I] [--big-every K --big-bytes N]
 """
 import argparse
 import sys
@@ -16,11 +17,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 
 
-def message(kind, i):
+def message(kind, i, pad=0):
     if kind == "string":
         from std_msgs.msg import String
         m = String()
-        m.data = str(i)
+        # The index, then `pad` spaces (a larger message, same index).
+        m.data = str(i) + " " * pad
         return m
     from geometry_msgs.msg import PoseStamped
     m = PoseStamped()
@@ -51,6 +53,9 @@ def main():
     p.add_argument("--linger-s", type=float, default=2.0)
     p.add_argument("--hang", action="store_true", help="after the last message, stay until killed")
     p.add_argument("--name", default="talker")
+    p.add_argument("--first", type=int, default=0, help="the first message's index")
+    p.add_argument("--big-every", type=int, default=0, help="every K-th message is --big-bytes larger")
+    p.add_argument("--big-bytes", type=int, default=0)
     p.add_argument("--ready", help="a file written once the subscribers are there")
     a = p.parse_args()
 
@@ -78,7 +83,8 @@ def main():
             if left <= 0:
                 break
             time.sleep(min(left, 0.01))
-        pub.publish(message(a.type, i))
+        big = a.big_every and (i + 1) % a.big_every == 0
+        pub.publish(message(a.type, a.first + i, a.big_bytes if big else 0))
     print(f"talker: {a.count} sent on {a.topic}", file=sys.stderr, flush=True)
     end = time.monotonic() + a.linger_s
     while a.hang or time.monotonic() < end:

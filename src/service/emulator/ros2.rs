@@ -147,6 +147,9 @@ impl Plan {
             bail!("--ros2-return given {} times for {} lanes (--ros2-topic): the K-th return topic is lane K's", r.ros2_return.len(), r.ros2_topic.len());
         }
         anyhow::ensure!(r.ros2_max_bytes >= 1, "--ros2-max-bytes must be at least 1");
+        if let Some(s) = a.wait_for_peer_s.filter(|s| !(s.is_finite() && *s >= 0.0)) {
+            bail!("--wait-for-peer-s must be a non-negative number of seconds, got {s}");
+        }
         let mut lanes = Vec::new();
         for (k, text) in r.ros2_topic.iter().enumerate() {
             let forward = pair("--ros2-topic", text)?;
@@ -280,6 +283,9 @@ pub struct TopicReport {
     pub bad_encoding: Option<&'static str>,
     /// Why the stream ended, if it ended by itself.
     pub ended: Option<StreamEnd>,
+    /// The console's and the robot's motion, where the type is a known
+    /// kinematic one (the forward stream's).
+    pub motion: Option<crate::ros2msg::MotionReport>,
     /// Every publisher of `from` and subscriber of `to` seen, with when it
     /// came and left.
     pub endpoints: Vec<EndpointSeen>,
@@ -321,6 +327,10 @@ pub struct EventRow {
 #[derive(Debug, Clone, Serialize)]
 pub struct Ros2Report {
     pub domain_id: u16,
+    /// The forward account closes and, where the stream ended by itself,
+    /// the publishers' own count is what entered, what was lost before the
+    /// emulator and what they sent before it listened.
+    pub balanced: bool,
     pub forward: TopicReport,
     pub return_path: Option<TopicReport>,
     /// Graph events past those kept.
@@ -359,6 +369,29 @@ fn discover(node: &mut Ros2Node, topic: &TopicName, wait_ns: u64) -> Vec<Remote>
     }
 }
 
+/// How long a refusal waits for the name of the node it names: a node's
+/// name comes in its participant's `ros_discovery_info`, which Fast DDS
+/// sends a reader that joined later on its writer's next heartbeat (every
+/// 3 s).
+const NAME_WAIT_NS: u64 = 4_000_000_000;
+
+/// The node of `guid`, waiting for its name up to [`NAME_WAIT_NS`]; else
+/// the GUID. Only where a message names it: a refusal.
+fn named(node: &mut Ros2Node, guid: rustdds::GUID) -> String {
+    let t0 = crate::clock::now_ns();
+    loop {
+        let now = crate::clock::now_ns();
+        node.poll(now);
+        if let Some(n) = node.node_of(guid) {
+            return n;
+        }
+        if now - t0 >= NAME_WAIT_NS {
+            return node.name(guid);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
 /// Decides the type and QoS of a lane's `from` → `to`, from what is given
 /// and what is discovered, and checks every publisher of `from` and
 /// subscriber of `to` against them. A mismatch is an error that names both
@@ -375,7 +408,7 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
             if let Some(p) = pubs.iter().find(|p| p.dds_type != t.dds()) {
                 bail!(
                     "type mismatch on {from}: --ros2-type gives {t}, but the publisher {} publishes {} (DDS matches by type name: nothing would be relayed)",
-                    node.name(p.guid),
+                    named(node, p.guid),
                     TypeName::parse(&p.dds_type).map_or(p.dds_type.clone(), |t| t.to_string())
                 );
             }
@@ -400,8 +433,11 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
     };
     let reader_qos = qos::reader(&requested);
     for p in &pubs {
-        qos::check(&p.qos, &reader_qos, &format!("the publisher {} of {from}", node.name(p.guid)), &format!("the emulator's reader (--ros2-qos {from}=…)"))
-            .map_err(|m| anyhow::anyhow!("QoS mismatch on {from}: {m}"))?;
+        if qos::check(&p.qos, &reader_qos, "", "").is_err() {
+            let name = named(node, p.guid);
+            qos::check(&p.qos, &reader_qos, &format!("the publisher {name} of {from}"), &format!("the emulator's reader (--ros2-qos {from}=…)"))
+                .map_err(|m| anyhow::anyhow!("QoS mismatch on {from}: {m}"))?;
+        }
     }
     // The writer offers what the publishers offered (their subscribers
     // were configured for it), or what is given.
@@ -410,8 +446,10 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
         Some(text) => qos::parse(text, &base)?,
         None => base,
     };
-    for s in node.remotes(to, Role::Subscriber) {
-        let name = node.name(s.guid);
+    let subs: Vec<Remote> = node.remotes(to, Role::Subscriber).cloned().collect();
+    for s in &subs {
+        let bad = s.dds_type != type_name.dds() || qos::check(&qos::writer(&writer_qos), &s.qos, "", "").is_err();
+        let name = if bad { named(node, s.guid) } else { continue };
         if s.dds_type != type_name.dds() {
             bail!("type mismatch on {to}: the subscriber {name} expects {}, the lane relays {type_name} from {from}", TypeName::parse(&s.dds_type).map_or(s.dds_type.clone(), |t| t.to_string()));
         }
@@ -422,11 +460,34 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
     Ok(Opened { type_name, type_hash, type_from, qos_from, reader_qos, writer_qos })
 }
 
-/// Opens the channel of `from` → `to` as `o` decided.
-fn ports(node: &Ros2Node, plan: &Plan, o: &Opened, from: &TopicName, to: &TopicName, slots: usize, idle_end_ns: Option<u64>) -> anyhow::Result<TopicPorts> {
+/// Opens the channel of `from` → `to` as `o` decided: its writer first,
+/// so that a publisher that waits for a subscriber (the emulator's reader)
+/// does not publish before the emulator can relay; with `wait_ns`, the
+/// reader only once `to` has a subscriber of the lane's type (or after
+/// that long), so that nothing is released into nothing.
+fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicName, &TopicName), slots: usize, idle_end_ns: Option<u64>, wait_ns: Option<u64>) -> anyhow::Result<TopicPorts> {
+    let writer = node.borrow().writer(to, &o.type_name, &o.writer_qos)?;
+    if let Some(wait_ns) = wait_ns {
+        let t0 = crate::clock::now_ns();
+        loop {
+            let now = crate::clock::now_ns();
+            let mut n = node.borrow_mut();
+            n.poll(now);
+            if n.remotes(to, Role::Subscriber).any(|s| s.dds_type == o.type_name.dds()) {
+                break;
+            }
+            if now - t0 >= wait_ns {
+                eprintln!("emulator: WARNING: no subscriber of {to} within {:.1} s; relaying anyway", wait_ns as f64 / 1e9);
+                break;
+            }
+            drop(n);
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+    let reader = node.borrow().reader(from, &o.type_name, &o.reader_qos)?;
     Ok(TopicPorts {
-        reader: node.reader(from, &o.type_name, &o.reader_qos)?,
-        writer: node.writer(to, &o.type_name, &o.writer_qos)?,
+        reader,
+        writer,
         from: from.clone(),
         to: to.clone(),
         type_name: o.type_name.clone(),
@@ -446,30 +507,33 @@ struct LaneEnd {
     ret: Option<Opened>,
 }
 
-/// Opens lane `k`: its topics settled, its channels, its forward path and
-/// its return path (before the loop is pinned: each path starts its trace
+/// Settles lane `topics`' type and QoS in each direction.
+fn settle_lane(node: &RefCell<Ros2Node>, plan: &Plan, topics: &LaneTopics) -> anyhow::Result<LaneEnd> {
+    let (from, to) = &topics.forward;
+    let forward = settle(&mut node.borrow_mut(), plan, from, to)?;
+    let ret = topics.ret.as_ref().map(|(from, to)| settle(&mut node.borrow_mut(), plan, from, to)).transpose()?;
+    Ok(LaneEnd { forward, ret })
+}
+
+/// Opens a lane as `end` settled it: its channels, its forward path and its
+/// return path (before the loop is pinned: each path starts its trace
 /// writer).
-fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: &LaneTopics) -> anyhow::Result<(Ros2Lane, LaneEnd)> {
+fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: &LaneTopics, end: &LaneEnd, t0_ns: u64) -> anyhow::Result<Ros2Lane> {
     std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
     let a = &l.args;
     let (from, to) = &topics.forward;
-    let fwd = settle(&mut node.borrow_mut(), plan, from, to)?;
     let idle_end_ns = a.idle_end_ms.map(|ms| (ms * 1e6) as u64);
-    let chan = Topic::<Forward>::new(ports(&node.borrow(), plan, &fwd, from, to, l.queue_capacity + 1, idle_end_ns)?, node.clone());
+    let wait_ns = a.wait_for_peer_s.map(|s| (s * 1e9) as u64);
+    let chan = Topic::<Forward>::new(ports(node, plan, &end.forward, (from, to), l.queue_capacity + 1, idle_end_ns, wait_ns)?, node.clone(), t0_ns);
     let scenario = Scenario::new(&l.scenario, l.seed)?;
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
     let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
-    let ret = match &topics.ret {
-        Some((from, to)) => {
-            let o = settle(&mut node.borrow_mut(), plan, from, to)?;
-            let rp = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, l.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
-            let chan = Topic::<Return>::new(ports(&node.borrow(), plan, &o, from, to, rp.queue_capacity + 1, None)?, node.clone());
-            reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
-            Some(o)
-        }
-        None => None,
-    };
-    Ok((Lane::new(forward, reverse), LaneEnd { forward: fwd, ret }))
+    if let (Some((from, to)), Some(o)) = (&topics.ret, &end.ret) {
+        let rp = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, l.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
+        let chan = Topic::<Return>::new(ports(node, plan, o, (from, to), rp.queue_capacity + 1, None, None)?, node.clone(), t0_ns);
+        reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
+    }
+    Ok(Lane::new(forward, reverse))
 }
 
 /// What `node` saw of `from`'s publishers and `to`'s subscribers, `t0_ns`
@@ -535,6 +599,7 @@ fn topic_report<D: crate::service::emulator::ros2_topic::Direction>(node: &Ros2N
         window_full: chan.map_or(0, |c| c.counts.window_full),
         bad_encoding: chan.and_then(|c| c.counts.last_bad_encoding),
         ended: chan.and_then(|c| c.end.clone()),
+        motion: chan.and_then(|c| c.motion.as_ref()).map(|m| m.report()),
         endpoints,
         events,
     }
@@ -551,9 +616,14 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
     let t0_ns = crate::clock::now_ns();
     let node = Rc::new(RefCell::new(Ros2Node::open(plan.domain)?));
     eprintln!("emulator: ROS 2 domain {}; {} lane(s)", plan.domain, plan.lanes.len());
-    let (mut lanes, mut ends) = (Vec::new(), Vec::new());
-    for (k, (l, topics)) in cfg.lanes.iter().zip(&plan.lanes).enumerate() {
-        let (lane, end) = open_lane(&node, &plan, l, topics).with_context(|| format!("lane {k} ({} → {})", topics.forward.0, topics.forward.1))?;
+    // Every topic is settled before any is read: a publisher that starts
+    // once the emulator subscribes waits for the whole set-up, not for the
+    // discovery of another lane's topics.
+    let name = |k: usize| format!("lane {k} ({} → {})", plan.lanes[k].forward.0, plan.lanes[k].forward.1);
+    let ends = plan.lanes.iter().enumerate().map(|(k, t)| settle_lane(&node, &plan, t).with_context(|| name(k))).collect::<anyhow::Result<Vec<_>>>()?;
+    let mut lanes = Vec::new();
+    for (k, ((l, topics), end)) in cfg.lanes.iter().zip(&plan.lanes).zip(&ends).enumerate() {
+        lanes.push(open_lane(&node, &plan, l, topics, end, t0_ns).with_context(|| name(k))?);
         let o = &end.forward;
         eprintln!(
             "emulator: lane {k}: {} → {} ({}, {} QoS {}), scenario {} seed {}, queue {}",
@@ -566,8 +636,6 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
             l.seed,
             l.queue_capacity
         );
-        lanes.push(lane);
-        ends.push(end);
     }
     let nodes = (0..lanes.len()).map(|_| None).collect();
     let before_finish = |k: usize, lane: &Ros2Lane| {
@@ -575,16 +643,23 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
         let end = &ends[k];
         let n = node.borrow();
         let (from, to) = &topics.forward;
-        let report = Ros2Report {
+        let mut report = Ros2Report {
             domain_id: plan.domain,
+            balanced: false,
             forward: topic_report(&n, &end.forward, Some(&lane.forward.chan), from, to, plan.max_bytes, t0_ns),
             return_path: topics.ret.as_ref().zip(end.ret.as_ref()).map(|((f, t), o)| topic_report::<Return>(&n, o, None, f, t, plan.max_bytes, t0_ns)),
             events_dropped: n.events_dropped,
         };
         let dir = cfg.lanes[k].out_dir.clone();
         let after: run::After = Box::new(move |r: &EmulatorReport| {
-            run::write_json(&dir.join("ros2.json"), &report)?;
             let a = &r.process.frames.account;
+            let f = &report.forward;
+            report.balanced = a.closes()
+                && match (&f.ended, r.process.frames.sent_by_console) {
+                    (Some(_), Some(sent)) => sent == a.entered + f.lost_before_ingress + f.sent_before_emulator,
+                    _ => true,
+                };
+            run::write_json(&dir.join("ros2.json"), &report)?;
             eprintln!(
                 "emulator: {} → {}: {} entered, {} delivered, {} dropped {:?}, {} held at end, {} lost before ingress; ended by {}{}",
                 report.forward.from,

@@ -12,8 +12,12 @@
 //! `rate` and `trace` stages see), and the writer sends the slot's bytes at
 //! release. A message larger than `--ros2-max-bytes` is the drop
 //! `too_large`, an empty one `wrong_size`, one in an encapsulation the
-//! emulator does not relay `bad_flags`; each is bad input, counted with its
-//! sender. The slot holds one message, so a `duplicate` stage (a second
+//! emulator does not relay `bad_flags`; a message of a known kinematic type
+//! (PoseStamped, TransformStamped, JointState: [`crate::ros2msg`]) that
+//! does not read as its type, `wrong_size`. Each is bad input, counted with
+//! its sender. Messages of a known kinematic type are read on both sides
+//! (taken in, released): the console's and the robot's motion, the robot's
+//! stalls and the divergence, in `ros2.json`. The slot holds one message, so a `duplicate` stage (a second
 //! release of the same slot) and a `corrupt` stage (bits of an ITP frame,
 //! which a CDR message is not) are refused by name.
 //!
@@ -32,6 +36,7 @@
 
 use crate::clock::now_ns;
 use crate::injector::{DropCause, Invalid};
+use crate::ros2msg::{Kind, Motion};
 use crate::service::emulator::forward::ForwardExtra;
 use crate::service::emulator::lane::ForwardChannel;
 use crate::service::emulator::path::{Channel, Ending, Take, GRACE_NS};
@@ -236,6 +241,9 @@ pub struct Topic<D: Direction> {
     /// Set off the hot path when the stream has ended; the next empty take
     /// says so.
     pub end: Option<StreamEnd>,
+    /// The console's and the robot's motion, where the type is a known
+    /// kinematic one.
+    pub motion: Option<Motion>,
     _d: PhantomData<D>,
 }
 
@@ -263,10 +271,12 @@ fn realtime_offset_ns() -> i128 {
 }
 
 impl<D: Direction> Topic<D> {
-    /// The channel of `p` on `node`.
-    pub fn new(p: TopicPorts, node: Rc<RefCell<Ros2Node>>) -> Topic<D> {
-        let t = now_ns();
+    /// The channel of `p` on `node`; its log's times count from `t0_ns`
+    /// (when the emulator joined the domain).
+    pub fn new(p: TopicPorts, node: Rc<RefCell<Ros2Node>>, t0_ns: u64) -> Topic<D> {
+        let t = t0_ns;
         let events_seen = node.borrow().events.len();
+        let motion = Kind::of(&p.type_name.ros()).map(|k| Motion::new(k, crate::kinematics::STALL_THRESHOLD_NS_DEFAULT));
         Topic {
             reader: p.reader,
             writer: p.writer,
@@ -291,6 +301,7 @@ impl<D: Direction> Topic<D> {
             last_take_ns: 0,
             events_seen,
             end: None,
+            motion,
             _d: PhantomData,
         }
     }
@@ -322,6 +333,21 @@ impl<D: Direction> Topic<D> {
                 mono.clamp(0, i128::from(now)) as u64
             }
             None => now,
+        }
+    }
+
+    /// A message of a known kinematic type, taken in at `t` into `slot`:
+    /// whether it reads as its type (the console's motion follows it);
+    /// `true` for any other type.
+    #[inline]
+    fn read_console(&mut self, slot: u32, t: u64) -> bool {
+        let Some(m) = self.motion.as_mut() else { return true };
+        match m.read(self.slots.get_mut().get(slot)) {
+            Some(s) => {
+                m.console(t, &s);
+                true
+            }
+            None => false,
         }
     }
 
@@ -426,10 +452,14 @@ impl<D: Direction> Channel for Topic<D> {
             None => self.counts.writers_untracked += 1,
         }
         let why = match m.payload {
-            Payload::Stored { len } => {
+            Payload::Stored { len } if self.read_console(slot, t) => {
                 self.next = None;
                 let source_ticks = m.source.map_or(0, |s| s.to_ticks());
                 return Take::Item(Ros2Item { slot, len, ingress_ns: t, source_ticks }, Some(u64::from(len)), arrival);
+            }
+            Payload::Stored { .. } => {
+                self.counts.bad_input.len_short += 1;
+                Invalid::WrongSize
             }
             Payload::TooLarge { .. } => {
                 self.counts.bad_input.len_oversize += 1;
@@ -462,6 +492,11 @@ impl<D: Direction> Channel for Topic<D> {
         let source = (item.source_ticks != 0).then(|| rustdds::Timestamp::from_ticks(item.source_ticks));
         let release_ns = stamp();
         let written = self.writer.write(slots.get(item.slot), source);
+        if let Some(m) = self.motion.as_mut() {
+            if let Some(s) = m.read(slots.get(item.slot)) {
+                m.robot(release_ns, &s);
+            }
+        }
         slots.free(item.slot);
         self.unsubscribed += u64::from(self.subscribers == 0);
         match written {
