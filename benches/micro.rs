@@ -1,7 +1,8 @@
-//! Micro benchmarks of the hot path: one decision per model, one injector
-//! step, the release queue at several depths, and one frame through the
-//! emulator's forward loop over in-memory ports. Run with
-//! `cargo bench --bench micro`; steal time is printed beside the results.
+//! Micro benchmarks of the core's hot path: the codec, one decision per
+//! model, one injector step, the release queue at several depths (criterion;
+//! its results under `target/criterion/`). Run with `cargo bench --bench
+//! micro`; steal time is printed beside the results. The emulator's loop
+//! around them is `benches/emulator.rs`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use netfi::host::CpuTimes;
@@ -10,13 +11,6 @@ use netfi::model::{AnyModel, StageRng};
 use netfi::sample::FrameSample;
 use netfi::scenario::{self, ModelSpec, Scenario};
 use netfi::scheduler::{QueueOrder, ReleaseQueue};
-use netfi::service::emulator::{lane::Lane, path::Path, Forward};
-use netfi::service::link::Link;
-use netfi::transport::MemoryPort;
-
-#[path = "common/cpu_time.rs"]
-mod cpu_time;
-use cpu_time::ThreadCpu;
 use rand::SeedableRng;
 use std::hint::black_box;
 
@@ -128,44 +122,6 @@ fn codec(c: &mut Criterion) {
     g.finish();
 }
 
-/// One frame through the emulator's forward loop over in-memory ports
-/// (`Lane::turn`: take, classify, decide, trace, queue, release), without
-/// a transport: the emulator's own cost per frame. `batch 1` puts one frame
-/// at the ingress per turn (the loop as a slow stream sees it), `batch 64`
-/// puts 64 (a fast stream: the turn takes them all). Normal releases each
-/// frame the turn after it came; PLM-2 → DLM-2 holds them for 210 ms and
-/// more, so the queue runs deep (capacity 2^21). Measured in the thread's
-/// CPU time (`common/cpu_time.rs`), as the queue benchmark is.
-fn forward_frame(c: &mut Criterion<ThreadCpu>) {
-    let mut template = FrameSample::ZERO;
-    netfi::frame::ItpFrame::default().write_to_sample(&mut template);
-    let plm2_dlm2 = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n", "bench", "bench").unwrap();
-    let mut g = c.benchmark_group("forward frame (memory ports)");
-    for (name, spec) in [("Normal", netfi::load::resolve("Normal").unwrap()), ("PLM-2 + DLM-2", plm2_dlm2)] {
-        for batch in [1u64, 64] {
-            let link = Link::new(Scenario::new(&spec, 1).unwrap(), 1 << 21, 1 << 22).unwrap();
-            let chan = Forward::new(MemoryPort::with_capacity(64), MemoryPort::with_capacity(1 << 16), false, true);
-            let mut lane = Lane::new(Path::of(link, chan, 1, std::env::temp_dir().join("netfi-micro-unused.csv"), false), Vec::new());
-            let mut i = 0u64;
-            g.throughput(criterion::Throughput::Elements(batch));
-            g.bench_function(format!("{name}, batch {batch}"), |b| {
-                b.iter(|| {
-                    for _ in 0..batch {
-                        let mut s = template;
-                        s.console_index = i;
-                        s.send_ns = netfi::clock::now_ns();
-                        lane.forward.chan.source.queue.push_back(s);
-                        i += 1;
-                    }
-                    lane.turn();
-                    lane.forward.chan.sink.queue.clear();
-                })
-            });
-        }
-    }
-    g.finish();
-}
-
 fn report_steal(_c: &mut Criterion) {
     if let (Some(start), Some(now)) = (START.get(), CpuTimes::read()) {
         let s = now.steal_since(start);
@@ -186,9 +142,4 @@ criterion_group! {
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2));
     targets = start, codec, decisions, injector_step, queue_depths, report_steal
 }
-criterion_group! {
-    name = forward;
-    config = Criterion::default().with_measurement(ThreadCpu).warm_up_time(std::time::Duration::from_millis(500)).measurement_time(std::time::Duration::from_secs(2));
-    targets = forward_frame
-}
-criterion_main!(benches, forward);
+criterion_main!(benches);

@@ -7,9 +7,13 @@
 //! ```
 //!
 //! `docs/cost.csv` has a header and the columns `axis,x,series,ns,machine,
-//! load,steal,command`: `ns` is the cost of one frame (or one packet) in ns
-//! at `x`, measured on `machine` under that load average and steal (%) by
-//! `command`. The figures are rebuilt from it, never edited by hand.
+//! cores,load,steal,command`: `ns` is the cost of one frame (or one packet)
+//! in ns at `x`, measured on `machine` (`cores` of them) under that load
+//! average and steal (%) by `command`, the last column, which may hold
+//! commas. The benchmarks that measure a curve write rows of it into their
+//! results (`target/netfi-bench/<program>/cost.csv`). The figures are
+//! rebuilt from it, never edited by hand; where an axis has points of more
+//! than one machine, each line names its machine.
 
 use netfi::html::plot::{self, Figure, Line, Scale};
 use plotters::prelude::SeriesLabelPosition;
@@ -46,19 +50,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// axis → series → points (x, ns), in file order.
 type Points = BTreeMap<String, BTreeMap<String, Vec<(f64, f64)>>>;
 
+/// The columns before `command`.
+const COLUMNS: usize = 8;
+
 fn parse(csv: &str) -> Result<Points, String> {
-    let mut out = Points::new();
+    let mut rows = Vec::new();
     for (i, line) in csv.lines().enumerate().skip(1) {
         if line.trim().is_empty() {
             continue;
         }
-        let f: Vec<&str> = line.splitn(8, ',').collect();
-        if f.len() < 4 {
-            return Err(format!("docs/cost.csv line {}: fewer than 4 columns", i + 1));
+        let f: Vec<&str> = line.splitn(COLUMNS + 1, ',').collect();
+        if f.len() <= COLUMNS {
+            return Err(format!("docs/cost.csv line {}: {} columns, expected {}", i + 1, f.len(), COLUMNS + 1));
         }
-        let num = |k: usize| f.get(k).and_then(|v| v.trim().parse::<f64>().ok()).ok_or(format!("docs/cost.csv line {}: column {} is not a number", i + 1, k + 1));
-        let (x, ns) = (num(1)?, num(3)?);
-        out.entry(f[0].to_string()).or_default().entry(f[2].to_string()).or_default().push((x, ns));
+        let num = |k: usize| f[k].trim().parse::<f64>().map_err(|_| format!("docs/cost.csv line {}: column {} is not a number", i + 1, k + 1));
+        rows.push((f[0], f[2], f[4], num(1)?, num(3)?));
+    }
+    // Lines name their machine where an axis has more than one.
+    let machines = |axis: &str| rows.iter().filter(|r| r.0 == axis).map(|r| r.2).collect::<std::collections::BTreeSet<_>>().len();
+    let mut out = Points::new();
+    for &(axis, series, machine, x, ns) in &rows {
+        let label = if machines(axis) > 1 { format!("{series}, {machine}") } else { series.to_string() };
+        out.entry(axis.to_string()).or_default().entry(label).or_default().push((x, ns));
     }
     Ok(out)
 }

@@ -26,11 +26,13 @@ pub mod stats;
 pub mod video;
 
 pub mod clock;
+pub mod durable;
 pub mod host;
 pub mod html;
 pub mod load;
 pub mod metrics;
 pub mod service;
+pub mod study;
 pub mod trace;
 pub mod transport;
 pub mod ui;

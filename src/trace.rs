@@ -24,6 +24,11 @@
 //! error naming the file, returned by [`TraceWriter::finish`]; the writer
 //! keeps draining the ring so the loop is never held up.
 //!
+//! Every file here (the trace, the histogram logs, and a [`CsvLog`]'s) is
+//! written as `NAME.partial` and renamed to `NAME` once whole, flushed and
+//! synced ([`crate::durable`]): a file cut by a full disk or a killed
+//! process keeps the `.partial` name, so a reader tells it from a whole one.
+//!
 //! # `trace.csv`
 //! One header line, then one row per ingress index, in ingress order, and
 //! after it one row per copy of that frame a `duplicate` stage made and
@@ -62,6 +67,7 @@
 //! Times are integers; empty cells are missing values. `pandas.read_csv` and
 //! `polars.read_csv` read it as it is.
 
+use crate::durable::PartialFile;
 use crate::injector::DropCause;
 use crate::metrics::LatencyHistogram;
 use anyhow::Context;
@@ -175,9 +181,8 @@ impl TraceSink {
 
 /// Where the writer writes: the CSV, and the histogram logs if asked.
 struct Output {
-    csv: std::fs::File,
-    csv_path: PathBuf,
-    hlogs: Option<[(std::fs::File, PathBuf); 2]>,
+    csv: PartialFile,
+    hlogs: Option<[PartialFile; 2]>,
 }
 
 /// What the writer did.
@@ -522,7 +527,9 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
         }
         std::thread::sleep(tick);
     };
-    let Output { csv, csv_path, hlogs } = out;
+    let Output { csv, hlogs } = out;
+    // Errors name the file as it stands on disk: cut, it keeps this name.
+    let csv_path = csv.partial().to_path_buf();
     // From now on only the rows of frames in flight are held: a small
     // ring, grown by doubling (off the hot path) when more are.
     table.rows.shrink_to(PENDING_ROWS_START.max(table.rows.len()));
@@ -535,12 +542,10 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
     if let Err(e) = writeln!(csv, "{CSV_HEADER}") {
         failed = Some(anyhow::Error::new(e).context(format!("writing {}", csv_path.display())));
     }
-    let (mut hfiles, hpaths) = match hlogs {
-        Some([(d, dp), (l, lp)]) => (Some((d, l)), Some((dp, lp))),
-        None => (None, None),
-    };
+    let hpaths = hlogs.as_ref().map(|[d, l]| (d.partial().to_path_buf(), l.partial().to_path_buf()));
+    let mut hfiles = hlogs.map(|[d, l]| (d, l));
     let mut ser = (V2DeflateSerializer::new(), V2DeflateSerializer::new());
-    let mut logs: Option<(IntervalLogWriter<'_, '_, std::fs::File, V2DeflateSerializer>, IntervalLogWriter<'_, '_, std::fs::File, V2DeflateSerializer>)> = None;
+    let mut logs: Option<(IntervalLogWriter<'_, '_, PartialFile, V2DeflateSerializer>, IntervalLogWriter<'_, '_, PartialFile, V2DeflateSerializer>)> = None;
     if let (Some((d, l)), Some((dp, lp))) = (hfiles.as_mut(), hpaths.as_ref()) {
         let begin = |f, s, what: &str, p: &Path| {
             IntervalLogWriterBuilder::new()
@@ -612,6 +617,24 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
         }
         std::thread::sleep(tick);
     }
+    // Whole: flushed, synced and under their own names; otherwise each
+    // keeps its `.partial` name.
+    drop(logs);
+    if failed.is_none() {
+        match csv.into_inner() {
+            Ok(f) => {
+                if let Err(e) = f.commit() {
+                    failed = Some(e.into());
+                }
+            }
+            Err(e) => failed = Some(anyhow::Error::new(e.into_error()).context(format!("writing {}", csv_path.display()))),
+        }
+    }
+    if let (None, Some((d, l))) = (&failed, hfiles) {
+        if let Err(e) = d.commit().and_then(|_| l.commit()) {
+            failed = Some(e.into());
+        }
+    }
     match failed {
         Some(e) => Err(e),
         None => Ok(written),
@@ -630,23 +653,21 @@ impl TraceWriter {
     }
 
     /// Streams the trace to `csv_path` from now on (and the histogram logs
-    /// `decision.hlog` and `lateness.hlog` into `hlog_dir`, if given). The
-    /// files are created here, so that one that cannot be is an error at
-    /// once. Only the first call counts.
+    /// `decision.hlog` and `lateness.hlog` into `hlog_dir`, if given), each
+    /// as `NAME.partial` until [`TraceWriter::finish`] has written it whole.
+    /// The files are created here, so that one that cannot be is an error
+    /// at once. Only the first call counts. Returns the histogram logs'
+    /// names once whole.
     pub fn stream_to(&mut self, csv_path: &Path, hlog_dir: Option<&Path>) -> anyhow::Result<Option<[PathBuf; 2]>> {
         let Some(tx) = self.output.take() else { return Ok(None) };
-        let create = |p: &Path| std::fs::File::create(p).with_context(|| format!("creating {}", p.display()));
-        let csv = create(csv_path)?;
+        let csv = PartialFile::create(csv_path)?;
         let hlogs = match hlog_dir {
-            Some(dir) => {
-                let (d, l) = (dir.join("decision.hlog"), dir.join("lateness.hlog"));
-                Some([(create(&d)?, d), (create(&l)?, l)])
-            }
+            Some(dir) => Some([PartialFile::create(&dir.join("decision.hlog"))?, PartialFile::create(&dir.join("lateness.hlog"))?]),
             None => None,
         };
-        let paths = hlogs.as_ref().map(|[(_, d), (_, l)]| [d.clone(), l.clone()]);
+        let paths = hlogs.as_ref().map(|[d, l]| [d.path().to_path_buf(), l.path().to_path_buf()]);
         // The thread is alive until `finish`; a send cannot fail before.
-        let _ = tx.send(Output { csv, csv_path: csv_path.to_path_buf(), hlogs });
+        let _ = tx.send(Output { csv, hlogs });
         Ok(paths)
     }
 
@@ -658,8 +679,10 @@ impl TraceWriter {
     }
 
     /// Stops the writer after it has written everything pushed so far
-    /// (rows of frames still queued as `held`); call after the hot loop has
-    /// ended. A trace never given files is written to `csv_path`.
+    /// (rows of frames still queued as `held`), and gives its files their
+    /// own names once whole; call after the hot loop has ended. A trace
+    /// never given files is written to `csv_path`. An error names the file
+    /// that was cut (it keeps its `.partial` name).
     pub fn finish(mut self, csv_path: &Path) -> anyhow::Result<Written> {
         self.stream_to(csv_path, None)?;
         self.stop.store(true, Ordering::Release);
@@ -668,16 +691,18 @@ impl TraceWriter {
 }
 
 /// Writes a table as CSV, joined with receive times (`recv_ns[i]` for
-/// ingress index i; 0 = not received).
+/// ingress index i; 0 = not received): as `path.partial`, renamed to
+/// `path` once whole.
 pub fn write_csv(path: &Path, rows: &[Row], recv_ns: &[u64]) -> std::io::Result<()> {
-    let mut w = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, PartialFile::create(path).map_err(std::io::Error::other)?);
     writeln!(w, "{CSV_HEADER}")?;
     for (i, r) in rows.iter().enumerate() {
         if r.present {
             format_row(&mut w, i as u64, r, None, recv_ns.get(i).copied().filter(|t| *t != 0))?;
         }
     }
-    w.flush()
+    w.into_inner().map_err(|e| e.into_error())?.commit().map_err(std::io::Error::other)?;
+    Ok(())
 }
 
 /// A CSV written as its rows come, by the thread that has them (the
@@ -685,32 +710,33 @@ pub fn write_csv(path: &Path, rows: &[Row], recv_ns: &[u64]) -> std::io::Result<
 /// buffered, flushed at least once a second when rows keep coming
 /// ([`CsvLog::tick`]), so that memory stays flat however long the run and
 /// a killed process leaves its rows up to its last second. Nothing is
-/// allocated per row. The first failed write is kept, later rows are
-/// skipped, and [`CsvLog::finish`] reports it naming the file (a full disk
-/// is an error, not a cut file).
+/// allocated per row. The file is `NAME.partial` until [`CsvLog::finish`]
+/// has written it whole (a killed process leaves it so). The first failed
+/// write is kept, later rows are skipped, and [`CsvLog::finish`] reports it
+/// naming the file, which keeps its `.partial` name: a full disk is an
+/// error and a file marked cut.
 pub struct CsvLog {
     path: PathBuf,
-    w: std::io::BufWriter<std::fs::File>,
+    w: std::io::BufWriter<PartialFile>,
     error: Option<std::io::Error>,
     rows: u64,
     last_flush_ns: u64,
 }
 
 impl CsvLog {
-    /// Creates `path` with its `header` line; an error names the file.
+    /// Creates `path.partial` with its `header` line; an error names the
+    /// file.
     pub fn create(path: PathBuf, header: &str) -> anyhow::Result<CsvLog> {
-        let open = || -> std::io::Result<std::io::BufWriter<std::fs::File>> {
-            let mut w = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&path)?);
-            writeln!(w, "{header}")?;
-            Ok(w)
-        };
-        let w = open().with_context(|| format!("writing {}", path.display()))?;
+        let file = PartialFile::create(&path)?;
+        let partial = file.partial().to_path_buf();
+        let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
+        writeln!(w, "{header}").with_context(|| format!("writing {}", partial.display()))?;
         Ok(CsvLog { path, w, error: None, rows: 0, last_flush_ns: 0 })
     }
 
     /// Appends one row, which `write` writes (its line's end included).
     #[inline]
-    pub fn push(&mut self, write: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>) {
+    pub fn push(&mut self, write: impl FnOnce(&mut std::io::BufWriter<PartialFile>) -> std::io::Result<()>) {
         if self.error.is_none() {
             match write(&mut self.w) {
                 Ok(()) => self.rows += 1,
@@ -738,19 +764,22 @@ impl CsvLog {
         self.rows
     }
 
-    /// The file.
+    /// The file, as it is named once whole.
     pub fn path(&self) -> &Path {
         &self.path
     }
 
-    /// Writes what is buffered; the first failed write, naming the file.
+    /// Writes what is buffered and gives the file its own name; returns
+    /// it. The first failed write is the error, naming the file, which
+    /// then stays `NAME.partial`.
     pub fn finish(mut self) -> anyhow::Result<PathBuf> {
-        let result = match self.error.take() {
-            Some(e) => Err(e),
-            None => self.w.flush(),
-        };
-        result.with_context(|| format!("writing {}", self.path.display()))?;
-        Ok(self.path)
+        let partial = self.w.get_ref().partial().to_path_buf();
+        let named = || format!("writing {}", partial.display());
+        if let Some(e) = self.error.take() {
+            return Err(anyhow::Error::new(e).context(named()));
+        }
+        let file = self.w.into_inner().map_err(|e| anyhow::Error::new(e.into_error()).context(named()))?;
+        Ok(file.commit()?)
     }
 }
 
@@ -844,17 +873,21 @@ mod tests {
         sink.push(ingress(0, Some(7), 10, 20, None, 120));
         let ge = DropCause::Stage { phase: 0, stage: 1, kind: ModelKind::GeLomax };
         sink.push(ingress(1, Some(8), 30, 40, Some(ge), 0));
-        // Row 1 is complete but row 0 is not: nothing is written yet.
+        // Row 1 is complete but row 0 is not: nothing is written yet. Until
+        // the end the file says it is not whole.
+        let partial = crate::durable::partial_path(&path);
         std::thread::sleep(std::time::Duration::from_millis(1200));
-        let text = std::fs::read_to_string(&path).unwrap();
+        let text = std::fs::read_to_string(&partial).unwrap();
         assert_eq!(text.lines().count(), 1, "{text}");
         sink.push(TraceEvent::Release { ingress_index: 0, release_sched_ns: 120, release_ns: 121 });
         // Within the flush period both are on disk, before the end.
         std::thread::sleep(std::time::Duration::from_millis(1200));
-        let text = std::fs::read_to_string(&path).unwrap();
+        let text = std::fs::read_to_string(&partial).unwrap();
         assert_eq!(text.lines().count(), 3, "{text}");
+        assert!(!path.exists() && !dir.join("decision.hlog").exists());
         sink.push(ingress(2, None, 50, 60, None, 70));
         let w = writer.finish(&path).unwrap();
+        assert!(!partial.exists() && crate::durable::cut_files(&dir).unwrap().is_empty(), "whole files under their own names");
         assert_eq!((w.rows, w.forced), (3, 0));
         assert!(w.intervals >= 2);
         let text = std::fs::read_to_string(&path).unwrap();
@@ -879,29 +912,102 @@ mod tests {
     }
 
     #[test]
-    fn a_csv_log_streams_its_rows_and_names_its_file_when_a_write_fails() {
+    fn a_csv_log_streams_its_rows_and_is_whole_once_finished() {
         let path = std::env::temp_dir().join(format!("netfi-csvlog-{}.csv", std::process::id()));
+        let partial = crate::durable::partial_path(&path);
         let mut log = CsvLog::create(path.clone(), "a,b").unwrap();
         log.push(|w| writeln!(w, "1,2"));
         // Not yet a second since the last flush (none: at 0): nothing asked.
         log.tick(1);
         log.tick(FLUSH_EVERY.as_nanos() as u64);
-        // Flushed while the log is still open: a killed process keeps it.
-        assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,b\n1,2\n");
+        // Flushed while the log is still open: a killed process keeps it,
+        // under the name that says it is cut.
+        assert_eq!(std::fs::read_to_string(&partial).unwrap(), "a,b\n1,2\n");
+        assert!(!path.exists());
         log.push(|w| writeln!(w, "3,4"));
         assert_eq!(log.rows(), 2);
         assert_eq!(log.finish().unwrap(), path);
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "a,b\n1,2\n3,4\n");
+        assert!(!partial.exists());
         std::fs::remove_file(&path).ok();
-        // /dev/full takes the file but refuses every write.
-        if Path::new("/dev/full").exists() {
-            let mut log = CsvLog::create(PathBuf::from("/dev/full"), "a").unwrap();
-            log.push(|w| w.write_all(&[b'x'; 1 << 17]));
-            log.push(|w| writeln!(w, "never"));
-            assert_eq!(log.rows(), 0);
-            let e = format!("{:#}", log.finish().unwrap_err());
-            assert!(e.contains("/dev/full"), "{e}");
+    }
+
+    /// A tmpfs of `size` mounted at a fresh directory, unmounted and
+    /// removed when dropped; `None` (the test then says so and passes)
+    /// where this process may not mount, unless `NETFI_REQUIRE_ROOT=1`
+    /// demands it (`.ci/run` runs as root).
+    struct Tmpfs(PathBuf);
+
+    impl Tmpfs {
+        fn mount(name: &str, size: &str) -> Option<Tmpfs> {
+            let dir = std::env::temp_dir().join(format!("netfi-tmpfs-{}-{name}", std::process::id()));
+            let _ = std::fs::create_dir_all(&dir);
+            let mounted = std::process::Command::new("mount")
+                .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+                .arg(&dir)
+                .stderr(std::process::Stdio::piped())
+                .output();
+            match mounted {
+                Ok(o) if o.status.success() => Some(Tmpfs(dir)),
+                other => {
+                    let why = match other {
+                        Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_string(),
+                        Err(e) => e.to_string(),
+                    };
+                    let _ = std::fs::remove_dir(&dir);
+                    assert!(std::env::var("NETFI_REQUIRE_ROOT").as_deref() != Ok("1"), "NETFI_REQUIRE_ROOT=1 but a tmpfs cannot be mounted: {why}");
+                    eprintln!("SKIP: cannot mount a tmpfs here ({why}; not root?): the full-disk test did not run");
+                    None
+                }
+            }
         }
+    }
+
+    impl Drop for Tmpfs {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(&self.0).status();
+            let _ = std::fs::remove_dir(&self.0);
+        }
+    }
+
+    #[test]
+    fn a_full_disk_leaves_every_file_it_cut_marked_and_named() {
+        let Some(fs) = Tmpfs::mount("full", "64k") else { return };
+        let dir = fs.0.clone();
+        // The trace: 4,000 rows of about 60 bytes do not fit in 64 KiB.
+        let (mut sink, mut writer) = start(4000, 0);
+        writer.stream_to(&dir.join("trace_emulator.csv"), Some(&dir)).unwrap();
+        let ge = DropCause::Stage { phase: 0, stage: 0, kind: ModelKind::GeLomax };
+        for i in 0..4000 {
+            sink.push(ingress(i, Some(i as u32), 1_000_000_000 + i, 2_000_000_000 + i, Some(ge), 0));
+        }
+        assert_eq!(sink.overflowed(), 0);
+        let e = format!("{:#}", writer.finish(&dir.join("trace_emulator.csv")).unwrap_err());
+        assert!(e.contains("trace_emulator.csv.partial") && e.contains("No space left on device"), "{e}");
+        assert!(!dir.join("trace_emulator.csv").exists(), "a cut trace is not under its own name");
+        // A CSV log on the full disk: its rows cannot be flushed.
+        let mut log = CsvLog::create(dir.join("received.csv"), "ingress_index,recv_ns").unwrap();
+        for i in 0..2000u64 {
+            log.push(|w| writeln!(w, "{i},{}", 3_000_000_000 + i));
+        }
+        let e = format!("{:#}", log.finish().unwrap_err());
+        assert!(e.contains("received.csv.partial") && e.contains("No space left on device"), "{e}");
+        // A JSON report written whole, or not at all under its name.
+        let e = crate::durable::write_whole(&dir.join("report.json"), &vec![b' '; 1 << 16]).unwrap_err();
+        assert!(e.to_string().contains("report.json.partial"), "{e}");
+        assert!(!dir.join("report.json").exists());
+        // The run's cut files, every one named.
+        let names: Vec<String> = crate::durable::cut_files(&dir)
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        for cut in ["trace_emulator.csv.partial", "decision.hlog.partial", "lateness.hlog.partial", "received.csv.partial", "report.json.partial"] {
+            assert!(names.iter().any(|n| n == cut), "{cut} not among the cut files {names:?}");
+        }
+        // What was written before the disk filled is there to read.
+        let kept = std::fs::read_to_string(dir.join("trace_emulator.csv.partial")).unwrap();
+        assert!(kept.starts_with(CSV_HEADER) && kept.lines().count() > 100, "{} bytes kept", kept.len());
     }
 
     #[test]

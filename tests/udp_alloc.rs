@@ -11,7 +11,7 @@ use netfi::service::emulator::lane::Lane;
 use netfi::service::emulator::path::Path;
 use netfi::service::emulator::udp_return::UdpReturn;
 use netfi::service::link::Link;
-use netfi::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
+use netfi::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Instant;
@@ -52,8 +52,11 @@ fn allocations_in_steady_state(
     let spec = scenario::parse_str(scenario_text, "alloc.toml", "alloc").unwrap();
     let capacity = 256;
     let arena = Rc::new(RefCell::new(Arena::new(capacity + 1)));
-    let (console, robot, egress) = (bind(), bind(), bind());
-    let source = UdpSource::new(bind(), Some(arena.clone()));
+    let (console, robot, mut egress) = (bind(), bind(), bind());
+    // As `transport::open` sets them up: each side takes datagrams from its
+    // one peer (the filter is on the receive path the loop turns).
+    egress.accept_only(robot.local_addr());
+    let source = UdpSource::new(bind(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()));
     let (from_robot, to_console) = (egress.try_clone().unwrap(), source.port().try_clone().unwrap());
     let to_bridge = PeerAddr::new(source.local_addr());
     let shared = ConsoleAddr::default();

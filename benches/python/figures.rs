@@ -1,13 +1,13 @@
 //! From the Python programs' per-frame records to percentiles: per part,
 //! over the quiet windows and over all of them, each with the host's state
-//! over the windows it used; the differences through the emulator − direct;
-//! the bars.
+//! over the windows it used; the differences through the emulator − direct.
 
+use crate::common::table::ns;
 use crate::parts::Part;
 use crate::windows::{self, Window};
 use netfi::metrics::{difference, fmt_ns, LatencyHistogram, Summary};
 use serde::Serialize;
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -32,9 +32,9 @@ pub const DISTS: [(&str, &str); 10] = [
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Selection {
-    /// Steal at most `NETFI_BENCH_QUIET_STEAL`: where the bars are judged.
+    /// Steal at most `--quiet-steal`.
     Quiet,
-    /// Quiet, and other processes under `NETFI_BENCH_QUIET_OTHERS`.
+    /// Quiet, and other processes under `--quiet-others`.
     Calm,
     All,
 }
@@ -185,7 +185,7 @@ impl Figures {
         }
         for (label, added, ratio) in [("one-way", &self.oneway_added_ns, &self.oneway_ratio), ("round trip", &self.rtt_added_ns, &self.rtt_ratio)] {
             if !added.is_empty() {
-                let cells: Vec<String> = KEYS.iter().map(|k| signed(added[*k])).collect();
+                let cells: Vec<String> = KEYS.iter().map(|k| ns(added[*k])).collect();
                 let _ = writeln!(md, "| **{label}: through − direct** | {} | |", cells.join(" | "));
                 let _ = writeln!(md, "| {label}: through / direct | {:.2}× | | {:.2}× | | | |", ratio["p50"], ratio["p99"]);
             }
@@ -195,14 +195,6 @@ impl Figures {
 
 fn ratios(a: &Summary, b: &Summary) -> BTreeMap<String, f64> {
     ["p50", "p99"].iter().map(|k| (k.to_string(), a.get(k).unwrap_or(0) as f64 / b.get(k).unwrap_or(0).max(1) as f64)).collect()
-}
-
-pub fn signed(v: i64) -> String {
-    if v < 0 {
-        format!("−{}", fmt_ns(v.unsigned_abs()))
-    } else {
-        fmt_ns(v as u64)
-    }
 }
 
 /// The emulator's own measurements over the whole part (its report):
@@ -219,20 +211,4 @@ pub fn emulator_rows(emulator: &Value) -> Vec<(String, Summary)> {
     put("feedback: decision", &emulator["feedback"]["decision_ns"]);
     put("feedback: release lateness", &emulator["feedback"]["release_lateness_ns"]);
     rows
-}
-
-/// The bars of docs/performance.md for the Python clients: the emulator's
-/// share of the iceoryx2 round trip over the quiet windows.
-pub fn bars(quiet: &Figures) -> Vec<Value> {
-    let share = quiet.dists.get("share");
-    [("p50", 2_000u64), ("p99", 20_000)]
-        .iter()
-        .map(|&(k, limit)| match share {
-            Some(s) => {
-                let v = s.get(k).unwrap_or(0);
-                json!({"bar": format!("emulator's share of the Python round trip at 1 kHz (iceoryx2, Normal both ways), {k}, quiet windows"), "value_ns": v, "limit_ns": limit, "met": v <= limit})
-            }
-            None => json!({"bar": format!("emulator's share of the Python round trip, {k}"), "limit_ns": limit, "met": Value::Null, "why": "no quiet window"}),
-        })
-        .collect()
 }

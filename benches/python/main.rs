@@ -1,123 +1,120 @@
 //! What the netfi emulator adds between Python processes: a Python console
-//! and a Python robot (clients/python/bench/, on iceoryx2's official
-//! Python bindings and the `netfi_iox` module), once over iceoryx2 and once
-//! over UDP through the emulator's UDP bridge, each against a direct
-//! Python → Python hop measured in the same run.
+//! and a Python robot (`clients/python/bench/`, on iceoryx2's Python
+//! bindings and `netfi_iox`), once over iceoryx2 and once through the UDP
+//! bridge, each against a direct Python → Python hop in the same run, and
+//! the emulator's share of the round trip from its own stamps.
 //!
-//! `cargo bench --bench python` runs both parts for 20 s each at 1 kHz per
-//! route (about a minute in all); `-- --quick` runs each for 2 s, to check
-//! that it runs. Results go to `target/netfi-bench/python/`: `python.json`,
-//! `python.md` (printed too) and each part's files under `runs/`. The method
-//! and this machine's figures are in docs/performance.md ("Python clients:
-//! what the emulator adds"). In short:
+//! ```sh
+//! cargo bench --bench python                     # both parts, 20 s each at 1 kHz per route
+//! cargo bench --bench python -- --parts udp --seconds 60
+//! ```
 //!
-//! - **Two routes, alternating.** The console sends one frame every half
-//!   period, alternately through the emulator (the chain) and straight to
-//!   the robot (direct), so both routes run at the rate and see the same
-//!   moments of the run. The robot records each frame's one-way latency and
-//!   answers it at once on the same route; the console records the round
-//!   trip of each answer. Over iceoryx2 the direct hop is a second run id
-//!   with no emulator (the console publishes on its `emulator` channel and
-//!   takes the robot's `feedback` itself); over UDP it is the robot's second
-//!   socket. The emulator runs `Normal` both ways (`--return-scenario
-//!   Normal`: the iceoryx2 feedback loop, or the UDP return path).
-//! - **The emulator's share.** Over iceoryx2 every frame carries the
-//!   emulator's stamps, and every answer carries those of the command and
-//!   its own: the emulator's share of a round trip is the time each
-//!   direction spent inside it (taken → released), summed. The round trip
-//!   through the emulator − the direct one is reported beside it.
-//! - **Quiet windows.** A thread samples `/proc/stat` and the CPU time of
-//!   the benchmark's processes once a window (1 s): each window's steal and
-//!   the cores other processes kept busy. Every figure is given over the
-//!   quiet windows (steal ≤ 1 %, others ≤ 0.25 cores) and over all, with
-//!   the host's state over the windows it used. The bars (the emulator's
-//!   share of the round trip: p50 ≤ 2 µs, p99 ≤ 20 µs) are judged over the
-//!   quiet windows; nothing is asserted.
-//!
-//! Placement: the emulator on the last core, which it clears of other
-//! threads and interrupts for its run (`netfi emulator --isolate`, as
-//! `netfi run` and benches/overhead do); the console on the first core, the
-//! robot on a third where there is one, else beside the console (both poll
-//! with `sched_yield`, so each gives the core up when it has nothing to do).
-//!
-//! | variable | default | meaning |
-//! |---|---|---|
-//! | `NETFI_BENCH_SECONDS` | 20 (2 quick) | length of each part after a 0.5 s warm-up |
-//! | `NETFI_BENCH_RATE` | 1000 | frames per second on each route |
-//! | `NETFI_BENCH_WINDOW_S` | 1 | length of a window |
-//! | `NETFI_BENCH_QUIET_STEAL` | 0.01 | a quiet window's largest steal fraction |
-//! | `NETFI_BENCH_QUIET_OTHERS` | 0.25 | … and the most cores other processes may keep busy in it |
-//! | `NETFI_BENCH_QUIET_CORES` | unset | before each part, wait until other processes keep at most this many cores busy (`NETFI_BENCH_QUIET_WAIT_S`, 600, at most) |
-//! | `NETFI_BENCH_RT_PRIORITY` | unset | run the emulator at this SCHED_FIFO priority |
-//! | `NETFI_BENCH_ISOLATE` | 1 | `0`: leave the emulator's core as it is |
-//! | `NETFI_BENCH_PYTHON` | `python3` | the interpreter |
-//! | `NETFI_BENCH_PYTHON_NICE` | unset | run the Python console and robot at this nice value (e.g. `-10`, with root: ahead of other work on their core) |
-//! | `NETFI_BENCH_QUICK` | unset | `1`: as `--quick` |
-//! | `NETFI_BENCH_OUT` | `target/netfi-bench/python` | where results go |
-//!
-//! Without python3 or its `iceoryx2` package the benchmark says so and
-//! exits successfully, measuring nothing.
-//!
-//! The emulator process and the host's figures are benches/overhead's own
-//! modules (`emulator.rs`, `host.rs`), compiled in here unchanged.
+//! The console sends a frame every half period, alternately through the
+//! emulator and straight to the robot; the robot answers each at once on
+//! the same route. A thread samples `/proc/stat` once a window: each figure
+//! is given over the quiet windows (low steal), the calm ones (and other
+//! processes nearly idle) and all. Needs python3 with `iceoryx2==0.10.0`;
+//! without it the program says so and measures nothing.
 
+#[path = "../common/mod.rs"]
+mod common;
 mod args;
-#[allow(dead_code)]
-#[path = "../overhead/emulator.rs"]
-mod emulator;
 mod figures;
-#[allow(dead_code)]
-#[path = "../overhead/host.rs"]
-mod host;
 mod parts;
-mod report;
 mod windows;
 
-use anyhow::{bail, Result};
-use args::{Args, Settings};
-use clap::Parser;
-
-const NETFI: &str = env!("CARGO_BIN_EXE_netfi");
+use anyhow::{ensure, Result};
+use args::Args;
+use common::args::{check_interrupted, Placement};
+use common::host::{clear_core, restore_core};
+use common::out::Out;
+use common::process::Build;
+use figures::{Figures, Selection};
+use netfi::metrics::fmt_ns;
+use parts::Part;
+use serde_json::{json, Value};
+use std::fmt::Write as _;
 
 fn main() {
-    if !std::env::args().skip(1).any(|a| a == "--bench") {
-        println!("python: a benchmark of about a minute; run it with `cargo bench --bench python` (`-- --quick`: seconds)");
-        return;
-    }
-    if let Err(e) = run(&Args::parse()) {
-        eprintln!("python benchmark failed: {e:#}");
-        std::process::exit(1);
-    }
+    common::args::main("python", "what the emulator adds between Python processes (a minute)", run);
 }
 
-fn run(args: &Args) -> Result<()> {
-    let s = Settings::from_env(args)?;
-    if let Some(why) = parts::python_missing(&s) {
-        println!("python: skipped: {} cannot import iceoryx2's Python bindings or netfi_iox ({why}); pip install iceoryx2==0.10.0", s.python);
+fn run(a: Args) -> Result<()> {
+    ensure!(a.seconds > 0.0 && a.rate_hz > 0.0 && a.window_s > 0.0, "--seconds, --rate-hz and --window-s must be positive");
+    if let Some(why) = parts::python_missing(&a.python) {
+        println!("python: skipped: {} cannot import iceoryx2's Python bindings or netfi_iox ({why}); pip install iceoryx2==0.10.0", a.python);
         return Ok(());
     }
-    std::fs::create_dir_all(&s.out_dir)?;
-    netfi::service::signals::install();
+    let p = a.cores.placement(&a.common)?;
+    let out = Out::create(&a.common, "python")?;
+    let build = Build::new("netfi", a.netfi.as_deref())?;
     let _ = netfi::transport::cleanup_stale();
-    println!(
-        "netfi Python benchmark: parts {}, {} s each at {} Hz per route; emulator core {:?}, console core {:?}, robot core {:?}, Python nice value {:?}; results in {}",
-        s.parts.join(","),
-        s.seconds,
-        s.rate_hz,
-        s.emulator_core,
-        s.driver_core,
-        s.robot_core,
-        s.python_nice,
-        s.out_dir.display()
-    );
-    let bench_host = host::HostTimer::start(None);
+    let cleared = clear_core(&p);
     let mut done = Vec::new();
-    for transport in args::PARTS.into_iter().filter(|p| s.wants(p)) {
-        if netfi::service::signals::stop_requested() {
-            bail!("interrupted (Ctrl-C / SIGTERM): no results written");
-        }
-        println!("  {transport}: {} s …", s.seconds);
-        done.push(parts::run(&s, transport)?);
+    for transport in ["iceoryx2", "udp"].into_iter().filter(|t| a.parts.iter().any(|x| x == t)) {
+        check_interrupted()?;
+        println!("  {transport}: {} s …", a.seconds);
+        done.push(parts::run(&a, &p, &build, &out, transport)?);
     }
-    report::write(&s, &done, &bench_host.stop())
+    let (cleared, isolation) = restore_core(cleared);
+    let (figures, md) = report(&a, &p, &cleared, &done);
+    out.finish(&a, json!({"placement": p, "isolation": isolation, "build": build, "parts": figures}), &md)
+}
+
+/// Every part's figures over each selection of windows, as JSON and as
+/// Markdown.
+fn report(a: &Args, p: &Placement, cleared: &str, parts: &[Part]) -> (Vec<Value>, String) {
+    let robot = p.other_core.map_or("any core".to_string(), |c| format!("core {c}"));
+    let mut md = format!("{}, the Python console on the benchmark's core, the robot on {robot}. {cleared} {} frames/s per route.\n", p.line(), a.rate_hz);
+    let mut out = Vec::new();
+    let mut chain_p50 = Vec::new();
+    for part in parts {
+        let figs: Vec<Figures> = Selection::ALL.iter().map(|&sel| Figures::of(part, sel)).collect();
+        write_part(&mut md, part, &figs);
+        let pick = figs.iter().find(|f| f.windows_used > 0).unwrap_or(&figs[2]);
+        if let Some(d) = pick.dists.get("oneway_chain") {
+            chain_p50.push((part.transport, d.p50));
+        }
+        out.push(json!({
+            "transport": part.transport, "dir": part.dir, "figures": figs, "windows": part.windows, "host": part.host,
+            "console": part.console_summary, "robot": part.robot_summary, "emulator": part.emulator,
+        }));
+    }
+    if let [(_, i), (_, u)] = chain_p50[..] {
+        let _ = writeln!(md, "\nThrough the emulator, Python to Python, one way at p50: iceoryx2 {}, UDP {} ({:.1}× as long over UDP).", fmt_ns(i), fmt_ns(u), u as f64 / i.max(1) as f64);
+    }
+    (out, md)
+}
+
+/// A part's tables: over the quiet windows, the calm ones and all (a
+/// selection that takes no window, or the same windows as the one before,
+/// is only named), then the emulator's own histograms.
+fn write_part(md: &mut String, p: &Part, figs: &[Figures]) {
+    let (c, e) = (&p.console_summary, &p.emulator);
+    let what = match p.transport {
+        "iceoryx2" => "iceoryx2: Python console → netfi emulator → Python robot, feedback back through the emulator (Normal both ways)",
+        _ => "UDP: Python console → the UDP bridge → Python robot, echoes back through its return path (Normal both ways)",
+    };
+    let dropped: u64 = e["frames"]["dropped"].as_object().map_or(0, |m| m.values().filter_map(Value::as_u64).sum());
+    let _ = writeln!(
+        md,
+        "\n## {what}\n\nThe console sent {} through / {} direct and got {} / {} answers back; the emulator took {} frames in, delivered {}, dropped {dropped}. Over the part {}.",
+        c["sent"][0], c["sent"][1], c["feedback_received"][0], c["feedback_received"][1], e["frames"]["entered"], e["frames"]["delivered"], p.host.line()
+    );
+    let mut shown: Option<usize> = None;
+    for f in figs {
+        if f.windows_used == 0 || shown == Some(f.windows_used) {
+            let _ = writeln!(md, "\n*{}*{}", f.host_line(), if f.windows_used == 0 { "" } else { " (the same windows as above)" });
+            continue;
+        }
+        f.write_md(md);
+        shown = Some(f.windows_used);
+    }
+    let rows = figures::emulator_rows(e);
+    if !rows.is_empty() {
+        let _ = writeln!(md, "\n*The emulator's own histograms, whole part:*\n\n| | p50 | p90 | p99 | p99.9 | max | frames |\n|---|---|---|---|---|---|---|");
+        for (label, s) in rows {
+            let _ = writeln!(md, "| {label} | {} | {} | {} | {} | {} | {} |", fmt_ns(s.p50), fmt_ns(s.p90), fmt_ns(s.p99), fmt_ns(s.p999), fmt_ns(s.max), s.count);
+        }
+    }
 }

@@ -1,11 +1,13 @@
-//! One part: the netfi emulator started as benches/overhead starts it, the
-//! Python robot, then the Python console for the interval; the host
-//! sampled meanwhile; everything read back.
+//! One part: `netfi emulator` (Normal both ways), the Python robot, then
+//! the Python console for the interval; the host sampled meanwhile;
+//! everything read back.
 
-use crate::args::Settings;
-use crate::emulator::{self, Emulator};
-use crate::host::{HostTimer, HostWindow};
+use crate::common::args::{Placement, ROOT};
+use crate::common::host::{HostTimer, HostWindow};
+use crate::common::out::Out;
+use crate::common::process::{fresh_run_id, read_json, Build, Emulator, EmulatorSpec};
 use crate::windows::{Sampler, Window};
+use crate::args::Args;
 use anyhow::{bail, Context, Result};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -31,29 +33,29 @@ pub struct Part {
     pub host: HostWindow,
 }
 
-/// Whether python3 can import the bindings and the client module; why not
-/// when it cannot.
-pub fn python_missing(s: &Settings) -> Option<String> {
-    let code = format!("import sys; sys.path.insert(0, {:?}); import iceoryx2, netfi_iox", concat!(env!("CARGO_MANIFEST_DIR"), "/clients/python"));
-    match Command::new(&s.python).args(["-c", &code]).output() {
+/// Whether the interpreter can import the bindings and the client module;
+/// why not when it cannot.
+pub fn python_missing(python: &str) -> Option<String> {
+    let code = format!("import sys; sys.path.insert(0, {:?}); import iceoryx2, netfi_iox", format!("{ROOT}/clients/python"));
+    match Command::new(python).args(["-c", &code]).output() {
         Ok(o) if o.status.success() => None,
         Ok(o) => Some(String::from_utf8_lossy(&o.stderr).trim().lines().last().unwrap_or("").to_string()),
-        Err(e) => Some(format!("{}: {e}", s.python)),
+        Err(e) => Some(format!("{python}: {e}")),
     }
 }
 
-fn python(s: &Settings, script: &str, dir: &Path, who: &str, core: Option<usize>, extra: &[String]) -> Result<Child> {
+fn python(a: &Args, script: &str, dir: &Path, who: &str, core: Option<usize>, extra: &[String]) -> Result<Child> {
     let log = std::fs::File::create(dir.join(format!("{who}.log")))?;
-    let mut c = Command::new(&s.python);
+    let mut c = Command::new(&a.python);
     c.arg(format!("{BENCH_PY}/{script}")).args(extra);
     c.arg("--records").arg(dir.join(format!("{who}.bin"))).arg("--summary").arg(dir.join(format!("{who}.json")));
     if let Some(core) = core {
         c.args(["--core", &core.to_string()]);
     }
-    if let Some(nice) = s.python_nice {
+    if let Some(nice) = a.python_nice {
         c.args(["--nice", &nice.to_string()]);
     }
-    c.stdin(Stdio::null()).stdout(log.try_clone()?).stderr(log).spawn().with_context(|| format!("starting {} {script}", s.python))
+    c.stdin(Stdio::null()).stdout(log.try_clone()?).stderr(log).spawn().with_context(|| format!("starting {} {script}", a.python))
 }
 
 /// Waits for `child` up to `limit`; kills it after.
@@ -96,69 +98,63 @@ fn ready(robot: &mut Child, path: &Path) -> Result<Value> {
 }
 
 /// The part over `transport` ("iceoryx2" or "udp").
-pub fn run(s: &Settings, transport: &'static str) -> Result<Part> {
-    let dir = s.out_dir.join("runs").join(transport);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir)?;
-    let host = HostTimer::start(s.quiet);
+pub fn run(a: &Args, p: &Placement, build: &Build, out: &Out, transport: &'static str) -> Result<Part> {
+    let dir = out.run_dir(transport)?;
+    let host = HostTimer::start(p.quiet);
     let ready_path = dir.join("robot.ready");
     let robot_args = |extra: &[String]| {
-        let timeout_s = (s.seconds + 90.0).to_string();
-        let mut v = vec!["--transport".to_string(), transport.into(), "--ready".into(), ready_path.display().to_string(), "--timeout-s".into(), timeout_s];
+        let mut v = vec!["--transport".to_string(), transport.into(), "--ready".into(), ready_path.display().to_string(), "--timeout-s".into(), (a.seconds + 90.0).to_string()];
         v.extend(extra.iter().cloned());
         v
     };
     let (emu, robot, routes) = if transport == "iceoryx2" {
-        let run_id = netfi::service::plan::fresh_run_id();
+        let run_id = fresh_run_id();
         let ids = vec!["--run-id".to_string(), run_id.clone(), "--direct-run-id".into(), format!("{run_id}-direct")];
-        let emu = start_emulator(s, &dir, Some(run_id), &[])?;
-        let mut robot = python(s, "robot.py", &dir, "robot", s.robot_core, &robot_args(&ids))?;
+        let emu = start_emulator(a, p, build, &dir, Some(&run_id), Vec::new())?;
+        let mut robot = python(a, "robot.py", &dir, "robot", p.other_core, &robot_args(&ids))?;
         ready(&mut robot, &ready_path)?;
         (emu, robot, ids)
     } else {
         // The robot's sockets first: the emulator's egress is the robot's
         // chain port.
-        let mut robot = python(s, "robot.py", &dir, "robot", s.robot_core, &robot_args(&[]))?;
+        let mut robot = python(a, "robot.py", &dir, "robot", p.other_core, &robot_args(&[]))?;
         let ports = ready(&mut robot, &ready_path)?;
         let port = |k: &str| ports[k].as_u64().with_context(|| format!("robot.ready: no {k} port"));
-        let udp = vec!["--ingress".into(), "udp://127.0.0.1:0".into(), "--egress".into(), format!("udp://127.0.0.1:{}", port("chain")?), "--payload".into(), "itp".into(), "--idle-end-ms".into(), "500".into()];
-        let emu = start_emulator(s, &dir, None, &udp)?;
+        let udp = ["--ingress".into(), "udp://127.0.0.1:0".into(), "--egress".into(), format!("udp://127.0.0.1:{}", port("chain")?), "--payload".into(), "itp".into(), "--idle-end-ms".into(), "500".into(), "--console-from".into(), "first".into()];
+        let emu = start_emulator(a, p, build, &dir, None, udp.to_vec())?;
         let routes = vec!["--chain-to".into(), emu.udp_ingress()?.to_string(), "--direct-to".into(), format!("127.0.0.1:{}", port("direct")?)];
         (emu, robot, routes)
     };
-    let sampler = Sampler::start(s.window_s);
-    let mut args = vec!["--transport".to_string(), transport.into(), "--rate-hz".into(), s.rate_hz.to_string(), "--duration-s".into(), s.seconds.to_string()];
+    let sampler = Sampler::start(a.window_s);
+    let mut args = vec!["--transport".to_string(), transport.into(), "--rate-hz".into(), a.rate_hz.to_string(), "--duration-s".into(), a.seconds.to_string()];
     args.extend(routes);
-    let console = python(s, "console.py", &dir, "console", s.driver_core, &args)?;
-    let limit = Duration::from_secs_f64(s.seconds + 60.0);
+    let console = python(a, "console.py", &dir, "console", p.bench_core, &args)?;
+    let limit = Duration::from_secs_f64(a.seconds + 60.0);
     let done = wait(console, "console", limit, &dir).and_then(|_| wait(robot, "robot", Duration::from_secs(30), &dir));
-    let windows = sampler.stop(s.quiet_steal, s.quiet_others);
+    let windows = sampler.stop(a.quiet_steal, a.quiet_others);
     let report = emu.finish(Duration::from_secs(10));
     done?;
-    let report = report?;
-    let host = host.stop();
     Ok(Part {
         transport,
         robot: records(&dir.join("robot.bin"))?,
         console: records(&dir.join("console.bin"))?,
-        console_summary: json_file(&dir.join("console.json"))?,
-        robot_summary: json_file(&dir.join("robot.json"))?,
-        emulator: serde_json::to_value(&report)?,
+        console_summary: read_json(&dir.join("console.json"))?,
+        robot_summary: read_json(&dir.join("robot.json"))?,
+        emulator: report?,
         windows,
-        host,
+        host: host.stop(),
         dir,
     })
 }
 
 /// `netfi emulator` with Normal both ways (the forward scenario, and the
 /// feedback loop's or the UDP return path's), on the emulator's core.
-fn start_emulator(s: &Settings, dir: &Path, run_id: Option<String>, udp: &[String]) -> Result<Emulator> {
-    let expected = (s.rate_hz * (s.seconds + 1.0)) as u64 + 16;
-    let mut a = emulator::args(s, "Normal", &dir.join("emulator"), expected, run_id);
-    a.no_feedback = false;
-    a.isolate = s.isolate && s.emulator_core.is_some();
-    a.return_scenario = Some("Normal".into());
-    Emulator::spawn(&dir.join("emulator"), &emulator::argv(&a, udp))
+fn start_emulator(a: &Args, p: &Placement, build: &Build, dir: &Path, run_id: Option<&str>, mut extra: Vec<String>) -> Result<Emulator> {
+    extra.extend(["--return-scenario".to_string(), "Normal".to_string()]);
+    let expected = (a.rate_hz * (a.seconds + 1.0)) as u64 + 16;
+    let emu_dir = dir.join("emulator");
+    let spec = EmulatorSpec { scenario: "Normal", dir: &emu_dir, expected_frames: expected, run_id, feedback: true, queue_capacity: None, extra };
+    build.emulator(&spec, p)
 }
 
 fn records<const N: usize>(path: &Path) -> Result<Vec<[i64; N]>> {
@@ -167,8 +163,4 @@ fn records<const N: usize>(path: &Path) -> Result<Vec<[i64; N]>> {
         .chunks_exact(8 * N)
         .map(|r| std::array::from_fn(|i| i64::from_le_bytes(r[8 * i..8 * i + 8].try_into().expect("8 bytes"))))
         .collect())
-}
-
-fn json_file(path: &Path) -> Result<Value> {
-    serde_json::from_slice(&std::fs::read(path).with_context(|| format!("reading {}", path.display()))?).with_context(|| format!("parsing {}", path.display()))
 }

@@ -11,6 +11,8 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    netfi::service::emulator::main(&cli.args)?;
+    netfi::host::process::die_with_runner()?;
+    let report = netfi::service::emulator::main(&cli.args)?;
+    print!("{}", netfi::service::report::emulator_text(&report));
     Ok(())
 }

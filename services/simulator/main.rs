@@ -11,6 +11,7 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    netfi::host::process::die_with_runner()?;
     netfi::service::simulator::main(&cli.args)?;
     Ok(())
 }

@@ -1,6 +1,7 @@
-//! What a run left in its output directory, read for the page: the report,
-//! its optional control events, the HdrHistogram logs, the scenario's
-//! delay law and the trace's summary.
+//! What a run left in its output directory, read for the page: the report
+//! (`report.json`, or for a run started by hand the report assembled from
+//! its services' own), the HdrHistogram logs, the scenario's delay law and
+//! the trace's summary.
 //!
 //! Files are looked up in the directory by name (not by the absolute paths
 //! the report holds), so a run directory that was moved or copied still
@@ -12,17 +13,7 @@ use super::HtmlError;
 use crate::model::AnyModel;
 use crate::service::report::RunReport;
 use hdrhistogram::Histogram;
-use serde::Deserialize;
 use std::path::{Path, PathBuf};
-
-/// One control action during the run (a scenario switch, a pause). Runs
-/// record none yet; a report may carry them as `events: [{t_s, what}]`.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct ControlEvent {
-    /// Seconds since the run started.
-    pub t_s: f64,
-    pub what: String,
-}
 
 /// One latency distribution from an HdrHistogram log (all its intervals),
 /// and its percentiles interval by interval.
@@ -76,7 +67,6 @@ impl Law {
 pub struct RunInputs {
     pub dir: PathBuf,
     pub report: RunReport,
-    pub events: Vec<ControlEvent>,
     pub latency: Vec<Latency>,
     pub law: Option<Law>,
     pub trace: Option<TraceSummary>,
@@ -97,14 +87,7 @@ pub fn bin_ns(duration_s: f64) -> u64 {
 impl RunInputs {
     /// Reads the run directory `dir`.
     pub fn read(dir: &Path) -> Result<RunInputs, HtmlError> {
-        let report_path = dir.join("report.json");
-        let bytes = std::fs::read(&report_path).map_err(|e| HtmlError::read(&report_path, e))?;
-        let value: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| HtmlError::malformed(&report_path, e.to_string()))?;
-        let events = match value.get("events") {
-            None | Some(serde_json::Value::Null) => Vec::new(),
-            Some(v) => Vec::<ControlEvent>::deserialize(v).map_err(|e| HtmlError::malformed(&report_path, format!("events: {e}")))?,
-        };
-        let report: RunReport = serde_json::from_value(value).map_err(|e| HtmlError::malformed(&report_path, e.to_string()))?;
+        let report = RunReport::of_dir(dir)?;
         let f = &report.files;
         // The simulator writes direct_hop.hlog beside end_to_end.hlog.
         let latency = vec![
@@ -120,7 +103,7 @@ impl RunInputs {
             }
             None => None,
         };
-        Ok(RunInputs { dir: dir.to_path_buf(), report, events, latency, law, trace })
+        Ok(RunInputs { dir: dir.to_path_buf(), report, latency, law, trace })
     }
 }
 
@@ -180,11 +163,21 @@ pub fn read_hlog_intervals(path: &Path) -> Result<(Histogram<u64>, Vec<IntervalP
 }
 
 /// The law of the scenario's delay, when the scenario is one phase with one
-/// delay (or jitter) stage; the scenario is the run's own copy.
+/// delay (or jitter) stage: the run's own copy of the scenario, which must
+/// be there when the report names one; else (a run started by hand) the
+/// preset the report names, if it is one.
 fn law(dir: &Path, report: &RunReport) -> Result<Option<Law>, HtmlError> {
-    let path = dir.join("scenario.toml");
-    let spec = crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
-    let scenario = crate::scenario::Scenario::new(&spec, report.seed).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
+    let spec = match &report.files.scenario {
+        Some(_) => {
+            let path = dir.join("scenario.toml");
+            crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?
+        }
+        None => match crate::scenario::preset(&report.scenario) {
+            Some(spec) => spec,
+            None => return Ok(None),
+        },
+    };
+    let scenario = crate::scenario::Scenario::new(&spec, report.seed).map_err(|e| HtmlError::malformed(&dir.join("scenario.toml"), e.to_string()))?;
     Ok(Law::of_scenario(&scenario))
 }
 

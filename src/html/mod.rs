@@ -4,16 +4,18 @@
 //! file, and a browser front end can serve the same page.
 //!
 //! The page is built from what a run leaves in its output directory
-//! ([`inputs::RunInputs`]): `report.json` (with an optional `events` list
-//! of control actions), `scenario.toml` (for the delay law), the
+//! ([`inputs::RunInputs`]): `report.json` (with its `events` list of
+//! control actions; for a run started by hand, the report assembled from
+//! the services' own), `scenario.toml` (for the delay law), the
 //! HdrHistogram logs and `trace.csv`, read as a stream into fixed-size
 //! summaries. A missing or malformed file is an error naming it.
 //!
 //! Elements a test or a browser asserts on have stable ids: `run-id`,
 //! `provenance` (and `prov-version`, `prov-command`, `prov-started`,
 //! `prov-seed`, `prov-host`), `realized-loss` (its `data-value` is the
-//! report's figure), `latency`, `delay-law`, `over-time`, `loss-runs`,
-//! `kinematics`, `events`; every plot is an `<svg class="plot">` with its
+//! report's figure), `balanced`, `faults`, `missing` (the services'
+//! reports not in the directory), `udp` (a run with a UDP side), `latency`, `delay-law`, `over-time`,
+//! `loss-runs`, `kinematics`, `events`; every plot is an `<svg class="plot">` with its
 //! own id.
 
 pub mod figures;
@@ -37,6 +39,9 @@ pub enum HtmlError {
     /// The page could not be written.
     #[error("writing {}: {source}", path.display())]
     Write { path: PathBuf, source: std::io::Error },
+    /// The run's report could not be read or assembled.
+    #[error(transparent)]
+    Run(#[from] crate::service::report::DirError),
     /// A plot could not be drawn (its data out of its axes' reach).
     #[error("plot {id}: {message}")]
     Plot { id: String, message: String },

@@ -104,6 +104,12 @@ fn summary(r: &RunReport) -> Markup {
             @if !r.faults.is_empty() {
                 ul #faults { @for fault in &r.faults { li.fault { (fault) } } }
             }
+            @if let Some(u) = &r.udp {
+                p #udp { "UDP: " (crate::service::report::udp_line(u)) "." }
+            }
+            @if !r.missing.is_empty() {
+                p #missing.none { "Not in the run's directory: " (r.missing.join(", ")) " (the figures that need them are unknown)." }
+            }
         }
     }
 }
@@ -294,12 +300,12 @@ fn events(inp: &RunInputs) -> Markup {
     html! {
         section #events {
             h2 { "Control events" }
-            @if inp.events.is_empty() {
+            @if inp.report.events.is_empty() {
                 p #no-events.none { "no control events" }
             } @else {
                 table #event-list {
                     tr { th { "t (s)" } th { "what" } }
-                    @for e in &inp.events { tr.event { td { (format!("{:.3}", e.t_s)) } td { (e.what) } } }
+                    @for e in &inp.report.events { tr.event { td { (format!("{:.3}", e.t_s)) } td { (e.what) } } }
                 }
             }
         }

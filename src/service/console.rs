@@ -18,7 +18,7 @@ use crate::motion::{MotionGenerator, MotionParams};
 use crate::frame::{ItpFrame, ItpView};
 use crate::kinematics::{Integrator, KinematicsConfig};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
-use crate::transport::FrameSubscriber;
+use crate::transport::{FramePublisher, FrameSubscriber};
 use crate::service::args::ConsoleArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSink;
@@ -232,7 +232,7 @@ impl Script {
 impl Script {
     /// The capture given, or synthetic motion at the given rate.
     fn from_args(args: &ConsoleArgs, seed: u64) -> Result<Script> {
-        Ok(match &args.capture {
+        Ok(match &args.source.capture {
             Some(path) => {
                 let cap = capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
                 let t0 = cap.records.first().map_or(0, |r| r.time_ns);
@@ -246,11 +246,11 @@ impl Script {
                         (last, r.payload)
                     })
                     .collect();
-                Script::Replay { records, period_ns: args.rate_hz.map(|r| 1e9 / r) }
+                Script::Replay { records, period_ns: args.source.rate_hz.map(|r| 1e9 / r) }
             }
             None => {
                 // `--rate-hz` is checked where it is parsed (`args::parse_rate_hz`).
-                let rate = args.rate_hz.unwrap_or(crate::service::plan::DEFAULT_RATE_HZ);
+                let rate = args.source.rate_hz.unwrap_or(crate::service::args::values::DEFAULT_RATE_HZ);
                 let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
                 Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
             }
@@ -305,131 +305,176 @@ fn wait(args: &ConsoleArgs) -> Wait {
     args.nap_us.map_or(Wait::SpinYield, |us| Wait::Nap(us * 1000))
 }
 
+/// The console while it streams: its ports, its feedback, and its counts.
+struct Streamer<'a> {
+    args: &'a ConsoleArgs,
+    port: FramePublisher,
+    direct: Option<FramePublisher>,
+    fb: FeedbackIn,
+    lateness: LatencyHistogram,
+    send_errors: u64,
+    sent_unsubscribed: u64,
+    direct_sent: u64,
+    sent: u64,
+}
+
+/// How a stream went: how it ended, and when it started and ended.
+struct Streamed {
+    ended_by: &'static str,
+    t_start: u64,
+    t_end: u64,
+}
+
+impl Streamer<'_> {
+    /// Sends the `n` frames of `script` on time, each also straight to the
+    /// simulator, polling the feedback meanwhile; ends early on a stop or
+    /// when the emulator ended the feedback.
+    fn stream(&mut self, script: &mut Script, n: u64, stop: &mut signals::StopCheck<impl FnMut() -> bool>) -> Streamed {
+        let period_ns = match script {
+            Script::Synthetic { period_ns, .. } => *period_ns,
+            Script::Replay { period_ns, .. } => period_ns.unwrap_or(1e9 / 517.0),
+        };
+        // Sleep until this long before a frame's time, then poll: a VM's wake-up
+        // latency is tens of µs; at ≥ 20 kHz there is no time to sleep at all.
+        // A napping console sleeps up to the frame's time itself.
+        let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else if self.args.nap_us.is_some() { 0 } else { 200_000 };
+        let wait = wait(self.args);
+        let t_start = now_ns() + 1_000_000;
+        let mut ended_by = "done";
+        let mut sample = FrameSample::ZERO;
+        sample.len = ITP_FRAME_LEN as u32;
+        let mut next_live = 0u64;
+        for i in 0..n {
+            let (offset_ns, wire) = script.frame(i);
+            let target = t_start + offset_ns;
+            if target > now_ns() + slack_ns && stop.requested() {
+                // Only a console about to sleep checks for a stop: often enough.
+                ended_by = "signal";
+                break;
+            }
+            if self.fb.port.peers_connected() > 0 {
+                // Feedback flows: poll it while waiting, so each round trip is
+                // taken when the feedback arrives, not at the next frame.
+                while now_ns() < target {
+                    self.fb.poll(self.sent);
+                    wait.relax();
+                }
+            } else {
+                wait_until_ns(target, slack_ns, wait);
+            }
+            sample.wire = wire;
+            sample.console_index = i;
+            let send_ns = self.send(&sample);
+            self.fb.sent(i, send_ns, &wire);
+            self.fb.poll(self.sent);
+            if self.args.live && send_ns >= next_live {
+                eprintln!("{}", self.fb.live_line());
+                next_live = send_ns + 1_000_000_000;
+            }
+            self.lateness.record(send_ns.saturating_sub(target));
+            if let Some(d) = self.direct.as_mut() {
+                if FrameSink::send_with(d, &sample, |s| s.send_ns = now_ns()).is_ok() {
+                    self.direct_sent += 1;
+                }
+            }
+            if self.fb.sent_by_emulator.is_some() {
+                // The emulator ended the feedback early: its robot is gone.
+                // Stop, so the stream ends with an end marker it will take.
+                ended_by = "emulator_ended";
+                break;
+            }
+            if i % 1024 == 1023 && stop.requested() {
+                ended_by = "signal";
+                break;
+            }
+        }
+        Streamed { ended_by, t_start, t_end: now_ns() }
+    }
+
+    /// Sends `sample` to the emulator, stamped as it goes; returns its send time.
+    #[inline]
+    fn send(&mut self, sample: &FrameSample) -> u64 {
+        let mut send_ns = 0;
+        match FrameSink::send_with(&mut self.port, sample, |s| {
+            send_ns = now_ns();
+            s.send_ns = send_ns;
+        }) {
+            Ok(Some(0)) => self.sent_unsubscribed += 1,
+            Ok(_) => {}
+            Err(_) => self.send_errors += 1,
+        }
+        self.sent += 1;
+        send_ns
+    }
+
+    /// Ends the stream on both ports with the end marker.
+    fn end(&mut self) {
+        let end = FrameSample::end_marker(self.sent);
+        let _ = FrameSink::send_with(&mut self.port, &end, |_| {});
+        if let Some(d) = self.direct.as_mut() {
+            let _ = FrameSink::send_with(d, &end, |_| {});
+        }
+    }
+
+    /// The console's report.
+    fn report(&self, source: String, seed: u64, s: &Streamed, fb_ended: &str, steal: crate::host::Steal) -> ConsoleReport {
+        let duration_s = (s.t_end.saturating_sub(s.t_start)) as f64 / 1e9;
+        ConsoleReport {
+            frames_sent: self.sent,
+            source,
+            rate_hz: if duration_s > 0.0 { self.sent as f64 / duration_s } else { 0.0 },
+            seed,
+            duration_s,
+            send_lateness_ns: self.lateness.summary(),
+            send_errors: self.send_errors,
+            sent_unsubscribed: self.sent_unsubscribed,
+            direct_sent: self.direct_sent,
+            ended_by: s.ended_by.into(),
+            steal_ms: steal.ms,
+            steal_fraction: steal.fraction,
+            feedback: Some(self.fb.report(fb_ended, &self.args.out, duration_s)),
+            video: None,
+        }
+    }
+}
+
 /// Runs the console with `args`; returns its report (also `console.json`).
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
-    let seed = args.seed.unwrap_or_else(crate::service::plan::fresh_seed);
+    args.source.planned()?;
+    let seed = crate::service::seeds::given_or_fresh(args.seed);
     let mut script = Script::from_args(args, seed)?;
-    let n = script.len(args.frames, args.duration_s);
+    let n = script.len(args.source.frames, args.source.duration_s);
     crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
-    let mut port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
-    let mut direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
+    let port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
+    let direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
     let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
-    let mut fb = FeedbackIn::new(fb_port)?;
+    let fb = FeedbackIn::new(fb_port)?;
     signals::install();
-    crate::service::place("console", args.core, args.avoid_core)?;
+    crate::host::placement::place("console", args.pin.core, args.pin.avoid_core)?;
     // After the placement, whose CPU mask its thread inherits: off the emulator's core.
     let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
-    let source = match &args.capture {
+    let source = match &args.source.capture {
         Some(p) => format!("capture:{}", p.display()),
         None => "synthetic".into(),
     };
     eprintln!("console: {n} frames from {source}, seed {seed}");
     // `netfi run` names a console that never gets here.
     std::fs::write(args.out.join("console.ready"), b"").context("writing console.ready")?;
-    let period_ns = match &script {
-        Script::Synthetic { period_ns, .. } => *period_ns,
-        Script::Replay { period_ns, .. } => period_ns.unwrap_or(1e9 / 517.0),
-    };
-    // Sleep until this long before a frame's time, then poll: a VM's wake-up
-    // latency is tens of µs; at ≥ 20 kHz there is no time to sleep at all.
-    // A napping console sleeps up to the frame's time itself.
-    let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else if args.nap_us.is_some() { 0 } else { 200_000 };
-    let wait = wait(args);
-    let mut lateness = LatencyHistogram::new();
-    let (mut send_errors, mut sent_unsubscribed, mut direct_sent, mut sent) = (0u64, 0u64, 0u64, 0u64);
+    let mut s = Streamer { args, port, direct, fb, lateness: LatencyHistogram::new(), send_errors: 0, sent_unsubscribed: 0, direct_sent: 0, sent: 0 };
     let steal_timer = StealTimer::start();
-    let t_start = now_ns() + 1_000_000;
-    let mut ended_by = "done";
     let mut stop = signals::StopCheck::new(64, || node.termination_requested());
-    let mut sample = FrameSample::ZERO;
-    sample.len = ITP_FRAME_LEN as u32;
-    let mut next_live = 0u64;
-    for i in 0..n {
-        let (offset_ns, wire) = script.frame(i);
-        let target = t_start + offset_ns;
-        if target > now_ns() + slack_ns && stop.requested() {
-            // Only a console about to sleep checks for a stop: often enough.
-            ended_by = "signal";
-            break;
-        }
-        if fb.port.peers_connected() > 0 {
-            // Feedback flows: poll it while waiting, so each round trip is
-            // taken when the feedback arrives, not at the next frame.
-            while now_ns() < target {
-                fb.poll(sent);
-                wait.relax();
-            }
-        } else {
-            wait_until_ns(target, slack_ns, wait);
-        }
-        sample.wire = wire;
-        sample.console_index = i;
-        let mut send_ns = 0;
-        match FrameSink::send_with(&mut port, &sample, |s| {
-            send_ns = now_ns();
-            s.send_ns = send_ns;
-        }) {
-            Ok(Some(0)) => sent_unsubscribed += 1,
-            Ok(_) => {}
-            Err(_) => send_errors += 1,
-        }
-        sent += 1;
-        fb.sent(i, send_ns, &wire);
-        fb.poll(sent);
-        if args.live && send_ns >= next_live {
-            eprintln!("{}", fb.live_line());
-            next_live = send_ns + 1_000_000_000;
-        }
-        lateness.record(send_ns.saturating_sub(target));
-        if let Some(d) = direct.as_mut() {
-            if FrameSink::send_with(d, &sample, |s| s.send_ns = now_ns()).is_ok() {
-                direct_sent += 1;
-            }
-        }
-        if fb.sent_by_emulator.is_some() {
-            // The emulator ended the feedback early: its robot is gone.
-            // Stop, so the stream ends with an end marker it will take.
-            ended_by = "emulator_ended";
-            break;
-        }
-        if i % 1024 == 1023 && stop.requested() {
-            ended_by = "signal";
-            break;
-        }
-    }
-    let t_end = now_ns();
-    let end = FrameSample::end_marker(sent);
-    let _ = FrameSink::send_with(&mut port, &end, |_| {});
-    if let Some(d) = direct.as_mut() {
-        let _ = FrameSink::send_with(d, &end, |_| {});
-    }
-    let fb_ended = wait_for_feedback(&mut fb, sent, args, &mut stop);
+    let streamed = s.stream(&mut script, n, &mut stop);
+    s.end();
+    let fb_ended = wait_for_feedback(&mut s.fb, s.sent, args, &mut stop);
     let video = video.map(|v| v.finish()).transpose()?;
-    let steal = steal_timer.stop();
-    let duration_s = (t_end.saturating_sub(t_start)) as f64 / 1e9;
-    let report = ConsoleReport {
-        frames_sent: sent,
-        source,
-        rate_hz: if duration_s > 0.0 { sent as f64 / duration_s } else { 0.0 },
-        seed,
-        duration_s,
-        send_lateness_ns: lateness.summary(),
-        send_errors,
-        sent_unsubscribed,
-        direct_sent,
-        ended_by: ended_by.into(),
-        steal_ms: steal.ms,
-        steal_fraction: steal.fraction,
-        feedback: Some(fb.report(fb_ended, &args.out, duration_s)),
-        video,
-    };
-    if args.live || fb.received > 0 {
-        eprintln!("{}", fb.live_line());
+    let report = ConsoleReport { video, ..s.report(source, seed, &streamed, fb_ended, steal_timer.stop()) };
+    if args.live || s.fb.received > 0 {
+        eprintln!("{}", s.fb.live_line());
     }
     let path = args.out.join("console.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
     Ok(report)
 }

@@ -261,7 +261,10 @@ struct Server {
     telemetry: mpsc::Receiver<TelemetrySample>,
     timeline: Vec<Mirrored>,
     events: Vec<ControlEvent>,
-    log: Option<std::fs::File>,
+    /// `events.jsonl`, as `events.jsonl.partial` until the run ends with
+    /// every line written (then renamed; a write that fails leaves it cut).
+    log: Option<crate::durable::PartialFile>,
+    log_failed: bool,
     next_id: u64,
     /// Commands sent and not yet reported applied.
     sent: Vec<Sent>,
@@ -278,7 +281,7 @@ impl Server {
         let timeline = (0..spec.phases.len())
             .map(|i| Mirrored { start_ns: crate::model::units::ms_to_ns(spec.phases[i].start_ms), spec: spec.clone(), phase: i })
             .collect();
-        Server { settings, commands, applied, shared, telemetry, timeline, events: Vec::new(), log: None, next_id: 0, sent: Vec::new() }
+        Server { settings, commands, applied, shared, telemetry, timeline, events: Vec::new(), log: None, log_failed: false, next_id: 0, sent: Vec::new() }
     }
 
     fn run(mut self, ready: mpsc::Sender<anyhow::Result<()>>) -> Vec<ControlEvent> {
@@ -290,7 +293,7 @@ impl Server {
                 None => None,
             };
             let path = self.settings.out_dir.join("events.jsonl");
-            let log = std::fs::File::create(&path).map_err(|e| anyhow::anyhow!("creating {}: {e}", path.display()))?;
+            let log = crate::durable::PartialFile::create(&path)?;
             Ok((node, server, publisher, log))
         })();
         let (_node, server, publisher, log) = match opened {
@@ -303,7 +306,10 @@ impl Server {
         self.log = Some(log);
         let _ = ready.send(Ok(()));
         while !self.shared.stop.load(Ordering::Acquire) {
-            server.serve(|req| self.answer(req));
+            server.serve(|req| match req {
+                Ok(req) => self.answer(req),
+                Err(e) => refuse(&e),
+            });
             self.drain_applied(None);
             if let Some(p) = &publisher {
                 while let Ok(mut s) = self.telemetry.try_recv() {
@@ -321,6 +327,11 @@ impl Server {
     /// The events that took effect: a switch scheduled after the run's
     /// last frame never did.
     fn finish_events(mut self) -> Vec<ControlEvent> {
+        if let Some(log) = self.log.take().filter(|_| !self.log_failed) {
+            if let Err(e) = log.commit() {
+                eprintln!("emulator: {e}");
+            }
+        }
         let end_s = self.now_offset_ns() as f64 / 1e9;
         self.events.retain(|e| e.t_s <= end_s);
         self.events
@@ -334,6 +345,8 @@ impl Server {
     }
 
     fn answer(&mut self, req: &[u8]) -> Vec<u8> {
+        // The transport hands over only requests within its limit.
+        debug_assert!(req.len() <= crate::transport::ipc::control::MAX_MESSAGE_BYTES);
         let resp = match serde_json::from_slice::<Request>(req) {
             Ok(r) => self.handle(r),
             Err(e) => Err(format!("bad request: {e}")),
@@ -473,9 +486,10 @@ impl Server {
 
     /// One line of `events.jsonl`, flushed at once.
     fn log_line(&mut self, e: &ControlEvent) {
-        if let Some(f) = self.log.as_mut() {
-            let _ = serde_json::to_writer(&mut *f, e).and_then(|_| f.write_all(b"\n").map_err(serde_json::Error::io));
-            let _ = f.flush();
+        if let Some(f) = self.log.as_mut().filter(|_| !self.log_failed) {
+            let written = serde_json::to_writer(&mut *f, e).map_err(std::io::Error::from).and_then(|()| f.write_all(b"\n"));
+            // A line that could not be written whole leaves the file cut.
+            self.log_failed = written.and_then(|()| f.flush()).is_err();
         }
     }
 
@@ -534,6 +548,13 @@ fn check_real_time(t: &Timeline, kinds: &[crate::model::ModelKind]) -> Result<()
         )),
         None => Ok(()),
     }
+}
+
+/// The answer to a request the transport refused before reading it (too
+/// large): an error, and nothing changes.
+fn refuse(e: &crate::transport::ipc::control::RequestError) -> Vec<u8> {
+    let resp = Response { ok: false, message: format!("bad request: {e}"), state: None };
+    serde_json::to_vec(&resp).expect("a response always serializes")
 }
 
 /// Headroom of phases a run reserves for switches.

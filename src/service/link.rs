@@ -19,7 +19,7 @@ use crate::metrics::LatencyHistogram;
 use crate::model::ModelKind;
 use crate::sample::FrameSample;
 use crate::scenario::Scenario;
-use crate::service::schema::{Account, LinkMeasures};
+use crate::service::schema::path::{Account, LinkMeasures};
 use crate::stats::BatchMeans;
 use crate::trace::{self, TraceEvent, TraceSink, TraceWriter};
 use crate::transport::PortError;

@@ -41,6 +41,36 @@ pub fn derived(given: Option<u64>, spec: &ScenarioSpec, seed: u64, tag: u64) -> 
     given.or(spec.seed).unwrap_or_else(|| splitmix64(seed ^ tag))
 }
 
+/// What the feedback path's seed is derived from, with the stream's seed,
+/// when not given (`"feedback"` in ASCII).
+pub const FEEDBACK_TAG: u64 = 0x6665_6564_6261_636b;
+
+/// What the video path's seed is derived from, with the stream's seed,
+/// when not given (`"video"` in ASCII).
+pub const VIDEO_TAG: u64 = 0x7669_6465_6f00_0000;
+
+/// The tag the UDP return path's seed is derived with (`"return"`).
+pub const RETURN_TAG: u64 = 0x7265_7475_726e;
+
+/// The tag a ROS 2 return topic's seed is derived with (`"ros2retu"`).
+pub const ROS2_RETURN_TAG: u64 = 0x726f_7332_7265_7475;
+
+/// The seed of the feedback path through `spec` (`--return-seed`).
+pub fn feedback(given: Option<u64>, spec: &ScenarioSpec, seed: u64) -> u64 {
+    derived(given, spec, seed, FEEDBACK_TAG)
+}
+
+/// The seed of the video path through `spec` (`--video-seed`).
+pub fn video(given: Option<u64>, spec: &ScenarioSpec, seed: u64) -> u64 {
+    derived(given, spec, seed, VIDEO_TAG)
+}
+
+/// A seed with no scenario to take one from (a console's synthetic
+/// motion, a fit): `given` (by `netfi run`: the stream's), else a fresh one.
+pub fn given_or_fresh(given: Option<u64>) -> u64 {
+    given.unwrap_or_else(fresh)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -57,5 +87,9 @@ mod tests {
         assert_eq!(stream(42, 0), 42);
         assert_eq!(stream(42, 3), splitmix64(42 ^ splitmix64(3)));
         assert_ne!(stream(42, 1), stream(42, 2));
+        assert_eq!(given_or_fresh(Some(3)), 3);
+        spec.seed = None;
+        assert_eq!(feedback(None, &spec, 1), splitmix64(1 ^ FEEDBACK_TAG));
+        assert_eq!(video(None, &spec, 1), splitmix64(1 ^ VIDEO_TAG));
     }
 }

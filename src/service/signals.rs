@@ -87,3 +87,4 @@ impl<F: FnMut() -> bool> StopCheck<F> {
         false
     }
 }
+

@@ -6,14 +6,18 @@
 //! simulator — so every report and the trace are flushed:
 //!
 //! - Ctrl-C / SIGTERM: stop the console; once it has ended, the emulator.
-//! - The console failed: the others keep going to the planned end, then
-//!   the emulator is stopped.
+//! - A process died (ended otherwise than with exit status 0): the run
+//!   ends now. The console is stopped; once it has ended, the emulator
+//!   ([`PEER_SETTLE`] after the death at the earliest, so the emulator
+//!   sees a dead console go); once the emulator has ended, the simulator
+//!   ([`END_MARKER_GRACE`] later, for the emulator's end marker, or at
+//!   once when the emulator died). Whatever does not end within
+//!   [`KILL_GRACE`] of its stop is killed.
 //! - The console ended normally but the emulator has not drained what it
 //!   holds within the drain grace: stop it.
-//! - The emulator is gone (died, or ended 5 s ago): the simulator gets no
-//!   end marker; stop it.
-//! - The emulator is gone and the console still streams into nothing: stop
-//!   it at the planned end.
+//! - The emulator ended normally 5 s ago and the simulator still runs (no
+//!   end marker came): stop it; the console still streaming is stopped at
+//!   the planned end.
 //! - A console still running but not yet streaming (no `console.ready`)
 //!   [`CONSOLE_READY`] after its start is stuck: it is named as a fault
 //!   and the run is stopped as on Ctrl-C. (On a host whose disk is busy,
@@ -21,6 +25,11 @@
 //!   files to disk; without this the run would wait for the hard deadline
 //!   with nothing said.)
 //! - Past the hard deadline (planned + drain grace + 60 s): kill them all.
+//!
+//! Each stop is ordered once. Each stream's consoles and robots are one
+//! role each ([`State::of_group`]): the role has died once none of them
+//! runs and one failed, so one stream's dead console leaves the others
+//! streaming to their end.
 
 use std::time::Duration;
 
@@ -70,17 +79,38 @@ pub struct Seen {
     pub simulator: State,
 }
 
-/// What to do after a look. Stopping a process that has ended does nothing.
+/// One flag per role.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Roles {
+    pub console: bool,
+    pub emulator: bool,
+    pub simulator: bool,
+}
+
+impl Roles {
+    /// All three.
+    pub const ALL: Roles = Roles { console: true, emulator: true, simulator: true };
+
+    fn get_mut(&mut self, k: usize) -> &mut bool {
+        match k {
+            0 => &mut self.console,
+            1 => &mut self.emulator,
+            _ => &mut self.simulator,
+        }
+    }
+}
+
+/// What to do after a look. Stopping or killing a process that has ended
+/// does nothing.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Orders {
-    pub stop_console: bool,
-    pub stop_emulator: bool,
-    pub stop_simulator: bool,
-    /// Kill whatever still runs, then reap: the run is over.
-    pub kill_all: bool,
+    /// Ask these to stop (SIGTERM).
+    pub stop: Roles,
+    /// Kill these (SIGKILL): they did not stop when asked.
+    pub kill: Roles,
     /// The consoles not yet streaming are stuck: name them (once).
     pub consoles_stalled: bool,
-    /// All three have ended (or were killed): stop supervising.
+    /// All three have ended (or are killed, then reaped): stop supervising.
     pub done: bool,
 }
 
@@ -94,6 +124,10 @@ pub struct Supervisor {
     stalled: bool,
     console_ended_at: Option<Duration>,
     emulator_ended_at: Option<Duration>,
+    /// When a process was first seen dead.
+    died_at: Option<Duration>,
+    /// When each role (console, emulator, simulator) was asked to stop.
+    stopped_at: [Option<Duration>; 3],
 }
 
 /// How long the emulator is given after its console ended to release what
@@ -110,8 +144,23 @@ pub const SIMULATOR_GRACE: Duration = Duration::from_secs(5);
 /// is stuck.
 pub const CONSOLE_READY: Duration = Duration::from_secs(30);
 
+/// After a death, how long the emulator is left running before it is
+/// stopped: the runner reaps the dead process's iceoryx2 node at once, and
+/// the emulator, which looks at its peers every few milliseconds, records
+/// the peer gone.
+pub const PEER_SETTLE: Duration = Duration::from_millis(300);
+
+/// After a death, how long the simulator is given to take the emulator's
+/// end marker before it is stopped.
+pub const END_MARKER_GRACE: Duration = Duration::from_secs(1);
+
+/// After a death, how long a process asked to stop has before it is
+/// killed; also what a process left running by a failing runner gets.
+pub const KILL_GRACE: Duration = Duration::from_secs(2);
+
 impl Supervisor {
-    /// A run whose stream is planned to last `planned_s` seconds.
+    /// A run whose stream is planned to last `planned_s` seconds (finite,
+    /// at most a week: checked where the flags are parsed).
     pub fn new(planned_s: f64) -> Supervisor {
         let planned = Duration::from_secs_f64(planned_s + 1.0);
         Supervisor {
@@ -122,12 +171,19 @@ impl Supervisor {
             stalled: false,
             console_ended_at: None,
             emulator_ended_at: None,
+            died_at: None,
+            stopped_at: [None; 3],
         }
     }
 
     /// Whether the run was interrupted (Ctrl-C / SIGTERM, or stuck consoles).
     pub fn interrupted(&self) -> bool {
         self.interrupted
+    }
+
+    /// Whether a process of the run died.
+    pub fn died(&self) -> bool {
+        self.died_at.is_some()
     }
 
     /// The orders after one look.
@@ -141,7 +197,7 @@ impl Supervisor {
         }
         if (s.stop_requested || stuck) && !self.interrupted {
             self.interrupted = true;
-            o.stop_console = true;
+            o.stop.console = true;
         }
         if c && self.console_ended_at.is_none() {
             self.console_ended_at = Some(s.now);
@@ -153,118 +209,70 @@ impl Supervisor {
             o.done = true;
             return o;
         }
-        let since = |t: Option<Duration>| t.map(|t| s.now.saturating_sub(t));
-        let past_plan = s.now >= self.planned;
-        let console_failed = s.console == State::Failed;
-        if !e && (self.interrupted && c || console_failed && past_plan) {
-            o.stop_emulator = true;
+        if self.died_at.is_none() && [s.console, s.emulator, s.simulator].contains(&State::Failed) {
+            self.died_at = Some(s.now);
         }
-        if !e && since(self.console_ended_at).is_some_and(|d| d > self.drain_grace) {
-            o.stop_emulator = true;
-        }
-        if e && !m && (s.emulator == State::Failed || since(self.emulator_ended_at).is_some_and(|d| d > SIMULATOR_GRACE)) {
-            o.stop_simulator = true;
-        }
-        if e && !c && (self.interrupted || past_plan) {
-            o.stop_console = true;
+        match self.died_at {
+            Some(t) => self.wind_down(s, t, &mut o),
+            None => self.go_on(s, &mut o),
         }
         if s.now > self.hard_deadline {
-            o.kill_all = true;
+            o.kill = Roles::ALL;
             o.done = true;
         }
+        self.once(s.now, &mut o);
         o
+    }
+
+    /// No process died: the stream goes to its end, or to the Ctrl-C.
+    fn go_on(&self, s: Seen, o: &mut Orders) {
+        let (c, e) = (s.console.ended(), s.emulator.ended());
+        let since = |t: Option<Duration>| t.map(|t| s.now.saturating_sub(t));
+        if !e && self.interrupted && c {
+            o.stop.emulator = true;
+        }
+        if !e && since(self.console_ended_at).is_some_and(|d| d > self.drain_grace) {
+            o.stop.emulator = true;
+        }
+        if e && !s.simulator.ended() && since(self.emulator_ended_at).is_some_and(|d| d > SIMULATOR_GRACE) {
+            o.stop.simulator = true;
+        }
+        if e && !c && (self.interrupted || s.now >= self.planned) {
+            o.stop.console = true;
+        }
+    }
+
+    /// A process died at `died`: the others are stopped in order, and
+    /// killed when they do not stop.
+    fn wind_down(&self, s: Seen, died: Duration, o: &mut Orders) {
+        if s.console == State::Running {
+            o.stop.console = true;
+        } else if s.emulator == State::Running && s.now.saturating_sub(died) >= PEER_SETTLE {
+            o.stop.emulator = true;
+        }
+        let marker_late = self.emulator_ended_at.is_some_and(|t| s.now.saturating_sub(t) >= END_MARKER_GRACE);
+        if s.simulator == State::Running && (s.emulator == State::Failed || marker_late) {
+            o.stop.simulator = true;
+        }
+        for (k, state) in [s.console, s.emulator, s.simulator].into_iter().enumerate() {
+            if state == State::Running && self.stopped_at[k].is_some_and(|t| s.now.saturating_sub(t) >= KILL_GRACE) {
+                *o.kill.get_mut(k) = true;
+            }
+        }
+    }
+
+    /// Keeps only the first order to stop each role, remembering when.
+    fn once(&mut self, now: Duration, o: &mut Orders) {
+        for k in 0..3 {
+            let stop = o.stop.get_mut(k);
+            if *stop && self.stopped_at[k].is_some() {
+                *stop = false;
+            } else if *stop {
+                self.stopped_at[k] = Some(now);
+            }
+        }
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::State::*;
-    use super::*;
-
-    #[test]
-    fn a_group_runs_while_any_runs_then_fails_if_any_failed() {
-        assert_eq!(State::of_group([Succeeded, Running, Failed]), Running);
-        assert_eq!(State::of_group([Succeeded, Failed]), Failed);
-        assert_eq!(State::of_group([Succeeded, Succeeded]), Succeeded);
-        assert_eq!(State::of_group([Succeeded]), Succeeded);
-    }
-
-    fn seen(t: f64, console: State, emulator: State, simulator: State) -> Seen {
-        Seen { now: Duration::from_secs_f64(t), stop_requested: false, console, consoles_ready: true, emulator, simulator }
-    }
-
-    #[test]
-    fn a_console_not_streaming_long_after_its_start_is_named_and_the_run_stopped() {
-        let mut s = Supervisor::new(100.0);
-        let waiting = |t| Seen { consoles_ready: false, ..seen(t, Running, Running, Running) };
-        assert_eq!(s.look(waiting(29.0)), Orders::default(), "a console may take its time to start");
-        let o = s.look(waiting(31.0));
-        assert_eq!(o, Orders { stop_console: true, consoles_stalled: true, ..Orders::default() });
-        assert!(s.interrupted());
-        assert_eq!(s.look(waiting(32.0)), Orders::default(), "named and stopped once");
-        // Stopped in order once the console has ended.
-        assert_eq!(s.look(seen(33.0, Succeeded, Running, Running)), Orders { stop_emulator: true, ..Orders::default() });
-        // Consoles that stream, or that ended, are not stuck.
-        let mut s = Supervisor::new(100.0);
-        assert_eq!(s.look(seen(40.0, Running, Running, Running)), Orders::default());
-        assert_eq!(s.look(Seen { consoles_ready: false, ..seen(41.0, Failed, Running, Running) }), Orders::default());
-    }
-
-    #[test]
-    fn a_normal_run_is_left_alone_until_all_three_end() {
-        let mut s = Supervisor::new(10.0);
-        assert_eq!(s.look(seen(1.0, Running, Running, Running)), Orders::default());
-        assert_eq!(s.look(seen(10.0, Succeeded, Running, Running)), Orders::default());
-        assert_eq!(s.look(seen(10.5, Succeeded, Succeeded, Running)), Orders::default());
-        assert_eq!(s.look(seen(10.6, Succeeded, Succeeded, Succeeded)), Orders { done: true, ..Orders::default() });
-        assert!(!s.interrupted());
-    }
-
-    #[test]
-    fn ctrl_c_stops_the_console_then_the_emulator() {
-        let mut s = Supervisor::new(10.0);
-        let o = s.look(Seen { stop_requested: true, ..seen(2.0, Running, Running, Running) });
-        assert_eq!(o, Orders { stop_console: true, ..Orders::default() });
-        assert!(s.interrupted());
-        let o = s.look(Seen { stop_requested: true, ..seen(2.1, Running, Running, Running) });
-        assert_eq!(o, Orders::default(), "the console is stopped once");
-        let o = s.look(seen(2.2, Succeeded, Running, Running));
-        assert_eq!(o, Orders { stop_emulator: true, ..Orders::default() });
-    }
-
-    #[test]
-    fn a_failed_console_leaves_the_emulator_running_to_the_planned_end() {
-        let mut s = Supervisor::new(10.0);
-        assert_eq!(s.look(seen(3.0, Failed, Running, Running)), Orders::default());
-        assert_eq!(s.look(seen(11.0, Failed, Running, Running)), Orders { stop_emulator: true, ..Orders::default() });
-    }
-
-    #[test]
-    fn an_emulator_that_does_not_drain_is_stopped_after_the_grace() {
-        let mut s = Supervisor::new(10.0);
-        s.look(seen(11.0, Succeeded, Running, Running));
-        assert_eq!(s.look(seen(40.0, Succeeded, Running, Running)), Orders::default());
-        assert_eq!(s.look(seen(41.5, Succeeded, Running, Running)), Orders { stop_emulator: true, ..Orders::default() });
-    }
-
-    #[test]
-    fn the_simulator_is_stopped_when_the_emulator_died_or_ended_long_ago() {
-        let mut s = Supervisor::new(10.0);
-        let o = s.look(seen(4.0, Running, Failed, Running));
-        assert!(o.stop_simulator && !o.stop_console, "{o:?}: the console goes on to the planned end");
-        let o = s.look(seen(11.0, Running, Failed, Running));
-        assert!(o.stop_simulator && o.stop_console, "{o:?}");
-        let mut s = Supervisor::new(10.0);
-        assert_eq!(s.look(seen(11.0, Succeeded, Succeeded, Running)), Orders::default());
-        assert_eq!(s.look(seen(16.5, Succeeded, Succeeded, Running)), Orders { stop_simulator: true, ..Orders::default() });
-    }
-
-    #[test]
-    fn past_the_hard_deadline_everything_is_killed() {
-        let mut s = Supervisor::new(10.0);
-        let o = s.look(seen(102.0, Running, Running, Running));
-        assert_eq!(o, Orders { kill_all: true, done: true, ..Orders::default() });
-        let mut s = Supervisor::new(10.0);
-        assert!(!s.look(seen(100.0, Succeeded, Running, Running)).kill_all, "11 + 30 + 60 s not yet passed");
-    }
-}
+mod tests;

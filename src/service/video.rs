@@ -11,7 +11,7 @@
 use crate::clock::now_ns;
 use crate::metrics::{LatencyHistogram, Summary};
 use crate::sample::VideoHeader;
-use crate::service::emulator::video::VideoExtra;
+use crate::service::schema::VideoExtra;
 use crate::service::schema::PathReport;
 use crate::transport::ipc::video::{VideoSubscriber, DEFAULT_VIDEO_MAX_BYTES};
 use crate::transport::{Channel, Role};

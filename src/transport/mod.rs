@@ -40,7 +40,7 @@ pub mod ros2;
 pub mod udp;
 
 pub use endpoint::{Endpoint, EndpointError, Payload};
-pub use open::{cleanup_stale, open, open_feedback, open_node, Egress, FeedbackEgress, FeedbackIngress, Ingress, Transports, Wiring};
+pub use open::{cleanup_stale, open, open_feedback, open_node, ConsoleUnnamed, Egress, FeedbackEgress, FeedbackIngress, Ingress, Transports, Wiring};
 pub use ports::{FrameSink, FrameSource, MemoryPort, PortError};
 
 pub use ipc::{

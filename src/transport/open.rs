@@ -7,7 +7,7 @@ use crate::sample::{FeedbackSample, FrameSample};
 use std::collections::VecDeque;
 use crate::transport::endpoint::{Endpoint, Payload};
 use crate::transport::ports::{FrameSink, FrameSource, MemoryPort, PortError};
-use crate::transport::udp::{Arena, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
+use crate::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use crate::transport::{Channel, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
 use anyhow::{Context, Result};
 use std::cell::RefCell;
@@ -199,9 +199,11 @@ pub struct Wiring {
     pub udp: UdpOptions,
     /// Local address a UDP egress sends from (default: an ephemeral port).
     pub egress_bind: Option<SocketAddr>,
-    /// The only sender a UDP ingress takes datagrams from (default: the
-    /// first, then locked).
-    pub console_from: Option<SocketAddr>,
+    /// The console a UDP ingress takes datagrams from (anything else is
+    /// refused and counted): its address, or, as a
+    /// [`ConsolePolicy::FirstDatagram`], the first sender. Required with a
+    /// UDP ingress: without it [`open`] fails with [`ConsoleUnnamed`].
+    pub console_from: Option<ConsolePolicy>,
     /// Raw payload: datagrams the release queue may hold (the arena has
     /// one slot more).
     pub queue_capacity: usize,
@@ -210,6 +212,19 @@ pub struct Wiring {
     /// Open the egress first and wait this long for a receiver on it
     /// before opening the ingress (`None`: do not wait).
     pub wait_for_peer_ns: Option<u64>,
+}
+
+/// A UDP ingress was to be opened without a console: nothing would tell
+/// the console's frames from anyone else's.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the UDP ingress udp://{ingress} takes frames from one console, and none was named: \
+     give the console's address (--console-from ADDR:PORT) or pair with the first sender (--console-from first); \
+     datagrams from anyone else are refused and counted"
+)]
+pub struct ConsoleUnnamed {
+    /// The ingress address.
+    pub ingress: SocketAddr,
 }
 
 /// The emulator's transports, open.
@@ -244,16 +259,31 @@ impl Transports {
 
 /// Opens `ingress` and `egress`: UDP sockets first, then the iceoryx2 node
 /// and ports if a side needs them.
+///
+/// A UDP ingress takes frames from its console only (`w.console_from`,
+/// required); a UDP egress socket receives from the robot's address only
+/// (what the return path reads from it; a handle made with
+/// [`UdpPort::try_clone`] keeps that, and [`UdpPort::accept_only`] on it
+/// names another robot address). What either refuses is counted per
+/// sender ([`UdpPort::refused`], [`UdpSource::foreign`]).
 pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transports> {
+    // `Into`: the field may hold an address or a whole policy.
+    let console: Option<ConsolePolicy> = w.console_from.map(Into::into);
+    let console = match (ingress.udp(), console) {
+        (Some(addr), None) => return Err(ConsoleUnnamed { ingress: addr }.into()),
+        (_, c) => c.unwrap_or(ConsolePolicy::FirstDatagram),
+    };
     let arena = (w.payload == Payload::Raw).then(|| Rc::new(RefCell::new(Arena::new(w.queue_capacity + 1))));
     let sink = match egress.udp() {
         Some(peer) => {
             let opts = UdpOptions { reuse_address: false, ..w.udp };
-            let port = match w.egress_bind {
+            let mut port = match w.egress_bind {
                 Some(local) => UdpPort::bind(local, &opts),
                 None => UdpPort::bind_towards(peer, &opts),
             }
             .context("opening the UDP egress socket")?;
+            // Only the robot answers on the way back.
+            port.accept_only(peer);
             Some(UdpSink::new(port, peer, arena.clone()))
         }
         None => None,
@@ -261,11 +291,14 @@ pub fn open(ingress: &Endpoint, egress: &Endpoint, w: &Wiring) -> Result<Transpo
     let source = match ingress.udp() {
         Some(addr) => {
             let port = UdpPort::bind(addr, &w.udp).context("opening the UDP ingress socket")?;
-            let s = UdpSource::new(port, arena.clone());
-            let s = match w.console_from {
-                Some(c) => s.only_from(c),
-                None => s,
-            };
+            if console == ConsolePolicy::FirstDatagram {
+                eprintln!(
+                    "emulator: WARNING: the UDP ingress udp://{} will take the first sender as its console (--console-from first): \
+                     whoever sends first is trusted",
+                    port.local_addr()
+                );
+            }
+            let s = UdpSource::new(port, arena.clone(), console);
             Some(match w.idle_end_ns {
                 Some(ns) => s.with_idle_end(ns),
                 None => s,

@@ -3,7 +3,7 @@
 
 use super::runs::Start;
 use super::Ui;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::response::{Html, IntoResponse, Response};
 use axum::Json;
@@ -18,12 +18,22 @@ fn not_found(id: &str) -> Response {
     (StatusCode::NOT_FOUND, format!("no run `{id}` was started here")).into_response()
 }
 
+/// `POST /api/preview`'s body.
 #[derive(Debug, Deserialize)]
-pub struct PreviewQuery {
+#[serde(deny_unknown_fields)]
+pub struct PreviewRequest {
+    toml: String,
     #[serde(default = "default_frames")]
     frames: u64,
     #[serde(default = "default_rate")]
     rate_hz: f64,
+}
+
+/// `POST /api/parse`'s body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParseRequest {
+    toml: String,
 }
 
 fn default_frames() -> u64 {
@@ -34,13 +44,13 @@ fn default_rate() -> f64 {
     1000.0
 }
 
-/// `POST /api/preview?frames=N&rate_hz=R` with a scenario's TOML: the
-/// checker's figures and plots as an HTML fragment, or the parser's error.
-pub async fn preview(Query(q): Query<PreviewQuery>, body: String) -> Response {
+/// `POST /api/preview` `{toml, frames, rate_hz}`: the checker's figures
+/// and plots as an HTML fragment, or the parser's error.
+pub async fn preview(Json(q): Json<PreviewRequest>) -> Response {
     if !(1_000..=5_000_000).contains(&q.frames) {
         return unprocessable(format!("frames: between 1000 and 5000000, got {}", q.frames));
     }
-    let done = tokio::task::spawn_blocking(move || super::preview::render(&body, q.frames, q.rate_hz)).await;
+    let done = tokio::task::spawn_blocking(move || super::preview::render(&q.toml, q.frames, q.rate_hz)).await;
     match done {
         Ok(Ok(html)) => Html(html).into_response(),
         Ok(Err(e)) => unprocessable(e),
@@ -48,9 +58,9 @@ pub async fn preview(Query(q): Query<PreviewQuery>, body: String) -> Response {
     }
 }
 
-/// `POST /api/parse` with a scenario's TOML: the scenario as the builder
-/// holds it (its file's tables as JSON), or the parser's error.
-pub async fn parse(body: String) -> Response {
+/// `POST /api/parse` `{toml}`: the scenario as the builder holds it (its
+/// file's tables as JSON), or the parser's error.
+pub async fn parse(Json(ParseRequest { toml: body }): Json<ParseRequest>) -> Response {
     if let Err(e) = crate::scenario::parse_str(&body, "scenario", "scenario") {
         return unprocessable(e);
     }
@@ -76,8 +86,8 @@ pub async fn status(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Respon
     }
 }
 
-/// `POST /api/runs/{id}/stop`.
-pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
+/// `POST /api/runs/{id}/stop` `{}`.
+pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(_): Json<serde_json::Value>) -> Response {
     if ui.runs.stop(&id) {
         StatusCode::NO_CONTENT.into_response()
     } else {

@@ -9,13 +9,20 @@
 //! emulator's core; every page asset is compiled into the binary, nothing is
 //! fetched at run time. Work that takes longer than a request should block
 //! (a preview) runs on tokio's blocking pool.
+//!
+//! It obeys its own page only ([`guard`]): a `Host` that is not its own is
+//! refused (DNS rebinding), every request needs the token printed at start
+//! (then held in a same-origin cookie), and every state change is a JSON
+//! request with the page's own header, from its own origin.
 
 mod api;
 mod builder;
+pub mod guard;
 mod live;
 mod page;
 mod preview;
 mod runs;
+mod study;
 
 use anyhow::Context;
 use std::future::IntoFuture;
@@ -36,6 +43,10 @@ pub struct UiOptions {
     pub netfi: PathBuf,
     /// The core the runs' emulators use: the server keeps off it.
     pub emulator_core: usize,
+    /// Serve without a token (loopback only).
+    pub no_token: bool,
+    /// Host names the server answers to besides `localhost` and addresses.
+    pub allow_hosts: Vec<String>,
 }
 
 /// What the handlers share.
@@ -46,11 +57,15 @@ pub(crate) struct Ui {
 
 /// Serves until SIGINT/SIGTERM; stops the runs it started on the way out.
 pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
+    let token = if opts.no_token { None } else { Some(guard::new_token()?) };
+    // Checked before anything listens: no token is for loopback only.
+    guard::Guard::new(opts.bind, token.clone(), opts.allow_hosts.clone())?;
     let mask = runs::CpuMask::current().context("reading this process's CPU mask")?;
     keep_off_core(opts.emulator_core)?;
     if !opts.bind.ip().is_loopback() {
         eprintln!(
-            "warning: netfi ui listens on {} — not loopback: anyone who reaches this address can start runs on this host",
+            "WARNING: netfi ui listens on {} — not loopback: whoever reaches this address and has the token can start runs on this host, \
+             and plain HTTP carries the token in clear",
             opts.bind
         );
     }
@@ -61,8 +76,9 @@ pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
         let listener =
             tokio::net::TcpListener::bind(ui.opts.bind).await.with_context(|| format!("listening on {}", ui.opts.bind))?;
         let addr = listener.local_addr()?;
-        println!("netfi ui on http://{addr}/");
-        let app = router(ui.clone());
+        let guard = Arc::new(guard::Guard::new(addr, token, ui.opts.allow_hosts.clone())?);
+        println!("netfi ui on {}", guard.url());
+        let app = router(ui.clone(), guard);
         // A signal ends the serving at once: a browser's idle keep-alive
         // connection would hold a graceful shutdown open for ever.
         tokio::select! {
@@ -74,7 +90,7 @@ pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
     })
 }
 
-fn router(ui: Arc<Ui>) -> Router {
+fn router(ui: Arc<Ui>, guard: Arc<guard::Guard>) -> Router {
     Router::new()
         .route("/", get(page::index))
         .route("/runs/{id}", get(page::run))
@@ -87,7 +103,16 @@ fn router(ui: Arc<Ui>) -> Router {
         .route("/api/runs/{id}/ctl", post(api::ctl))
         .route("/assets/app.js", get(page::script))
         .route("/assets/app.css", get(page::style))
+        .route("/study", get(study::page))
+        .route("/study/view", get(study::participant_view))
+        .route("/api/study/status", get(study::status))
+        .route("/api/study/start", post(study::start))
+        .route("/api/study/stop", post(study::stop))
+        .route("/api/study/mark", post(study::mark))
+        .route("/api/study/answer", post(study::answer))
+        .route("/assets/study.js", get(study::script))
         .with_state(ui)
+        .layer(axum::middleware::from_fn_with_state(guard, guard::check))
 }
 
 async fn shutdown() {
@@ -108,5 +133,5 @@ fn keep_off_core(emulator_core: usize) -> anyhow::Result<()> {
         eprintln!("WARNING: netfi ui shares core {emulator_core} with the runs' emulators: there is no other core");
         return Ok(());
     }
-    crate::service::place("ui", None, Some(emulator_core))
+    Ok(crate::host::placement::place("ui", None, Some(emulator_core))?)
 }

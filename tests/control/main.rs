@@ -218,3 +218,65 @@ fn ctl_to_a_run_that_does_not_exist_fails_clearly_and_leaves_nothing() {
     let (ok, _, err) = ctl("bad/id", &["show"]);
     assert!(!ok && err.contains("run id `bad/id`"), "{err}");
 }
+
+/// A client of the control service written against iceoryx2 itself, as any
+/// binding could be: it sends what it likes, with no size check of its own.
+fn raw_request(run: &str, request: &[u8]) -> Value {
+    use iceoryx2::prelude::*;
+    use netfi::transport::ipc::control::{CONTROL_SERVICE, MAX_CONTROL_CLIENTS};
+    let config = netfi::transport::IpcConfig::new(netfi::transport::RunId::new(run).unwrap());
+    let name = NodeName::new(&config.node_name(netfi::transport::Role::Tool)).unwrap();
+    let node = NodeBuilder::new().name(&name).config(config.iceoryx2()).create::<ipc::Service>().unwrap();
+    // The service's own limits: opening asks for no more than it has.
+    let service = node
+        .service_builder(&ServiceName::new(&format!("netfi/{run}/{CONTROL_SERVICE}")).unwrap())
+        .request_response::<[u8], [u8]>()
+        .max_servers(1)
+        .max_clients(MAX_CONTROL_CLIENTS)
+        .max_nodes(netfi::transport::MAX_NODES_PER_CHANNEL)
+        .max_active_requests_per_client(1)
+        .max_response_buffer_size(1)
+        .max_borrowed_responses_per_pending_response(1)
+        .max_loaned_requests(1)
+        .enable_fire_and_forget_requests(false)
+        .open()
+        .unwrap_or_else(|e| panic!("opening the control service: {e:?}"));
+    let client = service.client_builder().initial_max_slice_len(request.len()).create().unwrap();
+    let pending = client.loan_slice_uninit(request.len()).unwrap().write_from_slice(request).send().unwrap();
+    let t0 = Instant::now();
+    loop {
+        if let Some(resp) = pending.receive().unwrap() {
+            return serde_json::from_slice(resp.payload()).unwrap();
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "no answer to a {} byte request", request.len());
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+/// A valid `show` request padded with JSON whitespace to `len` bytes.
+fn padded_show(len: usize) -> Vec<u8> {
+    let mut r = br#"{"cmd":"show"}"#.to_vec();
+    r.resize(len, b' ');
+    r
+}
+
+#[test]
+fn a_request_over_the_1_mib_limit_is_refused_and_one_at_it_answered() {
+    use netfi::transport::ipc::control::MAX_MESSAGE_BYTES;
+    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let run = Run::start("toolarge", &["Normal", "--duration-s", "4", "--seed", "1"]);
+    let id = run.id.clone();
+    let at_limit = raw_request(&id, &padded_show(MAX_MESSAGE_BYTES));
+    assert_eq!(at_limit["ok"], true, "{at_limit}");
+    for len in [MAX_MESSAGE_BYTES + 1, 10 << 20] {
+        let r = raw_request(&id, &padded_show(len));
+        assert_eq!(r["ok"], false, "a {len} byte request was answered {r}");
+        let message = r["message"].as_str().unwrap();
+        assert!(message.contains(&format!("the request is {len} bytes; at most {MAX_MESSAGE_BYTES} are accepted")), "{message}");
+    }
+    // The run went on, its control too.
+    assert_eq!(show(&id)["scenario"], "Normal");
+    let (r, out) = run.report();
+    assert!(r["events"].as_array().is_none_or(|e| e.is_empty()), "{}", r["events"]);
+    std::fs::remove_dir_all(out).ok();
+}

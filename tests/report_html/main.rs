@@ -3,12 +3,18 @@
 //! the provenance, the control events, and errors that name their file.
 //!
 //! One short run (PLM-2 then DLM-2, a few seconds) serves every test; a
-//! test that changes the run's files works on its own copy.
+//! test that changes the run's files works on its own copy. `foreign`: a
+//! run started by hand, without `netfi run`.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
+
+mod foreign;
+
+/// Each run has a busy-waiting emulator pinned to a core: one at a time.
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn netfi() -> Command {
     Command::new(env!("CARGO_BIN_EXE_netfi"))
@@ -24,6 +30,7 @@ fn temp_dir(name: &str) -> PathBuf {
 fn the_run() -> &'static Path {
     static RUN: OnceLock<PathBuf> = OnceLock::new();
     RUN.get_or_init(|| {
+        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let out = temp_dir("run");
         let scenario = concat!(env!("CARGO_MANIFEST_DIR"), "/config/scenarios/plm2_dlm2.toml");
         let o = netfi().args(["run", scenario, "--duration-s", "3", "--seed", "11", "--out"]).arg(&out).output().unwrap();
@@ -34,9 +41,14 @@ fn the_run() -> &'static Path {
 
 /// A copy of the run's directory that a test may change.
 fn copy_of_the_run(name: &str) -> PathBuf {
+    copy_dir(the_run(), name)
+}
+
+/// A copy of the files of the run directory `from`.
+fn copy_dir(from: &Path, name: &str) -> PathBuf {
     let to = temp_dir(name);
     std::fs::create_dir_all(&to).unwrap();
-    for e in std::fs::read_dir(the_run()).unwrap() {
+    for e in std::fs::read_dir(from).unwrap() {
         let e = e.unwrap();
         if e.file_type().unwrap().is_file() {
             std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
@@ -192,8 +204,12 @@ fn missing_or_malformed_inputs_are_errors_naming_the_file() {
     let report = std::fs::read(dir.join("report.json")).unwrap();
     std::fs::write(dir.join("report.json"), &report[..report.len() / 2]).unwrap();
     fails_naming(&dir, "report.json");
+    // Without report.json the report is assembled from the services' own;
+    // without the emulator's too, there is no run to report.
     std::fs::remove_file(dir.join("report.json")).unwrap();
+    std::fs::remove_file(dir.join("emulator.json")).unwrap();
     fails_naming(&dir, "report.json");
+    fails_naming(&dir, "emulator.json");
     assert!(!dir.join("report.html").exists(), "a page was written from bad inputs");
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -177,7 +177,7 @@ fn kill_in_three_streams(name: &str, role: &str, dir: impl Fn(&Path) -> PathBuf)
 }
 
 /// Processes whose command line names `run_id` (every process of the run does, by `--run-id`).
-fn processes_naming(run_id: &str) -> Vec<String> {
+pub(super) fn processes_naming(run_id: &str) -> Vec<String> {
     let mut found = Vec::new();
     for e in std::fs::read_dir("/proc").unwrap().filter_map(|e| e.ok()) {
         let Ok(cmd) = std::fs::read(e.path().join("cmdline")) else { continue };

@@ -114,7 +114,8 @@ fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
 }
 
 /// kill -9 of the emulator mid-run: its trace and histogram logs are on
-/// disk up to its last second (the writer flushes every second).
+/// disk up to its last second (the writer flushes every second), under
+/// their cut names, and the run's report names each as cut.
 #[test]
 fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
@@ -134,11 +135,17 @@ fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
     unsafe { libc::kill(pid, libc::SIGKILL) };
     let o = child.wait_with_output().unwrap();
     assert!(!o.status.success(), "a run with a killed emulator fails");
-    let trace = out.join("trace.csv");
+    assert!(!out.join("trace.csv").exists(), "a trace joined from a cut one is not whole");
+    let trace = out.join("trace.csv.partial");
     let text = std::fs::read_to_string(&trace).unwrap_or_else(|e| panic!("{}: {e}\n{}", trace.display(), String::from_utf8_lossy(&o.stderr)));
     let rows = text.lines().count() - 1;
     assert!(rows >= 1500, "only {rows} rows of a 3 s stream at 1 kHz survived");
-    let log = std::fs::read_to_string(out.join("decision.hlog")).unwrap();
+    let log = std::fs::read_to_string(out.join("decision.hlog.partial")).unwrap();
     let intervals = log.lines().filter(|l| !l.starts_with('#') && !l.starts_with('"') && l.contains(',')).count();
-    assert!(intervals >= 2, "{intervals} intervals in decision.hlog:\n{log}");
+    assert!(intervals >= 2, "{intervals} intervals in decision.hlog.partial:\n{log}");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let faults: Vec<&str> = r["faults"].as_array().unwrap().iter().filter_map(|f| f.as_str()).collect();
+    for cut in ["trace.csv.partial", "decision.hlog.partial"] {
+        assert!(faults.iter().any(|f| f.starts_with("cut file:") && f.contains(cut)), "{cut} not named as cut: {faults:?}");
+    }
 }

@@ -11,6 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+mod deaths;
 mod faults;
 mod integrity;
 mod streams;
@@ -266,38 +267,6 @@ fn wait_pid(out: &Path, role: &str) -> i32 {
         assert!(t0.elapsed() < Duration::from_secs(30), "{role} never started");
         std::thread::sleep(Duration::from_millis(10));
     }
-}
-
-#[test]
-fn a_killed_console_is_reported_and_the_others_finish() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let out = out_dir("kill-console");
-    let child = netfi()
-        .args(["run", "Normal", "--duration-s", "3", "--seed", "7", "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let pid = wait_pid(&out, "console");
-    std::thread::sleep(Duration::from_millis(700));
-    // SAFETY: signalling a process this test started (through the runner).
-    unsafe { libc::kill(pid, libc::SIGKILL) };
-    let o = child.wait_with_output().unwrap();
-    assert!(!o.status.success(), "a run with a killed process must fail");
-    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
-    let faults: Vec<String> = r["faults"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
-    assert!(faults.iter().any(|f| f.contains("console ended abnormally (signal 9)")), "{faults:?}");
-    // The emulator and simulator finished and closed their own accounts.
-    let f = &r["frames"];
-    let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
-    assert!(u(&f["entered"]) > 300, "{f}");
-    assert_eq!(u(&f["entered"]), u(&f["delivered"]) + dropped + u(&f["held_at_end"]));
-    assert_eq!(u(&f["delivered"]), u(&f["received"]));
-    assert_eq!(r["emulator"]["ended_by"], "signal");
-    // The emulator saw its console go away (the runner reaps dead peers).
-    let events = r["peer_events"].as_array().unwrap();
-    assert!(events.iter().any(|e| e["peer"] == "console" && e["connected"] == 0), "{events:?}");
 }
 
 /// Starts one service alone (`netfi <role> --run-id … --out …`).

@@ -21,8 +21,12 @@ fn the_emulators_memory_does_not_grow_with_the_frames() {
     let out = out_dir("memory");
     let robot = socket();
     let egress = format!("udp://{}", robot.local_addr());
-    let emu = Emulator::start(&out, &["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--egress", &egress]);
     let console = socket();
+    let from = console.local_addr().to_string();
+    let emu = Emulator::start(
+        &out,
+        &["--scenario", "Normal", "--seed", "1", "--ingress", "udp://127.0.0.1:0", "--console-from", &from, "--egress", &egress],
+    );
     let n: u32 = 100_000;
     let frame = |i: u32| itp(i).to_vec();
     // A warm-up that fills the writer's 1 MiB buffer and the allocator's

@@ -148,6 +148,8 @@ fn console_and_robot_in_two_namespaces_talk_only_through_the_emulator() {
             "5",
             "--ingress",
             "udp://192.0.2.2:36000",
+            "--console-from",
+            &console.local_addr().to_string(),
             "--egress",
             "udp://198.51.100.2:36000",
             "--idle-end-ms",

@@ -1,8 +1,11 @@
 //! Clients nobody here wrote, through the bridge in raw mode: `sockperf`
 //! ping-pong (Normal, the return path relaying the replies) and `iperf3 -u`
-//! (PLM-2 and Bernoulli 30%), on loopback. Each test skips, saying why, where
-//! its tool is not installed (Debian packages `sockperf`, `iperf3`; `.ci/run`
-//! installs them).
+//! (PLM-2 and Bernoulli 30%), on loopback. Each client binds a port of its
+//! own, which the emulator is given as the console's (`--console-from`).
+//! Each test skips, saying why, where its tool is not installed (Debian
+//! packages `sockperf`, `iperf3`; `.ci/run` installs them), and fails
+//! instead where `NETFI_REQUIRE_SOCKPERF=1` or `NETFI_REQUIRE_IPERF3=1`
+//! says it must run.
 //!
 //! Latency is printed, never asserted (the machine is shared and noisy);
 //! counts are asserted exactly: what iperf3 says it lost is what netfi says
@@ -15,10 +18,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-/// Whether `tool` runs here; prints why a test skips if not.
+/// Whether `tool` runs here; prints why a test skips if not, and fails
+/// where `NETFI_REQUIRE_<TOOL>=1` asks for it.
 fn have(tool: &str) -> bool {
     let ok = Command::new(tool).arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_ok();
+    let require = format!("NETFI_REQUIRE_{}", tool.to_ascii_uppercase());
     if !ok {
+        assert!(std::env::var(&require).as_deref() != Ok("1"), "{require}=1 but `{tool}` is not installed (Debian package `{tool}`)");
         eprintln!("skipping: `{tool}` is not installed (Debian package `{tool}`; .ci/run installs it)");
     }
     ok
@@ -103,6 +109,8 @@ fn sockperf_ping_pong_through_the_bridge() {
         .unwrap();
     let mut server = Reaped(server);
     wait_bound("udp", server_port, &mut server.0, "sockperf server");
+    // The client's own port, so the emulator can be told it is the console.
+    let client_port = free_udp_port();
     let ping = |port: u16| {
         let o = run_bounded(
             Command::new("sockperf").args([
@@ -111,6 +119,10 @@ fn sockperf_ping_pong_through_the_bridge() {
                 "127.0.0.1",
                 "-p",
                 &port.to_string(),
+                "--client_ip",
+                "127.0.0.1",
+                "--client_port",
+                &client_port.to_string(),
                 "-t",
                 "2",
                 "-m",
@@ -125,6 +137,7 @@ fn sockperf_ping_pong_through_the_bridge() {
     };
     let direct = ping(server_port);
     let egress = format!("udp://127.0.0.1:{server_port}");
+    let console = format!("127.0.0.1:{client_port}");
     let emu = Emulator::start(
         &out,
         &[
@@ -136,6 +149,8 @@ fn sockperf_ping_pong_through_the_bridge() {
             "raw",
             "--ingress",
             "udp://127.0.0.1:0",
+            "--console-from",
+            &console,
             "--egress",
             &egress,
         ],
@@ -197,6 +212,10 @@ fn iperf3_through(name: &str, scenario: &str, seed: u64, datagrams: u64) -> (Val
     let ingress = format!("udp://127.0.0.2:{port}");
     let egress = format!("udp://127.0.0.1:{port}");
     let expected = (datagrams + 1).to_string();
+    // The client's UDP test socket, bound where the emulator is told the
+    // console is.
+    let client_port = free_udp_port();
+    let console = format!("127.0.0.1:{client_port}");
     let emu = Emulator::start(
         &out,
         &[
@@ -208,6 +227,8 @@ fn iperf3_through(name: &str, scenario: &str, seed: u64, datagrams: u64) -> (Val
             "raw",
             "--ingress",
             &ingress,
+            "--console-from",
+            &console,
             "--egress",
             &egress,
             "--expected-frames",
@@ -220,6 +241,10 @@ fn iperf3_through(name: &str, scenario: &str, seed: u64, datagrams: u64) -> (Val
             "127.0.0.2",
             "-p",
             &port.to_string(),
+            "-B",
+            "127.0.0.1",
+            "--cport",
+            &client_port.to_string(),
             "-u",
             "-b",
             "20M",

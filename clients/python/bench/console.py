@@ -32,7 +32,8 @@ from common import CHAIN, DIRECT, ROUTES, Records, now  # noqa: E402
 from netfi_iox import FeedbackSample, FrameSample, RunNode, end_marker  # noqa: E402
 
 #: Before a slot, with nothing in flight, the console sleeps until this long
-#: before it, then polls (as benches/overhead's driving thread does).
+#: before it, then polls (as the Rust benchmarks' driving thread does,
+#: benches/common/drive.rs).
 SLEEP_SLACK_NS = 100_000
 
 

@@ -56,6 +56,7 @@ pub enum Command {
     /// Show the report of a finished run from its output directory; with
     /// --html, write it as one self-contained page, `report.html`, there.
     Report(ReportArgs),
+    Study(crate::study::StudyArgs),
 }
 
 #[derive(Debug, Args)]
@@ -74,7 +75,7 @@ pub struct UiArgs {
     #[arg(long, default_value_t = 8080)]
     pub port: u16,
     /// Address to listen on. Anything but loopback lets whoever reaches it
-    /// start runs on this host.
+    /// and has the token start runs on this host, over plain HTTP.
     #[arg(long, default_value = "127.0.0.1")]
     pub bind: std::net::IpAddr,
     /// Parent directory of the runs' output directories.
@@ -84,6 +85,16 @@ pub struct UiArgs {
     /// server keeps off it.
     #[arg(long)]
     pub emulator_core: Option<usize>,
+    /// Also answer to this host name (as other machines reach this one;
+    /// repeatable). Requests naming any other host are refused, except
+    /// `localhost` and IP addresses of this server.
+    #[arg(long, value_name = "NAME")]
+    pub allow_host: Vec<String>,
+    /// Serve without the token printed at start: loopback only (`--bind`
+    /// another address is refused), and any program of any user of this
+    /// host can then drive it.
+    #[arg(long)]
+    pub no_token: bool,
 }
 
 #[derive(Debug, Args)]

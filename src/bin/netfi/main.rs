@@ -8,6 +8,7 @@ mod fit;
 mod report;
 mod restore;
 mod scenario;
+mod study;
 
 use clap::Parser;
 
@@ -19,11 +20,17 @@ fn main() -> std::process::ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let args = cli::Cli::parse();
+    if matches!(args.command, cli::Command::Console(_) | cli::Command::Emulator(_) | cli::Command::Simulator(_)) {
+        if let Err(e) = netfi::host::process::die_with_runner() {
+            eprintln!("netfi: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    }
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
         cli::Command::Run(a) => run(&a),
         cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()),
-        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|_| ()),
+        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r))),
         cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
@@ -33,6 +40,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
         cli::Command::Report(a) => report::run(&a),
         cli::Command::Ctl(a) => ctl::run(a),
+        cli::Command::Study(a) => study::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -68,5 +76,7 @@ fn ui(a: cli::UiArgs) -> anyhow::Result<()> {
         out_dir: a.out,
         netfi: std::env::current_exe()?,
         emulator_core: a.emulator_core.unwrap_or(last_core),
+        no_token: a.no_token,
+        allow_hosts: a.allow_host,
     })
 }

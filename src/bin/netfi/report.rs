@@ -1,8 +1,9 @@
 //! `netfi report DIR [--html]`: the report of a finished run, from what it
-//! left in its output directory.
+//! left in its output directory: the run's `report.json`, or, for a run
+//! started by hand (a stand-alone emulator and its clients), the report
+//! assembled from the services' own.
 
 use crate::cli::ReportArgs;
-use anyhow::Context;
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     if args.html {
@@ -10,10 +11,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         println!("{}", path.display());
         return Ok(());
     }
-    let path = args.out_dir.join("report.json");
-    let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-    let report: netfi::service::report::RunReport =
-        serde_json::from_slice(&bytes).with_context(|| format!("{}: not a run report", path.display()))?;
+    let report = netfi::service::report::RunReport::of_dir(&args.out_dir)?;
     print!("{}", report.to_text());
     Ok(())
 }

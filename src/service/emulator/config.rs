@@ -1,10 +1,16 @@
 //! What the emulator runs, resolved once from its arguments: each lane's
 //! own arguments, scenario, seed and queue; where the loop runs; its live
 //! control. Nothing after this reads the arguments' defaults again.
+//!
+//! Started by `netfi run`, the emulator is given every seed (`--seed`,
+//! `--return-seed`, `--video-seed`) and the run's own copy of each
+//! scenario, and uses them as given; alone, it applies the same rules
+//! ([`crate::service::seeds`]) to what it was given.
 
 use crate::scenario::ScenarioSpec;
-use crate::service::args::{EmulatorArgs, StreamArgs};
-use crate::service::plan::{parse_stream_scenario, stream_dir, stream_run_id};
+use crate::service::args::{EmulatorArgs, ScenarioArgs, StreamArgs};
+use crate::service::args::streams;
+use crate::service::seeds;
 use crate::transport::{IpcConfig, Payload, RunId};
 use anyhow::Context;
 use std::collections::BTreeMap;
@@ -26,7 +32,7 @@ pub struct LaneConfig {
 impl LaneConfig {
     /// Whether a sample flagged raw may come (UDP raw payloads).
     pub fn accept_raw(&self) -> bool {
-        self.args.payload == Payload::Raw
+        self.args.udp.payload == Payload::Raw
     }
 }
 
@@ -53,26 +59,30 @@ pub struct EmulatorConfig {
 /// Lane `k`'s own arguments: its run id, scenario, seed and directory.
 fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64, k: usize) -> EmulatorArgs {
     let n = args.stream.streams as usize;
-    EmulatorArgs {
-        run_id: args.run_id.as_deref().map(|r| stream_run_id(r, k)),
-        scenario: scenarios.get(&k).unwrap_or(&args.scenario).clone(),
-        seed: Some(crate::service::seeds::stream(seed, k)),
-        return_seed: args.return_seed.map(|s| crate::service::seeds::stream(s, k)),
-        out: stream_dir(&args.out, n, k),
+    let mut lane = EmulatorArgs {
+        run_id: args.run_id.as_deref().map(|r| streams::run_id(r, k)),
+        scenario: ScenarioArgs {
+            scenario: scenarios.get(&k).unwrap_or(&args.scenario.scenario).clone(),
+            seed: Some(seeds::stream(seed, k)),
+            queue_capacity: args.scenario.queue_capacity,
+        },
+        out: streams::dir(&args.out, n, k),
         stream: StreamArgs::default(),
         ..args.clone()
-    }
+    };
+    lane.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
+    lane
 }
 
 /// The lane of `args` (already its own).
 fn lane(args: EmulatorArgs) -> anyhow::Result<LaneConfig> {
-    let scenario = crate::load::resolve(&args.scenario)?;
-    let seed = crate::service::seeds::run(args.seed, &scenario);
-    let default_capacity = match args.payload {
+    let scenario = crate::load::resolve(&args.scenario.scenario)?;
+    let seed = seeds::run(args.scenario.seed, &scenario);
+    let default_capacity = match args.udp.payload {
         Payload::Raw => crate::service::emulator::udp_return::RAW_DEFAULT_QUEUE_CAPACITY,
         Payload::Itp => crate::service::link::DEFAULT_QUEUE_CAPACITY,
     };
-    let queue_capacity = args.queue_capacity.or(scenario.queue_capacity).unwrap_or(default_capacity);
+    let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(default_capacity);
     anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
     Ok(LaneConfig { out_dir: args.out.clone(), scenario, seed, queue_capacity, args })
 }
@@ -83,11 +93,7 @@ impl EmulatorConfig {
         args.validate()?;
         let lanes = if args.stream.several() {
             anyhow::ensure!(args.run_id.is_some(), "--streams needs --run-id");
-            let mut scenarios = BTreeMap::new();
-            for text in &args.stream.stream_scenario {
-                let (k, what) = parse_stream_scenario(text, args.stream.streams)?;
-                scenarios.insert(k, what);
-            }
+            let scenarios = args.stream.named_scenarios()?;
             let seed = lane(args.clone())?.seed;
             (0..args.stream.streams as usize)
                 .map(|k| lane(lane_args(args, &scenarios, seed, k)).with_context(|| format!("stream {k}")))
@@ -95,9 +101,9 @@ impl EmulatorConfig {
         } else {
             vec![lane(args.clone())?]
         };
-        let core = match args.no_pin {
+        let core = match args.placement.no_pin {
             true => None,
-            false => args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
+            false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
         };
         let control = match (&args.run_id, args.control.no_control) {
             (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
@@ -106,8 +112,8 @@ impl EmulatorConfig {
         Ok(EmulatorConfig {
             lanes,
             core,
-            rt_priority: args.rt_priority,
-            isolate: args.isolate,
+            rt_priority: args.placement.rt_priority,
+            isolate: args.placement.isolate,
             control,
             reorder_queue: args.control.reorder_queue,
             out_dir: args.out.clone(),

@@ -11,12 +11,11 @@
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::DEFAULT_QUEUE_CAPACITY;
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, FeedbackExtra};
 use crate::transport::{FeedbackEgress, FeedbackIngress, PortError};
-use serde::{Deserialize, Serialize};
 
 impl Carried for FeedbackSample {
     /// A copy of feedback is a second release of the same sample; a flip
@@ -46,13 +45,6 @@ impl Feedback {
     pub fn ports_mut(&mut self) -> (&mut FeedbackIngress, &mut FeedbackEgress) {
         (&mut self.source, &mut self.sink)
     }
-}
-
-/// What the feedback channel adds to its path's report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeedbackExtra {
-    /// Feedback samples the robot said it sent (from its end marker).
-    pub sent_by_robot: Option<u64>,
 }
 
 impl Channel for Feedback {
@@ -117,12 +109,9 @@ impl Channel for Feedback {
 /// and unless `--no-feedback`, through `--return-scenario` (default Normal).
 pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
     let a = o.args;
-    let Some(node) = o.t.node.as_ref().filter(|_| !a.ingress.is_udp() && !a.egress.is_udp() && !a.no_feedback) else { return Ok(None) };
-    let plan = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, o.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
+    let Some(node) = o.t.node.as_ref().filter(|_| !a.udp.ingress.is_udp() && !a.udp.egress.is_udp() && !a.return_path.no_feedback) else { return Ok(None) };
+    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::FEEDBACK_TAG, DEFAULT_QUEUE_CAPACITY)?;
     let (source, sink) = crate::transport::open_feedback(node)?;
     Ok(Some(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?)))
 }
 
-/// What the feedback path's seed is derived from, with the run's seed,
-/// when not given.
-pub const SEED_TAG: u64 = 0x6665_6564_6261_636b;

@@ -6,12 +6,11 @@
 use crate::frame::ItpView;
 use crate::injector::{DropCause, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
-use crate::service::emulator::lane::ForwardChannel;
+use crate::service::emulator::path::ForwardChannel;
 use crate::service::emulator::path::{Channel, Ending, Take};
 use crate::service::link::Arrival;
-use crate::service::schema::{Account, BadInput};
+use crate::service::schema::{Account, BadInput, ForwardExtra};
 use crate::transport::{FrameSink, FrameSource, PortError};
-use serde::{Deserialize, Serialize};
 use std::cell::Cell;
 use std::net::SocketAddr;
 use std::rc::Rc;
@@ -82,14 +81,6 @@ impl<S: FrameSource, K: FrameSink> ForwardChannel for Forward<S, K> {
             }
         }
     }
-}
-
-/// What the forward channel adds to its path's report.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct ForwardExtra {
-    pub sent_by_console: Option<u64>,
-    pub bad_checksum_passed: u64,
-    pub bad_input: BadInput,
 }
 
 impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {

@@ -37,7 +37,7 @@ struct Opened {
 fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
     let a = &l.args;
-    let t = crate::transport::open(&a.ingress, &a.egress, &a.wiring(l.queue_capacity))?;
+    let t = crate::transport::open(&a.udp.ingress, &a.udp.egress, &a.wiring(l.queue_capacity))?;
     let console = ConsoleAddr::default();
     let o = reverse::Opening { args: a, t: &t, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir, console: &console };
     let reverse = reverse::open_all(&o)?;
@@ -45,7 +45,7 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, RAW_UNSUPPORTED).filter(|_| l.accept_raw()) {
         anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
     }
-    let bound = report::bound(&t.ingress, &t.egress, a.egress.udp());
+    let bound = report::bound(&t.ingress, &t.egress, a.udp.egress.udp());
     let crate::transport::Transports { ingress, egress, node, arena } = t;
     let udp_in = matches!(ingress, Ingress::Udp(_));
     let mut chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
@@ -53,7 +53,7 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
         chan.share_console(console);
     }
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
-    if a.ingress.is_udp() || a.egress.is_udp() {
+    if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
         run::write_json(&l.out_dir.join("udp_endpoints.json"), &bound)?;
     }
     Ok(Opened { lane: Lane::new(forward, reverse), node, arena, bound })
@@ -77,7 +77,7 @@ pub fn main(cfg: &EmulatorConfig) -> anyhow::Result<Vec<EmulatorReport>> {
     let udp_side = |k: usize, lane: &ItpLane| {
         let l = &cfg.lanes[k];
         let (arena, bound) = &ends[k];
-        let u = (l.args.ingress.is_udp() || l.args.egress.is_udp())
+        let u = (l.args.udp.ingress.is_udp() || l.args.udp.egress.is_udp())
             .then(|| report::udp_report(&l.args, &lane.forward.chan.source, arena.as_ref().map(|a| a.borrow()).as_deref(), bound));
         let dir = l.out_dir.clone();
         let after: run::After = Box::new(move |r: &EmulatorReport| {
@@ -98,18 +98,18 @@ fn say_lane(cfg: &EmulatorConfig, k: usize, o: &Opened) {
     let a = &l.args;
     if cfg.several() {
         eprintln!("emulator: stream {k}: run {} scenario {} seed {}", a.run_id.as_deref().unwrap_or("?"), l.scenario.name, l.seed);
-    } else if a.ingress.is_udp() || a.egress.is_udp() {
+    } else if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
         eprintln!(
             "emulator: scenario {} seed {}, queue {}, core {:?}; ingress {}{}, egress {}{}, payload {:?}",
             l.scenario.name,
             l.seed,
             l.queue_capacity,
             cfg.core,
-            a.ingress,
+            a.udp.ingress,
             o.bound.ingress.map_or(String::new(), |x| format!(" (bound {x})")),
-            a.egress,
+            a.udp.egress,
             o.bound.egress_local.map_or(String::new(), |x| format!(" (from {x})")),
-            a.payload,
+            a.udp.payload,
         );
     } else {
         eprintln!("emulator: scenario {} seed {}, queue {}, core {:?}", l.scenario.name, l.seed, l.queue_capacity, cfg.core);

@@ -6,7 +6,7 @@
 
 use crate::clock::now_ns;
 use crate::service::emulator::busy::BusyClock;
-use crate::service::emulator::path::{Channel, Ending, Path, Reverse};
+use crate::service::emulator::path::{Ending, ForwardChannel, Path, Reverse};
 use crate::service::schema::{LoopBusy, PeerEvent};
 
 /// How close a release must be for an idle loop of one stream to prepare
@@ -28,14 +28,6 @@ pub const RELEASE_SPIN_NS: u64 = 1_000;
 /// three turns more (well under a microsecond); once one is busy, they are
 /// polled every turn again.
 pub const REVERSE_EVERY: u32 = 4;
-
-/// What a lane asks of its forward channel beyond what every channel
-/// gives: its report is the forward stream's (`emulator.json`'s frames).
-pub trait ForwardChannel: Channel<Extra = crate::service::emulator::forward::ForwardExtra> {
-    /// Off the hot path: names who sent the bad input seen since the count
-    /// `seen` (which it updates).
-    fn name_bad_senders(&mut self, _seen: &mut u64) {}
-}
 
 /// One stream of the emulator.
 pub struct Lane<F: ForwardChannel> {
@@ -209,7 +201,7 @@ mod tests {
     use crate::sample::FrameSample;
     use crate::scenario::Scenario;
     use crate::service::emulator::forward::Forward;
-    use crate::service::emulator::path::Take;
+    use crate::service::emulator::path::{Channel, Take};
     use crate::service::link::{Arrival, Carried, Link};
     use crate::service::schema::{Account, PathReport};
     use crate::transport::{MemoryPort, PortError};

@@ -11,7 +11,7 @@
 //! |---|---|
 //! | `path` | the path around a link, generic over its channel; the reverse paths' object |
 //! | `forward`, `feedback`, `video`, `udp_return` | the channels, one file each |
-//! | `reverse` | what opening a reverse path needs, and the list of them |
+//! | `opening`, `reverse` | what opening a reverse path needs; the list of them |
 //! | `lane` | one stream: its forward path, its reverse paths, its turn and its end |
 //! | `spin` | the one loop over the lanes, and the reaper of dead peers |
 //! | `busy` | the loop's busy time and the capacity it implies |
@@ -27,6 +27,7 @@ pub mod feedback;
 pub mod forward;
 pub mod itp;
 pub mod lane;
+pub mod opening;
 pub mod path;
 pub mod report;
 pub mod reverse;

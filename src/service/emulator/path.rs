@@ -125,6 +125,14 @@ pub trait Channel {
     fn finish(&mut self, account: &Account, sent: Option<u64>) -> (Self::Extra, bool);
 }
 
+/// What a lane asks of its forward channel beyond what every channel
+/// gives: its report is the forward stream's (`emulator.json`'s frames).
+pub trait ForwardChannel: Channel<Extra = crate::service::schema::ForwardExtra> {
+    /// Off the hot path: names who sent the bad input seen since the count
+    /// `seen` (which it updates).
+    fn name_bad_senders(&mut self, _seen: &mut u64) {}
+}
+
 /// One step of a poll's intake.
 enum Step {
     /// An item entered, taken in at this time.

@@ -4,7 +4,7 @@
 
 use crate::host::isolate::IsolationSummary;
 use crate::service::control::ControlEvent;
-use crate::service::emulator::forward::ForwardExtra;
+use crate::service::schema::ForwardExtra;
 use crate::service::emulator::spin::LoopEnd;
 use crate::service::schema::{
     BoundEndpoints, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, ForeignSender, LoopBusy, PathReport, PeerEvent, Shaping, UdpReport, WithPaths,
@@ -133,9 +133,9 @@ pub fn udp_report(args: &crate::service::args::EmulatorArgs, ingress: &Ingress, 
         _ => None,
     };
     UdpReport {
-        ingress: args.ingress.to_string(),
-        egress: args.egress.to_string(),
-        payload: args.payload,
+        ingress: args.udp.ingress.to_string(),
+        egress: args.udp.egress.to_string(),
+        payload: args.udp.payload,
         ingress_local: bound.ingress,
         egress_local: bound.egress_local,
         datagrams_in: source.map(|s| s.taken()),

@@ -10,70 +10,25 @@
 //! who came and left, and why its stream ended.
 
 use crate::scenario::Scenario;
-use crate::service::args::{millis, seconds, EmulatorArgs};
+use crate::service::args::EmulatorArgs;
 use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::path::{Path, Reverse};
-use crate::service::emulator::reverse::PathPlan;
+use crate::service::emulator::opening::PathPlan;
 use crate::service::emulator::ros2_topic::{Forward, Return, StreamEnd, Topic, TopicPorts};
 use crate::service::emulator::run;
+use crate::service::args::{ScenarioArgs, StreamArgs};
 use crate::service::schema::EmulatorReport;
+use crate::service::seeds;
 use crate::transport::ros2::qos::{self, Summary};
 use crate::transport::ros2::{Happened, Remote, Role, Ros2Node, TopicName, TypeName};
 use crate::transport::{IpcConfig, RunId};
 use anyhow::{bail, Context};
-use clap::Args;
 use rustdds::QosPolicies;
 use serde::Serialize;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::rc::Rc;
-
-/// The emulator's ROS 2 flags (`netfi emulator --ros2-topic …`).
-#[derive(Debug, Clone, Default, PartialEq, Args)]
-pub struct Ros2Args {
-    /// Relay the messages of ROS 2 topic IN to topic OUT (any message type,
-    /// byte for byte) through the scenario; repeatable: each pair is a lane
-    /// of its own (scenario: `--stream-scenario K=…`, seed derived from
-    /// --seed, files in `<out>/stream-K/` when more than one).
-    #[arg(long, value_name = "IN=OUT")]
-    pub ros2_topic: Vec<String>,
-    /// Lane K's return topic, the K-th given: messages on IN (the robot's
-    /// state) go to OUT (the console's) through --return-scenario.
-    #[arg(long, value_name = "IN=OUT")]
-    pub ros2_return: Vec<String>,
-    /// The message type on TOPIC (a topic the emulator reads), e.g.
-    /// `/MTMR/measured_cp=geometry_msgs/msg/PoseStamped`; a publisher of
-    /// another type is an error. Default: the publisher's.
-    #[arg(long, value_name = "TOPIC=TYPE")]
-    pub ros2_type: Vec<String>,
-    /// The QoS on TOPIC: on a topic the emulator reads, what its reader
-    /// requests; on one it writes, what its writer offers. A list of
-    /// `reliable`/`best_effort`, `volatile`/`transient_local`,
-    /// `depth=N`/`keep_all`. Default: the publisher's.
-    #[arg(long, value_name = "TOPIC=QOS")]
-    pub ros2_qos: Vec<String>,
-    /// The ROS 2 domain (default: $ROS_DOMAIN_ID, else 0).
-    #[arg(long, value_name = "ID")]
-    pub ros2_domain: Option<u16>,
-    /// The largest serialized message relayed, bytes; a larger one is the
-    /// drop `too_large`. Each lane holds its queue's worth of slots of this
-    /// size.
-    #[arg(long, default_value_t = DEFAULT_MAX_BYTES, value_name = "BYTES")]
-    pub ros2_max_bytes: usize,
-    /// How long to wait at start for the publisher of each topic read, to
-    /// learn its type and QoS (with `--ros2-type` given, the lane opens
-    /// without one after this).
-    #[arg(long, default_value = "10", value_parser = seconds, value_name = "S")]
-    pub ros2_discovery_s: f64,
-    /// How long a lane's publishers may all be gone before its stream ends
-    /// (a node restarted within it continues the run).
-    #[arg(long, default_value = "1000", value_parser = millis, value_name = "MS")]
-    pub ros2_linger_ms: f64,
-}
-
-/// Default `--ros2-max-bytes`: 64 KiB.
-pub const DEFAULT_MAX_BYTES: usize = 1 << 16;
 
 /// Default release-queue capacity of a ROS 2 lane: 4096 messages (4 s at
 /// 1 kHz; 256 MiB of address space at 64 KiB a slot, of which only what
@@ -82,17 +37,6 @@ pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
 
 /// The most memory a lane's slots may reserve: 64 GiB.
 const SLOTS_BYTES_MAX: usize = 64 << 30;
-
-/// What the return path's seed is derived from, with the lane's seed, when
-/// not given.
-pub const SEED_TAG: u64 = 0x726f_7332_7265_7475;
-
-impl Ros2Args {
-    /// Whether the emulator relays ROS 2 topics.
-    pub fn on(&self) -> bool {
-        !self.ros2_topic.is_empty()
-    }
-}
 
 /// One lane's topics, as the arguments name them.
 #[derive(Debug, Clone, PartialEq)]
@@ -134,13 +78,13 @@ struct Plan {
 impl Plan {
     fn of(a: &EmulatorArgs) -> anyhow::Result<Plan> {
         let r = &a.ros2;
-        if a.ingress.is_udp() || a.egress.is_udp() {
+        if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
             bail!("--ros2-topic relays ROS 2 topics: --ingress and --egress (iceoryx2 or UDP endpoints) do not apply");
         }
         if a.stream.streams > 1 {
             bail!("--ros2-topic makes a lane of each pair; --streams does not apply (give --ros2-topic once per lane)");
         }
-        if a.video.on() || a.no_feedback || a.return_to.is_some() || a.no_return || a.payload == crate::transport::Payload::Raw {
+        if a.video.on() || a.return_path.no_feedback || a.udp.return_to.is_some() || a.udp.no_return || a.udp.payload == crate::transport::Payload::Raw {
             bail!("--video-mbps, --no-feedback, --return-to, --no-return and --payload apply to iceoryx2 and UDP lanes, not to ROS 2 topics");
         }
         if r.ros2_return.len() > r.ros2_topic.len() {
@@ -201,17 +145,17 @@ impl Plan {
 fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfig> {
     let mut scenarios = BTreeMap::new();
     for text in &args.stream.stream_scenario {
-        let (k, what) = crate::service::plan::parse_stream_scenario(text, lanes as u32)?;
+        let (k, what) = crate::service::args::groups::parse_stream_scenario(text, lanes as u32)?;
         scenarios.insert(k, what);
     }
-    let spec = crate::load::resolve(&args.scenario)?;
-    let seed = crate::service::seeds::run(args.seed, &spec);
+    let spec = crate::load::resolve(&args.scenario.scenario)?;
+    let seed = seeds::run(args.scenario.seed, &spec);
     let mut out = Vec::new();
     for k in 0..lanes {
-        let name = scenarios.get(&k).unwrap_or(&args.scenario).clone();
+        let name = scenarios.get(&k).unwrap_or(&args.scenario.scenario).clone();
         let scenario = crate::load::resolve(&name).with_context(|| format!("lane {k}"))?;
-        let lane_seed = crate::service::seeds::stream(seed, k);
-        let queue_capacity = args.queue_capacity.or(scenario.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
+        let lane_seed = seeds::stream(seed, k);
+        let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
         anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 message");
         let bytes = (queue_capacity + 1).checked_mul(args.ros2.ros2_max_bytes).filter(|b| *b <= SLOTS_BYTES_MAX);
         anyhow::ensure!(
@@ -221,20 +165,19 @@ fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfig> {
             args.ros2.ros2_max_bytes,
             SLOTS_BYTES_MAX >> 30
         );
-        let out_dir = crate::service::plan::stream_dir(&args.out, lanes, k);
-        let lane_args = EmulatorArgs {
-            scenario: name,
-            seed: Some(lane_seed),
-            return_seed: args.return_seed.map(|s| crate::service::seeds::stream(s, k)),
+        let out_dir = crate::service::args::streams::dir(&args.out, lanes, k);
+        let mut lane_args = EmulatorArgs {
+            scenario: ScenarioArgs { scenario: name, seed: Some(lane_seed), queue_capacity: args.scenario.queue_capacity },
             out: out_dir.clone(),
-            stream: crate::service::args::StreamArgs::default(),
+            stream: StreamArgs::default(),
             ..args.clone()
         };
+        lane_args.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
         out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
     }
-    let core = match args.no_pin {
+    let core = match args.placement.no_pin {
         true => None,
-        false => args.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
+        false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
     };
     let control = match (&args.run_id, args.control.no_control) {
         (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
@@ -243,8 +186,8 @@ fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfig> {
     Ok(EmulatorConfig {
         lanes: out,
         core,
-        rt_priority: args.rt_priority,
-        isolate: args.isolate,
+        rt_priority: args.placement.rt_priority,
+        isolate: args.placement.isolate,
         control,
         reorder_queue: args.control.reorder_queue,
         out_dir: args.out.clone(),
@@ -522,14 +465,14 @@ fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: 
     std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
     let a = &l.args;
     let (from, to) = &topics.forward;
-    let idle_end_ns = a.idle_end_ms.map(|ms| (ms * 1e6) as u64);
+    let idle_end_ns = a.udp.idle_end_ms.map(|ms| (ms * 1e6) as u64);
     let wait_ns = a.wait_for_peer_s.map(|s| (s * 1e9) as u64);
     let chan = Topic::<Forward>::new(ports(node, plan, &end.forward, (from, to), l.queue_capacity + 1, idle_end_ns, wait_ns)?, node.clone(), t0_ns);
     let scenario = Scenario::new(&l.scenario, l.seed)?;
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
     let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
     if let (Some((from, to)), Some(o)) = (&topics.ret, &end.ret) {
-        let rp = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, l.seed, SEED_TAG, DEFAULT_QUEUE_CAPACITY)?;
+        let rp = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
         let chan = Topic::<Return>::new(ports(node, plan, o, (from, to), rp.queue_capacity + 1, None, None)?, node.clone(), t0_ns);
         reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
     }
@@ -612,7 +555,7 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
     crate::service::write_pid(&cfg.out_dir, "emulator")?;
     // The participant's threads (receive, discovery, send) start now and
     // keep the mask of the thread that starts them: off the loop's core.
-    crate::service::place("ROS 2 participant", None, cfg.core)?;
+    crate::host::placement::place("ROS 2 participant", None, cfg.core)?;
     let t0_ns = crate::clock::now_ns();
     let node = Rc::new(RefCell::new(Ros2Node::open(plan.domain)?));
     eprintln!("emulator: ROS 2 domain {}; {} lane(s)", plan.domain, plan.lanes.len());
@@ -722,7 +665,7 @@ mod tests {
         assert_eq!(p.domain, 7);
         let cfg = config(&a, 2).unwrap();
         // Lane 0 keeps the run's seed; lane 1 gets its own; each its directory.
-        assert_eq!((cfg.lanes[0].seed, cfg.lanes[1].seed), (5, crate::service::seeds::stream(5, 1)));
+        assert_eq!((cfg.lanes[0].seed, cfg.lanes[1].seed), (5, seeds::stream(5, 1)));
         assert!(cfg.lanes[1].out_dir.ends_with("stream-1"));
         assert_eq!(cfg.lanes[0].queue_capacity, DEFAULT_QUEUE_CAPACITY);
     }

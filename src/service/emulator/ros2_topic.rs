@@ -37,9 +37,8 @@
 use crate::clock::now_ns;
 use crate::injector::{DropCause, Invalid};
 use crate::ros2msg::{Kind, Motion};
-use crate::service::emulator::forward::ForwardExtra;
-use crate::service::emulator::lane::ForwardChannel;
-use crate::service::emulator::path::{Channel, Ending, Take, GRACE_NS};
+use crate::service::emulator::path::{Channel, Ending, ForwardChannel, Take, GRACE_NS};
+use crate::service::schema::ForwardExtra;
 use crate::service::link::{Arrival, Carried};
 use crate::service::schema::{Account, BadInput};
 use crate::transport::ros2::{Happened, Payload, Reader, Role, Ros2Node, Slots, TopicName, TypeName, Writer};

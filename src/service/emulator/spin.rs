@@ -11,7 +11,7 @@
 
 use crate::clock::now_ns;
 use crate::service::control::ControlPort;
-use crate::service::emulator::lane::{ForwardChannel, Lane};
+use crate::service::emulator::{lane::Lane, path::ForwardChannel};
 use crate::transport::{IpcNode, Role};
 
 /// What the loop's look off the hot path (every 4096 rounds) found.

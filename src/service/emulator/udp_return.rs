@@ -16,13 +16,12 @@
 use crate::injector::DropCause;
 use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, ReturnExtra};
 use crate::transport::udp::{Arena, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
 use crate::transport::{Endpoint, PortError};
 use anyhow::{bail, Context};
-use serde::{Deserialize, Serialize};
 
 /// Default release-queue capacity of the return path (and of the forward
 /// stream in raw mode): 4096 datagrams. Each needs an arena slot of 64 KiB
@@ -77,22 +76,6 @@ impl UdpReturn {
             unroutable: 0,
         }
     }
-}
-
-/// What the return channel adds to its path's report: `received = entered
-/// + unroutable`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ReturnExtra {
-    /// `untouched` (no return scenario) or `scenario`.
-    pub mode: String,
-    /// Where return datagrams go.
-    pub destination: String,
-    /// Datagrams taken off the egress socket.
-    pub received: u64,
-    /// Received before any console was known: not relayed.
-    pub unroutable: u64,
-    /// Return datagrams the kernel dropped before the emulator took them.
-    pub kernel_drops: Option<u64>,
 }
 
 impl Channel for UdpReturn {
@@ -164,30 +147,30 @@ impl Channel for UdpReturn {
             received: self.received,
             unroutable: self.unroutable,
             kernel_drops: self.from_robot.kernel_drops(),
+            refused: self.from_robot.refused().report(),
         };
         (extra, self.received == account.entered + self.unroutable)
     }
 }
 
-/// What the return path's seed is derived from, with the run's seed, when
-/// not given.
-pub const SEED_TAG: u64 = 0x7265_7475_726e;
-
 /// The return path, with UDP on both sides and unless `--no-return`.
 pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
     let a = o.args;
     let (Some(ingress), Some(egress)) = (o.t.udp_ingress(), o.t.udp_egress()) else { return Ok(None) };
-    if a.no_return {
+    if a.udp.no_return {
         return Ok(None);
     }
-    let to = match &a.return_to {
+    let to = match &a.udp.return_to {
         Some(Endpoint::Udp(addr)) => Some(*addr),
         Some(Endpoint::Iceoryx2) => bail!("--return-to takes udp://ADDR:PORT"),
         None => None,
     };
-    let plan = PathPlan::resolve("--return-scenario", a.return_scenario.as_deref(), a.return_seed, o.seed, SEED_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
-    let from_robot = egress.try_clone().context("opening the return path")?;
+    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::RETURN_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
+    let mut from_robot = egress.try_clone().context("opening the return path")?;
+    if let Some(robot) = a.udp.robot_from {
+        from_robot.accept_only(robot);
+    }
     let to_console = ingress.try_clone().context("opening the return path")?;
-    let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_scenario.is_some(), plan.queue_capacity);
+    let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_path.return_scenario.is_some(), plan.queue_capacity);
     Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))
 }

@@ -17,15 +17,14 @@
 
 use crate::injector::{DropCause, Invalid};
 use crate::service::emulator::path::{Channel, Ending, Path, Reverse, Take, GRACE_NS};
-use crate::service::emulator::reverse::{Opening, PathPlan};
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
+use crate::service::schema::{Account, VideoExtra};
 use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO_HELD_FRAMES};
 use crate::service::video::VideoArgs;
 use crate::transport::{Channel as Port, IpcNode, PortError};
 use crate::video::{drop_kind, DropKind};
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
 
 /// What the emulator's video link holds: the slot of the borrowed sample,
 /// and what the link and the release need of it.
@@ -56,21 +55,6 @@ pub struct Video {
     bytes_entered: u64,
     bytes_delivered: u64,
     unsubscribed: u64,
-}
-
-/// What the video channel adds to its path's report: `entered = delivered
-/// + dropped + held_at_end`, and every drop is damaged or lost.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct VideoExtra {
-    pub max_bytes: usize,
-    /// Frames the camera said it sent (from its end marker).
-    pub sent_by_camera: Option<u64>,
-    /// Dropped frames of several packets taken by a loss stage.
-    pub dropped_damaged: u64,
-    /// Dropped frames lost whole.
-    pub dropped_lost: u64,
-    pub bytes_entered: u64,
-    pub bytes_delivered: u64,
 }
 
 impl Channel for Video {
@@ -168,10 +152,6 @@ impl Channel for Video {
     }
 }
 
-/// What the video path's seed is derived from, with the run's seed, when
-/// not given.
-pub const SEED_TAG: u64 = 0x7669_6465_6f00_0000;
-
 /// The video path, when the run has video (`--video-mbps`) and an iceoryx2
 /// node.
 pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
@@ -187,7 +167,7 @@ pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path)
         return Ok(None);
     }
     v.validate()?;
-    let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, SEED_TAG, VIDEO_HELD_FRAMES - 1)?;
+    let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, crate::service::seeds::VIDEO_TAG, VIDEO_HELD_FRAMES - 1)?;
     plan.queue_capacity = VIDEO_HELD_FRAMES - 1;
     let source = node.video_subscriber(Port::Video).context("opening the robot → emulator video port")?;
     let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).context("opening the emulator → console video port")?;

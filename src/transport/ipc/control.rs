@@ -228,13 +228,20 @@ impl ControlServer {
     }
 
     /// Answers every request waiting, each with `answer(request)`; returns
-    /// how many. A request that cannot be answered (its client left) is
+    /// how many. A request larger than [`MAX_MESSAGE_BYTES`] (a client
+    /// other than `netfi ctl` may send one) is not handed over as bytes:
+    /// `answer` gets [`RequestError::TooLarge`] for it, to answer with an
+    /// error. A request that cannot be answered (its client left) is
     /// skipped.
-    pub fn serve(&self, mut answer: impl FnMut(&[u8]) -> Vec<u8>) -> usize {
+    pub fn serve(&self, mut answer: impl FnMut(Result<&[u8], RequestError>) -> Vec<u8>) -> usize {
         let mut n = 0;
         while let Ok(Some(req)) = self.port.receive() {
             n += 1;
-            let reply = answer(req.payload());
+            let payload = req.payload();
+            let reply = match payload.len() {
+                len if len > MAX_MESSAGE_BYTES => answer(Err(RequestError::TooLarge { len })),
+                _ => answer(Ok(payload)),
+            };
             let Ok(resp) = req.loan_slice_uninit(reply.len()) else { continue };
             let _ = resp.write_from_slice(&reply).send();
         }

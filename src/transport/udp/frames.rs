@@ -14,7 +14,7 @@
 //! an end marker once no datagram has arrived for that long, and the sink
 //! never sends one.
 
-use super::{PeerAddr, UdpPort, MAX_DATAGRAM_BYTES};
+use super::{ConsolePolicy, ForeignSenders, PeerAddr, UdpPort, MAX_DATAGRAM_BYTES};
 use crate::clock::now_ns;
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::transport::ports::{FrameSink, FrameSource, PortError};
@@ -111,62 +111,20 @@ fn port_error(port: &UdpPort, e: impl fmt::Display) -> PortError {
     PortError { port: format!("udp://{}", port.local_addr()), message: e.to_string() }
 }
 
-/// How many distinct foreign senders a UDP source names in its report;
-/// datagrams from further ones are counted together.
-pub const FOREIGN_SENDERS_NAMED: usize = 16;
-
-/// Datagrams from senders other than the console: counted, never taken.
-/// A fixed table, so that a flood from many addresses costs no allocation.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ForeignSenders {
-    named: [Option<(SocketAddr, u64)>; FOREIGN_SENDERS_NAMED],
-    /// All foreign datagrams.
-    pub total: u64,
-    /// Those from senders beyond the first [`FOREIGN_SENDERS_NAMED`].
-    pub unnamed: u64,
-}
-
-impl ForeignSenders {
-    #[inline]
-    fn count(&mut self, from: SocketAddr) {
-        self.total += 1;
-        for slot in self.named.iter_mut() {
-            match slot {
-                Some((a, n)) if *a == from => {
-                    *n += 1;
-                    return;
-                }
-                Some(_) => {}
-                None => {
-                    *slot = Some((from, 1));
-                    return;
-                }
-            }
-        }
-        self.unnamed += 1;
-    }
-
-    /// The senders named, with their datagram counts, in the order first seen.
-    pub fn named(&self) -> impl Iterator<Item = (SocketAddr, u64)> + '_ {
-        self.named.iter().flatten().copied()
-    }
-}
-
 /// The emulator's source on a UDP socket.
 ///
-/// It takes datagrams from one sender only, the console: the address given
-/// ([`UdpSource::only_from`]) or else the first sender's, locked from then
-/// on, so that no other socket can feed the robot or take over the return
-/// path. Datagrams from anyone else are dropped before they enter the link
-/// (they are not frames of the stream, so the link's accounting
+/// It takes datagrams from one sender only, the console, as its
+/// [`ConsolePolicy`] says: the address named, or the first sender's,
+/// locked from then on (and said on stderr). Datagrams from anyone else
+/// are refused by the port ([`UdpPort::accept_only`]) before they enter
+/// the link (they are not frames of the stream, so the link's accounting
 /// `entered = delivered + dropped + held` is about the console's frames
-/// only) and counted as `foreign_sender` in [`UdpSource::foreign`].
+/// only) and counted per sender in [`UdpSource::foreign`]. So no other
+/// socket can feed the robot or take over the return path.
 pub struct UdpSource {
     port: UdpPort,
     arena: Option<Rc<RefCell<Arena>>>,
     taken: u64,
-    console: Option<PeerAddr>,
-    foreign: ForeignSenders,
     idle_end_ns: Option<u64>,
     last_rx_ns: u64,
     ended: bool,
@@ -174,20 +132,18 @@ pub struct UdpSource {
 
 impl UdpSource {
     /// A source taking ITP frames (`arena: None`) or raw datagrams (into
-    /// `arena`) off `port`.
-    pub fn new(port: UdpPort, arena: Option<Rc<RefCell<Arena>>>) -> UdpSource {
-        UdpSource { port, arena, taken: 0, console: None, foreign: ForeignSenders::default(), idle_end_ns: None, last_rx_ns: 0, ended: false }
+    /// `arena`) off `port`, from the console `console` names.
+    pub fn new(mut port: UdpPort, arena: Option<Rc<RefCell<Arena>>>, console: ConsolePolicy) -> UdpSource {
+        match console {
+            ConsolePolicy::Named(addr) => port.accept_only(addr),
+            ConsolePolicy::FirstDatagram => {}
+        }
+        UdpSource { port, arena, taken: 0, idle_end_ns: None, last_rx_ns: 0, ended: false }
     }
 
-    /// Takes datagrams from `console` only.
-    pub fn only_from(mut self, console: SocketAddr) -> UdpSource {
-        self.console = Some(PeerAddr::new(console));
-        self
-    }
-
-    /// The datagrams from other senders, dropped.
-    pub fn foreign(&self) -> &ForeignSenders {
-        &self.foreign
+    /// The datagrams from other senders, refused.
+    pub fn foreign(&self) -> ForeignSenders {
+        self.port.refused()
     }
 
     /// End the stream after `idle_ns` without a datagram (once one came).
@@ -206,9 +162,9 @@ impl UdpSource {
         self.taken
     }
 
-    /// The console's address: given, or the first sender's.
+    /// The console's address: named, or the first sender's once it spoke.
     pub fn console(&self) -> Option<SocketAddr> {
-        self.console.as_ref().map(PeerAddr::addr)
+        self.port.peer().map(PeerAddr::addr)
     }
 
     /// The socket, for what is read off the hot path (kernel drops, buffer
@@ -228,6 +184,19 @@ impl UdpSource {
         }
         false
     }
+
+    /// The first datagram of a source told to pair with the first sender:
+    /// its sender is the console from now on. Once per run, so the line
+    /// on stderr costs the loop nothing per frame.
+    #[cold]
+    fn pair(&mut self, from: SocketAddr) {
+        self.port.accept_only(from);
+        eprintln!(
+            "emulator: UDP ingress udp://{} paired with its first sender, udp://{from}, as the console (--console-from first); \
+             datagrams from any other address are refused and counted",
+            self.port.local_addr()
+        );
+    }
 }
 
 impl FrameSource for UdpSource {
@@ -246,18 +215,11 @@ impl FrameSource for UdpSource {
             }
         };
         match got {
-            Ok(Some(d)) if self.console.as_ref().is_some_and(|c| c.addr() != d.from) => {
-                self.foreign.count(d.from);
-                if let (Some(arena), Some(slot)) = (&self.arena, slot) {
-                    arena.borrow_mut().free(slot);
-                }
-                Ok(false)
-            }
             Ok(Some(d)) => {
                 let now = now_ns();
                 self.last_rx_ns = now;
-                if self.console.is_none() {
-                    self.console = Some(PeerAddr::new(d.from));
+                if self.port.peer().is_none() {
+                    self.pair(d.from);
                 }
                 out.send_ns = now;
                 out.console_index = self.taken;
@@ -291,7 +253,7 @@ impl FrameSource for UdpSource {
 
     #[inline]
     fn sender(&self) -> Option<&PeerAddr> {
-        self.console.as_ref()
+        self.port.peer()
     }
 
     #[inline]
@@ -402,7 +364,7 @@ mod tests {
     #[test]
     fn an_itp_source_keeps_the_true_length_and_a_raw_one_the_slot() {
         let console = loopback();
-        let mut itp = UdpSource::new(loopback(), None);
+        let mut itp = UdpSource::new(loopback(), None, ConsolePolicy::FirstDatagram);
         let to = PeerAddr::new(itp.local_addr());
         console.send_to(&[1u8; 300], &to).unwrap();
         let s = recv_one(&mut itp);
@@ -412,9 +374,16 @@ mod tests {
         let s = recv_one(&mut itp);
         assert_eq!((s.len, s.console_index), (10, 1));
         assert_eq!(&s.wire[..12], &[2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 0, 0], "bytes past the datagram are zero");
+        // Paired with the first sender: another one is refused, and counted.
+        let stranger = loopback();
+        stranger.send_to(&[9u8; 124], &to).unwrap();
+        console.send_to(&[4u8; 124], &to).unwrap();
+        let s = recv_one(&mut itp);
+        assert_eq!((s.wire[0], s.console_index), (4, 2));
+        assert_eq!(itp.foreign().named().collect::<Vec<_>>(), vec![(stranger.local_addr(), 1)]);
 
         let arena = Rc::new(RefCell::new(Arena::new(2)));
-        let mut raw = UdpSource::new(loopback(), Some(arena.clone()));
+        let mut raw = UdpSource::new(loopback(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()));
         console.send_to(&[3u8; 2000], &PeerAddr::new(raw.local_addr())).unwrap();
         let s = recv_one(&mut raw);
         assert!(s.is_raw());
@@ -455,7 +424,7 @@ mod tests {
     #[test]
     fn an_idle_source_ends_the_stream_once() {
         let console = loopback();
-        let mut src = UdpSource::new(loopback(), None).with_idle_end(1_000_000);
+        let mut src = UdpSource::new(loopback(), None, ConsolePolicy::Named(console.local_addr())).with_idle_end(1_000_000);
         let mut s = FrameSample::ZERO;
         std::thread::sleep(std::time::Duration::from_millis(3));
         assert!(!src.try_recv(&mut s).unwrap(), "no end before the first datagram");

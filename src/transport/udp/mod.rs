@@ -17,15 +17,27 @@
 //! - What the kernel itself dropped because a receive buffer was full is
 //!   not lost from view: [`UdpPort::kernel_drops`] reads the socket's drop
 //!   counter (`/proc/net/udp`, `/proc/net/udp6`), off the hot path.
+//! - A port can be given its one peer ([`UdpPort::accept_only`]): from
+//!   then on a receive takes datagrams from that address only. Anything
+//!   else is **refused**: taken off the socket, counted per sender
+//!   ([`UdpPort::refused`]) and never handed over, with no allocation
+//!   (a fixed table, [`ForeignSenders`]). This is how the emulator's
+//!   ingress takes only its console's frames ([`ConsolePolicy`]) and its
+//!   return path only the robot's datagrams (the egress port accepts only
+//!   the robot's address). Unlike `connect(2)`, what is refused is counted,
+//!   and a handle made by [`UdpPort::try_clone`] keeps the peer.
 //!
 //! Sockets here know nothing about frames, scenarios or the emulator; the
 //! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
 //! raw-mode [`Arena`]) are in [`frames`].
 
 pub mod frames;
-pub use frames::{Arena, ForeignSenders, UdpSink, UdpSource, ARENA_SLOT_BYTES, FOREIGN_SENDERS_NAMED};
+pub mod peers;
+pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
+pub use peers::{ConsolePolicy, ConsolePolicyError, ForeignSenders, Refused, RefusedSender, FOREIGN_SENDERS_NAMED};
 
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
+use std::cell::Cell;
 use std::io;
 use std::mem::MaybeUninit;
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
@@ -205,11 +217,21 @@ pub struct Datagram {
     pub from: SocketAddr,
 }
 
+/// Refused datagrams one receive takes off the socket before it answers
+/// "nothing waiting": a flood from strangers costs the caller a bounded
+/// number of system calls per receive, and moves on with the queue.
+pub const REFUSED_PER_RECEIVE: usize = 32;
+
 /// One bound, non-blocking UDP socket.
 #[derive(Debug)]
 pub struct UdpPort {
     socket: Socket,
     local: SocketAddr,
+    /// The only sender received from, once given.
+    peer: Option<PeerAddr>,
+    /// What came from anyone else. A `Cell`: a receive takes `&self`, and
+    /// a port is used by one thread at a time.
+    refused: Cell<ForeignSenders>,
 }
 
 impl UdpPort {
@@ -232,7 +254,7 @@ impl UdpPort {
             .map_err(|source| UdpOpenError::LocalAddr { addr, source })?
             .as_socket()
             .ok_or_else(|| UdpOpenError::LocalAddr { addr, source: io::Error::other("not an IP address") })?;
-        Ok(UdpPort { socket, local })
+        Ok(UdpPort { socket, local, peer: None, refused: Cell::default() })
     }
 
     /// An ephemeral port on the address that reaches `peer` most directly:
@@ -249,10 +271,27 @@ impl UdpPort {
     }
 
     /// A second handle on the same socket (one descriptor more), for a
-    /// second owner that only receives, or only sends.
+    /// second owner that only receives, or only sends. It accepts the same
+    /// peer, and counts what it refuses itself (from zero).
     pub fn try_clone(&self) -> Result<UdpPort, UdpOpenError> {
         let socket = self.socket.try_clone().map_err(|source| UdpOpenError::Create { addr: self.local, source })?;
-        Ok(UdpPort { socket, local: self.local })
+        Ok(UdpPort { socket, local: self.local, peer: self.peer.clone(), refused: Cell::default() })
+    }
+
+    /// From now on, receives take datagrams from `peer` only; any other is
+    /// refused and counted ([`UdpPort::refused`]).
+    pub fn accept_only(&mut self, peer: SocketAddr) {
+        self.peer = Some(PeerAddr::new(peer));
+    }
+
+    /// The only sender this port receives from, once given.
+    pub fn peer(&self) -> Option<&PeerAddr> {
+        self.peer.as_ref()
+    }
+
+    /// The datagrams this handle refused, per sender.
+    pub fn refused(&self) -> ForeignSenders {
+        self.refused.get()
     }
 
     /// The address the socket is bound to (with the real port when bound
@@ -263,9 +302,27 @@ impl UdpPort {
 
     /// Receives one datagram into `buf` if one waits. The returned length is
     /// the datagram's true length; if it exceeds `buf.len()`, only the first
-    /// `buf.len()` bytes were kept.
+    /// `buf.len()` bytes were kept. With a peer ([`UdpPort::accept_only`]),
+    /// datagrams from anyone else are refused and counted (up to
+    /// [`REFUSED_PER_RECEIVE`] per call; their bytes may have been written
+    /// into `buf`) and the answer is the peer's next datagram or `Ok(None)`.
     #[inline]
     pub fn recv_from(&self, buf: &mut [u8]) -> Result<Option<Datagram>, UdpRecvError> {
+        for _ in 0..REFUSED_PER_RECEIVE {
+            match self.recv_any(buf)? {
+                Some(d) if self.peer.as_ref().is_some_and(|p| p.addr() != d.from) => {
+                    let mut r = self.refused.get();
+                    r.count(d.from);
+                    self.refused.set(r);
+                }
+                got => return Ok(got),
+            }
+        }
+        Ok(None)
+    }
+
+    #[inline]
+    fn recv_any(&self, buf: &mut [u8]) -> Result<Option<Datagram>, UdpRecvError> {
         // SAFETY: `MaybeUninit<u8>` has the layout of `u8`, and the kernel
         // only writes initialized bytes into the buffer, so it stays a valid
         // `[u8]` for the caller.
@@ -369,6 +426,37 @@ mod tests {
         let e = UdpPort::bind(a.local_addr(), &UdpOptions::default()).unwrap_err();
         assert!(matches!(e, UdpOpenError::Bind { addr, .. } if addr == a.local_addr()), "{e}");
         assert!(e.to_string().contains(&a.local_addr().to_string()));
+    }
+
+    #[test]
+    fn a_port_with_a_peer_refuses_and_counts_everyone_else_and_its_clone_too() {
+        let (peer, stranger) = (UdpPort::bind(loopback(), &UdpOptions::default()).unwrap(), UdpPort::bind(loopback(), &UdpOptions::default()).unwrap());
+        let mut b = UdpPort::bind(loopback(), &UdpOptions::default()).unwrap();
+        b.accept_only(peer.local_addr());
+        let to = PeerAddr::new(b.local_addr());
+        for _ in 0..3 {
+            stranger.send_to(b"evil", &to).unwrap();
+        }
+        peer.send_to(b"good", &to).unwrap();
+        let mut buf = [0u8; 8];
+        let t0 = std::time::Instant::now();
+        let got = loop {
+            if let Some(d) = b.recv_from(&mut buf).unwrap() {
+                break d;
+            }
+            assert!(t0.elapsed().as_secs() < 5, "loopback datagram never arrived");
+        };
+        assert_eq!((got.from, &buf[..got.len]), (peer.local_addr(), &b"good"[..]));
+        let r = b.refused().report();
+        assert_eq!((r.datagrams, r.senders.len(), r.unnamed), (3, 1, 0));
+        assert_eq!((r.senders[0].addr, r.senders[0].datagrams), (stranger.local_addr(), 3));
+        // A second handle accepts the same peer and counts on its own.
+        let c = b.try_clone().unwrap();
+        assert_eq!(c.peer().map(PeerAddr::addr), Some(peer.local_addr()));
+        stranger.send_to(b"evil", &to).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        assert!(c.recv_from(&mut buf).unwrap().is_none());
+        assert_eq!((c.refused().total, b.refused().total), (1, 3));
     }
 
     #[test]

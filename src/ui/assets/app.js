@@ -4,11 +4,14 @@
 
 const $ = (id) => document.getElementById(id);
 
-async function call(method, url, body, json) {
-  const init = { method, headers: {} };
-  if (body !== undefined) {
-    init.body = json ? JSON.stringify(body) : body;
-    init.headers["content-type"] = json ? "application/json" : "text/plain";
+// Every state change is JSON with the page's own header: the server
+// refuses anything else, so no other page can make one.
+async function call(method, url, body) {
+  const init = { method, headers: {}, credentials: "same-origin" };
+  if (method !== "GET") {
+    init.body = JSON.stringify(body ?? {});
+    init.headers["content-type"] = "application/json";
+    init.headers["x-netfi-ui"] = "1";
   }
   const res = await fetch(url, init);
   const text = await res.text();
@@ -144,7 +147,7 @@ const builder = {
   // pipeline.
   async load(text) {
     try {
-      const v = JSON.parse(await call("POST", "/api/parse", text));
+      const v = JSON.parse(await call("POST", "/api/parse", { toml: text }));
       if (v.phase) {
         $("toml-error").textContent = "a timeline (phases): kept as text; preview and run use it as written";
         return;
@@ -173,10 +176,10 @@ const builder = {
   },
 
   async preview() {
-    const q = `frames=${Number($("preview-frames").value)}&rate_hz=${Number($("preview-rate").value)}`;
+    const req = { toml: $("toml").value, frames: Number($("preview-frames").value), rate_hz: Number($("preview-rate").value) };
     $("preview").innerHTML = "<p class=busy>simulating…</p>";
     try {
-      $("preview").innerHTML = await call("POST", `/api/preview?${q}`, $("toml").value);
+      $("preview").innerHTML = await call("POST", "/api/preview", req);
     } catch (e) {
       $("preview").innerHTML = "";
       const pre = document.createElement("pre");
@@ -192,7 +195,7 @@ const builder = {
     try {
       const duration_s = parseDuration($("duration").value);
       const seed = $("scenario-seed").value === "" ? null : Number($("scenario-seed").value);
-      const r = JSON.parse(await call("POST", "/api/runs", { toml: $("toml").value, duration_s, seed }, true));
+      const r = JSON.parse(await call("POST", "/api/runs", { toml: $("toml").value, duration_s, seed }));
       location.href = `/runs/${r.id}`;
     } catch (e) {
       $("run-error").textContent = e.message;
@@ -304,7 +307,7 @@ const runPage = {
 
   init() {
     this.id = $("run-id").textContent;
-    $("stop-btn").onclick = () => call("POST", `/api/runs/${this.id}/stop`).catch((e) => this.error(e));
+    $("stop-btn").onclick = () => call("POST", `/api/runs/${this.id}/stop`, {}).catch((e) => this.error(e));
     $("switch-btn").onclick = () => this.ctl({ cmd: "switch", arg: $("switch-to").value });
     $("pause-btn").onclick = () => this.ctl({ cmd: "pause" });
     $("resume-btn").onclick = () => this.ctl({ cmd: "resume" });
@@ -319,7 +322,7 @@ const runPage = {
   async ctl(req) {
     $("ctl-error").textContent = "";
     try {
-      const r = JSON.parse(await call("POST", `/api/runs/${this.id}/ctl`, req, true));
+      const r = JSON.parse(await call("POST", `/api/runs/${this.id}/ctl`, req));
       if (r.event) this.event(r.event);
     } catch (e) {
       this.error(e);

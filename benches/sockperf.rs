@@ -1,0 +1,173 @@
+//! A foreign tool through the UDP bridge: sockperf ping-pong (64-byte
+//! messages), client and server on the bench core, first directly, then
+//! through `netfi emulator --payload raw` (Normal) on its own core, the
+//! replies coming back through the return path. Added = through − direct,
+//! percentile by percentile, in sockperf's unit (half the round trip).
+//!
+//! ```sh
+//! cargo bench --bench sockperf                            # 10 s each way, 3 repetitions
+//! cargo bench --bench sockperf -- --halt-poll-ns 200000   # with a VM's guest halt polling on
+//! ```
+//!
+//! Needs `sockperf` (Debian: `apt install sockperf`). On a virtual machine
+//! whose guest halt polling is off, every message a relay on another core
+//! hands to a sleeping end wakes a halted vCPU through the hypervisor;
+//! `--halt-poll-ns` sets it for the run and puts it back after.
+
+#[path = "common/mod.rs"]
+mod common;
+
+use anyhow::{bail, ensure, Context, Result};
+use common::args::{check_interrupted, stopped, Common, Cores, Placement};
+use common::host::{clear_core, pin, restore_core, HostTimer};
+use common::out::Out;
+use common::process::{read_json, Build, EmulatorSpec};
+use common::table::{header, median_map, row, Map};
+use serde::Serialize;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+const HALT_POLL_NS: &str = "/sys/module/haltpoll/parameters/guest_halt_poll_ns";
+
+/// `cargo bench --bench sockperf -- [FLAGS]`.
+#[derive(Debug, clap::Parser, Serialize)]
+#[command(name = "sockperf", bin_name = "cargo bench --bench sockperf --", about = "sockperf ping-pong through the UDP bridge, against a direct run")]
+struct Args {
+    #[command(flatten)]
+    common: Common,
+    #[command(flatten)]
+    cores: Cores,
+    /// The netfi binary whose emulator is measured [default: this
+    /// package's build]
+    #[arg(long, value_name = "PATH")]
+    netfi: Option<PathBuf>,
+    /// Length of each ping-pong
+    #[arg(long, default_value_t = 10)]
+    seconds: u64,
+    #[arg(long, default_value_t = 3)]
+    repetitions: usize,
+    /// Set the guest's halt polling to this for the run (put back after)
+    #[arg(long, value_name = "NS")]
+    halt_poll_ns: Option<u64>,
+}
+
+fn main() {
+    common::args::main("sockperf", "sockperf through the UDP bridge (a minute)", run);
+}
+
+fn run(a: Args) -> Result<()> {
+    ensure!(a.seconds >= 1 && a.repetitions >= 1, "--seconds and --repetitions must be at least 1");
+    if Command::new("sockperf").arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_err() {
+        bail!("sockperf is not installed (Debian: apt install sockperf)");
+    }
+    let p = a.cores.placement(&a.common)?;
+    let out = Out::create(&a.common, "sockperf")?;
+    let build = Build::new("netfi", a.netfi.as_deref())?;
+    let before = std::fs::read_to_string(HALT_POLL_NS).ok();
+    if let Some(ns) = a.halt_poll_ns {
+        std::fs::write(HALT_POLL_NS, ns.to_string()).with_context(|| format!("setting {HALT_POLL_NS}"))?;
+    }
+    let cleared = clear_core(&p);
+    let reps: Result<Vec<Value>> = (0..a.repetitions).map(|rep| interval(&a, &p, &build, &out, rep)).collect();
+    let (cleared, isolation) = restore_core(cleared);
+    if let (Some(_), Some(b)) = (a.halt_poll_ns, &before) {
+        let _ = std::fs::write(HALT_POLL_NS, b.trim());
+    }
+    let reps = reps?;
+    let halt = before.and_then(|t| t.trim().parse::<u64>().ok());
+    let maps = |k: &str| median_map(&reps.iter().filter_map(|v| serde_json::from_value::<Map>(v[k].clone()).ok()).collect::<Vec<_>>());
+    let (direct, via, added) = (maps("direct_ns"), maps("through_netfi_ns"), maps("added_ns"));
+    let md = format!(
+        "{}. {cleared} Guest halt polling {}. Median over {} repetitions of sockperf's latency (half the round trip).\n\n{}\n{}\n{}\n{}\n",
+        p.line(),
+        a.halt_poll_ns.or(halt).map_or("not available".to_string(), |n| format!("{n} ns")),
+        reps.len(),
+        header("sockperf latency"),
+        row("direct (client → server)", &direct),
+        row("through netfi (client → emulator → server, and back)", &via),
+        row("**added**", &added)
+    );
+    out.finish(&a, json!({"placement": p, "isolation": isolation, "build": build, "guest_halt_poll_ns_before": halt, "median_ns": {"direct": direct, "through_netfi": via, "added": added}, "repetitions": reps}), &md)
+}
+
+/// One repetition: the direct ping-pong, then the same through netfi.
+fn interval(a: &Args, p: &Placement, build: &Build, out: &Out, rep: usize) -> Result<Value> {
+    check_interrupted()?;
+    let host = HostTimer::start(p.quiet);
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
+    let dir = out.run_dir(&format!("sockperf-r{rep}"))?;
+    let mut server = sockperf_on(p.bench_core, &["server", "-i", "127.0.0.1", "-p", &port.to_string()], &dir.join("server.log"))?;
+    std::thread::sleep(Duration::from_millis(300));
+    let result = (|| -> Result<Value> {
+        let direct = ping_pong(p.bench_core, port, a.seconds, &dir.join("direct.log"))?;
+        let egress = format!("udp://127.0.0.1:{port}");
+        let extra = ["--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--console-from", "first"].map(String::from).to_vec();
+        let spec = EmulatorSpec { scenario: "Normal", dir: &dir, expected_frames: a.seconds * 200_000, run_id: None, feedback: false, queue_capacity: None, extra };
+        let emu = build.emulator(&spec, p)?;
+        let via = ping_pong(p.bench_core, emu.udp_ingress()?.port(), a.seconds, &dir.join("through.log"))?;
+        let report = emu.finish(Duration::ZERO)?;
+        let added: Map = via.iter().filter_map(|(k, v)| Some((k.clone(), v - direct.get(k)?))).collect();
+        println!("  rep {rep}: added p50 {} ns, p99 {} ns", added.get("p50").unwrap_or(&0), added.get("p99").unwrap_or(&0));
+        let udp = read_json(&dir.join("udp.json")).unwrap_or(Value::Null);
+        Ok(json!({"repetition": rep, "direct_ns": direct, "through_netfi_ns": via, "added_ns": added, "emulator_frames": report["frames"], "return_path": udp["return_path"]}))
+    })();
+    let _ = server.kill();
+    let _ = server.wait();
+    let mut v = result?;
+    v["host"] = json!(host.stop());
+    Ok(v)
+}
+
+/// Starts `sockperf ARGS` on `core` (a child takes its parent thread's
+/// placement), its output in `log`.
+fn sockperf_on(core: Option<usize>, args: &[&str], log: &Path) -> Result<Child> {
+    let file = std::fs::File::create(log)?;
+    std::thread::scope(|sc| {
+        sc.spawn(|| {
+            pin(core, None);
+            Command::new("sockperf").args(args).stdin(Stdio::null()).stdout(file.try_clone()?).stderr(file).spawn().context("starting sockperf")
+        })
+        .join()
+        .map_err(|_| anyhow::anyhow!("the spawning thread panicked"))?
+    })
+}
+
+/// One ping-pong of `seconds` against `port`: sockperf's percentiles, ns.
+fn ping_pong(core: Option<usize>, port: u16, seconds: u64, log: &Path) -> Result<Map> {
+    let mut child = sockperf_on(core, &["ping-pong", "-i", "127.0.0.1", "-p", &port.to_string(), "-t", &seconds.to_string(), "-m", "64"], log)?;
+    while child.try_wait()?.is_none() {
+        if stopped() {
+            let _ = child.kill();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    check_interrupted()?;
+    let text = std::fs::read_to_string(log)?;
+    parse(&text).with_context(|| format!("no percentiles in sockperf's output ({})", log.display()))
+}
+
+/// sockperf's latency percentiles (µs in its output) in ns.
+fn parse(text: &str) -> Option<Map> {
+    let mut m = Map::new();
+    for line in text.lines() {
+        let value = |l: &str| l.rsplit('=').next()?.trim().parse::<f64>().ok();
+        let key = if let Some(rest) = line.split("percentile ").nth(1) {
+            match rest.split_whitespace().next()? {
+                "50.000" => "p50",
+                "90.000" => "p90",
+                "99.000" => "p99",
+                "99.900" => "p999",
+                "99.990" => "p9999",
+                _ => continue,
+            }
+        } else if line.contains("<MAX> observation") {
+            "max"
+        } else {
+            continue;
+        };
+        m.insert(key.to_string(), (value(line)? * 1000.0).round() as i64);
+    }
+    m.contains_key("p50").then_some(m)
+}

@@ -1,0 +1,248 @@
+//! The groups of flags that more than one command takes, each declared
+//! once and flattened into every command that takes it; each renders its
+//! own flags ([`Render`]). Where a flag means something slightly different
+//! to one command, that command says so with clap's `mut_arg` (see
+//! [`super::help`]).
+
+use super::argv::{Argv, Render};
+use super::error::ArgsError;
+use super::values::{self, DEFAULT_RATE_HZ, MAX_RUN_S};
+use clap::Args;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// The scenario, its seed and the release queue: `netfi run` (the
+/// scenario positional) and `netfi emulator` (`--scenario`).
+#[derive(Debug, Clone, PartialEq, Eq, Args)]
+pub struct ScenarioArgs {
+    /// A scenario file (TOML) or a preset name (Normal, PLM-1..3, DLM-1..3, CLM-1..3, their calibrated -cal variants; see `netfi scenario list`).
+    pub scenario: String,
+    /// Seed of the scenario's random streams (default: the scenario file's,
+    /// else random; printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Release-queue capacity in frames, 1 to 2^24 (default: the scenario
+    /// file's, else 65536).
+    #[arg(long, value_parser = values::queue_capacity())]
+    pub queue_capacity: Option<usize>,
+}
+
+impl ScenarioArgs {
+    /// The scenario `scenario`, its seed and queue left to the file or the default.
+    pub fn named(scenario: impl Into<String>) -> ScenarioArgs {
+        ScenarioArgs { scenario: scenario.into(), seed: None, queue_capacity: None }
+    }
+}
+
+impl Render for ScenarioArgs {
+    fn render(&self, a: &mut Argv) {
+        a.val("--scenario", &self.scenario).opt("--seed", self.seed).opt("--queue-capacity", self.queue_capacity);
+    }
+}
+
+/// Where the frames come from and how many: `netfi run` and `netfi console`.
+#[derive(Debug, Clone, Default, PartialEq, Args)]
+pub struct SourceArgs {
+    /// Frame rate in Hz, 0.001 to 10e6 (default 1000; with --capture, the
+    /// capture is replayed at this fixed rate instead of its own timing).
+    #[arg(long, value_parser = values::parse_rate_hz)]
+    pub rate_hz: Option<f64>,
+    /// Frames to stream instead of a duration, 1 to 10^13.
+    #[arg(long, conflicts_with = "duration_s", value_parser = values::frames())]
+    pub frames: Option<u64>,
+    /// Seconds to stream, or a duration with its unit (`250ms`, `2min`), at
+    /// most a week; default 10 s; with --capture, the whole capture.
+    #[arg(long, visible_alias = "duration", value_parser = values::run_seconds)]
+    pub duration_s: Option<f64>,
+    /// Replay a recorded capture (LZ4 ITP records) instead of synthetic motion.
+    #[arg(long)]
+    pub capture: Option<PathBuf>,
+}
+
+impl SourceArgs {
+    /// How long the stream is planned to last (s), and the frames expected;
+    /// a stream longer than a run may last is an error.
+    pub fn planned(&self) -> Result<(f64, u64), ArgsError> {
+        let rate_hz = self.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
+        let planned = match (&self.capture, self.frames, self.duration_s) {
+            (_, Some(n), _) => (n as f64 / rate_hz, n),
+            (_, None, Some(d)) => (d, (d * rate_hz).ceil() as u64),
+            (Some(_), None, None) if self.rate_hz.is_none() => (90.0, 50_000),
+            (Some(_), None, None) => (60.0, (60.0 * rate_hz) as u64),
+            (None, None, None) => (10.0, (10.0 * rate_hz) as u64),
+        };
+        if planned.0 > MAX_RUN_S {
+            let seconds = crate::model::units::show(planned.0);
+            return Err(ArgsError::TooLong { frames: planned.1, rate_hz, seconds, max_s: MAX_RUN_S });
+        }
+        Ok(planned)
+    }
+}
+
+impl Render for SourceArgs {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--rate-hz", self.rate_hz)
+            .opt("--frames", self.frames)
+            .opt("--duration-s", self.duration_s)
+            .opt("--capture", self.capture.as_ref().map(|c| c.display()));
+    }
+}
+
+/// What comes back from the robot: `netfi run` and `netfi emulator`.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
+pub struct ReturnArgs {
+    /// Pass the robot's feedback back to the console through this scenario
+    /// (file or preset; default Normal: nothing injected).
+    #[arg(long, value_name = "SCENARIO")]
+    pub return_scenario: Option<String>,
+    /// Seed of the return scenario (default: the file's, else derived from
+    /// the run's seed; printed).
+    #[arg(long)]
+    pub return_seed: Option<u64>,
+    /// No feedback path: the robot's feedback is not carried back to the
+    /// console (iceoryx2 on both sides).
+    #[arg(long, conflicts_with_all = ["return_scenario", "return_seed"])]
+    pub no_feedback: bool,
+}
+
+impl Render for ReturnArgs {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--return-scenario", self.return_scenario.as_ref()).opt("--return-seed", self.return_seed).switch("--no-feedback", self.no_feedback);
+    }
+}
+
+/// Where a console or a robot runs.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
+pub struct PinArgs {
+    /// Core to pin this process to.
+    #[arg(long, value_parser = values::core())]
+    pub core: Option<usize>,
+    /// Run on any core but this one (the emulator's), when not pinned.
+    #[arg(long, conflicts_with = "core", value_parser = values::core())]
+    pub avoid_core: Option<usize>,
+}
+
+impl Render for PinArgs {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--core", self.core).opt("--avoid-core", self.avoid_core);
+    }
+}
+
+/// Where the emulator's loop runs: `netfi emulator`, and `netfi run`
+/// (where `--core` is `--emulator-core`, and the core is cleared unless
+/// `--no-isolate`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
+pub struct EmulatorPlacement {
+    /// Core to pin the emulator's loop to (default: the last core).
+    #[arg(long, value_parser = values::core())]
+    pub core: Option<usize>,
+    /// Do not pin the emulator at all.
+    #[arg(long, conflicts_with = "core")]
+    pub no_pin: bool,
+    /// Run the emulator's loop at this SCHED_FIFO priority (1–99; needs root
+    /// or CAP_SYS_NICE), so no ordinary process on its core preempts it.
+    #[arg(long, value_parser = values::rt_priority())]
+    pub rt_priority: Option<i32>,
+    /// Clear the emulator's core for the run: move other processes'
+    /// threads, movable kernel threads and device interrupts off it, and
+    /// put them back at the end (root or CAP_SYS_NICE for others' threads).
+    #[arg(long)]
+    pub isolate: bool,
+}
+
+impl Render for EmulatorPlacement {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--core", self.core).switch("--no-pin", self.no_pin).opt("--rt-priority", self.rt_priority).switch("--isolate", self.isolate);
+    }
+}
+
+/// The emulator's live control and telemetry (`netfi ctl`), as `netfi
+/// emulator` and `netfi run` take them.
+#[derive(Debug, Clone, PartialEq, Eq, Args)]
+pub struct ControlArgs {
+    /// Publish telemetry (counts, loss, delay and lateness percentiles)
+    /// every this many milliseconds on the run's telemetry service, up to
+    /// an hour (3600000); 0: none.
+    #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS", value_parser = values::telemetry_ms())]
+    pub telemetry_ms: u64,
+    /// Hold frames in the reordering release queue even if the scenario
+    /// cannot reorder, so that `netfi ctl switch` may switch the run to one
+    /// that does.
+    #[arg(long)]
+    pub reorder_queue: bool,
+    /// Serve no control and no telemetry service (`netfi ctl` cannot reach
+    /// the run).
+    #[arg(long)]
+    pub no_control: bool,
+}
+
+impl Default for ControlArgs {
+    /// Control served, telemetry at its default interval.
+    fn default() -> Self {
+        ControlArgs { telemetry_ms: crate::service::telemetry::DEFAULT_INTERVAL_MS, reorder_queue: false, no_control: false }
+    }
+}
+
+impl Render for ControlArgs {
+    fn render(&self, a: &mut Argv) {
+        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue).switch("--no-control", self.no_control);
+    }
+}
+
+/// How many console → robot streams the one emulator serves, and their
+/// scenarios: the same two flags for `netfi run` and `netfi emulator`
+/// (whose help says what they mean to it, [`super::help::EMULATOR_STREAMS`]).
+#[derive(Debug, Clone, PartialEq, Eq, Args)]
+pub struct StreamArgs {
+    /// Console → robot pairs through the one emulator (1 to 64), each with
+    /// its own services, scenario, seed, accounting and files
+    /// (`<out>/stream-K/` when more than one).
+    #[arg(long, default_value_t = 1, value_parser = values::streams())]
+    pub streams: u32,
+    /// Stream K's scenario (file or preset), as `K=SCENARIO`; repeatable.
+    /// Streams not named take the run's scenario.
+    #[arg(long, value_name = "K=SCENARIO")]
+    pub stream_scenario: Vec<String>,
+}
+
+impl Default for StreamArgs {
+    /// One stream, its scenario the run's.
+    fn default() -> Self {
+        StreamArgs { streams: 1, stream_scenario: Vec::new() }
+    }
+}
+
+impl StreamArgs {
+    /// Whether more than one stream, or any stream's own scenario, is asked for.
+    pub fn several(&self) -> bool {
+        self.streams > 1 || !self.stream_scenario.is_empty()
+    }
+
+    /// The scenario each stream named by `--stream-scenario` is given.
+    pub fn named_scenarios(&self) -> Result<BTreeMap<usize, String>, ArgsError> {
+        self.stream_scenario.iter().map(|text| parse_stream_scenario(text, self.streams)).collect()
+    }
+}
+
+/// `K=SCENARIO` (`--stream-scenario`): the stream and its scenario.
+pub fn parse_stream_scenario(text: &str, streams: u32) -> Result<(usize, String), ArgsError> {
+    let bad = |why: String| ArgsError::StreamScenario { text: text.to_string(), why };
+    let (k, what) = text.split_once('=').ok_or_else(|| bad("expected K=SCENARIO".into()))?;
+    let k: u32 = k.trim().parse().map_err(|_| bad("K must be a stream number".into()))?;
+    if k >= streams {
+        return Err(bad(format!("stream {k} does not exist (streams 0 to {})", streams - 1)));
+    }
+    if what.is_empty() {
+        return Err(bad("no scenario".into()));
+    }
+    Ok((k as usize, what.to_string()))
+}
+
+impl Render for StreamArgs {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--streams", (self.streams > 1).then_some(self.streams));
+        for k in &self.stream_scenario {
+            a.val("--stream-scenario", k);
+        }
+    }
+}

@@ -1,0 +1,45 @@
+//! Command-line arguments of `netfi run` and of the services, shared by
+//! `netfi <service>` and the stand-alone `netfi-console`, `netfi-emulator`,
+//! `netfi-simulator`.
+//!
+//! Each group of flags is declared once ([`groups`], [`udp`]) and flattened
+//! into every command that takes it; every numeric flag's range is checked
+//! where it is parsed ([`values`]). Each process's arguments render as the
+//! argv that parses back to them ([`argv`]), which is how `netfi run`
+//! starts the services.
+//!
+//! | file | what |
+//! |---|---|
+//! | `values` | limits and value parsers |
+//! | `groups` | scenario, source of frames, return path, placement, control, streams |
+//! | `udp` | the emulator's UDP endpoints |
+//! | `ros2` | the emulator's ROS 2 topics |
+//! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
+//! | `run` | `RunArgs` |
+//! | `argv` | the renderer |
+//! | `help` | what a shared flag means to one command |
+//! | `streams` | the run id and directory of each stream of a run |
+//! | `error` | arguments that do not go together |
+
+pub mod argv;
+pub mod error;
+pub mod groups;
+pub mod help;
+pub mod ros2;
+pub mod run;
+pub mod streams;
+pub mod services;
+pub mod udp;
+pub mod values;
+
+pub use argv::{Argv, Render};
+pub use error::ArgsError;
+pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+pub use ros2::Ros2Args;
+pub use run::{RunArgs, RunPlacement};
+pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
+pub use udp::UdpArgs;
+pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,266 @@
+//! The arguments of the three services, each its groups and its own flags.
+
+use super::argv::{Argv, Render};
+use super::error::ArgsError;
+use super::groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+use super::help;
+use super::ros2::Ros2Args;
+use super::udp::UdpArgs;
+use super::values;
+use crate::service::video::VideoArgs;
+use crate::transport::udp::UdpOptions;
+use crate::transport::Wiring;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Args)]
+pub struct ConsoleArgs {
+    /// Run id shared by the three processes (letters, digits, '-', '_').
+    #[arg(long)]
+    pub run_id: String,
+    #[command(flatten)]
+    pub source: SourceArgs,
+    /// Seed of the synthetic motion (default: random, printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    #[command(flatten)]
+    pub pin: PinArgs,
+    /// Directory for `console.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Do not also send each frame directly to the simulator (the baseline hop).
+    #[arg(long)]
+    pub no_direct: bool,
+    /// Seconds to wait for the emulator to subscribe before streaming, at most an hour.
+    #[arg(long, default_value_t = 10.0, value_parser = values::wait_seconds)]
+    pub wait_for_peer_s: f64,
+    /// Seconds to wait, after the last frame, for the end of the robot's
+    /// feedback (while an emulator publishes it), at most an hour.
+    #[arg(long, default_value_t = 5.0, value_parser = values::wait_seconds)]
+    pub feedback_wait_s: f64,
+    /// Print the round trip and the robot's divergence once a second.
+    #[arg(long)]
+    pub live: bool,
+    /// Sleep this many microseconds (up to 1000000) between polls instead
+    /// of yielding the core (many consoles sharing few cores, `netfi run
+    /// --streams`).
+    #[arg(long, value_name = "US", value_parser = values::nap_us())]
+    pub nap_us: Option<u64>,
+    #[command(flatten)]
+    pub video: VideoArgs,
+}
+
+impl Render for ConsoleArgs {
+    fn render(&self, a: &mut Argv) {
+        a.val("--run-id", &self.run_id)
+            .val("--out", self.out.display())
+            .opt("--seed", self.seed)
+            .group(&self.source)
+            .switch("--no-direct", self.no_direct)
+            .group(&self.pin)
+            .val("--wait-for-peer-s", self.wait_for_peer_s)
+            .val("--feedback-wait-s", self.feedback_wait_s)
+            .switch("--live", self.live)
+            .opt("--nap-us", self.nap_us)
+            .words(self.video.argv());
+    }
+}
+
+impl ConsoleArgs {
+    /// The argv that starts a console with these arguments.
+    pub fn to_argv(&self) -> Vec<String> {
+        super::argv::render(self)
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+#[command(
+    mut_arg("scenario", |a| a.long("scenario").help(help::EMULATOR_SCENARIO)),
+    mut_arg("return_scenario", |a| a.help(help::EMULATOR_RETURN[0])),
+    mut_arg("return_seed", |a| a.help(help::EMULATOR_RETURN[1])),
+    mut_arg("streams", |a| a.help(help::EMULATOR_STREAMS[0])),
+    mut_arg("stream_scenario", |a| a.help(help::EMULATOR_STREAMS[1]))
+)]
+pub struct EmulatorArgs {
+    /// Run id shared with the console and simulator (needed when either side
+    /// is iceoryx2).
+    #[arg(long)]
+    pub run_id: Option<String>,
+    #[command(flatten)]
+    pub scenario: ScenarioArgs,
+    #[command(flatten)]
+    pub placement: EmulatorPlacement,
+    /// Drop frames with a wrong ITP checksum (default: count and pass them).
+    #[arg(long)]
+    pub drop_bad_checksum: bool,
+    /// Frames expected, 1 to 10^13 (sizes the trace table and the loss
+    /// interval's batches).
+    #[arg(long, default_value_t = 100_000, value_parser = values::expected_frames())]
+    pub expected_frames: u64,
+    /// Directory for the trace, histograms and `emulator.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Open the egress first and wait up to this many seconds (at most an
+    /// hour) for a robot to subscribe to it before opening the ingress, so
+    /// no frame is released into nothing (a stand-alone emulator for
+    /// foreign clients).
+    #[arg(long, value_name = "S", value_parser = values::wait_seconds)]
+    pub wait_for_peer_s: Option<f64>,
+    #[command(flatten)]
+    pub return_path: ReturnArgs,
+    #[command(flatten)]
+    pub udp: UdpArgs,
+    #[command(flatten)]
+    pub control: ControlArgs,
+    #[command(flatten)]
+    pub stream: StreamArgs,
+    #[command(flatten)]
+    pub video: VideoArgs,
+    #[command(flatten)]
+    pub ros2: Ros2Args,
+}
+
+impl Render for EmulatorArgs {
+    fn render(&self, a: &mut Argv) {
+        a.opt("--run-id", self.run_id.as_ref())
+            .group(&self.scenario)
+            .val("--out", self.out.display())
+            .val("--expected-frames", self.expected_frames)
+            .group(&self.placement)
+            .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .group(&self.return_path)
+            .opt("--wait-for-peer-s", self.wait_for_peer_s)
+            .group(&self.udp)
+            .group(&self.control)
+            .group(&self.stream)
+            .words(self.video.argv())
+            .group(&self.ros2);
+    }
+}
+
+impl EmulatorArgs {
+    /// An emulator of `scenario` (iceoryx2 on both sides, run `run_id`),
+    /// everything else at its default.
+    pub fn new(run_id: Option<String>, scenario: impl Into<String>) -> EmulatorArgs {
+        EmulatorArgs {
+            run_id,
+            scenario: ScenarioArgs::named(scenario),
+            placement: EmulatorPlacement::default(),
+            drop_bad_checksum: false,
+            expected_frames: 100_000,
+            out: PathBuf::from("out"),
+            wait_for_peer_s: None,
+            return_path: ReturnArgs::default(),
+            udp: UdpArgs::default(),
+            control: ControlArgs::default(),
+            stream: StreamArgs::default(),
+            video: VideoArgs::default(),
+            ros2: Ros2Args::default(),
+        }
+    }
+
+    /// The argv that starts an emulator with these arguments.
+    pub fn to_argv(&self) -> Vec<String> {
+        super::argv::render(self)
+    }
+
+    /// Checks that the options fit the endpoints, with errors that say what
+    /// would be accepted.
+    pub fn validate(&self) -> Result<(), ArgsError> {
+        let udp = self.udp.any();
+        if self.stream.several() && udp {
+            return Err(ArgsError::StreamsNeedIceoryx2);
+        }
+        self.video.validate().map_err(ArgsError::Video)?;
+        if self.video.on() && udp {
+            return Err(ArgsError::VideoNeedsIceoryx2);
+        }
+        if self.video.on() && self.stream.streams > 1 {
+            return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
+        }
+        if self.wait_for_peer_s.is_some() && self.udp.egress.is_udp() {
+            return Err(ArgsError::WaitForUdpPeer);
+        }
+        let r = &self.return_path;
+        if !udp {
+            if self.run_id.is_none() {
+                return Err(ArgsError::RunIdRequired);
+            }
+            if self.udp.return_to.is_some() || self.udp.no_return {
+                return Err(ArgsError::UdpReturnWithIceoryx2);
+            }
+            if r.no_feedback && (r.return_scenario.is_some() || r.return_seed.is_some()) {
+                return Err(ArgsError::NoFeedbackWithReturn);
+            }
+            return Ok(());
+        }
+        if r.no_feedback {
+            return Err(ArgsError::NoFeedbackNeedsIceoryx2);
+        }
+        self.udp.validate(r.return_scenario.is_some() || r.return_seed.is_some(), self.run_id.is_some())
+    }
+
+    /// How to open the transports, for a release queue of `queue_capacity`.
+    pub fn wiring(&self, queue_capacity: usize) -> Wiring {
+        let u = &self.udp;
+        Wiring {
+            run_id: self.run_id.clone(),
+            payload: u.payload,
+            udp: UdpOptions { reuse_address: true, buffer_bytes: Some(u.udp_buffer_bytes) },
+            egress_bind: u.egress_bind,
+            console_from: u.console_from,
+            queue_capacity,
+            idle_end_ns: u.idle_end_ms.map(|ms| (ms * 1e6) as u64),
+            wait_for_peer_ns: self.wait_for_peer_s.map(|s| (s * 1e9) as u64),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SimulatorArgs {
+    /// Run id shared by the three processes (letters, digits, '-', '_').
+    #[arg(long)]
+    pub run_id: String,
+    #[command(flatten)]
+    pub pin: PinArgs,
+    /// A gap between received frames longer than this is a stall (more
+    /// than 0, at most an hour).
+    #[arg(long, default_value_t = 10.0, value_parser = values::stall_millis)]
+    pub stall_ms: f64,
+    /// Ignore frames with a wrong ITP checksum (default: count and apply them).
+    #[arg(long)]
+    pub drop_bad_checksum: bool,
+    /// Busy-poll without yielding (only on a core of its own).
+    #[arg(long)]
+    pub spin: bool,
+    /// Directory for `received.csv`, `end_to_end.hlog` and `simulator.json`.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Sleep this many microseconds (up to 1000000) between idle polls
+    /// instead of yielding the core (many robots sharing few cores, `netfi
+    /// run --streams`).
+    #[arg(long, value_name = "US", value_parser = values::nap_us())]
+    pub nap_us: Option<u64>,
+    #[command(flatten)]
+    pub video: VideoArgs,
+}
+
+impl Render for SimulatorArgs {
+    fn render(&self, a: &mut Argv) {
+        a.val("--run-id", &self.run_id)
+            .val("--out", self.out.display())
+            .group(&self.pin)
+            .switch("--spin", self.spin)
+            .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .val("--stall-ms", self.stall_ms)
+            .opt("--nap-us", self.nap_us)
+            .words(self.video.argv());
+    }
+}
+
+impl SimulatorArgs {
+    /// The argv that starts a simulator with these arguments.
+    pub fn to_argv(&self) -> Vec<String> {
+        super::argv::render(self)
+    }
+}

@@ -1,0 +1,218 @@
+use super::*;
+use clap::{CommandFactory, Parser};
+
+#[derive(Parser)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(clap::Subcommand)]
+enum Cmd {
+    Run(RunArgs),
+    Console(ConsoleArgs),
+    Emulator(EmulatorArgs),
+    Simulator(SimulatorArgs),
+}
+
+fn parse(role: &str, argv: &[String]) -> Result<Cmd, clap::Error> {
+    Cli::try_parse_from([vec!["netfi".to_string(), role.to_string()], argv.to_vec()].concat()).map(|c| c.cmd)
+}
+
+/// Video on, every one of its flags off its default.
+fn video() -> crate::service::video::VideoArgs {
+    crate::service::video::VideoArgs {
+        video_mbps: Some(2.5),
+        video_hz: 30.0,
+        video_gop: 12,
+        video_key_ratio: 6.5,
+        video_max_bytes: 123_456,
+        video_scenario: Some("PLM-1".into()),
+        video_seed: Some(99),
+    }
+}
+
+#[test]
+fn a_console_parses_back_what_it_renders() {
+    let c = ConsoleArgs {
+        run_id: "r9".into(),
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()) },
+        seed: Some(u64::MAX),
+        pin: PinArgs { core: None, avoid_core: Some(3) },
+        out: "o/c".into(),
+        no_direct: true,
+        wait_for_peer_s: 2.5,
+        feedback_wait_s: 0.0,
+        live: true,
+        nap_us: Some(0),
+        video: video(),
+    };
+    let Ok(Cmd::Console(back)) = parse("console", &c.to_argv()) else { panic!("{:?}", c.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{c:?}"));
+    let frames = ConsoleArgs { source: SourceArgs { frames: Some(17), duration_s: None, ..c.source.clone() }, pin: PinArgs { core: Some(2), avoid_core: None }, ..c };
+    let Ok(Cmd::Console(back)) = parse("console", &frames.to_argv()) else { panic!("{:?}", frames.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{frames:?}"));
+}
+
+#[test]
+fn an_emulator_parses_back_what_it_renders() {
+    let e = EmulatorArgs {
+        run_id: Some("r9".into()),
+        scenario: ScenarioArgs { scenario: "PLM-2".into(), seed: Some(3), queue_capacity: Some(77) },
+        placement: EmulatorPlacement { core: Some(1), no_pin: false, rt_priority: Some(5), isolate: true },
+        drop_bad_checksum: true,
+        expected_frames: 1234,
+        out: "o/e".into(),
+        wait_for_peer_s: Some(1.5),
+        return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
+        udp: UdpArgs::default(),
+        control: ControlArgs { telemetry_ms: 250, reorder_queue: true, no_control: true },
+        stream: StreamArgs::default(),
+        video: video(),
+        ros2: Default::default(),
+    };
+    let Ok(Cmd::Emulator(back)) = parse("emulator", &e.to_argv()) else { panic!("{:?}", e.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{e:?}"));
+    // Several streams, no feedback, unpinned.
+    let streams = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] };
+    let e2 = EmulatorArgs {
+        stream: streams,
+        video: Default::default(),
+        return_path: ReturnArgs { no_feedback: true, ..Default::default() },
+        placement: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: false },
+        ..e.clone()
+    };
+    let Ok(Cmd::Emulator(back)) = parse("emulator", &e2.to_argv()) else { panic!("{:?}", e2.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{e2:?}"));
+    // A UDP bridge: every UDP flag off its default.
+    let udp = UdpArgs {
+        ingress: "udp://127.0.0.1:4000".parse().unwrap(),
+        egress: "udp://127.0.0.1:4001".parse().unwrap(),
+        payload: crate::transport::Payload::Raw,
+        egress_bind: Some("127.0.0.1:4002".parse().unwrap()),
+        console_from: Some("127.0.0.1:4003".parse().unwrap()),
+        robot_from: Some("127.0.0.1:4004".parse().unwrap()),
+        return_to: Some("udp://127.0.0.1:4004".parse().unwrap()),
+        no_return: false,
+        idle_end_ms: Some(500.5),
+        udp_buffer_bytes: 65536,
+    };
+    let e3 = EmulatorArgs { udp, video: Default::default(), wait_for_peer_s: None, ..e };
+    let Ok(Cmd::Emulator(back)) = parse("emulator", &e3.to_argv()) else { panic!("{:?}", e3.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{e3:?}"));
+    e3.validate().unwrap();
+    // ROS 2 lanes: every ROS 2 flag off its default.
+    let ros2 = Ros2Args {
+        ros2_topic: vec!["/MTMR/measured_cp=/PSM1/servo_cp".into(), "/MTML/measured_cp=/PSM2/servo_cp".into()],
+        ros2_return: vec!["/PSM1/measured_cp=/MTMR/state".into()],
+        ros2_type: vec!["/MTMR/measured_cp=geometry_msgs/msg/PoseStamped".into()],
+        ros2_qos: vec!["/PSM1/servo_cp=best_effort,depth=1".into()],
+        ros2_domain: Some(7),
+        ros2_max_bytes: 4096,
+        ros2_discovery_s: 2.5,
+        ros2_linger_ms: 250.0,
+    };
+    let e4 = EmulatorArgs { ros2, udp: UdpArgs::default(), ..e3 };
+    let Ok(Cmd::Emulator(back)) = parse("emulator", &e4.to_argv()) else { panic!("{:?}", e4.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{e4:?}"));
+}
+
+#[test]
+fn a_simulator_parses_back_what_it_renders() {
+    let s = SimulatorArgs {
+        run_id: "r9".into(),
+        pin: PinArgs { core: Some(0), avoid_core: None },
+        stall_ms: 2.5,
+        drop_bad_checksum: true,
+        spin: true,
+        out: "o/s".into(),
+        nap_us: Some(300),
+        video: video(),
+    };
+    let Ok(Cmd::Simulator(back)) = parse("simulator", &s.to_argv()) else { panic!("{:?}", s.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{s:?}"));
+}
+
+#[test]
+fn the_run_and_the_emulator_take_the_same_groups_each_with_its_help() {
+    let want = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into()] };
+    let flags = ["--streams", "3", "--stream-scenario", "1=PLM-1"].map(String::from);
+    let with = |head: &[&str]| [head.iter().map(|s| s.to_string()).collect::<Vec<_>>(), flags.to_vec()].concat();
+    let Ok(Cmd::Run(r)) = parse("run", &with(&["Normal"])) else { unreachable!() };
+    assert_eq!(r.stream, want);
+    let Ok(Cmd::Emulator(e)) = parse("emulator", &with(&["--scenario", "Normal"])) else { unreachable!() };
+    assert_eq!(e.stream, want);
+    assert_eq!(r.scenario, e.scenario, "the scenario positional for the run, `--scenario` for the emulator");
+    assert!(e.to_argv().windows(4).any(|w| w == flags), "{:?}", e.to_argv());
+    let cmd = Cli::command();
+    let help = |sub: &str, arg: &str| {
+        let sub = cmd.find_subcommand(sub).unwrap();
+        sub.get_arguments().find(|a| a.get_id() == arg).and_then(|a| a.get_help()).map(|h| h.to_string()).unwrap()
+    };
+    assert_eq!(help("emulator", "streams"), help::EMULATOR_STREAMS[0]);
+    assert_eq!(help("emulator", "stream_scenario"), help::EMULATOR_STREAMS[1]);
+    assert!(help("run", "streams").starts_with("Console → robot pairs through the one emulator (1 to 64)"));
+    assert!(help("run", "stream_scenario").ends_with("Streams not named take the run's scenario"));
+    assert_eq!(help("emulator", "return_scenario"), help::EMULATOR_RETURN[0]);
+    assert!(help("run", "return_scenario").starts_with("Pass the robot's feedback back to the console"));
+    assert_eq!(help("run", "seed"), help::RUN_SEED);
+    assert_eq!(help("run", "no_feedback"), help::RUN_NO_FEEDBACK);
+    assert_eq!(help("run", "core"), help::RUN_PLACEMENT[0]);
+    assert!(help("emulator", "core").starts_with("Core to pin the emulator's loop to"));
+    assert!(cmd.find_subcommand("run").unwrap().get_arguments().any(|a| a.get_long() == Some("emulator-core")));
+}
+
+/// Every numeric flag of the run and the services, a value past its range
+/// on each side, and a word of the message.
+const OUT_OF_RANGE: &[(&str, &str, &[&str], &str)] = &[
+    ("run", "--duration-s", &["0", "1e30", "604801"], "a week"),
+    ("run", "--frames", &["0", "18446744073709551615"], "1..="),
+    ("run", "--rate-hz", &["0", "1e30"], "10 MHz"),
+    ("run", "--queue-capacity", &["0", "16777217"], "1..=16777216"),
+    ("run", "--emulator-core", &["1024"], "0..=1023"),
+    ("run", "--console-core", &["18446744073709551615"], "0..=1023"),
+    ("run", "--simulator-core", &["1024"], "0..=1023"),
+    ("run", "--rt-priority", &["0", "100"], "1..=99"),
+    ("run", "--telemetry-ms", &["18446744073709551615", "3600001"], "0..=3600000"),
+    ("run", "--streams", &["0", "65"], "1..=64"),
+    ("console", "--wait-for-peer-s", &["1e30", "3601"], "an hour"),
+    ("console", "--feedback-wait-s", &["1e30"], "an hour"),
+    ("console", "--nap-us", &["1000001"], "0..=1000000"),
+    ("console", "--duration-s", &["1e300"], "a week"),
+    ("console", "--core", &["4096"], "0..=1023"),
+    ("console", "--avoid-core", &["4096"], "0..=1023"),
+    ("emulator", "--expected-frames", &["0", "18446744073709551615"], "1..="),
+    ("emulator", "--idle-end-ms", &["0", "1e30"], "a week"),
+    ("emulator", "--wait-for-peer-s", &["1e30"], "an hour"),
+    ("emulator", "--udp-buffer-bytes", &["0", "4294967296"], "1..=1073741824"),
+    ("emulator", "--core", &["1024"], "0..=1023"),
+    ("emulator", "--queue-capacity", &["0"], "1..=16777216"),
+    ("emulator", "--telemetry-ms", &["18446744073709551615"], "0..=3600000"),
+    ("simulator", "--stall-ms", &["0", "1e30"], "an hour"),
+    ("simulator", "--nap-us", &["18446744073709551615"], "0..=1000000"),
+];
+
+#[test]
+fn every_numeric_flag_out_of_range_is_refused_naming_the_flag_and_its_range() {
+    let head = |role: &str| match role {
+        "run" => vec!["Normal".to_string()],
+        "emulator" => vec!["--scenario".into(), "Normal".into()],
+        _ => vec!["--run-id".into(), "r".into()],
+    };
+    for (role, flag, bad, range) in OUT_OF_RANGE {
+        for v in *bad {
+            let argv = [head(role), vec![format!("{flag}={v}")]].concat();
+            let e = parse(role, &argv).err().unwrap_or_else(|| panic!("{role} {flag} {v} was taken")).to_string();
+            assert!(e.contains(flag) && e.contains(range), "{role} {flag} {v}: {e}");
+        }
+    }
+}
+
+#[test]
+fn the_largest_values_in_range_are_taken() {
+    let argv = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let ok = parse("run", &argv(&["Normal", "--duration-s", "604800", "--telemetry-ms", "3600000", "--queue-capacity", "16777216"]));
+    let Ok(Cmd::Run(r)) = ok else { panic!() };
+    assert_eq!((r.source.duration_s, r.control.telemetry_ms, r.scenario.queue_capacity), (Some(604800.0), 3_600_000, Some(1 << 24)));
+    r.validate().unwrap();
+}

@@ -1,0 +1,144 @@
+use super::*;
+use clap::Parser;
+
+#[derive(Parser)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(clap::Subcommand)]
+enum Cmd {
+    Run(RunArgs),
+    Console(ConsoleArgs),
+    Emulator(EmulatorArgs),
+    Simulator(SimulatorArgs),
+}
+
+fn run_args(argv: &[&str]) -> RunArgs {
+    match Cli::parse_from([&["netfi", "run"], argv].concat()).cmd {
+        Cmd::Run(a) => a,
+        _ => unreachable!(),
+    }
+}
+
+fn normal() -> ScenarioSpec {
+    crate::load::resolve("Normal").unwrap()
+}
+
+/// What the runner resolves for `args`: its scenario for every stream,
+/// Normal for the paths that are on.
+fn resolved(args: &RunArgs) -> Resolved {
+    Resolved {
+        streams: vec![normal(); args.stream.streams as usize],
+        return_path: (!args.return_path.no_feedback).then(normal),
+        video: args.video.on().then(normal),
+    }
+}
+
+fn plan(argv: &[&str], host: &[usize]) -> Plan {
+    let a = run_args(argv);
+    Plan::new(&a, &resolved(&a), 7, "r1".into(), host).unwrap()
+}
+
+#[test]
+fn the_emulator_gets_the_last_core_and_with_four_the_others_get_one_each() {
+    assert_eq!(plan(&["Normal"], &[0, 1]).cores, Cores { emulator: Some(1), console: None, simulator: None });
+    assert_eq!(plan(&["Normal"], &[0, 1, 2, 3]).cores, Cores { emulator: Some(3), console: Some(1), simulator: Some(2) });
+    assert_eq!(plan(&["Normal"], &[0]).cores, Cores { emulator: None, console: None, simulator: None });
+    let p = plan(&["Normal", "--emulator-core", "0"], &[0, 1, 2, 3]);
+    assert_eq!(p.cores, Cores { emulator: Some(0), console: None, simulator: None });
+    let p = plan(&["Normal", "--no-pin"], &[0, 1, 2, 3]);
+    assert_eq!(p.cores, Cores { emulator: None, console: None, simulator: None });
+    assert!(p.emulator.placement.no_pin && p.streams[0].console.pin.avoid_core.is_none());
+}
+
+#[test]
+fn frames_follow_the_duration_the_count_or_the_default() {
+    let f = |argv: &[&str]| frames(&run_args(argv)).unwrap();
+    assert_eq!(f(&["Normal", "--duration-s", "3"]), (3.0, 3000));
+    assert_eq!(f(&["Normal", "--frames", "500", "--rate-hz", "100"]), (5.0, 500));
+    assert_eq!(f(&["Normal"]), (10.0, 10_000));
+    assert_eq!(f(&["Normal", "--capture", "x.lz4"]), (90.0, 50_000));
+}
+
+#[test]
+fn a_stream_longer_than_a_week_is_refused_before_anything_starts() {
+    let a = run_args(&["Normal", "--frames", "1000000", "--rate-hz", "0.001"]);
+    let e = frames(&a).unwrap_err().to_string();
+    assert!(e.contains("--frames 1000000 at 0.001 Hz") && e.contains("at most a week (604800 s)"), "{e}");
+    assert!(Plan::new(&a, &resolved(&a), 7, "r1".into(), &[0, 1]).is_err());
+}
+
+#[test]
+fn the_core_is_cleared_unless_asked_not_to_and_only_when_pinned() {
+    assert!(plan(&["Normal"], &[0, 1]).emulator.placement.isolate);
+    assert!(plan(&["Normal", "--isolate"], &[0, 1]).emulator.placement.isolate);
+    assert!(!plan(&["Normal", "--no-isolate"], &[0, 1]).emulator.placement.isolate);
+    assert!(plan(&["Normal", "--no-isolate", "--isolate"], &[0, 1]).emulator.placement.isolate, "the later flag wins");
+    assert!(plan(&["Normal"], &[0]).emulator.placement.isolate, "no core of its own: passed on, so the report says why nothing was cleared");
+}
+
+#[test]
+fn each_process_parses_back_what_the_plan_gave_it() {
+    let p = plan(&["Normal", "--duration-s", "2", "--rate-hz", "500", "--drop-bad-checksum", "--queue-capacity", "9"], &[0, 1]);
+    let parse = |role: &str, argv: Vec<String>| Cli::parse_from([vec!["netfi".to_string(), role.to_string()], argv].concat()).cmd;
+    let s0 = &p.streams[0];
+    let Cmd::Console(c) = parse("console", s0.console.to_argv()) else { unreachable!() };
+    assert_eq!(c.to_argv(), s0.console.to_argv());
+    assert_eq!((c.source.rate_hz, c.source.duration_s, c.seed, c.pin.avoid_core, c.pin.core), (Some(500.0), Some(2.0), Some(7), Some(1), None));
+    let Cmd::Emulator(e) = parse("emulator", p.emulator.to_argv()) else { unreachable!() };
+    assert_eq!(e.to_argv(), p.emulator.to_argv());
+    assert_eq!((e.placement.core, e.scenario.queue_capacity, e.expected_frames, e.placement.isolate, e.drop_bad_checksum), (Some(1), Some(9), 1000, true, true));
+    let Cmd::Simulator(s) = parse("simulator", s0.simulator.to_argv()) else { unreachable!() };
+    assert_eq!(s.to_argv(), s0.simulator.to_argv());
+    assert_eq!((s.pin.avoid_core, s.spin, s.drop_bad_checksum), (Some(1), false, true));
+}
+
+#[test]
+fn the_emulator_is_told_every_seed_the_runner_decided() {
+    let p = plan(&["Normal", "--video-mbps", "2"], &[0, 1]);
+    let e = &p.emulator;
+    assert_eq!(e.scenario.seed, Some(7));
+    assert_eq!(e.return_path.return_seed, Some(seeds::feedback(None, &normal(), 7)));
+    assert_eq!(e.video.video_seed, Some(seeds::video(None, &normal(), 7)));
+    assert_eq!(e.scenario.scenario, p.streams[0].own_scenario.display().to_string(), "the emulator reads the run's own copy");
+    // A seed given, or the return scenario's own, wins over the rule.
+    let p = plan(&["Normal", "--return-seed", "5"], &[0, 1]);
+    assert_eq!(p.emulator.return_path.return_seed, Some(5));
+    let a = run_args(&["Normal"]);
+    let mut r = resolved(&a);
+    r.return_path.as_mut().unwrap().seed = Some(11);
+    assert_eq!(Plan::new(&a, &r, 7, "r1".into(), &[0, 1]).unwrap().emulator.return_path.return_seed, Some(11));
+    // Without feedback, no seed for it and the emulator is told.
+    let p = plan(&["Normal", "--no-feedback"], &[0, 1]);
+    assert_eq!((p.emulator.return_path.return_seed, p.emulator.return_path.no_feedback), (None, true));
+    assert!(p.emulator.to_argv().contains(&"--no-feedback".to_string()));
+    assert_eq!(p.seeds.video, None);
+}
+
+#[test]
+fn each_stream_has_its_run_id_seed_directory_and_scenario_copy() {
+    let p = plan(&["Normal", "--streams", "3"], &[0, 1]);
+    assert_eq!(p.streams.len(), 3);
+    let s2 = &p.streams[2];
+    assert_eq!((s2.run_id.as_str(), s2.seed), ("r1-s2", seeds::stream(7, 2)));
+    assert_eq!(s2.out, PathBuf::from("out/r1/stream-2"));
+    assert_eq!(s2.console.seed, Some(s2.seed));
+    assert_eq!((s2.console.nap_us, s2.simulator.nap_us, s2.simulator.spin), (Some(STREAM_NAP_US), Some(STREAM_NAP_US), false));
+    assert_eq!(p.emulator.stream.streams, 3);
+    assert_eq!(p.emulator.stream.stream_scenario[1], format!("2={}", s2.own_scenario.display()));
+    // Each lane derives its return seed from its own seed, as before.
+    assert_eq!(p.emulator.return_path.return_seed, None);
+}
+
+#[test]
+fn a_rate_outside_the_physical_range_is_refused_naming_the_flag() {
+    for bad in ["0", "-5", "NaN", "inf", "0.0001", "2e7", "fast"] {
+        let flag = format!("--rate-hz={bad}");
+        let e = Cli::try_parse_from(["netfi", "run", "Normal", &flag]).err().expect(bad).to_string();
+        assert!(e.contains("--rate-hz") && e.contains("0.001 Hz and 10 MHz") || bad == "fast", "{bad}: {e}");
+    }
+    assert_eq!(run_args(&["Normal", "--rate-hz", "0.001"]).source.rate_hz, Some(0.001));
+    assert_eq!(run_args(&["Normal", "--rate-hz", "10000000"]).source.rate_hz, Some(1e7));
+}

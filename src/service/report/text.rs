@@ -1,0 +1,397 @@
+//! The run report as a person reads it, section by section: each section
+//! a function of what it shows, so that the stand-alone emulator's own
+//! report (`emulator_text`) shares those the emulator knows.
+
+use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, Provenance, RunReport, RunStreams};
+use crate::check::{LinkReport, StageReport};
+use crate::metrics::{fmt_ns, Summary};
+use crate::service::control::ControlEvent;
+use crate::service::schema::{LoopBusy, PeerEvent, UdpReport};
+use std::collections::BTreeMap;
+
+/// A count, or `?` where it is unknown.
+pub(super) fn opt(v: Option<u64>) -> String {
+    v.map_or("?".to_string(), |x| x.to_string())
+}
+
+/// `N by CAUSE, …`, or `none`.
+pub(super) fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
+    let d: Vec<String> = dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
+    if d.is_empty() {
+        "none".into()
+    } else {
+        d.join(", ")
+    }
+}
+
+/// A latency distribution's percentiles on one line.
+fn line(p: &Option<Summary>) -> String {
+    match p {
+        Some(p) => format!(
+            "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",
+            fmt_ns(p.p50),
+            fmt_ns(p.p90),
+            fmt_ns(p.p99),
+            fmt_ns(p.p999),
+            fmt_ns(p.p9999),
+            fmt_ns(p.max)
+        ),
+        None => "unavailable".into(),
+    }
+}
+
+impl RunReport {
+    /// The report as a person reads it.
+    pub fn to_text(&self) -> String {
+        let mut s = format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        if let Some(p) = &self.provenance {
+            s += &p.to_text();
+        }
+        s += &frames_text(&self.frames);
+        if let Some(u) = &self.udp {
+            s += &format!("udp        {}\n", udp_line(u));
+        }
+        s += &loss_text(self.loss_rate.zip(self.loss_rate_ci95), &self.stages, &self.links);
+        s += &injected_text(&self.injected_delay_ns);
+        s += &overhead_text(&self.overhead_ns, self.emulator.as_ref().and_then(|e| e.busy.as_ref()));
+        if let Some(dc) = &self.delay_check {
+            s += &delay_law_text(dc);
+        }
+        if let Some(k) = &self.kinematics {
+            s += &kinematics_text(k);
+        }
+        if let Some(fb) = &self.feedback {
+            s += &fb.to_text();
+        }
+        if let Some(v) = &self.video {
+            s += &v.to_text();
+        }
+        s += &self.host_text();
+        s += &happenings_text(&self.peer_events, &self.events);
+        for fault in &self.faults {
+            s += &format!("FAULT      {fault}\n");
+        }
+        if !self.missing.is_empty() {
+            s += &format!("missing    {} (what needs them is shown as ?)\n", self.missing.join(", "));
+        }
+        s += &self.files_text();
+        if let Some(st) = &self.streams {
+            s += &st.to_text();
+        }
+        s
+    }
+
+    /// The host's steal time, each process, and what clearing the
+    /// emulator's core did.
+    fn host_text(&self) -> String {
+        let mut s = format!("host steal {} ms ({:.3}% of CPU time)\n", self.steal.ms, self.steal.fraction * 100.0);
+        for p in &self.processes {
+            s += &format!("process    {:<9} pid {:<7} core {:<5} {}\n", p.role, p.pid, p.core.map_or("-".into(), |c| c.to_string()), p.status);
+        }
+        if let Some(i) = self.emulator.as_ref().and_then(|e| e.isolation.as_ref()) {
+            s += &format!("isolation  {i}\n");
+        }
+        s
+    }
+
+    /// Where the run's files are.
+    fn files_text(&self) -> String {
+        let f = &self.files;
+        let mut s = format!("files      {}\n", f.out_dir.display());
+        if let Some(t) = &f.trace {
+            s += &format!("  trace     {}\n", t.display());
+        }
+        for h in [&f.decision_hlog, &f.lateness_hlog, &f.end_to_end_hlog].into_iter().flatten() {
+            s += &format!("  histogram {}\n", h.display());
+        }
+        for v in [&f.video_trace, &f.video_received].into_iter().flatten() {
+            s += &format!("  video     {}\n", v.display());
+        }
+        s += &format!("  report    {}\n", f.report_json.display());
+        s
+    }
+}
+
+/// Every frame from the console to the robot, what was dropped, corrupted,
+/// and whether it all balances.
+fn frames_text(f: &FrameAccount) -> String {
+    let mut s = format!(
+        "frames     sent {}  entered {}  delivered {}  received {}  held at end {}\n",
+        opt(f.sent),
+        opt(f.entered),
+        opt(f.delivered),
+        opt(f.received),
+        opt(f.held_at_end)
+    );
+    if let Some(n) = f.duplicated.filter(|n| *n > 0) {
+        s += &format!("duplicated {n} copies made (each delivered, dropped or held like a frame: delivered may exceed entered by these)\n");
+    }
+    s += &format!("dropped    {}\n", dropped_list(&f.dropped));
+    if let Some(c) = &f.corruption {
+        s += &format!(
+            "corrupted  {} queued with flipped bits, {} delivered: {} caught by the robot's checksum, {} passed (the checksum does not cover pactyp, version, the rotations or the grasp byte: a flip there is applied)\n",
+            c.corrupted,
+            c.delivered,
+            opt(c.caught),
+            opt(c.passed)
+        );
+    }
+    s += &format!(
+        "accounting {}\n",
+        if f.balanced {
+            BALANCED.to_string()
+        } else {
+            format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator))
+        }
+    );
+    s
+}
+
+pub(super) const BALANCED: &str = "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end";
+
+/// The emulator's UDP side on one line: its sockets, what came in, what
+/// the kernel dropped before it, and the senders it refused.
+pub fn udp_line(u: &UdpReport) -> String {
+    let bound = |a: Option<std::net::SocketAddr>, how: &str| a.map_or(String::new(), |a| format!(" ({how} {a})"));
+    let mut s = format!(
+        "ingress {}{}, egress {}{}, payload {}: {} datagrams in, {} dropped by the kernel before ingress; console {}",
+        u.ingress,
+        bound(u.ingress_local, "bound"),
+        u.egress,
+        bound(u.egress_local, "from"),
+        serde_json::to_value(u.payload).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default(),
+        opt(u.datagrams_in),
+        opt(u.ingress_kernel_drops),
+        u.console.map_or("?".into(), |c| c.to_string())
+    );
+    if u.foreign_sender > 0 {
+        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
+        s += &format!("; {} datagrams from other senders refused: {}", u.foreign_sender, who.join(", "));
+        if u.foreign_unnamed > 0 {
+            s += &format!(" and {} from others", u.foreign_unnamed);
+        }
+    }
+    s
+}
+
+/// The realized loss, each stage's share of it, and the link stages.
+pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], links: &[LinkReport]) -> String {
+    let mut s = String::new();
+    if let Some((l, [lo, hi])) = loss {
+        s += &format!("loss       {:.4} realized, 95% CI [{lo:.4}, {hi:.4}]\n", l);
+    }
+    for st in stages {
+        let model = match (st.loss_rate_model, st.delay_ms_model) {
+            (_, Some(d)) => format!("model mean delay {d:.3} ms"),
+            (Some(l), None) => format!("model loss {l:.4}"),
+            _ => String::new(),
+        };
+        s += &format!("  phase {} stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase, st.stage, st.label, st.reached, st.dropped, st.loss_rate);
+    }
+    for l in links {
+        s += &format!(
+            "  link phase {} {:<14} utilisation {:.3} ({:.0} of {:.0} bit/s); queue max {} packets, {} bytes; time at stage p50 {:.3} ms p99 {:.3} ms max {:.3} ms; {} of {} frames dropped for the queue\n",
+            l.phase,
+            l.label,
+            l.utilisation,
+            l.carried_bit_s,
+            l.capacity_bit_s,
+            l.queue_packets_max,
+            l.queue_bytes_max,
+            l.delay_ms.p50,
+            l.delay_ms.p99,
+            l.delay_ms.max,
+            l.frames_dropped,
+            l.frames + l.frames_dropped
+        );
+    }
+    s
+}
+
+/// The injected delay of delivered frames.
+pub(super) fn injected_text(d: &Option<Summary>) -> String {
+    match d {
+        Some(x) => format!("delay      injected mean {:.3} ms; {}\n", x.mean / 1e6, line(d)),
+        None => String::new(),
+    }
+}
+
+/// What netfi itself adds: the emulator's own figures, the end to end
+/// ones against the direct hop, and the loop's time on frames.
+fn overhead_text(o: &Overhead, busy: Option<&LoopBusy>) -> String {
+    let mut s = emulator_overhead_text(&o.ingress_wait, &o.decision, &o.release_lateness);
+    s += &format!("  end-to-end extra  {}\n", line(&o.end_to_end_extra));
+    s += &format!("  direct hop        {}\n", line(&o.direct_hop));
+    if let Some(a) = &o.added_over_direct {
+        s += &format!("  added over direct p50 {} ns  p99 {} ns  p99.9 {} ns\n", a["p50"], a["p99"], a["p999"]);
+        if a.values().any(|v| *v < 0) {
+            s += "    (each a difference of the two lines above at that percentile, not a per-frame figure: negative\n     where the direct hop's own tail is longer; release lateness is the emulator's per-frame cost)\n";
+        }
+    }
+    if let Some(b) = busy {
+        s += &busy_text(b);
+    }
+    s
+}
+
+/// The overhead lines the emulator measures itself.
+pub(super) fn emulator_overhead_text(ingress_wait: &Option<Summary>, decision: &Option<Summary>, lateness: &Option<Summary>) -> String {
+    let mut s = "overhead (what netfi itself adds)\n".to_string();
+    s += &format!("  ingress wait      {}\n", line(ingress_wait));
+    s += &format!("  decision          {}\n", line(decision));
+    s += &format!("  release lateness  {}\n", line(lateness));
+    s
+}
+
+/// The emulator loop's time on frames, as a line of the overhead part.
+pub(super) fn busy_text(b: &LoopBusy) -> String {
+    let (per, cap) = match (b.busy_ns_per_frame, b.capacity_frames_per_s) {
+        (Some(p), Some(c)) => (format!("{p:.0} ns a frame"), format!("{c:.0} frames/s")),
+        _ => ("-".into(), "-".into()),
+    };
+    let mut s = format!(
+        "  emulator loop     {} of {} turns busy, {:.3} ms on {} frames: {per}, capacity {cap} (busy time is an upper bound on the cost)\n",
+        b.busy_turns,
+        b.turns,
+        b.busy_ns as f64 / 1e6,
+        b.frames
+    );
+    if let (Some(p), Some(c)) = (b.short_turns_ns_per_frame, b.short_turns_capacity_frames_per_s) {
+        s += &format!(
+            "    without the {} turns over 200 µs ({:.3} ms; the core most likely lost): {p:.0} ns a frame, capacity {c:.0} frames/s\n",
+            b.long_turns,
+            b.long_ns as f64 / 1e6
+        );
+    }
+    s
+}
+
+/// The delays seen against the drawn and the model's law, by quantile.
+fn delay_law_text(dc: &DelayCheck) -> String {
+    let mut s = format!("delay law  {} frames; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames);
+    for q in &dc.quantiles {
+        let model = match (q.model_ms, q.model_band_ms) {
+            (Some(m), Some([lo, hi])) => format!("{m:9.3} [{lo:.3}, {hi:.3}]"),
+            _ => "-".into(),
+        };
+        s += &format!("  q{:<5} {model}  {:9.3} ms  {:9.3} ms  {:+8.1} µs\n", q.q, q.injected_ms, q.seen_ms, q.seen_minus_injected_us);
+    }
+    s
+}
+
+/// The kinematics: per arm, the motion length on each side and the
+/// divergence; clutch activations; stalls at the robot.
+fn kinematics_text(k: &serde_json::Value) -> String {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let mut s = String::new();
+    for arm in 0..2 {
+        s += &format!(
+            "kinematics arm {arm}: motion console {:.1} mm, robot {:.1} mm; divergence final {:.2} mm, max {:.2} mm\n",
+            f(&k["console"]["length_mm"][arm]),
+            f(&k["robot"]["length_mm"][arm]),
+            f(&k["divergence"][arm]["final_mm"]),
+            f(&k["divergence"][arm]["max_mm"]),
+        );
+    }
+    let st = &k["robot"]["stalls"];
+    s += &format!(
+        "           clutch activations console {} robot {}; robot stalls {} (longest {:.1} ms, total {:.1} ms)\n",
+        k["console"]["clutch_activations"],
+        k["robot"]["clutch_activations"],
+        st["count"],
+        f(&st["longest_ns"]) / 1e6,
+        f(&st["total_ns"]) / 1e6,
+    );
+    s
+}
+
+/// Peers coming and going, and live control actions.
+pub(super) fn happenings_text(peers: &[PeerEvent], events: &[ControlEvent]) -> String {
+    let mut s = String::new();
+    for e in peers {
+        s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, e.peer, e.connected);
+    }
+    for e in events {
+        s += &format!("control    t={:.3}s {}\n", e.t_s, e.what);
+    }
+    s
+}
+
+impl FeedbackSection {
+    /// The feedback loop's lines of the text report.
+    pub(super) fn to_text(&self) -> String {
+        let mut s = format!(
+            "feedback   return scenario {} (seed {}): sent by robot {}  entered {}  delivered {}  received {}  held at end {}; dropped {}\n",
+            self.return_scenario,
+            self.seed,
+            opt(self.sent_by_robot),
+            self.entered,
+            self.delivered,
+            opt(self.received_by_console),
+            self.held_at_end,
+            dropped_list(&self.dropped)
+        );
+        if self.duplicated > 0 {
+            s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
+        }
+        s += &format!(
+            "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
+            if self.balanced { "balanced" } else { "NOT balanced" },
+            self.loss_rate,
+            self.loss_rate_ci95[0],
+            self.loss_rate_ci95[1]
+        );
+        s += &format!("  round trip        {}\n", line(&self.round_trip_ns));
+        s += &format!("  emulator's share  {}\n", line(&self.emulator_share_ns));
+        if let (Some(f), Some(m)) = (self.divergence_final_mm, self.divergence_max_mm) {
+            s += &format!("  live divergence   arm 0 final {:.2} mm (max {:.2}), arm 1 final {:.2} mm (max {:.2})\n", f[0], m[0], f[1], m[1]);
+        }
+        s
+    }
+}
+
+impl Provenance {
+    fn to_text(&self) -> String {
+        format!("provenance netfi {} on {}, started {} (seed {})\n  command  {}\n", self.version, self.host, self.started_utc, self.seed, self.command_line)
+    }
+}
+
+impl RunStreams {
+    /// The table of streams, for the text report.
+    pub fn to_text(&self) -> String {
+        let mut s = format!("streams    {} (the figures above are stream 0's)\n", self.streams.len());
+        s += "  stream  scenario          sent  entered  delivered  received  dropped  held  loss     lateness p99  balanced\n";
+        for st in &self.streams {
+            let f = &st.frames;
+            s += &format!(
+                "  {:<6}  {:<16} {:>6} {:>8} {:>10} {:>9} {:>8} {:>5}  {:<7.4}  {:>12}  {}\n",
+                st.stream,
+                st.scenario,
+                opt(f.sent),
+                opt(f.entered),
+                opt(f.delivered),
+                opt(f.received),
+                f.dropped.values().sum::<u64>(),
+                opt(f.held_at_end),
+                st.loss_rate.unwrap_or(f64::NAN),
+                st.release_lateness_ns.map_or("?".into(), |p| fmt_ns(p.p99)),
+                if f.balanced { "yes" } else { "NO" }
+            );
+        }
+        let t = &self.total;
+        s += &format!(
+            "  total   {:<16} {:>6} {:>8} {:>10} {:>9} {:>8} {:>5}  {:<7.4}  {:>12}  {}\n",
+            "",
+            t.sent,
+            t.entered,
+            t.delivered,
+            t.received,
+            t.dropped.values().sum::<u64>(),
+            t.held_at_end,
+            t.loss_rate,
+            t.release_lateness_p99_max_ns.map_or("?".into(), fmt_ns),
+            if t.balanced { "yes" } else { "NO" }
+        );
+        s
+    }
+}

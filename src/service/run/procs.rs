@@ -1,0 +1,269 @@
+//! The processes of a run: started in their own process group, each kind
+//! once the one before is ready; watched, signalled and, however the
+//! runner leaves (an error, a panic), never left behind: a process still
+//! running when its handle is dropped is stopped, and killed if it does not
+//! end within [`KILL_GRACE`](crate::service::supervise::KILL_GRACE).
+
+use crate::host::guardian::RunGuard;
+use crate::service::plan::Plan;
+use crate::service::report::ProcessEnd;
+use crate::service::supervise::{State, KILL_GRACE};
+use anyhow::{bail, Context, Result};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// One process of the run.
+pub struct Proc {
+    pub role: &'static str,
+    pub child: Child,
+    pub core: Option<usize>,
+    pub log: PathBuf,
+    pub status: Option<std::process::ExitStatus>,
+    /// Why the runner stopped it, when it was stuck.
+    pub stuck: Option<String>,
+}
+
+impl Proc {
+    /// Whether it has ended (reaped now if it just did).
+    pub fn poll(&mut self) -> bool {
+        if self.status.is_none() {
+            if let Ok(Some(s)) = self.child.try_wait() {
+                self.status = Some(s);
+            }
+        }
+        self.status.is_some()
+    }
+
+    /// Asks it to stop (SIGTERM), if it still runs.
+    pub fn terminate(&mut self) {
+        if !self.poll() {
+            // SAFETY: signalling our own child by pid; it is not reaped yet,
+            // so the pid is still its.
+            unsafe {
+                libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM);
+            }
+        }
+    }
+
+    /// Kills it (SIGKILL) if it still runs, saying why.
+    pub fn kill(&mut self, why: &str) {
+        if !self.poll() {
+            if self.stuck.is_none() {
+                self.stuck(why);
+            }
+            let _ = self.child.kill();
+        }
+    }
+
+    fn status_text(&self) -> String {
+        match self.status {
+            None => "running".into(),
+            Some(s) => match (s.code(), s.signal()) {
+                (Some(c), _) => format!("exit {c}"),
+                (None, Some(sig)) => format!("signal {sig}"),
+                _ => format!("{s}"),
+            },
+        }
+    }
+
+    pub fn state(&self) -> State {
+        match self.status {
+            None => State::Running,
+            Some(s) if s.success() => State::Succeeded,
+            Some(_) => State::Failed,
+        }
+    }
+
+    pub fn end(&self) -> ProcessEnd {
+        ProcessEnd { role: self.role.into(), pid: self.child.id(), core: self.core, status: self.status_text(), log: self.log.clone() }
+    }
+
+    /// What went wrong with it: stuck, and how it ended.
+    pub fn faults(&self) -> impl Iterator<Item = String> + '_ {
+        self.stuck.clone().into_iter().chain(self.died())
+    }
+
+    /// Names a process stuck: what it is doing, as the kernel says (its
+    /// state and, when asleep in the kernel, where).
+    pub fn stuck(&mut self, what: &str) {
+        let pid = self.child.id();
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        // The state follows the command name, in parentheses.
+        let state = stat.rsplit_once(") ").and_then(|(_, rest)| rest.split(' ').next()).unwrap_or("?").to_string();
+        let wchan = std::fs::read_to_string(format!("/proc/{pid}/wchan")).unwrap_or_default();
+        let at = match (state.as_str(), wchan.trim()) {
+            ("D", w) if !w.is_empty() && w != "0" => format!(", waiting in the kernel at {w} (uninterruptibly: a busy disk?)"),
+            (_, w) if !w.is_empty() && w != "0" => format!(", asleep at {w}"),
+            _ => String::new(),
+        };
+        let line = format!("{} {what} (pid {pid}, state {state}{at}); see {}", self.role, self.log.display());
+        eprintln!("WARNING: {line}");
+        self.stuck = Some(line);
+    }
+
+    fn died(&self) -> Option<String> {
+        let s = self.status?;
+        if s.success() {
+            None
+        } else {
+            // The process's own last words (e.g. which file it could not write).
+            let last = tail(&self.log, 1);
+            let why = if last.trim().is_empty() { String::new() } else { format!(": {}", last.trim()) };
+            Some(format!("{} ended abnormally ({}){why}; see {}", self.role, self.status_text(), self.log.display()))
+        }
+    }
+}
+
+impl Drop for Proc {
+    /// A process still running when the runner lets go of it (an error, a
+    /// panic) is stopped, then killed after the grace, and reaped: no
+    /// process of a run outlives its runner.
+    fn drop(&mut self) {
+        if self.poll() {
+            return;
+        }
+        self.terminate();
+        let t0 = Instant::now();
+        while !self.poll() && t0.elapsed() < KILL_GRACE {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts `netfi <role> <args>` with its log `<out>/<role>.log`, in a
+/// process group of its own (Ctrl-C reaches only the runner), telling it
+/// the runner's pid (it dies with the runner).
+pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, guard: &mut Option<RunGuard>) -> Result<Proc> {
+    let exe = std::env::current_exe().context("locating the netfi executable")?;
+    let log = out.join(format!("{role}.log"));
+    let file = std::fs::File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+    let child = Command::new(&exe)
+        .arg(role)
+        .args(&args)
+        .stdin(Stdio::null())
+        .stdout(file.try_clone()?)
+        .stderr(file)
+        .process_group(0)
+        .env(crate::host::process::RUNNER_PID_ENV, std::process::id().to_string())
+        .env(crate::transport::ipc::IPC_ROOT_ENV, crate::transport::ipc::user_root_dir())
+        .spawn()
+        .with_context(|| format!("starting the {role} ({})", exe.display()))?;
+    if let Some(Err(e)) = guard.as_mut().map(|g| g.add(child.id())) {
+        eprintln!("WARNING: the {role} is not on the run's record ({e}): if the runner is killed, it ends by the parent-death signal only");
+    }
+    Ok(Proc { role, child, core, log, status: None, stuck: None })
+}
+
+/// Waits for `<out>/<role>.ready`, failing early if the process ends.
+fn wait_ready(p: &mut Proc, out: &Path, timeout: Duration) -> Result<()> {
+    let ready = out.join(format!("{}.ready", p.role));
+    let t0 = Instant::now();
+    while !ready.exists() {
+        if p.poll() {
+            bail!("the {} ended before it was ready ({}):\n{}", p.role, p.status_text(), tail(&p.log, 20));
+        }
+        if t0.elapsed() > timeout {
+            p.terminate();
+            bail!("the {} was not ready after {:?}:\n{}", p.role, timeout, tail(&p.log, 20));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Ok(())
+}
+
+/// The last `lines` lines of a log.
+pub fn tail(path: &Path, lines: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n")
+}
+
+/// The processes of a run: each stream's console and robot, and the one
+/// emulator.
+pub struct Procs {
+    pub consoles: Vec<Proc>,
+    pub emulator: Proc,
+    pub simulators: Vec<Proc>,
+}
+
+impl Procs {
+    /// Consoles, emulator, robots: the order of the report.
+    pub fn all(&self) -> impl Iterator<Item = &Proc> {
+        self.consoles.iter().chain(std::iter::once(&self.emulator)).chain(self.simulators.iter())
+    }
+
+    pub fn all_mut(&mut self) -> impl Iterator<Item = &mut Proc> {
+        self.consoles.iter_mut().chain(std::iter::once(&mut self.emulator)).chain(self.simulators.iter_mut())
+    }
+}
+
+/// Starts `role` in `out` and waits until it is ready.
+fn start_one(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, timeout: Duration, guard: &mut Option<RunGuard>) -> Result<Proc> {
+    let mut p = spawn(role, args, core, out, guard)?;
+    wait_ready(&mut p, out, timeout)?;
+    Ok(p)
+}
+
+/// Starts the simulators, the emulator and the consoles, each kind once
+/// the one before is ready. Those started are stopped (as their handles
+/// are dropped) if one fails to start. Each is put on the run's record
+/// `guard` (its guardian ends them if the runner is killed).
+pub fn start(plan: &Plan, guard: &mut Option<RunGuard>) -> Result<Procs> {
+    let (out, cores) = (&plan.out, plan.cores);
+    let mut simulators = Vec::new();
+    for s in &plan.streams {
+        simulators.push(start_one("simulator", s.simulator.to_argv(), cores.simulator, &s.out, Duration::from_secs(30), guard)?);
+    }
+    // Each stream's link, queue, trace and feedback path are set up before
+    // the emulator is ready: a second or so each on a loaded machine.
+    let ready = Duration::from_secs(30 + 2 * plan.streams.len() as u64);
+    let emulator = start_one("emulator", plan.emulator.to_argv(), cores.emulator, out, ready, guard)?;
+    let mut procs = Procs { consoles: Vec::new(), emulator, simulators };
+    for s in &plan.streams {
+        procs.consoles.push(spawn("console", s.console.to_argv(), cores.console, &s.out, guard)?);
+    }
+    Ok(procs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sleeper() -> Proc {
+        let child = Command::new("sleep").arg("60").spawn().unwrap();
+        Proc { role: "console", child, core: None, log: PathBuf::from("/nonexistent"), status: None, stuck: None }
+    }
+
+    fn gone(pid: u32) -> bool {
+        !Path::new(&format!("/proc/{pid}")).exists()
+    }
+
+    #[test]
+    fn a_panic_in_the_runner_takes_its_processes_with_it() {
+        let pids = std::sync::Mutex::new(Vec::new());
+        let r = std::panic::catch_unwind(|| {
+            let procs = [sleeper(), sleeper()];
+            pids.lock().unwrap().extend(procs.iter().map(|p| p.child.id()));
+            panic!("the runner fails with its processes running");
+        });
+        assert!(r.is_err());
+        let pids = pids.into_inner().unwrap();
+        assert_eq!(pids.len(), 2);
+        assert!(pids.iter().all(|&p| gone(p)), "processes left: {pids:?}");
+    }
+
+    #[test]
+    fn a_process_that_ended_is_left_as_it_was() {
+        let child = Command::new("true").spawn().unwrap();
+        let mut p = Proc { role: "simulator", child, core: None, log: PathBuf::from("/nonexistent"), status: None, stuck: None };
+        while !p.poll() {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert_eq!(p.state(), State::Succeeded);
+        drop(p);
+    }
+}
