@@ -17,7 +17,7 @@
 //! | `busy` | the loop's busy time and the capacity it implies |
 //! | `config` | the arguments resolved once: each lane's scenario, seed and queue |
 //! | `itp` | lanes of ITP frames over iceoryx2 and UDP: their transports opened, `udp.json` |
-//! | `ros2`, `ros2_topic` | lanes of ROS 2 topics: their flags, topics settled and opened, `ros2.json`; the forward and return channels |
+//! | `ros2`, `ros2_plan`, `ros2_topic` | lanes of ROS 2 topics: their flags resolved, topics settled and opened, `ros2.json`; the forward and return channels |
 //! | `run` | running lanes of any kind: control, placement, the loop, the reports |
 //! | `report` | `emulator.json`, the joint report of several lanes, `udp.json` |
 
@@ -32,6 +32,7 @@ pub mod path;
 pub mod report;
 pub mod reverse;
 pub mod ros2;
+pub mod ros2_plan;
 pub mod ros2_topic;
 pub mod run;
 pub mod spin;

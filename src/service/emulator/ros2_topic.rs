@@ -38,12 +38,13 @@ use crate::clock::now_ns;
 use crate::injector::{DropCause, Invalid};
 use crate::ros2msg::{Kind, Motion};
 use crate::service::emulator::path::{Channel, Ending, ForwardChannel, Take, GRACE_NS};
-use crate::service::schema::ForwardExtra;
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, BadInput};
+use crate::service::schema::ros2::{ReturnExtra, StreamEnd};
+use crate::service::schema::{Account, BadInput, ForwardExtra};
+use crate::transport::ros2::senders::Senders;
 use crate::transport::ros2::{Happened, Payload, Reader, Role, Ros2Node, Slots, TopicName, TypeName, Writer};
 use crate::transport::PortError;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::cell::RefCell;
 use std::marker::PhantomData;
 use std::rc::Rc;
@@ -97,18 +98,6 @@ impl Direction for Forward {
     }
 }
 
-/// What the return channel adds to its path's report.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct ReturnExtra {
-    /// Messages the robot's publishers said they sent (their sequence
-    /// numbers), as far as they were tracked.
-    pub sent_by_robot: Option<u64>,
-    /// Messages missing from those sequences before the emulator: lost on
-    /// the DDS hop or by the reader's history.
-    pub lost_before_ingress: u64,
-    pub bad_input: BadInput,
-}
-
 impl Direction for Return {
     const NAME: &'static str = "ros2_return";
     const TRACE_FILE: &'static str = "trace_ros2_return.csv";
@@ -120,86 +109,18 @@ impl Direction for Return {
     }
 }
 
-/// Most publishers whose sequence numbers a channel follows; messages of
-/// further ones are relayed and counted as `writers_untracked`.
-pub const WRITERS_TRACKED: usize = 16;
-
 /// What a channel counts of what it took.
 #[derive(Debug, Clone, Default)]
 pub struct Counts {
     pub bad_input: BadInput,
     /// Messages missing from the publishers' sequences.
     pub lost_before_ingress: u64,
-    /// Messages of publishers beyond [`WRITERS_TRACKED`].
+    /// Messages of publishers beyond [`WRITERS_TRACKED`](crate::transport::ros2::senders::WRITERS_TRACKED).
     pub writers_untracked: u64,
     /// The encapsulation of the last message refused for it.
     pub last_bad_encoding: Option<&'static str>,
     /// Writes that failed because a reliable subscriber's window was full.
     pub window_full: u64,
-}
-
-/// The publishers a channel has heard from: their GUIDs, the first and
-/// last sequence numbers seen. A fixed table: no allocation per message.
-#[derive(Debug, Clone)]
-struct Senders {
-    guid: [[u8; 16]; WRITERS_TRACKED],
-    first: [i64; WRITERS_TRACKED],
-    last: [i64; WRITERS_TRACKED],
-    len: usize,
-    /// The entry of the last message, looked at first.
-    hint: usize,
-}
-
-impl Senders {
-    fn new() -> Senders {
-        Senders { guid: [[0; 16]; WRITERS_TRACKED], first: [0; WRITERS_TRACKED], last: [0; WRITERS_TRACKED], len: 0, hint: 0 }
-    }
-
-    /// Message `sequence` of `guid` came: the messages missing before it,
-    /// or `None` where the table is full.
-    #[inline]
-    fn saw(&mut self, guid: [u8; 16], sequence: i64) -> Option<u64> {
-        let k = if self.len > 0 && self.guid[self.hint] == guid {
-            self.hint
-        } else if let Some(k) = self.guid[..self.len].iter().position(|g| *g == guid) {
-            k
-        } else if self.len < WRITERS_TRACKED {
-            let k = self.len;
-            self.len += 1;
-            self.guid[k] = guid;
-            self.first[k] = sequence;
-            self.last[k] = sequence - 1;
-            k
-        } else {
-            return None;
-        };
-        self.hint = k;
-        let missing = (sequence - self.last[k] - 1).max(0) as u64;
-        self.last[k] = self.last[k].max(sequence);
-        Some(missing)
-    }
-
-    /// What the publishers say they sent: their last sequence numbers.
-    fn sent(&self) -> u64 {
-        self.last[..self.len].iter().map(|&l| l.max(0) as u64).sum()
-    }
-
-    /// What they sent before the emulator first heard from each (a
-    /// publisher that started first, on a volatile topic).
-    fn before_first(&self) -> u64 {
-        self.first[..self.len].iter().map(|&f| (f - 1).max(0) as u64).sum()
-    }
-}
-
-/// Why the forward stream ended, once it has.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StreamEnd {
-    /// `publishers_gone` or `idle`.
-    pub reason: String,
-    /// Seconds into the loop.
-    pub t_s: f64,
-    /// What the log said.
-    pub detail: String,
 }
 
 /// A ROS 2 channel: a reader of one topic, a writer of another, the slots
@@ -319,7 +240,7 @@ impl<D: Direction> Topic<D> {
 
     /// The publishers' own count, where every publisher was tracked.
     fn sent(&self) -> Option<u64> {
-        (self.counts.writers_untracked == 0 && self.senders.len > 0).then(|| self.senders.sent())
+        (self.counts.writers_untracked == 0 && !self.senders.is_empty()).then(|| self.senders.sent())
     }
 
     /// The emulator's time of a source timestamp, if it has one and it is
@@ -552,30 +473,5 @@ impl ForwardChannel for Topic<Forward> {
                 self.counts.bad_input.from.push(who);
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn publishers_sequences_give_what_they_sent_and_what_was_lost_before_ingress() {
-        let mut s = Senders::new();
-        let (a, b) = ([1u8; 16], [2u8; 16]);
-        assert_eq!(s.saw(a, 1), Some(0));
-        assert_eq!(s.saw(a, 2), Some(0));
-        assert_eq!(s.saw(a, 5), Some(2), "3 and 4 missing");
-        // A publisher heard from its 10th message on.
-        assert_eq!(s.saw(b, 10), Some(0));
-        assert_eq!(s.saw(b, 11), Some(0));
-        // An old message (DDS does not repeat them; if it did, it is no gap).
-        assert_eq!(s.saw(a, 4), Some(0));
-        assert_eq!((s.sent(), s.before_first()), (5 + 11, 9));
-        for k in 0..(WRITERS_TRACKED - 2) {
-            assert_eq!(s.saw([10 + k as u8; 16], 1), Some(0));
-        }
-        assert_eq!(s.saw([99; 16], 1), None, "the table is full");
-        assert_eq!(s.saw(a, 6), Some(0), "known ones are still followed");
     }
 }

@@ -23,6 +23,7 @@ pub mod names;
 pub mod node;
 pub mod port;
 pub mod qos;
+pub mod senders;
 
 pub use names::{NameError, TopicName, TypeName};
 pub use node::{GraphEvent, Happened, OpenError, Remote, Role, Ros2Node};
