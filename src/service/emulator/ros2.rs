@@ -248,7 +248,7 @@ fn seen(node: &Ros2Node, from: &TopicName, to: &TopicName, t0_ns: u64) -> (Vec<E
                     left_s: None,
                     left: None,
                 });
-                ("joined", format!("{}", e.dds_type))
+                ("joined", e.dds_type.to_string())
             }
             Happened::Left { reason } => {
                 let guid = crate::transport::ros2::node::guid_hex(e.guid);
