@@ -13,6 +13,7 @@
 //!
 //! The runs are serialized: each has a busy-waiting emulator.
 
+mod bag;
 mod edges;
 mod hosts;
 mod relay;
@@ -133,7 +134,7 @@ impl Case {
         }
     }
 
-    fn spawn(&self, mut c: Command, name: &str) -> Proc {
+    pub(crate) fn spawn(&self, mut c: Command, name: &str) -> Proc {
         let log = self.dir.join(format!("{name}.log"));
         let f = std::fs::File::create(&log).unwrap();
         c.env("ROS_DOMAIN_ID", self.domain.to_string()).stdout(f.try_clone().unwrap()).stderr(f).stdin(Stdio::null());

@@ -35,7 +35,7 @@ pub mod values;
 pub use argv::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
-pub use ros2::Ros2Args;
+pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use run::{RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
 pub use udp::UdpArgs;

@@ -44,6 +44,20 @@ fn by_topic(flag: &str, texts: &[String]) -> anyhow::Result<BTreeMap<TopicName, 
     Ok(m)
 }
 
+/// The ROS 2 domain: `given`, else `$ROS_DOMAIN_ID`, else 0.
+pub fn domain(given: Option<u16>) -> anyhow::Result<u16> {
+    let domain = match given {
+        Some(d) => d,
+        None => match std::env::var("ROS_DOMAIN_ID") {
+            Ok(v) if !v.trim().is_empty() => v.trim().parse().with_context(|| format!("ROS_DOMAIN_ID={v}: not a domain id"))?,
+            _ => 0,
+        },
+    };
+    // DDS's default port mapping leaves room for domains 0 to 232.
+    anyhow::ensure!(domain <= 232, "ROS 2 domain {domain}: domain ids go from 0 to 232");
+    Ok(domain)
+}
+
 /// The ROS 2 arguments resolved: each lane's topics, the given types and
 /// QoS by topic, and the domain.
 #[derive(Debug, Clone)]
@@ -99,15 +113,7 @@ impl Plan {
         for (t, text) in &qos {
             qos::parse(text, &qos::ros_default()).with_context(|| format!("--ros2-qos {t}"))?;
         }
-        let domain = match r.ros2_domain {
-            Some(d) => d,
-            None => match std::env::var("ROS_DOMAIN_ID") {
-                Ok(v) if !v.trim().is_empty() => v.trim().parse().with_context(|| format!("ROS_DOMAIN_ID={v}: not a domain id"))?,
-                _ => 0,
-            },
-        };
-        // DDS's default port mapping leaves room for domains 0 to 232.
-        anyhow::ensure!(domain <= 232, "ROS 2 domain {domain}: domain ids go from 0 to 232");
+        let domain = domain(r.ros2_domain)?;
         Ok(Plan {
             lanes,
             types,
