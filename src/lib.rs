@@ -18,6 +18,7 @@ pub mod injector;
 pub mod kinematics;
 pub mod model;
 pub mod motion;
+pub mod ros2msg;
 pub mod sample;
 pub mod scenario;
 pub mod scheduler;

@@ -11,6 +11,7 @@
 //! | `paths` | what each direction adds to its path's report |
 //! | `emulator` | `emulator.json`: the shaping, the process, the reverse paths; several streams |
 //! | `udp` | `udp.json` and `udp_endpoints.json` |
+//! | `ros2` | `ros2.json`, and what the ROS 2 channels add to their paths' reports |
 //! | `run` | `report.json`: the run report (`service::report` assembles it) |
 //!
 //! The console's and the robot's own reports (`console.json`,
@@ -19,6 +20,7 @@
 pub mod emulator;
 pub mod path;
 pub mod paths;
+pub mod ros2;
 pub mod run;
 pub mod udp;
 

@@ -52,6 +52,9 @@ pub const VIDEO_TAG: u64 = 0x7669_6465_6f00_0000;
 /// The tag the UDP return path's seed is derived with (`"return"`).
 pub const RETURN_TAG: u64 = 0x7265_7475_726e;
 
+/// The tag a ROS 2 return topic's seed is derived with (`"ros2retu"`).
+pub const ROS2_RETURN_TAG: u64 = 0x726f_7332_7265_7475;
+
 /// The seed of the feedback path through `spec` (`--return-seed`).
 pub fn feedback(given: Option<u64>, spec: &ScenarioSpec, seed: u64) -> u64 {
     derived(given, spec, seed, FEEDBACK_TAG)

@@ -36,6 +36,7 @@ pub mod endpoint;
 pub mod ipc;
 pub mod open;
 pub mod ports;
+pub mod ros2;
 pub mod udp;
 
 pub use endpoint::{Endpoint, EndpointError, Payload};

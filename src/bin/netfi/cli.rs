@@ -57,6 +57,9 @@ pub enum Command {
     /// --html, write it as one self-contained page, `report.html`, there.
     Report(ReportArgs),
     Study(crate::study::StudyArgs),
+    /// Record ROS 2 topics as MCAP, and replay a recording at its timing.
+    #[command(subcommand)]
+    Ros2(netfi::service::ros2_bag::Ros2Cmd),
 }
 
 #[derive(Debug, Args)]

@@ -13,6 +13,7 @@
 //! | `values` | limits and value parsers |
 //! | `groups` | scenario, source of frames, return path, placement, control, streams |
 //! | `udp` | the emulator's UDP endpoints |
+//! | `ros2` | the emulator's ROS 2 topics |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
 //! | `argv` | the renderer |
@@ -24,6 +25,7 @@ pub mod argv;
 pub mod error;
 pub mod groups;
 pub mod help;
+pub mod ros2;
 pub mod run;
 pub mod streams;
 pub mod services;
@@ -33,6 +35,7 @@ pub mod values;
 pub use argv::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use run::{RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
 pub use udp::UdpArgs;

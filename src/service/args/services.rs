@@ -4,6 +4,7 @@ use super::argv::{Argv, Render};
 use super::error::ArgsError;
 use super::groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
+use super::ros2::Ros2Args;
 use super::udp::UdpArgs;
 use super::values;
 use crate::service::video::VideoArgs;
@@ -115,6 +116,8 @@ pub struct EmulatorArgs {
     pub stream: StreamArgs,
     #[command(flatten)]
     pub video: VideoArgs,
+    #[command(flatten)]
+    pub ros2: Ros2Args,
 }
 
 impl Render for EmulatorArgs {
@@ -130,7 +133,8 @@ impl Render for EmulatorArgs {
             .group(&self.udp)
             .group(&self.control)
             .group(&self.stream)
-            .words(self.video.argv());
+            .words(self.video.argv())
+            .group(&self.ros2);
     }
 }
 
@@ -151,6 +155,7 @@ impl EmulatorArgs {
             control: ControlArgs::default(),
             stream: StreamArgs::default(),
             video: VideoArgs::default(),
+            ros2: Ros2Args::default(),
         }
     }
 

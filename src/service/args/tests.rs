@@ -71,6 +71,7 @@ fn an_emulator_parses_back_what_it_renders() {
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, no_control: true },
         stream: StreamArgs::default(),
         video: video(),
+        ros2: Default::default(),
     };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e.to_argv()) else { panic!("{:?}", e.to_argv()) };
     assert_eq!(format!("{back:?}"), format!("{e:?}"));
@@ -102,6 +103,20 @@ fn an_emulator_parses_back_what_it_renders() {
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e3.to_argv()) else { panic!("{:?}", e3.to_argv()) };
     assert_eq!(format!("{back:?}"), format!("{e3:?}"));
     e3.validate().unwrap();
+    // ROS 2 lanes: every ROS 2 flag off its default.
+    let ros2 = Ros2Args {
+        ros2_topic: vec!["/MTMR/measured_cp=/PSM1/servo_cp".into(), "/MTML/measured_cp=/PSM2/servo_cp".into()],
+        ros2_return: vec!["/PSM1/measured_cp=/MTMR/state".into()],
+        ros2_type: vec!["/MTMR/measured_cp=geometry_msgs/msg/PoseStamped".into()],
+        ros2_qos: vec!["/PSM1/servo_cp=best_effort,depth=1".into()],
+        ros2_domain: Some(7),
+        ros2_max_bytes: 4096,
+        ros2_discovery_s: 2.5,
+        ros2_linger_ms: 250.0,
+    };
+    let e4 = EmulatorArgs { ros2, udp: UdpArgs::default(), ..e3 };
+    let Ok(Cmd::Emulator(back)) = parse("emulator", &e4.to_argv()) else { panic!("{:?}", e4.to_argv()) };
+    assert_eq!(format!("{back:?}"), format!("{e4:?}"));
 }
 
 #[test]

@@ -17,6 +17,7 @@
 //! | `busy` | the loop's busy time and the capacity it implies |
 //! | `config` | the arguments resolved once: each lane's scenario, seed and queue |
 //! | `itp` | lanes of ITP frames over iceoryx2 and UDP: their transports opened, `udp.json` |
+//! | `ros2`, `ros2_plan`, `ros2_topic` | lanes of ROS 2 topics: their flags resolved, topics settled and opened, `ros2.json`; the forward and return channels |
 //! | `run` | running lanes of any kind: control, placement, the loop, the reports |
 //! | `report` | `emulator.json`, the joint report of several lanes, `udp.json` |
 
@@ -30,6 +31,9 @@ pub mod opening;
 pub mod path;
 pub mod report;
 pub mod reverse;
+pub mod ros2;
+pub mod ros2_plan;
+pub mod ros2_topic;
 pub mod run;
 pub mod spin;
 pub mod udp_return;
@@ -45,6 +49,9 @@ use config::EmulatorConfig;
 /// (and the joint one of several, and `udp.json` where a side is UDP).
 /// Returns lane 0's report.
 pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
+    if args.ros2.on() {
+        return Ok(ros2::main(args)?.swap_remove(0));
+    }
     let cfg = EmulatorConfig::of(args)?;
     crate::service::write_pid(&cfg.out_dir, "emulator")?;
     let mut reports = itp::main(&cfg)?;

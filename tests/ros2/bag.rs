@@ -1,0 +1,70 @@
+//! `netfi ros2 record` and `replay` with rclpy nodes: what the robot's side
+//! received through a scenario, recorded as MCAP, then replayed as the
+//! console at its recorded timing.
+
+use crate::{assert_balanced, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use std::process::Command;
+
+/// A PoseStamped's x (the talker's index), from its CDR with the header.
+fn x_of(data: &[u8]) -> f64 {
+    let body = &data[4..];
+    let s = netfi::ros2msg::decode(netfi::ros2msg::Kind::PoseStamped, body).expect("a PoseStamped");
+    s.q[0]
+}
+
+#[test]
+fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
+    let Some(py) = python() else { return };
+    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let c = Case::new("bag", py);
+    const N: usize = 300;
+    let bag = c.dir.join("robot.mcap");
+    let mut talker = c.node("talker.py", "console", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "200", "--type", "pose"]);
+    // The emulator's writer first, and its reader only once the recorder
+    // subscribes, so that the recording has every message delivered.
+    let mut emu = c.emulator(&["--scenario", "PLM-2", "--seed", "3", "--wait-for-peer-s", "60", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
+    let mut rec = Command::new(env!("CARGO_BIN_EXE_netfi"));
+    rec.args(["ros2", "record"]).arg(&bag).args(["/PSM1/servo_cp", "--idle-end-ms", "1500", "--discovery-s", "60"]);
+    let mut rec = c.spawn(rec, "record");
+    talker.done();
+    emu.done();
+    rec.done();
+    let e = c.json("emulator.json");
+    assert_balanced(&e["frames"]);
+    assert_eq!(u(&e["frames"]["entered"]), N as u64);
+    // The recording is what was delivered, in release order, byte for byte
+    // what the talker's PoseStamped serializes to.
+    let bytes = std::fs::read(&bag).unwrap();
+    let recorded: Vec<(u64, Vec<u8>)> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| {
+            let m = m.unwrap();
+            assert_eq!((m.channel.topic.as_str(), m.channel.message_encoding.as_str()), ("/PSM1/servo_cp", "cdr"));
+            assert_eq!(m.channel.schema.as_ref().unwrap().name, "geometry_msgs/msg/PoseStamped");
+            (m.log_time, m.data.to_vec())
+        })
+        .collect();
+    let mut delivered: Vec<_> = trace(&c, "trace_emulator.csv").into_iter().filter(|r| r["fate"] == "delivered").collect();
+    delivered.sort_by_key(|r| r["release_ns"].parse::<u64>().unwrap());
+    let want: Vec<f64> = delivered.iter().map(|r| crate::index(r) as f64).collect();
+    let have: Vec<f64> = recorded.iter().map(|(_, d)| x_of(d)).collect();
+    assert_eq!(have, want, "the recording is what the emulator delivered, in order");
+    assert!(recorded.iter().all(|(_, d)| d[..4] == [0, 1, 0, 0]), "each message with its CDR header");
+    // Replayed onto the robot's topic: a listener gets every message, in
+    // order, spread as recorded.
+    let count = want.len().to_string();
+    let mut listener = c.listener("replayed", "/PSM1/servo_cp", &["--type", "pose", "--count", &count]);
+    let mut play = Command::new(env!("CARGO_BIN_EXE_netfi"));
+    play.args(["ros2", "replay"]).arg(&bag);
+    let mut play = c.spawn(play, "replay");
+    play.done();
+    listener.done();
+    let got = c.received("replayed");
+    assert_eq!(got.iter().map(|r| r.index as f64).collect::<Vec<_>>(), want, "the replay is the recording");
+    // The span of the replay is the recording's: each message is due at
+    // its recorded offset (a sleep's lateness, well under 20 ms, is what
+    // may be added at the last).
+    let span_recorded = (recorded.last().unwrap().0 - recorded[0].0) as i64;
+    let span_replayed = got.last().unwrap().received_ns - got[0].received_ns;
+    assert!((span_replayed - span_recorded).abs() < 20_000_000, "recorded over {span_recorded} ns, replayed over {span_replayed} ns");
+}

@@ -1,0 +1,206 @@
+//! Messages relayed between rclpy nodes through a scenario: the fates are
+//! `scenario check`'s, the delays the injected ones, each lane and the
+//! return topic with its own scenario, seed and account, and the motion
+//! of PoseStamped read on both sides.
+
+use crate::{assert_balanced, assert_listener_got_what_was_delivered, assert_loss_is_the_models, index, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use std::collections::BTreeMap;
+
+#[test]
+fn plm2_drops_exactly_what_scenario_check_drops_and_the_listener_gets_the_rest() {
+    let Some(py) = python() else { return };
+    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let c = Case::new("plm2", py);
+    const N: usize = 1500;
+    let mut listener = c.listener("listener", "/chatter_out", &[]);
+    let mut talker = c.node("talker.py", "talker", &["/chatter", &N.to_string(), "--rate-hz", "500"]);
+    let mut emu = c.emulator(&["--scenario", "PLM-2", "--seed", "3", "--ros2-topic", "/chatter=/chatter_out"]);
+    talker.done();
+    emu.done();
+    listener.done();
+    let e = c.json("emulator.json");
+    let f = &e["frames"];
+    assert_balanced(f);
+    assert_eq!((u(&f["entered"]), u(&f["sent_by_console"])), (N as u64, N as u64), "every message entered: {f:#}");
+    assert_eq!(u(&f["held_at_end"]), 0);
+    let r = c.json("ros2.json");
+    assert_eq!(r["balanced"], true);
+    assert_eq!(r["forward"]["type"], "std_msgs/msg/String");
+    assert!(r["forward"]["motion"].is_null(), "a String is no kinematic type");
+    assert_eq!(r["forward"]["type_from"], "publisher");
+    assert_eq!(r["forward"]["lost_before_ingress"], 0);
+    assert_eq!(r["forward"]["ended"]["reason"], "publishers_gone");
+    // ge_lomax decides per message: with every message entered, the very
+    // fates `scenario check` gives in simulated time, message for message.
+    let t = trace(&c, "trace_emulator.csv");
+    let fates: Vec<String> = t.iter().map(|r| r["fate"].clone()).collect();
+    assert_eq!(fates, c.check_fates("PLM-2", N, 3));
+    assert!(t.iter().enumerate().all(|(k, r)| index(r) == k as u64), "messages entered in the talker's order");
+    assert_listener_got_what_was_delivered(&t, &c.received("listener"));
+    assert_loss_is_the_models(&e);
+}
+
+#[test]
+fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
+    let Some(py) = python() else { return };
+    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let c = Case::new("dlm1", py);
+    const N: usize = 600;
+    let mut listener = c.listener("listener", "/PSM1/servo_cp", &["--type", "pose"]);
+    let mut talker = c.node("talker.py", "talker", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "200", "--type", "pose"]);
+    let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "5", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
+    talker.done();
+    emu.done();
+    listener.done();
+    let e = c.json("emulator.json");
+    assert_balanced(&e["frames"]);
+    assert_eq!(u(&e["frames"]["delivered"]), N as u64, "DLM-1 drops nothing");
+    assert_eq!(c.json("ros2.json")["forward"]["type"], "geometry_msgs/msg/PoseStamped");
+    let t = trace(&c, "trace_emulator.csv");
+    let got = c.received("listener");
+    assert_listener_got_what_was_delivered(&t, &got);
+    // What the listener sees of each message (its reception less the
+    // talker's source timestamp, which the emulator keeps) is the hop in,
+    // the injected delay, the release's lateness and the hop out. Less the
+    // hop in (from the trace), it is the injected delay plus what comes
+    // after the release: never less than the delay and the lateness.
+    let by_index: BTreeMap<u64, &BTreeMap<String, String>> = t.iter().map(|r| (index(r), r)).collect();
+    let n = |r: &BTreeMap<String, String>, k: &str| r[k].parse::<i64>().unwrap();
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for m in &got {
+        let r = by_index[&m.index];
+        let seen = m.received_ns - m.source_ns;
+        let hop_in = n(r, "ingress_ns") - n(r, "send_ns");
+        let injected = n(r, "release_sched_ns") - n(r, "ingress_ns");
+        let late = n(r, "release_ns") - n(r, "release_sched_ns");
+        let y = seen - hop_in;
+        // The wall clock the timestamps are read on may be slewed by up to
+        // 500 ppm against the emulator's monotonic clock: twice that, and
+        // a clock read's worth, is the tolerance.
+        let tol = y / 1000 + 50_000;
+        assert!(y >= injected + late - tol, "message {}: seen {seen} ns (hop in {hop_in}) but injected {injected} ns and {late} ns late", m.index);
+        xs.push(injected as f64);
+        ys.push(y as f64);
+    }
+    // And the listener sees the delays one for one: the slope of what it
+    // sees against what was injected is 1, within six standard errors of
+    // the fit (and the clocks' rates).
+    let k = xs.len() as f64;
+    let (mx, my) = (xs.iter().sum::<f64>() / k, ys.iter().sum::<f64>() / k);
+    let sxx: f64 = xs.iter().map(|x| (x - mx).powi(2)).sum();
+    let sxy: f64 = xs.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let slope = sxy / sxx;
+    let resid: f64 = xs.iter().zip(&ys).map(|(x, y)| (y - my - slope * (x - mx)).powi(2)).sum();
+    let se = (resid / (k - 2.0) / sxx).sqrt();
+    assert!((slope - 1.0).abs() <= 6.0 * se + 1e-3, "slope {slope} ± {se}: the listener does not see the injected delays");
+    // DLM-1 reorders: the listener saw that too.
+    assert!(got.windows(2).any(|w| w[1].index < w[0].index), "DLM-1 reorders some messages");
+    // PoseStamped is read on both sides: the talker's x is its index, so
+    // the console's path is N − 1 long; the robot's, in release order, is
+    // the sum of the steps between what it got.
+    let m = &c.json("ros2.json")["forward"]["motion"];
+    assert_eq!(m["kind"], "pose_stamped");
+    assert_eq!((u(&m["console"]["messages"]), m["console"]["length"].as_f64()), (N as u64, Some(N as f64 - 1.0)));
+    assert_eq!(u(&m["robot"]["messages"]), got.len() as u64);
+    let robot_length: u64 = got.windows(2).map(|w| w[1].index.abs_diff(w[0].index)).sum();
+    assert_eq!(m["robot"]["length"].as_f64(), Some(robot_length as f64));
+    assert!(m["divergence_max"].as_f64().unwrap() >= 1.0, "a delay of 70 ms or more at 200 Hz leaves the robot behind: {m}");
+    assert_eq!(u(&m["malformed"]), 0);
+}
+
+#[test]
+fn the_return_topic_goes_back_through_its_own_scenario() {
+    let Some(py) = python() else { return };
+    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let c = Case::new("return", py);
+    const N: usize = 800;
+    let mut console_view = c.listener("console_view", "/MTMR/state", &[]);
+    let mut robot = c.listener("robot", "/PSM1/servo_cp", &["--type", "pose"]);
+    let mut state = c.node("talker.py", "robot_state", &["/PSM1/measured_cp", &N.to_string(), "--rate-hz", "400"]);
+    let mut console = c.node("talker.py", "console", &["/MTMR/measured_cp", "200", "--rate-hz", "100", "--type", "pose"]);
+    let mut emu = c.emulator(&[
+        "--scenario",
+        "Normal",
+        "--seed",
+        "8",
+        "--ros2-topic",
+        "/MTMR/measured_cp=/PSM1/servo_cp",
+        "--ros2-return",
+        "/PSM1/measured_cp=/MTMR/state",
+        "--return-scenario",
+        "PLM-2",
+    ]);
+    state.done();
+    console.done();
+    emu.done();
+    robot.done();
+    console_view.done();
+    let e = c.json("emulator.json");
+    assert_balanced(&e["frames"]);
+    assert_eq!(u(&e["frames"]["delivered"]), 200);
+    let r = &e["ros2_return"];
+    assert_balanced(r);
+    assert_eq!(r["scenario"], "PLM-2");
+    assert_eq!((u(&r["entered"]), u(&r["sent_by_robot"]), u(&r["lost_before_ingress"])), (N as u64, N as u64, 0), "{r:#}");
+    // The return path's own seed, derived from the lane's: its fates are
+    // scenario check's for that seed.
+    assert_ne!(u(&r["seed"]), 8);
+    let t = trace(&c, "trace_ros2_return.csv");
+    let fates: Vec<String> = t.iter().map(|r| r["fate"].clone()).collect();
+    assert_eq!(fates, c.check_fates("PLM-2", N, u(&r["seed"])));
+    assert_listener_got_what_was_delivered(&t, &c.received("console_view"));
+    assert_eq!(c.received("robot").len(), 200, "the forward topic is untouched (Normal)");
+    let ros2 = c.json("ros2.json");
+    assert_eq!(ros2["return_path"]["from"], "/PSM1/measured_cp");
+    assert_eq!(ros2["return_path"]["to"], "/MTMR/state");
+}
+
+#[test]
+fn two_lanes_each_with_its_own_scenario_seed_and_account() {
+    let Some(py) = python() else { return };
+    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let c = Case::new("bimanual", py);
+    const N: usize = 800;
+    let mut psm1 = c.listener("psm1", "/PSM1/servo_cp", &["--type", "pose"]);
+    let mut psm2 = c.listener("psm2", "/PSM2/servo_cp", &["--type", "pose"]);
+    let mut mtmr = c.node("talker.py", "mtmr", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "400", "--type", "pose"]);
+    let mut mtml = c.node("talker.py", "mtml", &["/MTML/measured_cp", &N.to_string(), "--rate-hz", "400", "--type", "pose"]);
+    let mut emu = c.emulator(&[
+        "--scenario",
+        "PLM-2",
+        "--stream-scenario",
+        "1=PLM-1",
+        "--seed",
+        "11",
+        "--ros2-topic",
+        "/MTMR/measured_cp=/PSM1/servo_cp",
+        "--ros2-topic",
+        "/MTML/measured_cp=/PSM2/servo_cp",
+    ]);
+    for p in [&mut mtmr, &mut mtml, &mut emu, &mut psm1, &mut psm2] {
+        p.done();
+    }
+    let mut seeds = Vec::new();
+    for (k, (scenario, listener)) in [("PLM-2", "psm1"), ("PLM-1", "psm2")].into_iter().enumerate() {
+        let e = c.json(&format!("stream-{k}/emulator.json"));
+        assert_eq!(e["scenario"], scenario);
+        assert_balanced(&e["frames"]);
+        assert_eq!(u(&e["frames"]["entered"]), N as u64, "lane {k}");
+        let t = trace(&c, &format!("stream-{k}/trace_emulator.csv"));
+        let fates: Vec<String> = t.iter().map(|r| r["fate"].clone()).collect();
+        assert_eq!(fates, c.check_fates(scenario, N, u(&e["seed"])), "lane {k}");
+        let got = c.received(listener);
+        assert_listener_got_what_was_delivered(&t, &got);
+        // Loss costs an absolute pose nothing once the next one arrives:
+        // the robot's path runs from the first message it got to the last.
+        let m = &c.json(&format!("stream-{k}/ros2.json"))["forward"]["motion"];
+        assert_eq!(m["console"]["length"].as_f64(), Some(N as f64 - 1.0));
+        let (first, last) = (got.first().unwrap().index, got.last().unwrap().index);
+        assert_eq!(m["robot"]["length"].as_f64(), Some((last - first) as f64), "lane {k}");
+        seeds.push(u(&e["seed"]));
+    }
+    assert_eq!(seeds[0], 11, "lane 0 keeps the run's seed");
+    assert_ne!(seeds[0], seeds[1], "each lane its own seed");
+    let joint = c.json("emulator.json");
+    assert_eq!(u(&joint["total"]["entered"]), 2 * N as u64);
+}

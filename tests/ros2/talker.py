@@ -1,0 +1,98 @@
+"""A ROS 2 publisher for netfi's tests: COUNT messages on TOPIC at RATE,
+each carrying its index (std_msgs/String: `data`; PoseStamped: the
+header's `frame_id`, and the index as the x of the position), then it
+stays a while so that a reliable subscriber gets every message, and leaves
+cleanly (or, with --hang, stays until killed).
+
+usage: talker.py TOPIC COUNT [--rate-hz R] [--type string|pose] [--qos reliable|best_effort]
+                 [--wait-subs N] [--linger-s S] [--hang] [--name NODE] [--ready FILE]
+                 [--first I] [--big-every K --big-bytes N]
+"""
+import argparse
+import sys
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+
+
+def message(kind, i, pad=0):
+    if kind == "string":
+        from std_msgs.msg import String
+        m = String()
+        # The index, then `pad` spaces (a larger message, same index).
+        m.data = str(i) + " " * pad
+        return m
+    from geometry_msgs.msg import PoseStamped
+    m = PoseStamped()
+    m.header.frame_id = str(i)
+    m.pose.position.x = float(i)
+    m.pose.orientation.w = 1.0
+    return m
+
+
+def msg_type(kind):
+    if kind == "string":
+        from std_msgs.msg import String
+        return String
+    from geometry_msgs.msg import PoseStamped
+    return PoseStamped
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("topic")
+    p.add_argument("count", type=int)
+    p.add_argument("--rate-hz", type=float, default=200.0)
+    p.add_argument("--type", default="string", choices=["string", "pose"])
+    p.add_argument("--qos", default="reliable", choices=["reliable", "best_effort"])
+    p.add_argument("--depth", type=int, default=100)
+    p.add_argument("--wait-subs", type=int, default=1, help="subscribers to wait for before publishing")
+    p.add_argument("--wait-s", type=float, default=30.0)
+    p.add_argument("--linger-s", type=float, default=2.0)
+    p.add_argument("--hang", action="store_true", help="after the last message, stay until killed")
+    p.add_argument("--name", default="talker")
+    p.add_argument("--first", type=int, default=0, help="the first message's index")
+    p.add_argument("--big-every", type=int, default=0, help="every K-th message is --big-bytes larger")
+    p.add_argument("--big-bytes", type=int, default=0)
+    p.add_argument("--ready", help="a file written once the subscribers are there")
+    a = p.parse_args()
+
+    rclpy.init()
+    node = rclpy.create_node(a.name)
+    rel = ReliabilityPolicy.RELIABLE if a.qos == "reliable" else ReliabilityPolicy.BEST_EFFORT
+    qos = QoSProfile(depth=a.depth, reliability=rel, history=HistoryPolicy.KEEP_LAST)
+    pub = node.create_publisher(msg_type(a.type), a.topic, qos)
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    t0 = time.monotonic()
+    while pub.get_subscription_count() < a.wait_subs:
+        if time.monotonic() - t0 > a.wait_s:
+            print(f"talker: no subscriber on {a.topic} within {a.wait_s} s", file=sys.stderr)
+            return 2
+        ex.spin_once(timeout_sec=0.02)
+    if a.ready:
+        open(a.ready, "w").close()
+    period = 1.0 / a.rate_hz
+    start = time.monotonic()
+    for i in range(a.count):
+        due = start + i * period
+        while True:
+            left = due - time.monotonic()
+            if left <= 0:
+                break
+            time.sleep(min(left, 0.01))
+        big = a.big_every and (i + 1) % a.big_every == 0
+        pub.publish(message(a.type, a.first + i, a.big_bytes if big else 0))
+    print(f"talker: {a.count} sent on {a.topic}", file=sys.stderr, flush=True)
+    end = time.monotonic() + a.linger_s
+    while a.hang or time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
