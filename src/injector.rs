@@ -248,14 +248,17 @@ impl<T: Copy + Default> Injector<T> {
                 Fate::Dropped(DropCause::Stage { phase, stage, kind })
             }
             Decision::Pass { delay_ns } => {
-                let flips = *self.scenario.flips();
+                // Read in place: a copy of the `Flips` (34 bytes) per frame
+                // costs more than the check.
+                let flips = self.scenario.flips();
+                let flipped = !flips.is_empty();
                 let mut own = item;
-                if !flips.is_empty() {
-                    apply(&mut own, &flips);
+                if flipped {
+                    apply(&mut own, flips);
                 }
                 match self.queue.push(now_ns.saturating_add(delay_ns), ingress_index, own) {
                     Ok(release_ns) => {
-                        if !flips.is_empty() {
+                        if flipped {
                             self.counts.corrupted += 1;
                             corrupted = true;
                         }

@@ -31,6 +31,7 @@ pub mod html;
 pub mod load;
 pub mod metrics;
 pub mod service;
+pub mod study;
 pub mod trace;
 pub mod transport;
 pub mod ui;

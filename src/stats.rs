@@ -29,21 +29,39 @@ pub struct BatchMeans {
     trials: Vec<u64>,
     events: Vec<u64>,
     n: u64,
+    /// The fine batch trial `n` goes into, `min(n / trials_per_batch,
+    /// FINE_BATCHES − 1)`, kept as a count rather than divided out per
+    /// trial; and the trials that batch takes before the next one starts.
+    batch: usize,
+    left: u64,
 }
 
 impl BatchMeans {
     /// For a run of `total_trials` trials, known in advance.
     pub fn new(total_trials: u64) -> Self {
         let trials_per_batch = total_trials.div_ceil(FINE_BATCHES as u64).max(1);
-        BatchMeans { trials_per_batch, trials: vec![0; FINE_BATCHES], events: vec![0; FINE_BATCHES], n: 0 }
+        BatchMeans {
+            trials_per_batch,
+            trials: vec![0; FINE_BATCHES],
+            events: vec![0; FINE_BATCHES],
+            n: 0,
+            batch: 0,
+            left: trials_per_batch,
+        }
     }
 
     #[inline]
     pub fn record(&mut self, event: bool) {
-        let b = ((self.n / self.trials_per_batch) as usize).min(FINE_BATCHES - 1);
+        let b = self.batch;
         self.trials[b] += 1;
         self.events[b] += u64::from(event);
         self.n += 1;
+        self.left -= 1;
+        if self.left == 0 {
+            // The last fine batch takes every trial beyond the expected.
+            self.batch = (b + 1).min(FINE_BATCHES - 1);
+            self.left = self.trials_per_batch;
+        }
     }
 
     pub fn trials(&self) -> u64 {
@@ -253,6 +271,25 @@ mod tests {
     }
     use rand::{RngExt, SeedableRng};
     use rand_xoshiro::Xoshiro256PlusPlus;
+
+    #[test]
+    fn a_trial_goes_into_the_batch_of_its_index() {
+        // Fewer, exactly and more trials than expected: trial n is in fine
+        // batch min(n / trials_per_batch, FINE_BATCHES - 1).
+        for (expected, run) in [(1u64, 3u64), (1000, 999), (5000, 5000), (4096, 9000), (10_000_000, 10_000_001)] {
+            let mut bm = BatchMeans::new(expected);
+            let mut trials = vec![0u64; FINE_BATCHES];
+            let mut events = vec![0u64; FINE_BATCHES];
+            for n in 0..run {
+                let event = n % 3 == 0 || n % 7 == 0;
+                bm.record(event);
+                let b = ((n / bm.trials_per_batch) as usize).min(FINE_BATCHES - 1);
+                trials[b] += 1;
+                events[b] += u64::from(event);
+            }
+            assert_eq!((bm.trials(), &bm.trials, &bm.events), (run, &trials, &events), "{expected} expected, {run} run");
+        }
+    }
 
     #[test]
     fn independent_trials_give_about_the_binomial_interval() {

@@ -183,7 +183,7 @@ pub fn pin(core: Option<usize>, rt_priority: Option<i32>) {
         }
     }
     if let Some(p) = rt_priority {
-        if let Err(e) = netfi::service::set_realtime(p) {
+        if let Err(e) = netfi::host::placement::set_realtime(p) {
             eprintln!("SCHED_FIFO {p} refused ({e}); staying at normal priority");
         }
     }

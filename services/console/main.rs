@@ -11,7 +11,7 @@ struct Cli {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    netfi::service::signals::die_with_runner();
+    netfi::host::process::die_with_runner()?;
     netfi::service::console::main(&cli.args)?;
     Ok(())
 }

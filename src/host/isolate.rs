@@ -15,7 +15,7 @@
 //! something else changed it meanwhile. Threads bound to that core alone
 //! (per-CPU kernel threads, the timer interrupt) stay: nothing can move
 //! them. Threads created while isolated inherit their parent's narrowed
-//! mask; restoring widens them again (see [`super::record`]). This is what
+//! mask; restoring widens them again (see [`super::changes`]). This is what
 //! `tuna --isolate` or a `cpuset` partition does, for one run, without a
 //! reboot (`isolcpus=` and `nohz_full=` do it for good, and better).
 //!
@@ -23,17 +23,25 @@
 //! host-wide record before it is made, a guardian process restores when
 //! the record's owners all die, and `netfi restore` (run first by every
 //! `netfi run`) restores any record whose owners and guardian were all
-//! killed ([`super::record`]).
+//! killed ([`super::record`], [`super::guardian`]).
 //!
 //! Moving other users' threads and interrupts needs root or CAP_SYS_NICE;
 //! without it only the caller's own processes move, and the summary says
 //! what stayed and why.
 
+use super::affinity::{format_mask, parse_mask, set_affinity};
+use super::changes::{irq_list_path, WORKQUEUE_MASK};
+use super::guardian;
+use super::private_dir::PrivateDirError;
+use super::process::{comm, is_kernel_thread, now_ticks, numeric_entries, Owner};
+use super::record::{self, Record, WriteError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-const WORKQUEUE_MASK: &str = "/sys/devices/virtual/workqueue/cpumask";
+pub use super::affinity::{format_list, get_affinity, online_cpus, parse_list};
+pub use super::changes::IsolationState;
+pub use super::process::RUNNER_PID_ENV;
 
 /// What [`isolate`] did, for reports.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -116,18 +124,6 @@ impl std::fmt::Display for IsolationSummary {
     }
 }
 
-/// What was changed, so it can be undone, also by another process (the
-/// runner, when the emulator that isolated its core was killed).
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct IsolationState {
-    pub core: usize,
-    /// (thread id, CPUs allowed before, CPUs allowed after).
-    pub threads: Vec<(i32, Vec<usize>, Vec<usize>)>,
-    /// (irq number, `smp_affinity_list` before).
-    pub irqs: Vec<(u32, String)>,
-    /// The workqueue mask before, when narrowed.
-    pub workqueue: Option<String>,
-}
 
 /// A cleared core; restores on drop.
 #[derive(Debug)]
@@ -135,13 +131,15 @@ pub struct Isolation {
     summary: IsolationSummary,
     /// The host-wide record of what was changed (removed after restoring).
     record: Option<PathBuf>,
+    /// The guardian watching the record, reaped once the record is gone.
+    guardian: Option<std::process::Child>,
     restored: bool,
 }
 
 impl Isolation {
     /// A core that was not cleared, for the report: `warning` says why.
     pub fn not_cleared(core: usize, warning: String) -> Isolation {
-        Isolation { summary: IsolationSummary::not_cleared(core, warning), record: None, restored: true }
+        Isolation { summary: IsolationSummary::not_cleared(core, warning), record: None, guardian: None, restored: true }
     }
 
     pub fn summary(&self) -> &IsolationSummary {
@@ -151,9 +149,9 @@ impl Isolation {
     /// Puts back every thread, interrupt and workqueue mask changed, and
     /// returns the summary with `restored` set.
     pub fn restore(&mut self) -> IsolationSummary {
-        if let (false, Some(record)) = (self.restored, &self.record) {
+        if let (false, Some(path)) = (self.restored, &self.record) {
             self.restored = true;
-            match super::record::restore(record, false, None) {
+            match record::restore(path, false, None) {
                 Ok(Some(r)) => {
                     self.summary.restored = Some(r.undone);
                     self.summary.threads_widened = Some(r.widened);
@@ -161,7 +159,10 @@ impl Isolation {
                 // The guardian or `netfi restore` got there first (this
                 // process was taken for dead, or the record was removed).
                 Ok(None) => self.summary.restored = Some(0),
-                Err(e) => self.summary.warnings.push(format!("restoring from {} failed: {e}; run `netfi restore`", record.display())),
+                Err(e) => self.summary.warnings.push(format!("restoring from {} failed: {e}; run `netfi restore`", path.display())),
+            }
+            if let Some(g) = self.guardian.as_mut() {
+                guardian::reap(g, 4 * guardian::GUARD_POLL);
             }
         }
         self.summary.clone()
@@ -174,10 +175,21 @@ impl Drop for Isolation {
     }
 }
 
-/// The environment variable through which `netfi run` names itself to the
-/// processes it starts, so that an emulator's record counts the runner
-/// among its owners.
-pub const RUNNER_PID_ENV: &str = "NETFI_RUNNER_PID";
+/// Why a core could not be cleared.
+#[derive(Debug, thiserror::Error)]
+pub enum IsolateError {
+    #[error("core {core} is not online (online: {online})")]
+    NotOnline { core: usize, online: String },
+    #[error("only one core is online: nowhere to move anything to")]
+    OneCore,
+    #[error("the directory of records: {0}")]
+    StateDir(#[from] PrivateDirError),
+    #[error("cannot read this process's start time")]
+    StartTime,
+    /// The record could not be written: nothing was changed.
+    #[error(transparent)]
+    Record(#[from] WriteError),
+}
 
 /// Clears `core` of everything that may run elsewhere, except the threads
 /// of the calling process (it places its own). Every change is put on the
@@ -185,135 +197,180 @@ pub const RUNNER_PID_ENV: &str = "NETFI_RUNNER_PID";
 /// narrowed to what was made afterwards), and a guardian is started, so the
 /// changes are undone should the caller (and the runner that started it,
 /// named by [`RUNNER_PID_ENV`]) die at any point without restoring.
-/// `_state_file` is no longer used (the record is host-wide), and kept for
-/// callers of the earlier interface.
-pub fn isolate(core: usize) -> std::io::Result<Isolation> {
+pub fn isolate(core: usize) -> Result<Isolation, IsolateError> {
     let online = online_cpus();
     if !online.contains(&core) {
-        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("core {core} is not online (online: {})", format_list(&online))));
+        return Err(IsolateError::NotOnline { core, online: format_list(&online) });
     }
     if online.len() < 2 {
-        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "only one core is online: nowhere to move anything to"));
+        return Err(IsolateError::OneCore);
     }
-    let own = std::process::id() as i32;
+    let dir = record::state_dir_resolved()?;
+    let (me, owners) = owners()?;
+    let record_path = dir.path.join(format!("isolation-{}-{}.json", me.pid, me.start_ticks));
+    let started_ticks = now_ticks();
     let mut summary = IsolationSummary { core, cleared: true, ..Default::default() };
-    let dir = super::record::state_dir()?;
-    let me = super::record::Owner::of(own).ok_or_else(|| std::io::Error::other("cannot read this process's start time"))?;
+    summary.warnings.extend(dir.warning());
+
+    let plan = Plan::gather(core, &online, me.pid);
+    summary.threads_bound_to_core = plan.threads_bound_to_core;
+    // On record before anything moves: restoring a change that was never
+    // made is harmless (a thread is put back only while its mask is still
+    // the planned one; an interrupt or the workqueues get their own value
+    // again). The guardian watches the record from now on.
+    let online_list: Vec<usize> = online.iter().copied().collect();
+    let save = |state: &IsolationState| {
+        let r = Record { owners: owners.clone(), started_ticks, online: online_list.clone(), state: state.clone() };
+        record::write(&record_path, &r)
+    };
+    save(&plan.state)?;
+    summary.record = Some(record_path.clone());
+    let guardian = match guardian::spawn(&record_path) {
+        Ok(child) => {
+            summary.guardian_pid = Some(child.id());
+            Some(child)
+        }
+        Err(e) => {
+            summary.warnings.push(format!(
+                "no guardian ({e}): if this process and its runner are both killed, the core stays cleared until `netfi restore`"
+            ));
+            None
+        }
+    };
+    let state = plan.apply(&mut summary);
+    // The planned record, a superset, stays if this fails.
+    let _ = save(&state);
+    Ok(Isolation { summary, record: Some(record_path), guardian, restored: false })
+}
+
+/// This process, and the owners of what it clears: itself, and the runner
+/// that started it when there is one ([`RUNNER_PID_ENV`] names the parent).
+fn owners() -> Result<(Owner, Vec<Owner>), IsolateError> {
+    let me = Owner::of(std::process::id() as i32).ok_or(IsolateError::StartTime)?;
     let mut owners = vec![me];
     // SAFETY: getppid has no preconditions.
     let parent = unsafe { libc::getppid() };
     if std::env::var(RUNNER_PID_ENV).ok().and_then(|v| v.parse::<i32>().ok()) == Some(parent) {
-        owners.extend(super::record::Owner::of(parent));
+        owners.extend(Owner::of(parent));
     }
-    let record_path = dir.join(format!("isolation-{own}-{}.json", me.start_ticks));
-    let started_ticks = super::record::now_ticks();
+    Ok((me, owners))
+}
 
-    // 1. The plan: every thread, the workqueue mask and every interrupt
-    // that may run on `core` and elsewhere.
-    let mut plan = IsolationState { core, ..Default::default() };
-    let mut kernel_tids = BTreeSet::new();
-    for pid in numeric_entries(Path::new("/proc")) {
-        if pid as i32 == own {
-            continue;
-        }
-        let kernel = is_kernel_thread(pid);
-        for tid in numeric_entries(&Path::new("/proc").join(pid.to_string()).join("task")) {
-            let tid = tid as i32;
-            let Some(before) = get_affinity(tid) else { continue };
-            if !before.contains(&core) {
-                continue;
-            }
-            let after: BTreeSet<usize> = before.iter().copied().filter(|&c| c != core).collect();
-            if after.is_empty() {
-                summary.threads_bound_to_core += 1;
-                continue;
-            }
-            if kernel {
-                kernel_tids.insert(tid);
-            }
-            plan.threads.push((tid, before.into_iter().collect(), after.into_iter().collect()));
-        }
-    }
-    let mut workqueue_narrowed = None;
-    if let Ok(text) = std::fs::read_to_string(WORKQUEUE_MASK) {
-        if let Some(mask) = parse_mask(text.trim()) {
-            let narrowed: BTreeSet<usize> = mask.iter().copied().filter(|&c| c != core).collect();
-            if mask.contains(&core) && !narrowed.is_empty() {
-                plan.workqueue = Some(text.trim().to_string());
-                workqueue_narrowed = Some(format_mask(&narrowed));
-            }
-        }
-    }
-    let mut irq_narrowed = Vec::new();
-    for irq in numeric_entries(Path::new("/proc/irq")) {
-        let Ok(text) = std::fs::read_to_string(irq_list_path(irq as u32)) else { continue };
-        let Some(cpus) = parse_list(text.trim()) else { continue };
-        let narrowed: BTreeSet<usize> = cpus.iter().copied().filter(|&c| c != core && online.contains(&c)).collect();
-        if cpus.contains(&core) && !narrowed.is_empty() {
-            plan.irqs.push((irq as u32, text.trim().to_string()));
-            irq_narrowed.push(format_list(&narrowed));
-        }
-    }
-    // 2. On record before anything moves: restoring a change that was
-    // never made is harmless (a thread is put back only while its mask is
-    // still the planned one; an interrupt or the workqueues get their own
-    // value again). The guardian watches the record from now on.
-    let online_list: Vec<usize> = online.iter().copied().collect();
-    let save = |state: &IsolationState| -> std::io::Result<()> {
-        let record = super::record::Record { owners: owners.clone(), started_ticks, online: online_list.clone(), state: state.clone() };
-        super::record::write(&record_path, &record)
-    };
-    save(&plan)?;
-    summary.record = Some(record_path.clone());
-    match super::record::spawn_guardian(&record_path) {
-        Ok(pid) => summary.guardian_pid = Some(pid),
-        Err(e) => summary.warnings.push(format!(
-            "no guardian ({e}): if this process and its runner are both killed, the core stays cleared until `netfi restore`"
-        )),
-    }
+/// What a clearing will change: every thread, the workqueue mask and every
+/// interrupt that may run on the core and elsewhere.
+struct Plan {
+    /// Each change with its value before (the record).
+    state: IsolationState,
+    threads_bound_to_core: usize,
+    kernel_tids: BTreeSet<i32>,
+    /// The narrowed workqueue mask to write, when narrowed.
+    workqueue_narrowed: Option<String>,
+    /// The narrowed CPU list of each interrupt of `state.irqs`, in order.
+    irq_narrowed: Vec<String>,
+}
 
-    // 3. The moves.
-    let mut state = IsolationState { core, ..Default::default() };
-    let mut kernel_names = BTreeSet::new();
-    let mut refused_names = BTreeSet::new();
-    for (tid, before, after) in plan.threads {
-        match set_affinity(tid, &after.iter().copied().collect()) {
-            Ok(()) => {
-                summary.threads_moved += 1;
-                if kernel_tids.contains(&tid) {
-                    kernel_names.insert(comm(tid));
-                }
-                state.threads.push((tid, before, after));
-            }
-            Err(e) if e.raw_os_error() == Some(libc::ESRCH) => {}
-            Err(_) => {
-                summary.threads_refused += 1;
-                if refused_names.len() < 8 {
-                    refused_names.insert(comm(tid));
+impl Plan {
+    fn gather(core: usize, online: &BTreeSet<usize>, own: i32) -> Plan {
+        let mut plan = Plan {
+            state: IsolationState { core, ..Default::default() },
+            threads_bound_to_core: 0,
+            kernel_tids: BTreeSet::new(),
+            workqueue_narrowed: None,
+            irq_narrowed: Vec::new(),
+        };
+        plan.gather_threads(own);
+        if let Ok(text) = std::fs::read_to_string(WORKQUEUE_MASK) {
+            if let Some(mask) = parse_mask(text.trim()) {
+                let narrowed: BTreeSet<usize> = mask.iter().copied().filter(|&c| c != core).collect();
+                if mask.contains(&core) && !narrowed.is_empty() {
+                    plan.state.workqueue = Some(text.trim().to_string());
+                    plan.workqueue_narrowed = Some(format_mask(&narrowed));
                 }
             }
         }
+        for irq in numeric_entries(Path::new("/proc/irq")) {
+            let Ok(text) = std::fs::read_to_string(irq_list_path(irq as u32)) else { continue };
+            let Some(cpus) = parse_list(text.trim()) else { continue };
+            let narrowed: BTreeSet<usize> = cpus.iter().copied().filter(|&c| c != core && online.contains(&c)).collect();
+            if cpus.contains(&core) && !narrowed.is_empty() {
+                plan.state.irqs.push((irq as u32, text.trim().to_string()));
+                plan.irq_narrowed.push(format_list(&narrowed));
+            }
+        }
+        plan
     }
-    // Unbound workqueue workers cannot be moved one by one; their mask can.
-    if let (Some(before), Some(narrowed)) = (plan.workqueue, workqueue_narrowed) {
-        if std::fs::write(WORKQUEUE_MASK, narrowed).is_ok() {
-            state.workqueue = Some(before);
-            summary.workqueues_moved = true;
+
+    /// Every thread of other processes allowed on the core and elsewhere.
+    fn gather_threads(&mut self, own: i32) {
+        let core = self.state.core;
+        for pid in numeric_entries(Path::new("/proc")) {
+            if pid as i32 == own {
+                continue;
+            }
+            let kernel = is_kernel_thread(pid);
+            for tid in numeric_entries(&Path::new("/proc").join(pid.to_string()).join("task")) {
+                let tid = tid as i32;
+                let Some(before) = get_affinity(tid) else { continue };
+                if !before.contains(&core) {
+                    continue;
+                }
+                let after: BTreeSet<usize> = before.iter().copied().filter(|&c| c != core).collect();
+                if after.is_empty() {
+                    self.threads_bound_to_core += 1;
+                    continue;
+                }
+                if kernel {
+                    self.kernel_tids.insert(tid);
+                }
+                self.state.threads.push((tid, before.into_iter().collect(), after.into_iter().collect()));
+            }
         }
     }
-    for ((irq, before), narrowed) in plan.irqs.into_iter().zip(irq_narrowed) {
-        if std::fs::write(irq_list_path(irq), narrowed).is_ok() {
-            summary.irqs_moved += 1;
-            state.irqs.push((irq, before));
-        } else {
-            summary.irqs_refused += 1;
+
+    /// Makes the changes, counting them in `summary`; returns what was
+    /// changed.
+    fn apply(self, summary: &mut IsolationSummary) -> IsolationState {
+        let core = self.state.core;
+        let mut state = IsolationState { core, ..Default::default() };
+        let mut kernel_names = BTreeSet::new();
+        let mut refused_names = BTreeSet::new();
+        for (tid, before, after) in self.state.threads {
+            match set_affinity(tid, &after.iter().copied().collect()) {
+                Ok(()) => {
+                    summary.threads_moved += 1;
+                    if self.kernel_tids.contains(&tid) {
+                        kernel_names.insert(comm(tid));
+                    }
+                    state.threads.push((tid, before, after));
+                }
+                Err(e) if e.raw_os_error() == Some(libc::ESRCH) => {}
+                Err(_) => {
+                    summary.threads_refused += 1;
+                    if refused_names.len() < 8 {
+                        refused_names.insert(comm(tid));
+                    }
+                }
+            }
         }
+        // Unbound workqueue workers cannot be moved one by one; their mask can.
+        if let (Some(before), Some(narrowed)) = (self.state.workqueue, self.workqueue_narrowed) {
+            if std::fs::write(WORKQUEUE_MASK, narrowed).is_ok() {
+                state.workqueue = Some(before);
+                summary.workqueues_moved = true;
+            }
+        }
+        for ((irq, before), narrowed) in self.state.irqs.into_iter().zip(self.irq_narrowed) {
+            if std::fs::write(irq_list_path(irq), narrowed).is_ok() {
+                summary.irqs_moved += 1;
+                state.irqs.push((irq, before));
+            } else {
+                summary.irqs_refused += 1;
+            }
+        }
+        summary.kernel_threads_moved = kernel_names.into_iter().collect();
+        summary.refused_examples = refused_names.into_iter().collect();
+        state
     }
-    summary.kernel_threads_moved = kernel_names.into_iter().collect();
-    summary.refused_examples = refused_names.into_iter().collect();
-    // The planned record, a superset, stays if this fails.
-    let _ = save(&state);
-    Ok(Isolation { summary, record: Some(record_path), restored: false })
 }
 
 /// Why a process cannot have a core of its own here: it may run on fewer
@@ -331,170 +388,6 @@ pub fn pin_problem() -> Option<String> {
     })
 }
 
-pub(crate) fn restore_state(state: &IsolationState) -> usize {
-    let mut undone = 0;
-    for (tid, before, after) in &state.threads {
-        // Only where the mask is still ours: a later change by someone else stands.
-        let now = get_affinity(*tid);
-        let ours: BTreeSet<usize> = after.iter().copied().collect();
-        if now.as_ref() == Some(&ours) && set_affinity(*tid, &before.iter().copied().collect()).is_ok() {
-            undone += 1;
-        }
-    }
-    // Interrupts and the workqueues likewise: put back only while they
-    // still have the narrowed value this clearing wrote (a change not yet
-    // made, or made since by someone else, stands). Two runs clearing
-    // cores at once thus never restore each other's narrowed values.
-    let online = online_cpus();
-    let narrowed = |before: Option<BTreeSet<usize>>| -> Option<BTreeSet<usize>> {
-        Some(before?.into_iter().filter(|&c| c != state.core && online.contains(&c)).collect())
-    };
-    for (irq, before) in &state.irqs {
-        let now = std::fs::read_to_string(irq_list_path(*irq)).ok().and_then(|t| parse_list(t.trim()));
-        if now.is_some() && now == narrowed(parse_list(before)) && std::fs::write(irq_list_path(*irq), before).is_ok() {
-            undone += 1;
-        }
-    }
-    if let Some(before) = &state.workqueue {
-        let now = std::fs::read_to_string(WORKQUEUE_MASK).ok().and_then(|t| parse_mask(t.trim()));
-        // Narrowed as `isolate` did: the core taken out, nothing else.
-        let ours = parse_mask(before).map(|m| m.into_iter().filter(|&c| c != state.core).collect::<BTreeSet<usize>>());
-        if now.is_some() && now == ours && std::fs::write(WORKQUEUE_MASK, before).is_ok() {
-            undone += 1;
-        }
-    }
-    undone
-}
-
-fn irq_list_path(irq: u32) -> PathBuf {
-    PathBuf::from(format!("/proc/irq/{irq}/smp_affinity_list"))
-}
-
-pub(crate) fn numeric_entries(dir: &Path) -> Vec<u64> {
-    let Ok(rd) = std::fs::read_dir(dir) else { return Vec::new() };
-    rd.filter_map(|e| e.ok()?.file_name().to_str()?.parse().ok()).collect()
-}
-
-/// Kernel threads are children of kthreadd (pid 2), or kthreadd itself.
-fn is_kernel_thread(pid: u64) -> bool {
-    if pid == 2 {
-        return true;
-    }
-    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { return false };
-    // The name may hold spaces and parentheses: the fields after it start
-    // after the last ')'. They are: state, ppid, ...
-    stat.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().nth(1)?.parse::<u64>().ok()) == Some(2)
-}
-
-fn comm(tid: i32) -> String {
-    std::fs::read_to_string(format!("/proc/{tid}/comm")).map(|s| s.trim().to_string()).unwrap_or_else(|_| format!("tid {tid}"))
-}
-
-/// The CPUs online (`/sys/devices/system/cpu/online`), whatever this
-/// process's own mask.
-pub fn online_cpus() -> BTreeSet<usize> {
-    std::fs::read_to_string("/sys/devices/system/cpu/online")
-        .ok()
-        .and_then(|t| parse_list(t.trim()))
-        .unwrap_or_else(|| core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect())
-}
-
-/// The CPUs thread `tid` (0: the caller) may run on.
-pub fn get_affinity(tid: i32) -> Option<BTreeSet<usize>> {
-    // SAFETY: a zeroed cpu_set_t is a valid empty set, filled by the kernel.
-    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
-    // SAFETY: `set` is valid for writes of its size.
-    if unsafe { libc::sched_getaffinity(tid, std::mem::size_of::<libc::cpu_set_t>(), &mut set) } != 0 {
-        return None;
-    }
-    // SAFETY: CPU_ISSET reads the set only, for indices within its size.
-    Some((0..libc::CPU_SETSIZE as usize).filter(|&c| unsafe { libc::CPU_ISSET(c, &set) }).collect())
-}
-
-pub(crate) fn set_affinity(tid: i32, cpus: &BTreeSet<usize>) -> std::io::Result<()> {
-    // SAFETY: as in `get_affinity`; CPU_SET writes within the set's size.
-    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
-    for &c in cpus.iter().filter(|&&c| c < libc::CPU_SETSIZE as usize) {
-        unsafe { libc::CPU_SET(c, &mut set) };
-    }
-    // SAFETY: `set` is a valid cpu_set_t of the size passed.
-    if unsafe { libc::sched_setaffinity(tid, std::mem::size_of::<libc::cpu_set_t>(), &set) } == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::last_os_error())
-    }
-}
-
-/// Parses a CPU list as the kernel writes it: `0-3,8,10-11`.
-pub fn parse_list(text: &str) -> Option<BTreeSet<usize>> {
-    let mut set = BTreeSet::new();
-    if text.is_empty() {
-        return Some(set);
-    }
-    for part in text.split(',') {
-        match part.split_once('-') {
-            Some((a, b)) => {
-                let (a, b): (usize, usize) = (a.trim().parse().ok()?, b.trim().parse().ok()?);
-                if a > b {
-                    return None;
-                }
-                set.extend(a..=b);
-            }
-            None => {
-                set.insert(part.trim().parse().ok()?);
-            }
-        }
-    }
-    Some(set)
-}
-
-/// Writes a CPU list in the kernel's form, ranges folded: `0-3,8`.
-pub fn format_list(cpus: &BTreeSet<usize>) -> String {
-    let mut parts = Vec::new();
-    let mut it = cpus.iter().copied().peekable();
-    while let Some(start) = it.next() {
-        let mut end = start;
-        while it.peek() == Some(&(end + 1)) {
-            end = it.next().unwrap_or(end);
-        }
-        parts.push(if start == end { start.to_string() } else { format!("{start}-{end}") });
-    }
-    parts.join(",")
-}
-
-/// Parses a hexadecimal CPU mask as the kernel writes it: 32-bit groups,
-/// most significant first, separated by commas (`ff,00000003`).
-pub fn parse_mask(text: &str) -> Option<BTreeSet<usize>> {
-    let mut set = BTreeSet::new();
-    let groups: Vec<&str> = text.split(',').collect();
-    for (i, g) in groups.iter().rev().enumerate() {
-        let v = u32::from_str_radix(g.trim(), 16).ok()?;
-        for bit in 0..32 {
-            if v & (1 << bit) != 0 {
-                set.insert(i * 32 + bit);
-            }
-        }
-    }
-    Some(set)
-}
-
-/// Writes a CPU set as a hexadecimal mask in 32-bit groups.
-pub fn format_mask(cpus: &BTreeSet<usize>) -> String {
-    let groups = cpus.iter().next_back().map_or(1, |&m| m / 32 + 1);
-    (0..groups)
-        .rev()
-        .map(|g| {
-            let v: u32 = cpus.iter().filter(|&&c| c / 32 == g).fold(0, |v, &c| v | 1 << (c % 32));
-            if g == groups - 1 {
-                format!("{v:x}")
-            } else {
-                format!("{v:08x}")
-            }
-        })
-        .collect::<Vec<_>>()
-        .join(",")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -507,31 +400,6 @@ mod tests {
             let _ = self.0.kill();
             let _ = self.0.wait();
         }
-    }
-
-    fn set(v: &[usize]) -> BTreeSet<usize> {
-        v.iter().copied().collect()
-    }
-
-    #[test]
-    fn cpu_lists_round_trip() {
-        assert_eq!(parse_list("0-3,8,10-11"), Some(set(&[0, 1, 2, 3, 8, 10, 11])));
-        assert_eq!(format_list(&set(&[0, 1, 2, 3, 8, 10, 11])), "0-3,8,10-11");
-        assert_eq!(parse_list("1"), Some(set(&[1])));
-        assert_eq!(format_list(&set(&[1])), "1");
-        assert_eq!(parse_list(""), Some(set(&[])));
-        assert_eq!(parse_list("3-1"), None);
-        assert_eq!(parse_list("a"), None);
-    }
-
-    #[test]
-    fn cpu_masks_round_trip() {
-        assert_eq!(parse_mask("3"), Some(set(&[0, 1])));
-        assert_eq!(parse_mask("00000003"), Some(set(&[0, 1])));
-        assert_eq!(parse_mask("1,80000001"), Some(set(&[0, 31, 32])));
-        assert_eq!(format_mask(&set(&[0, 31, 32])), "1,80000001");
-        assert_eq!(format_mask(&set(&[1])), "2");
-        assert_eq!(parse_mask("xyz"), None);
     }
 
     /// A child process of ours is moved off the core and put back; this
@@ -552,27 +420,27 @@ mod tests {
             return;
         }
         let mut iso = isolate(core).expect("isolate");
-        let record = iso.summary().record.clone().expect("a record");
+        let path = iso.summary().record.clone().expect("a record");
         let moved = get_affinity(pid).unwrap();
         assert!(!moved.contains(&core), "child still allowed on core {core}: {moved:?}");
         assert_eq!(moved.len(), all.len() - 1);
         assert!(iso.summary().threads_moved >= 1);
-        assert!(record.exists());
+        assert!(path.exists());
         let s = iso.restore();
         assert!(s.restored.unwrap() >= 1);
         assert_eq!(get_affinity(pid).unwrap(), all);
-        assert!(!record.exists(), "record left after restoring");
+        assert!(!path.exists(), "record left after restoring");
         // Restoring from the record, as the guardian or `netfi restore` do.
         let iso2 = isolate(core).expect("isolate");
-        let record = iso2.summary().record.clone().unwrap();
+        let path = iso2.summary().record.clone().unwrap();
         assert!(!get_affinity(pid).unwrap().contains(&core));
         std::mem::forget(iso2);
         // Its owner (this process) lives: not an orphan.
-        assert_eq!(super::super::record::restore(&record, true, None).unwrap(), None);
-        let r = super::super::record::restore(&record, true, Some(std::process::id() as i32)).unwrap().unwrap();
+        assert_eq!(record::restore(&path, true, None).unwrap(), None);
+        let r = record::restore(&path, true, Some(std::process::id() as i32)).unwrap().unwrap();
         assert!(r.undone >= 1);
         assert_eq!(get_affinity(pid).unwrap(), all);
-        assert!(!record.exists());
+        assert!(!path.exists());
         drop(child);
     }
 }

@@ -1,82 +1,39 @@
-//! The host-wide record of cleared cores, and the guardian that undoes a
-//! clearing whose owners died.
+//! The host-wide records of what runs changed and which processes they
+//! started, so that whoever outlives a killed run can put the host back and
+//! end what is left of it.
 //!
-//! Every [`isolate`](super::isolate::isolate) puts what it is about to change
-//! into one file of a private directory ([`state_dir`]: `/run/netfi` for
-//! root, else `$XDG_RUNTIME_DIR/netfi` or `/tmp/netfi-<uid>`, mode 0700,
-//! owned by the user) *before* changing anything. The file names the
-//! processes that own the clearing (the emulator and, under `netfi run`, the
-//! runner), each by pid and start time, so a recycled pid is never taken
-//! for a live owner. A record outlives its owners only when they were all
-//! killed without restoring; then
+//! Two kinds of record live in one private directory ([`state_dir`]:
+//! `/run/netfi` for root, else `$XDG_RUNTIME_DIR/netfi` or
+//! `/tmp/netfi-<uid>`, mode 0700, owned by the user; where that name is
+//! taken by someone else, a fresh `/tmp/netfi-<uid>-XXXXXX` is used and
+//! found again by later runs):
 //!
-//! - the **guardian**, a small `netfi restore --guard RECORD` process the
-//!   clearing process starts in a session of its own (so Ctrl-C and kill of
-//!   the run's process group do not reach it), sees every owner gone and
-//!   restores from the record at once; it exits as soon as the record is
-//!   removed, which the owners do when they restore themselves;
-//! - if the guardian itself was killed too, `netfi restore` — which every
-//!   `netfi run` performs first — restores every record whose owners are
-//!   all dead.
+//! - `isolation-*.json` ([`Record`]): a cleared core, written *before*
+//!   anything is changed, naming the processes that own the clearing (the
+//!   emulator and, under `netfi run`, the runner);
+//! - `run-*.json` ([`RunRecord`]): a run's owner (the runner) and the
+//!   processes it started, each added as it starts.
 //!
-//! Restoring takes an exclusive lock on the record and removes it while
-//! holding it, so of several restorers exactly one restores.
+//! Processes are named by pid and start time ([`Owner`]), so a recycled
+//! pid is never taken for a live owner, nor killed for a member. A record
+//! outlives its owners only when they were all killed; then its guardian
+//! ([`super::guardian`]) acts at once, or, if the guardian was killed too,
+//! `netfi restore` (which every `netfi run` performs first). Acting on a
+//! record takes an exclusive lock on it and removes it while holding it,
+//! so of several restorers exactly one acts.
 
+use super::changes::{undo, widen_born_during, IsolationState};
+use super::private_dir::{self, PrivateDir, PrivateDirError};
+use super::process::{end_processes, Ended, Owner};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
 use std::io;
-use std::os::unix::fs::{DirBuilderExt, MetadataExt, OpenOptionsExt};
+use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
-/// How often the guardian looks at its owners and its record.
-const GUARD_POLL: std::time::Duration = std::time::Duration::from_millis(100);
-
-/// A process, by pid and start time (clock ticks after boot), so that a
-/// recycled pid is not mistaken for it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Owner {
-    pub pid: i32,
-    pub start_ticks: u64,
-}
-
-impl Owner {
-    /// The process `pid`, if it exists.
-    pub fn of(pid: i32) -> Option<Owner> {
-        Some(Owner { pid, start_ticks: start_ticks(&format!("/proc/{pid}/stat"))? })
-    }
-
-    /// Whether this very process is still there (not a zombie).
-    pub fn alive(&self) -> bool {
-        let path = format!("/proc/{}/stat", self.pid);
-        start_ticks(&path) == Some(self.start_ticks) && !is_zombie(&path)
-    }
-}
-
-/// Field 22 of a `/proc/…/stat` file: the start time in clock ticks after boot.
-pub(crate) fn start_ticks(stat_path: &str) -> Option<u64> {
-    let stat = std::fs::read_to_string(stat_path).ok()?;
-    // The name may hold spaces and parentheses: fields after it start after
-    // the last ')'; starttime is the 20th of those (field 22 overall).
-    stat.rsplit_once(')')?.1.split_whitespace().nth(19)?.parse().ok()
-}
-
-fn is_zombie(stat_path: &str) -> bool {
-    std::fs::read_to_string(stat_path)
-        .ok()
-        .and_then(|s| s.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().next().map(|x| x == "Z" || x == "X")))
-        .unwrap_or(true)
-}
-
-/// Now, in clock ticks after boot (the unit of [`Owner::start_ticks`]).
-pub(crate) fn now_ticks() -> u64 {
-    // SAFETY: sysconf has no preconditions.
-    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
-    let up: f64 = std::fs::read_to_string("/proc/uptime")
-        .ok()
-        .and_then(|t| t.split_whitespace().next()?.parse().ok())
-        .unwrap_or(0.0);
-    (up * hz) as u64
-}
+/// How long the processes of a run whose owner is gone have to end on
+/// SIGTERM (writing what they have) before they are killed.
+pub const RUN_END_GRACE: Duration = Duration::from_millis(800);
 
 /// What a clearing changed (or is about to change), with its owners.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -88,7 +45,7 @@ pub struct Record {
     pub started_ticks: u64,
     /// The CPUs online when it began.
     pub online: Vec<usize>,
-    pub state: super::isolate::IsolationState,
+    pub state: IsolationState,
 }
 
 impl Record {
@@ -99,59 +56,102 @@ impl Record {
     }
 }
 
-/// The private directory of records, created 0700 if missing. Refused when
-/// it is not a directory owned by this user and closed to everyone else.
-pub fn state_dir() -> io::Result<PathBuf> {
-    // SAFETY: geteuid has no preconditions.
-    let uid = unsafe { libc::geteuid() };
-    let dir = if uid == 0 {
-        PathBuf::from("/run/netfi")
-    } else {
-        match std::env::var_os("XDG_RUNTIME_DIR") {
-            Some(d) if !d.is_empty() => PathBuf::from(d).join("netfi"),
-            _ => PathBuf::from(format!("/tmp/netfi-{uid}")),
+/// The processes of one run: its owner, and the others, which must not
+/// outlive it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub owner: Owner,
+    pub members: Vec<Owner>,
+    /// The run's iceoryx2 run ids, whose shared memory goes once the run
+    /// has ended.
+    pub run_ids: Vec<String>,
+}
+
+/// The candidate places of the records, in order of preference.
+fn preferred_dirs() -> Vec<PathBuf> {
+    let uid = private_dir::uid();
+    if uid == 0 {
+        return vec![PathBuf::from("/run/netfi"), PathBuf::from("/tmp/netfi-0")];
+    }
+    let mut dirs: Vec<PathBuf> = private_dir::xdg_runtime_dir().map(|d| d.join("netfi")).into_iter().collect();
+    dirs.push(PathBuf::from(format!("/tmp/netfi-{uid}")));
+    dirs
+}
+
+/// The private directory of records, created 0700 if missing, with what
+/// was passed over on the way (a directory of that name taken by another
+/// user).
+pub fn state_dir_resolved() -> Result<PrivateDir, PrivateDirError> {
+    private_dir::resolve(&preferred_dirs(), Path::new("/tmp"), &format!("netfi-{}", private_dir::uid()))
+}
+
+/// The private directory of records (see [`state_dir_resolved`]).
+pub fn state_dir() -> Result<PathBuf, PrivateDirError> {
+    state_dir_resolved().map(|d| d.path)
+}
+
+/// Every private directory of this user's records: the one in use and any
+/// other a process of this user may have used (the usual names, and the
+/// replacements of a taken name).
+fn all_state_dirs() -> Result<Vec<PathBuf>, PrivateDirError> {
+    let mut dirs = vec![state_dir()?];
+    let stem = format!("netfi-{}-", private_dir::uid());
+    let replacements = std::fs::read_dir("/tmp")
+        .map(|rd| rd.filter_map(|e| e.ok()).filter(|e| e.file_name().to_str().is_some_and(|n| n.starts_with(&stem))).map(|e| e.path()).collect())
+        .unwrap_or_else(|_| Vec::new());
+    for d in preferred_dirs().into_iter().chain(replacements) {
+        if !dirs.contains(&d) && private_dir::is_private(&d) {
+            dirs.push(d);
         }
-    };
-    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(io::Error::new(e.kind(), format!("creating {}: {e}", dir.display()))),
     }
-    let meta = std::fs::symlink_metadata(&dir)?;
-    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o077 != 0 {
-        return Err(io::Error::new(
-            io::ErrorKind::PermissionDenied,
-            format!(
-                "{} is not a private directory of uid {uid} (a directory, owner {}, mode {:o}): refusing to keep records there",
-                dir.display(),
-                meta.uid(),
-                meta.mode() & 0o7777
-            ),
-        ));
-    }
-    Ok(dir)
+    Ok(dirs)
+}
+
+/// Why a record could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("writing the record {}: {source}", path.display())]
+pub struct WriteError {
+    pub path: PathBuf,
+    #[source]
+    pub source: io::Error,
 }
 
 /// Writes `record` to `path` atomically (a temporary file renamed over it),
 /// mode 0600.
-pub fn write(path: &Path, record: &Record) -> io::Result<()> {
+pub fn write(path: &Path, record: &impl Serialize) -> Result<(), WriteError> {
+    let error = |source| WriteError { path: path.to_path_buf(), source };
     let tmp = path.with_extension("tmp");
-    let bytes = serde_json::to_vec(record).map_err(io::Error::other)?;
-    let mut f = std::fs::OpenOptions::new().write(true).create(true).truncate(true).mode(0o600).open(&tmp)?;
-    io::Write::write_all(&mut f, &bytes)?;
+    let bytes = serde_json::to_vec(record).map_err(|e| error(io::Error::other(e)))?;
+    let mut f = std::fs::OpenOptions::new().write(true).create(true).truncate(true).mode(0o600).open(&tmp).map_err(error)?;
+    io::Write::write_all(&mut f, &bytes).map_err(error)?;
     drop(f);
-    std::fs::rename(&tmp, path)
+    std::fs::rename(&tmp, path).map_err(error)
 }
 
-/// Every record file of the directory.
-pub fn list(dir: &Path) -> Vec<PathBuf> {
+/// Every record file of the directory whose name starts with `kind`.
+fn list_kind(dir: &Path, kind: &str) -> Vec<PathBuf> {
     let Ok(rd) = std::fs::read_dir(dir) else { return Vec::new() };
     let mut v: Vec<PathBuf> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("isolation-") && n.ends_with(".json")))
+        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(kind) && n.ends_with(".json")))
         .collect();
     v.sort();
     v
+}
+
+/// Every record of a cleared core in the directory.
+pub fn list(dir: &Path) -> Vec<PathBuf> {
+    list_kind(dir, "isolation-")
+}
+
+/// Every record of a run in the directory.
+pub fn list_runs(dir: &Path) -> Vec<PathBuf> {
+    list_kind(dir, "run-")
+}
+
+/// Whether `path` names a record of a run (not of a cleared core).
+pub fn is_run_record(path: &Path) -> bool {
+    path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("run-"))
 }
 
 /// What one restore did.
@@ -164,163 +164,122 @@ pub struct Restored {
     pub widened: usize,
 }
 
-/// Restores from the record at `path` if `orphaned_only` is false or the
-/// record is an orphan (every owner but `except` gone), and removes it.
-/// `Ok(None)`: nothing to do (removed meanwhile, or an owner lives).
-pub fn restore(path: &Path, orphaned_only: bool, except: Option<i32>) -> io::Result<Option<Restored>> {
+/// What ending a run whose owner is gone did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EndedRun {
+    pub ended: Ended,
+    /// The run's iceoryx2 run ids.
+    pub run_ids: Vec<String>,
+}
+
+/// Why a record could not be acted on.
+#[derive(Debug, thiserror::Error)]
+pub enum RestoreError {
+    #[error("opening {}: {source}", path.display())]
+    Open { path: PathBuf, source: io::Error },
+    #[error("locking {}: {source}", path.display())]
+    Lock { path: PathBuf, source: io::Error },
+    /// Unreadable: not a record of this version (a record is renamed into
+    /// place only when complete, so a kill cannot cut one).
+    #[error("{}: {source}", path.display())]
+    Unreadable { path: PathBuf, source: serde_json::Error },
+    #[error("removing {}: {source}", path.display())]
+    Remove { path: PathBuf, source: io::Error },
+}
+
+/// Opens and locks the record at `path` and reads it; `Ok(None)` when it
+/// is gone, or was removed while this waited for the lock. The lock lasts
+/// as long as the returned file.
+fn lock_and_read<R: for<'de> Deserialize<'de>>(path: &Path) -> Result<Option<(std::fs::File, R)>, RestoreError> {
     let f = match std::fs::OpenOptions::new().read(true).open(path) {
         Ok(f) => f,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e),
+        Err(source) => return Err(RestoreError::Open { path: path.to_path_buf(), source }),
     };
     use std::os::fd::AsRawFd;
     // SAFETY: flock on a descriptor we own.
     if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX) } != 0 {
-        return Err(io::Error::last_os_error());
+        return Err(RestoreError::Lock { path: path.to_path_buf(), source: io::Error::last_os_error() });
     }
     // Another restorer removed it while we waited for the lock.
-    if f.metadata()?.nlink() == 0 {
+    if f.metadata().map_err(|source| RestoreError::Open { path: path.to_path_buf(), source })?.nlink() == 0 {
         return Ok(None);
     }
-    let record: Record = match serde_json::from_reader(io::BufReader::new(&f)) {
-        Ok(r) => r,
-        Err(e) => {
-            // Unreadable (cut by a kill while being written: the temporary
-            // file is renamed only when complete, so this is not ours).
-            return Err(io::Error::new(io::ErrorKind::InvalidData, format!("{}: {e}", path.display())));
-        }
-    };
+    let record = serde_json::from_reader(io::BufReader::new(&f)).map_err(|source| RestoreError::Unreadable { path: path.to_path_buf(), source })?;
+    Ok(Some((f, record)))
+}
+
+fn remove(path: &Path) -> Result<(), RestoreError> {
+    std::fs::remove_file(path).map_err(|source| RestoreError::Remove { path: path.to_path_buf(), source })
+}
+
+/// Restores from the record at `path` if `orphaned_only` is false or the
+/// record is an orphan (every owner but `except` gone), and removes it.
+/// `Ok(None)`: nothing to do (removed meanwhile, or an owner lives).
+pub fn restore(path: &Path, orphaned_only: bool, except: Option<i32>) -> Result<Option<Restored>, RestoreError> {
+    let Some((_lock, record)) = lock_and_read::<Record>(path)? else { return Ok(None) };
     if orphaned_only && !record.orphaned(except) {
         return Ok(None);
     }
-    let undone = super::isolate::restore_state(&record.state);
-    let widened = widen_born_during(&record);
-    std::fs::remove_file(path)?;
+    let undone = undo(&record.state);
+    let widened = widen_born_during(&record.state, record.started_ticks, &record.online);
+    remove(path)?;
     Ok(Some(Restored { undone, widened }))
 }
 
-/// Restores every orphaned record of this user's directory; returns the
-/// records restored with what each did. Records that cannot be read are
-/// reported as errors and left.
-pub fn restore_orphans(except: Option<i32>) -> io::Result<Vec<(PathBuf, Restored)>> {
-    let dir = state_dir()?;
+/// Ends the run of the record at `path` if its owner is gone (or
+/// `orphaned_only` is false): its other processes are sent SIGTERM, then
+/// SIGKILL after [`RUN_END_GRACE`]; the record is removed. `Ok(None)`:
+/// nothing to do (removed meanwhile, or the owner lives).
+pub fn end_run(path: &Path, orphaned_only: bool) -> Result<Option<EndedRun>, RestoreError> {
+    let Some((_lock, record)) = lock_and_read::<RunRecord>(path)? else { return Ok(None) };
+    if orphaned_only && record.owner.alive() {
+        return Ok(None);
+    }
+    let ended = end_processes(&record.members, RUN_END_GRACE);
+    remove(path)?;
+    Ok(Some(EndedRun { ended, run_ids: record.run_ids }))
+}
+
+/// Why the orphaned records of this user could not all be acted on.
+#[derive(Debug, thiserror::Error)]
+pub enum RestoreOrphansError {
+    #[error("the directory of records: {0}")]
+    StateDir(#[from] PrivateDirError),
+    #[error(transparent)]
+    Restore(#[from] RestoreError),
+}
+
+/// Restores every orphaned record of a cleared core of this user; returns
+/// the records restored with what each did. A record that cannot be read
+/// is an error, and left.
+pub fn restore_orphans(except: Option<i32>) -> Result<Vec<(PathBuf, Restored)>, RestoreOrphansError> {
     let mut done = Vec::new();
-    for path in list(&dir) {
-        if let Some(r) = restore(&path, true, except)? {
-            done.push((path, r));
+    for dir in all_state_dirs()? {
+        for path in list(&dir) {
+            if let Some(r) = restore(&path, true, except)? {
+                done.push((path, r));
+            }
         }
     }
     Ok(done)
 }
 
-/// Threads started while the core was cleared inherited their parent's
-/// narrowed mask and would keep it for good. Each thread started after the
-/// clearing began whose mask is exactly one of the narrowed masks of the
-/// record gets the mask that one had before (within the CPUs online now).
-/// A thread started during the run and deliberately kept to exactly such a
-/// set is widened too: the record cannot tell it from an inherited mask.
-fn widen_born_during(record: &Record) -> usize {
-    let core = record.state.core;
-    let online = super::isolate::online_cpus();
-    // Narrowed mask → the mask it came from; ambiguous ones are skipped.
-    let mut map: std::collections::BTreeMap<BTreeSet<usize>, Option<BTreeSet<usize>>> = Default::default();
-    for (_, before, after) in &record.state.threads {
-        let (b, a): (BTreeSet<usize>, BTreeSet<usize>) = (before.iter().copied().collect(), after.iter().copied().collect());
-        map.entry(a).and_modify(|v| if v.as_ref() != Some(&b) { *v = None }).or_insert(Some(b));
-    }
-    // Threads of processes that had nothing to move (already off the
-    // core) but narrowed by inheritance from the runner's placement are
-    // covered by the common case: all online CPUs but the core.
-    let all: BTreeSet<usize> = record.online.iter().copied().collect();
-    let narrowed_all: BTreeSet<usize> = all.iter().copied().filter(|&c| c != core).collect();
-    map.entry(narrowed_all).or_insert(Some(all));
-    let recorded: BTreeSet<i32> = record.state.threads.iter().map(|t| t.0).collect();
-    let own = std::process::id() as i32;
-    let mut widened = 0;
-    for pid in super::isolate::numeric_entries(Path::new("/proc")) {
-        if pid as i32 == own {
-            continue;
-        }
-        for tid in super::isolate::numeric_entries(&Path::new("/proc").join(pid.to_string()).join("task")) {
-            let tid = tid as i32;
-            if recorded.contains(&tid) {
-                continue;
-            }
-            let Some(born) = start_ticks(&format!("/proc/{pid}/task/{tid}/stat")) else { continue };
-            if born < record.started_ticks {
-                continue;
-            }
-            let Some(mask) = super::isolate::get_affinity(tid) else { continue };
-            let Some(Some(before)) = map.get(&mask) else { continue };
-            let target: BTreeSet<usize> = before.intersection(&online).copied().collect();
-            if !target.is_empty() && super::isolate::set_affinity(tid, &target).is_ok() {
-                widened += 1;
+/// Ends every run of this user whose owner is gone (its guardian killed
+/// too); returns the records acted on with what each did.
+pub fn end_orphaned_runs() -> Result<Vec<(PathBuf, EndedRun)>, RestoreOrphansError> {
+    let mut done = Vec::new();
+    for dir in all_state_dirs()? {
+        for path in list_runs(&dir) {
+            if let Some(r) = end_run(&path, true)? {
+                done.push((path, r));
             }
         }
     }
-    widened
+    Ok(done)
 }
 
-/// The `netfi` executable that can act as guardian (`netfi restore
-/// --guard`): this program when it is `netfi`, else a `netfi` beside it or
-/// one directory up (a test or benchmark binary in `target/*/deps`).
-pub fn guardian_program() -> Option<PathBuf> {
-    let exe = std::env::current_exe().ok()?;
-    if exe.file_name().is_some_and(|n| n == "netfi") {
-        return Some(exe);
-    }
-    let dir = exe.parent()?;
-    [dir.join("netfi"), dir.parent()?.join("netfi")].into_iter().find(|p| p.is_file())
-}
-
-/// Starts the guardian of the record at `path` in a session of its own,
-/// off `core`. Returns its pid.
-pub fn spawn_guardian(path: &Path) -> io::Result<u32> {
-    let program = guardian_program().ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "no `netfi` executable found to guard the record"))?;
-    use std::os::unix::process::CommandExt;
-    let mut cmd = std::process::Command::new(program);
-    cmd.arg("restore")
-        .arg("--guard")
-        .arg(path)
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null());
-    // SAFETY: setsid is async-signal-safe; it only detaches the child from
-    // the run's session and process group.
-    unsafe {
-        cmd.pre_exec(|| {
-            libc::setsid();
-            Ok(())
-        });
-    }
-    Ok(cmd.spawn()?.id())
-}
-
-/// The guardian's loop (`netfi restore --guard RECORD`): waits until the
-/// record is gone (its owners restored) or every owner has ended, then
-/// restores from it. Returns what it restored, if anything.
-pub fn guard(path: &Path) -> io::Result<Option<Restored>> {
-    // Off the cleared core: the guardian was started by a pinned process.
-    if let Ok(text) = std::fs::read(path) {
-        if let Ok(r) = serde_json::from_slice::<Record>(&text) {
-            let off: BTreeSet<usize> = r.online.iter().copied().filter(|&c| c != r.state.core).collect();
-            if !off.is_empty() {
-                let _ = super::isolate::set_affinity(0, &off);
-            }
-        }
-    }
-    loop {
-        let record: Record = match std::fs::read(path) {
-            Ok(text) => match serde_json::from_slice(&text) {
-                Ok(r) => r,
-                Err(e) => return Err(io::Error::new(io::ErrorKind::InvalidData, format!("{}: {e}", path.display()))),
-            },
-            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
-            Err(e) => return Err(e),
-        };
-        if record.orphaned(None) {
-            return restore(path, true, None);
-        }
-        std::thread::sleep(GUARD_POLL);
-    }
+/// The records of this user left in place: their owners live.
+pub fn live_records() -> Result<Vec<PathBuf>, PrivateDirError> {
+    Ok(all_state_dirs()?.iter().flat_map(|d| list_runs(d).into_iter().chain(list(d))).collect())
 }

@@ -329,7 +329,10 @@ impl Scenario {
         self.decide_payload(offset_ns, t_ns, Some(len))
     }
 
-    #[inline]
+    /// Inlined whole into the caller's loop (the injector's ingress), the
+    /// original's pass through the stages with it; the copies' passes, when
+    /// there are any, are out of line ([`run_copies`]).
+    #[inline(always)]
     fn decide_payload(&mut self, offset_ns: u64, t_ns: u64, len: Option<u64>) -> Decision {
         while self.current + 1 < self.phases.len() && self.phases[self.current + 1].start_offset_ns <= offset_ns {
             self.current += 1;
@@ -354,20 +357,8 @@ impl Scenario {
         };
         copies.passed = 0;
         copies.dropped = 0;
-        let mut next = 0;
-        while next < queued {
-            let (from, t, mut copy_flips) = pending[next];
-            next += 1;
-            match run_stages(stages, from, t, len, &mut copy_flips, pending, &mut queued) {
-                Ok(end) => {
-                    copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
-                    copies.flips[usize::from(copies.passed)] = copy_flips;
-                    // `new` caps a phase's stages at u16::MAX.
-                    copies.starts[usize::from(copies.passed)] = from as u16;
-                    copies.passed += 1;
-                }
-                Err(_) => copies.dropped += 1,
-            }
+        if queued > 0 {
+            run_copies(stages, t_ns, len, copies, pending, queued);
         }
         decision
     }
@@ -402,10 +393,41 @@ impl Scenario {
     }
 }
 
+/// Runs the `queued` copies waiting in `pending` (of a frame that entered at
+/// `t_ns`) through the rest of `stages`, in the order they were made (copies
+/// of copies queue after their parents), into `copies`. Out of line: a frame
+/// without copies, most of them, keeps the caller's loop short.
+#[inline(never)]
+fn run_copies(
+    stages: &mut [Stage],
+    t_ns: u64,
+    len: Option<u64>,
+    copies: &mut Copies,
+    pending: &mut [(usize, u64, Flips); MAX_COPIES],
+    mut queued: usize,
+) {
+    let mut next = 0;
+    while next < queued {
+        let (from, t, mut copy_flips) = pending[next];
+        next += 1;
+        match run_stages(stages, from, t, len, &mut copy_flips, pending, &mut queued) {
+            Ok(end) => {
+                copies.delays_ns[usize::from(copies.passed)] = end - t_ns;
+                copies.flips[usize::from(copies.passed)] = copy_flips;
+                // `new` caps a phase's stages at u16::MAX.
+                copies.starts[usize::from(copies.passed)] = from as u16;
+                copies.passed += 1;
+            }
+            Err(_) => copies.dropped += 1,
+        }
+    }
+}
+
 /// Runs a frame through `stages[from..]` starting at `t`: `Ok(time at the
 /// end)` or `Err(index of the stage that dropped it)`. A copy made on the way
-/// is queued in `pending` to start at the next stage.
-#[inline]
+/// is queued in `pending` to start at the next stage. Inlined always: out of
+/// line, its call and register saves cost a frame about 30 instructions.
+#[inline(always)]
 fn run_stages(
     stages: &mut [Stage],
     from: usize,

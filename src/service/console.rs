@@ -451,7 +451,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
     let fb = FeedbackIn::new(fb_port)?;
     signals::install();
-    crate::service::place("console", args.pin.core, args.pin.avoid_core)?;
+    crate::host::placement::place("console", args.pin.core, args.pin.avoid_core)?;
     // After the placement, whose CPU mask its thread inherits: off the emulator's core.
     let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.

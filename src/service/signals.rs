@@ -88,23 +88,3 @@ impl<F: FnMut() -> bool> StopCheck<F> {
     }
 }
 
-/// For a process started by `netfi run` (which names itself in
-/// [`RUNNER_PID_ENV`](crate::host::isolate::RUNNER_PID_ENV)): asks the
-/// kernel for SIGTERM when the runner dies, so no process of a run outlives
-/// it, and exits at once if the runner is already gone (it died before the
-/// request was made). A process started otherwise is left as it is.
-pub fn die_with_runner() {
-    let Some(runner) = std::env::var(crate::host::isolate::RUNNER_PID_ENV).ok().and_then(|v| v.parse::<libc::pid_t>().ok()) else {
-        return;
-    };
-    // SAFETY: prctl(PR_SET_PDEATHSIG) takes a signal number and touches no
-    // memory; getppid has no preconditions.
-    let parent = unsafe {
-        libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0);
-        libc::getppid()
-    };
-    if parent != runner {
-        let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("netfi: the run's runner (pid {runner}) is gone; ending\n"));
-        std::process::exit(1);
-    }
-}

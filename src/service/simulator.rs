@@ -261,7 +261,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
     let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
     signals::install();
-    crate::service::place("simulator", args.pin.core, args.pin.avoid_core)?;
+    crate::host::placement::place("simulator", args.pin.core, args.pin.avoid_core)?;
     // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.
     let camera = crate::service::video::camera(&args.run_id, &args.video)?;
     let wait = match (args.spin, args.nap_us) {

@@ -24,6 +24,7 @@ mod live;
 mod page;
 mod preview;
 mod runs;
+mod study;
 
 use anyhow::Context;
 use std::future::IntoFuture;
@@ -105,6 +106,14 @@ fn router(ui: Arc<Ui>, guard: Arc<guard::Guard>) -> Router {
         .route("/api/runs/{id}/ctl", post(api::ctl))
         .route("/assets/app.js", get(page::script))
         .route("/assets/app.css", get(page::style))
+        .route("/study", get(study::page))
+        .route("/study/view", get(study::participant_view))
+        .route("/api/study/status", get(study::status))
+        .route("/api/study/start", post(study::start))
+        .route("/api/study/stop", post(study::stop))
+        .route("/api/study/mark", post(study::mark))
+        .route("/api/study/answer", post(study::answer))
+        .route("/assets/study.js", get(study::script))
         .with_state(ui)
         .layer(axum::middleware::from_fn_with_state(guard, guard::check))
 }
@@ -127,5 +136,5 @@ fn keep_off_core(emulator_core: usize) -> anyhow::Result<()> {
         eprintln!("WARNING: netfi ui shares core {emulator_core} with the runs' emulators: there is no other core");
         return Ok(());
     }
-    crate::service::place("ui", None, Some(emulator_core))
+    Ok(crate::host::placement::place("ui", None, Some(emulator_core))?)
 }

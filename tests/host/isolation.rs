@@ -2,7 +2,7 @@
 
 use super::*;
 use std::collections::BTreeMap;
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 
 /// What a run may change on the host and must put back.
 #[derive(Debug, PartialEq)]
@@ -67,7 +67,7 @@ fn differences(before: &HostState, after: &HostState) -> Vec<String> {
 }
 
 fn last_core() -> usize {
-    *netfi::host::isolate::online_cpus().iter().next_back().unwrap()
+    *netfi::host::affinity::online_cpus().iter().next_back().unwrap()
 }
 
 /// The record of the clearing done by the emulator `pid`, if any.
@@ -84,16 +84,6 @@ fn guardian_of(record: &Path) -> Option<i32> {
     })
 }
 
-/// A child process, killed and reaped however the test ends.
-struct Reaped(Child);
-
-impl Drop for Reaped {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 #[derive(Debug, Clone, Copy)]
 enum Kill {
     Emulator,
@@ -104,41 +94,121 @@ enum Kill {
     All,
 }
 
+/// A run whose emulator cleared its core, as the kill matrix finds it
+/// once everything is up.
+struct ClearedRun {
+    runner: Reaped,
+    out: PathBuf,
+    run_id: String,
+    emulator: i32,
+    /// The console and the simulator.
+    others: Vec<i32>,
+    record: PathBuf,
+    guardian: i32,
+}
+
+impl ClearedRun {
+    fn start(kill: Kill, core: usize) -> ClearedRun {
+        let out = out_dir(&format!("kill-{kill:?}"));
+        let run_id = format!("kill{kill:?}{}", std::process::id());
+        std::fs::create_dir_all(&out).unwrap();
+        let runner = Reaped(
+            netfi()
+                .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
+                .arg(&out)
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
+                .spawn()
+                .unwrap(),
+        );
+        let mut found = None;
+        wait_for("the emulator's pid", Duration::from_secs(60), || {
+            found = read_pid(&out, "emulator");
+            found.is_some()
+        });
+        let emulator = found.unwrap();
+        let mut record = None;
+        wait_for("the record of the cleared core", Duration::from_secs(60), || {
+            record = record_of(emulator);
+            record.is_some()
+        });
+        let record = record.unwrap();
+        let mut guardian = None;
+        wait_for("the guardian", Duration::from_secs(10), || {
+            guardian = guardian_of(&record);
+            guardian.is_some()
+        });
+        let mut others = Vec::new();
+        wait_for("the console's and the simulator's pids", Duration::from_secs(60), || {
+            others = ["console", "simulator"].iter().filter_map(|r| read_pid(&out, r)).collect();
+            others.len() == 2
+        });
+        ClearedRun { runner, out, run_id, emulator, others, record, guardian: guardian.unwrap() }
+    }
+
+    fn kill(&self, kill: Kill) {
+        let runner = self.runner.0.id() as i32;
+        match kill {
+            Kill::Emulator => sigkill(self.emulator),
+            Kill::Runner => sigkill(runner),
+            Kill::RunnerAndEmulator => {
+                sigkill(runner);
+                sigkill(self.emulator);
+            }
+            Kill::Guardian => sigkill(self.guardian),
+            Kill::All => {
+                // The run's own guardian too, else it would end the run and
+                // restore; the emulator before the runner, else the runner's
+                // death could let it restore itself first.
+                super::orphans::guardians_of_run(runner).into_iter().for_each(sigkill);
+                sigkill(self.guardian);
+                sigkill(self.emulator);
+                sigkill(runner);
+            }
+        }
+    }
+
+    /// With the runner killed: no process of the run is left after about
+    /// 2 s; with the emulator killed too, the guardian that ended the run
+    /// removed its shared memory.
+    fn check_nothing_outlives_the_runner(&self, kill: Kill) {
+        if let Kill::Runner | Kill::RunnerAndEmulator | Kill::All = kill {
+            let run: Vec<i32> = self.others.iter().copied().chain([self.emulator]).collect();
+            wait_for(&format!("{kill:?}: no process of the run left (console, simulator, emulator: {run:?})"), Duration::from_millis(2500), || {
+                run.iter().all(|&p| !alive(p))
+            });
+        }
+        if let Kill::RunnerAndEmulator = kill {
+            let mut left = ipc_files_of(&self.run_id);
+            let t0 = Instant::now();
+            while !left.is_empty() && t0.elapsed() < Duration::from_secs(10) {
+                std::thread::sleep(Duration::from_millis(100));
+                left = ipc_files_of(&self.run_id);
+            }
+            assert!(left.is_empty(), "{kill:?}: the run's shared memory is left after its processes ended: {left:?}");
+        }
+    }
+}
+
+impl Drop for ClearedRun {
+    /// A failed check must not leave the run going, or the host changed,
+    /// for the cases after it.
+    fn drop(&mut self) {
+        self.others.iter().chain([&self.emulator]).filter(|&&p| alive(p)).for_each(|&p| sigkill(p));
+        if std::thread::panicking() {
+            let _ = self.runner.0.kill();
+            let _ = self.runner.0.wait();
+            let _ = netfi().arg("restore").output();
+        }
+    }
+}
+
 fn kill_matrix_case(kill: Kill) {
     let _guard = lock();
     let core = last_core();
     let before = snapshot();
     let own_mask = allowed("/proc/self/status").unwrap();
-    let out = out_dir(&format!("kill-{kill:?}"));
-    let run_id = format!("kill{kill:?}{}", std::process::id());
-    std::fs::create_dir_all(&out).unwrap();
-    let runner = Reaped(
-        netfi()
-            .args(["run", "Normal", "--duration-s", "6", "--seed", "5", "--emulator-core", &core.to_string(), "--run-id", &run_id, "--out"])
-            .arg(&out)
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(out.join("runner.stderr")).unwrap())
-            .spawn()
-            .unwrap(),
-    );
-    let mut emulator = None;
-    wait_for("the emulator's pid", Duration::from_secs(60), || {
-        emulator = read_pid(&out, "emulator");
-        emulator.is_some()
-    });
-    let emulator = emulator.unwrap();
-    let mut record = None;
-    wait_for("the record of the cleared core", Duration::from_secs(60), || {
-        record = record_of(emulator);
-        record.is_some()
-    });
-    let record = record.unwrap();
-    let mut guardian = None;
-    wait_for("the guardian", Duration::from_secs(10), || {
-        guardian = guardian_of(&record);
-        guardian.is_some()
-    });
-    let guardian = guardian.unwrap();
+    let run = ClearedRun::start(kill, core);
     std::thread::sleep(Duration::from_millis(500));
     // The run did change the host (else the comparison below proves nothing).
     let during = snapshot();
@@ -148,25 +218,13 @@ fn kill_matrix_case(kill: Kill) {
     let mid_run = Reaped(Command::new("sleep").arg("120").spawn().unwrap());
     let mid_pid = mid_run.0.id() as i32;
     let narrowed = allowed(&format!("/proc/{mid_pid}/status")).unwrap();
-    assert!(!netfi::host::isolate::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
+    assert!(!netfi::host::affinity::parse_list(&narrowed).unwrap().contains(&core), "not narrowed: {narrowed}");
 
-    let runner_pid = runner.0.id() as i32;
-    match kill {
-        Kill::Emulator => sigkill(emulator),
-        Kill::Runner => sigkill(runner_pid),
-        Kill::RunnerAndEmulator => {
-            sigkill(runner_pid);
-            sigkill(emulator);
-        }
-        Kill::Guardian => sigkill(guardian),
-        Kill::All => {
-            sigkill(guardian);
-            sigkill(runner_pid);
-            sigkill(emulator);
-        }
-    }
+    run.kill(kill);
+    run.check_nothing_outlives_the_runner(kill);
+    let (record, guardian) = (&run.record, run.guardian);
     if let Kill::All = kill {
-        wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(emulator));
+        wait_for("the killed processes to end", Duration::from_secs(10), || !alive(guardian) && !alive(run.emulator));
         std::thread::sleep(Duration::from_millis(500));
         assert!(record.exists(), "with every owner and the guardian killed, nothing should have restored yet");
         let said = restore();
@@ -180,18 +238,17 @@ fn kill_matrix_case(kill: Kill) {
     // Whatever of the run is left is stopped; `netfi restore` removes the
     // iceoryx2 resources of the killed processes.
     for role in ["console", "emulator", "simulator"] {
-        if let Some(pid) = read_pid(&out, role).filter(|p| alive(*p)) {
+        if let Some(pid) = read_pid(&run.out, role).filter(|p| alive(*p)) {
             sigkill(pid);
         }
     }
-    drop(runner);
+    let (out, run_id) = (run.out.clone(), run.run_id.clone());
+    drop(run);
     std::thread::sleep(Duration::from_millis(200));
     restore();
 
-    let shm: Vec<String> = std::fs::read_dir("/dev/shm")
-        .map(|rd| rd.filter_map(|e| e.ok()?.file_name().into_string().ok()).filter(|n| n.contains(&run_id)).collect())
-        .unwrap_or_default();
-    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm after `netfi restore`: {shm:?}");
+    let shm = ipc_files_of(&run_id);
+    assert!(shm.is_empty(), "{kill:?}: left in /dev/shm or iceoryx2's directory after `netfi restore`: {shm:?}");
     let after = snapshot();
     let d = differences(&before, &after);
     let stderr = std::fs::read_to_string(out.join("runner.stderr")).unwrap_or_default();
@@ -204,11 +261,10 @@ fn kill_matrix_case(kill: Kill) {
 }
 
 fn skip() -> bool {
-    if !is_root() {
-        eprintln!("skipped: moving other processes' threads, interrupts and the workqueue mask needs root");
+    if skip_unless_root("moving other processes' threads, interrupts and the workqueue mask") {
         return true;
     }
-    if netfi::host::isolate::online_cpus().len() < 2 {
+    if netfi::host::affinity::online_cpus().len() < 2 {
         eprintln!("skipped: one core only");
         return true;
     }
@@ -255,12 +311,12 @@ fn kill_9_of_everything_is_undone_by_netfi_restore() {
 /// unpinned with a warning in the report's isolation line.
 #[test]
 fn a_pin_that_cannot_be_honoured_is_an_error_or_a_warning_in_the_report() {
-    if netfi::host::isolate::online_cpus().len() < 2 {
+    if netfi::host::affinity::online_cpus().len() < 2 {
         eprintln!("skipped: one core only");
         return;
     }
     let _guard = lock();
-    let first = *netfi::host::isolate::online_cpus().iter().next().unwrap();
+    let first = *netfi::host::affinity::online_cpus().iter().next().unwrap();
     let other = last_core();
     let on_one_core = |args: &[&str], out: &Path| {
         use std::os::unix::process::CommandExt;

@@ -14,19 +14,21 @@ fn shm_with(needle: &str) -> Vec<String> {
 
 /// The netfi binary where the user nobody may run it: the build's own
 /// path may pass through a directory only its owner can enter (a checkout
-/// under `mktemp -d`), so a copy is made once in a directory of its own.
-fn netfi_for_nobody() -> &'static str {
-    static COPY: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    COPY.get_or_init(|| {
-        use std::os::unix::fs::PermissionsExt;
-        let dir = std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id()));
+/// under `mktemp -d`), so a copy is made in a directory of its own (again
+/// if a test that finished removed it).
+fn netfi_for_nobody() -> String {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(format!("netfi-host-exe-{}", std::process::id()));
+    let exe = dir.join("netfi");
+    if !exe.exists() {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
-        let exe = dir.join("netfi");
-        std::fs::copy(netfi_exe(), &exe).unwrap();
-        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
-        exe.to_str().unwrap().to_string()
-    })
+        let tmp = dir.join("netfi.tmp");
+        std::fs::copy(netfi_exe(), &tmp).unwrap();
+        std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o755)).unwrap();
+        std::fs::rename(&tmp, &exe).unwrap();
+    }
+    exe.to_str().unwrap().to_string()
 }
 
 /// Removes the copy [`netfi_for_nobody`] made, if any.
@@ -36,8 +38,13 @@ fn remove_netfi_for_nobody() {
 
 /// `netfi …` as the user nobody.
 fn as_nobody(args: &[&str]) -> Command {
+    as_user(NOBODY, args)
+}
+
+/// `netfi …` as user `uid` (group `uid`), without `$XDG_RUNTIME_DIR`.
+fn as_user(uid: u32, args: &[&str]) -> Command {
     let mut c = Command::new("setpriv");
-    c.args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", netfi_for_nobody()])
+    c.args([&format!("--reuid={uid}"), &format!("--regid={uid}"), "--clear-groups", &netfi_for_nobody()])
         .args(args)
         .current_dir("/tmp")
         .env_remove("XDG_RUNTIME_DIR");
@@ -46,6 +53,19 @@ fn as_nobody(args: &[&str]) -> Command {
 
 fn have_setpriv() -> bool {
     Command::new("setpriv").arg("--version").output().is_ok_and(|o| o.status.success())
+}
+
+/// Whether a test that acts as other users must skip: it needs root and
+/// `setpriv`, and fails without them where `NETFI_REQUIRE_ROOT` is set.
+fn skip_unless_other_users() -> bool {
+    if skip_unless_root("acting as another user") {
+        return true;
+    }
+    assert!(have_setpriv() || std::env::var_os("NETFI_REQUIRE_ROOT").is_none(), "NETFI_REQUIRE_ROOT is set but `setpriv` (util-linux) is missing");
+    if !have_setpriv() {
+        eprintln!("skipped: acting as another user needs setpriv");
+    }
+    !have_setpriv()
 }
 
 #[test]
@@ -58,14 +78,12 @@ fn a_run_leaves_nothing_in_dev_shm_and_another_user_runs_after_root() {
     let left = shm_with(&run_id);
     assert!(left.is_empty(), "the run left {left:?} in /dev/shm");
     // This user's iceoryx2 directory is private.
-    // SAFETY: geteuid has no preconditions.
-    let uid = unsafe { libc::geteuid() };
-    let root = std::fs::metadata(format!("/tmp/netfi-iceoryx2-{uid}")).unwrap();
+    let root = std::fs::metadata(netfi::transport::ipc::user_root_dir()).unwrap();
     assert_eq!(root.mode() & 0o077, 0, "mode {:o}", root.mode());
+    assert_eq!(root.uid(), uid());
     let _ = std::fs::remove_dir_all(&out);
 
-    if !is_root() || !have_setpriv() {
-        eprintln!("skipped the second user: needs root and setpriv");
+    if skip_unless_other_users() {
         return;
     }
     // Another user, after root.
@@ -89,15 +107,12 @@ fn a_run_leaves_nothing_in_dev_shm_and_another_user_runs_after_root() {
 
 #[test]
 fn a_file_planted_by_another_user_is_refused_at_once() {
-    if !is_root() || !have_setpriv() {
-        eprintln!("skipped: needs root and setpriv to act as another user");
+    if skip_unless_other_users() {
         return;
     }
     let _guard = lock();
     let run_id = format!("planted{}", std::process::id());
-    // SAFETY: geteuid has no preconditions.
-    let uid = unsafe { libc::geteuid() };
-    let planted = format!("/dev/shm/netfi_u{uid}_{run_id}_node.global_mgmt");
+    let planted = format!("/dev/shm/netfi_u{}_{run_id}_node.global_mgmt", uid());
     let o = Command::new("setpriv")
         .args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", "touch", &planted])
         .output()
@@ -136,4 +151,61 @@ fn a_file_planted_by_another_user_is_refused_at_once() {
     let status = status.unwrap_or_else(|| panic!("the run hung on a planted file:\n{stderr}"));
     assert!(!status.success(), "a planted file was used");
     assert!(stderr.contains(&format!("belongs to uid {NOBODY}")), "{stderr}");
+}
+
+/// Directories another user made first under a user's usual names (the
+/// records' and iceoryx2's) do not lock that user out: runs say whose they
+/// are and use private ones of their own, found again by the next run.
+#[test]
+fn directories_taken_first_by_another_user_do_not_lock_a_user_out() {
+    if skip_unless_other_users() {
+        return;
+    }
+    let _guard = lock();
+    const USER: u32 = 54321;
+    const SQUATTER: u32 = 12345;
+    let taken = [format!("/tmp/netfi-iceoryx2-{USER}"), format!("/tmp/netfi-{USER}")];
+    let clean = || {
+        for e in std::fs::read_dir("/tmp").unwrap().filter_map(|e| e.ok()) {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with(&format!("netfi-iceoryx2-{USER}")) || name.starts_with(&format!("netfi-{USER}")) {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
+    };
+    clean();
+    for d in &taken {
+        std::fs::create_dir(d).unwrap();
+        std::os::unix::fs::chown(d, Some(SQUATTER), Some(SQUATTER)).unwrap();
+    }
+    let out = out_dir("taken");
+    std::fs::create_dir_all(&out).unwrap();
+    std::os::unix::fs::chown(&out, Some(USER), Some(USER)).unwrap();
+    let run = |n: u32| {
+        let run_id = format!("taken{n}x{}", std::process::id());
+        as_user(USER, &["run", "Normal", "--duration-s", "1", "--seed", "4", "--run-id", &run_id, "--out", out.to_str().unwrap()]).output().unwrap()
+    };
+    let (first, second) = (run(1), run(2));
+    let restored = as_user(USER, &["restore"]).output().unwrap();
+    let replacements: Vec<String> = std::fs::read_dir("/tmp")
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().display().to_string())
+        .filter(|p| p.starts_with(&format!("/tmp/netfi-iceoryx2-{USER}-")) || p.starts_with(&format!("/tmp/netfi-{USER}-")))
+        .collect();
+    let private: Vec<bool> = replacements.iter().map(|p| std::fs::metadata(p).is_ok_and(|m| m.uid() == USER && m.mode() & 0o077 == 0)).collect();
+    clean();
+    let _ = std::fs::remove_dir_all(&out);
+    remove_netfi_for_nobody();
+    let text = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(first.status.success(), "a run was locked out by directories of uid {SQUATTER}:\n{}", text(&first));
+    assert!(second.status.success(), "the second run failed:\n{}", text(&second));
+    assert!(restored.status.success(), "`netfi restore` failed:\n{}", text(&restored));
+    for o in [&first, &second, &restored] {
+        assert!(text(o).contains(&format!("belongs to uid {SQUATTER}")), "whose the directory is was not said:\n{}", text(o));
+    }
+    // One replacement each for the records and iceoryx2, found again by
+    // the second run and by `netfi restore`, closed to others.
+    assert_eq!(replacements.len(), 2, "{replacements:?}");
+    assert!(private.iter().all(|p| *p), "{replacements:?}");
 }

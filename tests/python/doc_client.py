@@ -24,7 +24,27 @@ import iceoryx2 as iox
 
 # "A run" → "The iceoryx2 configuration": the per-user layout.
 UID = os.geteuid()
-ROOT = f"/tmp/netfi-iceoryx2-{UID}/"
+
+
+def private(path: str) -> bool:
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == UID and not st.st_mode & 0o077
+
+
+def root() -> str:
+    named = os.environ.get("NETFI_IPC_ROOT", "")
+    if named and private(named):
+        return named.rstrip("/") + "/"
+    xdg = os.environ.get("XDG_RUNTIME_DIR", "")
+    if xdg and private(xdg):
+        return os.path.join(xdg, "netfi-iceoryx2") + "/"
+    return f"/tmp/netfi-iceoryx2-{UID}/"
+
+
+ROOT = root()
 
 
 def prefix(run: str) -> str:

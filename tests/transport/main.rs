@@ -609,6 +609,55 @@ fn dead_runs_are_found_by_their_files() {
         .is_empty());
 }
 
+/// The files under `dirs` (searched through) whose names start with `prefix`.
+fn files_with_prefix(prefix: &str) -> Vec<std::path::PathBuf> {
+    let mut dirs = vec![std::path::PathBuf::from("/dev/shm"), netfi::transport::ipc::user_root_dir()];
+    let mut found = Vec::new();
+    while let Some(dir) = dirs.pop() {
+        for e in std::fs::read_dir(&dir).into_iter().flatten().filter_map(|e| e.ok()) {
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                dirs.push(e.path());
+            } else if e.file_name().to_string_lossy().starts_with(prefix) {
+                found.push(e.path());
+            }
+        }
+    }
+    found
+}
+
+/// Every file of a run whose processes all died goes, also one no node
+/// owns; a live run's stay, also one no node owns.
+#[test]
+fn a_dead_runs_files_are_removed_and_a_live_ones_kept() {
+    let live = unique_config("sweep-live");
+    let dead = unique_config("sweep-dead");
+    let node = IpcNode::open(&live, Role::Simulator).unwrap();
+    let _sub = node.subscriber(Channel::Emulator).unwrap();
+    ChildPeer::spawn("publish", &dead).kill_9();
+    let long_ago = std::time::SystemTime::now() - Duration::from_secs(3600);
+    let stray = |config: &IpcConfig| {
+        let path = std::path::PathBuf::from(format!("/dev/shm/{}{}_7.data", config.prefix(), "0".repeat(40)));
+        let f = std::fs::File::create(&path).unwrap();
+        f.set_times(std::fs::FileTimes::new().set_modified(long_ago)).unwrap();
+        path
+    };
+    let (live_stray, dead_stray) = (stray(&live), stray(&dead));
+    assert!(!files_with_prefix(dead.prefix()).is_empty());
+
+    let swept = netfi::transport::ipc::remove_dead_run_files(|r| r == live.run_id() || r == dead.run_id()).unwrap();
+    let live_left = live_stray.exists();
+    let _ = std::fs::remove_file(&live_stray);
+    let _ = std::fs::remove_file(&dead_stray);
+    assert_eq!(swept.len(), 1, "{swept:?}");
+    assert_eq!(&swept[0].0, dead.run_id());
+    assert!(swept[0].1 >= 1);
+    let left = files_with_prefix(dead.prefix());
+    assert!(left.is_empty(), "left of the dead run: {left:?}");
+    assert!(live_left, "a live run's file was removed");
+    // The live run works on.
+    assert!(node.reap_dead_peers().unwrap().is_clean());
+}
+
 #[test]
 fn node_open_reports_what_it_cleaned() {
     let config = unique_config("report");

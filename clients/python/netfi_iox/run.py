@@ -33,8 +33,8 @@ HISTORY_FRAMES = 0
 #: Where a run's iceoryx2 files live, and under which names.
 #:
 #: ``shared``: prefix ``netfi_<run>_`` under iceoryx2's own ``/tmp/iceoryx2/``.
-#: ``per-user``: prefix ``netfi_u<uid>_<run>_`` under ``/tmp/netfi-iceoryx2-<uid>/``
-#: (a directory of the user's own, mode 0700).
+#: ``per-user``: prefix ``netfi_u<uid>_<run>_`` under the user's own directory
+#: (mode 0700), found as netfi finds it (:func:`user_root_dir`).
 LAYOUTS = ("shared", "per-user")
 
 #: The layout of the netfi build this module ships with. The environment
@@ -82,9 +82,67 @@ def location(run_id: str, which: Optional[str] = None) -> Tuple[str, str]:
     check_run_id(run_id)
     which = which or file_layout()
     if which == "per-user":
-        uid = os.geteuid()
-        return f"/tmp/netfi-iceoryx2-{uid}/", f"netfi_u{uid}_{run_id}_"
+        return user_root_dir(), f"netfi_u{os.geteuid()}_{run_id}_"
     return "/tmp/iceoryx2/", f"netfi_{run_id}_"
+
+
+#: The longest root directory netfi accepts, in bytes (iceoryx2's path limit).
+_ROOT_MAX_LEN = 96
+
+
+def _is_private(path: str) -> bool:
+    """A directory (not a link) of this user, closed to others."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid() and st.st_mode & 0o077 == 0
+
+
+def _usable(path: str) -> bool:
+    return os.path.isabs(path) and len(os.fsencode(path)) <= _ROOT_MAX_LEN
+
+
+def user_root_dir() -> str:
+    """This user's iceoryx2 root directory, with a trailing ``/``, chosen
+    in netfi's order (docs/interface.md, "Where the files live"):
+
+    1. ``$NETFI_IPC_ROOT`` when it names a private directory of this user
+       (``netfi run`` sets it for the processes it starts);
+    2. ``$XDG_RUNTIME_DIR/netfi-iceoryx2`` when ``$XDG_RUNTIME_DIR`` is a
+       private directory of this user;
+    3. ``/tmp/netfi-iceoryx2-<uid>``;
+    4. where those are taken by someone else, the first private
+       ``/tmp/netfi-iceoryx2-<uid>-*`` of this user, by name.
+
+    A usual place that does not exist yet is created (mode 0700), as netfi
+    creates it; one that exists but is not private is passed over.
+    """
+    named = os.environ.get("NETFI_IPC_ROOT", "")
+    if named and _usable(named) and _is_private(named):
+        return named.rstrip("/") + "/"
+    uid = os.geteuid()
+    usual = []
+    xdg = os.environ.get("XDG_RUNTIME_DIR", "")
+    if xdg and os.path.isabs(xdg) and _is_private(xdg):
+        usual.append(os.path.join(xdg, "netfi-iceoryx2"))
+    usual.append(f"/tmp/netfi-iceoryx2-{uid}")
+    for path in filter(_usable, usual):
+        try:
+            os.mkdir(path, 0o700)
+        except FileExistsError:
+            pass
+        except FileNotFoundError:
+            continue
+        if _is_private(path):
+            return path + "/"
+    stem = f"netfi-iceoryx2-{uid}-"
+    for name in sorted(os.listdir("/tmp")):
+        path = os.path.join("/tmp", name)
+        if name.startswith(stem) and _is_private(path):
+            return path + "/"
+    raise NoPeer(f"no private iceoryx2 directory of uid {uid}: /tmp/netfi-iceoryx2-{uid} is taken by another user "
+                 "and no replacement exists yet; start netfi first, it makes one")
 
 
 def service_name(run_id: str, channel: str) -> str:

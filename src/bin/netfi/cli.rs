@@ -56,6 +56,7 @@ pub enum Command {
     /// Show the report of a finished run from its output directory; with
     /// --html, write it as one self-contained page, `report.html`, there.
     Report(ReportArgs),
+    Study(crate::study::StudyArgs),
 }
 
 #[derive(Debug, Args)]

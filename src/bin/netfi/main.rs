@@ -8,6 +8,7 @@ mod fit;
 mod report;
 mod restore;
 mod scenario;
+mod study;
 
 use clap::Parser;
 
@@ -20,7 +21,10 @@ fn main() -> std::process::ExitCode {
     }
     let args = cli::Cli::parse();
     if matches!(args.command, cli::Command::Console(_) | cli::Command::Emulator(_) | cli::Command::Simulator(_)) {
-        netfi::service::signals::die_with_runner();
+        if let Err(e) = netfi::host::process::die_with_runner() {
+            eprintln!("netfi: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
     }
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
@@ -36,6 +40,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Man { dir } => docs::man(dir.as_deref()),
         cli::Command::Report(a) => report::run(&a),
         cli::Command::Ctl(a) => ctl::run(a),
+        cli::Command::Study(a) => study::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -39,7 +39,7 @@ pub fn run<F: ForwardChannel + 'static>(
         }
     }
     let mut control = start_control(cfg, &mut lanes[0].forward.link)?;
-    let mut placement = place::place(cfg, &lanes, control.as_ref().map(|(_, h)| h))?;
+    let mut placement = place(cfg, &lanes, control.as_ref().map(|(_, h)| h))?;
     signals::install();
     // Ready only now, set up and placed: a console started on it is taken
     // in at once. Said before the set-up, frames queued at the ingress for
@@ -59,7 +59,7 @@ pub fn run<F: ForwardChannel + 'static>(
     let steal_timer = StealTimer::start();
     let end = spin::spin(&mut lanes, look, control.as_mut().map(|(p, _)| p));
     let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
-    let isolation = placement.isolation.as_mut().map(|iso| iso.restore());
+    let isolation = placement.restore();
     let run = report::Run { end: &end, core: cfg.core, realtime_priority: placement.realtime_priority, steal: steal_timer.stop() };
     let dead = std::mem::take(&mut reaper.dead);
     let mut lane0 = Some((isolation, events));
@@ -151,85 +151,32 @@ fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> anyhow
     Ok(Some((port, handle)))
 }
 
-
-/// Where the loop runs.
-mod place {
-    use super::{ControlHandle, EmulatorConfig, ForwardChannel, Lane};
-    use crate::host::isolate::{self, Isolation};
-
-    /// How the loop's thread was placed.
-    pub(super) struct Placement {
-        pub(super) isolation: Option<Isolation>,
-        pub(super) realtime_priority: Option<i32>,
-    }
-
-    /// Pins the loop's thread (keeping every trace writer and the control
-    /// thread off its core), clears the core if asked, and raises the
-    /// thread's priority if asked.
-    pub(super) fn place<F: ForwardChannel>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> anyhow::Result<Placement> {
-        if let Some(core) = cfg.core {
-            let ok = core_affinity::set_for_current(core_affinity::CoreId { id: core });
-            anyhow::ensure!(ok, "could not pin the emulator to core {core}");
-            for l in lanes {
-                for what in l.keep_traces_off_core(core) {
-                    warn_unless_off(false, &format!("the {what} trace writer"), core);
-                }
-            }
-            if let Some(h) = control {
-                warn_unless_off(h.keep_off_core(core), "the control thread", core);
-            }
-        }
-        // After pinning: the loop's own threads are placed; everything else
-        // that may run elsewhere leaves the core until the run ends.
-        let isolation = match (cfg.isolate, cfg.core) {
-            (true, Some(core)) => match isolate::isolate(core) {
-                Ok(iso) => {
-                    eprintln!("emulator: {}", iso.summary());
-                    Some(iso)
-                }
-                Err(e) => {
-                    eprintln!("emulator: WARNING: could not clear core {core}: {e}");
-                    Some(Isolation::not_cleared(core, format!("could not clear core {core}: {e}")))
-                }
-            },
-            (true, None) => {
-                let why = isolate::pin_problem().unwrap_or_else(|| "--isolate needs a pinned core; nothing cleared".into());
-                eprintln!("emulator: WARNING: {why}");
-                Some(Isolation::not_cleared(0, why))
-            }
-            _ => None,
-        };
-        let realtime_priority = cfg.rt_priority.and_then(realtime);
-        Ok(Placement { isolation, realtime_priority })
-    }
-
-    /// Says loudly that one of the emulator's own threads (`what`) could
-    /// not be kept off the loop's core: it may use no other core, so each
-    /// time it runs it takes the core from the loop.
-    fn warn_unless_off(kept: bool, what: &str, core: usize) {
-        if !kept {
-            eprintln!("emulator: WARNING: {what} could not be kept off core {core} (it may use no other): the loop loses its core whenever that thread runs");
+/// Pins the loop's thread, keeping every trace writer of every lane and the
+/// control thread off its core, clears the core if asked, and raises the
+/// thread's priority if asked (`host::placement`, which says loudly what
+/// it could not do).
+fn place<F: ForwardChannel + 'static>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> anyhow::Result<crate::host::placement::Placement> {
+    use crate::host::placement::{place_loop, KeepOff, KeepOffFn, LoopPlacement};
+    let several = lanes.len() > 1;
+    let names: Vec<Vec<String>> = lanes
+        .iter()
+        .enumerate()
+        .map(|(k, l)| {
+            let whose = if several { format!("stream {k}'s ") } else { String::new() };
+            std::iter::once(format!("{whose}forward trace writer")).chain(l.reverse.iter().map(|r| format!("{whose}{} trace writer", r.name()))).collect()
+        })
+        .collect();
+    let mut threads: Vec<Box<dyn KeepOff + '_>> = Vec::new();
+    for (l, names) in lanes.iter().zip(&names) {
+        threads.push(Box::new(KeepOffFn(&names[0], |c| l.forward.keep_trace_off_core(c))));
+        for (r, name) in l.reverse.iter().zip(&names[1..]) {
+            threads.push(Box::new(KeepOffFn(name, |c| r.keep_trace_off_core(c))));
         }
     }
-
-    /// Moves the loop to SCHED_FIFO `p`, warning of real-time throttling;
-    /// the priority it got, if any.
-    fn realtime(p: i32) -> Option<i32> {
-        match crate::service::set_realtime(p) {
-            Ok(()) => {
-                if let Some((runtime, period)) = crate::service::rt_throttling() {
-                    eprintln!(
-                        "emulator: WARNING: real-time throttling is on (kernel.sched_rt_runtime_us = {runtime} of {period}): this busy loop at SCHED_FIFO will be stopped for {} ms of every {} ms; set it to -1, or use --isolate without --rt-priority",
-                        (period - runtime) / 1000,
-                        period / 1000
-                    );
-                }
-                Some(p)
-            }
-            Err(e) => {
-                eprintln!("emulator: staying at normal priority: SCHED_FIFO {p} refused ({e})");
-                None
-            }
-        }
+    if let Some(h) = control {
+        threads.push(Box::new(KeepOffFn("the control thread", |c| h.keep_off_core(c))));
     }
+    let keep_off: Vec<&dyn KeepOff> = threads.iter().map(|t| t.as_ref()).collect();
+    let want = LoopPlacement { core: cfg.core, isolate: cfg.isolate, rt_priority: cfg.rt_priority };
+    Ok(place_loop("emulator", &want, &keep_off)?)
 }

@@ -95,8 +95,11 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     std::fs::create_dir_all(&plan.out).with_context(|| format!("creating {}", plan.out.display()))?;
     let lock = OutDirLock::take(&plan.out)?;
     outdir::clear_marks(&plan)?;
-    // What killed runs left cleared (their owners and guardian all dead)
-    // is put back before anything else, as `netfi restore` does.
+    // What killed runs left (their owners and guardian all dead) is ended
+    // and put back before anything else, as `netfi restore` does.
+    if let Err(e) = crate::host::record::end_orphaned_runs() {
+        eprintln!("WARNING: could not end what earlier runs left running: {e}");
+    }
     restore_orphans(None);
     outdir::write_scenarios(&plan.streams)?;
     let cleaned = crate::transport::cleanup_stale()?;
@@ -113,7 +116,7 @@ fn announce(plan: &Plan) -> Result<()> {
     // dead peers every 200 ms; on the emulator's core each wake-up would
     // preempt the emulator's loop. The services set their own placement.
     if let Some(e) = cores.emulator {
-        crate::service::place("runner", None, Some(e))?;
+        crate::host::placement::place("runner", None, Some(e))?;
     }
     eprintln!(
         "netfi run {}: scenario {} seed {}; cores: emulator {}, console {}, simulator {}; output {}",
@@ -155,7 +158,8 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let steal_timer = StealTimer::start();
     let t0 = now_ns();
     let mut restore = RestoreOnLeaving { armed: true };
-    let mut procs = procs::start(&plan)?;
+    let mut guard = guard_run(&plan);
+    let mut procs = procs::start(&plan, &mut guard)?;
     let interrupted = watch::supervise(&plan, &mut procs);
     let duration_s = (now_ns() - t0) as f64 / 1e9;
     let steal = steal_timer.stop();
@@ -171,6 +175,22 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let paths: Vec<_> = std::iter::once(report.files.report_json.clone()).chain(args.report_json.clone()).collect();
     assemble::write(&mut report, &paths);
     Ok(report)
+}
+
+/// The record of the run's processes, watched by a guardian that ends them
+/// should the runner be killed; a warning where it cannot be had.
+fn guard_run(plan: &Plan) -> Option<crate::host::guardian::RunGuard> {
+    let run_ids: Vec<&str> = plan.streams.iter().map(|s| s.run_id.as_str()).collect();
+    match crate::host::guardian::RunGuard::start(&run_ids) {
+        Ok(g) => {
+            g.warnings().iter().for_each(|w| eprintln!("WARNING: {w}"));
+            Some(g)
+        }
+        Err(e) => {
+            eprintln!("WARNING: no record of the run's processes ({e}): if the runner is killed, they end by the parent-death signal only");
+            None
+        }
+    }
 }
 
 /// Restores the host-wide records of cleared cores whose owners (but

@@ -4,6 +4,7 @@
 //! running when its handle is dropped is stopped, and killed if it does not
 //! end within [`KILL_GRACE`](crate::service::supervise::KILL_GRACE).
 
+use crate::host::guardian::RunGuard;
 use crate::service::plan::Plan;
 use crate::service::report::ProcessEnd;
 use crate::service::supervise::{State, KILL_GRACE};
@@ -136,7 +137,7 @@ impl Drop for Proc {
 /// Starts `netfi <role> <args>` with its log `<out>/<role>.log`, in a
 /// process group of its own (Ctrl-C reaches only the runner), telling it
 /// the runner's pid (it dies with the runner).
-pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path) -> Result<Proc> {
+pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, guard: &mut Option<RunGuard>) -> Result<Proc> {
     let exe = std::env::current_exe().context("locating the netfi executable")?;
     let log = out.join(format!("{role}.log"));
     let file = std::fs::File::create(&log).with_context(|| format!("creating {}", log.display()))?;
@@ -147,9 +148,13 @@ pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &P
         .stdout(file.try_clone()?)
         .stderr(file)
         .process_group(0)
-        .env(crate::host::isolate::RUNNER_PID_ENV, std::process::id().to_string())
+        .env(crate::host::process::RUNNER_PID_ENV, std::process::id().to_string())
+        .env(crate::transport::ipc::IPC_ROOT_ENV, crate::transport::ipc::user_root_dir())
         .spawn()
         .with_context(|| format!("starting the {role} ({})", exe.display()))?;
+    if let Some(Err(e)) = guard.as_mut().map(|g| g.add(child.id())) {
+        eprintln!("WARNING: the {role} is not on the run's record ({e}): if the runner is killed, it ends by the parent-death signal only");
+    }
     Ok(Proc { role, child, core, log, status: None, stuck: None })
 }
 
@@ -197,28 +202,29 @@ impl Procs {
 }
 
 /// Starts `role` in `out` and waits until it is ready.
-fn start_one(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, timeout: Duration) -> Result<Proc> {
-    let mut p = spawn(role, args, core, out)?;
+fn start_one(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, timeout: Duration, guard: &mut Option<RunGuard>) -> Result<Proc> {
+    let mut p = spawn(role, args, core, out, guard)?;
     wait_ready(&mut p, out, timeout)?;
     Ok(p)
 }
 
 /// Starts the simulators, the emulator and the consoles, each kind once
 /// the one before is ready. Those started are stopped (as their handles
-/// are dropped) if one fails to start.
-pub fn start(plan: &Plan) -> Result<Procs> {
+/// are dropped) if one fails to start. Each is put on the run's record
+/// `guard` (its guardian ends them if the runner is killed).
+pub fn start(plan: &Plan, guard: &mut Option<RunGuard>) -> Result<Procs> {
     let (out, cores) = (&plan.out, plan.cores);
     let mut simulators = Vec::new();
     for s in &plan.streams {
-        simulators.push(start_one("simulator", s.simulator.to_argv(), cores.simulator, &s.out, Duration::from_secs(30))?);
+        simulators.push(start_one("simulator", s.simulator.to_argv(), cores.simulator, &s.out, Duration::from_secs(30), guard)?);
     }
     // Each stream's link, queue, trace and feedback path are set up before
     // the emulator is ready: a second or so each on a loaded machine.
     let ready = Duration::from_secs(30 + 2 * plan.streams.len() as u64);
-    let emulator = start_one("emulator", plan.emulator.to_argv(), cores.emulator, out, ready)?;
+    let emulator = start_one("emulator", plan.emulator.to_argv(), cores.emulator, out, ready, guard)?;
     let mut procs = Procs { consoles: Vec::new(), emulator, simulators };
     for s in &plan.streams {
-        procs.consoles.push(spawn("console", s.console.to_argv(), cores.console, &s.out)?);
+        procs.consoles.push(spawn("console", s.console.to_argv(), cores.console, &s.out, guard)?);
     }
     Ok(procs)
 }

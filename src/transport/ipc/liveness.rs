@@ -316,6 +316,103 @@ fn remove_shm(select: impl Fn(&str) -> bool, older_than: Option<std::time::Durat
     }
 }
 
+/// How long the files of a run must have been left untouched before they
+/// are taken for a dead run's, unless its dead nodes were just seen: a
+/// process that is starting creates files before its node can be seen.
+const UNSEEN_RUN_AGE: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Removes what this user's runs picked by `select` left in `/dev/shm` and
+/// under the root directory once their processes are all dead: their
+/// dead nodes first ([`cleanup_dead_nodes`]), then every file of theirs
+/// that iceoryx2 does not remove (segments of no node, half-created nodes,
+/// services whose nodes are gone). A run counts as dead when no node of it
+/// is alive or undetermined, and either dead nodes of it were found now or
+/// none of its files changed in the last 10 s (a process of the run may be
+/// creating its node). Call it before any other clean-up of dead nodes,
+/// which would hide that the run's processes died. Returns each run swept
+/// with the files removed.
+pub fn remove_dead_run_files(mut select: impl FnMut(&RunId) -> bool) -> Result<Vec<(RunId, usize)>, CleanupError> {
+    init_log_level();
+    let any = IpcConfig::new(RunId::new("any").expect("a valid run id"));
+    let (nodes, services) = (std::path::PathBuf::from(any.iceoryx2().global.node_dir().as_str()), std::path::PathBuf::from(any.iceoryx2().global.service_dir().as_str()));
+    let files: Vec<std::path::PathBuf> = [std::path::Path::new(SHM_DIR), &services, &nodes]
+        .iter()
+        .flat_map(|d| std::fs::read_dir(d).into_iter().flatten().filter_map(|e| e.ok().map(|e| e.path())))
+        .chain(node_files(&nodes))
+        .collect();
+    let mut runs = std::collections::BTreeMap::new();
+    for f in &files {
+        if let Some(run) = f.file_name().and_then(|n| n.to_str()).and_then(run_of_file) {
+            runs.entry(run.as_str().to_owned()).or_insert(run);
+        }
+    }
+    let mut swept = Vec::new();
+    for run in runs.into_values().filter(|r| select(r)) {
+        let config = IpcConfig::new(run.clone());
+        let report = cleanup_dead_nodes(&config)?;
+        let mine: Vec<&std::path::PathBuf> = files.iter().filter(|f| f.exists() && owned_member(f, config.prefix())).collect();
+        let young = |f: &std::path::Path| std::fs::symlink_metadata(f).ok().and_then(|m| m.modified().ok()?.elapsed().ok()).is_none_or(|age| age < UNSEEN_RUN_AGE);
+        if report.alive > 0 || report.undetermined > 0 || (report.is_clean() && mine.iter().any(|f| young(f))) {
+            continue;
+        }
+        let removed = mine.iter().filter(|f| remove_member(f, &nodes)).count();
+        if removed > 0 {
+            swept.push((run, removed));
+        }
+    }
+    Ok(swept)
+}
+
+/// The files in each node directory under `nodes`.
+fn node_files(nodes: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let Ok(rd) = std::fs::read_dir(nodes) else { return Vec::new() };
+    rd.filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .flat_map(|e| std::fs::read_dir(e.path()).into_iter().flatten().filter_map(|f| f.ok().map(|f| f.path())))
+        .collect()
+}
+
+/// The run of one of this user's iceoryx2 file names: `<prefix><hash>_…`,
+/// `<prefix><hash>.…` (segments, services), `<prefix><id>.node_monitor…`,
+/// `<prefix>node.details`, where the prefix is `netfi_u<uid>_<run>_`.
+fn run_of_file(name: &str) -> Option<RunId> {
+    let rest = name.strip_prefix(&user_prefix())?;
+    (1..rest.len()).filter(|&i| rest.as_bytes()[i] == b'_').find_map(|i| {
+        let run = RunId::new(&rest[..i]).ok()?;
+        member_rest(&rest[i + 1..]).then_some(run)
+    })
+}
+
+/// Whether `rest`, what follows a run's prefix, is one of iceoryx2's names.
+fn member_rest(rest: &str) -> bool {
+    let hash = rest.len() > 40 && rest.as_bytes()[..40].iter().all(u8::is_ascii_hexdigit) && matches!(rest.as_bytes()[40], b'_' | b'.');
+    let digits = rest.find('.').is_some_and(|i| i > 0 && rest.as_bytes()[..i].iter().all(u8::is_ascii_digit));
+    hash || digits || rest == "node.details"
+}
+
+/// Whether `path` is a file of the run with `prefix` that this user owns.
+fn owned_member(path: &std::path::Path, prefix: &str) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    name.strip_prefix(prefix).is_some_and(member_rest) && std::fs::symlink_metadata(path).is_ok_and(|m| m.uid() == uid)
+}
+
+/// Removes one file of a dead run, and the node directory it leaves
+/// empty; a node's details go with the node's whole directory (one node's,
+/// so one run's). Whether it went.
+fn remove_member(path: &std::path::Path, nodes: &std::path::Path) -> bool {
+    let Some(dir) = path.parent().filter(|d| d.parent() == Some(nodes)) else { return std::fs::remove_file(path).is_ok() };
+    if path.to_str().is_some_and(|p| p.ends_with("node.details")) {
+        return std::fs::remove_dir_all(dir).is_ok();
+    }
+    let removed = std::fs::remove_file(path).is_ok();
+    // Fails, as it should, while anything is left in it.
+    let _ = std::fs::remove_dir(dir);
+    removed
+}
+
 fn list_error(run: &str, e: &std::io::Error) -> CleanupError {
     match e.kind() {
         std::io::ErrorKind::PermissionDenied => CleanupError::InsufficientPermissions {
@@ -386,6 +483,23 @@ mod tests {
         // Another user's files are not this user's runs.
         assert_eq!(run_of_monitor_file("netfi_u4294967294_r1_1.node_monitor", suffix), None);
         assert_eq!(run("netfi_r1_123.details"), None);
+    }
+
+    /// A run's files are told from those of a run whose id extends it.
+    #[test]
+    fn file_names_yield_their_run_exactly() {
+        let p = user_prefix();
+        let hash = "0123456789abcdef0123456789abcdef01234567";
+        let run = |n: String| run_of_file(&n).map(|r| r.as_str().to_owned());
+        assert_eq!(run(format!("{p}a_{hash}_15.data")).as_deref(), Some("a"));
+        assert_eq!(run(format!("{p}a_b_{hash}_15.data")).as_deref(), Some("a_b"));
+        assert_eq!(run(format!("{p}a_b_{hash}.service")).as_deref(), Some("a_b"));
+        assert_eq!(run(format!("{p}a_12_34.node_monitor_context")).as_deref(), Some("a_12"));
+        assert_eq!(run(format!("{p}r-1_node.details")).as_deref(), Some("r-1"));
+        assert_eq!(run(format!("{p}r1_whatever")), None);
+        assert_eq!(run(format!("netfi_u4294967294_r1_{hash}_1.data")), None);
+        // Run `a` does not claim the files of run `a_b`.
+        assert!(!owned_member(std::path::Path::new(&format!("/nonexistent/{p}a_b_{hash}_1.data")), &format!("{p}a_")));
     }
 }
 

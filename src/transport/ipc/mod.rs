@@ -34,19 +34,25 @@
 //! [`IpcConfig`] builds an `iceoryx2::config::Config` from its defaults in
 //! code, never from a file (iceoryx2 would otherwise look for
 //! `./config/iceoryx2.toml`, a user and a system file), with the file prefix
-//! `netfi_u<uid>_<run>_` and a root directory of the user's own,
-//! `/tmp/netfi-iceoryx2-<uid>/` (mode 0700, checked to be the user's and
-//! closed to others before use), instead of iceoryx2's shared
+//! `netfi_u<uid>_<run>_` and a root directory of the user's own
+//! ([`user_root_dir`]: `$XDG_RUNTIME_DIR/netfi-iceoryx2/` or
+//! `/tmp/netfi-iceoryx2-<uid>/`, mode 0700, checked to be the user's and
+//! closed to others before use; a replacement beside it where another
+//! user took that name first; the one named by [`IPC_ROOT_ENV`] in the
+//! processes a run starts), instead of iceoryx2's shared
 //! `/tmp/iceoryx2/`: several users of one machine run side by side, none
 //! can write into another's files, and a file another user planted under
 //! this user's names is refused at once rather than waited on
 //! ([`NodeOpenError::Foreign`]). The shared-memory segments in `/dev/shm`
 //! are made private to the user (iceoryx2 creates its global management
 //! segment world-writable), and the last node of a run to close removes
-//! the run's management segment, so a run leaves nothing in `/dev/shm`. The automatic dead-node clean-ups of iceoryx2 are switched
-//! off: they fall back to the file-based global configuration for nodes whose
+//! the run's management segment, so a run leaves nothing in `/dev/shm`.
+//! The automatic dead-node clean-ups of iceoryx2 are switched off: they
+//! fall back to the file-based global configuration for nodes whose
 //! details are unreadable. Clean-up is explicit instead
-//! ([`cleanup_dead_nodes`], [`IpcNode::reap_dead_peers`]) and reported.
+//! ([`cleanup_dead_nodes`], [`IpcNode::reap_dead_peers`]) and reported;
+//! what a run whose processes all died leaves is removed by
+//! [`remove_dead_run_files`].
 //!
 //! # Signals
 //!
@@ -84,11 +90,15 @@ use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use std::path::{Path, PathBuf};
+
+use crate::host::private_dir::{self, PrivateDir, PrivateDirError};
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, LogLevel, SemanticString};
 
 pub use liveness::{
-    cleanup_dead_nodes, cleanup_dead_runs, remove_run_segment_if_unused, CleanupError, CleanupReport, DeadPeer, FailedCleanup,
+    cleanup_dead_nodes, cleanup_dead_runs, remove_dead_run_files, remove_run_segment_if_unused, CleanupError, CleanupReport, DeadPeer,
+    FailedCleanup,
 };
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
@@ -153,37 +163,70 @@ fn user_prefix() -> String {
     format!("{FILE_PREFIX}u{}_", unsafe { libc::geteuid() })
 }
 
-/// This user's iceoryx2 root directory: `/tmp/netfi-iceoryx2-<uid>/`.
-pub fn user_root_dir() -> std::path::PathBuf {
-    // SAFETY: geteuid has no preconditions.
-    std::path::PathBuf::from(format!("/tmp/netfi-iceoryx2-{}/", unsafe { libc::geteuid() }))
+/// The environment variable through which a process tells the processes
+/// it starts which iceoryx2 root directory the run uses, so that all of a
+/// run's processes agree on it even where the usual one was taken.
+pub const IPC_ROOT_ENV: &str = "NETFI_IPC_ROOT";
+
+/// The longest root directory accepted, in bytes: iceoryx2's paths (root,
+/// sub-directory, prefix, run id and its own names) must stay within its
+/// path limit.
+const ROOT_MAX_LEN: usize = 96;
+
+/// This user's iceoryx2 root directory, with a trailing `/` (see
+/// [`user_root_dir_resolved`]); where none can be had, the usual name,
+/// which opening a node then reports.
+pub fn user_root_dir() -> PathBuf {
+    let dir = ensure_user_root_dir().unwrap_or_else(|_| usual_root_dirs().pop().unwrap_or_default());
+    let mut text = dir.into_os_string();
+    text.push("/");
+    text.into()
 }
 
-/// Creates this user's root directory (0700) if missing and checks that it
-/// is a real directory of this user that nobody else may enter.
-fn ensure_user_root_dir() -> std::io::Result<std::path::PathBuf> {
-    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
-    let dir = user_root_dir();
-    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(e),
+/// This user's iceoryx2 root directory, private (0700, this user's, closed
+/// to others), created if missing, chosen in this order:
+///
+/// 1. [`IPC_ROOT_ENV`], as set by the process that started this one;
+/// 2. `$XDG_RUNTIME_DIR/netfi-iceoryx2`, where `$XDG_RUNTIME_DIR` is a
+///    private directory of this user;
+/// 3. `/tmp/netfi-iceoryx2-<uid>`;
+/// 4. where those are taken by someone else (another owner, or open to
+///    others): the first `/tmp/netfi-iceoryx2-<uid>-XXXXXX` of this user,
+///    made if none exists, with a warning naming the owner of the taken
+///    one.
+pub fn user_root_dir_resolved() -> Result<PrivateDir, PrivateDirError> {
+    let named = std::env::var_os(IPC_ROOT_ENV).filter(|e| !e.is_empty()).map(PathBuf::from).filter(|p| usable_root(p));
+    private_dir::resolve_named(named, &usual_root_dirs(), Path::new("/tmp"), &format!("netfi-iceoryx2-{}", private_dir::uid()))
+}
+
+/// The usual places of the root that iceoryx2 can use, in order of
+/// preference.
+fn usual_root_dirs() -> Vec<PathBuf> {
+    let tmp = PathBuf::from(format!("/tmp/netfi-iceoryx2-{}", private_dir::uid()));
+    private_dir::xdg_runtime_dir().map(|d| d.join("netfi-iceoryx2")).into_iter().chain([tmp]).filter(|p| usable_root(p)).collect()
+}
+
+/// Whether iceoryx2 can have its files under `dir`.
+fn usable_root(dir: &Path) -> bool {
+    dir.is_absolute() && dir.as_os_str().len() <= ROOT_MAX_LEN && iceoryx2::prelude::Path::new(dir.as_os_str().as_encoded_bytes()).is_ok()
+}
+
+/// The root this process resolved, while it stays private.
+static ROOT: std::sync::Mutex<Option<PathBuf>> = std::sync::Mutex::new(None);
+
+/// This user's root directory, resolved once per process (again only if it
+/// was removed meanwhile); a taken usual name is warned of once.
+fn ensure_user_root_dir() -> Result<PathBuf, PrivateDirError> {
+    let mut root = ROOT.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(dir) = root.as_ref().filter(|d| private_dir::is_private(d)) {
+        return Ok(dir.clone());
     }
-    let meta = std::fs::symlink_metadata(&dir)?;
-    // SAFETY: geteuid has no preconditions.
-    let uid = unsafe { libc::geteuid() };
-    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o077 != 0 {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::PermissionDenied,
-            format!(
-                "{} is not a private directory of uid {uid} (owner {}, mode {:o}); remove it",
-                dir.display(),
-                meta.uid(),
-                meta.mode() & 0o7777
-            ),
-        ));
+    let dir = user_root_dir_resolved()?;
+    if let Some(w) = dir.warning() {
+        eprintln!("WARNING: iceoryx2's directory: {w}");
     }
-    Ok(dir)
+    *root = Some(dir.path.clone());
+    Ok(dir.path)
 }
 
 /// Identifier of one run: 1 to [`RunId::MAX_LEN`] ASCII letters, digits,
@@ -391,8 +434,8 @@ impl IpcConfig {
             .expect("a validated run id always forms a valid iceoryx2 file prefix");
         let root = user_root_dir();
         config.global.set_root_path(
-            &iceoryx2::prelude::Path::new(root.to_string_lossy().as_bytes())
-                .expect("/tmp/netfi-iceoryx2-<uid>/ is always a valid path"),
+            &iceoryx2::prelude::Path::new(root.as_os_str().as_encoded_bytes())
+                .expect("the root directory is checked to be a valid iceoryx2 path when chosen"),
         );
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
@@ -557,10 +600,9 @@ mod tests {
         let config = IpcConfig::new(RunId::new("r1").unwrap());
         let uid = unsafe { libc::geteuid() };
         assert_eq!(config.prefix(), format!("netfi_u{uid}_r1_"));
-        assert_eq!(
-            config.iceoryx2().global.root_path().to_string(),
-            format!("/tmp/netfi-iceoryx2-{uid}/")
-        );
+        let root = user_root_dir();
+        assert_eq!(config.iceoryx2().global.root_path().to_string(), root.to_string_lossy());
+        assert!(private_dir::is_private(&root));
         assert_eq!(config.service_name(Channel::Console), "netfi/r1/console");
         assert_eq!(config.node_name(Role::Simulator), "netfi/r1/simulator");
         assert_eq!(

@@ -44,17 +44,17 @@ pub enum NodeOpenError {
         #[source]
         source: CleanupError,
     },
-    /// This user's iceoryx2 root directory (`/tmp/netfi-iceoryx2-<uid>/`)
-    /// cannot be created, or is not a private directory of this user.
-    #[error("cannot open the {role} node of run `{run}`: {source}")]
+    /// No private iceoryx2 root directory of this user could be had
+    /// ([`user_root_dir`](super::user_root_dir)): creating one failed.
+    #[error("cannot open the {role} node of run `{run}`: iceoryx2's directory: {source}")]
     RootDir {
         /// The role of the node being opened.
         role: Role,
         /// The run.
         run: String,
-        /// What is wrong with the directory.
+        /// Why the directory could not be had.
         #[source]
-        source: std::io::Error,
+        source: crate::host::private_dir::PrivateDirError,
     },
     /// A shared-memory file with this run's names belongs to another user
     /// (planted, or left by a version that did not name files per user):
@@ -71,7 +71,7 @@ pub enum NodeOpenError {
         uid: u32,
     },
     /// iceoryx2 could not create the node (permissions on its directories
-    /// under `/tmp/netfi-iceoryx2-<uid>`, or a corrupted system).
+    /// under the root directory, or a corrupted system).
     #[error("cannot create the {role} node of run `{run}` (iceoryx2: {source})")]
     Create {
         /// The role of the node being opened.

@@ -1,0 +1,328 @@
+//! Running a participant's next trial, marking it, and reading its figures.
+//!
+//! A trial is a `netfi run` child process with the trial's condition, its
+//! seed, and `--out DATA/P/trial-NN-CONDITION/`. The attempt is recorded
+//! `running` before the child starts, under the participant's lock. The
+//! child gets its own process group (a Ctrl-C at the terminal reaches only
+//! the runner, which passes one SIGINT on, so the run stops as Ctrl-C
+//! stops it and writes its report) and is told to stop (SIGTERM) if its
+//! runner dies (`PR_SET_PDEATHSIG`), so no run outlives the trial it
+//! belongs to.
+
+use super::file::ConditionSource;
+use super::metrics::{figures, outages, Figures, TraceFrame, METRICS};
+use super::questionnaire;
+use super::schedule::Due;
+use super::store::{claim, now_utc, read_json, save_state, write_json, Attempt, AttemptState, Next, OpenStudy, StudyError};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+/// A trial's figures as `figures.json` keeps them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FiguresFile {
+    /// Metric name → value (null where the run gave none).
+    pub figures: std::collections::BTreeMap<String, Option<f64>>,
+}
+
+impl FiguresFile {
+    /// In [`METRICS`]' order.
+    pub fn ordered(&self) -> Figures {
+        METRICS.iter().map(|m| self.figures.get(m.name).copied().flatten()).collect()
+    }
+}
+
+/// The run id of an attempt: unique to the study's data folder, the
+/// participant, the trial and the attempt (iceoryx2's names: at most 48
+/// characters of `[A-Za-z0-9_-]`).
+fn run_id(s: &OpenStudy, p: usize, trial: u32, attempt: u32) -> String {
+    let key = super::schedule::fnv1a(format!("{}\0{}", s.data.display(), s.study.participants[p].id).as_bytes());
+    format!("study-{key:016x}-t{trial:03}a{attempt}")
+}
+
+/// What to tell the experimenter when no trial can start.
+fn refusal(s: &OpenStudy, p: usize, next: &Next) -> String {
+    let id = &s.study.participants[p].id;
+    let file = s.file.display();
+    match next {
+        Next::Running(a) => format!("trial {} of `{id}` is running (pid {})", a.trial, a.runner_pid.unwrap_or(0)),
+        Next::Unmarked(a) => format!(
+            "trial {} of `{id}` ({}) ran and waits for its mark: `netfi study mark {file} --participant {id} done|failed|repeat`",
+            a.trial, a.condition
+        ),
+        Next::Questionnaire(Due::Sus) => format!(
+            "the System Usability Scale of `{id}` is due before trial 1: `netfi study answer {file} --participant {id} sus ITEM…` (ten answers 1–5), or `--missing REASON`"
+        ),
+        Next::Questionnaire(Due::Tlx { after, .. }) => format!(
+            "the NASA-TLX of `{id}` after trial {after} is due: `netfi study answer {file} --participant {id} tlx MENTAL PHYSICAL TEMPORAL PERFORMANCE EFFORT FRUSTRATION` (0–100 each), or `--missing REASON`"
+        ),
+        Next::Finished => format!("`{id}` has finished every trial"),
+        Next::Trial { .. } => String::new(),
+    }
+}
+
+/// The participant's next step now (without taking their lock).
+pub fn peek(s: &OpenStudy, p: usize) -> Result<Next, StudyError> {
+    let state = super::store::load_state(&s.participant_dir(p))?.unwrap_or_default();
+    Ok(super::store::next_step(s, p, &state, &questionnaire::answered(s, p)))
+}
+
+/// Runs participant `p`'s next trial with the `netfi` executable, until
+/// it ends or `stop()` turns true (then the run is stopped as Ctrl-C
+/// stops it, and the attempt is `stopped`). `started` is told the attempt
+/// once its run is started. Returns the attempt as recorded.
+pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, started: impl FnOnce(&Attempt)) -> Result<Attempt, StudyError> {
+    s.record_schedules()?;
+    let (lock, mut state) = claim(s, p, "netfi study next")?;
+    let next = super::store::next_step(s, p, &state, &questionnaire::answered(s, p));
+    let Next::Trial { trial, attempt } = next else { return Err(StudyError::State(refusal(s, p, &next))) };
+    let dir = s.participant_dir(p);
+    let condition = &s.study.conditions[trial.condition];
+    let name = s.trial_dir_name(&trial, attempt);
+    let out = dir.join(&name);
+    std::fs::create_dir_all(&out).map_err(|source| StudyError::Io { path: out.clone(), source })?;
+    let scenario = scenario_arg(s, &condition.source, &out)?;
+    let mut a = Attempt {
+        trial: trial.number,
+        attempt,
+        condition: condition.name.clone(),
+        dir: name,
+        state: AttemptState::Running,
+        seed: trial.seed,
+        started_utc: now_utc(),
+        ended_utc: None,
+        runner_pid: Some(std::process::id()),
+        run_pid: None,
+        run_status: None,
+        stopped: false,
+        report: false,
+        faults: Vec::new(),
+        note: String::new(),
+    };
+    state.attempts.push(a.clone());
+    save_state(&dir, &state)?;
+    let mut cmd = run_command(s, netfi, &scenario, &out, trial.seed, &run_id(s, p, trial.number, attempt))?;
+    let mut child = match cmd.spawn() {
+        Ok(c) => c,
+        Err(e) => {
+            let last = state.attempts.last_mut().expect("pushed above");
+            last.state = AttemptState::Ran;
+            last.faults = vec![format!("starting {}: {e}", netfi.display())];
+            last.ended_utc = Some(now_utc());
+            last.runner_pid = None;
+            save_state(&dir, &state)?;
+            return Err(StudyError::State(format!("starting {}: {e}", netfi.display())));
+        }
+    };
+    a.run_pid = Some(child.id());
+    *state.attempts.last_mut().expect("pushed above") = a.clone();
+    save_state(&dir, &state)?;
+    started(&a);
+    let (status, asked) = wait(&mut child, &out, stop)?;
+    finish(&mut a, &out, status, asked);
+    *state.attempts.last_mut().expect("pushed above") = a.clone();
+    save_state(&dir, &state)?;
+    lock.release();
+    Ok(a)
+}
+
+/// What `netfi run` is given as the condition's scenario: a preset's name,
+/// a file's absolute path, or inline stages written into the trial's folder.
+fn scenario_arg(s: &OpenStudy, source: &ConditionSource, out: &Path) -> Result<String, StudyError> {
+    Ok(match source {
+        ConditionSource::Preset(p) => p.to_string(),
+        ConditionSource::File(f) => absolute(&s.file.parent().unwrap_or(Path::new(".")).join(f)).display().to_string(),
+        ConditionSource::Inline(text) => {
+            let path = out.join("condition.toml");
+            crate::durable::write_whole(&path, text.as_bytes())?;
+            absolute(&path).display().to_string()
+        }
+    })
+}
+
+/// The trial's `netfi run`: its own process group, its output in `out`,
+/// stopped (SIGTERM) if its runner dies.
+fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u64, run_id: &str) -> Result<Command, StudyError> {
+    let mut cmd = Command::new(netfi);
+    cmd.arg("run").arg(scenario).arg("--out").arg(absolute(out)).arg("--seed").arg(seed.to_string());
+    cmd.args(["--run-id", run_id, "--json"]);
+    if let Some(d) = s.study.trial.duration_s {
+        cmd.arg("--duration-s").arg(d.to_string());
+    }
+    if let Some(c) = &s.capture {
+        cmd.arg("--capture").arg(absolute(c));
+    }
+    if let Some(r) = s.study.trial.rate_hz {
+        cmd.arg("--rate-hz").arg(r.to_string());
+    }
+    cmd.args(&s.study.trial.run_args);
+    let file = |n: &str| std::fs::File::create(out.join(n)).map_err(|source| StudyError::Io { path: out.join(n), source });
+    cmd.stdin(Stdio::null()).stdout(file("run.stdout")?).stderr(file("run.stderr")?).process_group(0);
+    // SAFETY: prctl is async-signal-safe; it only sets this child's parent-death signal.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    Ok(cmd)
+}
+
+/// Waits for the run to end, passing one SIGINT on once `stop()` turns
+/// true; how it ended, and whether it was asked to stop.
+fn wait(child: &mut std::process::Child, out: &Path, stop: impl Fn() -> bool) -> Result<(std::process::ExitStatus, bool), StudyError> {
+    let mut asked = false;
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) => return Ok((status, asked)),
+            Ok(None) => {}
+            Err(e) => return Err(StudyError::Io { path: out.to_path_buf(), source: e }),
+        }
+        if stop() && !asked {
+            asked = true;
+            // SAFETY: signalling our own child, not yet reaped.
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Records how the run ended: its report and figures if it left one;
+/// `interrupted` if it was killed without one.
+fn finish(a: &mut Attempt, out: &Path, status: std::process::ExitStatus, asked: bool) {
+    a.runner_pid = None;
+    a.ended_utc = Some(now_utc());
+    a.stopped = asked;
+    a.run_status = Some(match (status.code(), status.signal()) {
+        (Some(c), _) => format!("exit {c}"),
+        (None, Some(sig)) => format!("signal {sig}"),
+        _ => format!("{status}"),
+    });
+    let report_path = out.join("report.json");
+    a.report = report_path.is_file();
+    let report: Option<serde_json::Value> = if a.report { read_json(&report_path).ok() } else { None };
+    match &report {
+        Some(r) => {
+            a.state = AttemptState::Ran;
+            a.faults = r.get("faults").and_then(|f| serde_json::from_value(f.clone()).ok()).unwrap_or_default();
+            if let Ok(figs) = trial_figures(out, r) {
+                let _ = write_json(&out.join("figures.json"), &figs);
+            }
+        }
+        None if status.signal().is_some() => {
+            a.state = AttemptState::Interrupted;
+            a.note = format!("its run was killed ({}) and left no report", a.run_status.as_deref().unwrap_or("?"));
+        }
+        None => {
+            a.state = AttemptState::Ran;
+            let stderr = std::fs::read_to_string(out.join("run.stderr")).unwrap_or_default();
+            let last = stderr.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("no message").to_string();
+            a.faults = vec![format!("the run left no report ({}): {last}", a.run_status.as_deref().unwrap_or("?"))];
+        }
+    }
+}
+
+/// A trial folder's figures: from its `report.json` and `trace.csv`.
+pub fn trial_figures(out: &Path, report: &serde_json::Value) -> Result<FiguresFile, StudyError> {
+    let o = read_outages(&out.join("trace.csv"))?;
+    let values = figures(report, &o);
+    Ok(FiguresFile { figures: METRICS.iter().zip(values).map(|(m, v)| (m.name.to_string(), v)).collect() })
+}
+
+/// The frames of a run's `trace.csv` that outages need (copies left out).
+fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
+    use std::io::BufRead;
+    let bad = |problem: String| StudyError::Read { path: path.to_path_buf(), problem };
+    let f = match std::fs::File::open(path) {
+        Ok(f) => f,
+        // A run without a trace (a foreign layout) has no outage figures
+        // to give; the count is then of nothing.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(super::metrics::Outages::default()),
+        Err(e) => return Err(StudyError::Io { path: path.to_path_buf(), source: e }),
+    };
+    let mut lines = std::io::BufReader::new(f).lines();
+    let header = lines.next().transpose().map_err(|e| bad(e.to_string()))?.unwrap_or_default();
+    let cols: Vec<&str> = header.split(',').collect();
+    let col = |n: &str| cols.iter().position(|c| *c == n).ok_or_else(|| bad(format!("no `{n}` column")));
+    let (ix, ns, reason, copy) = (col("ingress_index")?, col("ingress_ns")?, col("reason")?, col("copy")?);
+    let mut frames = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let line = line.map_err(|e| bad(e.to_string()))?;
+        let f: Vec<&str> = line.split(',').collect();
+        let num = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).ok_or_else(|| bad(format!("line {}: column {} is not a number", k + 2, cols[i])));
+        if f.get(copy).is_some_and(|c| *c != "0" && !c.is_empty()) {
+            continue;
+        }
+        frames.push(TraceFrame { ingress_index: num(ix)?, ingress_ns: num(ns)?, outage: f.get(reason) == Some(&"outage") });
+    }
+    Ok(outages(frames))
+}
+
+fn absolute(p: &Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
+
+/// How the experimenter marks an attempt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mark {
+    Done,
+    Failed,
+    Repeat,
+}
+
+/// Marks participant `p`'s attempt (the last of trial `trial`, or the one
+/// waiting for its mark) `done`, `failed` or `repeat`, with a note.
+pub fn mark(s: &OpenStudy, p: usize, trial: Option<u32>, how: Mark, note: &str) -> Result<Attempt, StudyError> {
+    let (lock, mut state) = claim(s, p, "netfi study mark")?;
+    let id = &s.study.participants[p].id;
+    let index = match trial {
+        Some(n) => state.attempts.iter().rposition(|a| a.trial == n).ok_or_else(|| StudyError::State(format!("trial {n} of `{id}` has not run")))?,
+        None => state
+            .attempts
+            .iter()
+            .rposition(|a| a.state == AttemptState::Ran)
+            .ok_or_else(|| StudyError::State(format!("no trial of `{id}` waits for its mark (give --trial N to change one)")))?,
+    };
+    let a = &mut state.attempts[index];
+    match a.state {
+        AttemptState::Running => return Err(StudyError::State(format!("trial {} of `{id}` is still running", a.trial))),
+        AttemptState::Interrupted => {
+            return Err(StudyError::State(format!("trial {} of `{id}` was interrupted: it is run again by the next `netfi study next`", a.trial)))
+        }
+        _ => {}
+    }
+    if how == Mark::Done && !a.report {
+        return Err(StudyError::State(format!(
+            "trial {} of `{id}` left no run report, so it has no figures to count: mark it repeat or failed",
+            a.trial
+        )));
+    }
+    a.state = match how {
+        Mark::Done => AttemptState::Done,
+        Mark::Failed => AttemptState::Failed,
+        Mark::Repeat => AttemptState::Repeat,
+    };
+    if !note.is_empty() {
+        a.note = note.to_string();
+    }
+    let marked = a.clone();
+    save_state(&s.participant_dir(p), &state)?;
+    lock.release();
+    Ok(marked)
+}
+
+/// A trial folder's figures: `figures.json`, or computed from its report
+/// (and written) if missing.
+pub fn load_figures(out: &Path) -> Option<Figures> {
+    let path = out.join("figures.json");
+    if let Ok(f) = read_json::<FiguresFile>(&path) {
+        return Some(f.ordered());
+    }
+    let report: serde_json::Value = read_json(&out.join("report.json")).ok()?;
+    let figs = trial_figures(out, &report).ok()?;
+    let _ = write_json(&path, &figs);
+    Some(figs.ordered())
+}

@@ -1,0 +1,143 @@
+//! A participant's progress as `netfi study status` and the experimenter's
+//! page show it: every trial with its last attempt, and what comes next.
+
+use super::questionnaire;
+use super::schedule::Due;
+use super::store::{claim, load_state, AttemptState, Next, OpenStudy, ParticipantState, StudyError};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// One trial of a participant's schedule and how it stands.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrialView {
+    pub trial: u32,
+    pub block: String,
+    pub block_position: u32,
+    pub condition: String,
+    pub repetition: u32,
+    pub seed: u64,
+    /// `pending`, or its last attempt's state.
+    pub state: String,
+    pub attempts: u32,
+    /// The last attempt's folder, relative to the participant's.
+    pub dir: Option<String>,
+    pub stopped: bool,
+    pub faults: Vec<String>,
+    pub note: String,
+}
+
+/// What comes next, for people.
+#[derive(Debug, Clone, Serialize)]
+pub struct NextView {
+    /// `trial`, `running`, `unmarked`, `questionnaire` or `finished`.
+    pub kind: &'static str,
+    pub trial: Option<u32>,
+    pub attempt: Option<u32>,
+    pub condition: Option<String>,
+    pub block: Option<String>,
+    /// `sus` or `tlx`, and the key it is stored under.
+    pub questionnaire: Option<&'static str>,
+    pub key: Option<String>,
+}
+
+/// A participant's progress.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParticipantView {
+    pub participant: String,
+    pub attributes: BTreeMap<String, String>,
+    pub square_row: Option<usize>,
+    pub blocks: Vec<String>,
+    pub trials: Vec<TrialView>,
+    /// Counts of the trials by state.
+    pub counts: BTreeMap<String, u32>,
+    pub next: NextView,
+    /// Who is advancing the participant now, if someone is.
+    pub busy: Option<String>,
+    pub questionnaires_answered: Vec<String>,
+    pub questionnaires_due: Vec<String>,
+}
+
+/// Participant `p`'s progress. An attempt whose runner died is marked
+/// `interrupted` on the way, when nobody holds the participant.
+pub fn participant(s: &OpenStudy, p: usize) -> Result<ParticipantView, StudyError> {
+    let dir = s.participant_dir(p);
+    let stored = load_state(&dir)?.unwrap_or_default();
+    // Only a trial left `running` needs the lock (to be found interrupted);
+    // otherwise reading is enough, and takes nobody's lock from under them.
+    let (state, busy) = if stored.attempts.iter().any(|a| a.state == AttemptState::Running) {
+        match claim(s, p, "netfi study status") {
+            Ok((lock, state)) => {
+                lock.release();
+                (state, None)
+            }
+            Err(StudyError::Busy { holder, .. }) => (stored, Some(holder)),
+            Err(e) => return Err(e),
+        }
+    } else {
+        (stored, None)
+    };
+    let answered = questionnaire::answered(s, p);
+    let next = super::store::next_step(s, p, &state, &answered);
+    Ok(view(s, p, &state, &next, busy, answered))
+}
+
+fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Option<String>, answered: Vec<String>) -> ParticipantView {
+    let sch = &s.schedules[p];
+    let part = &s.study.participants[p];
+    let trials: Vec<TrialView> = sch
+        .trials
+        .iter()
+        .map(|t| {
+            let last = state.last_of(t.number);
+            TrialView {
+                trial: t.number,
+                block: s.study.blocks[t.block].name.clone(),
+                block_position: t.block_position,
+                condition: s.study.conditions[t.condition].name.clone(),
+                repetition: t.repetition,
+                seed: t.seed,
+                state: last.map_or("pending", |a| a.state.as_str()).to_string(),
+                attempts: state.attempts.iter().filter(|a| a.trial == t.number).count() as u32,
+                dir: last.map(|a| a.dir.clone()),
+                stopped: last.is_some_and(|a| a.stopped),
+                faults: last.map(|a| a.faults.clone()).unwrap_or_default(),
+                note: last.map(|a| a.note.clone()).unwrap_or_default(),
+            }
+        })
+        .collect();
+    let mut counts = BTreeMap::new();
+    for t in &trials {
+        *counts.entry(t.state.clone()).or_insert(0) += 1;
+    }
+    let name = |t: u32| sch.trials.iter().find(|x| x.number == t).map(|x| (s.study.conditions[x.condition].name.clone(), s.study.blocks[x.block].name.clone()));
+    let nv = |kind, trial: Option<u32>, attempt| {
+        let (condition, block) = trial.and_then(name).map_or((None, None), |(c, b)| (Some(c), Some(b)));
+        NextView { kind, trial, attempt, condition, block, questionnaire: None, key: None }
+    };
+    let next = match next {
+        Next::Trial { trial, attempt } => nv("trial", Some(trial.number), Some(*attempt)),
+        Next::Running(a) => nv("running", Some(a.trial), Some(a.attempt)),
+        Next::Unmarked(a) => nv("unmarked", Some(a.trial), Some(a.attempt)),
+        Next::Questionnaire(d) => {
+            let (q, block) = match d {
+                Due::Sus => ("sus", None),
+                Due::Tlx { block, .. } => ("tlx", Some(s.study.blocks[*block].name.clone())),
+            };
+            NextView { kind: "questionnaire", trial: None, attempt: None, condition: None, block, questionnaire: Some(q), key: Some(d.key()) }
+        }
+        Next::Finished => nv("finished", None, None),
+    };
+    let due = sch.due.iter().map(Due::key).filter(|k| !answered.contains(k)).collect();
+    ParticipantView {
+        participant: part.id.clone(),
+        attributes: part.attributes.clone(),
+        square_row: sch.square_row,
+        blocks: sch.blocks.iter().map(|&b| s.study.blocks[b].name.clone()).collect(),
+        trials,
+        counts,
+        next,
+        busy,
+        questionnaires_answered: answered,
+        questionnaires_due: due,
+    }
+}
