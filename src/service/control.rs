@@ -419,7 +419,7 @@ impl Server {
         check_real_time(&timeline, self.settings.unsupported)?;
         if self.settings.queue_order == QueueOrder::Fifo && timeline.may_reorder() {
             return Err(format!(
-                "scenario `{}` can release frames out of order, but this run's release queue is FIFO (its scenario cannot reorder); start the run with `--reorder-queue` to switch to it",
+                "scenario `{}` can release frames out of order, but this run's release queue is FIFO (it was started with `--fifo-queue`, or without live control); start it without `--fifo-queue` to switch to it",
                 spec.name
             ));
         }

@@ -116,6 +116,7 @@ fn a_run_switched_to_the_built_scenario_then_stopped_is_reported_as_stopped_per_
     // The runs: this one, running; its page.
     click(&tab, "#nav-runs");
     until(&tab, &format!("document.querySelector('tr.run[data-id=\"{id}\"]')?.dataset.state === 'running'"), 10);
+    screenshot(&tab, "runs.png");
     click(&tab, &format!("tr.run[data-id=\"{id}\"] a"));
     until(&tab, "document.getElementById('run-state')?.textContent === 'running'", 10);
     // Switch to the scenario being built, 1 s from now.
@@ -125,7 +126,7 @@ fn a_run_switched_to_the_built_scenario_then_stopped_is_reported_as_stopped_per_
     let events = until(&tab, "document.getElementById('events').textContent", 20).as_str().unwrap().to_string();
     assert!(events.contains("half") && events.contains("will take effect"), "events: {events} {}", text(&tab, "ctl-error"));
     until(&tab, "document.getElementById('ctl-now').textContent.includes('half')", 20);
-    screenshot(&tab, "run.png");
+    screenshot(&tab, "run-switched.png");
     std::thread::sleep(Duration::from_secs(3));
 
     // Stopped: a normal end, every frame accounted for, nothing to steer.
@@ -154,6 +155,7 @@ fn a_run_switched_to_the_built_scenario_then_stopped_is_reported_as_stopped_per_
         assert!((loss - model).abs() <= ci[1] - ci[0] + 1e-9, "{name}: {loss} {ci:?}, model {model}");
     }
     assert_eq!(number(&tab, "document.querySelectorAll('#run-phase-table tr.phase').length"), 2.0);
+    screenshot(&tab, "run-stopped.png");
 
     // The report page: each condition's row, the switch on the time plots.
     click(&tab, "#report-link");
@@ -164,5 +166,5 @@ fn a_run_switched_to_the_built_scenario_then_stopped_is_reported_as_stopped_per_
     let marked = js(&tab, "Array.from(document.querySelectorAll('svg[id^=plot-]')).filter(s => s.textContent.includes('half')).length");
     assert!(marked.as_f64().unwrap() >= 1.0, "no time plot marks the switch");
     assert!(text(&tab, "ended").to_lowercase().contains("stopped on request"), "the report does not say the run was stopped");
-    screenshot(&tab, "report.png");
+    screenshot(&tab, "report-switched.png");
 }
