@@ -150,7 +150,7 @@ pub async fn run(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> impl Into
     };
     let body = html! {
         h2 { "Run " span id="run-id" { (id) } }
-        p { "scenario " b id="run-scenario" { (status.scenario) } " · " span id="run-state" class={ "state " (status.state) } { (status.state) } " · "
+        p { "scenario " b id="run-scenario" { (status.scenario) } " · " span id="run-state" class={ "state " (status.state) } { (status.state) }
             span id="run-elapsed" {} " · output " code { (status.out) } }
         p id="run-said" {}
         section id="control" {

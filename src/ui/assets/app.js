@@ -400,8 +400,13 @@ const runPage = {
   state(st) {
     const phase = st.phase_name ? `${st.phase} (${st.phase_name})` : `${st.phase}`;
     const next = (st.upcoming || []).map(([t, name, p]) => `${name} phase ${p} at ${t.toFixed(3)} s`).join("; ");
-    $("ctl-now").textContent = `t = ${st.t_s.toFixed(3)} s, ${st.scenario} phase ${phase}, faults ${st.paused ? "paused" : "on"}` +
+    $("ctl-now").textContent = `t = ${st.t_s.toFixed(3)} s, ${st.scenario} (the run's phase ${phase}), faults ${st.paused ? "paused" : "on"}` +
       (next ? `; next: ${next}` : "");
+    // Pause when on, resume when paused.
+    if (!this.ended) {
+      $("pause-btn").disabled = !!st.paused;
+      $("resume-btn").disabled = !st.paused;
+    }
     const phases = st.scenario_phases || [];
     const sel = $("phase-to");
     const want = phases.map((p) => [String(p.number), `${p.number}${p.name ? " " + p.name : ""} (from ${p.start_s} s of ${st.scenario})`]);
@@ -410,6 +415,7 @@ const runPage = {
 
   // Once the run has ended nothing steers it: the controls say so.
   disable(said) {
+    this.ended = true;
     CONTROLS.forEach((id) => { $(id).disabled = true; });
     $("control-note").textContent = said;
   },
@@ -424,7 +430,7 @@ const runPage = {
     $("run-state").textContent = s.state;
     $("run-state").className = `state ${s.state}`;
     $("run-said").textContent = s.state_said;
-    $("run-elapsed").textContent = s.state === "running" ? `${s.elapsed_s.toFixed(1)} s of ${s.duration_s} s` : "";
+    $("run-elapsed").textContent = s.state === "running" ? ` · ${s.elapsed_s.toFixed(1)} s of ${s.duration_s} s` : "";
     if (s.live) $("live-table").innerHTML = s.live;
     if (s.state === "running") {
       // Where the emulator is, every 2 s (quietly: its control service

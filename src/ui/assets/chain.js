@@ -54,7 +54,7 @@ function chainDrawing(stage) {
   const NS = "http://www.w3.org/2000/svg";
   const svg = document.createElementNS(NS, "svg");
   svg.setAttribute("class", "chain");
-  svg.setAttribute("viewBox", "0 0 420 300");
+  svg.setAttribute("viewBox", "0 0 460 330");
   svg.dataset.states = k;
   const el = (name, attrs, text, parent = svg) => {
     const e = document.createElementNS(NS, name);
@@ -65,13 +65,15 @@ function chainDrawing(stage) {
   };
   const id = chainId++;
   const defs = el("defs", {});
-  const mk = el("marker", { id: `arrow-${id}`, viewBox: "0 0 10 10", refX: 9, refY: 5, markerWidth: 5, markerHeight: 5, orient: "auto-start-reverse", markerUnits: "strokeWidth" }, undefined, defs);
+  // Heads of one size whatever the arrow's width.
+  const mk = el("marker", { id: `arrow-${id}`, viewBox: "0 0 10 10", refX: 9, refY: 5, markerWidth: 9, markerHeight: 9, orient: "auto-start-reverse", markerUnits: "userSpaceOnUse" }, undefined, defs);
   el("path", { d: "M0,0 L10,5 L0,10 z", fill: "#333" }, undefined, mk);
   const marker = `url(#arrow-${id})`;
-  const [cx, cy, R, r] = [190, 150, k === 1 ? 0 : 95, 26];
+  // On an ellipse, state 1 on the left; room around for the loops.
+  const [cx, cy, Rx, Ry, r] = [230, 168, k === 1 ? 0 : 140, k === 1 ? 0 : 80, 30];
   const pos = names.map((_, i) => {
     const a = Math.PI + (2 * Math.PI * i) / k;
-    return [cx + R * Math.cos(a), cy + R * Math.sin(a)];
+    return [cx + Rx * Math.cos(a), cy + Ry * Math.sin(a)];
   });
   for (let i = 0; i < k; i++) {
     for (let j = 0; j < k; j++) {
@@ -86,9 +88,9 @@ function chainDrawing(stage) {
         const a = k === 1 ? -Math.PI / 2 : Math.atan2(y - cy, x - cx);
         const at = (da, d) => [x + d * Math.cos(a + da), y + d * Math.sin(a + da)];
         const [sx, sy] = at(-0.5, r), [ex, ey] = at(0.5, r + 2);
-        const [c1x, c1y] = at(-0.9, r + 55), [c2x, c2y] = at(0.9, r + 55);
+        const [c1x, c1y] = at(-0.8, r + 42), [c2x, c2y] = at(0.8, r + 42);
         el("path", { ...attrs, d: `M${sx},${sy} C${c1x},${c1y} ${c2x},${c2y} ${ex},${ey}` });
-        [lx, ly] = at(0, r + 48);
+        [lx, ly] = at(0, r + 44);
       } else {
         // Two arrows between a pair run side by side, each on its right.
         const [x1, y1] = pos[i], [x2, y2] = pos[j];
@@ -105,15 +107,19 @@ function chainDrawing(stage) {
   }
   names.forEach((s, i) => {
     el("circle", { cx: pos[i][0], cy: pos[i][1], r, class: "state" });
-    el("text", { x: pos[i][0], y: pos[i][1] + 4, class: "s" }, s.length > 9 ? s.slice(0, 8) + "…" : s);
+    // A name of two words on two lines.
+    const [first, ...rest] = s.split(" ");
+    const lines = rest.length ? [first, rest.join(" ")] : [s];
+    lines.forEach((line, n) => el("text", { x: pos[i][0], y: pos[i][1] + 4 + (n - (lines.length - 1) / 2) * 12, class: "s" }, line.length > 11 ? line.slice(0, 10) + "…" : line));
   });
   // The colour scale.
   const grad = el("linearGradient", { id: `scale-${id}` }, undefined, defs);
   el("stop", { offset: "0", "stop-color": probColour(0) }, undefined, grad);
   el("stop", { offset: "1", "stop-color": probColour(1) }, undefined, grad);
-  el("rect", { class: "scale", x: 120, y: 282, width: 140, height: 8, fill: `url(#scale-${id})`, stroke: "#999" });
-  el("text", { x: 112, y: 290, class: "scale-label", "text-anchor": "end" }, "p = 0");
-  el("text", { x: 268, y: 290, class: "scale-label", "text-anchor": "start" }, "1 (wider: likelier)");
+  el("text", { x: 8, y: 14, class: "scale-label" }, "transition probability (wider: likelier)");
+  el("rect", { class: "scale", x: 22, y: 20, width: 110, height: 8, fill: `url(#scale-${id})`, stroke: "#999" });
+  el("text", { x: 10, y: 28, class: "scale-label" }, "0");
+  el("text", { x: 136, y: 28, class: "scale-label" }, "1");
   return svg;
 }
 
@@ -248,7 +254,12 @@ function matrixEditor(stage, k, changed, rebuilt) {
     const tr = table.insertRow();
     const name = document.createElement("input");
     Object.assign(name, { value: names[i], size: 12, id: `state-name-${k}-${i}` });
-    name.oninput = () => { stage._names[i] = name.value; redraw(); };
+    name.oninput = () => {
+      stage._names[i] = name.value;
+      const law = $(`state-law-name-${k}-${i}`);
+      if (law) law.textContent = name.value;
+      redraw();
+    };
     tr.insertCell().appendChild(name);
     row.forEach((v, j) => {
       const cell = document.createElement("input");
@@ -271,7 +282,19 @@ function matrixEditor(stage, k, changed, rebuilt) {
     sums.push(sum);
   });
   box.appendChild(table);
-  // α and λ per state, and what they realize.
+  const laws = stateLaws(stage, k, names, changed, rebuilt);
+  box.appendChild(laws);
+  drawing.svg = chainDrawing(stage);
+  box.appendChild(drawing.svg);
+  stage.transition.forEach((row, i) => { sums[i].textContent = row.reduce((s, x) => s + x, 0).toFixed(4); });
+  box.redraw = redraw;
+  return box;
+}
+
+// α and λ of each state, each said in words as it moves; a state added or
+// removed.
+function stateLaws(stage, k, names, changed, rebuilt) {
+  const n = stage.transition.length;
   const laws = document.createElement("div");
   laws.className = "laws";
   const explain = document.createElement("p");
@@ -286,6 +309,7 @@ function matrixEditor(stage, k, changed, rebuilt) {
     const label = document.createElement("span");
     label.className = "pname";
     label.textContent = names[s];
+    label.id = `state-law-name-${k}-${s}`;
     const said = document.createElement("span");
     said.className = "said";
     said.id = `state-said-${k}-${s}`;
@@ -325,10 +349,5 @@ function matrixEditor(stage, k, changed, rebuilt) {
   add.title = `at most ${MAX_STATES} states`;
   add.onclick = () => { addState(stage); rebuilt(); };
   laws.appendChild(add);
-  box.appendChild(laws);
-  drawing.svg = chainDrawing(stage);
-  box.appendChild(drawing.svg);
-  stage.transition.forEach((row, i) => { sums[i].textContent = row.reduce((s, x) => s + x, 0).toFixed(4); });
-  box.redraw = redraw;
-  return box;
+  return laws;
 }
