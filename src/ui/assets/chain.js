@@ -110,7 +110,7 @@ function chainDrawing(stage) {
     // A name of two words on two lines.
     const [first, ...rest] = s.split(" ");
     const lines = rest.length ? [first, rest.join(" ")] : [s];
-    lines.forEach((line, n) => el("text", { x: pos[i][0], y: pos[i][1] + 4 + (n - (lines.length - 1) / 2) * 12, class: "s" }, line.length > 11 ? line.slice(0, 10) + "…" : line));
+    lines.forEach((line, n) => el("text", { x: pos[i][0], y: pos[i][1] + 4 + (n - (lines.length - 1) / 2) * 12, class: "s" }, line.length > 12 ? line.slice(0, 11) + "…" : line));
   });
   // The colour scale.
   const grad = el("linearGradient", { id: `scale-${id}` }, undefined, defs);
