@@ -22,6 +22,7 @@
 
 pub mod file;
 pub mod metrics;
+mod parse;
 pub mod questionnaire;
 pub mod report;
 pub mod schedule;

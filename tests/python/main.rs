@@ -335,6 +335,47 @@ print(json.dumps({{
     assert_eq!(off.as_object().unwrap().len(), 18, "a field the Rust type lacks: {off}");
 }
 
+/// The Python module finds the user's iceoryx2 root in netfi's order
+/// (docs/interface.md): a private `NETFI_IPC_ROOT`, then a private
+/// `$XDG_RUNTIME_DIR`'s `netfi-iceoryx2`, passing over either when it is
+/// open to others; pure file-system rules, so no run is needed.
+#[test]
+fn the_python_root_follows_netfis_order() {
+    use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
+    if !python_ready() {
+        return;
+    }
+    let base = std::env::temp_dir().join(format!("netfi-py-root-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let dir = |name: &str, mode: u32| {
+        let d = base.join(name);
+        std::fs::DirBuilder::new().recursive(true).mode(mode).create(&d).unwrap();
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(mode)).unwrap();
+        d
+    };
+    std::fs::DirBuilder::new().mode(0o700).create(&base).unwrap();
+    let (named, open, xdg) = (dir("named", 0o700), dir("open", 0o755), dir("xdg", 0o700));
+    let root_with = |env: &[(&str, &Path)]| {
+        let mut c = Command::new("python3");
+        c.env("PYTHONPATH", root().join("clients/python")).env_remove("NETFI_IPC_ROOT").env_remove("XDG_RUNTIME_DIR");
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.args(["-c", "import netfi_iox.run as r; print(r.user_root_dir())"]);
+        String::from_utf8(run_ok(c, "python3 user_root_dir").stdout).unwrap().trim().to_string()
+    };
+    let slash = |p: &Path| format!("{}/", p.display());
+    assert_eq!(root_with(&[("NETFI_IPC_ROOT", &named), ("XDG_RUNTIME_DIR", &xdg)]), slash(&named));
+    assert_eq!(root_with(&[("NETFI_IPC_ROOT", &open), ("XDG_RUNTIME_DIR", &xdg)]), slash(&xdg.join("netfi-iceoryx2")));
+    let made = std::fs::symlink_metadata(xdg.join("netfi-iceoryx2")).unwrap();
+    assert!(made.is_dir() && made.permissions().mode() & 0o077 == 0, "made private");
+    // SAFETY: geteuid has no preconditions.
+    let uid = unsafe { libc::geteuid() };
+    let tmp = root_with(&[("XDG_RUNTIME_DIR", &open)]);
+    assert!(tmp.starts_with(&format!("/tmp/netfi-iceoryx2-{uid}")), "an open XDG_RUNTIME_DIR is passed over: {tmp}");
+    let _ = std::fs::remove_dir_all(&base);
+}
+
 /// The Python ITP encoder and decoder agree with the Rust codec, checksum
 /// included, on every frame of a synthetic stream and the real capture.
 #[test]

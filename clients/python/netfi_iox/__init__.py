@@ -2,7 +2,8 @@
 
 - :mod:`netfi_iox.payload`: the shared-memory samples ``netfi::FrameSample.v1`` and ``netfi::FeedbackSample.v1``;
 - :mod:`netfi_iox.itp`: the ITP frame codec and its checksum;
-- :mod:`netfi_iox.run`: a run's configuration, names and ports;
+- :mod:`netfi_iox.run`: a run's configuration, names and node;
+- :mod:`netfi_iox.ports`: the ends of its channels (publishers, subscribers, waiting for a peer);
 - :mod:`netfi_iox.video`: the video channels' header ``netfi::VideoHeader.v1``, ports, and the
   synthetic camera's sizes and bytes;
 - :mod:`netfi_iox.capture`: reading netfi's LZ4 ITP captures.

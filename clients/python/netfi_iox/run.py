@@ -6,12 +6,16 @@ import ctypes
 import gc
 import os
 import stat
-import time
 from typing import Optional, Tuple, Type
 
 import iceoryx2 as iox
 
 from .payload import INTERFACE_VERSION, FeedbackSample, FrameSample
+from .ports import (  # noqa: F401 (re-exported)
+    HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL,
+    PUBLISHER_MAX_LOANED_SAMPLES, SUBSCRIBER_BUFFER_FRAMES, SUBSCRIBER_MAX_BORROWED_SAMPLES,
+    NoPeer, Publisher, PublishingEnd, Subscriber, SubscribingEnd,
+)
 
 #: The channels of a run: the last component of each service name. The
 #: video channels carry ``[u8]`` slices with a ``netfi::VideoHeader.v1``
@@ -21,14 +25,6 @@ CHANNELS = ("console", "emulator", "direct", "feedback", "feedback_out", "video"
 #: The roles a node may take: the last component of its node name.
 ROLES = ("console", "emulator", "simulator", "tool")
 
-#: Every subscriber's queue, in frames; also the service's maximum.
-SUBSCRIBER_BUFFER_FRAMES = 16_384
-MAX_PUBLISHERS_PER_CHANNEL = 1
-MAX_SUBSCRIBERS_PER_CHANNEL = 2
-MAX_NODES_PER_CHANNEL = 8
-PUBLISHER_MAX_LOANED_SAMPLES = 1
-SUBSCRIBER_MAX_BORROWED_SAMPLES = 1
-HISTORY_FRAMES = 0
 
 #: Where a run's iceoryx2 files live, and under which names.
 #:
@@ -48,10 +44,6 @@ _RUN_ID_MAX_LEN = 48
 class InterfaceMismatch(RuntimeError):
     """The run's service carries another payload type or attributes than
     this client speaks: it was refused rather than misread."""
-
-
-class NoPeer(RuntimeError):
-    """The expected peer did not appear in time."""
 
 
 def check_run_id(run_id: str) -> str:
@@ -471,81 +463,3 @@ def remove_mgmt_segment_if_unused(config, prefix: str) -> None:
                     os.unlink(p)
             except OSError:
                 pass
-
-
-class _End:
-    """What every end of a channel has: its service, its port, and
-    :meth:`close`."""
-
-    def __init__(self, service, port):
-        self.service = service
-        self.port = port
-
-    def close(self) -> None:
-        if self.port is not None:
-            self.port.delete()
-            self.port = None
-        self.service = None
-
-
-class PublishingEnd(_End):
-    """A publishing end: its subscribers, and waiting for the first."""
-
-    def peers_connected(self) -> int:
-        """Subscribers of the channel now."""
-        return self.service.dynamic_config.number_of_subscribers
-
-    def wait_for_subscriber(self, timeout_s: float, node: Optional["RunNode"] = None) -> None:
-        """Waits until the channel has a subscriber (the next stage)."""
-        deadline = time.monotonic() + timeout_s
-        while self.peers_connected() == 0:
-            if time.monotonic() > deadline:
-                raise NoPeer(f"no subscriber on {self.service.name} within {timeout_s} s")
-            if node is not None and node.termination_requested():
-                raise NoPeer(f"stopped while waiting for a subscriber on {self.service.name}")
-            time.sleep(0.001)
-
-
-class SubscribingEnd(_End):
-    """A subscribing end: its publishers."""
-
-    def peers_connected(self) -> int:
-        """Publishers of the channel now."""
-        return self.service.dynamic_config.number_of_publishers
-
-
-class Publisher(PublishingEnd):
-    """A publisher of one channel; :meth:`send` copies a sample in."""
-
-    def __init__(self, service, port, payload_type):
-        super().__init__(service, port)
-        self.payload_type = payload_type
-
-    def send(self, sample, stamp=None) -> int:
-        """Loans a slot, copies ``sample`` in, calls ``stamp(payload)`` on the
-        shared-memory copy just before sending (e.g. to set ``send_ns``), and
-        sends. Returns the number of subscribers that received it."""
-        uninit = self.port.loan_uninit()
-        loaned = uninit.write_payload(sample)
-        if stamp is not None:
-            stamp(loaned.payload().contents)
-        return loaned.send()
-
-
-class Subscriber(SubscribingEnd):
-    """A subscriber of one channel; :meth:`receive_into` copies a sample out."""
-
-    def __init__(self, service, port, payload_type):
-        super().__init__(service, port)
-        self.payload_type = payload_type
-
-    def receive_into(self, out) -> bool:
-        """Copies the next sample into ``out`` and releases it; False when
-        none is waiting."""
-        sample = self.port.receive()
-        if sample is None:
-            return False
-        ctypes.memmove(ctypes.byref(out), sample.payload_ptr, ctypes.sizeof(out))
-        sample.delete()
-        return True
-

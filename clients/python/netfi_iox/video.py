@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 import iceoryx2 as iox
 
-from .run import PublishingEnd, SubscribingEnd
+from .ports import MAX_SUBSCRIBERS_PER_CHANNEL, PublishingEnd, SubscribingEnd
 
 #: The iceoryx2 type name of the user header.
 VIDEO_HEADER_TYPE_NAME = "netfi::VideoHeader.v1"
@@ -262,8 +262,6 @@ def channel_limits(channel: str):
     """``(max_subscribers, subscriber_max_borrowed_samples)`` of a video
     channel: the emulator alone on ``video``, holding what its link holds;
     the console and one more viewer on ``video_out``, one frame each."""
-    from .run import MAX_SUBSCRIBERS_PER_CHANNEL
-
     if channel == "video":
         return 1, VIDEO_HELD_FRAMES
     if channel == "video_out":

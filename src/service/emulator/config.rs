@@ -7,6 +7,7 @@
 //! scenario, and uses them as given; alone, it applies the same rules
 //! ([`crate::service::seeds`]) to what it was given.
 
+use crate::model::ModelKind;
 use crate::scenario::ScenarioSpec;
 use crate::service::args::{EmulatorArgs, ScenarioArgs, StreamArgs};
 use crate::service::args::streams;
@@ -33,6 +34,14 @@ impl LaneConfig {
     /// Whether a sample flagged raw may come (UDP raw payloads).
     pub fn accept_raw(&self) -> bool {
         self.args.udp.payload == Payload::Raw
+    }
+
+    /// The stages this lane's frames cannot go through, beyond those its
+    /// channel refuses: a raw sample's bytes live in the UDP source's
+    /// arena, freed at its release, so a copy would be sent from a freed
+    /// slot, and a flip would miss.
+    pub fn unsupported(&self) -> &'static [ModelKind] {
+        if self.accept_raw() { &[ModelKind::Duplicate, ModelKind::Corrupt] } else { &[] }
     }
 }
 

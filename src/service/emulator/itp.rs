@@ -16,11 +16,6 @@ use anyhow::Context;
 use std::cell::RefCell;
 use std::rc::Rc;
 
-/// What a raw sample (`--payload raw`) cannot go through: its bytes live
-/// in the UDP source's arena, freed at its release, so a copy would be sent
-/// from a freed slot, and a flip would miss.
-pub const RAW_UNSUPPORTED: &[crate::model::ModelKind] = &[crate::model::ModelKind::Duplicate, crate::model::ModelKind::Corrupt];
-
 /// A lane of ITP frames.
 pub type ItpLane = Lane<Forward<Ingress, Egress>>;
 
@@ -42,7 +37,7 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     let o = reverse::Opening { args: a, t: &t, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir, console: &console };
     let reverse = reverse::open_all(&o)?;
     let scenario = Scenario::new(&l.scenario, l.seed)?;
-    if let Some(kind) = crate::service::link::unsupported_stage(&scenario, RAW_UNSUPPORTED).filter(|_| l.accept_raw()) {
+    if let Some(kind) = crate::service::link::unsupported_stage(&scenario, l.unsupported()) {
         anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
     }
     let bound = report::bound(&t.ingress, &t.egress, a.udp.egress.udp());

@@ -142,7 +142,7 @@ fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> anyhow
         queue_order: link.injector_mut().queue_order(),
         out_dir: lane0.out_dir.clone(),
         telemetry_interval_ns: interval_ns,
-        unsupported: if lane0.accept_raw() { crate::service::emulator::itp::RAW_UNSUPPORTED } else { T::UNSUPPORTED },
+        unsupported: if lane0.accept_raw() { lane0.unsupported() } else { T::UNSUPPORTED },
     };
     let (port, handle) = control::start(settings)?;
     if let Some(tap) = interval_ns.and_then(|ns| handle.aggregator(ns)) {

@@ -1,0 +1,507 @@
+//! Reading a study file: the TOML text → a validated [`Study`], every
+//! error with its line and field ([`StudyFileError`]).
+
+use super::file::{
+    BlockOrder, Condition, ConditionSource, Block, Participant, Questionnaires, Study, StudyFileError, TlxWhen, TrialSpec, Within,
+    MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, RESERVED_RUN_ARGS,
+};
+use super::square::MAX_BLOCKS;
+use crate::scenario::{canonical_name, PRESET_NAMES};
+use serde::Deserialize;
+use std::collections::{BTreeMap, BTreeSet};
+use std::ops::Range;
+use toml::Spanned;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Raw {
+    name: Option<String>,
+    description: Option<String>,
+    seed: Option<Spanned<i64>>,
+    data: Option<String>,
+    trials: Option<Spanned<i64>>,
+    baseline: Option<Spanned<String>>,
+    #[serde(default)]
+    hide_condition: bool,
+    trial: Option<RawTrial>,
+    order: Option<RawOrder>,
+    questionnaires: Option<RawQuestionnaires>,
+    #[serde(default)]
+    condition: Vec<Spanned<RawCondition>>,
+    #[serde(default)]
+    block: Vec<Spanned<RawBlock>>,
+    #[serde(default)]
+    participant: Vec<Spanned<toml::Table>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTrial {
+    duration_s: Option<Spanned<f64>>,
+    capture: Option<String>,
+    rate_hz: Option<Spanned<f64>>,
+    #[serde(default)]
+    run_args: Vec<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOrder {
+    blocks: Option<Spanned<String>>,
+    within: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawQuestionnaires {
+    sus: Option<Spanned<String>>,
+    tlx: Option<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCondition {
+    name: Spanned<String>,
+    scenario: Option<Spanned<String>>,
+    stage: Option<Vec<toml::Table>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBlock {
+    name: Spanned<String>,
+    conditions: Spanned<Vec<Spanned<String>>>,
+    trials: Option<Spanned<i64>>,
+}
+
+/// Where errors point: the text, for lines, and the file's name.
+struct Ctx<'a> {
+    text: &'a str,
+    origin: &'a str,
+}
+
+impl Ctx<'_> {
+    fn line_of(&self, byte: usize) -> usize {
+        self.text[..byte.min(self.text.len())].matches('\n').count() + 1
+    }
+
+    fn err(&self, span: Option<Range<usize>>, field: impl Into<String>, problem: impl Into<String>) -> StudyFileError {
+        StudyFileError {
+            origin: self.origin.to_string(),
+            line: span.map(|s| self.line_of(s.start)),
+            field: Some(field.into()).filter(|f: &String| !f.is_empty()),
+            problem: problem.into(),
+        }
+    }
+
+    /// The key written on `line` (1-based), if the line is `key = …`.
+    fn key_on_line(&self, line: usize) -> Option<String> {
+        let text = self.text.lines().nth(line.checked_sub(1)?)?;
+        let (key, _) = text.split_once('=')?;
+        let key = key.trim().trim_matches('"');
+        (!key.is_empty() && !key.starts_with('[') && !key.contains(' ')).then(|| key.to_string())
+    }
+
+    /// The byte span of `key = …` inside the table written at `table`, if
+    /// the key is written there. A table's span may be its header alone:
+    /// its keys are the lines after it, up to the next header.
+    fn key_span(&self, table: &Range<usize>, key: &str) -> Option<Range<usize>> {
+        let start = table.start.min(self.text.len());
+        let mut offset = start;
+        for (k, line) in self.text[start..].split_inclusive('\n').enumerate() {
+            let t = line.trim_start();
+            if k > 0 && t.starts_with('[') && offset >= table.end {
+                return None;
+            }
+            let rest = t.strip_prefix(key).or_else(|| t.strip_prefix(&format!("\"{key}\"")));
+            if rest.is_some_and(|r| r.trim_start().starts_with('=')) {
+                return Some(offset..offset + line.len());
+            }
+            offset += line.len();
+        }
+        None
+    }
+
+    /// A TOML syntax or type error: its line, and the key written there.
+    fn toml_error(&self, e: &toml::de::Error) -> StudyFileError {
+        let line = e.span().map(|s| self.line_of(s.start));
+        let mut message = e.message().trim().to_string();
+        // serde names Rust's types; a person wrote a number or text.
+        for (rust, words) in [("expected i64", "expected an integer"), ("expected f64", "expected a number"), ("expected a string", "expected text in quotes")] {
+            message = message.replace(rust, words);
+        }
+        let mut field = line.and_then(|l| self.key_on_line(l));
+        for prefix in ["unknown field `", "missing field `"] {
+            if let Some(rest) = message.strip_prefix(prefix) {
+                if let Some(end) = rest.find('`') {
+                    field = Some(rest[..end].to_string());
+                    message = if prefix.starts_with("unknown") {
+                        format!("unknown field{}", &rest[end + 1..])
+                    } else {
+                        "missing: this table requires it".to_string()
+                    };
+                }
+            }
+        }
+        StudyFileError { origin: self.origin.to_string(), line, field, problem: message }
+    }
+}
+
+/// A name that becomes a folder and a CSV value: letters, digits, `-`,
+/// `_`, `.`, `+`, spaces inside; not empty, not starting with `.`.
+fn check_name(name: &str) -> Result<(), String> {
+    let ok_char = |c: char| c.is_ascii_alphanumeric() || "-_.+ ".contains(c);
+    if name.trim().is_empty() {
+        return Err("empty: give a name".into());
+    }
+    if name.len() > MAX_NAME_LEN {
+        return Err(format!("{} characters: at most {MAX_NAME_LEN}", name.len()));
+    }
+    if name.starts_with('.') || name.trim() != name {
+        return Err(format!("`{name}`: a name neither starts with `.` nor starts or ends with a space"));
+    }
+    if let Some(c) = name.chars().find(|c| !ok_char(*c)) {
+        return Err(format!("`{name}` has `{c}`: letters, digits, `-`, `_`, `.`, `+` and inner spaces only (it names a folder and a CSV column value)"));
+    }
+    Ok(())
+}
+
+/// Parses a study file. `origin` names it in errors; `default_name` is
+/// the study's name when the file gives none.
+pub fn parse_study(text: &str, origin: &str, default_name: &str) -> Result<Study, StudyFileError> {
+    let ctx = Ctx { text, origin };
+    let raw: Raw = toml::from_str(text).map_err(|e| ctx.toml_error(&e))?;
+    let _ = raw.description;
+    let seed = match raw.seed {
+        None => return Err(ctx.err(None, "seed", "missing: a study needs a seed so every schedule and trial is reproducible (any integer ≥ 0, e.g. `seed = 2025`)")),
+        Some(s) => u64::try_from(*s.get_ref()).map_err(|_| ctx.err(Some(s.span()), "seed", format!("{}: a seed is an integer ≥ 0", s.get_ref())))?,
+    };
+    let trials_default = match &raw.trials {
+        None => 1,
+        Some(t) => trials_count(&ctx, t, "trials")?,
+    };
+    let trial = trial_spec(&ctx, raw.trial)?;
+    let (order, within) = order(&ctx, raw.order)?;
+    let questionnaires = questionnaires(&ctx, raw.questionnaires)?;
+    let defined = defined_conditions(&ctx, &raw.condition)?;
+    let (conditions, blocks) = blocks(&ctx, &raw.block, &defined, trials_default)?;
+    let participants = participants(&ctx, &raw.participant, &blocks, order)?;
+    let per_participant: usize = blocks.iter().map(|b| b.conditions.len() * b.trials as usize).sum();
+    if per_participant > MAX_TRIALS_PER_PARTICIPANT {
+        return Err(ctx.err(None, "block", format!("{per_participant} trials per participant: at most {MAX_TRIALS_PER_PARTICIPANT}")));
+    }
+    // Conditions defined but used by no block would be silently left out
+    // of the study: a typo in a block's list is the likely cause.
+    for (name, (span, _)) in &defined {
+        if !conditions.iter().any(|c| &c.name == name) {
+            return Err(ctx.err(Some(span.clone()), "condition.name", format!("`{name}` is defined but no block uses it: add it to a block's `conditions` or remove it")));
+        }
+    }
+    let baseline = match raw.baseline {
+        Some(b) => {
+            let name = canonical_name(b.get_ref()).map(str::to_string).unwrap_or_else(|| b.get_ref().clone());
+            let i = conditions.iter().position(|c| c.name == name).ok_or_else(|| {
+                let names: Vec<&str> = conditions.iter().map(|c| c.name.as_str()).collect();
+                ctx.err(Some(b.span()), "baseline", format!("`{}` is not a condition of this study (its conditions: {})", b.get_ref(), names.join(", ")))
+            })?;
+            Some(i)
+        }
+        None => conditions.iter().position(|c| c.name == "Normal"),
+    };
+    if let Some(data) = &raw.data {
+        if data.trim().is_empty() {
+            return Err(ctx.err(None, "data", "empty: a folder, relative to the study file, or absolute"));
+        }
+    }
+    let name = raw.name.unwrap_or_else(|| default_name.to_string());
+    Ok(Study {
+        name,
+        seed,
+        data: raw.data,
+        baseline,
+        hide_condition: raw.hide_condition,
+        trial,
+        conditions,
+        blocks,
+        participants,
+        order,
+        within,
+        questionnaires,
+    })
+}
+
+fn trials_count(ctx: &Ctx, t: &Spanned<i64>, field: &str) -> Result<u32, StudyFileError> {
+    let v = *t.get_ref();
+    if !(1..=i64::from(MAX_TRIALS_PER_CONDITION)).contains(&v) {
+        return Err(ctx.err(Some(t.span()), field, format!("{v}: trials of each condition are 1 to {MAX_TRIALS_PER_CONDITION}")));
+    }
+    Ok(v as u32)
+}
+
+fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileError> {
+    let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new() }) };
+    let duration_s = match raw.duration_s {
+        Some(d) if !(d.get_ref().is_finite() && *d.get_ref() > 0.0 && *d.get_ref() <= MAX_TRIAL_S) => {
+            return Err(ctx.err(Some(d.span()), "trial.duration_s", format!("{}: a trial lasts more than 0 and at most {MAX_TRIAL_S} s", d.get_ref())));
+        }
+        d => d.map(Spanned::into_inner),
+    };
+    let rate_hz = match raw.rate_hz {
+        Some(r) if !(r.get_ref().is_finite() && (0.001..=10e6).contains(r.get_ref())) => {
+            return Err(ctx.err(Some(r.span()), "trial.rate_hz", format!("{}: a frame rate of 0.001 to 10e6 Hz (as `netfi run --rate-hz`)", r.get_ref())));
+        }
+        r => r.map(Spanned::into_inner),
+    };
+    for (i, a) in raw.run_args.iter().enumerate() {
+        let flag = a.get_ref().split('=').next().unwrap_or_default();
+        if RESERVED_RUN_ARGS.contains(&flag) {
+            let own = match flag {
+                "--capture" => "write it as `trial.capture`",
+                "--rate-hz" => "write it as `trial.rate_hz`",
+                "--duration-s" | "--duration" => "write it as `trial.duration_s`",
+                _ => "the study sets it for each trial",
+            };
+            return Err(ctx.err(Some(a.span()), format!("trial.run_args[{}]", i + 1), format!("`{flag}`: {own} (the study decides {})", RESERVED_RUN_ARGS.join(", "))));
+        }
+    }
+    if let Some(c) = &raw.capture {
+        if c.trim().is_empty() {
+            return Err(ctx.err(None, "trial.capture", "empty: a capture file, relative to the study file"));
+        }
+    }
+    Ok(TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.into_iter().map(Spanned::into_inner).collect() })
+}
+
+fn order(ctx: &Ctx, raw: Option<RawOrder>) -> Result<(BlockOrder, Within), StudyFileError> {
+    let Some(raw) = raw else { return Ok((BlockOrder::Latin, Within::Shuffle)) };
+    let order = match raw.blocks.as_ref().map(|b| (b.get_ref().as_str(), b.span())) {
+        None | Some(("latin", _)) => BlockOrder::Latin,
+        Some(("table", _)) => BlockOrder::Table,
+        Some(("fixed", _)) => BlockOrder::Fixed,
+        Some((other, span)) => {
+            return Err(ctx.err(Some(span), "order.blocks", format!("`{other}`: latin (a balanced Latin square), table (each participant's `blocks`) or fixed (the file's order)")))
+        }
+    };
+    let within = match raw.within.as_ref().map(|w| (w.get_ref().as_str(), w.span())) {
+        None | Some(("shuffle", _)) => Within::Shuffle,
+        Some(("fixed", _)) => Within::Fixed,
+        Some((other, span)) => return Err(ctx.err(Some(span), "order.within", format!("`{other}`: shuffle or fixed"))),
+    };
+    Ok((order, within))
+}
+
+fn questionnaires(ctx: &Ctx, raw: Option<RawQuestionnaires>) -> Result<Questionnaires, StudyFileError> {
+    let Some(raw) = raw else { return Ok(Questionnaires { sus: false, tlx: TlxWhen::None }) };
+    let sus = match raw.sus.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
+        None | Some(("none", _)) => false,
+        Some(("start", _)) => true,
+        Some((other, span)) => return Err(ctx.err(Some(span), "questionnaires.sus", format!("`{other}`: start (a System Usability Scale before the first trial) or none"))),
+    };
+    let tlx = match raw.tlx.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
+        None | Some(("none", _)) => TlxWhen::None,
+        Some(("block", _)) => TlxWhen::Block,
+        Some(("trial", _)) => TlxWhen::Trial,
+        Some((other, span)) => {
+            return Err(ctx.err(Some(span), "questionnaires.tlx", format!("`{other}`: block (a NASA-TLX after each block), trial (after each trial) or none")))
+        }
+    };
+    Ok(Questionnaires { sus, tlx })
+}
+
+/// The `[[condition]]` tables by name: their span and source.
+type Defined = BTreeMap<String, (Range<usize>, ConditionSource)>;
+
+fn defined_conditions(ctx: &Ctx, raw: &[Spanned<RawCondition>]) -> Result<Defined, StudyFileError> {
+    let mut defined = Defined::new();
+    for (i, c) in raw.iter().enumerate() {
+        let field = format!("condition[{}]", i + 1);
+        let table = c.span();
+        let c = c.get_ref();
+        let name = c.name.get_ref();
+        check_name(name).map_err(|p| ctx.err(Some(c.name.span()), format!("{field}.name"), p))?;
+        if let Some(p) = canonical_name(name) {
+            // A condition named like a preset but running something else
+            // would be mistaken for the preset in every table.
+            if !matches!(c.scenario.as_ref().map(|s| canonical_name(s.get_ref())), Some(Some(q)) if q == p) {
+                return Err(ctx.err(Some(c.name.span()), format!("{field}.name"), format!("`{name}` is the name of a preset: name a condition of your own otherwise (`{name}-own`), or use the preset directly in a block")));
+            }
+        }
+        if defined.contains_key(name) {
+            return Err(ctx.err(Some(c.name.span()), format!("{field}.name"), format!("`{name}` is defined twice")));
+        }
+        let source = match (&c.scenario, &c.stage) {
+            (Some(_), Some(_)) | (None, None) => {
+                return Err(ctx.err(Some(table), field, "give either `scenario` (a preset or a scenario file) or `stage` (inline stages), not both or neither"));
+            }
+            (Some(s), None) => match canonical_name(s.get_ref()) {
+                Some(p) => ConditionSource::Preset(p),
+                None if s.get_ref().trim().is_empty() => return Err(ctx.err(Some(s.span()), format!("{field}.scenario"), "empty: a preset or a scenario file")),
+                None => ConditionSource::File(s.get_ref().clone()),
+            },
+            (None, Some(stages)) => ConditionSource::Inline(inline_scenario(ctx, name, stages, table.clone(), &field)?),
+        };
+        defined.insert(name.clone(), (table, source));
+    }
+    Ok(defined)
+}
+
+/// The scenario TOML of inline stages, checked by the scenario parser;
+/// its errors are given at the condition's `stage` line.
+fn inline_scenario(ctx: &Ctx, name: &str, stages: &[toml::Table], table: Range<usize>, field: &str) -> Result<String, StudyFileError> {
+    let at = ctx.key_span(&table, "stage").unwrap_or(table);
+    if stages.is_empty() {
+        return Err(ctx.err(Some(at), format!("{field}.stage"), "no stages: give at least one, e.g. `stage = [{ loss = \"30%\" }]`"));
+    }
+    let mut doc = toml::Table::new();
+    doc.insert("name".into(), toml::Value::String(name.to_string()));
+    doc.insert("stage".into(), toml::Value::Array(stages.iter().cloned().map(toml::Value::Table).collect()));
+    let text = toml::to_string(&doc).map_err(|e| ctx.err(Some(at.clone()), format!("{field}.stage"), e.to_string()))?;
+    crate::scenario::parse_str(&text, "inline", name).map_err(|e| {
+        let loc = e.location.map(|l| format!("{l}: ")).unwrap_or_default();
+        let f = e.field.map(|f| format!("`{f}`: ")).unwrap_or_default();
+        ctx.err(Some(at), format!("{field}.stage"), format!("{loc}{f}{}", e.problem))
+    })?;
+    Ok(text)
+}
+
+fn blocks(ctx: &Ctx, raw: &[Spanned<RawBlock>], defined: &Defined, trials_default: u32) -> Result<(Vec<Condition>, Vec<Block>), StudyFileError> {
+    if raw.is_empty() {
+        return Err(ctx.err(None, "block", "no blocks: give at least one `[[block]]` with `name` and `conditions`"));
+    }
+    if raw.len() > MAX_BLOCKS {
+        return Err(ctx.err(Some(raw[MAX_BLOCKS].span()), "block", format!("{} blocks: at most {MAX_BLOCKS}", raw.len())));
+    }
+    let mut conditions: Vec<Condition> = Vec::new();
+    let mut blocks: Vec<Block> = Vec::new();
+    for (i, b) in raw.iter().enumerate() {
+        let field = format!("block[{}]", i + 1);
+        let b = b.get_ref();
+        check_name(b.name.get_ref()).map_err(|p| ctx.err(Some(b.name.span()), format!("{field}.name"), p))?;
+        if blocks.iter().any(|x| &x.name == b.name.get_ref()) {
+            return Err(ctx.err(Some(b.name.span()), format!("{field}.name"), format!("`{}`: two blocks of one name", b.name.get_ref())));
+        }
+        if b.conditions.get_ref().is_empty() {
+            return Err(ctx.err(Some(b.conditions.span()), format!("{field}.conditions"), "empty: a block runs at least one condition"));
+        }
+        let trials = match &b.trials {
+            Some(t) => trials_count(ctx, t, &format!("{field}.trials"))?,
+            None => trials_default,
+        };
+        let mut members = Vec::new();
+        for (j, c) in b.conditions.get_ref().iter().enumerate() {
+            let cfield = format!("{field}.conditions[{}]", j + 1);
+            let written = c.get_ref();
+            let (name, source) = match (defined.get(written), canonical_name(written)) {
+                (Some((_, source)), _) => (written.clone(), source.clone()),
+                (None, Some(p)) => (p.to_string(), ConditionSource::Preset(p)),
+                (None, None) => {
+                    let own: Vec<&str> = defined.keys().map(String::as_str).collect();
+                    let own = if own.is_empty() { "none defined".to_string() } else { own.join(", ") };
+                    return Err(ctx.err(
+                        Some(c.span()),
+                        cfield,
+                        format!("`{written}` is neither a `[[condition]]` of this file ({own}) nor a preset ({})", PRESET_NAMES.join(", ")),
+                    ));
+                }
+            };
+            let k = match conditions.iter().position(|x| x.name == name) {
+                Some(k) => k,
+                None => {
+                    conditions.push(Condition { name, source });
+                    conditions.len() - 1
+                }
+            };
+            if members.contains(&k) {
+                return Err(ctx.err(Some(c.span()), cfield, format!("`{written}` twice in one block: use `trials` for more trials of it")));
+            }
+            members.push(k);
+        }
+        blocks.push(Block { name: b.name.get_ref().clone(), conditions: members, trials });
+    }
+    Ok((conditions, blocks))
+}
+
+fn participants(ctx: &Ctx, raw: &[Spanned<toml::Table>], blocks: &[Block], order: BlockOrder) -> Result<Vec<Participant>, StudyFileError> {
+    if raw.is_empty() {
+        return Err(ctx.err(None, "participant", "no participants: give at least one `[[participant]]` with an `id`"));
+    }
+    if raw.len() > MAX_PARTICIPANTS {
+        return Err(ctx.err(Some(raw[MAX_PARTICIPANTS].span()), "participant", format!("{} participants: at most {MAX_PARTICIPANTS}", raw.len())));
+    }
+    let mut seen = BTreeSet::new();
+    let mut out = Vec::new();
+    for (i, p) in raw.iter().enumerate() {
+        let field = format!("participant[{}]", i + 1);
+        let span = p.span();
+        let at = |key: &str| Some(ctx.key_span(&span, key).unwrap_or(span.clone()));
+        let table = p.get_ref();
+        let id = match table.get("id") {
+            Some(toml::Value::String(s)) => s.clone(),
+            Some(toml::Value::Integer(n)) => n.to_string(),
+            Some(_) => return Err(ctx.err(at("id"), format!("{field}.id"), "a participant's id is text (`id = \"P01\"`)")),
+            None => return Err(ctx.err(Some(span.clone()), format!("{field}.id"), "missing: every participant has an `id`")),
+        };
+        check_name(&id).map_err(|p| ctx.err(at("id"), format!("{field}.id"), p))?;
+        if !seen.insert(id.clone()) {
+            return Err(ctx.err(at("id"), format!("{field}.id"), format!("`{id}`: two participants of one id")));
+        }
+        let mut attributes = BTreeMap::new();
+        for (k, v) in table.iter().filter(|(k, _)| !matches!(k.as_str(), "id" | "blocks")) {
+            let text = match v {
+                toml::Value::String(s) => s.clone(),
+                toml::Value::Integer(n) => n.to_string(),
+                toml::Value::Float(x) => x.to_string(),
+                toml::Value::Boolean(b) => b.to_string(),
+                _ => return Err(ctx.err(at(k), format!("{field}.{k}"), "an attribute is a string, a number or a boolean")),
+            };
+            check_attribute(k).map_err(|p| ctx.err(at(k), format!("{field}.{k}"), p))?;
+            attributes.insert(k.clone(), text);
+        }
+        let order_of = match (table.get("blocks"), order) {
+            (None, BlockOrder::Table) => {
+                return Err(ctx.err(Some(span.clone()), format!("{field}.blocks"), "missing: with `order.blocks = \"table\"` every participant lists the blocks in their order"));
+            }
+            (None, _) => None,
+            (Some(_), BlockOrder::Latin | BlockOrder::Fixed) => {
+                return Err(ctx.err(at("blocks"), format!("{field}.blocks"), "a participant's own block order needs `order.blocks = \"table\"`"));
+            }
+            (Some(v), BlockOrder::Table) => Some(block_row(v, blocks).map_err(|p| ctx.err(at("blocks"), format!("{field}.blocks"), p))?),
+        };
+        out.push(Participant { id, attributes, blocks: order_of });
+    }
+    Ok(out)
+}
+
+/// Attribute names become CSV column names beside the fixed ones.
+fn check_attribute(key: &str) -> Result<(), String> {
+    if super::metrics::FIXED_COLUMNS.contains(&key) || super::metrics::METRICS.iter().any(|m| m.name == key) {
+        return Err(format!("`{key}` is a column of the study's table: name the attribute otherwise"));
+    }
+    if key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') || key.starts_with(|c: char| c.is_ascii_digit()) {
+        return Err(format!("`{key}`: an attribute's name is letters, digits and `_`, not starting with a digit (it becomes a column name)"));
+    }
+    Ok(())
+}
+
+/// A participant's block order: every block once, by name or 1-based number.
+fn block_row(v: &toml::Value, blocks: &[Block]) -> Result<Vec<usize>, String> {
+    let names: Vec<&str> = blocks.iter().map(|b| b.name.as_str()).collect();
+    let toml::Value::Array(items) = v else { return Err(format!("a list of the blocks in order, e.g. [\"{}\"]", names.join("\", \""))) };
+    let mut row = Vec::new();
+    for item in items {
+        let k = match item {
+            toml::Value::String(s) => names.iter().position(|n| n == s).ok_or_else(|| format!("`{s}` is not a block (blocks: {})", names.join(", ")))?,
+            toml::Value::Integer(n) if (1..=blocks.len() as i64).contains(n) => *n as usize - 1,
+            other => return Err(format!("{other}: a block's name or its number, 1 to {}", blocks.len())),
+        };
+        if row.contains(&k) {
+            return Err(format!("`{}` twice: every block once", names[k]));
+        }
+        row.push(k);
+    }
+    if row.len() != blocks.len() {
+        let missing: Vec<&str> = (0..blocks.len()).filter(|k| !row.contains(k)).map(|k| names[k]).collect();
+        return Err(format!("{} of {} blocks: missing {}", row.len(), blocks.len(), missing.join(", ")));
+    }
+    Ok(row)
+}
