@@ -16,7 +16,6 @@
 //! than one machine, each line names its machine.
 
 use netfi::html::plot::{self, Figure, Line, Scale};
-use plotters::prelude::SeriesLabelPosition;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -100,8 +99,8 @@ fn figure(axis: &str, title: &str, x_desc: &str, log: bool, series: &BTreeMap<St
         y_fmt: &plot::short,
         lines,
         bars: Vec::new(),
-        // The rate's first points (the product's runs) sit at the top left.
-        legend: if axis == "rate" { SeriesLabelPosition::LowerLeft } else { SeriesLabelPosition::UpperLeft },
+        // The legend goes below the plot, clear of every point.
+        marks: &[],
     };
     plot::svg(&fig).map_err(|e| e.to_string())
 }

@@ -2,11 +2,11 @@
 
 use super::inputs::{Latency, Law};
 use super::plot::{self, Bars, Figure, Line, Scale};
-use super::trace::TraceSummary;
+use super::plot::Mark;
+use super::trace::{Delays, TraceSummary};
 use super::HtmlError;
 use crate::metrics::fmt_ns;
 use hdrhistogram::Histogram;
-use plotters::chart::SeriesLabelPosition;
 use std::collections::BTreeMap;
 
 /// Points drawn per curve at most (a CDF of many distinct values is thinned).
@@ -42,46 +42,14 @@ pub fn percentiles(series: &[Latency]) -> Result<Option<String>, HtmlError> {
         y_fmt: &|v| fmt_ns(*v as u64),
         lines,
         bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperLeft,
+        marks: &[],
     })
     .map(Some)
 }
 
-/// One log's percentiles interval by interval (one interval per second):
-/// p50, p99 and the most, at each interval's middle; `None` for a log of
-/// fewer than two intervals with values.
-pub fn percentiles_over_time(s: &Latency, id: &str) -> Result<Option<String>, HtmlError> {
-    let filled: Vec<_> = s.intervals.iter().filter(|i| i.count > 0).collect();
-    if filled.len() < 2 {
-        return Ok(None);
-    }
-    let line = |label: &str, color, v: &dyn Fn(&super::inputs::IntervalPoint) -> u64| Line {
-        label: label.into(),
-        color,
-        points: filled.iter().map(|i| (i.start_s + i.duration_s / 2.0, v(i).max(1) as f64)).collect(),
-    };
-    let lines = vec![line("p50", plot::BLUE, &|i| i.p50), line("p99", plot::ORANGE, &|i| i.p99), line("most", plot::GREY, &|i| i.max)];
-    let (_, y) = extent(&lines);
-    let end = s.intervals.iter().map(|i| i.start_s + i.duration_s).fold(1.0, f64::max);
-    plot::svg(&Figure {
-        id,
-        title: &format!("{} per second", s.label),
-        x_desc: "time since the log started (s)",
-        y_desc: "latency",
-        x: Scale::linear(0.0..end),
-        y: Scale::log((y.start / 2.0).max(0.5)..y.end * 2.0),
-        x_fmt: &plot::short,
-        y_fmt: &|v| fmt_ns(*v as u64),
-        lines,
-        bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperRight,
-    })
-    .map(Some)
-}
-
-/// A link stage's queue over time: the most packets queued in each second
-/// of the run (from its first frame).
-pub fn link_occupancy(l: &crate::check::LinkReport, id: &str) -> Result<Option<String>, HtmlError> {
+/// A link stage's queue over time: the max packets queued in each second
+/// of the run (from its first frame), with the run's switches and pauses.
+pub fn link_occupancy(l: &crate::check::LinkReport, id: &str, marks: &[Mark]) -> Result<Option<String>, HtmlError> {
     if l.occupancy.is_empty() {
         return Ok(None);
     }
@@ -92,14 +60,14 @@ pub fn link_occupancy(l: &crate::check::LinkReport, id: &str) -> Result<Option<S
         id,
         title: &format!("Queue of phase {} {}, per second", l.phase, l.label),
         x_desc: "time since the first frame (s)",
-        y_desc: "packets queued, most",
+        y_desc: "packets queued, max",
         x: Scale::linear(0.0..end),
         y: Scale::linear(0.0..top),
         x_fmt: &plot::short,
         y_fmt: &plot::short,
-        lines: vec![Line { label: "packets queued, most".into(), color: plot::GREEN, points }],
+        lines: vec![Line { label: "packets queued, max".into(), color: plot::GREEN, points }],
         bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperRight,
+        marks,
     })
     .map(Some)
 }
@@ -139,8 +107,9 @@ fn cdf_ms(h: &Histogram<u64>) -> Vec<(f64, f64)> {
     pts
 }
 
-/// Delays seen and drawn against the law's distribution function.
-pub fn delay_law(t: &TraceSummary, law: Option<&Law>) -> Result<Option<String>, HtmlError> {
+/// Delays seen and drawn against the law's distribution function, as the
+/// plot `id` titled `title`.
+pub fn delay_law(t: &Delays, law: Option<&Law>, id: &str, title: &str) -> Result<Option<String>, HtmlError> {
     if t.drawn_ns.is_empty() || t.drawn_ns.max() <= 1 {
         return Ok(None);
     }
@@ -161,8 +130,8 @@ pub fn delay_law(t: &TraceSummary, law: Option<&Law>) -> Result<Option<String>, 
         l.points.retain(|p| p.0 <= hi);
     }
     plot::svg(&Figure {
-        id: "plot-delay-law",
-        title: "Delay: seen, drawn and the law",
+        id,
+        title,
         x_desc: "delay (ms)",
         y_desc: "fraction of frames ≤ delay",
         x: Scale::linear(lo..hi),
@@ -171,7 +140,7 @@ pub fn delay_law(t: &TraceSummary, law: Option<&Law>) -> Result<Option<String>, 
         y_fmt: &plot::short,
         lines,
         bars: Vec::new(),
-        legend: SeriesLabelPosition::LowerRight,
+        marks: &[],
     })
     .map(Some)
 }
@@ -184,8 +153,8 @@ fn bin_label(ns: u64) -> String {
     }
 }
 
-/// Loss rate per time bin.
-pub fn loss_over_time(t: &TraceSummary) -> Result<Option<String>, HtmlError> {
+/// Loss rate per time bin, with the run's switches and pauses.
+pub fn loss_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String>, HtmlError> {
     let points: Vec<(f64, f64)> =
         t.bins.iter().enumerate().filter(|(_, b)| b.frames > 0).map(|(i, b)| (t.centre_s(i), b.dropped as f64 / b.frames as f64)).collect();
     if points.len() < 2 {
@@ -202,22 +171,25 @@ pub fn loss_over_time(t: &TraceSummary) -> Result<Option<String>, HtmlError> {
         y_fmt: &plot::short,
         lines: vec![Line { label: "loss rate".into(), color: plot::PURPLE, points }],
         bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperRight,
+        marks,
     })
     .map(Some)
 }
 
-/// Mean drawn and seen delay, and the longest seen, per time bin.
-pub fn delay_over_time(t: &TraceSummary) -> Result<Option<String>, HtmlError> {
-    let per = |f: &dyn Fn(&super::trace::Bin) -> Option<f64>| -> Vec<(f64, f64)> {
-        t.bins.iter().enumerate().filter_map(|(i, b)| f(b).map(|v| (t.centre_s(i), v / 1e6))).collect()
-    };
+/// `f` of each bin that has a value, at the bin's middle, ns → ms.
+fn per_bin(t: &TraceSummary, f: &dyn Fn(&super::trace::Bin) -> Option<f64>) -> Vec<(f64, f64)> {
+    t.bins.iter().enumerate().filter_map(|(i, b)| f(b).map(|v| (t.centre_s(i), v / 1e6))).collect()
+}
+
+/// Mean drawn and seen delay, and the longest seen, per time bin, with
+/// the run's switches and pauses.
+pub fn delay_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String>, HtmlError> {
     let lines = vec![
-        Line { label: "drawn, mean".into(), color: plot::ORANGE, points: per(&|b| (b.delivered > 0).then(|| b.drawn_sum_ns as f64 / b.delivered as f64)) },
-        Line { label: "seen, mean".into(), color: plot::BLUE, points: per(&|b| (b.received > 0).then(|| b.seen_sum_ns as f64 / b.received as f64)) },
-        Line { label: "seen, longest".into(), color: plot::GREY, points: per(&|b| (b.received > 0).then_some(b.seen_max_ns as f64)) },
+        Line { label: "drawn, mean".into(), color: plot::ORANGE, points: per_bin(t, &|b| (b.delivered > 0).then(|| b.drawn_sum_ns as f64 / b.delivered as f64)) },
+        Line { label: "seen, mean".into(), color: plot::BLUE, points: per_bin(t, &|b| (b.received > 0).then(|| b.seen_sum_ns as f64 / b.received as f64)) },
+        Line { label: "seen, max".into(), color: plot::GREY, points: per_bin(t, &|b| (b.received > 0).then_some(b.seen_max_ns as f64)) },
     ];
-    if lines[0].points.len() < 2 || t.drawn_ns.max() <= 1 {
+    if lines[0].points.len() < 2 || t.delays.drawn_ns.max() <= 1 {
         return Ok(None);
     }
     let (_, y) = extent(&lines);
@@ -232,7 +204,40 @@ pub fn delay_over_time(t: &TraceSummary) -> Result<Option<String>, HtmlError> {
         y_fmt: &plot::short,
         lines,
         bars: Vec::new(),
-        legend: SeriesLabelPosition::UpperLeft,
+        marks,
+    })
+    .map(Some)
+}
+
+/// What netfi added per time bin, from the trace: release lateness (actual
+/// − scheduled release) and end to end (receive − send − injected delay),
+/// mean and max, with the run's switches and pauses.
+pub fn added_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String>, HtmlError> {
+    let lines = vec![
+        Line { label: "end to end, mean".into(), color: plot::BLUE, points: per_bin(t, &|b| (b.received > 0).then(|| b.added_sum_ns as f64 / b.received as f64)) },
+        Line { label: "end to end, max".into(), color: plot::SKY, points: per_bin(t, &|b| (b.received > 0).then_some(b.added_max_ns as f64)) },
+        Line { label: "release lateness, mean".into(), color: plot::VERMILLION, points: per_bin(t, &|b| (b.released > 0).then(|| b.late_sum_ns as f64 / b.released as f64)) },
+        Line { label: "release lateness, max".into(), color: plot::ORANGE, points: per_bin(t, &|b| (b.released > 0).then_some(b.late_max_ns as f64)) },
+    ];
+    let lines: Vec<Line> = lines.into_iter().filter(|l| l.points.len() >= 2).collect();
+    if lines.is_empty() {
+        return Ok(None);
+    }
+    let (_, y) = extent(&lines);
+    // Milliseconds on a log axis: microseconds and a preempted frame's
+    // tens of milliseconds in one plot.
+    plot::svg(&Figure {
+        id: "plot-added-over-time",
+        title: &format!("What netfi added per {} bin", bin_label(t.bin_ns)),
+        x_desc: "time since the first frame (s)",
+        y_desc: "added (ms)",
+        x: Scale::linear(0.0..t.end_s()),
+        y: Scale::log((y.start.max(1e-6) / 2.0)..(y.end.max(1e-5) * 2.0)),
+        x_fmt: &plot::short,
+        y_fmt: &plot::short,
+        lines,
+        bars: Vec::new(),
+        marks,
     })
     .map(Some)
 }
@@ -242,6 +247,11 @@ const RUN_LENGTHS_ONE_BY_ONE: u64 = 40;
 
 /// How many loss runs of each length; bars.
 pub fn loss_runs(runs: &BTreeMap<u64, u64>) -> Result<Option<String>, HtmlError> {
+    loss_runs_as(runs, "plot-loss-runs", "Loss runs (consecutive frames dropped)")
+}
+
+/// [`loss_runs`] as the plot `id` titled `title`.
+pub fn loss_runs_as(runs: &BTreeMap<u64, u64>, id: &str, title: &str) -> Result<Option<String>, HtmlError> {
     let Some(&longest) = runs.keys().next_back() else { return Ok(None) };
     let (bars, labels): (Vec<(f64, f64, f64)>, Vec<String>) = if longest <= RUN_LENGTHS_ONE_BY_ONE {
         runs.iter().map(|(&l, &n)| ((l as f64 - 0.4, l as f64 + 0.4, n as f64), l.to_string())).unzip()
@@ -269,8 +279,8 @@ pub fn loss_runs(runs: &BTreeMap<u64, u64>) -> Result<Option<String>, HtmlError>
     let x_end = bars.last().map_or(1.0, |b| b.1 + 0.6);
     let y_end = bars.iter().map(|b| b.2).fold(1.0, f64::max) * 1.1;
     plot::svg(&Figure {
-        id: "plot-loss-runs",
-        title: "Loss runs (consecutive frames dropped)",
+        id,
+        title,
         x_desc: if grouped { "run length (frames, grouped)" } else { "run length (frames)" },
         y_desc: "runs",
         x: Scale::linear(if grouped { -0.6 } else { 0.4 }..x_end),
@@ -279,13 +289,13 @@ pub fn loss_runs(runs: &BTreeMap<u64, u64>) -> Result<Option<String>, HtmlError>
         y_fmt: &plot::short,
         lines: Vec::new(),
         bars: vec![Bars { label: "runs".into(), color: plot::PURPLE, bars }],
-        legend: SeriesLabelPosition::UpperRight,
+        marks: &[],
     })
     .map(Some)
 }
 
 /// Divergence between the console's and the robot's pose per arm, mm:
-/// at the end and the most, as bars.
+/// at the end and the max, as bars.
 pub fn divergence(final_mm: [f64; 2], max_mm: [f64; 2]) -> Result<String, HtmlError> {
     let bars = |v: [f64; 2], from: f64, to: f64| (0..2).map(|a| (a as f64 + from, a as f64 + to, v[a])).collect();
     let y_end = max_mm.iter().chain(final_mm.iter()).fold(1.0f64, |a, b| a.max(*b)) * 1.15;
@@ -301,9 +311,9 @@ pub fn divergence(final_mm: [f64; 2], max_mm: [f64; 2]) -> Result<String, HtmlEr
         lines: Vec::new(),
         bars: vec![
             Bars { label: "at the end".into(), color: plot::BLUE, bars: bars(final_mm, -0.35, -0.02) },
-            Bars { label: "most".into(), color: plot::ORANGE, bars: bars(max_mm, 0.02, 0.35) },
+            Bars { label: "max".into(), color: plot::ORANGE, bars: bars(max_mm, 0.02, 0.35) },
         ],
-        legend: SeriesLabelPosition::UpperRight,
+        marks: &[],
     })
 }
 

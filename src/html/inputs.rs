@@ -10,19 +10,15 @@
 
 use super::trace::{self, TraceSummary};
 use super::HtmlError;
-use crate::model::AnyModel;
 use crate::service::report::RunReport;
 use hdrhistogram::Histogram;
 use std::path::{Path, PathBuf};
 
-/// One latency distribution from an HdrHistogram log (all its intervals),
-/// and its percentiles interval by interval.
+/// One latency distribution from an HdrHistogram log (all its intervals).
 pub struct Latency {
     pub label: &'static str,
     pub file: &'static str,
     pub histogram: Option<Histogram<u64>>,
-    /// One point per interval of the log (empty when not recorded).
-    pub intervals: Vec<IntervalPoint>,
 }
 
 /// One interval of an HdrHistogram log: when it started (seconds from the
@@ -37,39 +33,21 @@ pub struct IntervalPoint {
     pub max: u64,
 }
 
-/// The analytic law of the scenario's delay: its one delay stage.
-#[derive(Debug, Clone)]
-pub enum Law {
-    Delay(crate::model::delay::Delay),
-    Jitter(crate::model::jitter::Jitter),
-}
-
-impl Law {
-    /// `P(D ≤ x_ms)`.
-    pub fn cdf_ms(&self, x_ms: f64) -> f64 {
-        match self {
-            Law::Delay(d) => d.cdf_ms(x_ms),
-            Law::Jitter(j) => j.cdf_ms(x_ms),
-        }
-    }
-
-    /// Whether frames keep their order (`fifo`): a frame then waits for
-    /// the one before it, and the delays drawn lie at or above the law.
-    pub fn in_order(&self) -> bool {
-        match self {
-            Law::Delay(d) => !d.may_reorder(),
-            Law::Jitter(j) => !j.may_reorder(),
-        }
-    }
-}
+pub use crate::service::report::Law;
 
 /// Everything the page shows.
 pub struct RunInputs {
     pub dir: PathBuf,
     pub report: RunReport,
     pub latency: Vec<Latency>,
+    /// The whole run's delay law: only where it ran one condition throughout.
     pub law: Option<Law>,
     pub trace: Option<TraceSummary>,
+    /// The scenario the run started with, as TOML (its copy, or the preset
+    /// it names), where known.
+    pub scenario_toml: Option<String>,
+    /// The delay law of each of the run's stretches (`report.phases`).
+    pub phase_laws: Vec<Option<Law>>,
 }
 
 /// The first time bin is about a 100th of the run, rounded up to 1, 2 or
@@ -96,27 +74,30 @@ impl RunInputs {
             latency(dir, "release lateness", "lateness.hlog", f.lateness_hlog.is_some())?,
             latency(dir, "decision", "decision.hlog", f.decision_hlog.is_some())?,
         ];
-        let law = law(dir, &report)?;
-        let trace = match &f.trace {
-            Some(_) => {
-                Some(trace::summarize(&dir.join("trace.csv"), bin_ns(report.duration_s))?)
+        let (spec, scenario_toml) = scenario(dir, &report)?;
+        let one_condition = report.events.is_empty() && report.phases.is_empty() && report.phases_unknown.is_none();
+        let law = match (&spec, one_condition) {
+            (Some(spec), true) => {
+                let scenario = crate::scenario::Scenario::new(spec, report.seed).map_err(|e| HtmlError::malformed(&dir.join("scenario.toml"), e.to_string()))?;
+                Law::of_scenario(&scenario)
             }
+            _ => None,
+        };
+        let phase_laws = phase_laws(spec.as_ref(), &report);
+        let starts: Vec<u64> = report.phases.iter().map(|p| p.from_ns).collect();
+        let trace = match &f.trace {
+            Some(_) => Some(trace::summarize(&dir.join("trace.csv"), bin_ns(report.duration_s), &starts)?),
             None => None,
         };
-        Ok(RunInputs { dir: dir.to_path_buf(), report, latency, law, trace })
+        Ok(RunInputs { dir: dir.to_path_buf(), report, latency, law, trace, scenario_toml, phase_laws })
     }
 }
 
-/// The histogram of `dir/file`, all intervals added, and its intervals;
-/// `None` when the run did not write it (`expected` false).
+/// The histogram of `dir/file`, all intervals added; `None` when the run
+/// did not write it (`expected` false).
 fn latency(dir: &Path, label: &'static str, file: &'static str, expected: bool) -> Result<Latency, HtmlError> {
-    let (histogram, intervals) = if expected {
-        let (h, i) = read_hlog_intervals(&dir.join(file))?;
-        (Some(h), i)
-    } else {
-        (None, Vec::new())
-    };
-    Ok(Latency { label, file, histogram, intervals })
+    let histogram = if expected { Some(read_hlog(&dir.join(file))?) } else { None };
+    Ok(Latency { label, file, histogram })
 }
 
 /// Adds up every interval of an HdrHistogram interval log.
@@ -162,44 +143,44 @@ pub fn read_hlog_intervals(path: &Path) -> Result<(Histogram<u64>, Vec<IntervalP
     Ok((total, points))
 }
 
-/// The law of the scenario's delay, when the scenario is one phase with one
-/// delay (or jitter) stage: the run's own copy of the scenario, which must
-/// be there when the report names one; else (a run started by hand) the
-/// preset the report names, if it is one.
-fn law(dir: &Path, report: &RunReport) -> Result<Option<Law>, HtmlError> {
-    let spec = match &report.files.scenario {
+/// The scenario the run started with and its text: the run's own copy,
+/// which must be there when the report names one; else (a run started by
+/// hand) the preset the report names, if it is one.
+fn scenario(dir: &Path, report: &RunReport) -> Result<(Option<crate::scenario::ScenarioSpec>, Option<String>), HtmlError> {
+    match &report.files.scenario {
         Some(_) => {
             let path = dir.join("scenario.toml");
-            crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?
+            let text = std::fs::read_to_string(&path).map_err(|e| HtmlError::read(&path, e))?;
+            let spec = crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
+            Ok((Some(spec), Some(text)))
         }
-        None => match crate::scenario::preset(&report.scenario) {
-            Some(spec) => spec,
-            None => return Ok(None),
-        },
-    };
-    let scenario = crate::scenario::Scenario::new(&spec, report.seed).map_err(|e| HtmlError::malformed(&dir.join("scenario.toml"), e.to_string()))?;
-    Ok(Law::of_scenario(&scenario))
+        None => Ok(match crate::scenario::preset(&report.scenario) {
+            Some(spec) => {
+                let text = spec.to_toml();
+                (Some(spec), Some(text))
+            }
+            None => (None, None),
+        }),
+    }
 }
 
-impl Law {
-    /// The law of `scenario`'s delay: its one delay or jitter stage, in a
-    /// scenario of one phase; `None` otherwise.
-    pub fn of_scenario(scenario: &crate::scenario::Scenario) -> Option<Law> {
-        let [phase] = scenario.phases() else { return None };
-        let laws: Vec<Law> = phase
-            .stages()
-            .iter()
-            .filter_map(|s| match s.model() {
-                AnyModel::Delay(d) => Some(Law::Delay(d.clone())),
-                AnyModel::Jitter(j) => Some(Law::Jitter(j.clone())),
-                _ => None,
-            })
-            .collect();
-        match <[Law; 1]>::try_from(laws) {
-            Ok([one]) => Some(one),
-            Err(_) => None,
-        }
-    }
+/// The delay law of each stretch of the run (`report.phases`), from the
+/// timeline its scenario and control events make.
+fn phase_laws(spec: Option<&crate::scenario::ScenarioSpec>, report: &RunReport) -> Vec<Option<Law>> {
+    let timeline = spec.and_then(|s| crate::service::report::RunTimeline::of(s, &report.events).ok());
+    report
+        .phases
+        .iter()
+        .map(|p| {
+            let t = timeline.as_ref()?;
+            let phase = t.phases.get(p.run_phase.checked_sub(1)?)?;
+            let built = crate::scenario::Timeline::new(&phase.spec, phase.phase).ok()?;
+            if p.paused {
+                return None;
+            }
+            Law::of_phase(built.phases().first()?)
+        })
+        .collect()
 }
 
 #[cfg(test)]

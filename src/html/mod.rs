@@ -18,6 +18,7 @@
 //! `loss-runs`, `kinematics`, `events`; every plot is an `<svg class="plot">` with its
 //! own id.
 
+mod added;
 pub mod figures;
 pub mod inputs;
 mod page;

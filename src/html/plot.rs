@@ -5,6 +5,10 @@
 //! `<svg>` element, sized by its `viewBox` so the page's CSS scales it, and
 //! without the `xmlns` attribute (an inline `<svg>` in HTML needs none, and
 //! the page then names no URL at all).
+//!
+//! The legend is drawn below the plot area, never over a curve; a time
+//! plot marks the run's live switches (dashed lines, named) and its pauses
+//! (shaded).
 
 use super::HtmlError;
 use plotters::coord::types::RangedCoordf64;
@@ -58,6 +62,14 @@ pub struct Bars {
 
 type Format<'a> = &'a dyn Fn(&f64) -> String;
 
+/// What happened on a time axis: a switch (or a phase starting) at `x`,
+/// named, or a pause from `x` to `to` (its end, or the axis's).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Mark {
+    At { x: f64, label: String },
+    Paused { x: f64, to: Option<f64> },
+}
+
 /// What one plot shows.
 pub struct Figure<'a> {
     /// The `id` of the `<svg>` element.
@@ -71,8 +83,8 @@ pub struct Figure<'a> {
     pub y_fmt: Format<'a>,
     pub lines: Vec<Line>,
     pub bars: Vec<Bars>,
-    /// Where the legend goes (drawn when there are two series or more).
-    pub legend: SeriesLabelPosition,
+    /// Switches and pauses, on a time axis.
+    pub marks: &'a [Mark],
 }
 
 /// A number as short as it reads well: `0.25`, `12`, `1.5e6`.
@@ -102,15 +114,78 @@ pub fn svg(fig: &Figure) -> Result<String, HtmlError> {
         (true, true) => draw(fig, LogCoord::from(x.log_scale()), LogCoord::from(y.log_scale())),
     }
     .map_err(|message| HtmlError::Plot { id: fig.id.to_string(), message })?;
-    Ok(with_own_root(&body, fig.id, fig.title))
+    Ok(with_own_root(&body, fig.id, fig.title, &legend(fig)))
 }
 
-/// Replaces plotters' root element with one that scales with the page.
-fn with_own_root(svg: &str, id: &str, title: &str) -> String {
+/// One entry of the legend: a line, a filled box, a dashed line or a shade.
+enum Swatch {
+    Line(RGBColor),
+    Box(RGBColor),
+    Dashed,
+    Shade,
+}
+
+/// The legend's entries: every series when there are two or more, and
+/// what the marks mean.
+fn legend(fig: &Figure) -> Vec<(Swatch, String)> {
+    let mut out = Vec::new();
+    if fig.lines.len() + fig.bars.len() > 1 {
+        out.extend(fig.bars.iter().map(|b| (Swatch::Box(b.color), b.label.clone())));
+        out.extend(fig.lines.iter().map(|l| (Swatch::Line(l.color), l.label.clone())));
+    }
+    if fig.marks.iter().any(|m| matches!(m, Mark::At { .. })) {
+        out.push((Swatch::Dashed, "switch".into()));
+    }
+    if fig.marks.iter().any(|m| matches!(m, Mark::Paused { .. })) {
+        out.push((Swatch::Shade, "faults paused".into()));
+    }
+    out
+}
+
+/// Height of a legend row below the plot, SVG units.
+const LEGEND_ROW: u32 = 22;
+
+/// The legend below the plot area, in rows as wide as the figure; its
+/// height.
+fn legend_svg(entries: &[(Swatch, String)]) -> (String, u32) {
+    let (w, h) = SIZE;
+    let mut svg = String::from("<g class=\"legend\" font-family=\"sans-serif\" font-size=\"13\">");
+    let (mut x, mut row) = (84u32, 0u32);
+    for (swatch, label) in entries {
+        // About 7 units a character at 13 units a font.
+        let width = 28 + 7 * label.chars().count() as u32 + 18;
+        if x + width > w && x > 84 {
+            (x, row) = (84, row + 1);
+        }
+        let y = h + 6 + row * LEGEND_ROW + LEGEND_ROW / 2;
+        let c = |c: &RGBColor| format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2);
+        svg += &match swatch {
+            Swatch::Line(col) => format!("<line x1=\"{x}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"{}\" stroke-width=\"3\"/>", x + 20, c(col)),
+            Swatch::Box(col) => format!("<rect x=\"{x}\" y=\"{}\" width=\"20\" height=\"10\" fill=\"{}\"/>", y - 5, c(col)),
+            Swatch::Dashed => format!("<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"#333\" stroke-dasharray=\"4 3\"/>", x + 10, y - 8, x + 10, y + 8),
+            Swatch::Shade => format!("<rect x=\"{x}\" y=\"{}\" width=\"20\" height=\"14\" fill=\"#999\" fill-opacity=\"0.25\"/>", y - 7),
+        };
+        svg += &format!("<text x=\"{}\" y=\"{}\">{}</text>", x + 26, y + 4, super::escape(label));
+        x += width;
+    }
+    svg += "</g>";
+    let rows = if entries.is_empty() { 0 } else { row + 1 };
+    (svg, if rows == 0 { 0 } else { rows * LEGEND_ROW + 10 })
+}
+
+/// Replaces plotters' root element with one that scales with the page,
+/// and adds the legend below the plot.
+fn with_own_root(svg: &str, id: &str, title: &str, legend: &[(Swatch, String)]) -> String {
     let rest = svg.find('>').map_or(svg, |end| &svg[end + 1..]);
     let (w, h) = SIZE;
+    let (legend, extra) = legend_svg(legend);
+    let body = match rest.rfind("</svg>") {
+        Some(end) => format!("{}<rect y=\"{h}\" width=\"{w}\" height=\"{extra}\" fill=\"#fff\"/>{legend}</svg>", &rest[..end]),
+        None => rest.to_string(),
+    };
     format!(
-        "<svg id=\"{id}\" class=\"plot\" viewBox=\"0 0 {w} {h}\" role=\"img\" aria-label=\"{}\">{rest}",
+        "<svg id=\"{id}\" class=\"plot\" viewBox=\"0 0 {w} {}\" role=\"img\" aria-label=\"{}\">{body}",
+        h + extra,
         super::escape(title)
     )
 }
@@ -141,29 +216,35 @@ where
             .light_line_style(RGBColor(235, 235, 235))
             .draw()
             .map_err(|e| e.to_string())?;
+        let (x_range, y_range) = (fig.x.range.clone(), fig.y.range.clone());
+        // Pauses under the data, switches over it.
+        for m in fig.marks {
+            if let Mark::Paused { x, to } = m {
+                let (a, b) = (x.max(x_range.start), to.unwrap_or(x_range.end).min(x_range.end));
+                if a < b {
+                    let shade = Rectangle::new([(a, y_range.start), (b, y_range.end)], RGBColor(153, 153, 153).mix(0.25).filled());
+                    chart.draw_series(std::iter::once(shade)).map_err(|e| e.to_string())?;
+                }
+            }
+        }
         for b in &fig.bars {
             let color = b.color;
             let rects = b.bars.iter().map(move |&(x0, x1, h)| Rectangle::new([(x0, 0.0), (x1, h)], color.filled()));
-            chart.draw_series(rects).map_err(|e| e.to_string())?.label(b.label.as_str()).legend(move |(x, y)| {
-                Rectangle::new([(x, y - 5), (x + 16, y + 5)], color.filled())
-            });
+            chart.draw_series(rects).map_err(|e| e.to_string())?;
         }
         for l in &fig.lines {
-            let color = l.color;
-            chart
-                .draw_series(LineSeries::new(l.points.iter().copied(), color.stroke_width(2)))
-                .map_err(|e| e.to_string())?
-                .label(l.label.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
+            chart.draw_series(LineSeries::new(l.points.iter().copied(), l.color.stroke_width(2))).map_err(|e| e.to_string())?;
         }
-        if fig.lines.len() + fig.bars.len() > 1 {
-            chart
-                .configure_series_labels()
-                .position(fig.legend.clone())
-            .background_style(WHITE.mix(0.85))
-                .border_style(GREY)
-                .draw()
-                .map_err(|e| e.to_string())?;
+        for m in fig.marks {
+            if let Mark::At { x, label } = m {
+                if !x_range.contains(x) {
+                    continue;
+                }
+                let dashes = DashedLineSeries::new([(*x, y_range.start), (*x, y_range.end)], 4, 3, RGBColor(51, 51, 51).stroke_width(1));
+                chart.draw_series(dashes).map_err(|e| e.to_string())?;
+                let text = Text::new(label.clone(), (*x, y_range.end), ("sans-serif", 12).into_font().color(&RGBColor(51, 51, 51)));
+                chart.draw_series(std::iter::once(text)).map_err(|e| e.to_string())?;
+            }
         }
         root.present().map_err(|e| e.to_string())?;
     }

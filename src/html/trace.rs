@@ -1,8 +1,13 @@
 //! `trace.csv` read as a stream, one row at a time, into fixed-size
-//! summaries: loss and delay per time bin, loss-run lengths, and the
-//! histograms of the delays drawn and seen. Memory stays bounded however
-//! long the run: at most [`MAX_BINS`] bins, one counter per distinct
-//! loss-run length, and two HdrHistograms.
+//! summaries: loss, delay and what netfi added per time bin, loss-run
+//! lengths, and the histograms of the delays drawn and seen, for the whole
+//! run and for each of its first [`MAX_STRETCHES`] stretches under one
+//! condition. Memory stays bounded however long the run: at most
+//! [`MAX_BINS`] bins, one counter per distinct loss-run length, and two
+//! HdrHistograms per stretch kept.
+//!
+//! Time is the frame's ingress time from the run's first frame: the clock
+//! of the run's phases and of its control events.
 
 use super::HtmlError;
 use hdrhistogram::Histogram;
@@ -13,6 +18,10 @@ use std::path::Path;
 /// The most time bins kept; when the run outlasts them, neighbours merge
 /// and the bin width doubles.
 pub const MAX_BINS: usize = 256;
+
+/// The most stretches of a run whose delays are kept apart (each for a
+/// plot of its own); the figures of every stretch are in the report.
+pub const MAX_STRETCHES: usize = 16;
 
 /// The frames of one time bin.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -28,6 +37,15 @@ pub struct Bin {
     /// Sum and maximum of receive − send of received frames, ns.
     pub seen_sum_ns: u128,
     pub seen_max_ns: u64,
+    /// Sum and maximum of what netfi added to received frames (receive −
+    /// send − injected delay), ns.
+    pub added_sum_ns: u128,
+    pub added_max_ns: u64,
+    /// Released frames, and the sum and maximum of their release lateness
+    /// (actual − scheduled release), ns.
+    pub released: u64,
+    pub late_sum_ns: u128,
+    pub late_max_ns: u64,
 }
 
 impl Bin {
@@ -39,6 +57,39 @@ impl Bin {
         self.drawn_sum_ns += o.drawn_sum_ns;
         self.seen_sum_ns += o.seen_sum_ns;
         self.seen_max_ns = self.seen_max_ns.max(o.seen_max_ns);
+        self.added_sum_ns += o.added_sum_ns;
+        self.added_max_ns = self.added_max_ns.max(o.added_max_ns);
+        self.released += o.released;
+        self.late_sum_ns += o.late_sum_ns;
+        self.late_max_ns = self.late_max_ns.max(o.late_max_ns);
+    }
+}
+
+/// The delays drawn and seen of the frames of one stretch of the run.
+#[derive(Debug, Clone)]
+pub struct Delays {
+    /// Injected delays of delivered frames, ns.
+    pub drawn_ns: Histogram<u64>,
+    /// receive − send of received frames, ns.
+    pub seen_ns: Histogram<u64>,
+}
+
+impl Delays {
+    fn new() -> Delays {
+        // Three significant digits from 1 ns to an hour: a delay histogram
+        // of a few hundred kB whatever the run's length.
+        let h = || Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds");
+        Delays { drawn_ns: h(), seen_ns: h() }
+    }
+
+    /// Values outside the bounds are clamped, not lost.
+    fn record(&mut self, drawn: Option<u64>, seen: Option<u64>) {
+        if let Some(d) = drawn {
+            self.drawn_ns.saturating_record(d.max(1));
+        }
+        if let Some(v) = seen {
+            self.seen_ns.saturating_record(v.max(1));
+        }
     }
 }
 
@@ -46,15 +97,17 @@ impl Bin {
 #[derive(Debug, Clone)]
 pub struct TraceSummary {
     /// Width of a bin, ns; bin `i` covers `[i·w, (i+1)·w)` after the first
-    /// frame's send time.
+    /// frame's ingress.
     pub bin_ns: u64,
     pub bins: Vec<Bin>,
     /// Loss-run length (consecutive dropped frames, in ingress order) → count.
     pub loss_runs: BTreeMap<u64, u64>,
-    /// Injected delays of delivered frames, ns.
-    pub drawn_ns: Histogram<u64>,
-    /// receive − send of received frames, ns.
-    pub seen_ns: Histogram<u64>,
+    /// The whole run's delays.
+    pub delays: Delays,
+    /// Where each stretch of the run begins (ns from the first frame, the
+    /// first at 0), and the delays of the first [`MAX_STRETCHES`].
+    pub stretch_starts_ns: Vec<u64>,
+    pub stretches: Vec<Delays>,
     pub rows: u64,
     /// Dropped frames since the last delivered one.
     open_run: u64,
@@ -63,8 +116,11 @@ pub struct TraceSummary {
 /// The columns read, by name (the header decides their positions).
 struct Columns {
     send: usize,
+    ingress: usize,
     fate: usize,
     delay: usize,
+    release_sched: usize,
+    release: usize,
     recv: usize,
 }
 
@@ -72,22 +128,36 @@ impl Columns {
     fn from_header(header: &str) -> Option<Columns> {
         let names: Vec<&str> = header.trim_end().split(',').collect();
         let at = |n: &str| names.iter().position(|c| *c == n);
-        Some(Columns { send: at("send_ns")?, fate: at("fate")?, delay: at("delay_ns")?, recv: at("recv_ns")? })
+        Some(Columns {
+            send: at("send_ns")?,
+            ingress: at("ingress_ns")?,
+            fate: at("fate")?,
+            delay: at("delay_ns")?,
+            release_sched: at("release_sched_ns")?,
+            release: at("release_ns")?,
+            recv: at("recv_ns")?,
+        })
     }
 }
 
 impl TraceSummary {
-    /// An empty summary whose first bin is `bin_ns` wide.
+    /// An empty summary whose first bin is `bin_ns` wide, of a run of one
+    /// condition.
     pub fn new(bin_ns: u64) -> TraceSummary {
-        // Three significant digits from 1 ns to an hour: a delay histogram
-        // of a few tens of kB whatever the run's length.
-        let h = || Histogram::new_with_bounds(1, 3_600_000_000_000, 3).expect("valid histogram bounds");
+        TraceSummary::with_stretches(bin_ns, &[])
+    }
+
+    /// An empty summary of a run whose stretches under one condition begin
+    /// at `starts_ns` (ns from the first frame, in order; the first at 0).
+    pub fn with_stretches(bin_ns: u64, starts_ns: &[u64]) -> TraceSummary {
+        let kept = starts_ns.len().min(MAX_STRETCHES);
         TraceSummary {
             bin_ns: bin_ns.max(1),
             bins: Vec::new(),
             loss_runs: BTreeMap::new(),
-            drawn_ns: h(),
-            seen_ns: h(),
+            delays: Delays::new(),
+            stretch_starts_ns: starts_ns.to_vec(),
+            stretches: (0..kept).map(|_| Delays::new()).collect(),
             rows: 0,
             open_run: 0,
         }
@@ -126,15 +196,16 @@ impl TraceSummary {
 }
 
 /// Reads `path` row by row. `bin_ns` is the first bin width (it doubles
-/// while the run outlasts [`MAX_BINS`] bins). A row that does not parse is
+/// while the run outlasts [`MAX_BINS`] bins); `stretches_ns` where the
+/// run's stretches under one condition begin. A row that does not parse is
 /// an error naming the file and the line.
-pub fn summarize(path: &Path, bin_ns: u64) -> Result<TraceSummary, HtmlError> {
+pub fn summarize(path: &Path, bin_ns: u64, stretches_ns: &[u64]) -> Result<TraceSummary, HtmlError> {
     let file = std::fs::File::open(path).map_err(|e| HtmlError::read(path, e))?;
     let mut lines = std::io::BufReader::with_capacity(1 << 16, file).lines();
     let header = lines.next().transpose().map_err(|e| HtmlError::read(path, e))?.unwrap_or_default();
     let cols = Columns::from_header(&header)
         .ok_or_else(|| HtmlError::malformed(path, "line 1: not a trace header (send_ns, fate, delay_ns and recv_ns expected)"))?;
-    let mut s = TraceSummary::new(bin_ns);
+    let mut s = TraceSummary::with_stretches(bin_ns, stretches_ns);
     let mut t0: Option<u64> = None;
     for (n, line) in lines.enumerate() {
         let line = line.map_err(|e| HtmlError::read(path, e))?;
@@ -142,7 +213,7 @@ pub fn summarize(path: &Path, bin_ns: u64) -> Result<TraceSummary, HtmlError> {
             continue;
         }
         let row = Row::parse(&line, &cols).map_err(|what| HtmlError::malformed(path, format!("line {}: {what}", n + 2)))?;
-        let t = row.send_ns.saturating_sub(*t0.get_or_insert(row.send_ns));
+        let t = row.ingress_ns.saturating_sub(*t0.get_or_insert(row.ingress_ns));
         s.record(t, &row);
     }
     s.close_run();
@@ -154,7 +225,15 @@ impl TraceSummary {
     /// after the first, dropped or delivered after `drawn_ns`; nobody
     /// received it. Call [`TraceSummary::close_run`] after the last.
     pub fn record_simulated(&mut self, t_ns: u64, drawn_ns: Option<u64>) {
-        let row = Row { send_ns: t_ns, dropped: drawn_ns.is_none(), delivered: drawn_ns.is_some(), delay_ns: drawn_ns, recv_ns: None };
+        let row = Row {
+            send_ns: t_ns,
+            ingress_ns: t_ns,
+            dropped: drawn_ns.is_none(),
+            delivered: drawn_ns.is_some(),
+            delay_ns: drawn_ns,
+            release: None,
+            recv_ns: None,
+        };
         self.record(t_ns, &row);
     }
 
@@ -187,20 +266,27 @@ impl TraceSummary {
             b.delivered += 1;
             b.drawn_sum_ns += u128::from(d);
             drawn = Some(d);
+            if let Some((sched, actual)) = row.release {
+                let late = actual.saturating_sub(sched);
+                b.released += 1;
+                b.late_sum_ns += u128::from(late);
+                b.late_max_ns = b.late_max_ns.max(late);
+            }
             if let Some(r) = row.recv_ns {
                 let v = r.saturating_sub(row.send_ns);
+                let added = v.saturating_sub(d);
                 b.received += 1;
                 b.seen_sum_ns += u128::from(v);
                 b.seen_max_ns = b.seen_max_ns.max(v);
+                b.added_sum_ns += u128::from(added);
+                b.added_max_ns = b.added_max_ns.max(added);
                 seen = Some(v);
             }
         }
-        // Values outside the bounds are clamped, not lost.
-        if let Some(d) = drawn {
-            self.drawn_ns.saturating_record(d.max(1));
-        }
-        if let Some(v) = seen {
-            self.seen_ns.saturating_record(v.max(1));
+        self.delays.record(drawn, seen);
+        let k = self.stretch_starts_ns.partition_point(|s| *s <= t_ns).saturating_sub(1);
+        if let Some(st) = self.stretches.get_mut(k) {
+            st.record(drawn, seen);
         }
     }
 }
@@ -208,9 +294,12 @@ impl TraceSummary {
 /// The cells of one row that the summaries use.
 struct Row {
     send_ns: u64,
+    ingress_ns: u64,
     dropped: bool,
     delivered: bool,
     delay_ns: Option<u64>,
+    /// Scheduled and actual release, of a released frame.
+    release: Option<(u64, u64)>,
     recv_ns: Option<u64>,
 }
 
@@ -231,9 +320,11 @@ impl Row {
         }
         Ok(Row {
             send_ns: number(c.send, "send_ns")?.ok_or("send_ns is empty")?,
+            ingress_ns: number(c.ingress, "ingress_ns")?.ok_or("ingress_ns is empty")?,
             dropped: fate == "dropped",
             delivered: fate == "delivered",
             delay_ns: number(c.delay, "delay_ns")?,
+            release: number(c.release_sched, "release_sched_ns")?.zip(number(c.release, "release_ns")?),
             recv_ns: number(c.recv, "recv_ns")?,
         })
     }
@@ -260,11 +351,11 @@ mod tests {
             if [2, 3, 4, 7].contains(&i) {
                 text += &format!("{i},{i},{i},{send},{send},dropped,ge_lomax,1,1,,,,\n");
             } else {
-                text += &format!("{i},{i},{i},{send},{send},delivered,,,,5000000,0,0,{}\n", send + 5_000_100);
+                text += &format!("{i},{i},{i},{send},{send},delivered,,,,5000000,{},{},{}\n", send + 5_000_000, send + 5_000_000, send + 5_000_100);
             }
         }
         let p = write("ok", &text);
-        let s = summarize(&p, 5_000_000).unwrap();
+        let s = summarize(&p, 5_000_000, &[]).unwrap();
         std::fs::remove_file(&p).ok();
         assert_eq!(s.rows, 10);
         assert_eq!(s.loss_runs, BTreeMap::from([(1, 1), (3, 1)]));
@@ -272,18 +363,19 @@ mod tests {
         assert_eq!((s.bins[0].frames, s.bins[0].dropped), (5, 3));
         assert_eq!((s.bins[1].frames, s.bins[1].dropped), (5, 1));
         assert_eq!(s.bins[1].seen_max_ns, 5_000_100);
-        assert_eq!(s.drawn_ns.len(), 6);
-        assert_eq!(s.seen_ns.len(), 6);
+        assert_eq!((s.bins[1].added_max_ns, s.bins[1].released), (100, 4));
+        assert_eq!(s.delays.drawn_ns.len(), 6);
+        assert_eq!(s.delays.seen_ns.len(), 6);
     }
 
     #[test]
     fn long_runs_merge_bins_and_keep_every_frame() {
         let mut text = HEADER.to_string();
         for i in 0..3000u64 {
-            text += &format!("{i},{i},{i},{},0,dropped,x,1,1,,,,\n", i * 1_000_000);
+            text += &format!("{i},{i},{i},0,{},dropped,x,1,1,,,,\n", i * 1_000_000);
         }
         let p = write("long", &text);
-        let s = summarize(&p, 1_000_000).unwrap();
+        let s = summarize(&p, 1_000_000, &[]).unwrap();
         std::fs::remove_file(&p).ok();
         assert!(s.bins.len() <= MAX_BINS);
         assert_eq!(s.bin_ns, 16_000_000);
@@ -292,9 +384,31 @@ mod tests {
     }
 
     #[test]
+    fn each_stretch_keeps_its_own_delays_on_the_ingress_clock() {
+        let mut text = HEADER.to_string();
+        // Sent long before they entered: the time is the ingress's. Frames
+        // 0–4 delayed 1 ms, 5–9 delayed 9 ms; a stretch begins at 5 ms.
+        for i in 0..10u64 {
+            let t = 1_000_000_000 + i * 1_000_000;
+            let d = if i < 5 { 1_000_000 } else { 9_000_000 };
+            text += &format!("{i},{i},{i},0,{t},delivered,,,,{d},{},{},\n", t + d, t + d);
+        }
+        let p = write("stretches", &text);
+        let s = summarize(&p, 1_000_000, &[0, 5_000_000]).unwrap();
+        std::fs::remove_file(&p).ok();
+        assert_eq!(s.bins.len(), 10, "a bin a millisecond from the first ingress");
+        assert_eq!(s.stretches.len(), 2);
+        assert_eq!((s.stretches[0].drawn_ns.len(), s.stretches[0].drawn_ns.max() / 1000), (5, 1000));
+        // The histogram keeps 3 significant digits: 9 ms within 0.1%.
+        let second = &s.stretches[1].drawn_ns;
+        assert_eq!(second.len(), 5);
+        assert!((8_990..=9_000).contains(&(second.min() / 1000)), "{}", second.min());
+    }
+
+    #[test]
     fn a_bad_row_names_file_and_line() {
         let p = write("bad", &format!("{HEADER}0,0,0,12,0,delivered,,,,x,,,\n"));
-        let e = summarize(&p, 1).unwrap_err().to_string();
+        let e = summarize(&p, 1, &[]).unwrap_err().to_string();
         std::fs::remove_file(&p).ok();
         assert!(e.contains(&p.display().to_string()) && e.contains("line 2") && e.contains("delay_ns"), "{e}");
     }

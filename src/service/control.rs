@@ -40,6 +40,25 @@ pub struct ControlEvent {
     pub t_s: f64,
     /// What was done, in words.
     pub what: String,
+    /// The same time in ns, exactly (absent in reports of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub t_ns: Option<u64>,
+    /// What was done, exactly enough to rebuild the run's timeline from
+    /// its scenario and its events (absent in reports of older versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action: Option<Action>,
+}
+
+/// A control action as the loop applied it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Action {
+    /// The rest of the run's timeline replaced, from the event's time, by
+    /// `scenario` (as TOML) from its phase `from_phase` on; its first
+    /// phase became the run's phase `run_phase` (both from 1).
+    Switch { scenario: String, from_phase: usize, run_phase: usize },
+    Pause,
+    Resume,
 }
 
 /// A request to the control service (JSON, tagged by `cmd`).
@@ -103,6 +122,19 @@ pub struct State {
     pub upcoming: Vec<(f64, String, usize)>,
     /// `fifo` or `reorder`: a FIFO run cannot switch to a reordering scenario.
     pub queue_order: String,
+    /// The phases of the scenario running, each as `netfi ctl phase` names
+    /// it (absent from older emulators' answers).
+    #[serde(default)]
+    pub scenario_phases: Vec<PhaseOf>,
+}
+
+/// One phase of a scenario: its number (from 1), its name, and its start
+/// in the scenario (s).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PhaseOf {
+    pub number: usize,
+    pub name: Option<String>,
+    pub start_s: f64,
 }
 
 /// How the control thread is set up.
@@ -387,7 +419,7 @@ impl Server {
         check_real_time(&timeline, self.settings.unsupported)?;
         if self.settings.queue_order == QueueOrder::Fifo && timeline.may_reorder() {
             return Err(format!(
-                "scenario `{}` can release frames out of order, but this run's release queue is FIFO (its scenario cannot reorder); start the run with `--reorder-queue` to switch to it",
+                "scenario `{}` can release frames out of order, but this run's release queue is FIFO (it was started with `--fifo-queue`, or without live control); start it without `--fifo-queue` to switch to it",
                 spec.name
             ));
         }
@@ -453,16 +485,16 @@ impl Server {
         match done {
             Applied::Refused { .. } => Err(format!("the run's timeline is full: it holds at most {MAX_RUN_PHASES} phases switched in; nothing changed")),
             Applied::Paused { paused, t_ns, .. } => {
-                self.event(t_ns, sent.what.clone());
+                self.event(t_ns, sent.what.clone(), if paused { Action::Pause } else { Action::Resume });
                 Ok(format!("{} at t = {:.3} s", if paused { "paused" } else { "resumed" }, t_ns as f64 / 1e9))
             }
             Applied::Switched { s, .. } => {
                 let (spec, from) = sent.spec.expect("a switch carries its scenario");
                 // Switches told ahead that had not begun are replaced.
-                let cancelled: Vec<ControlEvent> = self.events.iter().filter(|e| e.t_s * 1e9 >= s.from_ns as f64).cloned().collect();
-                self.events.retain(|e| e.t_s * 1e9 < s.from_ns as f64);
+                let cancelled: Vec<ControlEvent> = self.events.iter().filter(|e| e.at_ns() >= s.from_ns && is_switch(e)).cloned().collect();
+                self.events.retain(|e| e.at_ns() < s.from_ns || !is_switch(e));
                 for c in cancelled {
-                    self.log_line(&ControlEvent { t_s: c.t_s, what: format!("cancelled before it began: {}", c.what) });
+                    self.log_line(&ControlEvent { what: format!("cancelled before it began: {}", c.what), action: None, ..c });
                 }
                 self.timeline.truncate(s.first_phase);
                 let base = crate::model::units::ms_to_ns(spec.phases[from].start_ms);
@@ -470,7 +502,8 @@ impl Server {
                     let start = s.from_ns + (crate::model::units::ms_to_ns(spec.phases[i].start_ms) - base);
                     self.timeline.push(Mirrored { start_ns: start, spec: spec.clone(), phase: i });
                 }
-                self.event(s.from_ns, sent.what.clone());
+                let action = Action::Switch { scenario: spec.to_toml(), from_phase: from + 1, run_phase: s.first_phase + 1 };
+                self.event(s.from_ns, sent.what.clone(), action);
                 // `s.retired` (the cut phases) is dropped here, off the loop.
                 let when = if s.from_ns > self.now_offset_ns() { "will take effect" } else { "took effect" };
                 Ok(format!("{}: {when} at t = {:.3} s (run phase {})", sent.what, s.from_ns as f64 / 1e9, s.first_phase + 1))
@@ -478,8 +511,8 @@ impl Server {
         }
     }
 
-    fn event(&mut self, t_ns: u64, what: String) {
-        let e = ControlEvent { t_s: t_ns as f64 / 1e9, what };
+    fn event(&mut self, t_ns: u64, what: String, action: Action) {
+        let e = ControlEvent { t_s: t_ns as f64 / 1e9, what, t_ns: Some(t_ns), action: Some(action) };
         self.log_line(&e);
         self.events.push(e);
     }
@@ -511,8 +544,28 @@ impl Server {
             phase_name: cur.spec.phases[cur.phase].name.clone(),
             upcoming: self.timeline[phase + 1..].iter().map(|m| (m.start_ns as f64 / 1e9, m.spec.name.clone(), m.phase + 1)).collect(),
             queue_order: format!("{:?}", self.settings.queue_order).to_lowercase(),
+            scenario_phases: cur
+                .spec
+                .phases
+                .iter()
+                .enumerate()
+                .map(|(i, p)| PhaseOf { number: i + 1, name: p.name.clone(), start_s: p.start_ms / 1e3 })
+                .collect(),
         }
     }
+}
+
+impl ControlEvent {
+    /// When it took effect, ns from the run's first frame: exact where the
+    /// event says, else from its seconds.
+    pub fn at_ns(&self) -> u64 {
+        self.t_ns.unwrap_or_else(|| (self.t_s * 1e9).round() as u64)
+    }
+}
+
+/// Whether `e` is a switch (pauses are not cut by a later switch).
+fn is_switch(e: &ControlEvent) -> bool {
+    !matches!(e.action, Some(Action::Pause | Action::Resume))
 }
 
 /// `at_ms` as ns from the run's first frame.

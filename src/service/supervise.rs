@@ -181,6 +181,12 @@ impl Supervisor {
         self.interrupted
     }
 
+    /// Whether the run was stopped at a person's request (Ctrl-C,
+    /// SIGTERM), not for stuck consoles: a normal end.
+    pub fn stopped_on_request(&self) -> bool {
+        self.interrupted && !self.stalled
+    }
+
     /// Whether a process of the run died.
     pub fn died(&self) -> bool {
         self.died_at.is_some()

@@ -27,6 +27,9 @@ pub struct PreviewRequest {
     frames: u64,
     #[serde(default = "default_rate")]
     rate_hz: f64,
+    /// In brief, for the figures beside the stage numbered so on the page.
+    #[serde(default)]
+    stage: Option<u32>,
 }
 
 /// `POST /api/parse`'s body.
@@ -44,13 +47,18 @@ fn default_rate() -> f64 {
     1000.0
 }
 
-/// `POST /api/preview` `{toml, frames, rate_hz}`: the checker's figures
-/// and plots as an HTML fragment, or the parser's error.
+/// `POST /api/preview` `{toml, frames, rate_hz, stage}`: the checker's
+/// figures and plots as an HTML fragment (in brief with `stage`), or the
+/// parser's error.
 pub async fn preview(Json(q): Json<PreviewRequest>) -> Response {
     if !(1_000..=5_000_000).contains(&q.frames) {
         return unprocessable(format!("frames: between 1000 and 5000000, got {}", q.frames));
     }
-    let done = tokio::task::spawn_blocking(move || super::preview::render(&q.toml, q.frames, q.rate_hz)).await;
+    let done = tokio::task::spawn_blocking(move || match q.stage {
+        Some(k) => super::preview::render_brief(&q.toml, q.frames, q.rate_hz, k),
+        None => super::preview::render(&q.toml, q.frames, q.rate_hz),
+    })
+    .await;
     match done {
         Ok(Ok(html)) => Html(html).into_response(),
         Ok(Err(e)) => unprocessable(e),
@@ -70,7 +78,8 @@ pub async fn parse(Json(ParseRequest { toml: body }): Json<ParseRequest>) -> Res
     }
 }
 
-/// `POST /api/runs` `{toml, duration_s, seed}`: starts a run; `{id}`.
+/// `POST /api/runs` `{toml, duration_s, seed, rate_hz, return_scenario,
+/// video_mbps, video_scenario, capture, isolate}`: starts a run; `{id}`.
 pub async fn start(State(ui): State<Arc<Ui>>, Json(req): Json<Start>) -> Response {
     match ui.runs.start(&ui.opts, &req) {
         Ok(id) => Json(serde_json::json!({ "id": id })).into_response(),
@@ -80,7 +89,7 @@ pub async fn start(State(ui): State<Arc<Ui>>, Json(req): Json<Start>) -> Respons
 
 /// `GET /api/runs/{id}`: the run's state (and its report once ended).
 pub async fn status(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
-    match ui.runs.status(&id) {
+    match ui.runs.status(&ui.opts.out_dir, &id) {
         Some(s) => Json(s).into_response(),
         None => not_found(&id),
     }
@@ -88,6 +97,9 @@ pub async fn status(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Respon
 
 /// `POST /api/runs/{id}/stop` `{}`.
 pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(_): Json<serde_json::Value>) -> Response {
+    if ui.runs.status(&ui.opts.out_dir, &id).is_some_and(|s| s.state != "running") {
+        return (StatusCode::CONFLICT, "the run has already ended").into_response();
+    }
     if ui.runs.stop(&id) {
         StatusCode::NO_CONTENT.into_response()
     } else {
@@ -95,15 +107,17 @@ pub async fn stop(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(_): Js
     }
 }
 
-/// `POST /api/runs/{id}/ctl` `{cmd, arg}`: live control of the run
-/// (`switch` to a preset, `pause`, `resume`, `show`) through its control
-/// service; the emulator's answer, or its error (the scenario parser's).
-pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): Json<serde_json::Value>) -> Response {
-    if ui.runs.out_dir(&id).is_none() {
-        return not_found(&id);
+/// `POST /api/runs/{id}/ctl`: live control of a running run through its
+/// control service (see [`super::live::Control`]); the emulator's answer,
+/// or its error (the scenario parser's). A run that has ended is a 409
+/// saying so.
+pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): Json<super::live::Control>) -> Response {
+    let Some(out) = ui.runs.out_dir(&ui.opts.out_dir, &id) else { return not_found(&id) };
+    if !ui.runs.is_running(&id) {
+        return (StatusCode::CONFLICT, "the run has ended: live control steers a running run only").into_response();
     }
     let netfi = ui.opts.netfi.clone();
-    match tokio::task::spawn_blocking(move || super::live::control(&netfi, &id, &req)).await {
+    match tokio::task::spawn_blocking(move || super::live::control(&netfi, &id, &out, &req)).await {
         Ok(Ok(answer)) => Json(answer).into_response(),
         Ok(Err(e)) => unprocessable(e),
         Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}")).into_response(),
@@ -113,8 +127,8 @@ pub async fn ctl(State(ui): State<Arc<Ui>>, Path(id): Path<String>, Json(req): J
 /// `GET /runs/{id}/report`: the run's report page (written on first
 /// request once the run has ended).
 pub async fn report(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Response {
-    let Some(out) = ui.runs.out_dir(&id) else { return not_found(&id) };
-    if ui.runs.status(&id).is_some_and(|s| s.state == "running") {
+    let Some(out) = ui.runs.out_dir(&ui.opts.out_dir, &id) else { return not_found(&id) };
+    if ui.runs.is_running(&id) {
         return (StatusCode::CONFLICT, "the run is still going: its report comes when it ends").into_response();
     }
     let page = tokio::task::spawn_blocking(move || {

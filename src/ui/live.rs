@@ -1,16 +1,16 @@
 //! A running run's live side, through `netfi ctl` child processes: its
 //! telemetry (`netfi ctl watch --json`, followed on a thread, the last
-//! intervals kept) and its control (`netfi ctl switch|pause|resume
+//! intervals kept) and its control (`netfi ctl switch|phase|pause|resume
 //! --json`, one process per request). The server itself opens no iceoryx2
 //! node: it neither touches the run's shared memory nor has its signals
 //! taken over by iceoryx2's handlers.
 
-use crate::html::plot::{self, Figure, Line, Scale};
+use crate::html::plot::{self, Figure, Line, Mark, Scale};
 use maud::{html, PreEscaped};
 use serde::Deserialize;
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
@@ -64,24 +64,27 @@ impl Telemetry {
         Ok(Telemetry { samples, stop, child, thread: Some(thread) })
     }
 
-    /// The live table and plot, once an interval came.
+    /// The live table and plots, once an interval came.
     pub fn html(&self) -> Option<String> {
         let samples = self.samples.lock().expect("telemetry lock");
         let last = samples.back()?;
         let ms = |ns: u64| format!("{:.3}", ns as f64 / 1e6);
         let us = |ns: u64| format!("{:.2}", ns as f64 / 1e3);
+        let interval = plot::short(&(last.length_ns as f64 / 1e6));
         let table = html! {
+            p { "The last interval of " span id="live-interval-ms" { (interval) } " ms, ending at "
+                (format!("{:.1} s", (last.start_ns + last.length_ns) as f64 / 1e9)) " from the run's first frame:" }
             table id="live-figures" class="figures" {
-                tr { th { "t" } td { (format!("{:.1} s", (last.start_ns + last.length_ns) as f64 / 1e9)) }
-                     th { "phase" } td id="live-phase" { (last.phase) } th { "faults" }
-                     td { @if last.paused { "paused" } @else { "on" } } }
-                tr { th { "entered" } td { (last.entered) } th { "dropped" } td { (last.dropped) }
-                     th { "loss" } td id="live-loss" { (last.loss_rate.map_or("-".into(), |l| format!("{l:.4}"))) } }
-                tr { th { "delay p50 / p99 (ms)" } td colspan="2" { (ms(last.injected_ns.p50)) " / " (ms(last.injected_ns.p99)) }
-                     th { "lateness p50 / p99.9 (µs)" } td colspan="2" { (us(last.lateness_ns.p50)) " / " (us(last.lateness_ns.p999)) } }
+                tr { th { "run phase" } td id="live-phase" { (last.phase) } th { "faults" }
+                     td id="live-faults" { @if last.paused { "paused" } @else { "on" } } }
+                tr { th { "frames in it" } td { (last.entered) } th { "dropped in it" } td { (last.dropped) }
+                     th { "loss in it" } td id="live-loss" { (last.loss_rate.map_or("-".into(), |l| format!("{l:.4}"))) } }
+                tr { th { "delay drawn p50 / p99 (ms)" } td colspan="2" { (ms(last.injected_ns.p50)) " / " (ms(last.injected_ns.p99)) }
+                     th { "release lateness p50 / p99.9 (µs)" } td colspan="2" { (us(last.lateness_ns.p50)) " / " (us(last.lateness_ns.p999)) } }
             }
         };
-        Some(table.into_string() + &loss_plot(&samples).unwrap_or_default())
+        let marks = marks(&samples);
+        Some(table.into_string() + &loss_plot(&samples, &marks).unwrap_or_default() + &delay_plot(&samples, &marks).unwrap_or_default())
     }
 
     /// Stops following: the watching process is ended, the thread joined.
@@ -131,43 +134,151 @@ fn watch(netfi: &Path, run_id: &str, samples: &Mutex<VecDeque<Interval>>, stop: 
     }
 }
 
-/// Loss per interval over the last minute.
-fn loss_plot(samples: &VecDeque<Interval>) -> Option<String> {
+/// The run's phase changes and pauses among the intervals kept, at each
+/// interval's start (the telemetry's resolution).
+fn marks(samples: &VecDeque<Interval>) -> Vec<Mark> {
+    let t = |s: &Interval| s.start_ns as f64 / 1e9;
+    let mut out = Vec::new();
+    let mut paused_from: Option<f64> = None;
+    for (prev, s) in samples.iter().zip(samples.iter().skip(1)) {
+        if s.phase != prev.phase {
+            out.push(Mark::At { x: t(s), label: format!("phase {}", s.phase) });
+        }
+        match (prev.paused, s.paused) {
+            (false, true) => paused_from = Some(t(s)),
+            (true, false) => out.push(Mark::Paused { x: paused_from.take().unwrap_or(t(prev)), to: Some(t(s)) }),
+            _ => {}
+        }
+    }
+    if let Some(x) = paused_from.or_else(|| samples.front().filter(|s| s.paused).map(t)) {
+        out.push(Mark::Paused { x, to: None });
+    }
+    out
+}
+
+/// The time axis of the intervals kept: at least a second wide.
+fn span(samples: &VecDeque<Interval>) -> Option<std::ops::Range<f64>> {
     let t = |s: &Interval| (s.start_ns + s.length_ns) as f64 / 1e9;
     let (first, last) = (t(samples.front()?), t(samples.back()?));
+    Some(first.min(last - 1.0)..last.max(first + 1.0))
+}
+
+/// Loss per interval over the last minute.
+fn loss_plot(samples: &VecDeque<Interval>, marks: &[Mark]) -> Option<String> {
+    let t = |s: &Interval| (s.start_ns + s.length_ns) as f64 / 1e9;
     let points: Vec<(f64, f64)> = samples.iter().filter_map(|s| Some((t(s), s.loss_rate?))).collect();
+    let ms = plot::short(&(samples.back()?.length_ns as f64 / 1e6));
     let svg = plot::svg(&Figure {
         id: "plot-live-loss",
-        title: "Loss per interval",
-        x_desc: "time (s)",
-        y_desc: "loss",
-        x: Scale::linear(first.min(last - 1.0)..last.max(first + 1.0)),
+        title: &format!("Loss per {ms} ms interval"),
+        x_desc: "time from the run's first frame (s)",
+        y_desc: "fraction of the interval's frames dropped",
+        x: Scale::linear(span(samples)?),
         y: Scale::linear(0.0..1.0),
         x_fmt: &plot::short,
         y_fmt: &plot::short,
         lines: vec![Line { label: "loss".into(), color: plot::BLUE, points }],
         bars: Vec::new(),
-        legend: plotters::prelude::SeriesLabelPosition::UpperRight,
+        marks,
     })
     .ok()?;
     Some(html! { div class="plot" { (PreEscaped(svg)) } }.into_string())
 }
 
-/// A control request from the page (`{cmd, arg}`: `switch` to a preset,
-/// `pause`, `resume`, `show`) sent to the run `run_id` by `netfi ctl`: the
-/// emulator's answer as `{event: {t_s, what}, state}`, or its error (the
-/// scenario parser's, for a bad switch).
-pub fn control(netfi: &PathBuf, run_id: &str, req: &serde_json::Value) -> Result<serde_json::Value, String> {
-    let arg = req.get("arg").and_then(|a| a.as_str()).unwrap_or_default();
-    let cmd: Vec<&str> = match req.get("cmd").and_then(|c| c.as_str()) {
-        Some("switch") if crate::scenario::canonical_name(arg).is_some() => vec!["switch", arg],
-        Some("switch") => return Err(format!("`{arg}` is not a preset (presets: {})", crate::scenario::PRESET_NAMES.join(", "))),
-        Some(c @ ("pause" | "resume" | "show")) => vec![c],
-        other => return Err(format!("unknown command {other:?}: switch, pause, resume or show")),
+/// The delay drawn per interval (p50, p99) over the last minute; none
+/// while no interval delayed a frame.
+fn delay_plot(samples: &VecDeque<Interval>, marks: &[Mark]) -> Option<String> {
+    let t = |s: &Interval| (s.start_ns + s.length_ns) as f64 / 1e9;
+    let delayed = samples.iter().filter(|s| s.entered > s.dropped);
+    let line = |label: &str, color, v: &dyn Fn(&Interval) -> u64| Line {
+        label: label.into(),
+        color,
+        points: delayed.clone().map(|s| (t(s), v(s) as f64 / 1e6)).collect(),
+    };
+    let lines = vec![line("drawn, p50", plot::ORANGE, &|s| s.injected_ns.p50), line("drawn, p99", plot::GREY, &|s| s.injected_ns.p99)];
+    let top = lines.iter().flat_map(|l| l.points.iter().map(|p| p.1)).fold(0.0, f64::max);
+    if top <= 0.0 {
+        return None;
+    }
+    let ms = plot::short(&(samples.back()?.length_ns as f64 / 1e6));
+    let svg = plot::svg(&Figure {
+        id: "plot-live-delay",
+        title: &format!("Delay drawn per {ms} ms interval"),
+        x_desc: "time from the run's first frame (s)",
+        y_desc: "delay (ms)",
+        x: Scale::linear(span(samples)?),
+        y: Scale::linear(0.0..top * 1.1),
+        x_fmt: &plot::short,
+        y_fmt: &plot::short,
+        lines,
+        bars: Vec::new(),
+        marks,
+    })
+    .ok()?;
+    Some(html! { div class="plot" { (PreEscaped(svg)) } }.into_string())
+}
+
+/// A control request from the run's page.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Control {
+    /// Switch to a preset, or to scenario text (the scenario being
+    /// built), now or `at` (as `netfi ctl --at` reads it: `12.5s` from the
+    /// run's first frame, `+5s` from now).
+    Switch {
+        #[serde(default)]
+        preset: Option<String>,
+        #[serde(default)]
+        toml: Option<String>,
+        #[serde(default)]
+        at: Option<String>,
+    },
+    /// Go to a phase (number from 1, or name) of the scenario running.
+    Phase {
+        phase: String,
+        #[serde(default)]
+        at: Option<String>,
+    },
+    Pause,
+    Resume,
+    Show,
+}
+
+/// Scenario texts a run was switched to, kept in its directory.
+const SWITCH_FILES_MAX: usize = 1024;
+
+/// Sends `req` to the run `run_id` (writing into `out`) by `netfi ctl`: the
+/// emulator's answer as `{event: {t_s, what}, state}` (no event for
+/// `show`), or its error (the scenario parser's, for a bad switch). A
+/// scenario text is written to `out/switch-N.toml` first, a record of what
+/// the run was switched to.
+pub fn control(netfi: &Path, run_id: &str, out: &Path, req: &Control) -> Result<serde_json::Value, String> {
+    let at = |at: &Option<String>| at.as_deref().map(str::trim).filter(|a| !a.is_empty()).map(|a| format!("--at={a}"));
+    let args: Vec<String> = match req {
+        Control::Switch { preset: Some(p), toml: None, at: when } => {
+            if crate::scenario::canonical_name(p).is_none() {
+                return Err(format!("`{p}` is not a preset (presets: {})", crate::scenario::PRESET_NAMES.join(", ")));
+            }
+            ["switch".to_string()].into_iter().chain(at(when)).chain(["--".to_string(), p.clone()]).collect()
+        }
+        Control::Switch { preset: None, toml: Some(text), at: when } => {
+            crate::scenario::parse_str(text, "the scenario being built", "scenario").map_err(|e| e.to_string())?;
+            let path = (1..=SWITCH_FILES_MAX)
+                .map(|n| out.join(format!("switch-{n}.toml")))
+                .find(|p| !p.exists())
+                .ok_or_else(|| format!("the run was switched to {SWITCH_FILES_MAX} scenarios already"))?;
+            std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+            ["switch".to_string()].into_iter().chain(at(when)).chain(["--".to_string(), path.display().to_string()]).collect()
+        }
+        Control::Switch { .. } => return Err("switch: give a preset or the scenario's text, one of them".into()),
+        Control::Phase { phase, at: when } => ["phase".to_string()].into_iter().chain(at(when)).chain(["--".to_string(), phase.clone()]).collect(),
+        Control::Pause => vec!["pause".into()],
+        Control::Resume => vec!["resume".into()],
+        Control::Show => vec!["show".into()],
     };
     let out = Command::new(netfi)
         .args(["ctl", "--run-id", run_id, "--json"])
-        .args(&cmd)
+        .args(&args)
         .stdin(Stdio::null())
         .output()
         .map_err(|e| format!("starting {}: {e}", netfi.display()))?;
@@ -175,6 +286,9 @@ pub fn control(netfi: &PathBuf, run_id: &str, req: &serde_json::Value) -> Result
         return Err(String::from_utf8_lossy(&out.stderr).trim().trim_start_matches("error: ").to_string());
     }
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).map_err(|e| format!("reading the emulator's answer: {e}"))?;
+    if matches!(req, Control::Show) {
+        return Ok(serde_json::json!({ "state": r["state"] }));
+    }
     let t_s = r.pointer("/state/t_s").and_then(|v| v.as_f64()).unwrap_or(0.0);
     Ok(serde_json::json!({ "event": { "t_s": t_s, "what": r["message"] }, "state": r["state"] }))
 }

@@ -2,8 +2,10 @@
 //! models with every parameter, presets and database targets; previews what
 //! a scenario realizes in simulated time ([`crate::check`]); loads and saves
 //! TOML; starts and stops runs (each a `netfi run` child process, so the
-//! emulator never shares a process with the server); steers a running one
-//! and shows its report page ([`crate::html`]).
+//! emulator never shares a process with the server) with the options of
+//! `netfi run` a study sets; lists them; steers a running one (switch to a
+//! preset or the scenario being built, now or at a time; go to a phase;
+//! pause) and shows its report page ([`crate::html`]).
 //!
 //! The server is one thread (a current-thread tokio runtime) kept off the
 //! emulator's core; every page asset is compiled into the binary, nothing is
@@ -93,6 +95,7 @@ pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
 fn router(ui: Arc<Ui>, guard: Arc<guard::Guard>) -> Router {
     Router::new()
         .route("/", get(page::index))
+        .route("/runs", get(page::runs))
         .route("/runs/{id}", get(page::run))
         .route("/runs/{id}/report", get(api::report))
         .route("/api/preview", post(api::preview))

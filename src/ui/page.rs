@@ -1,5 +1,6 @@
-//! The pages: the scenario builder (`/`) and a run's page (`/runs/{id}`).
-//! Their script and style are compiled in ([`script`], [`style`]).
+//! The pages: the scenario builder (`/`), the list of runs (`/runs`) and a
+//! run's page (`/runs/{id}`). Their script and style are compiled in
+//! ([`script`], [`style`]).
 
 use super::Ui;
 use axum::extract::{Path, State};
@@ -8,7 +9,7 @@ use axum::response::IntoResponse;
 use maud::{html, Markup, PreEscaped, DOCTYPE};
 use std::sync::Arc;
 
-const APP_JS: &str = include_str!("assets/app.js");
+const APP_JS: &str = concat!(include_str!("assets/app.js"), include_str!("assets/chain.js"));
 const APP_CSS: &str = include_str!("assets/app.css");
 
 fn shell(title: &str, page: &str, body: Markup) -> Markup {
@@ -22,11 +23,24 @@ fn shell(title: &str, page: &str, body: Markup) -> Markup {
                 link rel="stylesheet" href="/assets/app.css";
             }
             body data-page=(page) {
-                header { a href="/" { "netfi" } " — " (title) }
+                // The builder keeps the scenario being built in the tab's
+                // session storage: these links lose nothing.
+                header {
+                    a #home href="/" { "netfi" } " — " (title)
+                    nav { a #nav-builder href="/" { "builder" } a #nav-runs href="/runs" { "runs" } }
+                }
                 main { (body) }
                 script src="/assets/app.js" {}
             }
         }
+    }
+}
+
+/// The choices of a preset list, after `first`.
+fn preset_options(first: Markup) -> Markup {
+    html! {
+        (first)
+        @for p in crate::scenario::PRESET_NAMES { option value=(p) { (p) " — " (crate::scenario::preset_label(p).unwrap_or("")) } }
     }
 }
 
@@ -42,6 +56,7 @@ pub async fn index() -> Markup {
                 h2 { "Scenario" }
                 label { "name " input id="scenario-name" value="my scenario"; }
                 label { " seed " input id="scenario-seed" type="number" min="0" value="1"; }
+                p id="timeline-note" class="note" hidden {}
                 div id="stages" {}
                 div class="add" {
                     select id="add-model" {}
@@ -60,6 +75,7 @@ pub async fn index() -> Markup {
                     button id="apply-text" { "use this text" }
                     label class="file" { "load " input id="load" type="file" accept=".toml"; }
                     button id="save" { "save" }
+                    button id="new-scenario" { "start anew" }
                 }
                 pre id="toml-error" class="error" {}
             }
@@ -68,11 +84,22 @@ pub async fn index() -> Markup {
                 label { "frames " input id="preview-frames" type="number" value="100000" min="1000" max="5000000"; }
                 label { " at " input id="preview-rate" type="number" value="1000" min="1"; " Hz " }
                 button id="preview-btn" { "preview" }
+                label { input id="preview-auto" type="checkbox" checked; " again as the scenario changes" }
                 div id="preview" {}
             }
             section id="run-box" {
                 h2 { "Run" }
-                label { "duration " input id="duration" value="10s"; }
+                div class="run-form" {
+                    label { "duration " input id="duration" value="10s"; }
+                    label { "rate (Hz) " input id="run-rate" type="number" min="0.001" step="any" value="1000"; }
+                    label { "feedback path " select id="run-return" { (preset_options(html! {
+                        option value="" { "Normal (nothing injected)" } option value="none" { "none: no feedback path" }
+                    })) } }
+                    label { "video (Mbit/s) " input id="run-video" type="number" min="0" step="any" placeholder="none"; }
+                    label { "video through " select id="run-video-scenario" { (preset_options(html! { option value="" { "Normal (nothing injected)" } })) } }
+                    label { "replay capture " input id="run-capture" placeholder="path on this host; empty: synthetic motion" size="40"; }
+                    label { input id="run-isolate" type="checkbox" checked; " clear the emulator's core for the run (isolation)" }
+                }
                 button id="run-btn" { "run" }
                 pre id="run-error" class="error" {}
             }
@@ -80,23 +107,74 @@ pub async fn index() -> Markup {
     )
 }
 
+/// A run's state as a class and words.
+fn state_cell(s: &super::runs::Status) -> Markup {
+    html! { span class={ "state " (s.state) } { (s.state) } }
+}
+
+/// `/runs`: every run this server started, and those earlier servers left
+/// in its output directory.
+pub async fn runs(State(ui): State<Arc<Ui>>) -> Markup {
+    let list = ui.runs.list(&ui.opts.out_dir);
+    shell(
+        "runs",
+        "runs",
+        html! {
+            h2 { "Runs" }
+            @if list.is_empty() {
+                p id="no-runs" class="none" { "No run yet: build a scenario and run it." }
+            } @else {
+                table id="run-list" class="figures" {
+                    tr { th { "run" } th { "scenario" } th { "started" } th { "duration (s)" } th { "state" } th { "" } th { "" } }
+                    @for s in &list {
+                        tr class="run" data-id=(s.id) data-state=(s.state) {
+                            td { a href={ "/runs/" (s.id) } { (s.id) } }
+                            td { (s.scenario) }
+                            td class="started" data-unix=(s.started_unix_s) { (s.started_unix_s) }
+                            td { (format!("{:.1}", if s.state == "running" { s.elapsed_s } else { s.duration_s })) }
+                            td { (state_cell(s)) }
+                            td class="said" { (s.state_said) }
+                            td { @if s.state != "running" { a href={ "/runs/" (s.id) "/report" } { "report" } } }
+                        }
+                    }
+                }
+            }
+        },
+    )
+}
+
 /// `/runs/{id}`: a run's state, live control, and its report once done.
 pub async fn run(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> impl IntoResponse {
-    let Some(status) = ui.runs.status(&id) else {
+    let Some(status) = ui.runs.status(&ui.opts.out_dir, &id) else {
         return (axum::http::StatusCode::NOT_FOUND, shell("no such run", "missing", html! { p { "No run " (id) " here." } }));
     };
-    let presets = crate::scenario::PRESET_NAMES;
     let body = html! {
         h2 { "Run " span id="run-id" { (id) } }
-        p { "scenario " b id="run-scenario" { (status.scenario) } " · " span id="run-state" { (status.state) } " · "
-            span id="run-elapsed" {} }
+        p { "scenario " b id="run-scenario" { (status.scenario) } " · " span id="run-state" class={ "state " (status.state) } { (status.state) }
+            span id="run-elapsed" {} " · output " code { (status.out) } }
+        p id="run-said" {}
         section id="control" {
             h3 { "Live control" }
-            select id="switch-to" { @for p in presets { option value=(p) { (p) } } }
-            button id="switch-btn" { "switch now" }
-            button id="pause-btn" { "pause faults" }
-            button id="resume-btn" { "resume" }
-            button id="stop-btn" { "stop run" }
+            p id="control-note" class="note" {}
+            div class="ctl-row" {
+                label { "switch to " select id="switch-to" { (preset_options(html! {
+                    option value="@built" id="switch-built" disabled { "the scenario being built" }
+                })) } }
+                label { " at " input id="switch-at" placeholder="now" size="12"
+                    title="empty: now; 12.5s: that time from the run's first frame; +5s: that long from now"; }
+                button id="switch-btn" { "switch" }
+            }
+            div class="ctl-row" {
+                label { "go to phase " select id="phase-to" {} }
+                label { " at " input id="phase-at" placeholder="now" size="12"; }
+                button id="phase-btn" { "go" }
+            }
+            div class="ctl-row" {
+                button id="pause-btn" { "pause faults" }
+                button id="resume-btn" { "resume" }
+                button id="stop-btn" { "stop run" }
+            }
+            p { "Now: " span id="ctl-now" { "-" } }
             pre id="ctl-error" class="error" {}
             h3 { "Events" }
             ul id="events" {}
@@ -104,8 +182,10 @@ pub async fn run(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> impl Into
         section id="live" { h3 { "Live" } div id="live-table" {} div id="live-plot" {} }
         section id="done" hidden {
             h3 { "Result" }
-            p { "realized loss " b id="run-loss" {} }
-            a id="report-link" href={ "/runs/" (id) "/report" } { "report" }
+            p { "realized loss over the whole run " b id="run-loss" {} }
+            div id="run-phases" {}
+            ul id="run-faults" class="error" {}
+            a id="report-link" href={ "/runs/" (id) "/report" } { "the run's report" }
             pre id="run-stderr" {}
         }
     };

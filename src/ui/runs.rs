@@ -1,11 +1,13 @@
 //! The runs the UI started: each a `netfi run` child process with its own
-//! output directory (`<out>/<run id>/`), its input scenario beside it.
+//! output directory (`<out>/<run id>/`), its input scenario beside it; and
+//! the runs earlier servers left in the same parent directory, read from
+//! their reports.
 
 use super::UiOptions;
 use anyhow::{bail, Context};
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -58,6 +60,8 @@ struct Run {
     scenario: String,
     duration_s: f64,
     started: Instant,
+    /// Wall-clock start, s since the Unix epoch (for the list of runs).
+    started_unix_s: u64,
     /// The exit status once seen.
     exit: Option<std::process::ExitStatus>,
     /// Its telemetry as it comes (until it ends).
@@ -69,25 +73,120 @@ struct Run {
 pub(crate) struct Status {
     pub id: String,
     pub scenario: String,
-    /// `running`, `done` (the report balanced, no fault) or `failed`.
+    /// `running`; once ended, `done` (ran its course: every frame
+    /// accounted for, no fault), `stopped` (stopped on request, every frame
+    /// accounted for, no fault) or `failed`.
     pub state: &'static str,
+    /// The state in words, for the page.
+    pub state_said: String,
     pub elapsed_s: f64,
     pub duration_s: f64,
+    /// Wall-clock start, s since the Unix epoch.
+    pub started_unix_s: u64,
     pub out: String,
     /// The run's report (report.json), once written.
     pub report: Option<serde_json::Value>,
-    /// The end of the run's standard error, once it ended.
+    /// The end of the run's standard error, once it failed without a
+    /// report that says why.
     pub stderr_tail: Option<String>,
-    /// The last telemetry interval as a table, and the loss over time.
+    /// The last telemetry interval as a table, and the plots over time.
     pub live: Option<String>,
+    /// Whether this server started it (else: found in its directory).
+    pub here: bool,
 }
 
-/// What starting a run needs.
+/// What starting a run needs: the scenario, and the options of `netfi
+/// run` an experimenter sets.
 #[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub(crate) struct Start {
     pub toml: String,
     pub duration_s: f64,
     pub seed: Option<u64>,
+    /// Frames a second (`--rate-hz`).
+    #[serde(default)]
+    pub rate_hz: Option<f64>,
+    /// The feedback path's scenario: a preset, or `none` for no feedback
+    /// path (`--return-scenario`, `--no-feedback`).
+    #[serde(default)]
+    pub return_scenario: Option<String>,
+    /// A video stream robot → console at this mean bit rate (`--video-mbps`)
+    /// through this preset (`--video-scenario`).
+    #[serde(default)]
+    pub video_mbps: Option<f64>,
+    #[serde(default)]
+    pub video_scenario: Option<String>,
+    /// A recorded capture on this host to replay (`--capture`).
+    #[serde(default)]
+    pub capture: Option<String>,
+    /// Clear the emulator's core for the run (`--isolate`, the default;
+    /// `false`: `--no-isolate`).
+    #[serde(default)]
+    pub isolate: Option<bool>,
+}
+
+impl Start {
+    /// The options of `netfi run` this start asks for (after the scenario
+    /// and the run's own `--out`, `--run-id`). A choice that names no
+    /// preset is an error saying which.
+    fn options(&self) -> anyhow::Result<Vec<String>> {
+        let mut a = vec!["--duration-s".to_string(), self.duration_s.to_string()];
+        let preset = |what: &str, name: &str| -> anyhow::Result<String> {
+            match crate::scenario::canonical_name(name) {
+                Some(_) => Ok(name.to_string()),
+                None => bail!("{what} `{name}` is not a preset (presets: {})", crate::scenario::PRESET_NAMES.join(", ")),
+            }
+        };
+        if let Some(seed) = self.seed {
+            a.extend(["--seed".into(), seed.to_string()]);
+        }
+        if let Some(r) = self.rate_hz {
+            a.extend(["--rate-hz".into(), r.to_string()]);
+        }
+        match self.return_scenario.as_deref() {
+            None | Some("") => {}
+            Some("none") => a.push("--no-feedback".into()),
+            Some(name) => a.extend(["--return-scenario".into(), preset("the return scenario", name)?]),
+        }
+        if let Some(v) = self.video_mbps {
+            a.extend(["--video-mbps".into(), v.to_string()]);
+            if let Some(name) = self.video_scenario.as_deref().filter(|n| !n.is_empty()) {
+                a.extend(["--video-scenario".into(), preset("the video scenario", name)?]);
+            }
+        }
+        if let Some(c) = self.capture.as_deref().map(str::trim).filter(|c| !c.is_empty()) {
+            if !std::path::Path::new(c).is_file() {
+                bail!("capture `{c}`: no such file on this host (give the path of an LZ4 ITP capture, or leave it empty for synthetic motion)");
+            }
+            a.extend(["--capture".into(), c.to_string()]);
+        }
+        if self.isolate == Some(false) {
+            a.push("--no-isolate".into());
+        }
+        Ok(a)
+    }
+}
+
+/// `netfi run`'s arguments, read as the command line reads them.
+#[derive(clap::Parser)]
+#[command(name = "netfi run")]
+struct RunCommand {
+    #[command(flatten)]
+    run: crate::service::args::RunArgs,
+}
+
+/// Checks `argv` (after `netfi run`) as `netfi run` would, before any
+/// process starts: the first paragraph of clap's message, or the
+/// arguments' own check.
+fn check_run_args(argv: &[String]) -> anyhow::Result<()> {
+    use clap::Parser;
+    let parsed = RunCommand::try_parse_from(std::iter::once("netfi run".to_string()).chain(argv.iter().cloned())).map_err(|e| {
+        let text = e.render().to_string();
+        let first = text.split("\n\n").next().unwrap_or(&text).trim().trim_start_matches("error: ").to_string();
+        anyhow::anyhow!("{first}")
+    })?;
+    parsed.run.validate()?;
+    Ok(())
 }
 
 impl Runs {
@@ -95,13 +194,18 @@ impl Runs {
         Runs { runs: Mutex::default(), next: AtomicU64::new(0), mask }
     }
 
-    /// Validates the scenario (the parser's own errors) and starts `netfi
-    /// run` on it; the run's id.
+    /// Validates the scenario (the parser's own errors) and the options (as
+    /// `netfi run` reads them) and starts `netfi run`; the run's id.
     pub fn start(&self, opts: &UiOptions, req: &Start) -> anyhow::Result<String> {
         let scenario = crate::scenario::parse_str(&req.toml, "scenario", "scenario")?.name;
         if !(req.duration_s.is_finite() && req.duration_s > 0.0 && req.duration_s <= 86_400.0) {
             bail!("the duration must be between 0 and 86400 s, got {}", req.duration_s);
         }
+        // A run started here may be switched to any scenario: its queue
+        // keeps release-time order whatever its own scenario.
+        let mut options = req.options()?;
+        options.push("--reorder-queue".into());
+        check_run_args(&[vec!["scenario.toml".to_string()], options.clone()].concat())?;
         let id = format!("ui{}-{}", std::process::id(), self.next.fetch_add(1, Ordering::Relaxed) + 1);
         let out = opts.out_dir.join(&id);
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
@@ -112,13 +216,8 @@ impl Runs {
             std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))
         };
         let mut cmd = Command::new(&opts.netfi);
-        // A run started here may be switched to any scenario: its queue
-        // keeps release-time order whatever its own scenario.
-        cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id, "--duration-s", &req.duration_s.to_string(), "--reorder-queue"]);
+        cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id]).args(&options);
         self.mask.give(&mut cmd);
-        if let Some(seed) = req.seed {
-            cmd.args(["--seed", &seed.to_string()]);
-        }
         let child = cmd
             .stdin(Stdio::null())
             .stdout(log("run.stdout")?)
@@ -126,18 +225,42 @@ impl Runs {
             .spawn()
             .with_context(|| format!("starting {}", opts.netfi.display()))?;
         let telemetry = super::live::Telemetry::follow(&opts.netfi, &id).ok();
-        let run = Run { child, out, scenario, duration_s: req.duration_s, started: Instant::now(), exit: None, telemetry };
+        let started_unix_s = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let run = Run {
+            child,
+            out,
+            scenario,
+            duration_s: req.duration_s,
+            started: Instant::now(),
+            started_unix_s,
+            exit: None,
+            telemetry,
+        };
         self.runs.lock().expect("runs lock").insert(id.clone(), run);
         Ok(id)
     }
 
-    /// Where the run `id` writes, if the UI started it.
-    pub fn out_dir(&self, id: &str) -> Option<PathBuf> {
-        self.runs.lock().expect("runs lock").get(id).map(|r| r.out.clone())
+    /// Where the run `id` writes: a run this server started, or one an
+    /// earlier server left in `parent` (its directory holds a report).
+    pub fn out_dir(&self, parent: &Path, id: &str) -> Option<PathBuf> {
+        if let Some(r) = self.runs.lock().expect("runs lock").get(id) {
+            return Some(r.out.clone());
+        }
+        past_run_dir(parent, id)
     }
 
-    /// The run's state now.
-    pub fn status(&self, id: &str) -> Option<Status> {
+    /// Whether the run `id` is one this server started and still going.
+    pub fn is_running(&self, id: &str) -> bool {
+        self.status_here(id).is_some_and(|s| s.state == "running")
+    }
+
+    /// The run's state now: one this server started, or one an earlier
+    /// server left in `parent`.
+    pub fn status(&self, parent: &Path, id: &str) -> Option<Status> {
+        self.status_here(id).or_else(|| past_status(parent, id))
+    }
+
+    fn status_here(&self, id: &str) -> Option<Status> {
         let mut runs = self.runs.lock().expect("runs lock");
         let run = runs.get_mut(id)?;
         if run.exit.is_none() {
@@ -150,23 +273,46 @@ impl Runs {
             }
         }
         let read = |name: &str| std::fs::read_to_string(run.out.join(name)).ok();
-        let report = run.exit.and_then(|_| read("report.json")).and_then(|t| serde_json::from_str(&t).ok());
-        let stderr_tail = run.exit.and_then(|_| read("run.stderr")).map(|t| tail(&t, 2000));
+        let report: Option<serde_json::Value> = run.exit.and_then(|_| read("report.json")).and_then(|t| serde_json::from_str(&t).ok());
+        let (state, state_said) = match (run.exit, &report) {
+            (None, _) => ("running", "running".to_string()),
+            (Some(_), Some(r)) => ended(r, run.exit.is_some_and(|s| s.success())),
+            (Some(s), None) => ("failed", format!("failed ({}) before writing its report", exit_said(s))),
+        };
+        // The run's own words only where its report does not say why.
+        let stderr_tail = (run.exit.is_some() && report.is_none()).then(|| read("run.stderr")).flatten().map(|t| tail(&t, 2000));
         Some(Status {
             id: id.to_string(),
             scenario: run.scenario.clone(),
-            state: match run.exit {
-                None => "running",
-                Some(s) if s.success() => "done",
-                Some(_) => "failed",
-            },
+            state,
+            state_said,
             elapsed_s: run.started.elapsed().as_secs_f64(),
             duration_s: run.duration_s,
+            started_unix_s: run.started_unix_s,
             out: run.out.display().to_string(),
             report,
             stderr_tail,
             live,
+            here: true,
         })
+    }
+
+    /// Every run: this server's (newest first), then those earlier servers
+    /// left in `parent` (newest first).
+    pub fn list(&self, parent: &Path) -> Vec<Status> {
+        let ids: Vec<String> = self.runs.lock().expect("runs lock").keys().cloned().collect();
+        let mut here: Vec<Status> = ids.iter().filter_map(|id| self.status_here(id)).collect();
+        here.sort_by_key(|s| std::cmp::Reverse(s.started_unix_s));
+        let mut past: Vec<Status> = std::fs::read_dir(parent)
+            .into_iter()
+            .flatten()
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|id| !ids.contains(id))
+            .filter_map(|id| past_status(parent, &id))
+            .collect();
+        past.sort_by_key(|s| std::cmp::Reverse(s.started_unix_s));
+        here.extend(past);
+        here
     }
 
     /// Asks the run to stop as Ctrl-C would: it ends its processes and
@@ -196,6 +342,64 @@ fn interrupt(child: &Child) {
         // SAFETY: signalling our own child, which has not been reaped.
         unsafe { libc::kill(pid, libc::SIGINT) };
     }
+}
+
+/// A run's end from its report: `done`, `stopped` (on request; a normal
+/// end) or `failed` (a fault, frames unaccounted for, or the run's exit
+/// status), and in words.
+fn ended(r: &serde_json::Value, exit_ok: bool) -> (&'static str, String) {
+    let faults: Vec<&str> = r["faults"].as_array().map(|f| f.iter().filter_map(|x| x.as_str()).collect()).unwrap_or_default();
+    let balanced = r["frames"]["balanced"].as_bool().unwrap_or(false);
+    let stopped = r["stopped"].as_bool().unwrap_or(false);
+    let secs = r["duration_s"].as_f64().unwrap_or(0.0);
+    match (faults.is_empty() && balanced && exit_ok, stopped) {
+        (true, true) => ("stopped", format!("stopped on request after {secs:.1} s; every frame accounted for")),
+        (true, false) => ("done", format!("done after {secs:.1} s; every frame accounted for")),
+        (false, _) if !faults.is_empty() => ("failed", format!("failed: {}", faults.join("; "))),
+        (false, _) if !balanced => ("failed", "failed: not every frame is accounted for (see the report)".to_string()),
+        (false, _) => ("failed", "failed (see the report)".to_string()),
+    }
+}
+
+fn exit_said(s: std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (s.code(), s.signal()) {
+        (Some(c), _) => format!("exit status {c}"),
+        (None, Some(sig)) => format!("killed by signal {sig}"),
+        _ => "ended".to_string(),
+    }
+}
+
+/// The directory of a run an earlier server left in `parent`: a plain
+/// name (no path), holding a report.
+fn past_run_dir(parent: &Path, id: &str) -> Option<PathBuf> {
+    let plain = !id.is_empty() && !id.starts_with('.') && id.chars().all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c));
+    let dir = parent.join(id);
+    (plain && dir.join("report.json").is_file()).then_some(dir)
+}
+
+/// The state of a run an earlier server left in `parent`, from its report.
+fn past_status(parent: &Path, id: &str) -> Option<Status> {
+    let dir = past_run_dir(parent, id)?;
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).ok()?).ok()?;
+    let started = report["provenance"]["started_utc"].as_str().and_then(|t| humantime::parse_rfc3339(t).ok());
+    let started = started.or_else(|| std::fs::metadata(dir.join("report.json")).ok()?.modified().ok());
+    let started_unix_s = started?.duration_since(std::time::UNIX_EPOCH).ok()?.as_secs();
+    let (state, state_said) = ended(&report, true);
+    Some(Status {
+        id: id.to_string(),
+        scenario: report["scenario"].as_str().unwrap_or_default().to_string(),
+        state,
+        state_said,
+        elapsed_s: report["duration_s"].as_f64().unwrap_or(0.0),
+        duration_s: report["duration_s"].as_f64().unwrap_or(0.0),
+        started_unix_s,
+        out: dir.display().to_string(),
+        report: Some(report),
+        stderr_tail: None,
+        live: None,
+        here: false,
+    })
 }
 
 /// The last `n` bytes of `text`, cut at a character boundary.

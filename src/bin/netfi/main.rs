@@ -64,7 +64,9 @@ fn run(args: &netfi::service::args::RunArgs) -> anyhow::Result<()> {
         print!("{}", report.to_text());
     }
     if !report.frames.balanced || !report.faults.is_empty() {
-        anyhow::bail!("the run had faults (see the report above and {})", report.files.report_json.display());
+        // Named here, not "above": stdout may be a file, or a page's log.
+        let said = if report.faults.is_empty() { "not every frame is accounted for".to_string() } else { report.faults.join("; ") };
+        anyhow::bail!("the run had faults: {said} (its report: {})", report.files.report_json.display());
     }
     Ok(())
 }

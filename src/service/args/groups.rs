@@ -166,10 +166,16 @@ pub struct ControlArgs {
     #[arg(long, default_value_t = crate::service::telemetry::DEFAULT_INTERVAL_MS, value_name = "MS", value_parser = values::telemetry_ms())]
     pub telemetry_ms: u64,
     /// Hold frames in the reordering release queue even if the scenario
-    /// cannot reorder, so that `netfi ctl switch` may switch the run to one
-    /// that does.
+    /// cannot reorder. A run under live control (a run id, no
+    /// `--no-control`) always does, so that `netfi ctl switch` may switch
+    /// it to any scenario.
     #[arg(long)]
     pub reorder_queue: bool,
+    /// Keep the FIFO release ring for a scenario that cannot reorder, even
+    /// under live control (a switch to a scenario that reorders is then
+    /// refused).
+    #[arg(long, conflicts_with = "reorder_queue")]
+    pub fifo_queue: bool,
     /// Serve no control and no telemetry service (`netfi ctl` cannot reach
     /// the run).
     #[arg(long)]
@@ -179,13 +185,15 @@ pub struct ControlArgs {
 impl Default for ControlArgs {
     /// Control served, telemetry at its default interval.
     fn default() -> Self {
-        ControlArgs { telemetry_ms: crate::service::telemetry::DEFAULT_INTERVAL_MS, reorder_queue: false, no_control: false }
+        ControlArgs { telemetry_ms: crate::service::telemetry::DEFAULT_INTERVAL_MS, reorder_queue: false, fifo_queue: false, no_control: false }
     }
 }
 
 impl Render for ControlArgs {
     fn render(&self, a: &mut Argv) {
-        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue).switch("--no-control", self.no_control);
+        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue)
+            .switch("--fifo-queue", self.fifo_queue)
+            .switch("--no-control", self.no_control);
     }
 }
 

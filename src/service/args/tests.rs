@@ -68,7 +68,7 @@ fn an_emulator_parses_back_what_it_renders() {
         wait_for_peer_s: Some(1.5),
         return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
         udp: UdpArgs::default(),
-        control: ControlArgs { telemetry_ms: 250, reorder_queue: true, no_control: true },
+        control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: true },
         stream: StreamArgs::default(),
         video: video(),
         ros2: Default::default(),

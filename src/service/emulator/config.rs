@@ -118,13 +118,18 @@ impl EmulatorConfig {
             (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
             _ => None,
         };
+        let reorder_queue = args.control.reorder_queue || (control.is_some() && !args.control.fifo_queue);
         Ok(EmulatorConfig {
             lanes,
             core,
             rt_priority: args.placement.rt_priority,
             isolate: args.placement.isolate,
             control,
-            reorder_queue: args.control.reorder_queue,
+            // A run under live control may be switched to any scenario,
+            // one that reorders included: its queue keeps release-time
+            // order from the start (within noise of the FIFO ring,
+            // docs/performance.md "The reordering queue under control").
+            reorder_queue,
             out_dir: args.out.clone(),
         })
     }

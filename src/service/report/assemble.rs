@@ -4,6 +4,7 @@
 //! foreign clients, or netfi's own services started one by one).
 
 use super::delay::delay_check;
+use super::phases::{self, RunTimeline};
 use super::trace_merge::{merge_trace, Source};
 use super::{files, join, FeedbackSection, Files, ProcessEnd, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
@@ -34,7 +35,7 @@ pub struct RunFacts<'a> {
 
 /// What the runner saw of a run: how long it took, the host's steal time,
 /// how each process ended, what went wrong (dead processes), and whether
-/// it was interrupted.
+/// it was interrupted (stopped at a person's request).
 #[derive(Debug, Clone, Default)]
 pub struct RunnerView {
     pub duration_s: f64,
@@ -120,18 +121,24 @@ fn take<T>(found: Found<T>, (file, role): (&'static str, &'static str), missing:
 /// the delays, and names the cut files.
 pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, source: Source) -> RunReport {
     let mut faults = runner.faults;
-    let mut r = join_parts(facts, parts, runner.duration_s, runner.steal, runner.processes);
+    let mut r = join_parts(facts, parts, runner.duration_s, runner.steal, runner.processes, runner.interrupted);
     faults.append(&mut r.faults);
-    if runner.interrupted {
-        faults.push("interrupted (Ctrl-C / SIGTERM)".into());
-    }
     // The trace: the emulator's rows joined with the robot's receive times.
     let merged = merge_trace(facts.out, source).unwrap_or_else(|e| {
         faults.push(format!("trace not written: {e}"));
         Default::default()
     });
     r.files.trace = merged.trace;
-    r.delay_check = delay_check(facts.spec, facts.seed, merged.delays);
+    // The run's stretches under one condition; the whole run's delays are
+    // held against one law only where it had one condition throughout.
+    let timeline = facts.spec.map(|s| RunTimeline::of(s, &r.events));
+    let single = matches!(&timeline, Some(Ok(t)) if t.is_single());
+    match &timeline {
+        Some(Ok(t)) if !t.is_single() => r.phases = phases::figures(t, &merged.fates, &merged.delays, &r.stages),
+        Some(Err(why)) => r.phases_unknown = Some(why.clone()),
+        _ => {}
+    }
+    r.delay_check = delay_check(facts.spec.filter(|_| single), facts.seed, merged.delays);
     // Last, so that a trace cut by the join itself is named too.
     faults.extend(files::cut_faults(facts.out));
     r.faults = faults;
@@ -141,7 +148,7 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// The report of `facts`' run from its services' reports alone (no
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
-fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>) -> RunReport {
+fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
     let Parts { console, emulator, simulator, udp, missing } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
@@ -151,7 +158,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
     let feedback = emulator
         .as_ref()
         .and_then(|e| e.path::<FeedbackExtra>("feedback"))
-        .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent)));
+        .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent), stopped));
     let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
     let video = VideoSection::join(video_path.as_ref(), console.as_ref().and_then(|c| c.video.as_ref()), simulator.as_ref().and_then(|s| s.camera.as_ref()));
     let mut faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
@@ -175,9 +182,12 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         scenario: facts.scenario.to_string(),
         seed: facts.seed,
         duration_s,
+        stopped,
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
+        phases: Vec::new(),
+        phases_unknown: None,
         stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),
         links: e.map(|e| e.link.links.clone()).unwrap_or_default(),
         injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
@@ -467,7 +477,8 @@ mod tests {
         let runner = RunnerView { faults: vec!["simulator ended abnormally (signal 9)".into()], interrupted: true, ..RunnerView::default() };
         let r = RunReport::assemble_run(&facts, runner);
         let cut = format!("cut file: {} (its writer stopped before it was whole)", d.join("stream-1/received.csv.partial").display());
-        assert_eq!(r.faults, ["simulator ended abnormally (signal 9)", "no report from the simulator", "interrupted (Ctrl-C / SIGTERM)", cut.as_str()]);
+        assert_eq!(r.faults, ["simulator ended abnormally (signal 9)", "no report from the simulator", cut.as_str()]);
+        assert!(r.stopped, "a stop is a normal end, reported as such");
         assert_eq!(r.missing, ["simulator.json"]);
         assert_eq!((r.run_id.as_str(), r.files.report_json.clone()), ("r1", d.join("report.json")));
         std::fs::remove_dir_all(&d).ok();

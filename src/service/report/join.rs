@@ -54,12 +54,23 @@ impl FeedbackSection {
     /// Joins the emulator's feedback path, the console's view of it and
     /// the robot's own count of what it sent (`robot_sent`, from its
     /// report): that count stands where the robot's end marker did not
-    /// reach the emulator before it stopped waiting for it.
-    pub fn join(e: &PathReport<FeedbackExtra>, c: Option<&ConsoleFeedback>, robot_sent: Option<u64>) -> FeedbackSection {
+    /// reach the emulator before it stopped waiting for it. In a run that
+    /// was `stopped`, the processes stop console first and robot last:
+    /// what the robot sent after the emulator stopped, and what the
+    /// emulator delivered after the console stopped reading, were in
+    /// flight at the stop and are counted as such.
+    pub fn join(e: &PathReport<FeedbackExtra>, c: Option<&ConsoleFeedback>, robot_sent: Option<u64>, stopped: bool) -> FeedbackSection {
         let received_by_console = c.map(|c| c.received);
         let sent_by_robot = e.extra.sent_by_robot.or(robot_sent);
         let a = &e.account;
-        let balanced = sent_by_robot == Some(a.entered) && a.closes() && received_by_console == Some(a.delivered);
+        let (mut not_taken_at_stop, mut unread_at_stop) = (0, 0);
+        if stopped {
+            not_taken_at_stop = sent_by_robot.map_or(0, |s| s.saturating_sub(a.entered));
+            unread_at_stop = received_by_console.map_or(0, |r| a.delivered.saturating_sub(r));
+        }
+        let balanced = sent_by_robot == Some(a.entered + not_taken_at_stop)
+            && a.closes()
+            && received_by_console.map(|r| r + unread_at_stop) == Some(a.delivered);
         FeedbackSection {
             return_scenario: e.scenario.clone(),
             seed: e.seed,
@@ -70,6 +81,8 @@ impl FeedbackSection {
             dropped: a.dropped.clone(),
             held_at_end: a.held_at_end,
             received_by_console,
+            not_taken_at_stop,
+            unread_at_stop,
             balanced,
             loss_rate: e.measures.loss_rate,
             loss_rate_ci95: e.measures.loss_rate_ci95,
@@ -109,12 +122,24 @@ pub fn faults(frames: &FrameAccount, feedback: Option<&FeedbackSection>, video: 
     let mut faults = Vec::new();
     if let Some(f) = feedback.filter(|f| !f.balanced) {
         faults.push(format!(
-            "feedback not balanced: robot sent {:?}, {} entered, {} delivered, console received {:?}",
-            f.sent_by_robot, f.entered, f.delivered, f.received_by_console
+            "feedback not balanced: the robot sent {}, {} entered the emulator, {} were delivered, the console received {}",
+            super::text::opt(f.sent_by_robot),
+            f.entered,
+            f.delivered,
+            super::text::opt(f.received_by_console)
         ));
     }
     if let Some(v) = video.filter(|v| !v.balanced) {
-        faults.push(format!("video not balanced: {:?}, dropped {:?}, held at end {}", v.frames, v.dropped, v.held_at_end));
+        let f = &v.frames;
+        faults.push(format!(
+            "video not balanced: {} frames through the emulator ({} whole, {} damaged, {} lost), dropped {}, held at end {}",
+            f.sent,
+            f.whole,
+            f.damaged,
+            f.lost,
+            super::text::dropped_list(&v.dropped),
+            v.held_at_end
+        ));
     }
     if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
         faults.push(format!("{n} frames sent by the console never entered the emulator"));
@@ -321,7 +346,7 @@ pub(super) mod tests {
 
     #[test]
     fn feedback_balances_from_the_robot_through_the_emulator_to_the_console() {
-        let f = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(8)), Some(10));
+        let f = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(8)), Some(10), false);
         assert!(f.balanced, "{f:?}");
         assert_eq!((f.return_scenario.as_str(), f.seed, f.dropped["bernoulli"]), ("Normal", 3, 2));
         assert_eq!(f.round_trip_ns.map(|s| s.p50), Some(1_000));
@@ -329,19 +354,40 @@ pub(super) mod tests {
         assert_eq!(f.divergence_max_mm, Some([1.0, 0.5]));
         assert!(faults(&account(None, None, None), Some(&f), None).is_empty());
         // The robot's end marker did not reach the emulator: its own count stands.
-        let late = FeedbackSection::join(&feedback_path(10, 8, None), Some(&console_feedback(8)), Some(10));
+        let late = FeedbackSection::join(&feedback_path(10, 8, None), Some(&console_feedback(8)), Some(10), false);
         assert_eq!(late.sent_by_robot, Some(10));
         assert!(late.balanced);
         // The console received less than was delivered.
-        let short = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(7)), Some(10));
+        let short = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(7)), Some(10), false);
         assert!(!short.balanced);
         let fault = &faults(&account(None, None, None), Some(&short), None)[0];
-        assert_eq!(fault, "feedback not balanced: robot sent Some(10), 10 entered, 8 delivered, console received Some(7)");
+        assert_eq!(fault, "feedback not balanced: the robot sent 10, 10 entered the emulator, 8 were delivered, the console received 7");
         // The robot sent more than entered.
-        assert!(!FeedbackSection::join(&feedback_path(10, 8, Some(11)), Some(&console_feedback(8)), None).balanced);
-        // No console report: what it received is unknown.
-        let foreign = FeedbackSection::join(&feedback_path(10, 8, Some(10)), None, None);
+        assert!(!FeedbackSection::join(&feedback_path(10, 8, Some(11)), Some(&console_feedback(8)), None, false).balanced);
+        // No console report: what it received is unknown, and said so.
+        let foreign = FeedbackSection::join(&feedback_path(10, 8, Some(10)), None, None, false);
         assert_eq!((foreign.received_by_console, foreign.round_trip_ns, foreign.balanced), (None, None, false));
+        let fault = &faults(&account(None, None, None), Some(&foreign), None)[0];
+        assert!(fault.ends_with("the console received ?"), "{fault}");
+    }
+
+    #[test]
+    fn a_stopped_run_accounts_the_feedback_in_flight_at_the_stop() {
+        // The console stopped reading with one sample delivered to it, and
+        // the robot sent two after the emulator stopped taking them.
+        let stopped = FeedbackSection::join(&feedback_path(10, 8, Some(12)), Some(&console_feedback(7)), Some(12), true);
+        assert!(stopped.balanced, "{stopped:?}");
+        assert_eq!((stopped.not_taken_at_stop, stopped.unread_at_stop), (2, 1));
+        // The same counts in a run that ended on its own are lost samples.
+        let ended = FeedbackSection::join(&feedback_path(10, 8, Some(12)), Some(&console_feedback(7)), Some(12), false);
+        assert!(!ended.balanced);
+        assert_eq!((ended.not_taken_at_stop, ended.unread_at_stop), (0, 0));
+        // A stop explains nothing the other way: a console that received
+        // more than was delivered, or an emulator account that does not close.
+        assert!(!FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(9)), Some(10), true).balanced);
+        let mut open = feedback_path(10, 8, Some(10));
+        open.account.held_at_end = 1;
+        assert!(!FeedbackSection::join(&open, Some(&console_feedback(8)), Some(10), true).balanced);
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! | `emulator_text` | the stand-alone emulator's own report as text ([`emulator_text`]) |
 //! | `trace_merge` | `trace_emulator.csv` + `received.csv` → `trace.csv`, and the delays |
 //! | `delay` | the delays seen against the drawn and the model's law |
+//! | `phases` | the run's stretches under one condition (phases, live switches, pauses), each with its loss and delay law |
 //! | `provenance` | version, command line, start and host |
 //! | `files` | files written whole ([`write_whole`]), and the cut ones found |
 //!
@@ -20,15 +21,18 @@ mod delay;
 mod emulator_text;
 pub mod files;
 mod join;
+pub mod phases;
 mod provenance;
 mod text;
 mod trace_merge;
 
 pub use crate::service::schema::run::*;
 pub use assemble::{DirError, RunFacts, RunnerView};
+pub use delay::Law;
+pub use phases::RunTimeline;
 pub use files::{cut_files, write_whole, WriteError};
 pub use join::{account, corruption, difference, overhead};
-pub use text::udp_line;
+pub use text::{busy_text, dropped_list, phase_title, udp_line};
 pub use emulator_text::emulator_text;
 
 use crate::host::Steal;
@@ -37,8 +41,9 @@ use crate::service::plan::Plan;
 impl RunReport {
     /// Joins what the services left in the run's output directory into the
     /// run's report. `faults` holds what the runner saw go wrong (dead
-    /// processes); the report adds missing reports, lost frames, an
-    /// interruption, a trace that could not be joined and cut files.
+    /// processes); the report adds missing reports, lost frames, a trace
+    /// that could not be joined and cut files. A run `interrupted` (Ctrl-C,
+    /// SIGTERM) was stopped at a person's request: a normal end.
     pub fn assemble(plan: &Plan, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, faults: Vec<String>, interrupted: bool) -> RunReport {
         let facts = RunFacts {
             run_id: &plan.run_id,

@@ -2,7 +2,7 @@
 //! a function of what it shows, so that the stand-alone emulator's own
 //! report (`emulator_text`) shares those the emulator knows.
 
-use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, Provenance, RunReport, RunStreams};
+use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
 use crate::check::{LinkReport, StageReport};
 use crate::metrics::{fmt_ns, Summary};
 use crate::service::control::ControlEvent;
@@ -15,7 +15,7 @@ pub(super) fn opt(v: Option<u64>) -> String {
 }
 
 /// `N by CAUSE, …`, or `none`.
-pub(super) fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
+pub fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
     let d: Vec<String> = dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
     if d.is_empty() {
         "none".into()
@@ -44,6 +44,9 @@ impl RunReport {
     /// The report as a person reads it.
     pub fn to_text(&self) -> String {
         let mut s = format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        if self.stopped {
+            s += &format!("ended      stopped on request after {:.2} s (Ctrl-C, SIGTERM or the UI's stop): a normal end\n", self.duration_s);
+        }
         if let Some(p) = &self.provenance {
             s += &p.to_text();
         }
@@ -52,6 +55,12 @@ impl RunReport {
             s += &format!("udp        {}\n", udp_line(u));
         }
         s += &loss_text(self.loss_rate.zip(self.loss_rate_ci95), &self.stages, &self.links);
+        if !self.phases.is_empty() {
+            s += &phases_text(&self.phases);
+        }
+        if let Some(why) = &self.phases_unknown {
+            s += &format!("phases     not told apart: {why}\n");
+        }
         s += &injected_text(&self.injected_delay_ns);
         s += &overhead_text(&self.overhead_ns, self.emulator.as_ref().and_then(|e| e.busy.as_ref()));
         if let Some(dc) = &self.delay_check {
@@ -208,6 +217,63 @@ pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], l
     s
 }
 
+/// Each stretch of the run under one condition: its loss with its
+/// interval against its model, and its delays against its own law.
+fn phases_text(phases: &[PhaseFigures]) -> String {
+    let mut s = "phases     each stretch under one condition (the whole-run loss above mixes them)\n".to_string();
+    for p in phases {
+        s += &format!("  {}  {}: {} frames, dropped {}, loss {:.4} [{:.4}, {:.4}]{}\n",
+            span_text(p),
+            phase_title(p),
+            p.frames,
+            p.dropped,
+            p.loss_rate,
+            p.loss_rate_ci95[0],
+            p.loss_rate_ci95[1],
+            p.loss_rate_model.map_or(String::new(), |m| format!(", model {m:.4}")),
+        );
+        if let Some(dc) = &p.delay_check {
+            let law = |q: f64| dc.quantiles.iter().find(|x| x.q == q);
+            let mut parts = Vec::new();
+            for q in [0.5, 0.9, 0.99] {
+                if let Some(x) = law(q) {
+                    let model = x.model_ms.map_or(String::new(), |m| format!(" (law {m:.3})"));
+                    parts.push(format!("q{q} drawn {:.3} ms{model}, seen {:.3} ms", x.injected_ms, x.seen_ms));
+                }
+            }
+            let verdict = match dc.injected_within_model_band {
+                Some(true) => "; every drawn quantile within the law's 95% band",
+                Some(false) => "; NOT every drawn quantile within the law's 95% band",
+                None => "",
+            };
+            s += &format!("      delay {} frames: {}{verdict}\n", dc.frames, parts.join("; "));
+        }
+    }
+    s
+}
+
+/// `[from, to) s` of a stretch, from the run's first frame.
+pub(super) fn span_text(p: &PhaseFigures) -> String {
+    let to = p.to_ns.map_or("end".to_string(), |t| format!("{:.3}", t as f64 / 1e9));
+    format!("{:>8.3}–{to:<8} s", p.from_ns as f64 / 1e9)
+}
+
+/// What a stretch ran: `phase 2: DLM-1` or `paused (phase 2: DLM-1)`.
+pub fn phase_title(p: &PhaseFigures) -> String {
+    let mut what = format!("phase {}: {}", p.run_phase, p.scenario);
+    if p.scenario_phase > 1 || p.phase_name.is_some() {
+        what += &format!(" phase {}", p.scenario_phase);
+        if let Some(n) = &p.phase_name {
+            what += &format!(" ({n})");
+        }
+    }
+    if p.paused {
+        format!("paused ({what})")
+    } else {
+        what
+    }
+}
+
 /// The injected delay of delivered frames.
 pub(super) fn injected_text(d: &Option<Summary>) -> String {
     match d {
@@ -244,7 +310,7 @@ pub(super) fn emulator_overhead_text(ingress_wait: &Option<Summary>, decision: &
 }
 
 /// The emulator loop's time on frames, as a line of the overhead part.
-pub(super) fn busy_text(b: &LoopBusy) -> String {
+pub fn busy_text(b: &LoopBusy) -> String {
     let (per, cap) = match (b.busy_ns_per_frame, b.capacity_frames_per_s) {
         (Some(p), Some(c)) => (format!("{p:.0} ns a frame"), format!("{c:.0} frames/s")),
         _ => ("-".into(), "-".into()),
@@ -333,6 +399,12 @@ impl FeedbackSection {
         );
         if self.duplicated > 0 {
             s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
+        }
+        if self.not_taken_at_stop + self.unread_at_stop > 0 {
+            s += &format!(
+                "  in flight at the stop: {} sent by the robot after the emulator stopped, {} delivered after the console stopped reading\n",
+                self.not_taken_at_stop, self.unread_at_stop
+            );
         }
         s += &format!(
             "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",

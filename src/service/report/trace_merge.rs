@@ -9,6 +9,7 @@
 
 use super::delay::Delays;
 use super::files::{partial_path, WriteError};
+use super::phases::Fates;
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -22,9 +23,11 @@ pub const TRACE: &str = "trace.csv";
 
 /// Columns of a trace row (see `crate::trace::CSV_HEADER`).
 const SEND_COLUMN: usize = 3;
+const INGRESS_COLUMN: usize = 4;
 const FATE_COLUMN: usize = 5;
 const DELAY_COLUMN: usize = 9;
 const RELEASE_SCHED_COLUMN: usize = 10;
+const COPY_COLUMN: usize = 13;
 
 /// Why the trace could not be joined.
 #[derive(Debug, thiserror::Error)]
@@ -49,11 +52,13 @@ pub enum Source {
     Keep,
 }
 
-/// The joined trace, when there is a whole one, and the delays.
+/// The joined trace, when there is a whole one, the delays, and each
+/// frame's ingress time and fate.
 #[derive(Debug, Default)]
 pub struct Merged {
     pub trace: Option<PathBuf>,
     pub delays: Delays,
+    pub fates: Fates,
 }
 
 /// The robot's receive times, by ingress index: the first receipt of each
@@ -141,14 +146,14 @@ pub fn merge_trace(out: &Path, source: Source) -> Result<Merged, MergeError> {
         (true, _) => (emu, true),
         (false, true) => (partial_path(&emu), false),
         (false, false) if source == Source::Keep && joined.exists() => {
-            let delays = read_delays(&joined)?;
-            return Ok(Merged { trace: Some(joined), delays });
+            let (delays, fates) = read_delays(&joined)?;
+            return Ok(Merged { trace: Some(joined), delays, fates });
         }
         (false, false) => return Ok(Merged::default()),
     };
     let mut recv = Receipts::read(out)?;
     let cut = partial_path(&joined);
-    let delays = join_rows(&input, &cut, &mut recv)?;
+    let (delays, fates) = join_rows(&input, &cut, &mut recv)?;
     let trace = if whole {
         std::fs::rename(&cut, &joined).map_err(|e| WriteError::Rename { from: cut.clone(), to: joined.clone(), source: e })?;
         Some(joined)
@@ -158,20 +163,25 @@ pub fn merge_trace(out: &Path, source: Source) -> Result<Merged, MergeError> {
     if source == Source::Consume {
         std::fs::remove_file(&input).map_err(|source| MergeError::Remove { path: input.clone(), source })?;
     }
-    Ok(Merged { trace, delays })
+    Ok(Merged { trace, delays, fates })
 }
 
 /// Writes the rows of `input` to `output` (synced) with the receive time
-/// of each delivered row that has one, and returns their delays.
-fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<Delays, MergeError> {
+/// of each delivered row that has one, and returns their delays and every
+/// frame's fate.
+fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays, Fates), MergeError> {
     let write_err = |source| MergeError::Write(WriteError::Write { path: output.to_path_buf(), source });
     let read_err = |source| MergeError::Read { path: input.to_path_buf(), source };
     let file = std::fs::File::create(output).map_err(write_err)?;
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let mut delays = Delays::default();
+    let mut fates = Fates::default();
     let rows = std::io::BufReader::new(std::fs::File::open(input).map_err(read_err)?).lines();
     for (n, line) in rows.enumerate() {
         let line = line.map_err(read_err)?;
+        if n > 0 {
+            fate(&line, &mut fates);
+        }
         let received = if n == 0 { None } else { receipt(&line, recv) };
         let Some(t) = received else {
             writeln!(w, "{line}").map_err(write_err)?;
@@ -184,6 +194,7 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<Delays,
         }
         writeln!(w, "{}", cols.join(",")).map_err(write_err)?;
         if let (Some(send), Some(delay)) = (column(&cols, SEND_COLUMN), column(&cols, DELAY_COLUMN)) {
+            delays.ingress_ns.push(column(&cols, INGRESS_COLUMN).unwrap_or(0));
             delays.injected.push(delay);
             delays.seen.push(t.saturating_sub(send));
         }
@@ -192,7 +203,18 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<Delays,
     // under a whole one's name.
     let file = w.into_inner().map_err(|e| write_err(e.into_error()))?;
     file.sync_all().map_err(write_err)?;
-    Ok(delays)
+    Ok((delays, fates))
+}
+
+/// Adds a row's frame to `fates`: its ingress time and whether it was
+/// dropped; a copy's row (a `copy` other than 0) and a row that does not
+/// parse add nothing.
+fn fate(line: &str, fates: &mut Fates) {
+    let cols: Vec<&str> = line.split(',').collect();
+    let original = cols.get(COPY_COLUMN).is_none_or(|c| c.is_empty() || *c == "0");
+    if let (true, Some(t), Some(f)) = (original, column(&cols, INGRESS_COLUMN), cols.get(FATE_COLUMN)) {
+        fates.push(t, *f == "dropped");
+    }
 }
 
 /// The receipt of a delivered trace row, taken from `recv`.
@@ -209,20 +231,23 @@ fn column(cols: &[&str], k: usize) -> Option<u64> {
     cols.get(k).and_then(|x| x.parse().ok())
 }
 
-/// The delays of the received rows of a joined trace.
-fn read_delays(path: &Path) -> Result<Delays, MergeError> {
+/// The delays of the received rows of a joined trace, and every frame's fate.
+fn read_delays(path: &Path) -> Result<(Delays, Fates), MergeError> {
     let read_err = |source| MergeError::Read { path: path.to_path_buf(), source };
     let mut delays = Delays::default();
+    let mut fates = Fates::default();
     for line in std::io::BufReader::new(std::fs::File::open(path).map_err(read_err)?).lines().skip(1) {
         let line = line.map_err(read_err)?;
+        fate(&line, &mut fates);
         let cols: Vec<&str> = line.split(',').collect();
         let at = |k| column(&cols, k);
         if let (Some(send), Some(delay), Some(t)) = (at(SEND_COLUMN), at(DELAY_COLUMN), at(crate::trace::RECV_COLUMN)) {
+            delays.ingress_ns.push(at(INGRESS_COLUMN).unwrap_or(0));
             delays.injected.push(delay);
             delays.seen.push(t.saturating_sub(send));
         }
     }
-    Ok(delays)
+    Ok((delays, fates))
 }
 
 #[cfg(test)]
@@ -274,6 +299,9 @@ mod tests {
         assert_eq!(recv_of(&trace), ["1510", "", "3120", "3950", ""]);
         assert_eq!(m.delays.injected, [500, 100, 900]);
         assert_eq!(m.delays.seen, [510, 120, 950]);
+        assert_eq!(m.delays.ingress_ns, [1_000, 3_000, 3_000]);
+        // Four frames (the copy is none), the second dropped.
+        assert_eq!((m.fates.len(), m.fates.origin_ns()), (4, Some(1_000)));
         assert!(!d.join(EMULATOR_TRACE).exists(), "the joined emulator trace stays");
         std::fs::remove_dir_all(&d).ok();
     }
@@ -290,6 +318,7 @@ mod tests {
         std::fs::remove_file(d.join(EMULATOR_TRACE)).unwrap();
         let joined = merge_trace(&d, Source::Keep).unwrap();
         assert_eq!(joined.trace, Some(d.join(TRACE)));
+        assert_eq!(joined.fates.len(), 4);
         assert_eq!((joined.delays.injected, joined.delays.seen), (vec![500, 100, 900], vec![510, 120, 950]));
         // The runner's join of a directory without an emulator trace has none.
         let none = merge_trace(&d, Source::Consume).unwrap();

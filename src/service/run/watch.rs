@@ -41,7 +41,7 @@ struct Consoles {
 /// so the survivors see their peer counts drop and a restarted peer can
 /// take over its port); names each console not streaming
 /// ([`CONSOLE_READY`]) after its start. Returns whether the run was
-/// interrupted.
+/// stopped at a person's request (Ctrl-C, SIGTERM; not stuck consoles).
 pub fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
     let started = Instant::now();
     let mut policy = Supervisor::new(plan.planned_s);
@@ -73,7 +73,7 @@ pub fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
         }
         obey(&o, procs, &consoles.ready);
         if o.done {
-            return policy.interrupted();
+            return policy.stopped_on_request();
         }
     }
 }

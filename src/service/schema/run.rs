@@ -149,8 +149,9 @@ pub struct DelayCheck {
 /// The feedback loop robot → emulator → console: what the return scenario
 /// did, every feedback sample accounted for, and the round trip.
 ///
-/// `sent_by_robot = entered`, `entered + duplicated = delivered + dropped +
-/// held_at_end`, `delivered = received_by_console`: `balanced`.
+/// `sent_by_robot = entered + not_taken_at_stop`, `entered + duplicated =
+/// delivered + dropped + held_at_end`, `delivered = received_by_console +
+/// unread_at_stop`: `balanced`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeedbackSection {
     pub return_scenario: String,
@@ -164,6 +165,14 @@ pub struct FeedbackSection {
     pub dropped: BTreeMap<String, u64>,
     pub held_at_end: u64,
     pub received_by_console: Option<u64>,
+    /// In a stopped run: samples the robot sent after the emulator had
+    /// stopped taking them, and samples the emulator delivered after the
+    /// console had stopped reading (the processes stop console first,
+    /// robot last). Both 0 in a run that ended on its own.
+    #[serde(default)]
+    pub not_taken_at_stop: u64,
+    #[serde(default)]
+    pub unread_at_stop: u64,
     pub balanced: bool,
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
@@ -204,9 +213,26 @@ pub struct RunReport {
     pub scenario: String,
     pub seed: u64,
     pub duration_s: f64,
+    /// Stopped at a person's request (Ctrl-C, SIGTERM, the UI's stop)
+    /// before its planned end: a normal end, reported as such, with what
+    /// was in flight at the stop accounted for.
+    #[serde(default)]
+    pub stopped: bool,
     pub frames: FrameAccount,
+    /// The whole run's realized loss; where the run had several phases or
+    /// live switches it mixes their conditions (see `phases`).
     pub loss_rate: Option<f64>,
     pub loss_rate_ci95: Option<[f64; 2]>,
+    /// Each stretch of the run under one condition, in time order, where
+    /// the run had phases, live switches or pauses (absent otherwise).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub phases: Vec<PhaseFigures>,
+    /// Why the run's stretches could not be told apart, where it had
+    /// several and they could not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phases_unknown: Option<String>,
+    /// Each stage of each phase of the run's timeline (its own and those
+    /// switched in): what it realized against its model.
     pub stages: Vec<StageReport>,
     /// The link stages (`rate`, `trace`): utilisation, queue occupancy
     /// over time, queueing delay percentiles (absent when none).
@@ -255,6 +281,45 @@ pub struct RunReport {
     /// total; the fields above are then stream 0's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streams: Option<RunStreams>,
+}
+
+/// One stretch of a run under one condition: a phase of the run's
+/// timeline (its own scenario's, or one a live switch brought in) while
+/// faults were on, or a pause (every frame passed untouched). A phase a
+/// pause interrupted is two stretches. Computed from the trace (each
+/// frame's ingress time and fate), the run's scenario and its control
+/// events, exactly.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PhaseFigures {
+    /// The phase of the run's timeline, from 1 (as the trace's `phase`
+    /// column and the stages' `phase` count them).
+    pub run_phase: usize,
+    /// The scenario the phase comes from, and its phase there (from 1).
+    pub scenario: String,
+    pub scenario_phase: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phase_name: Option<String>,
+    /// Faults paused: every frame passed untouched.
+    pub paused: bool,
+    /// When it began and ended, ns from the run's first frame (`to_ns`
+    /// absent: at the run's end).
+    pub from_ns: u64,
+    pub to_ns: Option<u64>,
+    /// Frames that entered the emulator in it (copies not counted), and
+    /// of those the ones dropped.
+    pub frames: u64,
+    pub dropped: u64,
+    /// dropped / frames, with its 95% interval (batch means over the
+    /// stretch's frames in order).
+    pub loss_rate: f64,
+    pub loss_rate_ci95: [f64; 2],
+    /// The phase's long-run loss by its model, where it has exactly one
+    /// stage that drops and its model's loss is known (0 when paused).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_model: Option<f64>,
+    /// The delays seen and drawn in it against the phase's own delay law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_check: Option<DelayCheck>,
 }
 
 /// One stream of a run of several, as the run report gives it (its full
