@@ -47,7 +47,7 @@ def main():
     p.add_argument("--rate-hz", type=float, default=200.0)
     p.add_argument("--type", default="string", choices=["string", "pose"])
     p.add_argument("--qos", default="reliable", choices=["reliable", "best_effort"])
-    p.add_argument("--depth", type=int, default=100)
+    p.add_argument("--depth", type=int, default=None, help="history depth (default: COUNT, so that a reliable writer keeps every message until it is acknowledged, however late the reader is)")
     p.add_argument("--wait-subs", type=int, default=1, help="subscribers to wait for before publishing")
     p.add_argument("--wait-s", type=float, default=30.0)
     p.add_argument("--linger-s", type=float, default=2.0)
@@ -62,7 +62,7 @@ def main():
     rclpy.init()
     node = rclpy.create_node(a.name)
     rel = ReliabilityPolicy.RELIABLE if a.qos == "reliable" else ReliabilityPolicy.BEST_EFFORT
-    qos = QoSProfile(depth=a.depth, reliability=rel, history=HistoryPolicy.KEEP_LAST)
+    qos = QoSProfile(depth=a.depth or max(a.count, 1), reliability=rel, history=HistoryPolicy.KEEP_LAST)
     pub = node.create_publisher(msg_type(a.type), a.topic, qos)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
