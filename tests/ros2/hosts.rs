@@ -10,71 +10,26 @@
 //! the test removes again.
 
 use crate::{assert_balanced, python, trace, u, Case, ONE_RUN_AT_A_TIME};
-use std::process::Command;
+use netns::Hosts;
 
-/// Runs `ip ARGS`; `Err` with its message if it fails.
-fn ip(args: &[&str]) -> Result<(), String> {
-    let o = Command::new("ip").args(args).output().map_err(|e| format!("cannot run `ip`: {e}"))?;
-    if o.status.success() {
-        Ok(())
-    } else {
-        Err(format!("`ip {}` failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim()))
-    }
-}
-
-/// The three namespaces and their links; removed when dropped.
-struct Hosts {
-    console: String,
-    emu: String,
-    robot: String,
-}
-
-impl Hosts {
-    /// The topology of `docs/ros2.md`; `Err` says why it could not be made.
-    fn build() -> Result<Hosts, String> {
-        let id = std::process::id() % 100_000;
-        let h = Hosts { console: format!("nr2-con-{id}"), emu: format!("nr2-emu-{id}"), robot: format!("nr2-rob-{id}") };
-        ip(&["netns", "add", &h.console])?;
-        ip(&["netns", "add", &h.emu])?;
-        ip(&["netns", "add", &h.robot])?;
-        let (c0, c1, r0, r1) = (format!("r2c0-{id}"), format!("r2c1-{id}"), format!("r2r0-{id}"), format!("r2r1-{id}"));
-        ip(&["link", "add", &c0, "netns", &h.console, "type", "veth", "peer", "name", &c1, "netns", &h.emu])?;
-        ip(&["link", "add", &r0, "netns", &h.robot, "type", "veth", "peer", "name", &r1, "netns", &h.emu])?;
-        for (ns, dev, addr) in [(&h.console, &c0, "192.0.2.1/24"), (&h.emu, &c1, "192.0.2.2/24"), (&h.emu, &r1, "198.51.100.1/24"), (&h.robot, &r0, "198.51.100.2/24")] {
-            ip(&["-n", ns, "addr", "add", addr, "dev", dev])?;
-            ip(&["-n", ns, "link", "set", dev, "up"])?;
-        }
-        for ns in [&h.console, &h.emu, &h.robot] {
-            ip(&["-n", ns, "link", "set", "lo", "up"])?;
-        }
-        // DDS discovery is multicast: each end sends it towards the
-        // emulator's host (which forwards nothing).
-        ip(&["-n", &h.console, "route", "add", "default", "via", "192.0.2.2"])?;
-        ip(&["-n", &h.robot, "route", "add", "default", "via", "198.51.100.1"])?;
-        Ok(h)
-    }
-}
-
-impl Drop for Hosts {
-    fn drop(&mut self) {
-        for ns in [&self.console, &self.emu, &self.robot] {
-            let _ = ip(&["netns", "del", ns]);
-        }
-    }
-}
+#[path = "../common/netns.rs"]
+mod netns;
 
 #[test]
 fn console_and_robot_nodes_in_two_network_namespaces_talk_only_through_the_emulator() {
     let Some(py) = python() else { return };
+    let required = std::env::var("NETFI_REQUIRE_NETNS").as_deref() == Ok("1");
     // SAFETY: geteuid has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
+        assert!(!required, "NETFI_REQUIRE_NETNS=1 but this test does not run as root");
         eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
         return;
     }
     let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let hosts = match Hosts::build() {
+    let hosts = match Hosts::build("r2", true) {
         Ok(h) => h,
         Err(why) => {
+            assert!(!required, "NETFI_REQUIRE_NETNS=1 but network namespaces joined by veth pairs cannot be made: {why}");
             eprintln!("skipping: this machine does not allow network namespaces joined by veth pairs: {why}");
             return;
         }

@@ -13,70 +13,14 @@ use crate::bridge::{itp, u, Emulator};
 use crate::ONE_RUN_AT_A_TIME;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
+use netns_hosts::Hosts;
 use std::net::SocketAddr;
 use std::os::fd::AsRawFd;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-/// Runs `ip ARGS`; `Err` with its message if it fails.
-fn ip(args: &[&str]) -> Result<(), String> {
-    let o = Command::new("ip").args(args).output().map_err(|e| format!("cannot run `ip`: {e}"))?;
-    if o.status.success() {
-        Ok(())
-    } else {
-        Err(format!("`ip {}` failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim()))
-    }
-}
-
-/// The three namespaces and their links; removed when dropped.
-struct Hosts {
-    console: String,
-    emu: String,
-    robot: String,
-}
-
-impl Hosts {
-    /// Builds the topology of `docs/udp.md`; `Err` says why it could not.
-    fn build() -> Result<Hosts, String> {
-        let id = std::process::id() % 100_000;
-        let h = Hosts {
-            console: format!("netfi-con-{id}"),
-            emu: format!("netfi-emu-{id}"),
-            robot: format!("netfi-rob-{id}"),
-        };
-        ip(&["netns", "add", &h.console])?;
-        // From here on, `h` removes whatever was made if a step fails.
-        ip(&["netns", "add", &h.emu])?;
-        ip(&["netns", "add", &h.robot])?;
-        let (c0, c1, r0, r1) = (format!("nfc0-{id}"), format!("nfc1-{id}"), format!("nfr0-{id}"), format!("nfr1-{id}"));
-        // Console side: c0 (console) ↔ c1 (emulator).
-        ip(&["link", "add", &c0, "netns", &h.console, "type", "veth", "peer", "name", &c1, "netns", &h.emu])?;
-        // Robot side: r1 (emulator) ↔ r0 (robot).
-        ip(&["link", "add", &r0, "netns", &h.robot, "type", "veth", "peer", "name", &r1, "netns", &h.emu])?;
-        for (ns, dev, addr) in [
-            (&h.console, &c0, "192.0.2.1/24"),
-            (&h.emu, &c1, "192.0.2.2/24"),
-            (&h.emu, &r1, "198.51.100.1/24"),
-            (&h.robot, &r0, "198.51.100.2/24"),
-        ] {
-            ip(&["-n", ns, "addr", "add", addr, "dev", dev])?;
-            ip(&["-n", ns, "link", "set", dev, "up"])?;
-        }
-        for ns in [&h.console, &h.emu, &h.robot] {
-            ip(&["-n", ns, "link", "set", "lo", "up"])?;
-        }
-        Ok(h)
-    }
-}
-
-impl Drop for Hosts {
-    fn drop(&mut self) {
-        // Deleting a namespace deletes the veth ends in it (and so the pairs).
-        for ns in [&self.console, &self.emu, &self.robot] {
-            let _ = ip(&["netns", "del", ns]);
-        }
-    }
-}
+#[path = "../common/netns.rs"]
+mod netns_hosts;
 
 /// Opens a UDP socket bound to `addr` inside network namespace `ns`: a
 /// thread enters the namespace (a thread's own network namespace is what new
@@ -121,7 +65,7 @@ fn console_and_robot_in_two_namespaces_talk_only_through_the_emulator() {
         return;
     }
     let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let hosts = match Hosts::build() {
+    let hosts = match Hosts::build("nf", false) {
         Ok(h) => h,
         Err(why) => {
             assert!(!required, "NETFI_REQUIRE_NETNS=1 but network namespaces joined by veth pairs cannot be made: {why}");
