@@ -12,7 +12,9 @@ use std::sync::Arc;
 const APP_JS: &str = concat!(include_str!("assets/app.js"), include_str!("assets/chain.js"));
 const APP_CSS: &str = include_str!("assets/app.css");
 
-fn shell(title: &str, page: &str, body: Markup) -> Markup {
+/// A page of `netfi ui`: its head, the header with the navigation, `body`,
+/// and its script (`/assets/app.js` or a page's own).
+pub(super) fn shell_with(title: &str, page: &str, script: &str, body: Markup) -> Markup {
     html! {
         (DOCTYPE)
         html lang="en" {
@@ -30,10 +32,14 @@ fn shell(title: &str, page: &str, body: Markup) -> Markup {
                     nav { a #nav-builder href="/" { "builder" } a #nav-runs href="/runs" { "runs" } }
                 }
                 main { (body) }
-                script src="/assets/app.js" {}
+                script src=(script) {}
             }
         }
     }
+}
+
+fn shell(title: &str, page: &str, body: Markup) -> Markup {
+    shell_with(title, page, "/assets/app.js", body)
 }
 
 /// The choices of a preset list, after `first`.

@@ -48,25 +48,6 @@ fn open(file: Option<&str>) -> Result<OpenStudy, String> {
     OpenStudy::open(Path::new(file)).map_err(|e| e.to_string())
 }
 
-fn shell(title: &str, body: Markup) -> Markup {
-    html! {
-        (DOCTYPE)
-        html lang="en" {
-            head {
-                meta charset="utf-8";
-                meta name="viewport" content="width=device-width, initial-scale=1";
-                title { (title) }
-                link rel="stylesheet" href="/assets/app.css";
-            }
-            body data-page="study" {
-                header { a href="/" { "netfi" } " — " (title) }
-                main { (body) }
-                script src="/assets/study.js" {}
-            }
-        }
-    }
-}
-
 /// `GET /study?file=…`: the experimenter's page.
 pub async fn page(Query(w): Query<Which>) -> Markup {
     let file = w.file.clone().unwrap_or_default();
@@ -82,7 +63,7 @@ pub async fn page(Query(w): Query<Which>) -> Markup {
             Some(Ok(s)) => { (study_body(s, w.participant.as_deref())) }
         }
     };
-    shell("study", body)
+    super::page::shell_with("study", "study", "/assets/study.js", body)
 }
 
 fn study_body(s: &OpenStudy, chosen: Option<&str>) -> Markup {
