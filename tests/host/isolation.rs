@@ -237,17 +237,27 @@ fn kill_matrix_case(kill: Kill) {
 
     // Whatever of the run is left is stopped; `netfi restore` removes the
     // iceoryx2 resources of the killed processes.
-    for role in ["console", "emulator", "simulator"] {
-        if let Some(pid) = read_pid(&run.out, role).filter(|p| alive(*p)) {
-            sigkill(pid);
-        }
+    let pids: Vec<i32> = ["console", "emulator", "simulator"].iter().filter_map(|role| read_pid(&run.out, role)).collect();
+    for &pid in pids.iter().filter(|p| alive(**p)) {
+        sigkill(pid);
     }
     let (out, run_id) = (run.out.clone(), run.run_id.clone());
     drop(run);
-    std::thread::sleep(Duration::from_millis(200));
-    restore();
-
-    let shm = ipc_files_of(&run_id);
+    // `netfi restore` leaves a live process's node alone: it runs once every
+    // process of the run is gone (a process dying by its runner's death may
+    // still be on its way out), and again while a file is left, for at most
+    // a few seconds; what is left after that was left for good.
+    wait_for("the run's processes to end", Duration::from_secs(10), || pids.iter().all(|p| !alive(*p)));
+    let t0 = std::time::Instant::now();
+    let mut shm = Vec::new();
+    while t0.elapsed() < Duration::from_secs(5) {
+        restore();
+        shm = ipc_files_of(&run_id);
+        if shm.is_empty() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
     assert!(shm.is_empty(), "{kill:?}: left in /dev/shm or iceoryx2's directory after `netfi restore`: {shm:?}");
     let after = snapshot();
     let d = differences(&before, &after);
