@@ -9,7 +9,7 @@
 //! are documentation ranges that exist only inside these namespaces, which
 //! the test removes again.
 
-use crate::{assert_balanced, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{assert_balanced, index, python, trace, u, Case, ONE_RUN_AT_A_TIME};
 use netns::Hosts;
 
 #[path = "../common/netns.rs"]
@@ -53,7 +53,18 @@ fn console_and_robot_nodes_in_two_network_namespaces_talk_only_through_the_emula
     let t = trace(&c, "trace_emulator.csv");
     let fates: Vec<String> = t.iter().map(|r| r["fate"].clone()).collect();
     assert_eq!(fates, c.check_fates("PLM-1", N, 4));
-    assert_eq!(c.received("robot").len() as u64, u(&e["frames"]["delivered"]));
+    // Across namespaces, discovery of the robot's node by the emulator's
+    // writer can come after the first releases (volatile durability: what
+    // is written before a reader matches is not kept for it). So the robot
+    // gets every delivered message from its first one on, in release
+    // order: a suffix of what was delivered, nothing lost after the match.
+    let mut delivered: Vec<_> = t.iter().filter(|r| r["fate"] == "delivered").collect();
+    assert_eq!(delivered.len() as u64, u(&e["frames"]["delivered"]));
+    delivered.sort_by_key(|r| r["release_ns"].parse::<u64>().unwrap());
+    let want: Vec<u64> = delivered.iter().map(|r| index(r)).collect();
+    let have: Vec<u64> = c.received("robot").iter().map(|r| r.index).collect();
+    assert!(!have.is_empty(), "the robot got nothing");
+    assert!(want.ends_with(&have), "the robot got {} of {} delivered, not all of them from its first on", have.len(), want.len());
     assert_eq!(c.received("direct").len(), 0, "the robot's host reached the console's topic directly");
     let r = c.json("ros2.json");
     let nodes: Vec<&str> = r["forward"]["endpoints"].as_array().unwrap().iter().map(|p| p["node"].as_str().unwrap()).collect();
