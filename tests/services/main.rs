@@ -164,8 +164,9 @@ fn a_rate_link_reports_utilisation_queue_and_queueing_delay() {
     let at = html.find("id=\"plot-link-occupancy-1\"").expect("no occupancy plot");
     let plot = &html[at..at + html[at..].find("</svg>").unwrap()];
     assert!(plot.contains("<polyline"), "no line in the occupancy plot");
-    // And the simulator's per-second latency over time.
-    assert!(html.contains("id=\"plot-latency-over-time-end-to-end\""), "no end-to-end over time plot");
+    // And what netfi added over time (end to end and release lateness per bin).
+    let at = html.find("id=\"plot-added-over-time\"").expect("no added-over-time plot");
+    assert!(html[at..at + html[at..].find("</svg>").unwrap()].contains("<polyline"), "no line in the added-over-time plot");
     std::fs::remove_dir_all(&dir).ok();
 }
 
