@@ -4,9 +4,8 @@
 
 use super::figures;
 use super::inputs::RunInputs;
-use super::page::none;
 use super::plot::Mark;
-use super::HtmlError;
+use super::{none, HtmlError};
 use crate::metrics::{fmt_ns, Summary};
 use crate::service::report::RunReport;
 use maud::{html, Markup, PreEscaped};

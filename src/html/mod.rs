@@ -90,6 +90,11 @@ fn write_file(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 }
 
 /// `text` with `&`, `<`, `>`, `"` and `'` escaped, for an attribute or text.
+/// A short "nothing here" paragraph where a section has no data.
+fn none(text: &str) -> maud::Markup {
+    maud::html! { p.none { (text) } }
+}
+
 pub(crate) fn escape(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {

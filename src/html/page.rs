@@ -12,7 +12,7 @@ use super::added;
 use super::figures;
 use super::inputs::RunInputs;
 use super::plot::Mark;
-use super::HtmlError;
+use super::{none, HtmlError};
 use crate::service::report::{phase_title, RunReport};
 use maud::{html, Markup, PreEscaped, DOCTYPE};
 
@@ -67,10 +67,6 @@ pub fn page(inp: &RunInputs) -> Result<String, HtmlError> {
         }
     };
     Ok(page.into_string())
-}
-
-pub(super) fn none(text: &str) -> Markup {
-    html! { p.none { (text) } }
 }
 
 /// How the run ended, in one line: a stop is a normal end; faults are

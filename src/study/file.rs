@@ -220,4 +220,3 @@ pub struct Questionnaires {
     pub tlx: TlxWhen,
 }
 
-pub use super::parse::parse_study;

@@ -33,6 +33,7 @@ pub mod summary;
 pub mod trials;
 pub mod view;
 
-pub use file::{parse_study, Study, StudyFileError};
+pub use file::{Study, StudyFileError};
+pub use parse::parse_study;
 pub use schedule::{schedule, Schedule};
 pub use store::{Attempt, AttemptState, OpenStudy, StudyError};

@@ -20,7 +20,8 @@
 //! (the kernel let go of the lock) and marks it `interrupted`: it is kept,
 //! never counted, and the trial is run again.
 
-use super::file::{parse_study, ConditionSource, Study, StudyFileError};
+use super::file::{ConditionSource, Study, StudyFileError};
+use super::parse::parse_study;
 use super::schedule::{schedule, Due, Schedule, Trial};
 use crate::durable::{write_whole, DurableError};
 use serde::{Deserialize, Serialize};

@@ -1,7 +1,8 @@
 //! The pure parts, without processes: Latin squares, schedules, the study
 //! file's errors, and the statistics against published examples.
 
-use netfi::study::file::{parse_study, BlockOrder};
+use netfi::study::file::BlockOrder;
+use netfi::study::parse_study;
 use netfi::study::schedule::{balance, position_counts, schedule};
 use netfi::study::square::balanced_latin_square;
 use netfi::study::stats::{holm, paired_t, wilcoxon, WilcoxonMethod};
