@@ -97,6 +97,32 @@ fn lane(args: EmulatorArgs) -> anyhow::Result<LaneConfig> {
 }
 
 impl EmulatorConfig {
+    /// The emulator of `lanes`, placed and controlled as `args` say.
+    pub(crate) fn with_lanes(args: &EmulatorArgs, lanes: Vec<LaneConfig>) -> anyhow::Result<EmulatorConfig> {
+        let core = match args.placement.no_pin {
+            true => None,
+            false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
+        };
+        let control = match (&args.run_id, args.control.no_control) {
+            (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
+            _ => None,
+        };
+        // A run under live control may be switched to any scenario, one
+        // that reorders included: its queue keeps release-time order from
+        // the start (within noise of the FIFO ring, docs/performance.md
+        // "The reordering queue under control").
+        let reorder_queue = args.control.reorder_queue || (control.is_some() && !args.control.fifo_queue);
+        Ok(EmulatorConfig {
+            lanes,
+            core,
+            rt_priority: args.placement.rt_priority,
+            isolate: args.placement.isolate,
+            control,
+            reorder_queue,
+            out_dir: args.out.clone(),
+        })
+    }
+
     /// The emulator that `args` ask for (checked).
     pub fn of(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
         args.validate()?;
@@ -110,28 +136,7 @@ impl EmulatorConfig {
         } else {
             vec![lane(args.clone())?]
         };
-        let core = match args.placement.no_pin {
-            true => None,
-            false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
-        };
-        let control = match (&args.run_id, args.control.no_control) {
-            (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
-            _ => None,
-        };
-        let reorder_queue = args.control.reorder_queue || (control.is_some() && !args.control.fifo_queue);
-        Ok(EmulatorConfig {
-            lanes,
-            core,
-            rt_priority: args.placement.rt_priority,
-            isolate: args.placement.isolate,
-            control,
-            // A run under live control may be switched to any scenario,
-            // one that reorders included: its queue keeps release-time
-            // order from the start (within noise of the FIFO ring,
-            // docs/performance.md "The reordering queue under control").
-            reorder_queue,
-            out_dir: args.out.clone(),
-        })
+        Self::with_lanes(args, lanes)
     }
 
     /// Whether the emulator serves several lanes (streams).

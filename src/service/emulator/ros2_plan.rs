@@ -8,7 +8,6 @@ use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
 use crate::service::seeds;
 use crate::transport::ros2::qos;
 use crate::transport::ros2::{TopicName, TypeName};
-use crate::transport::{IpcConfig, RunId};
 use anyhow::{bail, Context};
 use std::collections::BTreeMap;
 
@@ -163,23 +162,7 @@ pub fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfi
         lane_args.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
         out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
     }
-    let core = match args.placement.no_pin {
-        true => None,
-        false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
-    };
-    let control = match (&args.run_id, args.control.no_control) {
-        (Some(run), false) => Some((IpcConfig::new(RunId::new(run)?), args.control.telemetry_ms)),
-        _ => None,
-    };
-    Ok(EmulatorConfig {
-        lanes: out,
-        core,
-        rt_priority: args.placement.rt_priority,
-        isolate: args.placement.isolate,
-        control,
-        reorder_queue: args.control.reorder_queue,
-        out_dir: args.out.clone(),
-    })
+    EmulatorConfig::with_lanes(args, out)
 }
 
 #[cfg(test)]
