@@ -356,7 +356,7 @@ impl GeLomax {
 }
 
 impl Model for GeLomax {
-    #[inline]
+    #[inline(always)]
     fn decide(&mut self, _t_ns: u64, rng: &mut StageRng) -> Verdict {
         let r = u53(rng);
         let row = &self.next_thresholds[self.state];
