@@ -1,7 +1,7 @@
 //! What a user gets from `netfi completions`, `netfi man`, and times with
 //! units on the command line and in scenario files.
 
-use crate::netfi_bin::netfi;
+use crate::common::netfi::netfi;
 
 #[test]
 fn completions_cover_the_commands_and_their_flags() {

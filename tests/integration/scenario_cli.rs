@@ -1,6 +1,6 @@
 //! The `netfi scenario` command as a user runs it.
 
-use crate::netfi_bin::netfi;
+use crate::common::netfi::netfi;
 
 #[test]
 fn check_json_has_the_documented_fields() {
