@@ -3,10 +3,12 @@
 //! machine). A run of netfi's processes (a busy-polling emulator pinned to
 //! a core, deadlines, a browser) needs the machine to itself, as far as a
 //! test process can give it: it holds [`alone`], and no other run, nor any
-//! test that holds [`not_beside_a_run`], goes on meanwhile. The CPU-bound
-//! tiers (millions of simulated frames) and the tests whose killed peers a
-//! run's start-up clean-up would remove hold [`not_beside_a_run`]; they run
-//! beside each other. The cheap tests hold neither.
+//! test that holds [`not_beside_a_run`], goes on meanwhile. Every test of
+//! the tiers that simulate (`statistical`, `fit`, `integration`: millions
+//! of frames, in this process or through `netfi scenario check`, on every
+//! core) and the transport tests whose killed peers a run's start-up
+//! clean-up would remove hold [`not_beside_a_run`]; they run beside each
+//! other. The other tests are cheap and hold neither.
 
 use std::sync::{RwLock, RwLockReadGuard, RwLockWriteGuard};
 

@@ -762,8 +762,8 @@ fn thread_schedstat() -> (u64, u64) {
 #[test]
 #[ignore = "measurement, not a check; run explicitly with --ignored --nocapture"]
 fn latency_one_hop_between_threads() {
-    let _machine = machine::alone();
     use hdrhistogram::Histogram;
+    let _machine = machine::alone();
 
     const WARMUP: u64 = 10_000;
     const SAMPLES: u64 = 100_000;
