@@ -1,8 +1,8 @@
 //! The integration tests, one binary: a module for each area (its folder
-//! under `tests/`), the helpers they share in `tests/common`. Tests that
-//! must have a process of their own are binaries of their own: `alloc.rs`
-//! and `udp_alloc.rs` install a counting global allocator, and `ros2/`
-//! plays DDS peers with its own environment.
+//! under `tests/`), the helpers they share in `tests/common`. Apart from it:
+//! `alloc.rs` and `udp_alloc.rs`, each a process of its own because each
+//! installs a counting global allocator, and `ros2/`, a binary with its
+//! own one-run-at-a-time lock.
 //!
 //! Tests of different modules now share a process and the machine: who
 //! may run beside whom is said once, in [`common::machine`].
