@@ -1,7 +1,7 @@
 //! The reorder queue as the project first had it: a binary min-heap
 //! on `(release_ns, ingress_index, slot)` over a slab of items. Kept as the
 //! baseline of `benches/queue.rs` and as a second reference in
-//! `tests/release_queue.rs` (identical release orders).
+//! `tests/release_queue/mod.rs` (identical release orders).
 
 #![allow(dead_code)]
 

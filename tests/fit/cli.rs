@@ -1,5 +1,6 @@
 //! `netfi fit` and `netfi export netem` as a user runs them.
 
+use crate::common::machine;
 use std::process::Command;
 
 fn netfi(args: &[&str]) -> std::process::Output {
@@ -8,6 +9,7 @@ fn netfi(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn fit_json_has_the_documented_fields_and_reproduces() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["fit", "loss", "30%", "--seed", "3", "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -39,6 +41,7 @@ fn fit_json_has_the_documented_fields_and_reproduces() {
 
 #[test]
 fn fit_prints_its_seed_and_a_stage() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["fit", "delay", "250ms", "--p99-ms", "900"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -53,6 +56,7 @@ fn fit_prints_its_seed_and_a_stage() {
 
 #[test]
 fn fit_jitter_takes_mean_p99_law_and_correlation() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["fit", "jitter", "100ms", "--p99-ms", "180", "--dist", "paretonormal", "--correlation", "25%", "--seed", "3", "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -74,6 +78,7 @@ fn fit_jitter_takes_mean_p99_law_and_correlation() {
 
 #[test]
 fn export_maps_loss_and_delay_and_says_what_is_approximated() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["export", "netem", "config/scenarios/plm2_dlm2.toml", "--dev", "veth0"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let script = String::from_utf8_lossy(&out.stdout);
@@ -94,6 +99,7 @@ fn export_maps_loss_and_delay_and_says_what_is_approximated() {
 
 #[test]
 fn export_refuses_what_netem_cannot_express() {
+    let _machine = machine::not_beside_a_run();
     for (scenario, says) in [("CLM-1", "outage windows"), ("config/scenarios/outage_timeline.toml", "timeline")] {
         let out = netfi(&["export", "netem", scenario]);
         assert!(!out.status.success(), "{scenario}");

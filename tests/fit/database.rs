@@ -1,5 +1,6 @@
 //! The shipped fault parameter database (`config/faultdb.toml`).
 
+use crate::common::machine;
 use netfi::fit::db::{self, Database, EntryView, Grid, GRIDS};
 use netfi::fit::{run, Kind, TOLERANCE_REL, TOOL_VERSION};
 
@@ -30,6 +31,7 @@ fn sample(entries: &[EntryView]) -> Vec<EntryView> {
 
 #[test]
 fn the_database_parses_and_covers_its_grid() {
+    let _machine = machine::not_beside_a_run();
     let db = shipped();
     assert_eq!(db.format, db::FORMAT);
     assert_eq!(db.tolerance_rel, TOLERANCE_REL);
@@ -54,6 +56,7 @@ fn the_database_parses_and_covers_its_grid() {
 /// inside its own interval.
 #[test]
 fn every_entry_is_on_target_by_closed_form() {
+    let _machine = machine::not_beside_a_run();
     let problems: Vec<String> = shipped().entries().iter().filter_map(|e| e.check_stored().err()).collect();
     assert!(problems.is_empty(), "{problems:#?}");
 }
@@ -64,6 +67,7 @@ fn every_entry_is_on_target_by_closed_form() {
 /// value.
 #[test]
 fn sampled_entries_reproduce_and_resimulate() {
+    let _machine = machine::not_beside_a_run();
     let entries = sample(&shipped().entries());
     assert_eq!(entries.len(), 20);
     let problems: Vec<String> =
@@ -77,6 +81,7 @@ fn sampled_entries_reproduce_and_resimulate() {
 /// Slow tier: all 450 entries, both re-simulations.
 #[test]
 fn every_entry_reproduces_and_resimulates() {
+    let _machine = machine::not_beside_a_run();
     let entries = shipped().entries();
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     let problems: Vec<String> =
@@ -91,6 +96,7 @@ fn every_entry_reproduces_and_resimulates() {
 /// from their seeds gives the stored parameters and realized values exactly.
 #[test]
 fn sampled_entries_regenerate_from_their_seeds() {
+    let _machine = machine::not_beside_a_run();
     let db = shipped();
     let plan = db::plan(db.seed);
     let picks: Vec<usize> = vec![0, 17, 94, 95, 150, 354, 355, 400, 449];
@@ -105,6 +111,7 @@ fn sampled_entries_regenerate_from_their_seeds() {
 
 #[test]
 fn lookups_name_the_covered_range() {
+    let _machine = machine::not_beside_a_run();
     let db = shipped();
     let e = db.lookup(Kind::Loss, 0.005, "loss").unwrap_err();
     assert!(e.problem.contains("outside") && e.problem.contains("1% to 95%"), "{e}");

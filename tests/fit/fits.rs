@@ -1,5 +1,6 @@
 //! Fits against their targets, their errors, and their reproducibility.
 
+use crate::common::machine;
 use netfi::fit::run;
 use netfi::fit::{FitError, FitRequest, Kind, Metric, Objective, TOLERANCE_REL};
 
@@ -18,6 +19,7 @@ fn rel(a: f64, b: f64) -> f64 {
 /// would be a 5-sigma event.
 #[test]
 fn one_target_fits_land_within_tolerance() {
+    let _machine = machine::not_beside_a_run();
     for (kind, target) in [
         (Kind::Loss, 0.05),
         (Kind::Loss, 0.5),
@@ -42,6 +44,7 @@ fn one_target_fits_land_within_tolerance() {
 /// tolerance or, where its interval is wider, within 4 standard errors.
 #[test]
 fn two_target_fits_land_within_tolerance() {
+    let _machine = machine::not_beside_a_run();
     for req in [
         FitRequest::new(Kind::Loss, 0.3, 5).with_goal(Metric::LossRunMean, 3.0),
         FitRequest::new(Kind::Delay, 300.0, 5).with_goal(Metric::DelayMsP99, 1000.0),
@@ -64,6 +67,7 @@ fn two_target_fits_land_within_tolerance() {
 /// delays, relative standard error ~0.1%) and outages (2^16 windows).
 #[test]
 fn monte_carlo_objective_lands_within_tolerance() {
+    let _machine = machine::not_beside_a_run();
     for (kind, target) in [(Kind::Delay, 250.0), (Kind::Outage, 0.5)] {
         let mut req = FitRequest::new(kind, target, 3);
         req.objective = Objective::MonteCarlo;
@@ -75,6 +79,7 @@ fn monte_carlo_objective_lands_within_tolerance() {
 
 #[test]
 fn unreachable_and_bad_targets_are_clear_errors() {
+    let _machine = machine::not_beside_a_run();
     let e = run::fit(&FitRequest::new(Kind::Loss, 0.3, 1).with_goal(Metric::LossRunMean, 1.2), 1, &|_| {}).unwrap_err();
     assert!(matches!(e, FitError::Unreachable { .. }), "{e}");
     assert!(e.to_string().contains("1/(1 − loss)"), "{e}");
@@ -100,6 +105,7 @@ fn unreachable_and_bad_targets_are_clear_errors() {
 /// threads; another seed gives another confirmation.
 #[test]
 fn the_same_seed_reproduces_the_same_fit() {
+    let _machine = machine::not_beside_a_run();
     for mut req in [
         FitRequest::new(Kind::Loss, 0.2, 9),
         FitRequest::new(Kind::Delay, 400.0, 9).with_goal(Metric::DelayMsP99, 1500.0),
@@ -126,6 +132,7 @@ fn the_same_seed_reproduces_the_same_fit() {
 /// Fitting many requests at once gives what fitting each alone gives.
 #[test]
 fn fit_many_equals_one_by_one() {
+    let _machine = machine::not_beside_a_run();
     let reqs = vec![
         FitRequest::new(Kind::Loss, 0.4, 1),
         FitRequest::new(Kind::Delay, 50.0, 2),

@@ -2,6 +2,7 @@
 //! closed form and confirmed by simulation; the same targets in a scenario
 //! stage; and their errors.
 
+use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::fit::run;
 use netfi::fit::{FitError, FitRequest, Kind, Metric, TOLERANCE_REL};
@@ -25,6 +26,7 @@ fn request(mean_ms: f64, p99_ms: f64, dist: JitterDist, rho: f64, seed: u64) -> 
 /// the p99's interval is wider, within 4 of its standard errors.
 #[test]
 fn jitter_fits_reach_mean_and_p99() {
+    let _machine = machine::not_beside_a_run();
     for (mean, p99, dist, rho) in [
         (100.0, 180.0, JitterDist::Normal, 0.0),
         (100.0, 180.0, JitterDist::Pareto, 0.0),
@@ -49,6 +51,7 @@ fn jitter_fits_reach_mean_and_p99() {
 
 #[test]
 fn jitter_fits_refuse_what_cannot_be() {
+    let _machine = machine::not_beside_a_run();
     // No p99.
     let e = run::fit(&FitRequest::new(Kind::Jitter, 100.0, 1), 1, &|_| {}).unwrap_err();
     assert!(matches!(&e, FitError::BadRequest { problem } if problem.contains("--p99-ms")), "{e}");
@@ -69,6 +72,7 @@ fn jitter_fits_refuse_what_cannot_be() {
 /// the mean within 5 standard errors.
 #[test]
 fn a_jitter_target_stage_resolves_in_closed_form() {
+    let _machine = machine::not_beside_a_run();
     let text = "[[stage]]\nname = \"j\"\ndelay_ms_mean = 100\ndelay_ms_p99 = 180\ndist = \"pareto\"\ncorrelation = \"20%\"\norder = \"fifo\"\n";
     let spec = parse_str(text, "t.toml", "t").unwrap();
     let st = &spec.phases[0].stages[0];
@@ -89,6 +93,7 @@ fn a_jitter_target_stage_resolves_in_closed_form() {
 
 #[test]
 fn jitter_target_stages_name_file_line_and_field() {
+    let _machine = machine::not_beside_a_run();
     for (text, line, field, says) in [
         ("[[stage]]\ndelay_ms_mean = 100\ndelay_ms_p99 = 50\n", 3, "delay_ms_p99", "above the mean"),
         ("[[stage]]\ndelay_ms_mean = 100\ndelay_ms_p99 = 180\ndist = \"cauchy\"\n", 4, "dist", "normal, pareto, paretonormal"),

@@ -1,5 +1,6 @@
 //! Target-based scenario stages and the calibrated study presets.
 
+use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::fit::db;
 use netfi::fit::family::metrics_exact;
@@ -13,6 +14,7 @@ fn parse(text: &str) -> Result<netfi::scenario::ScenarioSpec, ScenarioError> {
 
 #[test]
 fn targets_take_the_database_entry() {
+    let _machine = machine::not_beside_a_run();
     let spec = parse(
         "[[stage]]\nloss = \"30%\"\n[[stage]]\nname = \"lag\"\ndelay_ms_mean = 250\norder = \"fifo\"\n[[stage]]\noutage = 0.1\n",
     )
@@ -39,6 +41,7 @@ fn targets_take_the_database_entry() {
 /// of about ±0.2%).
 #[test]
 fn a_target_scenario_realizes_its_target() {
+    let _machine = machine::not_beside_a_run();
     let spec = parse("[[stage]]\nloss = \"30%\"\n").unwrap();
     let r = check::run(
         Scenario::new(&spec, 4).unwrap(),
@@ -53,6 +56,7 @@ fn a_target_scenario_realizes_its_target() {
 
 #[test]
 fn targets_outside_the_database_are_clear_errors() {
+    let _machine = machine::not_beside_a_run();
     for (text, line, field, says) in [
         ("name = \"x\"\n[[stage]]\nloss = \"0.5%\"\n", 3, "loss", "covers loss 1% to 95% in steps of 1%"),
         ("[[stage]]\nloss = \"30.5%\"\n", 2, "loss", "nearest: 30% and 31%"),
@@ -75,6 +79,7 @@ fn targets_outside_the_database_are_clear_errors() {
 /// --like` finds.
 #[test]
 fn calibrated_presets_hit_their_labels() {
+    let _machine = machine::not_beside_a_run();
     for (name, kind, label) in [
         ("PLM-1", Kind::Loss, 0.1),
         ("PLM-2", Kind::Loss, 0.3),
@@ -123,6 +128,7 @@ fn calibrated_presets_hit_their_labels() {
 
 #[test]
 fn calibrated_presets_resolve_by_name() {
+    let _machine = machine::not_beside_a_run();
     for name in ["PLM-1-cal", "plm1cal", "clm_3_cal", "DLM-2-CAL"] {
         let s = netfi::load::resolve(name).unwrap();
         assert_eq!(s.phases[0].stages.len(), 1, "{name}");

@@ -204,7 +204,7 @@ impl Drop for ClearedRun {
 }
 
 fn kill_matrix_case(kill: Kill) {
-    let _guard = lock();
+    let _guard = machine::alone();
     let core = last_core();
     let before = snapshot();
     let own_mask = allowed("/proc/self/status").unwrap();
@@ -325,7 +325,7 @@ fn a_pin_that_cannot_be_honoured_is_an_error_or_a_warning_in_the_report() {
         eprintln!("skipped: one core only");
         return;
     }
-    let _guard = lock();
+    let _guard = machine::alone();
     let first = *netfi::host::affinity::online_cpus().iter().next().unwrap();
     let other = last_core();
     let on_one_core = |args: &[&str], out: &Path| {

@@ -62,7 +62,8 @@ struct Peer {
 impl Peer {
     fn spawn(mode: &str) -> Peer {
         let mut child = Command::new(std::env::current_exe().unwrap())
-            .args(["orphans::child_process_entry", "--exact", "--nocapture", "--test-threads=1"])
+            .arg(crate::common::test_name(module_path!(), "child_process_entry"))
+            .args(["--exact", "--nocapture", "--test-threads=1"])
             .env(CHILD_ENV, mode)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -150,7 +151,7 @@ fn a_child_whose_parent_is_already_gone_exits_at_once() {
 #[test]
 fn the_guardian_ends_a_run_whose_owner_was_killed() {
     // The guardian also restores orphaned clearings: not during a kill case.
-    let _guard = lock();
+    let _guard = machine::alone();
     let run = OwnedRun::start("guarded");
     sigkill(run.owner.pid());
     wait_for("the run's processes to be ended", Duration::from_secs(10), || run.members.iter().all(|&m| !alive(m)));
@@ -162,7 +163,7 @@ fn the_guardian_ends_a_run_whose_owner_was_killed() {
 /// that die with their parent) until `netfi restore` ends them.
 #[test]
 fn netfi_restore_ends_a_run_whose_owner_and_guardian_were_killed() {
-    let _guard = lock();
+    let _guard = machine::alone();
     let run = OwnedRun::start("unguarded");
     sigkill(run.guardian);
     sigkill(run.owner.pid());
@@ -181,7 +182,7 @@ fn netfi_restore_ends_a_run_whose_owner_and_guardian_were_killed() {
 /// files stay.
 #[test]
 fn netfi_restore_removes_a_dead_runs_shared_memory_only() {
-    let _guard = lock();
+    let _guard = machine::alone();
     let run_id = format!("shmleft{}", std::process::id());
     let out = out_dir("shmleft");
     std::fs::create_dir_all(&out).unwrap();

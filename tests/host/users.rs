@@ -70,7 +70,7 @@ fn skip_unless_other_users() -> bool {
 
 #[test]
 fn a_run_leaves_nothing_in_dev_shm_and_another_user_runs_after_root() {
-    let _guard = lock();
+    let _guard = machine::alone();
     let run_id = format!("hostshm{}", std::process::id());
     let out = out_dir("shm");
     let o = netfi().args(["run", "Normal", "--duration-s", "1", "--seed", "4", "--no-isolate", "--run-id", &run_id, "--out"]).arg(&out).output().unwrap();
@@ -110,7 +110,7 @@ fn a_file_planted_by_another_user_is_refused_at_once() {
     if skip_unless_other_users() {
         return;
     }
-    let _guard = lock();
+    let _guard = machine::alone();
     let run_id = format!("planted{}", std::process::id());
     let planted = format!("/dev/shm/netfi_u{}_{run_id}_node.global_mgmt", uid());
     let o = Command::new("setpriv")
@@ -161,7 +161,7 @@ fn directories_taken_first_by_another_user_do_not_lock_a_user_out() {
     if skip_unless_other_users() {
         return;
     }
-    let _guard = lock();
+    let _guard = machine::alone();
     const USER: u32 = 54321;
     const SQUATTER: u32 = 12345;
     let taken = [format!("/tmp/netfi-iceoryx2-{USER}"), format!("/tmp/netfi-{USER}")];

@@ -4,6 +4,7 @@
 //! Tests that need the recording look for it at `../shared/data/itp/` beside
 //! the crate and skip, saying so, when it is absent.
 
+use crate::common::machine;
 use lz4_flex::frame::{FrameDecoder, FrameEncoder};
 use netfi::capture::{self, CaptureError, CaptureReader, CaptureRecord, CaptureStats, CaptureWriter, RECORD_LEN};
 use netfi::frame::ItpFrame;
@@ -47,6 +48,7 @@ fn synthetic(n: usize) -> (Vec<CaptureRecord>, Vec<u8>) {
 
 #[test]
 fn real_capture_statistics() {
+    let _machine = machine::not_beside_a_run();
     let Some(path) = real_capture() else { return };
     let cap = capture::load(&path).unwrap();
     let s = cap.stats;
@@ -67,6 +69,7 @@ fn real_capture_statistics() {
 
 #[test]
 fn real_capture_kinematics() {
+    let _machine = machine::not_beside_a_run();
     // Reference numbers computed independently from the decompressed file.
     let Some(path) = real_capture() else { return };
     let cap = capture::load(&path).unwrap();
@@ -95,6 +98,7 @@ fn real_capture_kinematics() {
 
 #[test]
 fn motion_model_resembles_the_real_capture() {
+    let _machine = machine::not_beside_a_run();
     // The capture's motion per second and clutch-released share, measured
     // here, against one hour of generated motion at the capture's rate.
     // Seed-to-seed the generator's rate varies by about 1.1 % and its
@@ -138,6 +142,7 @@ fn motion_model_resembles_the_real_capture() {
 
 #[test]
 fn real_records_round_trip_byte_exactly() {
+    let _machine = machine::not_beside_a_run();
     let Some(path) = real_capture() else { return };
     let n = 5_000;
     let original = decompress(&std::fs::read(&path).unwrap());
@@ -153,6 +158,7 @@ fn real_records_round_trip_byte_exactly() {
 
 #[test]
 fn file_round_trip_and_stats() {
+    let _machine = machine::not_beside_a_run();
     let (records, _) = synthetic(3_000);
     let dir = std::env::temp_dir().join(format!("netfi-it-capture-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -172,6 +178,7 @@ fn file_round_trip_and_stats() {
 
 #[test]
 fn truncated_record_is_reported_with_index_and_offset() {
+    let _machine = machine::not_beside_a_run();
     let (_, bytes) = synthetic(100);
     let content = decompress(&bytes);
     // Cut 40 bytes into the payload of record 57.
@@ -190,6 +197,7 @@ fn truncated_record_is_reported_with_index_and_offset() {
 
 #[test]
 fn wrong_length_field_is_reported_with_index_and_offset() {
+    let _machine = machine::not_beside_a_run();
     let (_, bytes) = synthetic(10);
     let mut content = decompress(&bytes);
     let at = 3 * RECORD_LEN;
@@ -205,6 +213,7 @@ fn wrong_length_field_is_reported_with_index_and_offset() {
 
 #[test]
 fn not_lz4_is_reported_with_the_path() {
+    let _machine = machine::not_beside_a_run();
     let (_, bytes) = synthetic(10);
     let dir = std::env::temp_dir().join(format!("netfi-it-notlz4-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -224,6 +233,7 @@ fn not_lz4_is_reported_with_the_path() {
 /// takes its arrival times; garbage between two of its frames is refused.
 #[test]
 fn the_real_recording_written_in_batches_is_the_same_capture() {
+    let _machine = machine::not_beside_a_run();
     let Some(path) = real_capture() else { return };
     let cap = capture::load(&path).unwrap();
     let dir = std::env::temp_dir().join(format!("netfi-it-batches-{}", std::process::id()));

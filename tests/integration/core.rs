@@ -1,6 +1,7 @@
 //! The sans-IO core end to end in simulated time: determinism, stream
 //! independence, conservation, and the shipped scenario files.
 
+use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::injector::{DropCause, Fate, Injector};
 use netfi::scenario::{self, parse_str, Decision, Scenario, ScenarioSpec};
@@ -26,6 +27,7 @@ fn fates(spec: &ScenarioSpec, seed: u64, n: u64) -> Vec<Fate> {
 
 #[test]
 fn same_seed_and_arrivals_give_the_same_fates() {
+    let _machine = machine::not_beside_a_run();
     let s = spec(PIPELINE);
     let a = fates(&s, 42, 200_000);
     assert_eq!(a, fates(&s, 42, 200_000));
@@ -68,6 +70,7 @@ fn per_stage_decisions(spec: &ScenarioSpec, seed: u64, n: u64) -> std::collectio
 
 #[test]
 fn inserting_a_stage_leaves_the_other_stages_decisions_unchanged() {
+    let _machine = machine::not_beside_a_run();
     let before = spec("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\npreset = \"DLM-2\"\n");
     let after = spec(
         "[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"bernoulli\"\np = 0.25\n[[stage]]\npreset = \"DLM-2\"\n",
@@ -88,6 +91,7 @@ fn inserting_a_stage_leaves_the_other_stages_decisions_unchanged() {
 
 #[test]
 fn every_frame_is_accounted_for_at_every_step() {
+    let _machine = machine::not_beside_a_run();
     // A small queue so that queue_full happens too.
     let s = spec(PIPELINE);
     let mut inj: Injector<u64> = Injector::new(Scenario::new(&s, 5).unwrap(), 64);
@@ -123,6 +127,7 @@ fn every_frame_is_accounted_for_at_every_step() {
 
 #[test]
 fn malformed_frames_enter_and_are_counted() {
+    let _machine = machine::not_beside_a_run();
     let mut inj: Injector<()> = Injector::new(scenario::Scenario::new(&spec(""), 1).unwrap(), 8);
     let e = inj.reject(10, netfi::injector::Invalid::WrongSize);
     assert_eq!(e.ingress_index, 0);
@@ -136,6 +141,7 @@ fn malformed_frames_enter_and_are_counted() {
 
 #[test]
 fn phases_switch_at_their_start_offsets() {
+    let _machine = machine::not_beside_a_run();
     let s = spec(
         "[[phase]]\npreset = \"Normal\"\n[[phase]]\nstart_ms = 1000\n[[phase.stage]]\nmodel = \"bernoulli\"\np = 1\n[[phase]]\nstart_ms = 2000\npreset = \"Normal\"\n",
     );
@@ -156,6 +162,7 @@ fn phases_switch_at_their_start_offsets() {
 
 #[test]
 fn fifo_delay_never_reorders_and_reorder_does() {
+    let _machine = machine::not_beside_a_run();
     let fifo = spec("[[stage]]\nmodel = \"delay\"\nmin_ms = 5\ndist = \"uniform\"\njitter_ms = 50\norder = \"fifo\"\n");
     let reorder = spec("[[stage]]\nmodel = \"delay\"\nmin_ms = 5\ndist = \"uniform\"\njitter_ms = 50\n");
     let arrivals = Arrivals::Rate { frames: 100_000, rate_hz: 1000.0 };
@@ -173,6 +180,7 @@ fn fifo_delay_never_reorders_and_reorder_does() {
 
 #[test]
 fn shipped_scenarios_parse_build_and_run() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenarios");
     let mut n = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
@@ -198,6 +206,7 @@ fn shipped_scenarios_parse_build_and_run() {
 
 #[test]
 fn every_preset_resolves_by_name() {
+    let _machine = machine::not_beside_a_run();
     for name in scenario::PRESET_NAMES {
         let s = netfi::load::resolve(name).unwrap();
         assert_eq!(s.phases[0].stages.len(), usize::from(name != "Normal"));

@@ -1,10 +1,12 @@
 //! What a user gets from `netfi completions`, `netfi man`, and times with
 //! units on the command line and in scenario files.
 
-use crate::netfi_bin::netfi;
+use crate::common::machine;
+use crate::common::netfi::netfi;
 
 #[test]
 fn completions_cover_the_commands_and_their_flags() {
+    let _machine = machine::not_beside_a_run();
     for shell in ["bash", "zsh", "fish"] {
         let out = netfi().args(["completions", shell]).output().unwrap();
         assert!(out.status.success(), "{shell}: {}", String::from_utf8_lossy(&out.stderr));
@@ -19,6 +21,7 @@ fn completions_cover_the_commands_and_their_flags() {
 
 #[test]
 fn man_writes_a_page_per_command() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-man-{}", std::process::id()));
     let out = netfi().args(["man", "--dir"]).arg(&dir).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -33,6 +36,7 @@ fn man_writes_a_page_per_command() {
 
 #[test]
 fn times_take_units_and_bad_ones_are_named() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-units-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("slots.toml");

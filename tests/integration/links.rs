@@ -5,6 +5,7 @@
 //! beside the repository; the tests that use them skip, saying so, when it
 //! is absent.
 
+use crate::common::machine;
 use netfi::injector::{Fate, Injector};
 use netfi::model::Schedule;
 use netfi::scenario::{parse_str, Scenario};
@@ -34,6 +35,7 @@ impl Drop for Scratch {
 
 #[test]
 fn a_saturated_rate_link_delivers_its_rate() {
+    let _machine = machine::not_beside_a_run();
     // 10 Mbit/s, offered 124-byte frames every 50 µs (19.8 Mbit/s) for 10 s.
     let rate = 10_000_000u64;
     let mut inj = injector(&format!("[[stage]]\nmodel = \"rate\"\nrate_bit_s = {rate}\n"));
@@ -84,6 +86,7 @@ fn reference_delays(arrivals_ns: &[u64], bits: u128, rate: u128) -> Vec<u64> {
 
 #[test]
 fn with_deterministic_arrivals_the_queueing_delay_is_the_backlog_over_the_rate() {
+    let _machine = machine::not_beside_a_run();
     // Bursts of five frames every 2 ms, at rates that divide evenly and not.
     let arrivals: Vec<u64> = (0..2_000u64).map(|i| 3_000 + (i / 5) * 2_000_000).collect();
     for rate in [1_000_000u64, 3_000_000, 8_000_000, 2_999_999] {
@@ -150,6 +153,7 @@ fn per_second_against_trace(schedule: &Schedule, file: &Path, payload: u64, spac
 
 #[test]
 fn a_synthetic_trace_link_delivers_per_second_what_the_trace_allows() {
+    let _machine = machine::not_beside_a_run();
     let dir = Scratch::new("synthetic");
     // A capacity that changes every 100 ms: 0 to 3 opportunities per ms
     // over a 700 ms period, with silent stretches.
@@ -173,6 +177,7 @@ fn a_synthetic_trace_link_delivers_per_second_what_the_trace_allows() {
 
 #[test]
 fn a_cellular_trace_link_delivers_per_second_what_the_trace_allows() {
+    let _machine = machine::not_beside_a_run();
     let file = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/traces/TMobile-LTE-short.up");
     if !file.exists() {
         eprintln!("skipped: the shared Mahimahi traces are not at {}", file.display());
@@ -187,6 +192,7 @@ fn a_cellular_trace_link_delivers_per_second_what_the_trace_allows() {
 
 #[test]
 fn replaying_a_trace_csv_reproduces_its_fates_exactly() {
+    let _machine = machine::not_beside_a_run();
     let dir = Scratch::new("replay");
     // A recorded run: losses, a reordering jitter, a bottleneck.
     let recorded = "[[stage]]\nmodel = \"bernoulli\"\np = 0.1\n[[stage]]\nmodel = \"jitter\"\nmean_ms = 20\nsd_ms = 5\ndist = \"normal\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_packets = 20\n";
@@ -221,6 +227,7 @@ fn replaying_a_trace_csv_reproduces_its_fates_exactly() {
 
 #[test]
 fn a_delay_capture_replays_the_delays_it_carries() {
+    let _machine = machine::not_beside_a_run();
     let dir = Scratch::new("capture");
     let path = dir.0.join("trial.bin");
     let frame = netfi::check::synthetic_frame();
@@ -257,6 +264,7 @@ fn netfi(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn scenario_check_reports_the_link() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "20000", "--json"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -282,6 +290,7 @@ fn scenario_check_reports_the_link() {
 
 #[test]
 fn show_and_export_speak_of_the_link_stages() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi(&["scenario", "show", "config/scenarios/rate_bottleneck.toml"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("model = \"rate\"") && text.contains("# phase 1 stage `rate#0`: rate 1000000 bit/s"), "{text}");
@@ -309,6 +318,7 @@ fn show_and_export_speak_of_the_link_stages() {
 
 #[test]
 fn shipped_scenarios_that_read_files_parse_build_run_and_print_back() {
+    let _machine = machine::not_beside_a_run();
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/scenarios/files");
     let files = netfi::load::DirFiles::new(&dir);
     let mut n = 0;
@@ -384,6 +394,7 @@ fn mm_link(schedule: &[u64], arrivals: &[(u64, i64)], limit: usize) -> Vec<Optio
 #[test]
 fn a_trace_link_departs_every_packet_when_mm_link_does() {
     use netfi::model::{LinkTrace, LinkTraceParams, Verdict};
+    let _machine = machine::not_beside_a_run();
     let trace = [2u64, 2, 3, 7, 7, 7, 8, 12, 15, 15];
     let schedule = Schedule::from_ms(&trace).unwrap();
     // Bursts of packets of assorted sizes (up to one opportunity, as mm-link
@@ -423,6 +434,7 @@ fn a_trace_link_departs_every_packet_when_mm_link_does() {
 #[test]
 fn a_link_queue_starts_empty_in_each_phase_and_after_a_switch() {
     use netfi::scheduler::QueueOrder;
+    let _machine = machine::not_beside_a_run();
     // 1 Mbit/s, 124 + 42 wire bytes a frame: 1.328 ms each. Frames every
     // 0.5 ms keep it busy from the first: frame k leaves at (k + 1)·1.328 ms.
     let link = "model = \"rate\"\nrate_bit_s = 1_000_000\noverhead_bytes = 42\nqueue_packets = 5000\n";
@@ -510,6 +522,7 @@ fn nearest_rank(sorted: &[u64], q: f64) -> u64 {
 /// them (clamped to 4.4·10⁶ ms, an hour, before).
 #[test]
 fn a_trace_link_whose_frames_wait_years_reports_exact_delays() {
+    let _machine = machine::not_beside_a_run();
     let dir = Scratch::new("slow");
     std::fs::write(dir.0.join("slow.up"), "5\n3600000000\n").unwrap();
     std::fs::write(dir.0.join("slow.toml"), "[[stage]]\nmodel = \"trace\"\nfile = \"slow.up\"\n").unwrap();
@@ -547,6 +560,7 @@ fn a_trace_link_whose_frames_wait_years_reports_exact_delays() {
 #[test]
 fn a_link_section_agrees_with_the_frames_fates() {
     use netfi::check::{run, Arrivals};
+    let _machine = machine::not_beside_a_run();
     let check = |text: &str, capacity: usize| {
         let spec = parse_str(text, "test.toml", "test").unwrap_or_else(|e| panic!("{e}"));
         run(Scenario::new(&spec, 3).unwrap(), &Arrivals::Rate { frames: 20_000, rate_hz: 1000.0 }, capacity, |_| {})
@@ -586,6 +600,7 @@ fn a_link_section_agrees_with_the_frames_fates() {
 /// `trace.csv`.
 #[test]
 fn a_replay_stage_names_the_layout_it_read() {
+    let _machine = machine::not_beside_a_run();
     let dir = Scratch::new("layout");
     let frame = netfi::check::synthetic_frame();
     let mut w = netfi::capture::CaptureWriter::create(dir.0.join("trial.bin")).unwrap();

@@ -1,9 +1,11 @@
 //! The `netfi scenario` command as a user runs it.
 
-use crate::netfi_bin::netfi;
+use crate::common::machine;
+use crate::common::netfi::netfi;
 
 #[test]
 fn check_json_has_the_documented_fields() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -27,6 +29,7 @@ fn check_json_has_the_documented_fields() {
 
 #[test]
 fn a_run_without_seed_prints_the_seed_it_chose() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi().args(["scenario", "check", "CLM-2", "--frames", "20000"]).output().unwrap();
     assert!(out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -37,6 +40,7 @@ fn a_run_without_seed_prints_the_seed_it_chose() {
 
 #[test]
 fn a_bad_scenario_file_is_a_clear_error() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("bad.toml");
@@ -50,6 +54,7 @@ fn a_bad_scenario_file_is_a_clear_error() {
 
 #[test]
 fn values_beyond_their_physical_range_are_refused_with_the_range() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "1000", "--rate-hz", "1e-300"]).output().unwrap();
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -71,6 +76,7 @@ fn values_beyond_their_physical_range_are_refused_with_the_range() {
 
 #[test]
 fn a_jitter_scenario_reports_its_exact_model_values() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi()
         .args(["scenario", "check", "config/scenarios/netem_jitter.toml", "--frames", "50000", "--seed", "2", "--json"])
         .output()
@@ -96,6 +102,7 @@ fn a_jitter_scenario_reports_its_exact_model_values() {
 
 #[test]
 fn a_bad_jitter_is_refused_with_file_line_and_field() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-cli-jitter-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("jitter.toml");
@@ -109,6 +116,7 @@ fn a_bad_jitter_is_refused_with_file_line_and_field() {
 
 #[test]
 fn duplication_is_counted_apart() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi()
         .args(["scenario", "check", "config/scenarios/netem_duplicate.toml", "--frames", "100000", "--seed", "3", "--json"])
         .output()
@@ -137,6 +145,7 @@ fn duplication_is_counted_apart() {
 
 #[test]
 fn corruption_reports_what_the_checksum_catches() {
+    let _machine = machine::not_beside_a_run();
     let out = netfi()
         .args(["scenario", "check", "config/scenarios/netem_corrupt.toml", "--frames", "100000", "--seed", "3", "--json"])
         .output()
@@ -164,6 +173,7 @@ fn corruption_reports_what_the_checksum_catches() {
 
 #[test]
 fn export_netem_writes_the_new_stages_as_netems_own() {
+    let _machine = machine::not_beside_a_run();
     let export = |file: &str| {
         let out = netfi().args(["export", "netem", file, "--dev", "eth0"]).output().unwrap();
         assert!(out.status.success(), "{file}: {}", String::from_utf8_lossy(&out.stderr));
@@ -188,6 +198,7 @@ fn export_netem_writes_the_new_stages_as_netems_own() {
 
 #[test]
 fn check_refuses_an_oversized_queue_with_a_message_not_a_panic() {
+    let _machine = machine::not_beside_a_run();
     let o = netfi().args(["scenario", "check", "Normal", "--frames", "10", "--queue-capacity", "4294967295"]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{err}");
@@ -196,6 +207,7 @@ fn check_refuses_an_oversized_queue_with_a_message_not_a_panic() {
 
 #[test]
 fn check_trace_writes_every_fate_in_a_runs_columns() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-check-trace-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("trace.csv");
@@ -227,6 +239,7 @@ fn check_trace_writes_every_fate_in_a_runs_columns() {
 /// histogram's, up to 0.1 % high); the JSON then carries no error bound.
 #[test]
 fn check_delay_percentiles_are_the_exact_ones() {
+    let _machine = machine::not_beside_a_run();
     let dir = std::env::temp_dir().join(format!("netfi-cli-exact-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("trace.csv");

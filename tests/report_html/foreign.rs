@@ -5,7 +5,8 @@
 //! the services wrote, with the same sections as a `netfi run`'s, and say
 //! which parts are missing when a client wrote none.
 
-use super::{copy_dir, netfi, polylines, svg, temp_dir, text_of, the_run, ONE_RUN_AT_A_TIME};
+use super::{copy_dir, netfi, polylines, svg, temp_dir, text_of, the_run};
+use crate::common::machine;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
@@ -43,7 +44,7 @@ fn finish(mut child: Child, what: &str) -> Output {
 fn the_foreign_run() -> &'static Path {
     static RUN: OnceLock<PathBuf> = OnceLock::new();
     RUN.get_or_init(|| {
-        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        let _guard = machine::alone();
         let out = temp_dir("foreign");
         let run_id = format!("html-foreign-{}", std::process::id());
         let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
@@ -201,7 +202,7 @@ fn a_udp_run_started_by_hand_is_reported_with_its_sockets() {
     use std::net::UdpSocket;
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::Arc;
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let dir = temp_dir("foreign-udp");
     let console = UdpSocket::bind("127.0.0.1:0").unwrap();
     let robot = UdpSocket::bind("127.0.0.1:0").unwrap();

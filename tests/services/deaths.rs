@@ -69,7 +69,7 @@ fn start_long_run(run_id: &str, out: &Path) -> (std::process::Child, i32) {
 /// `report.json`) names the dead, no process of the run is left, and the
 /// core it cleared is put back. Returns the report and the runner's stderr.
 fn kill_one(role: &str) -> (Value, String) {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir(&format!("death-{role}"));
     let run_id = format!("it-death-{role}-{}", std::process::id());
     let (mut child, emulator) = start_long_run(&run_id, &out);
@@ -121,7 +121,7 @@ fn a_killed_console_ends_the_run_at_once() {
 /// and the emulator saw its console go.
 #[test]
 fn a_killed_console_is_reported_and_the_others_finish() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("kill-console");
     let child = netfi()
         .args(["run", "Normal", "--duration-s", "3", "--seed", "7", "--json", "--out"])
@@ -164,7 +164,7 @@ fn a_killed_simulator_ends_the_run_at_once() {
 /// parent-death signal), end, and the emulator puts its core back.
 #[test]
 fn a_killed_runner_takes_its_processes_with_it() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("death-runner");
     let run_id = format!("it-death-runner-{}", std::process::id());
     let (mut child, emulator) = start_long_run(&run_id, &out);
@@ -207,7 +207,7 @@ fn a_flag_out_of_range_starts_nothing() {
 /// The longest telemetry interval accepted does not hold a short run up.
 #[test]
 fn the_longest_telemetry_interval_lets_a_run_end() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("telemetry-hour");
     let mut child = netfi()
         .args(["run", "Normal", "--duration-s", "1", "--seed", "2", "--telemetry-ms", "3600000", "--json", "--out"])

@@ -3,7 +3,8 @@
 //! real console and simulator; and processes of a run of several streams
 //! killed mid-run.
 
-use super::{allowed_cpus, assert_conserved, core_affinity_count, netfi, out_dir, run, u, wait_pid, Witness, ONE_RUN_AT_A_TIME};
+use super::{allowed_cpus, assert_conserved, core_affinity_count, netfi, out_dir, run, u, wait_pid, Witness};
+use crate::common::machine;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -111,7 +112,7 @@ fn the_feedback_path_duplicates_and_refuses_corruption() {
     assert!((duplicated as f64 - 600.0).abs() < 5.0 * (3000.0f64 * 0.2 * 0.8).sqrt(), "{fb}");
     let out = out_dir("fb-corrupt");
     let o = {
-        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        let _guard = machine::alone();
         netfi().args(["run", "Normal", "--return-scenario", corrupt.to_str().unwrap(), "--frames", "100", "--seed", "9", "--out"]).arg(&out).output().unwrap()
     };
     std::fs::remove_dir_all(&dir).ok();
@@ -137,7 +138,7 @@ struct Killed {
 /// nothing of its streams' services in /dev/shm or under iceoryx2's root,
 /// no record of a cleared core, and a witness process's CPUs as they were.
 fn kill_in_three_streams(name: &str, role: &str, dir: impl Fn(&Path) -> PathBuf) -> Killed {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir(name);
     let run_id = format!("it-{name}-{}", std::process::id());
     let witness = Witness(Command::new("sleep").arg("60").spawn().unwrap());

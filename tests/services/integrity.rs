@@ -1,7 +1,8 @@
 //! Run integrity: a run owns its output directory, and Ctrl-C to the
 //! terminal's process group ends a run cleanly.
 
-use super::{assert_conserved, netfi, out_dir, u, wait_pid, ONE_RUN_AT_A_TIME};
+use super::{assert_conserved, netfi, out_dir, u, wait_pid};
+use crate::common::machine;
 use serde_json::Value;
 use std::os::unix::process::CommandExt;
 use std::process::Stdio;
@@ -12,7 +13,7 @@ use std::time::{Duration, Instant};
 /// scenario to the end.
 #[test]
 fn two_runs_on_one_directory_the_second_is_refused() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("two-runs");
     let first = netfi()
         .args(["run", "Normal", "--duration-s", "3", "--seed", "1", "--json", "--out"])
@@ -48,7 +49,7 @@ fn two_runs_on_one_directory_the_second_is_refused() {
 /// says it was stopped (a normal end, not a fault).
 #[test]
 fn ctrl_c_to_the_process_group_ends_the_run() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     for attempt in 0..3 {
         let out = out_dir(&format!("ctrl-c-{attempt}"));
         let child = netfi()
@@ -88,7 +89,7 @@ fn ctrl_c_to_the_process_group_ends_the_run() {
 /// refuse iceoryx2's shared-memory segments, so it cannot stand in.)
 #[test]
 fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("full-disk");
     std::fs::create_dir_all(&out).unwrap();
     let mounted = std::process::Command::new("mount").args(["-t", "tmpfs", "-o", "size=128k", "tmpfs"]).arg(&out).status();
@@ -119,7 +120,7 @@ fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
 /// their cut names, and the run's report names each as cut.
 #[test]
 fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("kill-emulator-trace");
     let child = netfi()
         .args(["run", "Normal", "--duration-s", "6", "--seed", "9", "--json", "--out"])

@@ -1,7 +1,8 @@
 //! Several streams on one emulator (`netfi run --streams N`): each stream's
 //! own scenario, seed, accounting and files, and their total.
 
-use super::{assert_conserved, netfi, out_dir, run, service, u, wait_file, ONE_RUN_AT_A_TIME};
+use super::{assert_conserved, netfi, out_dir, run, service, u, wait_file};
+use crate::common::machine;
 use serde_json::Value;
 use std::path::PathBuf;
 use std::process::Child;
@@ -97,7 +98,7 @@ fn three_streams_each_realize_their_own_scenario_and_balance() {
 /// in that stream's report; the other stream runs to its end.
 #[test]
 fn a_standalone_emulator_of_two_streams_notices_a_dead_robot() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("streams-dead-robot");
     let run_id = format!("it-sdr-{}", std::process::id());
     let ids = [run_id.clone(), netfi::service::plan::stream_run_id(&run_id, 1)];

@@ -3,6 +3,7 @@
 //! flip's bit is uniform over the 992 bits (chi-square over the 124 bytes),
 //! and the checksum catches exactly `44/124` of single flips.
 
+use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::frame::{checksum_covers, CHECKSUM_COVERED_BYTES};
 use netfi::model::{Corrupt, CorruptParams, Model, StageRng, Verdict};
@@ -17,6 +18,7 @@ const CHI2_123_0_001: f64 = 177.26;
 
 #[test]
 fn corrupt_rate_bytes_and_checksum_catches() {
+    let _machine = machine::not_beside_a_run();
     // The flipped bits themselves: uniform over the bytes.
     let mut c = Corrupt::new(&CorruptParams::new(1.0).unwrap()).unwrap();
     let mut rng = StageRng::seed_from_u64(400);
@@ -63,6 +65,7 @@ const CHI2_7_0_001: f64 = 24.322;
 /// bit within a byte is uniform (chi-square over 8).
 #[test]
 fn corrupt_per_byte_realizes_its_binomial_law() {
+    let _machine = machine::not_beside_a_run();
     let q = 0.01f64;
     let mut c = Corrupt::new(&CorruptParams::per_byte(q).unwrap()).unwrap();
     let mut rng = StageRng::seed_from_u64(402);

@@ -1,6 +1,8 @@
 //! `duplicate` (docs/spec.md §3.8) against its law, through the injector, at
 //! α = 0.001 with fixed seeds.
 
+use crate::common::machine;
+
 const FRAME_NS: u64 = 1_000_000;
 /// `z` with `P(|Z| > z) = 0.001`.
 const Z_TWO_SIDED_0_001: f64 = 3.290_527;
@@ -13,6 +15,7 @@ const Z_TWO_SIDED_0_001: f64 = 3.290_527;
 fn duplicate_rate_and_copies_meet_later_stages() {
     use netfi::injector::Injector;
     use netfi::scenario::{parse_str, Scenario};
+    let _machine = machine::not_beside_a_run();
     let (p_dup, p_loss, n) = (0.05, 0.2, 2_000_000u64);
     let text = format!(
         "[[stage]]\nmodel = \"duplicate\"\np = {p_dup}\n[[stage]]\nmodel = \"bernoulli\"\np = {p_loss}\n"

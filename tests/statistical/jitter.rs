@@ -13,6 +13,7 @@
 //! so the kept sample is independent to that precision, and the critical value
 //! is that of its size (40,000).
 
+use crate::common::machine;
 use netfi::model::jitter::{normal_cdf, normal_quantile, normal_sf, PARETONORMAL_SD};
 use netfi::model::{Jitter, JitterDist, JitterParams, Model, StageRng, Verdict};
 use rand::SeedableRng;
@@ -93,6 +94,7 @@ fn pit(dist: JitterDist, xs: &[f64], mean_ms: f64, sd_ms: f64) -> Vec<f64> {
 /// rounding about 10^-8: both far below the critical distance.
 #[test]
 fn jitter_marginal_matches_each_law() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000;
     let critical = KS_C_0_001 / (n as f64).sqrt();
     for (seed, dist) in JitterDist::ALL.into_iter().enumerate() {
@@ -107,6 +109,7 @@ fn jitter_marginal_matches_each_law() {
 /// module docs): 40,000 nearly independent delays, critical distance 0.0097.
 #[test]
 fn jitter_marginal_stays_exact_under_correlation() {
+    let _machine = machine::not_beside_a_run();
     let (n, keep_every) = (4_000_000, 100);
     let kept = n / keep_every;
     let critical = KS_C_0_001 / (kept as f64).sqrt();
@@ -136,6 +139,7 @@ fn lag1(xs: &[f64]) -> f64 {
 /// of those (α = 0.001), with 10^6 frames: 0.0032 at ρ = 0.25, 0.0014 at 0.9.
 #[test]
 fn jitter_lag1_correlation_is_rho() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000;
     for (seed, (dist, rho)) in JitterDist::ALL
         .into_iter()
@@ -162,6 +166,7 @@ fn jitter_lag1_correlation_is_rho() {
 /// Student's t with 99 degrees of freedom at α = 0.001.
 #[test]
 fn jitter_clamped_mean_matches_exact() {
+    let _machine = machine::not_beside_a_run();
     for (seed, dist, sd_ms) in [(330, JitterDist::Normal, 20.0), (331, JitterDist::Pareto, 40.0)] {
         let p = params(dist, 10.0, sd_ms, 0.5);
         let exact = Jitter::new(&p).unwrap().mean_ms_exact();

@@ -9,6 +9,7 @@
 //! a busy period (mean S/(1 − ρ) = 3.3 S here); the bound is 4.5 standard
 //! errors of the batch means (two-sided α ≈ 7·10^-6 under normality).
 
+use crate::common::machine;
 use netfi::model::{Model, Rate, RateParams, StageRng, Verdict};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Exp};
@@ -26,6 +27,7 @@ fn batch_mean(values: &[f64]) -> (f64, f64) {
 
 #[test]
 fn a_rate_link_under_poisson_arrivals_is_an_md1_queue() {
+    let _machine = machine::not_beside_a_run();
     // 1 Mbit/s, 124-byte frames: S = 992 µs.
     let service_ns = 992_000.0;
     for (rho, seed) in [(0.5, 71u64), (0.7, 72)] {

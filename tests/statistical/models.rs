@@ -8,6 +8,7 @@
 //! outages, with the renewal-cycle ratio estimator; standard errors come from
 //! those, never from an assumed independence of frames.
 
+use crate::common::machine;
 use netfi::model::{
     Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott, GilbertElliottParams,
     Markov4, Markov4Params, Model, Order, Outage, OutageParams, Probability, StageRng, Verdict,
@@ -143,6 +144,7 @@ fn delays_ms(params: &DelayParams, seed: u64, n: usize) -> Vec<f64> {
 /// critical distance `1.95/√n ≈ 0.002`.
 #[test]
 fn delay_hyperexp_matches_its_cdf() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000;
     let critical = KS_C_0_001 / (n as f64).sqrt();
     for (seed, (name, min_ms, w, rates)) in dlm_presets().into_iter().enumerate() {
@@ -161,6 +163,7 @@ fn delay_hyperexp_matches_its_cdf() {
 /// applies (checked), and in `reorder` order.
 #[test]
 fn delay_uniform_matches_its_cdf() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000;
     let critical = KS_C_0_001 / (n as f64).sqrt();
     for (seed, order) in [(7, Order::Reorder), (8, Order::Fifo)] {
@@ -176,6 +179,7 @@ fn delay_uniform_matches_its_cdf() {
 /// within 3.29 standard errors (α = 0.001), the stronger of the two here.
 #[test]
 fn dlm_means_match_the_presets() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000;
     for (seed, (name, min_ms, w, rates)) in dlm_presets().into_iter().enumerate() {
         let params = hyperexp(min_ms, w, rates);
@@ -211,6 +215,7 @@ fn plm_presets() -> [(&'static str, GeLomaxParams, f64); 3] {
 /// bursts per state, bins expecting at least 5, tail pooled.
 #[test]
 fn ge_lomax_bursts_follow_the_floored_lomax() {
+    let _machine = machine::not_beside_a_run();
     let n = 1_000_000u64;
     let mut cases: Vec<(String, GeLomaxParams)> =
         plm_presets().into_iter().map(|(name, p, _)| (name.to_string(), p)).collect();
@@ -241,6 +246,7 @@ fn ge_lomax_bursts_follow_the_floored_lomax() {
 /// draws of the floored Lomax: chi-square at α = 0.001 over 10^6 runs.
 #[test]
 fn ge_lomax_drop_runs_follow_the_floored_lomax() {
+    let _machine = machine::not_beside_a_run();
     let params = GeLomaxParams { transition: vec![vec![1.0]], alpha: vec![2.2], lambda: vec![3.0] };
     let mut m = GeLomax::new(&params).unwrap();
     let mut rng = StageRng::seed_from_u64(400);
@@ -270,6 +276,7 @@ fn ge_lomax_drop_runs_follow_the_floored_lomax() {
 /// targets that the presets miss by design; the exact values are printed.
 #[test]
 fn ge_lomax_plm_loss_matches_exact() {
+    let _machine = machine::not_beside_a_run();
     for (seed, (name, params, label)) in plm_presets().into_iter().enumerate() {
         let mut m = GeLomax::new(&params).unwrap();
         let exact = m.loss_rate_exact();
@@ -291,6 +298,7 @@ fn ge_lomax_plm_loss_matches_exact() {
 /// lengths have a variance and batch means a normal limit.
 #[test]
 fn ge_lomax_other_chains_match_exact() {
+    let _machine = machine::not_beside_a_run();
     let cases = [
         GeLomaxParams {
             transition: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
@@ -330,6 +338,7 @@ fn ge_lomax_other_chains_match_exact() {
 
 #[test]
 fn markov4_loss_matches_closed_form() {
+    let _machine = machine::not_beside_a_run();
     let cases = [
         Markov4Params {
             p13: prob(0.05),
@@ -361,6 +370,7 @@ fn markov4_loss_matches_closed_form() {
 
 #[test]
 fn gilbert_elliott_loss_matches_closed_form() {
+    let _machine = machine::not_beside_a_run();
     let cases = [
         GilbertElliottParams {
             p: prob(0.01),
@@ -386,6 +396,7 @@ fn gilbert_elliott_loss_matches_closed_form() {
 /// Independent losses: binomial standard error over 10^7 frames, α = 0.001.
 #[test]
 fn bernoulli_loss_matches_p() {
+    let _machine = machine::not_beside_a_run();
     let p = 0.137;
     let mut m = Bernoulli::new(&BernoulliParams { p: prob(p) }).unwrap();
     let mut rng = StageRng::seed_from_u64(900);
@@ -439,6 +450,7 @@ fn outage_cycles(params: &OutageParams, seed: u64, frames: u64, interval_ns: u64
 /// `loss_rate_approx` at α = 0.001.
 #[test]
 fn outage_lost_fraction_matches_formula() {
+    let _machine = machine::not_beside_a_run();
     let cases = [
         ("CLM-1", outage_time(1.0, 0.0, 3000.0, 8500.0), FRAME_NS, 100_000_000),
         ("CLM-2", outage_time(1.0, 0.0, 1000.0, 1000.0), FRAME_NS, 100_000_000),
@@ -459,6 +471,7 @@ fn outage_lost_fraction_matches_formula() {
 
 #[test]
 fn outage_frames_lost_fraction_matches_formula() {
+    let _machine = machine::not_beside_a_run();
     let params = OutageParams::frames(0.02, 1, 30, 50).unwrap();
     let exact = Outage::new(&params).unwrap().loss_rate_approx(FRAME_NS).unwrap();
     assert!((exact - 15.5 / (15.5 + 50.0 + 49.0)).abs() < 1e-15);

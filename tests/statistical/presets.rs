@@ -2,6 +2,7 @@
 //! release queue, checker): realized values against each model's exact
 //! long-run value.
 
+use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::scenario::Scenario;
 
@@ -17,6 +18,7 @@ fn check_preset(name: &str, seed: u64) -> check::CheckReport {
 /// so these seeds are simply the first ones (1, 2, 3, …), not chosen.
 #[test]
 fn loss_presets_realize_their_exact_long_run_loss() {
+    let _machine = machine::not_beside_a_run();
     for (i, name) in ["PLM-1", "PLM-2", "PLM-3", "CLM-1", "CLM-2", "CLM-3"].iter().enumerate() {
         let r = check_preset(name, i as u64 + 1);
         let exact = r.stages[0].loss_rate_model.expect("loss models have an exact value");
@@ -57,6 +59,7 @@ fn reordered_fraction_exact(d: &netfi::model::Delay) -> f64 {
 /// reordered fraction as the law of the delays implies.
 #[test]
 fn delay_presets_realize_their_mean() {
+    let _machine = machine::not_beside_a_run();
     for (i, name) in ["DLM-1", "DLM-2", "DLM-3"].iter().enumerate() {
         let r = check_preset(name, i as u64 + 11);
         let exact = r.stages[0].delay_ms_model.unwrap();

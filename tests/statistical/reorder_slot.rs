@@ -1,6 +1,7 @@
 //! `reorder` (docs/spec.md §3.10) and `slot` (§3.11) against their laws,
 //! fixed seeds, α = 0.001.
 
+use crate::common::machine;
 use netfi::model::{Model, Reorder, ReorderParams, Slot, SlotParams, StageRng, Verdict};
 use rand::SeedableRng;
 
@@ -20,6 +21,7 @@ fn delay_of(v: Verdict) -> u64 {
 /// structure, so the standard error is the sample's).
 #[test]
 fn reorder_cycles_follow_the_gap_rule() {
+    let _machine = machine::not_beside_a_run();
     for (seed, p, gap) in [(500, 0.25, 5u64), (501, 0.6, 1), (502, 0.05, 20)] {
         let mut m = Reorder::new(&ReorderParams::new(p, gap, 10.0).unwrap()).unwrap();
         let mut rng = StageRng::seed_from_u64(seed);
@@ -52,6 +54,7 @@ fn reorder_cycles_follow_the_gap_rule() {
 /// errors, `(max − min)/√12` each, and within the bounds).
 #[test]
 fn saturated_slots_release_packets_per_uniform_spacing() {
+    let _machine = machine::not_beside_a_run();
     let (min_ms, max_ms, packets) = (2.0, 6.0, 4u64);
     let mut s = Slot::new(&SlotParams::new(min_ms, max_ms, Some(packets), None).unwrap()).unwrap();
     let mut rng = StageRng::seed_from_u64(510);

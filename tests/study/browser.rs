@@ -4,7 +4,8 @@
 //! Skips with a message where no chromium is installed, unless
 //! `NETFI_REQUIRE_BROWSER` is set (`.ci/run` sets it).
 
-use super::{netfi, Scratch, ONE_RUN_AT_A_TIME};
+use super::{netfi, Scratch};
+use crate::common::machine;
 use headless_chrome::{Browser, LaunchOptions, Tab};
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -88,7 +89,7 @@ fn click(tab: &Tab, selector: &str) {
 #[test]
 fn the_study_page_drives_a_trial_in_a_browser() {
     let Some(browser) = browser_or_skip() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = machine::alone();
     let dir = Scratch::new("page");
     let file = dir.file(
         "study.toml",

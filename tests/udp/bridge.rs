@@ -8,8 +8,8 @@
 //! the kernel dropped: `sent = entered + kernel drops at the ingress`, and
 //! `delivered = received by the robot + kernel drops at the robot`.
 
-use crate::netfi_bin::netfi;
-use crate::ONE_RUN_AT_A_TIME;
+use crate::common::netfi::netfi;
+use crate::common::machine;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
 use serde_json::Value;
@@ -279,7 +279,7 @@ fn assert_all_entered(e: &Value, udp: &Value, sent: u64) {
 
 #[test]
 fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("u2u");
     let (console, robot) = (socket(), socket());
     let robot_addr = robot.local_addr().to_string();
@@ -329,7 +329,7 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
 
 #[test]
 fn udp_to_iceoryx2_feeds_the_simulator() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("u2i");
     let run_id = format!("u2i{}", std::process::id());
     let sim_log = std::fs::File::create(out.join("simulator.log")).unwrap();
@@ -378,7 +378,7 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
 
 #[test]
 fn iceoryx2_to_udp_drives_a_udp_robot() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("i2u");
     let run_id = format!("i2u{}", std::process::id());
     let robot = socket();
@@ -425,7 +425,7 @@ fn iceoryx2_to_udp_drives_a_udp_robot() {
 
 #[test]
 fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let bad = |i: u32| {
         let mut f = itp(i);
         f[12] ^= 0x5a; // delx[0] changed after sealing
@@ -465,7 +465,7 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
 
 #[test]
 fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("flood");
     let Ends { console, from, egress, stop, robot: rx } = ends();
     let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--drop-bad-checksum", "--idle-end-ms", "1000"]);
@@ -507,7 +507,7 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
 
 #[test]
 fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("raw");
     let robot = socket();
     let egress = format!("udp://{}", robot.local_addr());
@@ -550,7 +550,7 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
 
 #[test]
 fn a_return_scenario_shapes_the_way_back() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("return");
     let scenario = out.join("return.toml");
     std::fs::write(
@@ -600,7 +600,7 @@ fn a_return_scenario_shapes_the_way_back() {
 
 #[test]
 fn a_stopped_bridge_reports_what_it_held() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("held");
     let Ends { console, from, egress, stop, robot: rx } = ends();
     let emu = Emulator::bridge(&out, "DLM-2", "2", &from, &egress, &[]);

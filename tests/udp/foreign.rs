@@ -5,8 +5,8 @@
 //! before it enters: counted per sender, never relayed, and it never takes
 //! over either direction.
 
-use crate::bridge::{itp, out_dir, read_json, receiver, send_paced, socket, u, Emulator};
-use crate::ONE_RUN_AT_A_TIME;
+use super::bridge::{itp, out_dir, read_json, receiver, send_paced, socket, u, Emulator};
+use crate::common::machine;
 use netfi::frame::ItpView;
 use netfi::transport::udp::UdpPort;
 use serde_json::Value;
@@ -48,7 +48,7 @@ struct Outcome {
 /// `h` says. `console_from` is the flag's value (`None`: the console's
 /// address). Checks what the robot, the console and the intruder got.
 fn run(name: &str, console_from: Option<&str>, h: Hostile) -> Outcome {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir(name);
     let (robot, console, intruder, stranger) = (socket(), socket(), socket(), socket());
     let egress = format!("udp://{}", robot.local_addr());
@@ -143,7 +143,7 @@ fn a_stranger_at_the_egress_port_is_refused_counted_and_never_reaches_the_consol
 #[test]
 fn a_robot_answering_from_another_port_is_refused_unless_named_with_robot_from() {
     for named in [false, true] {
-        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        let _guard = machine::alone();
         let out = out_dir(if named { "robot-from-named" } else { "robot-from-not" });
         let (robot_in, robot_out, console) = (socket(), socket(), socket());
         let (egress, from) = (format!("udp://{}", robot_in.local_addr()), console.local_addr().to_string());

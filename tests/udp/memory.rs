@@ -4,8 +4,8 @@
 //! writer's buffers, far less than the ≈ 64 bytes per frame a trace kept
 //! in memory would add.
 
-use crate::bridge::{itp, out_dir, send_paced, socket, u, Emulator};
-use crate::ONE_RUN_AT_A_TIME;
+use super::bridge::{itp, out_dir, send_paced, socket, u, Emulator};
+use crate::common::machine;
 use std::time::Duration;
 
 /// VmRSS of `pid`, bytes.
@@ -17,7 +17,7 @@ fn rss_bytes(pid: u32) -> u64 {
 
 #[test]
 fn the_emulators_memory_does_not_grow_with_the_frames() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("memory");
     let robot = socket();
     let egress = format!("udp://{}", robot.local_addr());

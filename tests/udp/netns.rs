@@ -9,18 +9,16 @@
 //! documentation ranges (192.0.2.0/24, 198.51.100.0/24) that exist only
 //! inside these namespaces, which the test removes again.
 
-use crate::bridge::{itp, u, Emulator};
-use crate::ONE_RUN_AT_A_TIME;
+use super::bridge::{itp, u, Emulator};
+use crate::common::machine;
 use netfi::frame::ItpView;
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort};
-use netns_hosts::Hosts;
+use crate::common::netns::Hosts;
 use std::net::SocketAddr;
 use std::os::fd::AsRawFd;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-#[path = "../common/netns.rs"]
-mod netns_hosts;
 
 /// Opens a UDP socket bound to `addr` inside network namespace `ns`: a
 /// thread enters the namespace (a thread's own network namespace is what new
@@ -64,7 +62,7 @@ fn console_and_robot_in_two_namespaces_talk_only_through_the_emulator() {
         eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let hosts = match Hosts::build("nf", false) {
         Ok(h) => h,
         Err(why) => {

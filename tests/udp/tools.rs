@@ -11,8 +11,8 @@
 //! counts are asserted exactly: what iperf3 says it lost is what netfi says
 //! it dropped.
 
-use crate::bridge::{free_udp_port, u, Emulator, Reaped};
-use crate::ONE_RUN_AT_A_TIME;
+use super::bridge::{free_udp_port, u, Emulator, Reaped};
+use crate::common::machine;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -98,7 +98,7 @@ fn sockperf_ping_pong_through_the_bridge() {
     if !have("sockperf") {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("sockperf");
     let server_port = free_udp_port();
     let server = Command::new("sockperf")
@@ -318,7 +318,7 @@ fn iperf3_udp_loss_matches_netfi_under_plm2() {
     if !have("iperf3") {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let seed = seed_passing_the_first_datagram(&netfi::load::resolve("PLM-2").unwrap());
     let n = 5000;
     let (client, e, udp, out) = iperf3_through("iperf3-plm2", "PLM-2", seed, n);
@@ -338,7 +338,7 @@ fn iperf3_udp_loss_matches_netfi_under_bernoulli_30() {
     if !have("iperf3") {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let text = "name = \"bernoulli 30%\"\n\n[[stage]]\nmodel = \"bernoulli\"\np = \"30%\"\n";
     let spec = netfi::scenario::parse_str(text, "bernoulli30.toml", "bernoulli 30%").unwrap();
     let seed = seed_passing_the_first_datagram(&spec);

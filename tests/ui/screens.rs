@@ -92,7 +92,7 @@ fn a_four_state_chain_built_through_the_grid_realizes_its_loss() {
 #[test]
 fn a_run_switched_to_the_built_scenario_then_stopped_is_reported_as_stopped_per_condition() {
     let Some(browser) = browser_or_skip() else { return };
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let server = Server::start();
     let tab = browser.new_tab().unwrap();
     builder(&tab, &server);

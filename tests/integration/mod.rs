@@ -1,5 +1,3 @@
-#[path = "../common/netfi.rs"]
-mod netfi_bin;
 mod capture;
 mod core;
 mod docs_cli;

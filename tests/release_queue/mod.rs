@@ -10,10 +10,8 @@
 //!   released in time as the emulator does, give the same sequence from the
 //!   queue as from a binary heap.
 
-#[path = "common/heap_queue.rs"]
-mod heap_queue;
 
-use heap_queue::HeapQueue;
+use crate::common::heap_queue::HeapQueue;
 use netfi::scenario::{self, Decision, Scenario};
 use netfi::scheduler::{Full, QueueOrder, ReleaseQueue, Released};
 use proptest::prelude::*;

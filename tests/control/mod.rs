@@ -4,16 +4,13 @@
 //! The runs are serialized: each has a busy-waiting emulator pinned to a
 //! core, and a 2-core machine has room for one at a time.
 
-#[path = "../common/netfi.rs"]
-mod netfi_bin;
-use netfi_bin::netfi;
+use crate::common::netfi::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+use crate::common::machine;
 
 fn run_id(name: &str) -> String {
     format!("ctl-{}-{name}", std::process::id())
@@ -106,7 +103,7 @@ fn trace(out: &Path) -> Vec<(u64, bool, Option<u64>)> {
 
 #[test]
 fn a_live_switch_from_plm2_to_dlm1_takes_effect_and_is_reported() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     // A plain run: any run under control may be switched to any scenario.
     let run = Run::start("switch", &["PLM-2", "--duration-s", "6", "--seed", "3"]);
     let id = run.id.clone();
@@ -184,7 +181,7 @@ fn a_live_switch_from_plm2_to_dlm1_takes_effect_and_is_reported() {
 
 #[test]
 fn pause_passes_every_frame_and_any_run_may_switch_to_a_reordering_scenario() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::start("pause", &["PLM-3", "--duration-s", "4", "--seed", "5"]);
     let id = run.id.clone();
     // PLM-3 cannot reorder, yet the run under control keeps release-time
@@ -273,7 +270,7 @@ fn padded_show(len: usize) -> Vec<u8> {
 #[test]
 fn a_request_over_the_1_mib_limit_is_refused_and_one_at_it_answered() {
     use netfi::transport::ipc::control::MAX_MESSAGE_BYTES;
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::start("toolarge", &["Normal", "--duration-s", "4", "--seed", "1"]);
     let id = run.id.clone();
     let at_limit = raw_request(&id, &padded_show(MAX_MESSAGE_BYTES));

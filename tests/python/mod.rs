@@ -10,18 +10,15 @@
 //!
 //! The runs are serialized: each has a busy-waiting emulator pinned to a core.
 
-#[path = "../common/netfi.rs"]
-mod netfi_bin;
-use netfi_bin::netfi;
+use crate::common::netfi::netfi;
 use netfi::sample::FrameSample;
 use netfi::transport::{Channel, IpcConfig, Role, RunId};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+use crate::common::machine;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -413,7 +410,7 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("py-py");
     let robot = run.python_robot();
     let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "20000"]);
@@ -482,7 +479,7 @@ fn rust_console_through_the_emulator_to_the_python_robot() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("rs-py");
     let robot = run.python_robot();
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "3000"]);
@@ -524,7 +521,7 @@ fn python_console_through_the_emulator_to_the_rust_simulator() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("py-rs");
     let sim = netfi()
         .args(["simulator", "--run-id", &run.id, "--out"])
@@ -570,7 +567,7 @@ fn the_python_console_replays_the_real_capture() {
         eprintln!("skipping: {} is absent", cap.display());
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("replay");
     let robot = run.python_robot();
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "1500"]);
@@ -601,7 +598,7 @@ fn a_client_of_another_payload_version_is_refused() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("version");
     let emu = run.emulator("Normal", &["--seed", "1"]);
     let o = python("../../tests/python/other_version.py", &run).arg(&run.id).output().unwrap();
@@ -632,7 +629,7 @@ fn killing_the_python_robot_ends_the_run_with_nothing_unaccounted() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("kill-robot");
     let mut robot = run.python_robot();
     let emu = run.emulator("PLM-1", &["--seed", "4", "--expected-frames", "60000"]);
@@ -670,7 +667,7 @@ fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("no-robot");
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "300"]);
     let mut console = python("examples/console.py", &run);
@@ -716,7 +713,7 @@ fn the_rust_refusal_names_both_payload_versions() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("rust-refusal");
     let holder = r#"
 import sys, netfi_iox as n
@@ -762,7 +759,7 @@ fn bad_input_is_counted_by_kind_and_its_sender_named() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("bad-input");
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "40000"]);
     let o = python("../../tests/python/bad_input.py", &run).args([&run.id, "30000"]).output().unwrap();
@@ -893,7 +890,7 @@ fn the_python_camera_through_the_emulator_to_the_python_viewer_and_netfis_consol
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("video-py");
     let viewer = run.python_viewer("60");
     let video = ["--video-mbps", "2", "--video-hz", "60", "--video-gop", "30"];
@@ -957,7 +954,7 @@ fn netfis_camera_through_the_emulator_to_the_python_viewer() {
     if !python_ready() {
         return;
     }
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("video-rs");
     let viewer = run.python_viewer("60");
     let video = ["--video-mbps", "4", "--video-hz", "60", "--video-gop", "30"];
@@ -1074,7 +1071,7 @@ fn a_client_written_from_the_document_alone_takes_part_in_a_run() {
     let script = root().join("tests/python/doc_client.py");
     let text = std::fs::read_to_string(&script).unwrap();
     assert!(!text.contains("import netfi_iox") && !text.contains("from netfi_iox"), "the client imports netfi's module");
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let run = Run::new("doc");
     assert_eq!(rust_layout(&run.config), "per-user", "the document's layout is per-user");
     let doc = |args: &[&str]| {

@@ -3,8 +3,12 @@
 //! a child (see [`child_process_entry`]).
 //!
 //! Every test uses its own run id (with this process's pid), so tests run in
-//! parallel, and concurrent runs of this binary, never share a channel.
+//! parallel, and concurrent runs of this binary, never share a channel. A
+//! test that leaves a killed peer behind to clean up itself holds
+//! [`machine::not_beside_a_run`]: a run's start-up clean-up would remove it
+//! first.
 
+use crate::common::machine;
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, ChildStdout, Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -424,8 +428,8 @@ impl ChildPeer {
     fn spawn(mode: &str, config: &IpcConfig) -> Self {
         let exe = std::env::current_exe().unwrap();
         let mut child = Command::new(exe)
+            .arg(crate::common::test_name(module_path!(), "child_process_entry"))
             .args([
-                "child_process_entry",
                 "--exact",
                 "--nocapture",
                 "--test-threads=1",
@@ -498,6 +502,7 @@ impl Drop for ChildPeer {
 
 #[test]
 fn killed_publisher_is_reaped_and_can_be_replaced() {
+    let _machine = machine::not_beside_a_run();
     let config = unique_config("kill");
     let node = IpcNode::open(&config, Role::Emulator).unwrap();
     let mut sub = node.subscriber(Channel::Console).unwrap();
@@ -537,6 +542,7 @@ fn killed_publisher_is_reaped_and_can_be_replaced() {
 
 #[test]
 fn killed_subscriber_is_reported_then_reaped() {
+    let _machine = machine::not_beside_a_run();
     let config = unique_config("killsub");
     let node = IpcNode::open(&config, Role::Emulator).unwrap();
     let mut publisher = node.publisher(Channel::Emulator).unwrap();
@@ -573,6 +579,7 @@ fn killed_subscriber_is_reported_then_reaped() {
 
 #[test]
 fn leftovers_of_a_killed_run_are_removed_at_start_up() {
+    let _machine = machine::not_beside_a_run();
     let config = unique_config("leftover");
     ChildPeer::spawn("publish", &config).kill_9();
 
@@ -594,6 +601,7 @@ fn leftovers_of_a_killed_run_are_removed_at_start_up() {
 
 #[test]
 fn dead_runs_are_found_by_their_files() {
+    let _machine = machine::not_beside_a_run();
     let config = unique_config("anyrun");
     ChildPeer::spawn("publish", &config).kill_9();
     // Only this test's run is selected: other tests (and other processes on
@@ -629,6 +637,7 @@ fn files_with_prefix(prefix: &str) -> Vec<std::path::PathBuf> {
 /// owns; a live run's stay, also one no node owns.
 #[test]
 fn a_dead_runs_files_are_removed_and_a_live_ones_kept() {
+    let _machine = machine::not_beside_a_run();
     let live = unique_config("sweep-live");
     let dead = unique_config("sweep-dead");
     let node = IpcNode::open(&live, Role::Simulator).unwrap();
@@ -660,6 +669,7 @@ fn a_dead_runs_files_are_removed_and_a_live_ones_kept() {
 
 #[test]
 fn node_open_reports_what_it_cleaned() {
+    let _machine = machine::not_beside_a_run();
     let config = unique_config("report");
     let child = ChildPeer::spawn("publish", &config);
     let pid = child.pid();
@@ -748,11 +758,12 @@ fn thread_schedstat() -> (u64, u64) {
 /// shared origin; the stamp is taken inside `send_with`, the receive time
 /// inside `recv_with`.
 ///
-/// `cargo test --test transport -- --ignored --nocapture latency`
+/// `cargo test --test all -- --ignored --nocapture transport::latency`
 #[test]
 #[ignore = "measurement, not a check; run explicitly with --ignored --nocapture"]
 fn latency_one_hop_between_threads() {
     use hdrhistogram::Histogram;
+    let _machine = machine::alone();
 
     const WARMUP: u64 = 10_000;
     const SAMPLES: u64 = 100_000;

@@ -16,12 +16,10 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::Arc;
 
-/// One run at a time: each has a busy-waiting emulator pinned to a core,
-/// and a 2-core machine has room for one.
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+use crate::common::machine;
+use std::time::{Duration, Instant};
 
 fn chromium() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("NETFI_CHROMIUM") {
@@ -214,7 +212,7 @@ fn builder(tab: &Arc<Tab>, server: &Server) {
 #[test]
 fn build_preview_run_switch_report() {
     let Some(browser) = browser_or_skip() else { return };
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let server = Server::start();
     let tab = browser.new_tab().unwrap();
     builder(&tab, &server);
@@ -304,7 +302,7 @@ fn hostile_site(page: String) -> String {
 #[test]
 fn a_page_of_another_origin_can_neither_stop_nor_start_a_run() {
     let Some(browser) = browser_or_skip() else { return };
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let server = Server::start();
     // The user opened the UI: the browser holds its cookie.
     let tab = browser.new_tab().unwrap();

@@ -5,13 +5,11 @@
 //! The runs are serialized: each has a busy-waiting emulator pinned to a
 //! core, and a 2-core machine has room for one at a time.
 
-#[path = "../common/netfi.rs"]
-mod netfi_bin;
-use netfi_bin::netfi;
+use crate::common::netfi::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::Mutex;
+use crate::common::machine;
 use std::time::{Duration, Instant};
 
 mod deaths;
@@ -19,8 +17,6 @@ mod faults;
 mod integrity;
 mod streams;
 mod video;
-
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-it-{}-{name}", std::process::id()));
@@ -30,7 +26,7 @@ fn out_dir(name: &str) -> PathBuf {
 
 /// `netfi run` with `args`; returns the JSON report and whether it exited 0.
 fn run(name: &str, args: &[&str]) -> (Value, bool, PathBuf) {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir(name);
     let o = netfi().arg("run").args(args).arg("--out").arg(&out).arg("--json").output().unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -292,7 +288,7 @@ fn wait_file(path: &Path) {
 
 #[test]
 fn a_restarted_console_reconnects() {
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("restart");
     let run_id = format!("it-restart-{}", std::process::id());
     let mut sim = service("simulator", &run_id, &out, &[]);
@@ -367,7 +363,7 @@ fn isolate_clears_the_emulators_core_and_puts_everything_back() {
     assert_eq!(allowed_cpus(witness.id()), before, "the witness was not put back");
 
     // The emulator killed while the core is cleared: the runner restores.
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("isolate-kill");
     let child = netfi()
         .args(["run", "Normal", "--duration-s", "3", "--seed", "3", "--isolate", "--emulator-core", &core, "--json", "--out"])
@@ -442,7 +438,7 @@ fn the_emulators_own_threads_stay_off_its_core() {
         return;
     }
     let core = cores - 1;
-    let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = machine::alone();
     let out = out_dir("own-threads");
     let run_id = format!("it-own-threads-{}", std::process::id());
     let mut emu = service("emulator", &run_id, &out, &["--scenario", "Normal", "--core", &core.to_string()]);

@@ -27,11 +27,11 @@ fn config() -> ProptestConfig {
 
 /// The example scenarios: the seeds of the mutations.
 const SEEDS: [&str; 5] = [
-    include_str!("../config/scenarios/gilbert_elliott.toml"),
-    include_str!("../config/scenarios/jitter_fifo.toml"),
-    include_str!("../config/scenarios/netem_markov4.toml"),
-    include_str!("../config/scenarios/outage_timeline.toml"),
-    include_str!("../config/scenarios/plm2_dlm2.toml"),
+    include_str!("../../config/scenarios/gilbert_elliott.toml"),
+    include_str!("../../config/scenarios/jitter_fifo.toml"),
+    include_str!("../../config/scenarios/netem_markov4.toml"),
+    include_str!("../../config/scenarios/outage_timeline.toml"),
+    include_str!("../../config/scenarios/plm2_dlm2.toml"),
 ];
 
 /// Errors about the file as a whole, which have no one line to name.

@@ -10,14 +10,11 @@
 mod browser;
 mod pure;
 
+use crate::common::machine;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-/// One trial at a time: each has a busy-waiting emulator pinned to a core,
-/// and a 2-core machine has room for one.
-pub static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 pub fn netfi() -> &'static str {
     env!("CARGO_BIN_EXE_netfi")
@@ -124,7 +121,7 @@ fn simulated_study() -> String {
 /// its own per-trial table.
 #[test]
 fn a_simulated_study_runs_trial_by_trial_and_its_report_is_its_table() {
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = machine::alone();
     let dir = Scratch::new("simulated");
     let file = dir.file("study.toml", &simulated_study());
     let f = file.to_str().unwrap();
@@ -300,7 +297,7 @@ fn start_trial(file: &Path, data: &Path, id: &str) -> (std::process::Child, u32,
 /// table counts it once. While it runs, a second experimenter is refused.
 #[test]
 fn a_trial_killed_mid_run_is_interrupted_and_run_again_never_counted_twice() {
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let _one = machine::alone();
     let dir = Scratch::new("kills");
     let file = dir.file("study.toml", &kill_study());
     let f = file.to_str().unwrap();

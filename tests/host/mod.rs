@@ -28,14 +28,9 @@ mod users;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn lock() -> std::sync::MutexGuard<'static, ()> {
-    ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
-}
+use crate::common::machine;
 
 fn netfi_exe() -> &'static str {
     env!("CARGO_BIN_EXE_netfi")

@@ -1,6 +1,6 @@
 //! The statistical tier: each model against its analytic law, with fixed
 //! seeds and stated significance levels. Slower than the unit tests (about
-//! 10^7 simulated frames per check); run with `cargo test --test statistical`.
+//! 10^7 simulated frames per check); run with `cargo test --test all statistical::`.
 
 mod corrupt;
 mod duplicate;

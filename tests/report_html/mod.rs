@@ -6,18 +6,15 @@
 //! test that changes the run's files works on its own copy. `foreign`: a
 //! run started by hand, without `netfi run`.
 
-#[path = "../common/netfi.rs"]
-mod netfi_bin;
-use netfi_bin::netfi;
+use crate::common::netfi::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Output;
-use std::sync::{Mutex, OnceLock};
+use std::sync::OnceLock;
+
+use crate::common::machine;
 
 mod foreign;
-
-/// Each run has a busy-waiting emulator pinned to a core: one at a time.
-static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("netfi-html-{}-{name}", std::process::id()));
@@ -29,7 +26,7 @@ fn temp_dir(name: &str) -> PathBuf {
 fn the_run() -> &'static Path {
     static RUN: OnceLock<PathBuf> = OnceLock::new();
     RUN.get_or_init(|| {
-        let _guard = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        let _guard = machine::alone();
         let out = temp_dir("run");
         let scenario = concat!(env!("CARGO_MANIFEST_DIR"), "/config/scenarios/plm2_dlm2.toml");
         let o = netfi().args(["run", scenario, "--duration-s", "3", "--seed", "11", "--out"]).arg(&out).output().unwrap();
