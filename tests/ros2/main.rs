@@ -242,10 +242,16 @@ impl Case {
     /// `netfi scenario check`'s fate of each of `n` messages of `scenario`
     /// with `seed`, in simulated time, by ingress index.
     pub(crate) fn check_fates(&self, scenario: &str, n: usize, seed: u64) -> Vec<String> {
+        self.check_rows(scenario, n, seed).iter().map(|r| r["fate"].clone()).collect()
+    }
+
+    /// `netfi scenario check`'s trace of `n` messages of `scenario` with
+    /// `seed`, in simulated time, by ingress index.
+    pub(crate) fn check_rows(&self, scenario: &str, n: usize, seed: u64) -> Vec<BTreeMap<String, String>> {
         let trace = self.dir.join(format!("check-{scenario}-{seed}.csv"));
         let o = netfi().args(["scenario", "check", scenario, "--frames", &n.to_string(), "--seed", &seed.to_string(), "--json", "--trace"]).arg(&trace).output().unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        rows(&trace).iter().map(|r| r["fate"].clone()).collect()
+        rows(&trace)
     }
 }
 
