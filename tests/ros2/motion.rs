@@ -79,7 +79,7 @@ fn run(name: &str, kind: &str, type_name: &str, positions: Option<usize>, scenar
     let sent_csv = c.dir.join("talker.sent.csv");
     let mut listener = c.listener("robot", "/arm/servo", &["--type", kind]);
     let mut talker = c.node("talker.py", "talker", &["/arm/measured", &N.to_string(), "--rate-hz", "200", "--type", kind, "--sent", sent_csv.to_str().unwrap()]);
-    let mut emu = c.emulator(&["--scenario", scenario, "--seed", &seed.to_string(), "--ros2-topic", "/arm/measured=/arm/servo"]);
+    let mut emu = c.emulator(&["--scenario", scenario, "--seed", &seed.to_string(), "--wait-for-peer-s", "60", "--ros2-topic", "/arm/measured=/arm/servo"]);
     talker.done();
     emu.done();
     listener.done();

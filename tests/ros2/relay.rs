@@ -40,6 +40,12 @@ fn plm2_drops_exactly_what_scenario_check_drops_and_the_listener_gets_the_rest()
     assert_loss_is_the_models(&e);
 }
 
+/// A reliable message whose datagram was lost on the way out is sent again
+/// once the emulator's writer (RustDDS) heartbeats, every second
+/// (`HEARTBEAT_PERIOD_SLOW`), and the listener answers: that period and two
+/// hops more than the hop out.
+const REPAIR_NS: i64 = 1_000_000_000;
+
 /// How long one read of both clocks may take at most to count (ns).
 const CLOCK_READ_NS: i64 = 20_000;
 
@@ -66,7 +72,9 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
     let mut listener = c.listener("listener", "/PSM1/servo_cp", &["--type", "pose"]);
     let mut talker = c.node("talker.py", "talker", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "200", "--type", "pose"]);
     let wall_before = wall_less_monotonic();
-    let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "5", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
+    // The emulator takes the talker's first message only once it has the
+    // listener's reader: no release before the listener can match.
+    let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "5", "--wait-for-peer-s", "60", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
     talker.done();
     emu.done();
     listener.done();
@@ -87,7 +95,8 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
     // measures. The hop out is one DDS hop between the same two
     // middlewares over the same loopback as the hop in: its allowance is
     // the largest hop in the report states for the run
-    // (`ingress_wait_ns.max`). And the emulator reads the monotonic clock,
+    // (`ingress_wait_ns.max`), and for a message repaired on the way out
+    // ([`REPAIR_NS`]) the writer's heartbeat and two such hops more. And the emulator reads the monotonic clock,
     // the listener the wall clock: however far the two drifted apart over
     // the run is allowed on either side.
     let check: BTreeMap<u64, i64> = c.check_rows("DLM-1", N, 5).iter().map(|r| (r["ingress_index"].parse().unwrap(), r["delay_ns"].parse().unwrap())).collect();
@@ -108,14 +117,15 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
         assert!((0..=hop_max).contains(&hop_in) && (0..=late_max).contains(&late), "message {}: the trace's hop in {hop_in} ns and lateness {late} ns within the report's {hop_max} and {late_max}", m.index);
         let hop_out = seen - injected - late - hop_in;
         assert!(
-            (-drift..=hop_max + drift).contains(&hop_out),
-            "message {}: the listener saw {seen} ns; injected {injected} ns, {late} ns late, hop in {hop_in} ns, leaves {hop_out} ns for the hop out, outside [0, {hop_max}] ± {drift} ns",
+            (-drift..=hop_max + REPAIR_NS + 2 * hop_max + drift).contains(&hop_out),
+            "message {}: the listener saw {seen} ns; injected {injected} ns, {late} ns late, hop in {hop_in} ns, leaves {hop_out} ns for the hop out, outside [0, {hop_max}] ± {drift} ns (and a repair's {REPAIR_NS} ns and two hops more)",
             m.index
         );
         hops_out.push(hop_out);
     }
     hops_out.sort_unstable();
-    eprintln!("hop out (ns): min {}, p50 {}, max {}; allowance {hop_max} ± {drift}", hops_out[0], hops_out[hops_out.len() / 2], hops_out[hops_out.len() - 1]);
+    let repaired = hops_out.iter().filter(|h| **h > hop_max + drift).count();
+    eprintln!("hop out (ns): min {}, p50 {}, max {}; allowance {hop_max} ± {drift}; {repaired} beyond it, within a repair", hops_out[0], hops_out[hops_out.len() / 2], hops_out[hops_out.len() - 1]);
     // DLM-1 reorders: the listener saw that too.
     assert!(got.windows(2).any(|w| w[1].index < w[0].index), "DLM-1 reorders some messages");
     // PoseStamped is read on both sides: the talker's x is its index, so
