@@ -4,15 +4,19 @@
 //! `cargo bench --bench ros2` (about half a minute; `-- --quick` for a few
 //! seconds) measures, in one run:
 //!
-//! - **Latency.** An rclpy talker publishes on `/bench` at `--rate-hz`; one
-//!   rclpy listener takes `/bench` straight from it (the direct hop),
-//!   another takes `/bench_out` through `netfi emulator --scenario Normal
+//! - **Latency.** A talker publishes on `/bench` at `--rate-hz`; one
+//!   subscriber takes `/bench` straight from it (the direct hop), another
+//!   takes `/bench_out` through `netfi emulator --scenario Normal
 //!   --ros2-topic /bench=/bench_out`: the same messages at the same moments
-//!   on both routes. Each message's latency is its reception less its
-//!   source timestamp, both taken by the DDS layer (Fast DDS's; the emulator
-//!   keeps the source timestamp), so neither Python's executor nor its
-//!   timers are in it. Reported: p50 and p99 of each route and of their
-//!   difference, message for message.
+//!   on both routes. Two runs: an rclpy talker, with rclpy listeners and a
+//!   Rust subscriber (RustDDS, in this process) on both topics; then a Rust
+//!   talker (RustDDS, in this process) with the rclpy listeners. A
+//!   message's latency is its reception less its source timestamp (the
+//!   emulator keeps the source timestamp): for rclpy both are taken by the
+//!   DDS layer (Fast DDS's), so neither Python's executor nor its timers
+//!   are in it; the Rust subscriber polls every 20 µs and takes its time
+//!   when it takes the message. Reported: p50 and p99 of each route and of
+//!   their difference, message for message (`added`: what netfi adds).
 //! - **CPU per message.** The emulator's loop busy-polls its core, so its
 //!   share is the busy time the emulator itself reports per message
 //!   (`emulator.json` `busy`); its other threads (RustDDS's receive,
@@ -25,18 +29,28 @@
 //!   (tests/alloc.rs for the link; the slots are fixed at start-up).
 //! - **Steal**, over the latency run.
 //!
+//! The rclpy nodes run Fast DDS with its UDP transport only
+//! (`FASTDDS_BUILTIN_TRANSPORTS=UDPv4`), as the emulator speaks it: the
+//! direct hop is then UDP over loopback too, not shared memory, and no node
+//! leaves shared-memory files behind.
+//!
 //! Results are printed and written to `target/netfi-bench/ros2/ros2.json`.
 //! Without a Python that runs rclpy (`--python`, else `NETFI_ROS2_PYTHON`,
 //! else `python3`) the latency part says so and is skipped.
 
 use clap::Parser;
-use netfi::transport::ros2::{qos, Payload, Ros2Node, Slots, TopicName, TypeName};
+use netfi::transport::ros2::{port::unix_ns, qos, Payload, Role, Ros2Node, Slots, TopicName, TypeName};
 use serde_json::{json, Value};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::{Cell, RefCell};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+/// Fast DDS with its UDP transport only, for the rclpy nodes.
+const UDP_ONLY: (&str, &str) = ("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4");
 
 /// Counts allocations made on threads that ask for it.
 struct Counting;
@@ -135,7 +149,9 @@ fn allocation_part(messages: usize) -> anyhow::Result<Value> {
         while Instant::now() < due {
             let (r, n) = allocations(|| reader.take(&slots, 0));
             if let Some(m) = r? {
-                assert_eq!(m.payload, Payload::Stored { len: message.len() as u32 });
+                // The message, padded as RTPS pads a serialized payload:
+                // to a multiple of 4 bytes.
+                assert_eq!(m.payload, Payload::Stored { len: message.len().next_multiple_of(4) as u32 });
                 takes += n;
                 taken += 1;
                 break;
@@ -154,7 +170,7 @@ fn allocation_part(messages: usize) -> anyhow::Result<Value> {
 /// The Python with rclpy, if it runs a node.
 fn python(a: &Args) -> Option<PathBuf> {
     let py = a.python.clone().or_else(|| std::env::var_os("NETFI_ROS2_PYTHON").map(PathBuf::from)).unwrap_or_else(|| "python3".into());
-    let ok = Command::new(&py).args(["-c", "import rclpy; rclpy.init(); rclpy.create_node('probe'); rclpy.shutdown()"]).env("ROS_DOMAIN_ID", "231").output();
+    let ok = Command::new(&py).args(["-c", "import rclpy; rclpy.init(); rclpy.create_node('probe'); rclpy.shutdown()"]).env("ROS_DOMAIN_ID", "231").env(UDP_ONLY.0, UDP_ONLY.1).output();
     match ok {
         Ok(o) if o.status.success() => Some(py),
         _ => {
@@ -210,15 +226,105 @@ fn received(csv: &Path) -> Vec<(u64, i64)> {
         .collect()
 }
 
-fn latency_part(a: &Args, py: &Path, messages: usize) -> anyhow::Result<Value> {
-    let dir = a.out.join("run");
+/// Who publishes `/bench` in a run.
+#[derive(Clone, Copy, PartialEq)]
+enum Talker {
+    /// `tests/ros2/talker.py`.
+    Rclpy,
+    /// A RustDDS writer in a thread of this process.
+    Rust,
+}
+
+/// Each message's index and latency (ns) as one subscriber saw it.
+type Seen = Vec<(u64, i64)>;
+
+/// The index a std_msgs/String of the talkers carries.
+fn index_of(cdr: &[u8]) -> Option<u64> {
+    let text = std::str::from_utf8(cdr.get(4..)?).ok()?;
+    text.trim_end_matches('\0').split(' ').next()?.parse().ok()
+}
+
+/// A Rust subscriber of `/bench` (direct) and `/bench_out` (through the
+/// emulator) in a thread of this process, until `n` messages came on each
+/// or none for 5 s after the first: what each saw. A message's latency is when the thread
+/// took it (it polls every 20 µs) less its source timestamp.
+fn rust_listener(domain: u16, n: usize, ready: Arc<AtomicBool>) -> std::thread::JoinHandle<anyhow::Result<[Seen; 2]>> {
+    std::thread::spawn(move || {
+        let mut node = Ros2Node::open(domain)?;
+        let ty = TypeName::parse("std_msgs/msg/String")?;
+        let q = qos::reader(&qos::relay(None));
+        let readers = [node.reader(&TopicName::parse("/bench")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_out")?, &ty, &q)?];
+        let slots = RefCell::new(Slots::new(1, 1024));
+        let slot = slots.borrow_mut().alloc().expect("a slot");
+        let mut seen: [Seen; 2] = [Vec::with_capacity(n), Vec::with_capacity(n)];
+        ready.store(true, Ordering::Release);
+        let (t0, mut last, mut polls) = (Instant::now(), None::<Instant>, 0u64);
+        while seen.iter().any(|s| s.len() < n) && !last.is_some_and(|l| l.elapsed() > Duration::from_secs(5)) && t0.elapsed() < Duration::from_secs(600) {
+            for (r, s) in readers.iter().zip(seen.iter_mut()) {
+                while let Some(m) = r.take(&slots, slot)? {
+                    let now = unix_ns(rustdds::Timestamp::now()) as i64;
+                    if let (Payload::Stored { len }, Some(src)) = (m.payload, m.source) {
+                        if let Some(i) = index_of(&slots.borrow().get(slot)[..len as usize]) {
+                            s.push((i, now - unix_ns(src) as i64));
+                        }
+                    }
+                    last = Some(Instant::now());
+                }
+            }
+            // The graph's news, taken as they come (discovery waits on
+            // them otherwise).
+            polls += 1;
+            if polls % 500 == 0 {
+                node.poll(netfi::clock::now_ns());
+            }
+            std::thread::sleep(Duration::from_micros(20));
+        }
+        Ok(seen)
+    })
+}
+
+/// A Rust publisher of `/bench`: once `subscribers` have matched, `n`
+/// std_msgs/String messages (each its index) at `rate_hz`, each stamped
+/// with its source time; it stays 1 s for reliable resends.
+fn rust_talker(domain: u16, n: usize, rate_hz: f64, subscribers: usize) -> std::thread::JoinHandle<anyhow::Result<()>> {
+    std::thread::spawn(move || {
+        let mut node = Ros2Node::open(domain)?;
+        let topic = TopicName::parse("/bench")?;
+        let writer = node.writer(&topic, &TypeName::parse("std_msgs/msg/String")?, &qos::relay(None))?;
+        let t0 = Instant::now();
+        loop {
+            node.poll(netfi::clock::now_ns());
+            if node.remotes(&topic, Role::Subscriber).count() >= subscribers {
+                break;
+            }
+            anyhow::ensure!(t0.elapsed() < Duration::from_secs(60), "the Rust talker found no {subscribers} subscribers within 60 s");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        // Matched on both sides: as the rclpy talker, a little after.
+        std::thread::sleep(Duration::from_millis(500));
+        let start = netfi::clock::now_ns();
+        for i in 0..n {
+            netfi::clock::sleep_until_ns(start + (i as f64 * 1e9 / rate_hz) as u64);
+            writer.write(&string_cdr(&i.to_string()), Some(rustdds::Timestamp::now()))?;
+        }
+        std::thread::sleep(Duration::from_secs(1));
+        Ok(())
+    })
+}
+
+/// One run: a talker (rclpy or Rust) publishes `/bench`; the emulator
+/// relays it to `/bench_out` through Normal; an rclpy listener takes each
+/// topic, and, with an rclpy talker, a Rust listener takes both too.
+fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16) -> anyhow::Result<Value> {
+    let label = if talker_kind == Talker::Rclpy { "rclpy_talker" } else { "rust_talker" };
+    let dir = a.out.join(label);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir)?;
-    let domain = (170 + std::process::id() % 30).to_string();
+    let domain_s = domain.to_string();
     let scripts = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/ros2");
     let node = |args: &[&str], log: &str| -> anyhow::Result<Kill> {
         let f = std::fs::File::create(dir.join(log))?;
-        let c = Command::new(py).current_dir(&scripts).args(args).env("ROS_DOMAIN_ID", &domain).stdout(f.try_clone()?).stderr(f).stdin(Stdio::null()).spawn()?;
+        let c = Command::new(py).current_dir(&scripts).args(args).env("ROS_DOMAIN_ID", &domain_s).env(UDP_ONLY.0, UDP_ONLY.1).stdout(f.try_clone()?).stderr(f).stdin(Stdio::null()).spawn()?;
         Ok(Kill(c))
     };
     let wait_file = |p: &Path| {
@@ -235,24 +341,47 @@ fn latency_part(a: &Args, py: &Path, messages: usize) -> anyhow::Result<Value> {
         listeners.push(node(&["listener.py", topic, csv.to_str().unwrap(), "--count", &n, "--idle-s", "5", "--depth", "1000", "--name", name, "--ready", ready.to_str().unwrap()], &format!("{name}.log"))?);
         wait_file(&ready);
     }
-    // The talker waits for both: the direct listener and the emulator.
-    let mut talker = node(&["talker.py", "/bench", &n, "--rate-hz", &a.rate_hz.to_string(), "--wait-subs", "2", "--depth", "1000"], "talker.log")?;
+    let rust = match talker_kind {
+        Talker::Rclpy => {
+            let ready = Arc::new(AtomicBool::new(false));
+            let h = rust_listener(domain, messages, ready.clone());
+            while !ready.load(Ordering::Acquire) && !h.is_finished() {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if h.is_finished() {
+                h.join().map_err(|_| anyhow::anyhow!("the Rust listener panicked"))??;
+                anyhow::bail!("the Rust listener ended before it subscribed");
+            }
+            Some(h)
+        }
+        Talker::Rust => None,
+    };
     let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
     let pin = if cores >= 2 { vec!["--core".to_string(), (cores - 1).to_string()] } else { vec!["--no-pin".to_string()] };
     let f = std::fs::File::create(dir.join("emulator.log"))?;
     let mut emu = Kill(
         Command::new(env!("CARGO_BIN_EXE_netfi"))
-            .args(["emulator", "--scenario", "Normal", "--seed", "1", "--ros2-topic", "/bench=/bench_out", "--ros2-domain", &domain, "--ros2-linger-ms", "300", "--expected-frames", &n, "--out"])
+            .args(["emulator", "--scenario", "Normal", "--seed", "1", "--ros2-topic", "/bench=/bench_out", "--ros2-domain", &domain_s, "--ros2-linger-ms", "300", "--expected-frames", &n, "--out"])
             .arg(dir.join("out"))
             .args(&pin)
+            .env(UDP_ONLY.0, UDP_ONLY.1)
             .stdout(f.try_clone()?)
             .stderr(f)
             .spawn()?,
     );
     let pid = emu.0.id();
+    // The talker waits for every subscriber of /bench: the direct
+    // listener(s) and the emulator.
+    let subscribers = if rust.is_some() { 3 } else { 2 };
     let steal = netfi::host::StealTimer::start();
     let ticks0 = thread_ticks(pid, pid);
-    wait(&mut talker, "the talker", Duration::from_secs(600))?;
+    match talker_kind {
+        Talker::Rclpy => {
+            let mut t = node(&["talker.py", "/bench", &n, "--rate-hz", &a.rate_hz.to_string(), "--wait-subs", &subscribers.to_string(), "--depth", "1000"], "talker.log")?;
+            wait(&mut t, "the talker", Duration::from_secs(600))?;
+        }
+        Talker::Rust => rust_talker(domain, messages, a.rate_hz, subscribers).join().map_err(|_| anyhow::anyhow!("the Rust talker panicked"))??,
+    }
     let ticks1 = thread_ticks(pid, pid);
     let steal = steal.stop();
     wait(&mut emu, "the emulator", Duration::from_secs(60))?;
@@ -260,27 +389,51 @@ fn latency_part(a: &Args, py: &Path, messages: usize) -> anyhow::Result<Value> {
         wait(l, if k == 0 { "the direct listener" } else { "the listener through the emulator" }, Duration::from_secs(60))?;
     }
     let e: Value = serde_json::from_slice(&std::fs::read(dir.join("out/emulator.json"))?)?;
-    let (direct, through) = (received(&direct_csv), received(&through_csv));
-    let by_index: std::collections::BTreeMap<u64, i64> = direct.iter().copied().collect();
-    let added: Vec<i64> = through.iter().filter_map(|(i, t)| by_index.get(i).map(|d| t - d)).collect();
     let tick_ns = 1e9 / 100.0;
     let delivered = e["frames"]["delivered"].as_u64().unwrap_or(0).max(1) as f64;
-    Ok(json!({
+    let mut out = json!({
+        "talker": if talker_kind == Talker::Rclpy { "rclpy" } else { "rust" },
         "messages": messages,
         "rate_hz": a.rate_hz,
-        "direct": summary(direct.iter().map(|d| d.1).collect()),
-        "through_emulator": summary(through.iter().map(|d| d.1).collect()),
-        "added": summary(added),
+        "rclpy_listener": both(&received(&direct_csv), &received(&through_csv)),
         "emulator_loop_busy_ns_per_message": e["busy"]["busy_ns_per_frame"],
         "emulator_other_threads_cpu_ns_per_message": (ticks1.saturating_sub(ticks0)) as f64 * tick_ns / delivered,
         "release_lateness_ns": e["release_lateness_ns"],
         "steal_fraction": steal.fraction,
         "steal_ms": steal.ms,
+    });
+    if let Some(h) = rust {
+        let [direct, through] = h.join().map_err(|_| anyhow::anyhow!("the Rust listener panicked"))??;
+        out["rust_listener"] = both(&direct, &through);
+    }
+    Ok(out)
+}
+
+/// The direct route's latency, the route's through the emulator, and their
+/// difference message for message.
+fn both(direct: &Seen, through: &Seen) -> Value {
+    let by_index: std::collections::BTreeMap<u64, i64> = direct.iter().copied().collect();
+    let added: Vec<i64> = through.iter().filter_map(|(i, t)| by_index.get(i).map(|d| t - d)).collect();
+    json!({
+        "direct": summary(direct.iter().map(|d| d.1).collect()),
+        "through_emulator": summary(through.iter().map(|d| d.1).collect()),
+        "added": summary(added),
+    })
+}
+
+fn latency_part(a: &Args, py: &Path, messages: usize) -> anyhow::Result<Value> {
+    let domain = 170 + (std::process::id() % 30) as u16;
+    Ok(json!({
+        "rclpy_talker": route(a, py, Talker::Rclpy, messages, domain)?,
+        "rust_talker": route(a, py, Talker::Rust, messages, domain + 1)?,
     }))
 }
 
 fn main() -> anyhow::Result<()> {
-    let a = Args::parse();
+    let mut a = Args::parse();
+    // The nodes run in tests/ros2: their files are named absolutely.
+    std::fs::create_dir_all(&a.out)?;
+    a.out = std::path::absolute(&a.out)?;
     let messages = if a.quick { 1000 } else { a.messages };
     std::fs::create_dir_all(&a.out)?;
     let alloc = allocation_part(if a.quick { 200 } else { 2000 })?;
@@ -289,7 +442,7 @@ fn main() -> anyhow::Result<()> {
         Some(py) => latency_part(&a, &py, messages)?,
         None => Value::Null,
     };
-    println!("rclpy → rclpy, direct and through the emulator (Normal): {latency:#}");
+    println!("talker → listener, direct and through the emulator (Normal): {latency:#}");
     let all = json!({ "allocation": alloc, "latency": latency });
     std::fs::write(a.out.join("ros2.json"), serde_json::to_vec_pretty(&all)?)?;
     Ok(())

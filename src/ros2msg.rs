@@ -17,6 +17,10 @@
 //!   the robot's (every message released): each side's motion length, the
 //!   robot's stalls, and how far the robot's last pose is from the
 //!   console's, sampled at each message of either side.
+//! - Each known type's message definition, as ROS 2 bags keep it
+//!   (encoding `ros2msg`: the type's `.msg` fields, then each type it uses,
+//!   after a line of 80 `=` and `MSG: pkg/msg/Type`), for MCAP files that
+//!   tools decode without the type installed.
 //! - Pure: no clock (times come in as ns), no I/O, and nothing allocates.
 
 use crate::kinematics::Stalls;
@@ -24,6 +28,49 @@ use serde::Serialize;
 
 /// The most joints of a JointState followed.
 pub const JOINTS_MAX: usize = 16;
+
+/// The delimiter of a used type's definition, and that definition (the
+/// pieces of [`Kind::definition`]).
+macro_rules! msg_dependency {
+    ($name:literal, $fields:literal) => {
+        concat!("================================================================================\nMSG: ", $name, "\n", $fields)
+    };
+}
+macro_rules! msg_header {
+    () => {
+        msg_dependency!("std_msgs/msg/Header", "builtin_interfaces/Time stamp\nstring frame_id\n")
+    };
+}
+macro_rules! msg_time {
+    () => {
+        msg_dependency!("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n")
+    };
+}
+macro_rules! msg_pose {
+    () => {
+        msg_dependency!("geometry_msgs/msg/Pose", "Point position\nQuaternion orientation\n")
+    };
+}
+macro_rules! msg_point {
+    () => {
+        msg_dependency!("geometry_msgs/msg/Point", "float64 x\nfloat64 y\nfloat64 z\n")
+    };
+}
+macro_rules! msg_quaternion {
+    () => {
+        msg_dependency!("geometry_msgs/msg/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n")
+    };
+}
+macro_rules! msg_transform {
+    () => {
+        msg_dependency!("geometry_msgs/msg/Transform", "Vector3 translation\nQuaternion rotation\n")
+    };
+}
+macro_rules! msg_vector3 {
+    () => {
+        msg_dependency!("geometry_msgs/msg/Vector3", "float64 x\nfloat64 y\nfloat64 z\n")
+    };
+}
 
 /// A known kinematic message type.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -42,6 +89,20 @@ impl Kind {
             "geometry_msgs/msg/TransformStamped" => Some(Kind::TransformStamped),
             "sensor_msgs/msg/JointState" => Some(Kind::JointState),
             _ => None,
+        }
+    }
+
+    /// Its complete message definition in ROS 2's `ros2msg` form: its own
+    /// fields first, then every type it uses (transitively), each after
+    /// the two-line delimiter. The fields are those of the ROS 2 `.msg`
+    /// files (Kilted), without their comments.
+    pub fn definition(self) -> &'static str {
+        match self {
+            Kind::PoseStamped => concat!("std_msgs/Header header\nPose pose\n", msg_header!(), msg_pose!(), msg_point!(), msg_quaternion!(), msg_time!()),
+            Kind::TransformStamped => {
+                concat!("std_msgs/Header header\nstring child_frame_id\nTransform transform\n", msg_header!(), msg_transform!(), msg_vector3!(), msg_quaternion!(), msg_time!())
+            }
+            Kind::JointState => concat!("std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n", msg_header!(), msg_time!()),
         }
     }
 
@@ -380,6 +441,32 @@ mod tests {
         assert_eq!(&t.q[..7], &[0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
         assert_eq!(Kind::of("geometry_msgs/msg/PoseStamped"), Some(Kind::PoseStamped));
         assert_eq!(Kind::of("std_msgs/msg/String"), None);
+    }
+
+    #[test]
+    fn each_definition_names_every_type_it_uses_once_after_the_delimiter() {
+        let delimiter = format!("{}\nMSG: ", "=".repeat(80));
+        for k in [Kind::PoseStamped, Kind::TransformStamped, Kind::JointState] {
+            let parts: Vec<&str> = k.definition().split(&delimiter).collect();
+            assert!(!parts[0].is_empty() && !parts[0].contains("MSG:"), "{k:?}: its own fields first");
+            let defined: Vec<&str> = parts[1..].iter().map(|p| p.lines().next().unwrap()).collect();
+            // Every complex field type (pkg/Type or a bare Type of the
+            // same package) is defined once.
+            let mut used = std::collections::BTreeSet::new();
+            for (i, part) in parts.iter().enumerate() {
+                let fields = if i == 0 { part } else { part.split_once('\n').unwrap().1 };
+                for line in fields.lines() {
+                    let ty = line.split(' ').next().unwrap().trim_end_matches("[]");
+                    if ty.chars().next().is_some_and(char::is_uppercase) || ty.contains('/') {
+                        used.insert(ty.rsplit('/').next().unwrap().to_string());
+                    }
+                }
+            }
+            let mut names: Vec<String> = defined.iter().map(|d| d.rsplit('/').next().unwrap().to_string()).collect();
+            names.sort();
+            assert_eq!(names, used.into_iter().collect::<Vec<_>>(), "{k:?}");
+            assert!(defined.iter().all(|d| d.split('/').nth(1) == Some("msg")), "{defined:?}");
+        }
     }
 
     #[test]

@@ -9,9 +9,12 @@
 //! - A message is kept as rosbag2 keeps it: its serialized CDR with the
 //!   4-byte encapsulation header, on a channel of message encoding `cdr`
 //!   whose schema is named by the ROS type (`geometry_msgs/msg/PoseStamped`,
-//!   encoding `ros2msg`). The schema's text is not written (netfi relays
-//!   bytes and has no message definitions): tools that play or read by type
-//!   name take the file; tools that decode from the schema's text do not.
+//!   encoding `ros2msg`). For the known kinematic types (PoseStamped,
+//!   TransformStamped, JointState) the schema holds the complete message
+//!   definition ([`crate::ros2msg::Kind::definition`]), so tools that decode
+//!   from it (Foxglove, rosbags) read the messages without the type
+//!   installed; for any other type it is empty (netfi relays bytes and
+//!   carries no other definitions): tools that read by type name take it.
 //! - `log_time` is when the recorder took the message; `publish_time` is its
 //!   publisher's source timestamp (ns since the Unix epoch).
 //! - Replay keeps the recording's spacing by `log_time` (scaled by
@@ -130,9 +133,11 @@ pub fn record(a: &RecordArgs) -> anyhow::Result<u64> {
         };
         let type_name = TypeName::parse(&p.dds_type).with_context(|| format!("the type of {topic}"))?;
         let reader = node.reader(&topic, &type_name, &qos::reader(&p.qos))?;
-        let schema = out.add_schema(&type_name.ros(), "ros2msg", &[])?;
+        let definition = crate::ros2msg::Kind::of(&type_name.ros()).map_or("", crate::ros2msg::Kind::definition);
+        let schema = out.add_schema(&type_name.ros(), "ros2msg", definition.as_bytes())?;
         let channel = out.add_channel(schema, topic.as_str(), "cdr", &BTreeMap::new())?;
-        eprintln!("ros2 record: {topic} ({type_name})");
+        let why = if definition.is_empty() { ", schema without its definition: not a type netfi knows" } else { "" };
+        eprintln!("ros2 record: {topic} ({type_name}{why})");
         readers.push((reader, channel));
     }
     if let Some(r) = &a.ready {

@@ -12,6 +12,34 @@ fn x_of(data: &[u8]) -> f64 {
     s.q[0]
 }
 
+/// The fields of `pkg/msg/Type`'s `.msg` file as the ROS 2 installation
+/// of `py` ships it: its lines without comments and blank lines.
+fn installed_fields(py: &std::path::Path, ty: &str) -> String {
+    let o = Command::new(py).args(["-c", "import sys; print(sys.prefix)"]).output().unwrap();
+    let prefix = String::from_utf8(o.stdout).unwrap();
+    let path = std::path::Path::new(prefix.trim()).join("share").join(format!("{ty}.msg"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines().map(|l| l.split('#').next().unwrap().trim_end()).filter(|l| !l.trim().is_empty()).map(|l| format!("{l}\n")).collect()
+}
+
+#[test]
+fn the_definitions_written_into_mcap_are_those_ros_2_ships() {
+    let Some(py) = python() else { return };
+    let delimiter = format!("{}\nMSG: ", "=".repeat(80));
+    for (kind, ty) in [
+        (netfi::ros2msg::Kind::PoseStamped, "geometry_msgs/msg/PoseStamped"),
+        (netfi::ros2msg::Kind::TransformStamped, "geometry_msgs/msg/TransformStamped"),
+        (netfi::ros2msg::Kind::JointState, "sensor_msgs/msg/JointState"),
+    ] {
+        let mut parts = kind.definition().split(&delimiter);
+        assert_eq!(parts.next().unwrap(), installed_fields(&py, ty), "{ty}");
+        for part in parts {
+            let (name, fields) = part.split_once('\n').unwrap();
+            assert_eq!(fields, installed_fields(&py, name), "{name}, used by {ty}");
+        }
+    }
+}
+
 #[test]
 fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
     let Some(py) = python() else { return };
@@ -40,7 +68,9 @@ fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
         .map(|m| {
             let m = m.unwrap();
             assert_eq!((m.channel.topic.as_str(), m.channel.message_encoding.as_str()), ("/PSM1/servo_cp", "cdr"));
-            assert_eq!(m.channel.schema.as_ref().unwrap().name, "geometry_msgs/msg/PoseStamped");
+            let schema = m.channel.schema.as_ref().unwrap();
+            assert_eq!((schema.name.as_str(), schema.encoding.as_str()), ("geometry_msgs/msg/PoseStamped", "ros2msg"));
+            assert_eq!(std::str::from_utf8(&schema.data), Ok(netfi::ros2msg::Kind::PoseStamped.definition()), "the complete definition");
             (m.log_time, m.data.to_vec())
         })
         .collect();

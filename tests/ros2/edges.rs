@@ -64,7 +64,9 @@ fn a_type_that_differs_from_the_one_given_or_expected_is_refused_with_both_types
     }
     // A subscriber of the topic written that expects another type.
     let _sub = c.listener("listener", "/y", &["--type", "pose", "--timeout-s", "60"]);
-    let log = refused(&c, &["--scenario", "Normal", "--ros2-topic", "/x=/y"]);
+    // (Waiting for the robot's reader: the subscriber may be discovered
+    // only after the lane is settled, and is refused then.)
+    let log = refused(&c, &["--scenario", "Normal", "--ros2-topic", "/x=/y", "--wait-for-peer-s", "30"]);
     for says in ["type mismatch on /y", "the subscriber /listener expects geometry_msgs/msg/PoseStamped", "the lane relays std_msgs/msg/String"] {
         assert!(log.contains(says), "{says}: {log}");
     }

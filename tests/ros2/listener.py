@@ -4,7 +4,7 @@ talker put in the message, and the DDS message info's source and reception
 timestamps), until COUNT have come, or none for --idle-s after the first,
 or --timeout-s in all.
 
-usage: listener.py TOPIC OUT_CSV [--type string|pose] [--qos reliable|best_effort] [--count N]
+usage: listener.py TOPIC OUT_CSV [--type string|pose|transform|joint] [--qos reliable|best_effort] [--count N]
                    [--idle-s S] [--timeout-s S] [--ready FILE] [--name NODE]
 """
 import argparse
@@ -15,7 +15,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 
-from talker import msg_type
+from talker import TYPES, msg_type
 
 
 def index_of(kind, m):
@@ -26,7 +26,7 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("topic")
     p.add_argument("out")
-    p.add_argument("--type", default="string", choices=["string", "pose"])
+    p.add_argument("--type", default="string", choices=TYPES)
     p.add_argument("--qos", default="reliable", choices=["reliable", "best_effort"])
     p.add_argument("--depth", type=int, default=1000)
     p.add_argument("--count", type=int, default=0)

@@ -12,14 +12,21 @@
 //! absence fails.
 //!
 //! The runs are serialized: each has a busy-waiting emulator.
+//!
+//! The rclpy nodes use Fast DDS's UDP transport only
+//! ([`FASTDDS_UDP_ONLY`]): its default adds a shared-memory transport whose
+//! segments (`/dev/shm/fastdds_*`, `/dev/shm/sem.fastdds_*`) a node that is
+//! killed, as some of these tests kill them, leaves behind. Each test checks
+//! at its end that its nodes left no such file.
 
 mod bag;
 mod edges;
 mod hosts;
+mod motion;
 mod relay;
 
 use serde_json::Value;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU16, Ordering};
@@ -27,6 +34,22 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// For every process a test starts: Fast DDS (the rclpy nodes' middleware)
+/// with its UDP transport only, without the shared-memory one it adds by
+/// default, whose files outlive a killed node. The emulator (RustDDS)
+/// speaks UDP only anyway.
+pub(crate) const FASTDDS_UDP_ONLY: (&str, &str) = ("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4");
+
+/// The names of Fast DDS's shared-memory files in /dev/shm now.
+fn fastdds_shm() -> BTreeSet<String> {
+    std::fs::read_dir("/dev/shm")
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with("fastdds_") || n.starts_with("sem.fastdds_"))
+        .collect()
+}
 
 pub(crate) fn here() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/ros2")
@@ -45,14 +68,14 @@ pub(crate) fn u(v: &Value) -> u64 {
 pub(crate) fn python() -> Option<PathBuf> {
     let py = std::env::var_os("NETFI_ROS2_PYTHON").map_or_else(|| PathBuf::from("python3"), PathBuf::from);
     // rclpy alone imports without a middleware; a node needs one.
-    let probe = "import rclpy, std_msgs.msg, geometry_msgs.msg; rclpy.init(); rclpy.create_node('probe'); rclpy.shutdown()";
-    let o = Command::new(&py).args(["-c", probe]).env("ROS_DOMAIN_ID", "231").output();
+    let probe = "import rclpy, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg; rclpy.init(); rclpy.create_node('probe'); rclpy.shutdown()";
+    let o = Command::new(&py).args(["-c", probe]).env("ROS_DOMAIN_ID", "231").env(FASTDDS_UDP_ONLY.0, FASTDDS_UDP_ONLY.1).output();
     let why = match o {
         Ok(o) if o.status.success() => return Some(py),
         Ok(o) => String::from_utf8_lossy(&o.stderr).trim().lines().last().unwrap_or_default().to_string(),
         Err(e) => format!("{}: {e}", py.display()),
     };
-    let install = "pip install ros-rclpy==9.1.2 ros-std-msgs ros-geometry-msgs ros-rmw-fastrtps-cpp, and name that Python in NETFI_ROS2_PYTHON";
+    let install = "pip install ros-rclpy==9.1.2 ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-rmw-fastrtps-cpp, and name that Python in NETFI_ROS2_PYTHON";
     assert!(std::env::var_os("NETFI_REQUIRE_ROS2").is_none(), "NETFI_REQUIRE_ROS2 is set but {} cannot run an rclpy node: {why}; {install}", py.display());
     eprintln!("skipping: {} cannot run an rclpy node ({why}); {install}", py.display());
     None
@@ -113,6 +136,21 @@ pub(crate) struct Case {
     py: PathBuf,
     /// Runs the nodes and the emulator in this network namespace, if any.
     netns: Option<String>,
+    /// Fast DDS's shared-memory files before the test's nodes started.
+    shm_before: BTreeSet<String>,
+}
+
+/// At the test's end (its processes, made before the case, are gone): the
+/// test's nodes left no shared-memory file. The tests run one at a time,
+/// so a file that came meanwhile is theirs.
+impl Drop for Case {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            return;
+        }
+        let left: Vec<String> = fastdds_shm().difference(&self.shm_before).cloned().collect();
+        assert!(left.is_empty(), "the nodes left Fast DDS shared-memory files in /dev/shm: {left:?}");
+    }
 }
 
 impl Case {
@@ -120,7 +158,7 @@ impl Case {
         let dir = std::env::temp_dir().join(format!("netfi-ros2-{}-{name}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        Case { dir, domain: domain(), py, netns: None }
+        Case { dir, domain: domain(), py, netns: None, shm_before: fastdds_shm() }
     }
 
     fn command(&self, netns: Option<&str>, program: &Path) -> Command {
@@ -137,7 +175,7 @@ impl Case {
     pub(crate) fn spawn(&self, mut c: Command, name: &str) -> Proc {
         let log = self.dir.join(format!("{name}.log"));
         let f = std::fs::File::create(&log).unwrap();
-        c.env("ROS_DOMAIN_ID", self.domain.to_string()).stdout(f.try_clone().unwrap()).stderr(f).stdin(Stdio::null());
+        c.env("ROS_DOMAIN_ID", self.domain.to_string()).env(FASTDDS_UDP_ONLY.0, FASTDDS_UDP_ONLY.1).stdout(f.try_clone().unwrap()).stderr(f).stdin(Stdio::null());
         Proc { child: c.spawn().unwrap_or_else(|e| panic!("starting {name}: {e}")), name: name.to_string(), log }
     }
 
@@ -204,10 +242,16 @@ impl Case {
     /// `netfi scenario check`'s fate of each of `n` messages of `scenario`
     /// with `seed`, in simulated time, by ingress index.
     pub(crate) fn check_fates(&self, scenario: &str, n: usize, seed: u64) -> Vec<String> {
+        self.check_rows(scenario, n, seed).iter().map(|r| r["fate"].clone()).collect()
+    }
+
+    /// `netfi scenario check`'s trace of `n` messages of `scenario` with
+    /// `seed`, in simulated time, by ingress index.
+    pub(crate) fn check_rows(&self, scenario: &str, n: usize, seed: u64) -> Vec<BTreeMap<String, String>> {
         let trace = self.dir.join(format!("check-{scenario}-{seed}.csv"));
         let o = netfi().args(["scenario", "check", scenario, "--frames", &n.to_string(), "--seed", &seed.to_string(), "--json", "--trace"]).arg(&trace).output().unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        rows(&trace).iter().map(|r| r["fate"].clone()).collect()
+        rows(&trace)
     }
 }
 

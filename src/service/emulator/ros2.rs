@@ -167,6 +167,13 @@ fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicN
             if n.remotes(to, Role::Subscriber).any(|s| s.dds_type == o.type_name.dds()) {
                 break;
             }
+            // A subscriber that came meanwhile with another type is refused
+            // as one found when the lane was settled.
+            let other = n.remotes(to, Role::Subscriber).find(|s| s.dds_type != o.type_name.dds()).cloned();
+            if let Some(s) = other {
+                let name = named(&mut n, s.guid);
+                bail!("type mismatch on {to}: the subscriber {name} expects {}, the lane relays {} from {from}", TypeName::parse(&s.dds_type).map_or(s.dds_type.clone(), |t| t.to_string()), o.type_name);
+            }
             if now - t0 >= wait_ns {
                 eprintln!("emulator: WARNING: no subscriber of {to} within {:.1} s; relaying anyway", wait_ns as f64 / 1e9);
                 break;

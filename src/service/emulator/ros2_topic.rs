@@ -82,6 +82,9 @@ pub trait Direction: 'static {
 }
 
 /// The console's topic to the robot's: a lane's forward path.
+/// The most writers of bad input a report names.
+const BAD_SENDERS_MAX: usize = 16;
+
 pub struct Forward;
 
 /// The robot's state topic back to the console's: a reverse path.
@@ -140,6 +143,8 @@ pub struct Topic<D: Direction> {
     pub counts: Counts,
     /// The writer of the last bad input.
     bad_from: Option<rustdds::GUID>,
+    /// The writers that sent bad input (at most [`BAD_SENDERS_MAX`]).
+    bad_senders: Vec<rustdds::GUID>,
     /// Publishers of `from` and subscribers of `to` of the lane's type, as
     /// last seen.
     publishers: usize,
@@ -191,6 +196,16 @@ fn realtime_offset_ns() -> i128 {
 }
 
 impl<D: Direction> Topic<D> {
+    /// Keeps the writer of the last bad input among the bad senders (off
+    /// the hot path; named when the report is written).
+    fn note_bad_sender(&mut self) {
+        if let Some(g) = self.bad_from {
+            if !self.bad_senders.contains(&g) && self.bad_senders.len() < BAD_SENDERS_MAX {
+                self.bad_senders.push(g);
+            }
+        }
+    }
+
     /// The channel of `p` on `node`; its log's times count from `t0_ns`
     /// (when the emulator joined the domain).
     pub fn new(p: TopicPorts, node: Rc<RefCell<Ros2Node>>, t0_ns: u64) -> Topic<D> {
@@ -209,6 +224,7 @@ impl<D: Direction> Topic<D> {
             senders: Senders::new(),
             counts: Counts::default(),
             bad_from: None,
+            bad_senders: Vec::new(),
             publishers: 0,
             subscribers: 0,
             unsubscribed: 0,
@@ -449,6 +465,12 @@ impl<D: Direction> Channel for Topic<D> {
     /// the publishers' count is what entered, plus what was lost before the
     /// emulator and what was sent before it listened.
     fn finish(&mut self, account: &Account, _sent: Option<u64>) -> (D::Extra, bool) {
+        // Named now, not when the bad input came: a node's name arrives
+        // with `ros_discovery_info`, which may come after its first message.
+        self.note_bad_sender();
+        let node = self.node.borrow();
+        self.counts.bad_input.from = self.bad_senders.iter().map(|g| node.name(*g)).collect();
+        drop(node);
         let sent = self.sent();
         let own = match (&self.end, sent) {
             (Some(_), Some(s)) => s == account.entered + self.counts.lost_before_ingress + self.senders.before_first(),
@@ -467,11 +489,6 @@ impl ForwardChannel for Topic<Forward> {
             return;
         }
         *seen = self.counts.bad_input.total();
-        if let Some(g) = self.bad_from {
-            let who = self.node.borrow().name(g);
-            if !self.counts.bad_input.from.contains(&who) {
-                self.counts.bad_input.from.push(who);
-            }
-        }
+        self.note_bad_sender();
     }
 }
