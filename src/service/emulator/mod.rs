@@ -36,6 +36,7 @@ pub mod ros2_plan;
 pub mod ros2_topic;
 pub mod run;
 pub mod spin;
+pub mod stamp;
 pub mod udp_return;
 pub mod video;
 
