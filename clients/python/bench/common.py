@@ -52,6 +52,13 @@ def place(core, nice) -> None:
         os.setpriority(os.PRIO_PROCESS, 0, nice)
 
 
+def add_route_args(ap) -> None:
+    """The transport, and the runs of the chained and direct routes."""
+    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
+    ap.add_argument("--run-id")
+    ap.add_argument("--direct-run-id")
+
+
 def add_placement_args(ap) -> None:
     ap.add_argument("--core", type=int, help="pin to this core")
     ap.add_argument("--nice", type=int, help="run at this nice value")

@@ -218,9 +218,7 @@ class Drive:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
-    ap.add_argument("--run-id")
-    ap.add_argument("--direct-run-id")
+    common.add_route_args(ap)
     ap.add_argument("--chain-to", help="UDP: the emulator's ingress, ADDR:PORT")
     ap.add_argument("--direct-to", help="UDP: the robot's direct socket, ADDR:PORT")
     ap.add_argument("--rate-hz", type=float, default=1000.0, help="frames per second on each route")

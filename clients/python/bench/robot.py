@@ -132,9 +132,7 @@ class UdpRobot:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
-    ap.add_argument("--run-id")
-    ap.add_argument("--direct-run-id")
+    common.add_route_args(ap)
     common.add_placement_args(ap)
     ap.add_argument("--ready", required=True)
     ap.add_argument("--timeout-s", type=float, default=120.0)
