@@ -9,6 +9,7 @@ straight from the console to the robot (the direct hop).
 
 import json
 import os
+import socket
 import struct
 import sys
 import time
@@ -62,6 +63,14 @@ def add_route_args(ap) -> None:
 def add_placement_args(ap) -> None:
     ap.add_argument("--core", type=int, help="pin to this core")
     ap.add_argument("--nice", type=int, help="run at this nice value")
+
+
+def udp_socket() -> socket.socket:
+    """A non-blocking UDP socket on a free loopback port."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.setblocking(False)
+    return s
 
 
 def frame(slot: int) -> bytearray:

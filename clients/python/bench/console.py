@@ -21,7 +21,6 @@ and a JSON summary (``--summary``).
 import argparse
 import math
 import os
-import socket
 import sys
 import time
 
@@ -100,12 +99,7 @@ class UdpRoutes:
 
     def __init__(self, chain_to: str, direct_to: str):
         self.to = [_addr(chain_to), _addr(direct_to)]
-        self.socks = []
-        for _ in ROUTES:
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            s.setblocking(False)
-            self.socks.append(s)
+        self.socks = [common.udp_socket() for _ in ROUTES]
         self.buf = bytearray(2048)
         self.ended = [False, False]
 

@@ -17,7 +17,6 @@ is written once its ports are open (over UDP: the two ports, as JSON).
 import argparse
 import json
 import os
-import socket
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -89,12 +88,7 @@ class UdpRobot:
     console's direct route to the second."""
 
     def __init__(self):
-        self.socks = []
-        for _ in ROUTES:
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            s.setblocking(False)
-            self.socks.append(s)
+        self.socks = [common.udp_socket() for _ in ROUTES]
         self.buf = bytearray(2048)
         self.view = memoryview(self.buf)
         self.answered = [0, 0]
