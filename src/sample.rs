@@ -190,37 +190,6 @@ impl Default for FeedbackSample {
     }
 }
 
-/// A sample the emulator releases with its stamps: the scheduled release
-/// time and the delay injected (scheduled − ingress), then the actual
-/// release time, stamped as late as the transport allows.
-pub trait ReleaseStamps {
-    /// Stamps the scheduled release time and the injected delay.
-    fn stamp_scheduled(&mut self, scheduled_ns: u64);
-    /// Stamps the actual release time.
-    fn stamp_released(&mut self, release_ns: u64);
-}
-
-/// The release stamps of samples that carry `ingress_ns`,
-/// `release_sched_ns`, `injected_delay_ns` and `release_ns`.
-macro_rules! release_stamps {
-    ($($sample:ty),*) => {$(
-        impl ReleaseStamps for $sample {
-            #[inline]
-            fn stamp_scheduled(&mut self, scheduled_ns: u64) {
-                self.release_sched_ns = scheduled_ns;
-                self.injected_delay_ns = scheduled_ns - self.ingress_ns;
-            }
-
-            #[inline]
-            fn stamp_released(&mut self, release_ns: u64) {
-                self.release_ns = release_ns;
-            }
-        }
-    )*};
-}
-
-release_stamps!(FrameSample, FeedbackSample);
-
 /// The user header of a video frame on the video channels (`video`,
 /// `video_out`): the payload is the frame's bytes, a `[u8]` slice of `len`
 /// bytes; this header travels beside it (docs/interface.md, "Video").

@@ -10,7 +10,6 @@
 
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
-use crate::service::emulator::stamp::release_stamped;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
 use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::DEFAULT_QUEUE_CAPACITY;
@@ -74,7 +73,17 @@ impl Channel for Feedback {
     /// times and its injected delay.
     #[inline]
     fn release(&mut self, item: &FeedbackSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        release_stamped(&mut self.sink, item, scheduled_ns, stamp)
+        let mut release_ns = 0;
+        let sent = self.sink.send_with(item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = stamp();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((crate::clock::now_ns(), e)),
+        }
     }
 
     fn send_end(&mut self, released: u64) {

@@ -7,7 +7,6 @@ use crate::frame::ItpView;
 use crate::injector::{DropCause, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::emulator::path::ForwardChannel;
-use crate::service::emulator::stamp::release_stamped;
 use crate::service::emulator::path::{Channel, Ending, Take};
 use crate::service::link::Arrival;
 use crate::service::schema::{Account, BadInput, ForwardExtra};
@@ -133,7 +132,17 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
     /// and its injected delay.
     #[inline]
     fn release(&mut self, item: &FrameSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        release_stamped(&mut self.sink, item, scheduled_ns, stamp)
+        let mut release_ns = 0;
+        let sent = self.sink.send_with(item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = stamp();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((crate::clock::now_ns(), e)),
+        }
     }
 
     fn send_end(&mut self, released: u64) {

@@ -36,7 +36,6 @@ pub mod ros2_plan;
 pub mod ros2_topic;
 pub mod run;
 pub mod spin;
-pub mod stamp;
 pub mod udp_return;
 pub mod video;
 
