@@ -31,6 +31,8 @@ pub mod host;
 pub mod html;
 pub mod load;
 pub mod metrics;
+#[cfg(test)]
+mod scratch;
 pub mod service;
 pub mod study;
 pub mod trace;

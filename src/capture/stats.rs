@@ -89,22 +89,8 @@ impl CaptureStats {
                 self.checksum_failures, self.frames
             ));
         }
-        if self.steps_backward_over_limit > 0 {
-            why.push(format!(
-                "{} time step(s) backwards of more than {} s (longest {:.3} s)",
-                self.steps_backward_over_limit,
-                MAX_STEP_BACKWARD_NS / 1_000_000_000,
-                self.step_backward_ns_max as f64 * 1e-9
-            ));
-        }
-        if self.gaps_over_limit > 0 {
-            why.push(format!(
-                "{} gap(s) of more than {} s between records (longest {:.3} s)",
-                self.gaps_over_limit,
-                MAX_GAP_NS / 1_000_000_000,
-                self.gap_ns_max as f64 * 1e-9
-            ));
-        }
+        why.extend(over_limit(self.steps_backward_over_limit, "time step(s) backwards", MAX_STEP_BACKWARD_NS, "", self.step_backward_ns_max));
+        why.extend(over_limit(self.gaps_over_limit, "gap(s)", MAX_GAP_NS, " between records", self.gap_ns_max));
         (!why.is_empty()).then(|| why.join("; "))
     }
 
@@ -143,4 +129,10 @@ impl CaptureStats {
             (self.frames - 1) as f64 / self.duration_s()
         }
     }
+}
+
+/// `count` intervals (`what`) longer than `limit_ns`, the longest
+/// `longest_ns`, in words; `None` when there are none.
+fn over_limit(count: u64, what: &str, limit_ns: u64, place: &str, longest_ns: u64) -> Option<String> {
+    (count > 0).then(|| format!("{count} {what} of more than {} s{place} (longest {:.3} s)", limit_ns / 1_000_000_000, longest_ns as f64 * 1e-9))
 }

@@ -56,16 +56,22 @@ pub fn link_occupancy(l: &crate::check::LinkReport, id: &str, marks: &[Mark]) ->
     let points: Vec<(f64, f64)> = l.occupancy.iter().map(|o| (o.second as f64 + 0.5, o.packets_max as f64)).collect();
     let end = l.occupancy.last().map_or(1.0, |o| o.second as f64 + 1.0);
     let top = points.iter().map(|p| p.1).fold(1.0, f64::max) * 1.1;
+    over_time(id, &format!("Queue of phase {} {}, per second", l.phase, l.label), "packets queued, max", end, Scale::linear(0.0..top), vec![Line { label: "packets queued, max".into(), color: plot::GREEN, points }], marks)
+}
+
+/// A plot of `lines` over the run's time (s from its first frame, to
+/// `end_s`), with the run's switches and pauses.
+fn over_time(id: &str, title: &str, y_desc: &str, end_s: f64, y: Scale, lines: Vec<Line>, marks: &[Mark]) -> Result<Option<String>, HtmlError> {
     plot::svg(&Figure {
         id,
-        title: &format!("Queue of phase {} {}, per second", l.phase, l.label),
+        title,
         x_desc: "time since the first frame (s)",
-        y_desc: "packets queued, max",
-        x: Scale::linear(0.0..end),
-        y: Scale::linear(0.0..top),
+        y_desc,
+        x: Scale::linear(0.0..end_s),
+        y,
         x_fmt: &plot::short,
         y_fmt: &plot::short,
-        lines: vec![Line { label: "packets queued, max".into(), color: plot::GREEN, points }],
+        lines,
         bars: Vec::new(),
         marks,
     })
@@ -160,20 +166,7 @@ pub fn loss_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String>
     if points.len() < 2 {
         return Ok(None);
     }
-    plot::svg(&Figure {
-        id: "plot-loss-over-time",
-        title: &format!("Loss per {} bin", bin_label(t.bin_ns)),
-        x_desc: "time since the first frame (s)",
-        y_desc: "fraction of frames dropped",
-        x: Scale::linear(0.0..t.end_s()),
-        y: Scale::linear(0.0..1.0),
-        x_fmt: &plot::short,
-        y_fmt: &plot::short,
-        lines: vec![Line { label: "loss rate".into(), color: plot::PURPLE, points }],
-        bars: Vec::new(),
-        marks,
-    })
-    .map(Some)
+    over_time("plot-loss-over-time", &format!("Loss per {} bin", bin_label(t.bin_ns)), "fraction of frames dropped", t.end_s(), Scale::linear(0.0..1.0), vec![Line { label: "loss rate".into(), color: plot::PURPLE, points }], marks)
 }
 
 /// `f` of each bin that has a value, at the bin's middle, ns → ms.
@@ -193,20 +186,7 @@ pub fn delay_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String
         return Ok(None);
     }
     let (_, y) = extent(&lines);
-    plot::svg(&Figure {
-        id: "plot-delay-over-time",
-        title: &format!("Delay per {} bin", bin_label(t.bin_ns)),
-        x_desc: "time since the first frame (s)",
-        y_desc: "delay (ms)",
-        x: Scale::linear(0.0..t.end_s()),
-        y: Scale::linear(0.0..y.end * 1.1),
-        x_fmt: &plot::short,
-        y_fmt: &plot::short,
-        lines,
-        bars: Vec::new(),
-        marks,
-    })
-    .map(Some)
+    over_time("plot-delay-over-time", &format!("Delay per {} bin", bin_label(t.bin_ns)), "delay (ms)", t.end_s(), Scale::linear(0.0..y.end * 1.1), lines, marks)
 }
 
 /// What netfi added per time bin, from the trace: release lateness (actual
@@ -226,20 +206,7 @@ pub fn added_over_time(t: &TraceSummary, marks: &[Mark]) -> Result<Option<String
     let (_, y) = extent(&lines);
     // Milliseconds on a log axis: microseconds and a preempted frame's
     // tens of milliseconds in one plot.
-    plot::svg(&Figure {
-        id: "plot-added-over-time",
-        title: &format!("What netfi added per {} bin", bin_label(t.bin_ns)),
-        x_desc: "time since the first frame (s)",
-        y_desc: "added (ms)",
-        x: Scale::linear(0.0..t.end_s()),
-        y: Scale::log((y.start.max(1e-6) / 2.0)..(y.end.max(1e-5) * 2.0)),
-        x_fmt: &plot::short,
-        y_fmt: &plot::short,
-        lines,
-        bars: Vec::new(),
-        marks,
-    })
-    .map(Some)
+    over_time("plot-added-over-time", &format!("What netfi added per {} bin", bin_label(t.bin_ns)), "added (ms)", t.end_s(), Scale::log((y.start.max(1e-6) / 2.0)..(y.end.max(1e-5) * 2.0)), lines, marks)
 }
 
 /// Lengths up to this are one bar each; longer runs are grouped in powers of two.

@@ -147,9 +147,8 @@ enum Jitter {
 pub struct Delay {
     min_ns: u64,
     jitter: Jitter,
-    fifo: bool,
+    releases: Releases,
     mean_ms: f64,
-    last_release_ns: u64,
 }
 
 impl Delay {
@@ -201,9 +200,8 @@ impl Delay {
         Ok(Delay {
             min_ns: ms_to_ns(min_ms),
             jitter,
-            fifo: params.order == Order::Fifo,
+            releases: Releases::new(params.order),
             mean_ms: min_ms + mean_x_ms,
-            last_release_ns: 0,
         })
     }
 
@@ -220,7 +218,7 @@ impl Delay {
             Jitter::Hyperexp { .. } => true,
             Jitter::Uniform { width_ms } => width_ms > 0.0,
         };
-        varies && !self.fifo
+        varies && !self.releases.fifo()
     }
 
     /// `P(D ≤ x_ms)`, the law's distribution function (without the `fifo`
@@ -343,13 +341,40 @@ fn hyperexp(weights: Option<&[f64]>, rates: Option<&[f64]>) -> Result<(Jitter, f
     Ok((Jitter::Hyperexp { components: n, pick_thresholds, mean_ms }, mean_x_ms))
 }
 
-impl Model for Delay {
+/// The release order of a delaying stage (`delay`, `jitter`): a frame
+/// leaves at its own release `t + D` (`reorder`), or no earlier than the
+/// frame before it (`fifo`).
+#[derive(Debug, Clone)]
+pub(crate) struct Releases {
+    fifo: bool,
+    last_release_ns: u64,
+}
+
+impl Releases {
+    pub(crate) fn new(order: Order) -> Releases {
+        Releases { fifo: order == Order::Fifo, last_release_ns: 0 }
+    }
+
+    /// Whether releases are held in arrival order.
+    pub(crate) fn fifo(&self) -> bool {
+        self.fifo
+    }
+
+    /// The verdict for a frame at `t_ns` drawn a delay of `delay_ns`.
     #[inline]
-    fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let own_ns = t_ns.saturating_add(self.sample_ns(rng));
+    pub(crate) fn pass(&mut self, t_ns: u64, delay_ns: u64) -> Verdict {
+        let own_ns = t_ns.saturating_add(delay_ns);
         let release_ns = if self.fifo { own_ns.max(self.last_release_ns) } else { own_ns };
         self.last_release_ns = release_ns;
         Verdict::Pass { delay_ns: release_ns - t_ns }
+    }
+}
+
+impl Model for Delay {
+    #[inline]
+    fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
+        let delay_ns = self.sample_ns(rng);
+        self.releases.pass(t_ns, delay_ns)
     }
 }
 

@@ -65,7 +65,7 @@
 //! With `sd_ms = 0` the delay is the constant `mean_ms` and the stage draws
 //! nothing. Otherwise one standard normal (ziggurat) per frame.
 
-use super::delay::Order;
+use super::delay::{Order, Releases};
 use super::units::{at_most_ms, ms_to_ns, MAX_DURATION_MS};
 use super::{Millis, Model, ParamError, Probability, StageRng, Verdict};
 use rand::RngExt;
@@ -303,11 +303,10 @@ pub struct Jitter {
     rho: f64,
     /// `√(1 − ρ²)`.
     innovation: f64,
-    fifo: bool,
+    releases: Releases,
     clamped_mean_ms: f64,
     /// The previous frame's normal score; NaN before the first frame.
     z_last: f64,
-    last_release_ns: u64,
 }
 
 impl Jitter {
@@ -335,10 +334,9 @@ impl Jitter {
             sd_ms,
             rho,
             innovation: (1.0 - rho * rho).sqrt(),
-            fifo: params.order == Order::Fifo,
+            releases: Releases::new(params.order),
             clamped_mean_ms: mean_ms,
             z_last: f64::NAN,
-            last_release_ns: 0,
         };
         j.clamped_mean_ms = j.clamped_mean();
         Ok(j)
@@ -361,7 +359,7 @@ impl Jitter {
 
     /// Whether frames can leave out of their arrival order.
     pub fn may_reorder(&self) -> bool {
-        !self.fifo && self.sd_ms > 0.0
+        !self.releases.fifo() && self.sd_ms > 0.0
     }
 
     /// `E[D]` in ms, the clamp at 0 included.
@@ -463,10 +461,8 @@ impl Jitter {
 impl Model for Jitter {
     #[inline]
     fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let own_ns = t_ns.saturating_add(self.sample_ns(rng));
-        let release_ns = if self.fifo { own_ns.max(self.last_release_ns) } else { own_ns };
-        self.last_release_ns = release_ns;
-        Verdict::Pass { delay_ns: release_ns - t_ns }
+        let delay_ns = self.sample_ns(rng);
+        self.releases.pass(t_ns, delay_ns)
     }
 }
 

@@ -34,6 +34,7 @@ mod spec;
 mod switch;
 
 pub use parse::{parse_str, parse_str_with, preset, FileError, NoFiles, ScenarioError, ScenarioFiles};
+pub(crate) use parse::field_of_message;
 pub use presets::preset_stages;
 pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
 pub use switch::{Switched, Timeline, MAX_RUN_PHASES};

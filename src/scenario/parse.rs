@@ -390,6 +390,18 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
     }
 }
 
+/// serde's `unknown field `x`, expected …` or `missing field `x``: the
+/// field named, and the message without it (`missing` says a missing one
+/// in the caller's words).
+pub(crate) fn field_of_message(message: &str, missing: &str) -> Option<(String, String)> {
+    ["unknown field `", "missing field `"].into_iter().find_map(|prefix| {
+        let rest = message.strip_prefix(prefix)?;
+        let end = rest.find('`')?;
+        let said = if prefix.starts_with("unknown") { format!("unknown field{}", &rest[end + 1..]) } else { missing.to_string() };
+        Some((rest[..end].to_string(), said))
+    })
+}
+
 /// Deserializes a stage's remaining keys into the model's parameter struct,
 /// keeping the path of the offending field.
 fn params<P: DeserializeOwned>(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &str, t: toml::Table) -> Result<P, ScenarioError> {
@@ -400,17 +412,9 @@ fn params<P: DeserializeOwned>(ctx: &Ctx, span: &std::ops::Range<usize>, loc: &s
         // Unknown and missing fields are reported at the table's level, with
         // the field only inside the message: pull it out.
         let mut field = if path == "." { None } else { Some(path) };
-        for prefix in ["unknown field `", "missing field `"] {
-            if let Some(rest) = message.strip_prefix(prefix) {
-                if let Some(end) = rest.find('`') {
-                    field = Some(rest[..end].to_string());
-                    message = if prefix.starts_with("unknown") {
-                        format!("unknown field{}", &rest[end + 1..])
-                    } else {
-                        "missing: this model requires it".to_string()
-                    };
-                }
-            }
+        if let Some((named, said)) = field_of_message(&message, "missing: this model requires it") {
+            field = Some(named);
+            message = said;
         }
         let line = field
             .as_deref()

@@ -9,7 +9,7 @@ use axum::response::IntoResponse;
 use maud::{html, Markup, PreEscaped, DOCTYPE};
 use std::sync::Arc;
 
-const APP_JS: &str = concat!(include_str!("assets/app.js"), include_str!("assets/chain.js"));
+const APP_JS: &str = concat!(include_str!("assets/call.js"), include_str!("assets/app.js"), include_str!("assets/chain.js"));
 const APP_CSS: &str = include_str!("assets/app.css");
 
 /// A page of `netfi ui`: its head, the header with the navigation, `body`,

@@ -9,6 +9,7 @@ straight from the console to the robot (the direct hop).
 
 import json
 import os
+import socket
 import struct
 import sys
 import time
@@ -52,9 +53,24 @@ def place(core, nice) -> None:
         os.setpriority(os.PRIO_PROCESS, 0, nice)
 
 
+def add_route_args(ap) -> None:
+    """The transport, and the runs of the chained and direct routes."""
+    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
+    ap.add_argument("--run-id")
+    ap.add_argument("--direct-run-id")
+
+
 def add_placement_args(ap) -> None:
     ap.add_argument("--core", type=int, help="pin to this core")
     ap.add_argument("--nice", type=int, help="run at this nice value")
+
+
+def udp_socket() -> socket.socket:
+    """A non-blocking UDP socket on a free loopback port."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.setblocking(False)
+    return s
 
 
 def frame(slot: int) -> bytearray:

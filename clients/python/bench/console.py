@@ -21,7 +21,6 @@ and a JSON summary (``--summary``).
 import argparse
 import math
 import os
-import socket
 import sys
 import time
 
@@ -100,12 +99,7 @@ class UdpRoutes:
 
     def __init__(self, chain_to: str, direct_to: str):
         self.to = [_addr(chain_to), _addr(direct_to)]
-        self.socks = []
-        for _ in ROUTES:
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            s.setblocking(False)
-            self.socks.append(s)
+        self.socks = [common.udp_socket() for _ in ROUTES]
         self.buf = bytearray(2048)
         self.ended = [False, False]
 
@@ -218,9 +212,7 @@ class Drive:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
-    ap.add_argument("--run-id")
-    ap.add_argument("--direct-run-id")
+    common.add_route_args(ap)
     ap.add_argument("--chain-to", help="UDP: the emulator's ingress, ADDR:PORT")
     ap.add_argument("--direct-to", help="UDP: the robot's direct socket, ADDR:PORT")
     ap.add_argument("--rate-hz", type=float, default=1000.0, help="frames per second on each route")

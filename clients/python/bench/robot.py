@@ -17,7 +17,6 @@ is written once its ports are open (over UDP: the two ports, as JSON).
 import argparse
 import json
 import os
-import socket
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -89,12 +88,7 @@ class UdpRobot:
     console's direct route to the second."""
 
     def __init__(self):
-        self.socks = []
-        for _ in ROUTES:
-            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            s.bind(("127.0.0.1", 0))
-            s.setblocking(False)
-            self.socks.append(s)
+        self.socks = [common.udp_socket() for _ in ROUTES]
         self.buf = bytearray(2048)
         self.view = memoryview(self.buf)
         self.answered = [0, 0]
@@ -132,9 +126,7 @@ class UdpRobot:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--transport", choices=("iceoryx2", "udp"), required=True)
-    ap.add_argument("--run-id")
-    ap.add_argument("--direct-run-id")
+    common.add_route_args(ap)
     common.add_placement_args(ap)
     ap.add_argument("--ready", required=True)
     ap.add_argument("--timeout-s", type=float, default=120.0)

@@ -18,7 +18,6 @@ sent), and prints a JSON summary (also ``--out FILE``).
 """
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -28,6 +27,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import netfi_iox  # noqa: E402
 from netfi_iox import FLAG_KEY, Gop, Pattern, RunNode, VideoHeader  # noqa: E402
 from netfi_iox.video import DEFAULT_VIDEO_MAX_BYTES  # noqa: E402
+from netfi_iox.cli import emit, quantiles, run_main  # noqa: E402
 
 
 def wait_until(target_ns: int) -> None:
@@ -37,14 +37,6 @@ def wait_until(target_ns: int) -> None:
         if left <= 0:
             return
         time.sleep(min(left, 2_000_000) / 1e9)
-
-
-def quantiles_us(values) -> dict:
-    if not values:
-        return {"count": 0}
-    v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e3  # noqa: E731
-    return {"count": len(v), "p50": q(0.5), "p99": q(0.99), "max": v[-1] / 1e3}
 
 
 def main() -> int:
@@ -117,20 +109,12 @@ def main() -> int:
         "bytes_sent": bytes_sent,
         "send_errors": send_errors,
         "sent_unsubscribed": unsubscribed,
-        "send_lateness_us": quantiles_us(lateness),
+        "send_lateness_us": quantiles(lateness),
         "ended_by": ended_by,
     }
-    text = json.dumps(summary, indent=2)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text + "\n")
+    emit(summary, a.out)
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (netfi_iox.InterfaceMismatch, netfi_iox.NoPeer, ValueError) as e:
-        print(f"camera: {e}", file=sys.stderr)
-        sys.exit(2)
+    run_main("camera", main, (netfi_iox.InterfaceMismatch, netfi_iox.NoPeer, ValueError))

@@ -16,7 +16,6 @@ waits for the end of the feedback (``--feedback-wait-s``).
 """
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -26,6 +25,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import netfi_iox  # noqa: E402
 from netfi_iox import FeedbackSample, FrameSample, ItpFrame, RunNode, end_marker  # noqa: E402
+from netfi_iox.cli import emit, quantiles, run_main  # noqa: E402
 
 
 def synthetic(rate_hz: float, n: int):
@@ -116,14 +116,6 @@ class Feedback:
             if node.termination_requested():
                 return "signal"
             time.sleep(0.0001)
-
-
-def quantiles_us(values) -> dict:
-    if not values:
-        return {"count": 0}
-    v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e3  # noqa: E731
-    return {"count": len(v), "p50": q(0.5), "p99": q(0.99), "max": v[-1] / 1e3}
 
 
 def main() -> int:
@@ -227,20 +219,12 @@ def main() -> int:
             "sent_by_emulator": fb.sent_by_emulator,
             "unknown_command": fb.unknown_command,
             "ended_by": feedback_ended_by,
-            "round_trip_us": quantiles_us(fb.rtt),
+            "round_trip_us": quantiles(fb.rtt),
         },
     }
-    text = json.dumps(summary, indent=2)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text + "\n")
+    emit(summary, a.out)
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (netfi_iox.InterfaceMismatch, netfi_iox.NoPeer, ValueError) as e:
-        print(f"console: {e}", file=sys.stderr)
-        sys.exit(2)
+    run_main("console", main, (netfi_iox.InterfaceMismatch, netfi_iox.NoPeer, ValueError))

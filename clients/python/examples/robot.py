@@ -16,7 +16,6 @@ end-of-stream marker (or SIGINT/SIGTERM), then prints a JSON summary (also
 """
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -27,6 +26,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import netfi_iox  # noqa: E402
 from netfi_iox import FeedbackSample, FrameSample, ItpFrame, RunNode  # noqa: E402
+from netfi_iox.cli import emit, quantiles, run_main  # noqa: E402
 
 
 @dataclass
@@ -104,14 +104,6 @@ def feedback_of(state: RobotState, robot_index: int, sample: FrameSample, comman
         fb.rotation[arm][0], fb.rotation[arm][1], fb.rotation[arm][2] = p.rx, p.ry, p.rz
         fb.grasp[arm] = p.grasp
     return fb
-
-
-def quantiles_us(values: List[int]) -> dict:
-    if not values:
-        return {"count": 0}
-    v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e3  # noqa: E731
-    return {"count": len(v), "p50": q(0.5), "p99": q(0.99), "max": v[-1] / 1e3, "mean": sum(v) / len(v) / 1e3}
 
 
 def main() -> int:
@@ -220,22 +212,14 @@ def main() -> int:
         "last_state": asdict(last_state) if last_state else None,
         "feedback_sent": feedback_sent,
         "feedback_unsubscribed": feedback_unsubscribed,
-        "delay_seen_us": quantiles_us(seen),
-        "end_to_end_extra_us": quantiles_us(extra),
+        "delay_seen_us": quantiles(seen, mean=True),
+        "end_to_end_extra_us": quantiles(extra, mean=True),
         "ended_by": ended_by,
         "duration_s": (t_end - t_start) / 1e9,
     }
-    text = json.dumps(summary, indent=2)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as f:
-            f.write(text + "\n")
+    emit(summary, a.out)
     return 0 if ended_by != "timeout" else 3
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (netfi_iox.InterfaceMismatch, ValueError) as e:
-        print(f"robot: {e}", file=sys.stderr)
-        sys.exit(2)
+    run_main("robot", main, (netfi_iox.InterfaceMismatch, ValueError))

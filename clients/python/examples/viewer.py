@@ -16,7 +16,6 @@ netfi's ``video_received.csv`` (docs/spec.md §6).
 """
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -25,20 +24,13 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import netfi_iox  # noqa: E402
 from netfi_iox import Pattern, RunNode  # noqa: E402
+from netfi_iox.cli import emit, quantiles, run_main  # noqa: E402
 
 #: The columns of netfi's ``video_received.csv``.
 CSV_HEADER = (
     "frame_index,gop_index,key,len,bytes,send_ns,ingress_index,ingress_ns,release_sched_ns,release_ns,"
     "recv_ns,delay_ns,fate,displayed,gap_ns,freeze"
 )
-
-
-def quantiles_ms(values) -> dict:
-    if not values:
-        return {"count": 0}
-    v = sorted(values)
-    q = lambda p: v[min(len(v) - 1, int(len(v) * p))] / 1e6  # noqa: E731
-    return {"count": len(v), "p50": q(0.5), "p90": q(0.9), "p99": q(0.99), "max": v[-1] / 1e6, "mean": sum(v) / len(v) / 1e6}
 
 
 class Viewer:
@@ -103,7 +95,7 @@ class Viewer:
             "key_frames": self.key_frames,
             "last_frame_index": self.last_index,
             "indices_increasing": self.indices_increasing,
-            "delay_ms": quantiles_ms(self.delays),
+            "delay_ms": quantiles(self.delays, unit_ns=1e6, points=(0.5, 0.9, 0.99), mean=True),
             "freezes": self.freezes,
             "freeze_total_ms": self.freeze_total_ns / 1e6,
             "freeze_longest_ms": self.freeze_longest_ns / 1e6,
@@ -158,17 +150,9 @@ def main() -> int:
     if csv is not None:
         csv.close()
     summary = {"interface": netfi_iox.VIDEO_HEADER_TYPE_NAME, "run_id": a.run_id, **v.summary(), "ended_by": ended_by, "duration_s": (t_end - t_start) / 1e9}
-    text = json.dumps(summary, indent=2)
-    print(text)
-    if a.out:
-        with open(a.out, "w") as out:
-            out.write(text + "\n")
+    emit(summary, a.out)
     return 0 if ended_by != "timeout" else 3
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except (netfi_iox.InterfaceMismatch, ValueError) as e:
-        print(f"viewer: {e}", file=sys.stderr)
-        sys.exit(2)
+    run_main("viewer", main, (netfi_iox.InterfaceMismatch, ValueError))

@@ -6,7 +6,9 @@
 - :mod:`netfi_iox.ports`: the ends of its channels (publishers, subscribers, waiting for a peer);
 - :mod:`netfi_iox.video`: the video channels' header ``netfi::VideoHeader.v1``, ports, and the
   synthetic camera's sizes and bytes;
-- :mod:`netfi_iox.capture`: reading netfi's LZ4 ITP captures.
+- :mod:`netfi_iox.capture`: reading netfi's LZ4 ITP captures;
+- :mod:`netfi_iox.layout`: the check at import that each ``ctypes`` mirror has the interface's layout;
+- :mod:`netfi_iox.cli`: what the example programs share (quantiles, their JSON summary, their exit on errors).
 """
 
 from . import capture

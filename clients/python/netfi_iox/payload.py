@@ -8,6 +8,8 @@ Rust test ``tests/python`` checks them against the Rust type.
 
 import ctypes
 
+from .layout import check_layout, layout_of
+
 #: The iceoryx2 type name of the payload. A layout or meaning change bumps
 #: the ``.vN`` suffix; iceoryx2 refuses to connect ports whose names differ.
 TYPE_NAME = "netfi::FrameSample.v1"
@@ -91,30 +93,15 @@ ALIGNMENT = 8
 
 def layout() -> dict:
     """The layout ctypes actually gives :class:`FrameSample` (for checks)."""
-    return {
-        "type_name": TYPE_NAME,
-        "size": ctypes.sizeof(FrameSample),
-        "alignment": ctypes.alignment(FrameSample),
-        "offsets": {name: getattr(FrameSample, name).offset for name, _ in FrameSample._fields_},
-    }
+    return layout_of(FrameSample, TYPE_NAME)
 
 
-def _check_layout() -> None:
-    actual = layout()
-    expected = {"type_name": TYPE_NAME, "size": SIZE, "alignment": ALIGNMENT, "offsets": OFFSETS}
-    if actual != expected:
-        raise ImportError(f"FrameSample layout differs from the interface: {actual} != {expected}")
-
-
-_check_layout()
+check_layout(FrameSample, TYPE_NAME, SIZE, ALIGNMENT, OFFSETS)
 
 
 def end_marker(frames_sent: int) -> FrameSample:
     """An end-of-stream marker after ``frames_sent`` frames."""
-    s = FrameSample()
-    s.console_index = frames_sent
-    s.flags = FLAG_END
-    return s
+    return FrameSample(console_index=frames_sent, flags=FLAG_END)
 
 
 #: The iceoryx2 type name of the robot's feedback (channels ``feedback`` and
@@ -186,27 +173,12 @@ FEEDBACK_SIZE = 216
 
 def feedback_layout() -> dict:
     """The layout ctypes actually gives :class:`FeedbackSample`."""
-    return {
-        "type_name": FEEDBACK_TYPE_NAME,
-        "size": ctypes.sizeof(FeedbackSample),
-        "alignment": ctypes.alignment(FeedbackSample),
-        "offsets": {name: getattr(FeedbackSample, name).offset for name, _ in FeedbackSample._fields_},
-    }
+    return layout_of(FeedbackSample, FEEDBACK_TYPE_NAME)
 
 
-def _check_feedback_layout() -> None:
-    actual = feedback_layout()
-    expected = {"type_name": FEEDBACK_TYPE_NAME, "size": FEEDBACK_SIZE, "alignment": ALIGNMENT, "offsets": FEEDBACK_OFFSETS}
-    if actual != expected:
-        raise ImportError(f"FeedbackSample layout differs from the interface: {actual} != {expected}")
-
-
-_check_feedback_layout()
+check_layout(FeedbackSample, FEEDBACK_TYPE_NAME, FEEDBACK_SIZE, ALIGNMENT, FEEDBACK_OFFSETS)
 
 
 def feedback_end_marker(sent: int) -> FeedbackSample:
     """The end of a feedback stream after ``sent`` feedback samples."""
-    s = FeedbackSample()
-    s.robot_index = sent
-    s.flags = FLAG_END
-    return s
+    return FeedbackSample(robot_index=sent, flags=FLAG_END)

@@ -421,22 +421,33 @@ class RunNode:
             remove_mgmt_segment_if_unused(self.config, self.prefix)
 
 
-def make_private(prefix: str) -> None:
-    """Takes group and other permissions off this user's files in
-    ``/dev/shm`` whose names start with ``prefix``, as netfi's own
-    processes do."""
+def _own_shm_files(prefix: str, suffix: str = ""):
+    """This user's files in ``/dev/shm`` whose names start with ``prefix``
+    and end with ``suffix``, each with its ``lstat``."""
     uid = os.geteuid()
     try:
         names = os.listdir("/dev/shm")
     except OSError:
         return
     for n in names:
-        if n.startswith(prefix):
+        if n.startswith(prefix) and n.endswith(suffix):
             p = os.path.join("/dev/shm", n)
             try:
                 st = os.lstat(p)
-                if stat.S_ISREG(st.st_mode) and st.st_uid == uid and st.st_mode & 0o077:
-                    os.chmod(p, st.st_mode & 0o700)
+            except OSError:
+                continue
+            if st.st_uid == uid:
+                yield p, st
+
+
+def make_private(prefix: str) -> None:
+    """Takes group and other permissions off this user's files in
+    ``/dev/shm`` whose names start with ``prefix``, as netfi's own
+    processes do."""
+    for p, st in _own_shm_files(prefix):
+        if stat.S_ISREG(st.st_mode) and st.st_mode & 0o077:
+            try:
+                os.chmod(p, st.st_mode & 0o700)
             except OSError:
                 pass
 
@@ -450,16 +461,8 @@ def remove_mgmt_segment_if_unused(config, prefix: str) -> None:
         return
     if any(not isinstance(s, iox.NodeState.Dead) for s in states):
         return
-    uid = os.geteuid()
-    try:
-        names = os.listdir("/dev/shm")
-    except OSError:
-        return
-    for n in names:
-        if n.startswith(prefix) and n.endswith(".global_mgmt"):
-            p = os.path.join("/dev/shm", n)
-            try:
-                if os.lstat(p).st_uid == uid:
-                    os.unlink(p)
-            except OSError:
-                pass
+    for p, _ in _own_shm_files(prefix, ".global_mgmt"):
+        try:
+            os.unlink(p)
+        except OSError:
+            pass

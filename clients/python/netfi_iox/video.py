@@ -19,6 +19,7 @@ from typing import Callable, Optional
 
 import iceoryx2 as iox
 
+from .layout import check_layout, layout_of
 from .ports import MAX_SUBSCRIBERS_PER_CHANNEL, PublishingEnd, SubscribingEnd
 
 #: The iceoryx2 type name of the user header.
@@ -98,35 +99,15 @@ VIDEO_HEADER_ALIGNMENT = 8
 
 def video_header_layout() -> dict:
     """The layout ctypes actually gives :class:`VideoHeader` (for checks)."""
-    return {
-        "type_name": VIDEO_HEADER_TYPE_NAME,
-        "size": ctypes.sizeof(VideoHeader),
-        "alignment": ctypes.alignment(VideoHeader),
-        "offsets": {name: getattr(VideoHeader, name).offset for name, _ in VideoHeader._fields_},
-    }
+    return layout_of(VideoHeader, VIDEO_HEADER_TYPE_NAME)
 
 
-def _check_layout() -> None:
-    actual = video_header_layout()
-    expected = {
-        "type_name": VIDEO_HEADER_TYPE_NAME,
-        "size": VIDEO_HEADER_SIZE,
-        "alignment": VIDEO_HEADER_ALIGNMENT,
-        "offsets": VIDEO_HEADER_OFFSETS,
-    }
-    if actual != expected:
-        raise ImportError(f"VideoHeader layout differs from the interface: {actual} != {expected}")
-
-
-_check_layout()
+check_layout(VideoHeader, VIDEO_HEADER_TYPE_NAME, VIDEO_HEADER_SIZE, VIDEO_HEADER_ALIGNMENT, VIDEO_HEADER_OFFSETS)
 
 
 def video_end_marker(count: int) -> VideoHeader:
     """The end marker after ``count`` frames."""
-    h = VideoHeader()
-    h.frame_index = count
-    h.flags = FLAG_VIDEO_END
-    return h
+    return VideoHeader(frame_index=count, flags=FLAG_VIDEO_END)
 
 
 def _round(x: float) -> int:

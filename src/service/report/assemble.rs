@@ -336,10 +336,7 @@ mod tests {
     use serde_json::json;
 
     fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("netfi-assemble-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+        crate::scratch::dir("assemble", name)
     }
 
     /// `emulator.json` of PLM-2 seed 7: 10 frames in, 6 delivered, 3

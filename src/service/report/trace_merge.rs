@@ -257,10 +257,7 @@ mod tests {
     const HEADER: &str = crate::trace::CSV_HEADER;
 
     fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("netfi-trace-merge-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+        crate::scratch::dir("trace-merge", name)
     }
 
     /// A trace row: index, send, fate, delay, scheduled release, copy.

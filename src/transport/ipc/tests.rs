@@ -1,4 +1,5 @@
 use super::*;
+use crate::host::private_dir;
 
 #[test]
 fn run_id_accepts_the_documented_alphabet() {

@@ -1,151 +1,20 @@
 //! Reading a study file: the TOML text → a validated [`Study`], every
 //! error with its line and field ([`StudyFileError`]).
 
+mod ctx;
+mod raw;
+
 use super::file::{
     BlockOrder, Condition, ConditionSource, Block, Participant, Questionnaires, Study, StudyFileError, TlxWhen, TrialSpec, Within,
     MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, RESERVED_RUN_ARGS,
 };
 use super::square::MAX_BLOCKS;
 use crate::scenario::{canonical_name, PRESET_NAMES};
-use serde::Deserialize;
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use toml::Spanned;
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Raw {
-    name: Option<String>,
-    description: Option<String>,
-    seed: Option<Spanned<i64>>,
-    data: Option<String>,
-    trials: Option<Spanned<i64>>,
-    baseline: Option<Spanned<String>>,
-    #[serde(default)]
-    hide_condition: bool,
-    trial: Option<RawTrial>,
-    order: Option<RawOrder>,
-    questionnaires: Option<RawQuestionnaires>,
-    #[serde(default)]
-    condition: Vec<Spanned<RawCondition>>,
-    #[serde(default)]
-    block: Vec<Spanned<RawBlock>>,
-    #[serde(default)]
-    participant: Vec<Spanned<toml::Table>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawTrial {
-    duration_s: Option<Spanned<f64>>,
-    capture: Option<String>,
-    rate_hz: Option<Spanned<f64>>,
-    #[serde(default)]
-    run_args: Vec<Spanned<String>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawOrder {
-    blocks: Option<Spanned<String>>,
-    within: Option<Spanned<String>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawQuestionnaires {
-    sus: Option<Spanned<String>>,
-    tlx: Option<Spanned<String>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawCondition {
-    name: Spanned<String>,
-    scenario: Option<Spanned<String>>,
-    stage: Option<Vec<toml::Table>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawBlock {
-    name: Spanned<String>,
-    conditions: Spanned<Vec<Spanned<String>>>,
-    trials: Option<Spanned<i64>>,
-}
-
-/// Where errors point: the text, for lines, and the file's name.
-struct Ctx<'a> {
-    text: &'a str,
-    origin: &'a str,
-}
-
-impl Ctx<'_> {
-    fn line_of(&self, byte: usize) -> usize {
-        self.text[..byte.min(self.text.len())].matches('\n').count() + 1
-    }
-
-    fn err(&self, span: Option<Range<usize>>, field: impl Into<String>, problem: impl Into<String>) -> StudyFileError {
-        StudyFileError {
-            origin: self.origin.to_string(),
-            line: span.map(|s| self.line_of(s.start)),
-            field: Some(field.into()).filter(|f: &String| !f.is_empty()),
-            problem: problem.into(),
-        }
-    }
-
-    /// The key written on `line` (1-based), if the line is `key = …`.
-    fn key_on_line(&self, line: usize) -> Option<String> {
-        let text = self.text.lines().nth(line.checked_sub(1)?)?;
-        let (key, _) = text.split_once('=')?;
-        let key = key.trim().trim_matches('"');
-        (!key.is_empty() && !key.starts_with('[') && !key.contains(' ')).then(|| key.to_string())
-    }
-
-    /// The byte span of `key = …` inside the table written at `table`, if
-    /// the key is written there. A table's span may be its header alone:
-    /// its keys are the lines after it, up to the next header.
-    fn key_span(&self, table: &Range<usize>, key: &str) -> Option<Range<usize>> {
-        let start = table.start.min(self.text.len());
-        let mut offset = start;
-        for (k, line) in self.text[start..].split_inclusive('\n').enumerate() {
-            let t = line.trim_start();
-            if k > 0 && t.starts_with('[') && offset >= table.end {
-                return None;
-            }
-            let rest = t.strip_prefix(key).or_else(|| t.strip_prefix(&format!("\"{key}\"")));
-            if rest.is_some_and(|r| r.trim_start().starts_with('=')) {
-                return Some(offset..offset + line.len());
-            }
-            offset += line.len();
-        }
-        None
-    }
-
-    /// A TOML syntax or type error: its line, and the key written there.
-    fn toml_error(&self, e: &toml::de::Error) -> StudyFileError {
-        let line = e.span().map(|s| self.line_of(s.start));
-        let mut message = e.message().trim().to_string();
-        // serde names Rust's types; a person wrote a number or text.
-        for (rust, words) in [("expected i64", "expected an integer"), ("expected f64", "expected a number"), ("expected a string", "expected text in quotes")] {
-            message = message.replace(rust, words);
-        }
-        let mut field = line.and_then(|l| self.key_on_line(l));
-        for prefix in ["unknown field `", "missing field `"] {
-            if let Some(rest) = message.strip_prefix(prefix) {
-                if let Some(end) = rest.find('`') {
-                    field = Some(rest[..end].to_string());
-                    message = if prefix.starts_with("unknown") {
-                        format!("unknown field{}", &rest[end + 1..])
-                    } else {
-                        "missing: this table requires it".to_string()
-                    };
-                }
-            }
-        }
-        StudyFileError { origin: self.origin.to_string(), line, field, problem: message }
-    }
-}
+use ctx::Ctx;
+use raw::{Raw, RawBlock, RawCondition, RawOrder, RawQuestionnaires, RawTrial};
 
 /// A name that becomes a folder and a CSV value: letters, digits, `-`,
 /// `_`, `.`, `+`, spaces inside; not empty, not starting with `.`.
@@ -505,3 +374,4 @@ fn block_row(v: &toml::Value, blocks: &[Block]) -> Result<Vec<usize>, String> {
     }
     Ok(row)
 }
+

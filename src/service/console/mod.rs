@@ -10,15 +10,17 @@
 //! stamped separately: the simulator measures the bare hop beside the
 //! emulated one, in the same run, and integrates it as the console's pose.
 
-use crate::capture::{self, CaptureError};
+
+mod feedback;
+mod script;
+
+pub use script::ScriptError;
+
 use crate::clock::{now_ns, wait_until_ns, Wait};
 use crate::host::StealTimer;
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::motion::{MotionGenerator, MotionParamError, MotionParams};
-use crate::frame::{ItpFrame, ItpView};
-use crate::kinematics::{Integrator, KinematicsConfig, KinematicsConfigError};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
-use crate::transport::{FramePublisher, FrameSubscriber};
+use crate::transport::FramePublisher;
 use crate::service::args::ConsoleArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSink;
@@ -26,17 +28,8 @@ use crate::service::signals;
 use crate::transport::{Channel, Role};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
-
-/// Why the console's frames could not be had.
-#[derive(Debug, thiserror::Error)]
-pub enum ScriptError {
-    /// The capture could not be read, or was refused.
-    #[error(transparent)]
-    Capture(#[from] CaptureError),
-    /// The synthetic motion's parameters were refused.
-    #[error(transparent)]
-    Motion(#[from] MotionParamError),
-}
+use feedback::FeedbackIn;
+use script::Script;
 
 /// Why the console did not start streaming.
 #[derive(Debug, thiserror::Error)]
@@ -106,183 +99,6 @@ pub struct ConsoleFeedback {
     pub divergence_final_mm: [f64; 2],
     pub divergence_max_mm: [f64; 2],
     pub round_trip_hlog: Option<std::path::PathBuf>,
-}
-
-/// Commands whose console-side pose is kept, to compare with the robot's
-/// feedback for them: 65,536 (65 s at 1 kHz).
-const POSE_RING: usize = 1 << 16;
-
-/// The console's end of the feedback loop: the port, the round trip, and
-/// the console's own pose per recent command.
-struct FeedbackIn {
-    port: FrameSubscriber<FeedbackSample>,
-    sample: FeedbackSample,
-    rtt: LatencyHistogram,
-    share: LatencyHistogram,
-    received: u64,
-    sent_by_emulator: Option<u64>,
-    unknown_command: u64,
-    own: Integrator,
-    poses: Vec<[[i64; 3]; 2]>,
-    unit_mm: f64,
-    div_final: [f64; 2],
-    div_max: [f64; 2],
-}
-
-impl FeedbackIn {
-    fn new(port: FrameSubscriber<FeedbackSample>) -> Result<FeedbackIn, KinematicsConfigError> {
-        let cfg = KinematicsConfig::default();
-        Ok(FeedbackIn {
-            port,
-            sample: FeedbackSample::ZERO,
-            rtt: LatencyHistogram::new(),
-            share: LatencyHistogram::new(),
-            received: 0,
-            sent_by_emulator: None,
-            unknown_command: 0,
-            own: Integrator::new(cfg)?,
-            poses: vec![[[0; 3]; 2]; POSE_RING],
-            unit_mm: cfg.unit_mm,
-            div_final: [0.0; 2],
-            div_max: [0.0; 2],
-        })
-    }
-
-    /// The console sent command `index` (`wire`) at `t`: its own pose after it.
-    fn sent(&mut self, index: u64, t: u64, wire: &[u8; ITP_FRAME_LEN]) {
-        self.own.push(t, &ItpFrame::parse_unverified(&ItpView::new_unchecked(&wire[..])));
-        self.poses[index as usize % POSE_RING] = [0, 1].map(|arm| self.own.pose(arm).position);
-    }
-
-    /// Takes every waiting feedback sample; `sent` commands have gone out.
-    fn poll(&mut self, sent: u64) {
-        loop {
-            let got = match self.port.try_recv() {
-                Ok(Some(s)) => s,
-                _ => return,
-            };
-            let t = now_ns();
-            self.sample = got;
-            let f = &self.sample;
-            if f.is_end() {
-                self.sent_by_emulator = Some(f.robot_index);
-                continue;
-            }
-            self.received += 1;
-            if f.console_index >= sent {
-                self.unknown_command += 1;
-                continue;
-            }
-            self.rtt.record(t.saturating_sub(f.command_send_ns));
-            let fwd = f.command_release_ns as i64 - f.command_ingress_ns as i64 - f.command_injected_delay_ns as i64;
-            let back = f.release_ns as i64 - f.ingress_ns as i64 - f.injected_delay_ns as i64;
-            if f.command_release_ns != 0 && f.release_ns != 0 {
-                self.share.record_signed(fwd + back);
-            }
-            if f.console_index + (POSE_RING as u64) >= sent {
-                let own = &self.poses[f.console_index as usize % POSE_RING];
-                for arm in 0..2 {
-                    let d: f64 = (0..3).map(|k| ((f.position[arm][k] - own[arm][k]) as f64).powi(2)).sum::<f64>().sqrt() * self.unit_mm;
-                    self.div_final[arm] = d;
-                    self.div_max[arm] = self.div_max[arm].max(d);
-                }
-            }
-        }
-    }
-
-    fn live_line(&self) -> String {
-        let r = self.rtt.summary();
-        format!(
-            "console: feedback {} received; round trip p50 {} p99 {}; divergence arm 0 {:.2} mm, arm 1 {:.2} mm",
-            self.received,
-            crate::metrics::fmt_ns(r.p50),
-            crate::metrics::fmt_ns(r.p99),
-            self.div_final[0],
-            self.div_final[1]
-        )
-    }
-
-    fn report(&self, ended_by: &str, out: &std::path::Path, duration_s: f64) -> ConsoleFeedback {
-        let hlog = out.join("round_trip.hlog");
-        let round_trip_hlog = self.rtt.write_log(&hlog, "round_trip", 0.0, duration_s).ok().map(|_| hlog);
-        ConsoleFeedback {
-            received: self.received,
-            sent_by_emulator: self.sent_by_emulator,
-            unknown_command: self.unknown_command,
-            ended_by: ended_by.into(),
-            round_trip_ns: self.rtt.summary(),
-            emulator_share_ns: self.share.summary(),
-            divergence_final_mm: self.div_final,
-            divergence_max_mm: self.div_max,
-            round_trip_hlog,
-        }
-    }
-}
-
-/// Where frames come from: each call gives the frame's planned offset from
-/// the stream's start and its wire bytes.
-enum Script {
-    Synthetic { motion: Box<MotionGenerator>, period_ns: f64 },
-    Replay { records: Vec<(u64, [u8; ITP_FRAME_LEN])>, period_ns: Option<f64> },
-}
-
-impl Script {
-    fn len(&self, frames: Option<u64>, duration_s: Option<f64>) -> u64 {
-        match self {
-            Script::Synthetic { period_ns, .. } => frames.unwrap_or_else(|| (duration_s.unwrap_or(10.0) * 1e9 / period_ns).round() as u64),
-            Script::Replay { records, period_ns } => {
-                let all = records.len() as u64;
-                let by_time = duration_s.map(|d| match period_ns {
-                    Some(p) => (d * 1e9 / p).round() as u64,
-                    None => records.iter().take_while(|r| r.0 as f64 <= d * 1e9).count() as u64,
-                });
-                frames.or(by_time).unwrap_or(all).min(all)
-            }
-        }
-    }
-
-    #[inline]
-    fn frame(&mut self, i: u64) -> (u64, [u8; ITP_FRAME_LEN]) {
-        match self {
-            Script::Synthetic { motion, period_ns } => ((i as f64 * *period_ns).round() as u64, motion.next_frame().to_bytes()),
-            Script::Replay { records, period_ns } => {
-                let r = &records[i as usize];
-                match period_ns {
-                    Some(p) => ((i as f64 * *p).round() as u64, r.1),
-                    None => (r.0, r.1),
-                }
-            }
-        }
-    }
-}
-
-impl Script {
-    /// The capture given, or synthetic motion at the given rate.
-    fn from_args(args: &ConsoleArgs, seed: u64) -> Result<Script, ScriptError> {
-        Ok(match &args.source.capture {
-            Some(path) => {
-                let cap = capture::load(path)?;
-                let t0 = cap.records.first().map_or(0, |r| r.time_ns);
-                let mut last = 0;
-                let records = cap
-                    .records
-                    .iter()
-                    .map(|r| {
-                        // Wall-clock captures can step backwards; a schedule cannot.
-                        last = r.time_ns.saturating_sub(t0).max(last);
-                        (last, r.payload)
-                    })
-                    .collect();
-                Script::Replay { records, period_ns: args.source.rate_hz.map(|r| 1e9 / r) }
-            }
-            None => {
-                // `--rate-hz` is checked where it is parsed (`args::parse_rate_hz`).
-                let rate = args.source.rate_hz.unwrap_or(crate::service::args::values::DEFAULT_RATE_HZ);
-                let motion = MotionGenerator::new(MotionParams::peg_transfer(rate), seed)?;
-                Script::Synthetic { motion: Box::new(motion), period_ns: 1e9 / rate }
-            }
-        })
-    }
 }
 
 /// Waits for the emulator to subscribe to the console port.

@@ -20,10 +20,18 @@
 //! (the kernel let go of the lock) and marks it `interrupted`: it is kept,
 //! never counted, and the trial is run again.
 
+
+mod lock;
+mod state;
+
+pub use lock::{claim, process_names, ParticipantLock};
+pub use state::{load_state, next_step, save_state, Attempt, AttemptState, Next, ParticipantState};
+
 use super::file::{ConditionSource, Study, StudyFileError};
 use super::parse::parse_study;
 use super::schedule::{schedule, Due, Schedule, Trial};
 use crate::durable::{write_whole, DurableError};
+use lock::StudyLock;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -271,144 +279,6 @@ impl ScheduleRecord {
     }
 }
 
-/// How an attempt stands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum AttemptState {
-    /// Its run is going (or its runner died: see the module's docs).
-    Running,
-    /// Its run ended; the experimenter has not marked it yet.
-    Ran,
-    /// Counted.
-    Done,
-    /// Over, not counted, not repeated (the task or the run failed).
-    Failed,
-    /// Not counted; the trial is run again.
-    Repeat,
-    /// Its runner was killed: not counted; the trial is run again.
-    Interrupted,
-}
-
-impl AttemptState {
-    /// As the table writes it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            AttemptState::Running => "running",
-            AttemptState::Ran => "ran",
-            AttemptState::Done => "done",
-            AttemptState::Failed => "failed",
-            AttemptState::Repeat => "repeat",
-            AttemptState::Interrupted => "interrupted",
-        }
-    }
-}
-
-/// One attempt of one trial.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Attempt {
-    pub trial: u32,
-    pub attempt: u32,
-    pub condition: String,
-    /// Its folder, relative to the participant's.
-    pub dir: String,
-    pub state: AttemptState,
-    pub seed: u64,
-    pub started_utc: String,
-    #[serde(default)]
-    pub ended_utc: Option<String>,
-    /// The process running it (`netfi study next`), while running.
-    #[serde(default)]
-    pub runner_pid: Option<u32>,
-    /// Its `netfi run`.
-    #[serde(default)]
-    pub run_pid: Option<u32>,
-    /// How the run ended (`exit 0`, `signal 9`).
-    #[serde(default)]
-    pub run_status: Option<String>,
-    /// The experimenter stopped it.
-    #[serde(default)]
-    pub stopped: bool,
-    /// The run left a report (`report.json`).
-    #[serde(default)]
-    pub report: bool,
-    /// The run's own faults, from its report.
-    #[serde(default)]
-    pub faults: Vec<String>,
-    #[serde(default)]
-    pub note: String,
-}
-
-/// A participant's state: every attempt, in the order they began.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct ParticipantState {
-    pub participant: String,
-    pub attempts: Vec<Attempt>,
-}
-
-impl ParticipantState {
-    /// The last attempt of trial `n`.
-    pub fn last_of(&self, n: u32) -> Option<&Attempt> {
-        self.attempts.iter().rev().find(|a| a.trial == n)
-    }
-
-    /// Whether trial `n` is over (its last attempt done or failed).
-    pub fn finished(&self, n: u32) -> bool {
-        self.last_of(n).is_some_and(|a| matches!(a.state, AttemptState::Done | AttemptState::Failed))
-    }
-}
-
-/// What comes next for a participant.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Next {
-    /// Run this trial, as this attempt.
-    Trial { trial: Trial, attempt: u32 },
-    /// An attempt is running.
-    Running(Attempt),
-    /// An attempt ran and waits for the experimenter's mark.
-    Unmarked(Attempt),
-    /// A questionnaire is due first.
-    Questionnaire(Due),
-    /// Every trial is over.
-    Finished,
-}
-
-/// What comes next for participant `p` given their state and the
-/// questionnaires answered (their keys).
-pub fn next_step(s: &OpenStudy, p: usize, state: &ParticipantState, answered: &[String]) -> Next {
-    if let Some(a) = state.attempts.iter().find(|a| a.state == AttemptState::Running) {
-        return Next::Running(a.clone());
-    }
-    if let Some(a) = state.attempts.iter().find(|a| a.state == AttemptState::Ran) {
-        return Next::Unmarked(a.clone());
-    }
-    let sch = &s.schedules[p];
-    let Some(trial) = sch.trials.iter().find(|t| !state.finished(t.number)) else {
-        // Questionnaires after the last trial are still due.
-        return match sch.due.iter().find(|d| !answered.contains(&d.key())) {
-            Some(d) => Next::Questionnaire(d.clone()),
-            None => Next::Finished,
-        };
-    };
-    if let Some(d) = sch.due.iter().find(|d| d.before_trial() <= trial.number && !answered.contains(&d.key())) {
-        return Next::Questionnaire(d.clone());
-    }
-    let attempt = state.attempts.iter().filter(|a| a.trial == trial.number).count() as u32 + 1;
-    Next::Trial { trial: trial.clone(), attempt }
-}
-
-/// Reads `dir/state.json` (`None` before the participant's first trial).
-pub fn load_state(dir: &Path) -> Result<Option<ParticipantState>, StudyError> {
-    let path = dir.join("state.json");
-    if !path.exists() {
-        return Ok(None);
-    }
-    read_json(&path).map(Some)
-}
-
-/// Writes `dir/state.json` whole.
-pub fn save_state(dir: &Path, state: &ParticipantState) -> Result<(), StudyError> {
-    write_json(&dir.join("state.json"), state)
-}
 
 /// Reads a JSON file of at most 256 MiB.
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, StudyError> {
@@ -427,101 +297,4 @@ pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), StudyError
 /// The current time, RFC 3339 (UTC, seconds).
 pub fn now_utc() -> String {
     humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string()
-}
-
-/// The exclusive claim on a participant: an `flock` on `DATA/P/lock`,
-/// held as long as this value lives (the kernel lets it go when the
-/// process ends, however it ends). The file holds the holder's pid and
-/// what it does, so a refused command can say who holds it.
-#[derive(Debug)]
-pub struct ParticipantLock {
-    file: std::fs::File,
-}
-
-impl ParticipantLock {
-    /// Takes the lock of the participant folder `dir` (created if need
-    /// be) without waiting, saying what the holder does (`what`).
-    pub fn take(dir: &Path, id: &str, what: &str) -> Result<ParticipantLock, StudyError> {
-        use std::io::{Read, Seek, Write};
-        use std::os::fd::AsRawFd;
-        std::fs::create_dir_all(dir).map_err(io(dir))?;
-        let path = dir.join("lock");
-        let mut file =
-            std::fs::OpenOptions::new().read(true).write(true).create(true).truncate(false).open(&path).map_err(io(&path))?;
-        // SAFETY: flock on a descriptor this function owns.
-        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
-            let err = std::io::Error::last_os_error();
-            if err.raw_os_error() == Some(libc::EWOULDBLOCK) {
-                let mut text = String::new();
-                let _ = file.read_to_string(&mut text);
-                let holder = if text.trim().is_empty() { "another process".to_string() } else { text.trim().to_string() };
-                return Err(StudyError::Busy { id: id.to_string(), holder, lock: path });
-            }
-            return Err(io(&path)(err));
-        }
-        let line = format!("pid {} ({what}, since {})\n", std::process::id(), now_utc());
-        file.set_len(0).and_then(|_| file.rewind()).and_then(|_| file.write_all(line.as_bytes())).map_err(io(&path))?;
-        Ok(ParticipantLock { file })
-    }
-
-    /// Lets the lock go and empties its file.
-    pub fn release(self) {
-        let _ = self.file.set_len(0);
-    }
-}
-
-/// A short exclusive claim on a whole study's shared files, waited for.
-struct StudyLock {
-    _file: std::fs::File,
-}
-
-impl StudyLock {
-    fn take(path: &Path) -> Result<StudyLock, StudyError> {
-        use std::os::fd::AsRawFd;
-        let file = std::fs::OpenOptions::new().write(true).create(true).truncate(false).open(path).map_err(io(path))?;
-        // SAFETY: flock on a descriptor this function owns.
-        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) } != 0 {
-            return Err(io(path)(std::io::Error::last_os_error()));
-        }
-        Ok(StudyLock { _file: file })
-    }
-}
-
-/// Whether process `pid` is alive and its command line names `needle`.
-pub fn process_names(pid: u32, needle: &str) -> bool {
-    std::fs::read(format!("/proc/{pid}/cmdline")).is_ok_and(|c| String::from_utf8_lossy(&c).contains(needle))
-}
-
-/// Takes participant `p`'s lock and brings their state up to date: an
-/// attempt still `running` had its runner die, and is `interrupted` (its
-/// `netfi run`, if still stopping, is waited for: the trial's next attempt
-/// must not share the emulator's core with it).
-pub fn claim(s: &OpenStudy, p: usize, what: &str) -> Result<(ParticipantLock, ParticipantState), StudyError> {
-    let dir = s.participant_dir(p);
-    let id = &s.study.participants[p].id;
-    let lock = ParticipantLock::take(&dir, id, what)?;
-    let mut state = load_state(&dir)?.unwrap_or_else(|| ParticipantState { participant: id.clone(), attempts: Vec::new() });
-    let mut changed = false;
-    for a in state.attempts.iter_mut().filter(|a| a.state == AttemptState::Running) {
-        if let Some(pid) = a.run_pid {
-            let out = dir.join(&a.dir);
-            let needle = out.display().to_string();
-            let t0 = std::time::Instant::now();
-            while process_names(pid, &needle) && t0.elapsed() < std::time::Duration::from_secs(60) {
-                std::thread::sleep(std::time::Duration::from_millis(100));
-            }
-        }
-        a.state = AttemptState::Interrupted;
-        a.report = dir.join(&a.dir).join("report.json").is_file();
-        a.ended_utc = Some(now_utc());
-        a.runner_pid = None;
-        if a.note.is_empty() {
-            a.note = "its runner ended while the trial was running".into();
-        }
-        changed = true;
-    }
-    if changed {
-        save_state(&dir, &state)?;
-    }
-    Ok((lock, state))
 }

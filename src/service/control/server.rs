@@ -1,141 +1,19 @@
-//! Live control of a running emulator (docs/interface.md, "Live control"):
-//! `netfi ctl --run-id R show | switch | phase | pause | resume | watch`.
-//!
-//! Two halves, joined by two wait-free single-producer rings (`rtrb`):
-//!
-//! - the **control thread** ([`start`]), off the loop's core, serves the
-//!   run's control service: it parses and validates each request with the
-//!   scenario parser (a bad one is answered with the parser's error and
-//!   changes nothing), builds the new phases ([`Timeline`]) and hands them
-//!   to the loop; it records what the loop applied as events (streamed to
-//!   `events.jsonl` beside the trace, and returned for the report), and
-//!   publishes the telemetry intervals the trace writer closes;
-//! - the loop's end, [`ControlPort`], which the emulator's loop polls every
-//!   4096 turns, as it looks at the stop flag: it moves the waiting
-//!   commands into the injector ([`crate::injector::Injector::switch`]:
-//!   no allocation, no lock) and sends back what it did, with the
-//!   phases a switch cut, to be dropped on the control thread.
-//!
-//! So a switch takes effect between two frames, frames already queued keep
-//! their release times, and the loop never parses, allocates or waits.
+//! The control thread: serves the run's control service, validates each
+//! request with the scenario parser, hands built phases to the loop and
+//! records what the loop applied (`events.jsonl`).
 
+use super::port::{Applied, Command, Shared};
+use super::protocol::{resolve, Action, ControlEvent, PhaseOf, Request, Response, State};
 use crate::clock::now_ns;
-use crate::scenario::{parse_str, preset, ScenarioError, ScenarioSpec, Switched, Timeline, MAX_RUN_PHASES, PRESET_NAMES};
+use crate::scenario::{ScenarioSpec, Timeline, MAX_RUN_PHASES};
 use crate::scheduler::QueueOrder;
-use crate::service::link::{Carried, Link};
 use crate::transport::ipc::control::{ControlServer, TelemetryPublisher, TelemetrySample};
 use crate::transport::{IpcConfig, IpcNode, Role};
-use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
-
-/// One control action, as the run report lists it (`events`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ControlEvent {
-    /// When it took effect, seconds from the run's first frame (the clock of
-    /// the phases and of `--at`).
-    pub t_s: f64,
-    /// What was done, in words.
-    pub what: String,
-    /// The same time in ns, exactly (absent in reports of older versions).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub t_ns: Option<u64>,
-    /// What was done, exactly enough to rebuild the run's timeline from
-    /// its scenario and its events (absent in reports of older versions).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub action: Option<Action>,
-}
-
-/// A control action as the loop applied it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Action {
-    /// The rest of the run's timeline replaced, from the event's time, by
-    /// `scenario` (as TOML) from its phase `from_phase` on; its first
-    /// phase became the run's phase `run_phase` (both from 1).
-    Switch { scenario: String, from_phase: usize, run_phase: usize },
-    Pause,
-    Resume,
-}
-
-/// A request to the control service (JSON, tagged by `cmd`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Request {
-    /// The current scenario, phase and pause.
-    Show,
-    /// Switch to a scenario from `at_ms` (from the run's first frame), or now.
-    Switch {
-        scenario: Target,
-        #[serde(default)]
-        at_ms: Option<f64>,
-    },
-    /// Go to a phase (number from 1, or name) of the current scenario.
-    Phase {
-        phase: String,
-        #[serde(default)]
-        at_ms: Option<f64>,
-    },
-    /// Every frame passes untouched until `resume`.
-    Pause,
-    Resume,
-}
-
-/// What to switch to: a preset's name, or scenario text (a file's
-/// contents, or a target stage such as `[[stage]]\nloss = "30%"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", deny_unknown_fields)]
-pub enum Target {
-    Preset(String),
-    Toml { text: String, origin: String, name: String },
-}
-
-/// The answer: `ok` with a message and the state, or the error.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Response {
-    pub ok: bool,
-    #[serde(default)]
-    pub message: String,
-    #[serde(default)]
-    pub state: Option<State>,
-}
-
-/// What `show` prints.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct State {
-    /// Seconds since the run's first frame (0 before it).
-    pub t_s: f64,
-    /// Whether a frame has entered yet.
-    pub started: bool,
-    pub frames_entered: u64,
-    pub paused: bool,
-    /// The phase running, in the run's timeline (from 1).
-    pub phase: usize,
-    /// The scenario it comes from, and its phase there (from 1, and name).
-    pub scenario: String,
-    pub scenario_phase: usize,
-    pub phase_name: Option<String>,
-    /// The phases still to come: `(t_s, scenario, phase from 1)`.
-    pub upcoming: Vec<(f64, String, usize)>,
-    /// `fifo` or `reorder`: a FIFO run cannot switch to a reordering scenario.
-    pub queue_order: String,
-    /// The phases of the scenario running, each as `netfi ctl phase` names
-    /// it (absent from older emulators' answers).
-    #[serde(default)]
-    pub scenario_phases: Vec<PhaseOf>,
-}
-
-/// One phase of a scenario: its number (from 1), its name, and its start
-/// in the scenario (s).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PhaseOf {
-    pub number: usize,
-    pub name: Option<String>,
-    pub start_s: f64,
-}
 
 /// How the control thread is set up.
 #[derive(Debug, Clone)]
@@ -151,121 +29,6 @@ pub struct Settings {
     /// The stages the run's link cannot apply ([`crate::service::link::Carried::UNSUPPORTED`]):
     /// a switch to a scenario with one is refused.
     pub unsupported: &'static [crate::model::ModelKind],
-}
-
-/// A command for the loop.
-enum Command {
-    Switch { id: u64, at_ns: Option<u64>, timeline: Timeline },
-    Pause { id: u64, paused: bool },
-}
-
-/// What the loop did with a command.
-enum Applied {
-    Switched { id: u64, s: Switched },
-    Refused { id: u64 },
-    Paused { id: u64, paused: bool, t_ns: u64 },
-}
-
-/// What the loop tells the control thread at every poll.
-#[derive(Default)]
-struct Shared {
-    /// The first frame's time + 1 (0: none yet).
-    start_ns: AtomicU64,
-    entered: AtomicU64,
-    phase: AtomicU64,
-    paused: AtomicBool,
-    stop: AtomicBool,
-}
-
-/// Commands in flight at once (one per request; requests are answered one
-/// at a time).
-const RING: usize = 8;
-
-/// The loop's end: polled every 4096 turns.
-pub struct ControlPort {
-    commands: rtrb::Consumer<Command>,
-    applied: rtrb::Producer<Applied>,
-    shared: Arc<Shared>,
-}
-
-impl ControlPort {
-    /// Applies the commands waiting (between two frames) and publishes the
-    /// loop's state. No allocation, lock or system call but the clock.
-    pub fn poll<T: Carried>(&mut self, link: &mut Link<T>) {
-        let inj = link.injector_mut();
-        while let Ok(cmd) = self.commands.pop() {
-            let now = now_ns();
-            let done = match cmd {
-                Command::Switch { id, at_ns, timeline } => match inj.switch(now, at_ns, timeline) {
-                    Ok(s) => Applied::Switched { id, s },
-                    Err(_refused) => Applied::Refused { id },
-                },
-                Command::Pause { id, paused } => {
-                    inj.set_paused(paused);
-                    Applied::Paused { id, paused, t_ns: inj.start_ns().map_or(0, |s| now.saturating_sub(s)) }
-                }
-            };
-            // The ring holds twice the commands that can be in flight.
-            let _ = self.applied.push(done);
-        }
-        let s = &self.shared;
-        s.start_ns.store(inj.start_ns().map_or(0, |t| t + 1), Ordering::Relaxed);
-        s.entered.store(inj.next_ingress_index(), Ordering::Relaxed);
-        s.phase.store(inj.scenario().current_phase() as u64, Ordering::Relaxed);
-        s.paused.store(inj.scenario().paused(), Ordering::Relaxed);
-    }
-}
-
-/// The control thread's handle.
-pub struct ControlHandle {
-    shared: Arc<Shared>,
-    thread: std::thread::JoinHandle<Vec<ControlEvent>>,
-    telemetry: Option<mpsc::Sender<TelemetrySample>>,
-}
-
-impl ControlHandle {
-    /// Keeps the control thread off `core` (the loop's); `false` where it
-    /// cannot be.
-    pub fn keep_off_core(&self, core: usize) -> bool {
-        use std::os::unix::thread::JoinHandleExt;
-        crate::host::keep_thread_off_core(self.thread.as_pthread_t(), core)
-    }
-
-    /// The telemetry aggregator to hand to the trace writer, if telemetry is on.
-    pub fn aggregator(&self, interval_ns: u64) -> Option<Box<dyn crate::trace::Tap>> {
-        let tx = self.telemetry.clone()?;
-        Some(Box::new(crate::service::telemetry::Aggregator::new(interval_ns, tx)))
-    }
-
-    /// Stops the control thread; the events that took effect.
-    pub fn finish(self) -> Vec<ControlEvent> {
-        self.shared.stop.store(true, Ordering::Release);
-        drop(self.telemetry);
-        self.thread.join().unwrap_or_default()
-    }
-}
-
-/// Starts the control thread (before the loop's core is pinned) and
-/// returns the loop's end and the handle. Fails if the control or
-/// telemetry service cannot be opened.
-pub fn start(settings: Settings) -> anyhow::Result<(ControlPort, ControlHandle)> {
-    let (cmd_tx, cmd_rx) = rtrb::RingBuffer::new(RING);
-    let (app_tx, app_rx) = rtrb::RingBuffer::new(2 * RING);
-    let shared = Arc::new(Shared::default());
-    let (tel_tx, tel_rx) = mpsc::channel();
-    let (ready_tx, ready_rx) = mpsc::channel();
-    let server = Server::new(settings, cmd_tx, app_rx, shared.clone(), tel_rx);
-    let thread = std::thread::Builder::new().name("netfi-control".into()).spawn(move || server.run(ready_tx))?;
-    match ready_rx.recv() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => {
-            let _ = thread.join();
-            return Err(e);
-        }
-        Err(_) => anyhow::bail!("the control thread ended before opening its services"),
-    }
-    let port = ControlPort { commands: cmd_rx, applied: app_tx, shared: shared.clone() };
-    Ok((port, ControlHandle { shared, thread, telemetry: Some(tel_tx) }))
 }
 
 /// One phase of the run's timeline, as the control thread mirrors it.
@@ -285,7 +48,7 @@ struct Sent {
 }
 
 /// The control thread's state.
-struct Server {
+pub(super) struct Server {
     settings: Settings,
     commands: rtrb::Producer<Command>,
     applied: rtrb::Consumer<Applied>,
@@ -308,7 +71,7 @@ const APPLY_WAIT: Duration = Duration::from_secs(2);
 const TICK: Duration = Duration::from_millis(5);
 
 impl Server {
-    fn new(settings: Settings, commands: rtrb::Producer<Command>, applied: rtrb::Consumer<Applied>, shared: Arc<Shared>, telemetry: mpsc::Receiver<TelemetrySample>) -> Server {
+    pub(super) fn new(settings: Settings, commands: rtrb::Producer<Command>, applied: rtrb::Consumer<Applied>, shared: Arc<Shared>, telemetry: mpsc::Receiver<TelemetrySample>) -> Server {
         let spec = Arc::new(settings.spec.clone());
         let timeline = (0..spec.phases.len())
             .map(|i| Mirrored { start_ns: crate::model::units::ms_to_ns(spec.phases[i].start_ms), spec: spec.clone(), phase: i })
@@ -316,7 +79,7 @@ impl Server {
         Server { settings, commands, applied, shared, telemetry, timeline, events: Vec::new(), log: None, log_failed: false, next_id: 0, sent: Vec::new() }
     }
 
-    fn run(mut self, ready: mpsc::Sender<anyhow::Result<()>>) -> Vec<ControlEvent> {
+    pub(super) fn run(mut self, ready: mpsc::Sender<anyhow::Result<()>>) -> Vec<ControlEvent> {
         let opened = (|| -> anyhow::Result<_> {
             let node = IpcNode::open(&self.settings.run, Role::Tool)?;
             let server = ControlServer::open(&node)?;
@@ -555,14 +318,6 @@ impl Server {
     }
 }
 
-impl ControlEvent {
-    /// When it took effect, ns from the run's first frame: exact where the
-    /// event says, else from its seconds.
-    pub fn at_ns(&self) -> u64 {
-        self.t_ns.unwrap_or_else(|| (self.t_s * 1e9).round() as u64)
-    }
-}
-
 /// Whether `e` is a switch (pauses are not cut by a later switch).
 fn is_switch(e: &ControlEvent) -> bool {
     !matches!(e.action, Some(Action::Pause | Action::Resume))
@@ -574,20 +329,6 @@ fn at(at_ms: Option<f64>) -> Result<Option<u64>, String> {
         None => Ok(None),
         Some(ms) if ms.is_finite() && (0.0..=crate::model::units::MAX_PHASE_START_MS).contains(&ms) => Ok(Some(crate::model::units::ms_to_ns(ms))),
         Some(ms) => Err(format!("--at must be a time from 0 to one year after the run's first frame, got {ms} ms")),
-    }
-}
-
-/// The scenario a request names, with the scenario parser's errors.
-pub fn resolve(t: &Target) -> Result<ScenarioSpec, ScenarioError> {
-    match t {
-        Target::Preset(name) => preset(name).ok_or_else(|| ScenarioError {
-            origin: name.clone(),
-            line: None,
-            location: None,
-            field: None,
-            problem: format!("not a preset (presets: {})", PRESET_NAMES.join(", ")),
-        }),
-        Target::Toml { text, origin, name } => parse_str(text, origin, name),
     }
 }
 
@@ -609,6 +350,3 @@ fn refuse(e: &crate::transport::ipc::control::RequestError) -> Vec<u8> {
     let resp = Response { ok: false, message: format!("bad request: {e}"), state: None };
     serde_json::to_vec(&resp).expect("a response always serializes")
 }
-
-/// Headroom of phases a run reserves for switches.
-pub const PHASE_ROOM: usize = MAX_RUN_PHASES;
