@@ -193,8 +193,12 @@ fn run_ok(mut c: Command, what: &str) -> Output {
     o
 }
 
+#[track_caller]
 fn u(v: &Value) -> u64 {
-    v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
+    match v.as_u64() {
+        Some(n) => n,
+        None => panic!("not a count: {v}"),
+    }
 }
 
 /// entered = delivered + dropped + held_at_end, every frame the console

@@ -36,8 +36,12 @@ fn run(name: &str, args: &[&str]) -> (Value, bool, PathBuf) {
     (report, o.status.success(), out)
 }
 
+#[track_caller]
 fn u(v: &Value) -> u64 {
-    v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
+    match v.as_u64() {
+        Some(n) => n,
+        None => panic!("not a count: {v}"),
+    }
 }
 
 /// sent = entered = delivered + dropped + held_at_end, delivered = received.

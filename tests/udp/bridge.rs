@@ -33,8 +33,12 @@ pub(crate) fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+#[track_caller]
 pub(crate) fn u(v: &Value) -> u64 {
-    v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
+    match v.as_u64() {
+        Some(n) => n,
+        None => panic!("not a count: {v}"),
+    }
 }
 
 fn dropped_total(frames: &Value) -> u64 {
