@@ -7,7 +7,7 @@
 //! simulated time (tests, Monte Carlo) and in the real-time emulator.
 //! `transport` is the only module that touches iceoryx2; `service` holds the
 //! real-time loops that wire the core to it; `load` reads scenario files for
-//! the core's parser. `tests/purity.rs` checks that the core names no clock,
+//! the core's parser. `tests/purity/` checks that the core names no clock,
 //! file, thread, socket or iceoryx2.
 
 pub mod capture;

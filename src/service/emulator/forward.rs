@@ -170,7 +170,7 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
 /// The datagram classifier: checks size and checksum. `Ok((sequence,
 /// checksum_bad))` for a frame to decide; `Err` for one to reject, with
 /// its sequence if readable. Total over any sample (property-tested in
-/// `tests/input_prop.rs`).
+/// `tests/input_prop/`).
 #[inline]
 pub fn classify(s: &FrameSample, drop_bad_checksum: bool, accept_raw: bool, bad: &mut BadInput) -> Result<(u32, bool), (Invalid, Option<u32>)> {
     const KNOWN: u32 = FrameSample::FLAG_END | FrameSample::FLAG_RAW;
