@@ -193,6 +193,41 @@ fn run_ok(mut c: Command, what: &str) -> Output {
     o
 }
 
+/// `python3 -c code` with the client tree on its path (and no
+/// `NETFI_IOX_LAYOUT`: the module's own default).
+fn python_c(code: &str) -> Command {
+    let mut c = Command::new("python3");
+    c.env("PYTHONPATH", root().join("clients/python")).env_remove("NETFI_IOX_LAYOUT").args(["-c", code]);
+    c
+}
+
+/// What `python3 -c code` printed, as JSON.
+fn python_json(code: &str, what: &str) -> Value {
+    serde_json::from_slice(&run_ok(python_c(code), what).stdout).unwrap()
+}
+
+/// A payload's layout as netfi_iox gives it (`type_name`, `size`,
+/// `alignment`, `offsets`, and the `iceoryx2_type_name` its bindings see)
+/// is the Rust type `T`'s, field for field.
+fn assert_layout<T: iceoryx2::prelude::ZeroCopySend>(l: &Value, type_name: &str, offsets: &[(&str, usize)]) {
+    // SAFETY: type_name only returns the #[type_name] attribute's string.
+    let rust_name = unsafe { <T as iceoryx2::prelude::ZeroCopySend>::type_name() };
+    assert_eq!(l["iceoryx2_type_name"], rust_name);
+    assert_eq!(l["type_name"], type_name);
+    assert_eq!(u(&l["size"]), core::mem::size_of::<T>() as u64);
+    assert_eq!(u(&l["alignment"]), core::mem::align_of::<T>() as u64);
+    let off = &l["offsets"];
+    for (field, at) in offsets {
+        assert_eq!(u(&off[*field]), *at as u64, "{field}");
+    }
+    assert_eq!(off.as_object().unwrap().len(), offsets.len(), "a field the Rust type lacks: {off}");
+}
+
+/// `(name, offset)` of each named field of a type.
+macro_rules! offsets {
+    ($t:ty: $($f:ident),*) => { &[$((stringify!($f), core::mem::offset_of!($t, $f))),*] };
+}
+
 #[track_caller]
 fn u(v: &Value) -> u64 {
     match v.as_u64() {
@@ -228,12 +263,10 @@ fn the_python_interface_is_the_rust_one() {
         return;
     }
     let run = Run::new("layout");
-    let o = run_ok(
-        {
-            // No NETFI_IOX_LAYOUT: the module's own default must be this build's.
-            let mut c = Command::new("python3");
-            c.env("PYTHONPATH", root().join("clients/python")).env_remove("NETFI_IOX_LAYOUT").arg("-c").arg(format!(
-                r#"
+    // No NETFI_IOX_LAYOUT (python_c leaves it out): the module's own default must be this build's.
+    let py = python_json(
+        &format!(
+            r#"
 import json, netfi_iox as n, netfi_iox.run as r
 root, prefix = n.location("{id}")
 print(json.dumps({{
@@ -244,13 +277,10 @@ print(json.dumps({{
     "end": n.FLAG_END, "raw": n.FLAG_RAW, "itp_len": n.ITP_FRAME_LEN,
 }}))
 "#,
-                id = run.id
-            ));
-            c
-        },
+            id = run.id
+        ),
         "python3 netfi_iox",
     );
-    let py: Value = serde_json::from_slice(&o.stdout).unwrap();
     let rust_root = root_path(&run.config);
     assert_eq!(
         (py["prefix"].as_str().unwrap(), Path::new(py["root"].as_str().unwrap())),
@@ -275,64 +305,30 @@ print(json.dumps({{
     assert_eq!((u(&py["end"]), u(&py["raw"])), (FrameSample::FLAG_END as u64, FrameSample::FLAG_RAW as u64));
     assert_eq!(u(&py["itp_len"]), netfi::sample::ITP_FRAME_LEN as u64);
 
-    // The payload: the type name iceoryx2 sees, size, alignment, offsets.
-    let o = run_ok(
-        {
-            let mut c = Command::new("python3");
-            c.env("PYTHONPATH", root().join("clients/python"))
-                .args(["-c", "import json, iceoryx2, netfi_iox as n; l = n.layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FrameSample); print(json.dumps(l))"]);
-            c
-        },
+    // The payloads: the type name iceoryx2 sees, size, alignment, offsets.
+    let l = python_json(
+        "import json, iceoryx2, netfi_iox as n; l = n.layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FrameSample); print(json.dumps(l))",
         "python3 netfi_iox.layout",
     );
-    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
-    // SAFETY: type_name only returns the #[type_name] attribute's string.
-    let rust_name = unsafe { <FrameSample as iceoryx2::prelude::ZeroCopySend>::type_name() };
-    assert_eq!(l["iceoryx2_type_name"], rust_name);
-    assert_eq!(l["type_name"], FrameSample::TYPE_NAME);
-    assert_eq!(u(&l["size"]), core::mem::size_of::<FrameSample>() as u64);
-    assert_eq!(u(&l["alignment"]), core::mem::align_of::<FrameSample>() as u64);
-    let off = &l["offsets"];
-    macro_rules! same_offset {
-        ($($f:ident),*) => {$(
-            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(FrameSample, $f) as u64, stringify!($f));
-        )*};
-    }
-    same_offset!(send_ns, console_index, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns, len, flags, wire, _pad);
-    assert_eq!(off.as_object().unwrap().len(), 11, "a field the Rust type lacks: {off}");
-
-    // The feedback payload, likewise.
+    assert_layout::<FrameSample>(
+        &l,
+        FrameSample::TYPE_NAME,
+        offsets!(FrameSample: send_ns, console_index, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns, len, flags, wire, _pad),
+    );
     use netfi::sample::FeedbackSample;
-    let o = run_ok(
-        {
-            let mut c = Command::new("python3");
-            c.env("PYTHONPATH", root().join("clients/python")).args([
-                "-c",
-                "import json, iceoryx2, netfi_iox as n; l = n.feedback_layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FeedbackSample); print(json.dumps(l))",
-            ]);
-            c
-        },
+    let l = python_json(
+        "import json, iceoryx2, netfi_iox as n; l = n.feedback_layout(); l['iceoryx2_type_name'] = iceoryx2.get_type_name(n.FeedbackSample); print(json.dumps(l))",
         "python3 netfi_iox.feedback_layout",
     );
-    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
-    // SAFETY: as above.
-    let rust_name = unsafe { <FeedbackSample as iceoryx2::prelude::ZeroCopySend>::type_name() };
-    assert_eq!(l["iceoryx2_type_name"], rust_name);
-    assert_eq!(l["type_name"], FeedbackSample::TYPE_NAME);
-    assert_eq!(u(&l["size"]), core::mem::size_of::<FeedbackSample>() as u64);
-    assert_eq!(u(&l["alignment"]), core::mem::align_of::<FeedbackSample>() as u64);
-    let off = &l["offsets"];
-    macro_rules! same_feedback_offset {
-        ($($f:ident),*) => {$(
-            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(FeedbackSample, $f) as u64, stringify!($f));
-        )*};
-    }
-    same_feedback_offset!(
-        send_ns, robot_index, console_index, command_send_ns, command_ingress_ns, command_release_ns,
-        command_injected_delay_ns, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns,
-        sequence, flags, position, rotation, grasp, commands
+    assert_layout::<FeedbackSample>(
+        &l,
+        FeedbackSample::TYPE_NAME,
+        offsets!(FeedbackSample:
+            send_ns, robot_index, console_index, command_send_ns, command_ingress_ns, command_release_ns,
+            command_injected_delay_ns, ingress_index, ingress_ns, injected_delay_ns, release_sched_ns, release_ns,
+            sequence, flags, position, rotation, grasp, commands
+        ),
     );
-    assert_eq!(off.as_object().unwrap().len(), 18, "a field the Rust type lacks: {off}");
 }
 
 /// The Python module finds the user's iceoryx2 root in netfi's order
@@ -356,12 +352,11 @@ fn the_python_root_follows_netfis_order() {
     std::fs::DirBuilder::new().mode(0o700).create(&base).unwrap();
     let (named, open, xdg) = (dir("named", 0o700), dir("open", 0o755), dir("xdg", 0o700));
     let root_with = |env: &[(&str, &Path)]| {
-        let mut c = Command::new("python3");
-        c.env("PYTHONPATH", root().join("clients/python")).env_remove("NETFI_IPC_ROOT").env_remove("XDG_RUNTIME_DIR");
+        let mut c = python_c("import netfi_iox.run as r; print(r.user_root_dir())");
+        c.env_remove("NETFI_IPC_ROOT").env_remove("XDG_RUNTIME_DIR");
         for (k, v) in env {
             c.env(k, v);
         }
-        c.args(["-c", "import netfi_iox.run as r; print(r.user_root_dir())"]);
         String::from_utf8(run_ok(c, "python3 user_root_dir").stdout).unwrap().trim().to_string()
     };
     let slash = |p: &Path| format!("{}/", p.display());
@@ -385,14 +380,7 @@ fn python_itp_frames_are_rust_itp_frames() {
     }
     let run = Run::new("codec");
     let o = run_ok(
-        {
-            let mut c = Command::new("python3");
-            c.env("PYTHONPATH", root().join("clients/python")).args([
-                "-c",
-                "import sys, netfi_iox as n; f = n.ItpFrame(sequence=2**32-1, delx=(2**31-1, -5), dely=(7, 8), delz=(-9, 10), qx=(0.5, -0.25), buttonstate=(1, 2), grasp=(300, -4), surgeon_mode=1).seal(); sys.stdout.buffer.write(f.encode())",
-            ]);
-            c
-        },
+        python_c("import sys, netfi_iox as n; f = n.ItpFrame(sequence=2**32-1, delx=(2**31-1, -5), dely=(7, 8), delz=(-9, 10), qx=(0.5, -0.25), buttonstate=(1, 2), grasp=(300, -4), surgeon_mode=1).seal(); sys.stdout.buffer.write(f.encode())"),
         "python3 ItpFrame.encode",
     );
     let wire = o.stdout;
@@ -730,10 +718,9 @@ with n.RunNode(sys.argv[1], "tool") as node:
     print("ready", flush=True)
     sys.stdin.read()
 "#;
-    let mut c = Command::new("python3");
-    c.env("PYTHONPATH", root().join("clients/python"))
-        .env("NETFI_IOX_LAYOUT", rust_layout(&run.config))
-        .args(["-c", holder, &run.id])
+    let mut c = python_c(holder);
+    c.env("NETFI_IOX_LAYOUT", rust_layout(&run.config))
+        .arg(&run.id)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -812,31 +799,14 @@ print(json.dumps(l))
 "#,
         gops = serde_json::to_string(&gops.iter().map(|g| serde_json::json!([g.0, g.1, g.2, g.3])).collect::<Vec<_>>()).unwrap()
     );
-    let o = run_ok(
-        {
-            let mut c = Command::new("python3");
-            c.env("PYTHONPATH", root().join("clients/python")).args(["-c", &script]);
-            c
-        },
-        "python3 netfi_iox.video_header_layout",
+    let l = python_json(&script, "python3 netfi_iox.video_header_layout");
+    assert_layout::<VideoHeader>(
+        &l,
+        VideoHeader::TYPE_NAME,
+        offsets!(VideoHeader: send_ns, frame_index, ingress_index, ingress_ns, release_sched_ns, release_ns, len, flags, gop_index, _reserved),
     );
-    let l: Value = serde_json::from_slice(&o.stdout).unwrap();
     // SAFETY: type_name only returns the #[type_name] attribute's string.
-    let rust_name = unsafe { <VideoHeader as iceoryx2::prelude::ZeroCopySend>::type_name() };
-    assert_eq!(l["iceoryx2_type_name"], rust_name);
-    assert_eq!(l["type_name"], VideoHeader::TYPE_NAME);
-    // SAFETY: as above.
     assert_eq!(l["payload"], unsafe { <u8 as iceoryx2::prelude::ZeroCopySend>::type_name() });
-    assert_eq!(u(&l["size"]), core::mem::size_of::<VideoHeader>() as u64);
-    assert_eq!(u(&l["alignment"]), core::mem::align_of::<VideoHeader>() as u64);
-    let off = &l["offsets"];
-    macro_rules! same_offset {
-        ($($f:ident),*) => {$(
-            assert_eq!(u(&off[stringify!($f)]), core::mem::offset_of!(VideoHeader, $f) as u64, stringify!($f));
-        )*};
-    }
-    same_offset!(send_ns, frame_index, ingress_index, ingress_ns, release_sched_ns, release_ns, len, flags, gop_index, _reserved);
-    assert_eq!(off.as_object().unwrap().len(), 10, "a field the Rust type lacks: {off}");
     assert_eq!(l["flags"], serde_json::json!([VideoHeader::FLAG_END, VideoHeader::FLAG_KEY]));
     assert_eq!(
         l["limits"],
@@ -1031,11 +1001,7 @@ fn the_python_capture_reader_reads_every_frame_and_refuses_garbage() {
         })
         .collect();
     let load = |path: &Path| {
-        let mut c = Command::new("python3");
-        c.args(["-c", "import sys; from netfi_iox import capture; r = capture.load(sys.argv[1]); print(len(r), r[-1][0])"])
-            .arg(path)
-            .env("PYTHONPATH", root().join("clients/python"));
-        c.output().unwrap()
+        python_c("import sys; from netfi_iox import capture; r = capture.load(sys.argv[1]); print(len(r), r[-1][0])").arg(path).output().unwrap()
     };
     let batched = write("batched.bin", &records);
     let o = load(&batched);

@@ -8,7 +8,7 @@ Rust test ``tests/python`` checks them against the Rust type.
 
 import ctypes
 
-from .layout import check_layout, layout_of
+from .layout import Payload, check_layout, layout_of
 
 #: The iceoryx2 type name of the payload. A layout or meaning change bumps
 #: the ``.vN`` suffix; iceoryx2 refuses to connect ports whose names differ.
@@ -29,7 +29,7 @@ FLAG_END = 1
 FLAG_RAW = 2
 
 
-class FrameSample(ctypes.Structure):
+class FrameSample(Payload):
     """One frame in shared memory: the 124 wire bytes plus metadata.
 
     All times are CLOCK_MONOTONIC nanoseconds (``time.monotonic_ns()`` in
@@ -50,14 +50,8 @@ class FrameSample(ctypes.Structure):
         ("_pad", ctypes.c_uint8 * 4),
     ]
 
-    @staticmethod
-    def type_name() -> str:
-        """The iceoryx2 type name (read by ``iceoryx2.get_type_name``)."""
-        return TYPE_NAME
-
-    def is_end(self) -> bool:
-        """Whether this sample is an end-of-stream marker."""
-        return bool(self.flags & FLAG_END)
+    TYPE_NAME = TYPE_NAME
+    END_FLAG = FLAG_END
 
     def payload(self) -> bytes:
         """The valid wire bytes (``len`` of them, at most 124)."""
@@ -109,7 +103,7 @@ def end_marker(frames_sent: int) -> FrameSample:
 FEEDBACK_TYPE_NAME = "netfi::FeedbackSample.v1"
 
 
-class FeedbackSample(ctypes.Structure):
+class FeedbackSample(Payload):
     """The robot's feedback, one per command it received: which command it
     answers, the robot's integrated pose then, and the emulator's stamps of
     both directions (docs/interface.md). Mirrors ``FeedbackSample`` of
@@ -136,14 +130,8 @@ class FeedbackSample(ctypes.Structure):
         ("commands", ctypes.c_uint64),
     ]
 
-    @staticmethod
-    def type_name() -> str:
-        """The iceoryx2 type name (read by ``iceoryx2.get_type_name``)."""
-        return FEEDBACK_TYPE_NAME
-
-    def is_end(self) -> bool:
-        """Whether this sample is the end of the feedback stream."""
-        return bool(self.flags & FLAG_END)
+    TYPE_NAME = FEEDBACK_TYPE_NAME
+    END_FLAG = FLAG_END
 
 
 #: Byte offset of every field of :class:`FeedbackSample`.

@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 import iceoryx2 as iox
 
-from .layout import check_layout, layout_of
+from .layout import Payload, check_layout, layout_of
 from .ports import MAX_SUBSCRIBERS_PER_CHANNEL, PublishingEnd, SubscribingEnd
 
 #: The iceoryx2 type name of the user header.
@@ -49,7 +49,7 @@ VIDEO_PAYLOAD = iox.Slice[ctypes.c_uint8]
 CHECK_STRIDE = 509
 
 
-class VideoHeader(ctypes.Structure):
+class VideoHeader(Payload):
     """The header beside each video frame. Times are CLOCK_MONOTONIC ns
     (``time.monotonic_ns()``)."""
 
@@ -66,14 +66,8 @@ class VideoHeader(ctypes.Structure):
         ("_reserved", ctypes.c_uint32),
     ]
 
-    @staticmethod
-    def type_name() -> str:
-        """The iceoryx2 type name (read by ``iceoryx2.get_type_name``)."""
-        return VIDEO_HEADER_TYPE_NAME
-
-    def is_end(self) -> bool:
-        """Whether this is the end marker."""
-        return bool(self.flags & FLAG_VIDEO_END)
+    TYPE_NAME = VIDEO_HEADER_TYPE_NAME
+    END_FLAG = FLAG_VIDEO_END
 
     def is_key(self) -> bool:
         """Whether the frame is a key frame."""
