@@ -22,6 +22,7 @@ pub mod args;
 pub mod console;
 pub mod control;
 pub mod emulator;
+pub mod error;
 pub mod link;
 pub mod plan;
 pub mod report;

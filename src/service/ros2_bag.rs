@@ -22,14 +22,66 @@
 //!   a count, messages in an encapsulation other than little-endian CDR.
 
 use crate::service::args::{millis, seconds, DEFAULT_MAX_BYTES};
-use crate::service::emulator::ros2_plan::domain;
-use crate::transport::ros2::{port::unix_ns, qos, Payload, Role, Ros2Node, Slots, TopicName, TypeName};
-use anyhow::{bail, Context};
+use crate::service::emulator::ros2_plan::{domain, Ros2PlanError};
+use crate::transport::ros2::{port::unix_ns, qos, NameError, OpenError, Payload, Role, Ros2Node, Slots, TakeError, TopicName, TypeName};
 use clap::{Args, Subcommand};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
+
+/// Why a recording was not made, or not replayed.
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    /// The domain.
+    #[error(transparent)]
+    Domain(#[from] Ros2PlanError),
+    /// The participant, a reader or a writer.
+    #[error(transparent)]
+    Dds(#[from] OpenError),
+    #[error(transparent)]
+    Take(#[from] TakeError),
+    /// Writing the MCAP file.
+    #[error(transparent)]
+    Mcap(#[from] mcap::McapError),
+    #[error("creating {}", .0.display())]
+    Create(PathBuf, #[source] std::io::Error),
+    #[error("writing {}", .0.display())]
+    Ready(PathBuf, #[source] std::io::Error),
+    #[error("reading {}", .0.display())]
+    Read(PathBuf, #[source] std::io::Error),
+    #[error("reading {}", .0.display())]
+    ReadMcap(PathBuf, #[source] mcap::McapError),
+    #[error("topic {text}")]
+    Topic {
+        text: String,
+        #[source]
+        cause: NameError,
+    },
+    #[error("no publisher of {topic} within {seconds} s: its type is not known")]
+    NoPublisher { topic: TopicName, seconds: f64 },
+    /// A type as its publisher, or the recording, names it.
+    #[error("{}the type of {topic}", .file.as_ref().map(|f| format!("{}: ", f.display())).unwrap_or_default())]
+    Type {
+        file: Option<PathBuf>,
+        topic: TopicName,
+        #[source]
+        cause: NameError,
+    },
+    #[error("{}: topic {topic}", .file.display())]
+    RecordedTopic {
+        file: PathBuf,
+        topic: String,
+        #[source]
+        cause: NameError,
+    },
+    #[error("{}: topic {topic} has no schema (no type)", .file.display())]
+    NoSchema { file: PathBuf, topic: String },
+    #[error("--rate must be above 0, got {0}")]
+    Rate(f64),
+    #[error("{}: no message of encoding cdr to replay", .0.display())]
+    Empty(PathBuf),
+}
 
 /// `netfi ros2 …`.
 #[derive(Debug, Subcommand)]
@@ -97,7 +149,7 @@ pub struct ReplayArgs {
 const CDR_LE_HEADER: [u8; 4] = [0, 1, 0, 0];
 
 /// Runs `netfi ros2 …`.
-pub fn run(cmd: Ros2Cmd) -> anyhow::Result<()> {
+pub fn run(cmd: Ros2Cmd) -> Result<(), BagError> {
     match cmd {
         Ros2Cmd::Record(a) => record(&a).map(|n| eprintln!("ros2 record: {n} messages into {}", a.out.display())),
         Ros2Cmd::Replay(a) => replay(&a).map(|n| eprintln!("ros2 replay: {n} messages published from {}", a.file.display())),
@@ -120,18 +172,18 @@ fn wait_until(node: &mut Ros2Node, wait: Duration, mut ready: impl FnMut(&Ros2No
 }
 
 /// Records `a.topics` into `a.out`; the messages written.
-pub fn record(a: &RecordArgs) -> anyhow::Result<u64> {
+pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
     let mut node = Ros2Node::open(domain(a.ros2_domain)?)?;
-    let file = std::fs::File::create(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let file = std::fs::File::create(&a.out).map_err(|e| BagError::Create(a.out.clone(), e))?;
     let mut out = mcap::Writer::new(std::io::BufWriter::new(file))?;
     let mut readers = Vec::new();
     for text in &a.topics {
-        let topic = TopicName::parse(text).with_context(|| format!("topic {text}"))?;
+        let topic = TopicName::parse(text).map_err(|cause| BagError::Topic { text: text.clone(), cause })?;
         let found = wait_until(&mut node, Duration::from_secs_f64(a.discovery_s), |n| n.remotes(&topic, Role::Publisher).next().is_some());
         let Some(p) = found.then(|| node.remotes(&topic, Role::Publisher).next().cloned()).flatten() else {
-            bail!("no publisher of {topic} within {} s: its type is not known", a.discovery_s);
+            return Err(BagError::NoPublisher { topic, seconds: a.discovery_s });
         };
-        let type_name = TypeName::parse(&p.dds_type).with_context(|| format!("the type of {topic}"))?;
+        let type_name = TypeName::parse(&p.dds_type).map_err(|cause| BagError::Type { file: None, topic: topic.clone(), cause })?;
         let reader = node.reader(&topic, &type_name, &qos::reader(&p.qos))?;
         let definition = crate::ros2msg::Kind::of(&type_name.ros()).map_or("", crate::ros2msg::Kind::definition);
         let schema = out.add_schema(&type_name.ros(), "ros2msg", definition.as_bytes())?;
@@ -141,7 +193,7 @@ pub fn record(a: &RecordArgs) -> anyhow::Result<u64> {
         readers.push((reader, channel));
     }
     if let Some(r) = &a.ready {
-        std::fs::write(r, b"").with_context(|| format!("writing {}", r.display()))?;
+        std::fs::write(r, b"").map_err(|e| BagError::Ready(r.clone(), e))?;
     }
     let slots = RefCell::new(Slots::new(1, a.max_bytes));
     let slot = slots.borrow_mut().alloc().expect("one slot");
@@ -193,14 +245,17 @@ struct Recorded {
 
 /// Publishes `a.file`'s messages at their recorded spacing; those
 /// published.
-pub fn replay(a: &ReplayArgs) -> anyhow::Result<u64> {
-    anyhow::ensure!(a.rate.is_finite() && a.rate > 0.0, "--rate must be above 0, got {}", a.rate);
-    let bytes = std::fs::read(&a.file).with_context(|| format!("reading {}", a.file.display()))?;
+pub fn replay(a: &ReplayArgs) -> Result<u64, BagError> {
+    if !(a.rate.is_finite() && a.rate > 0.0) {
+        return Err(BagError::Rate(a.rate));
+    }
+    let bytes = std::fs::read(&a.file).map_err(|e| BagError::Read(a.file.clone(), e))?;
     let mut node = Ros2Node::open(domain(a.ros2_domain)?)?;
     let (mut writers, mut by_channel, mut messages) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut skipped = 0u64;
-    for m in mcap::MessageStream::new(&bytes).with_context(|| format!("reading {}", a.file.display()))? {
-        let m = m.with_context(|| format!("reading {}", a.file.display()))?;
+    let unread = |e| BagError::ReadMcap(a.file.clone(), e);
+    for m in mcap::MessageStream::new(&bytes).map_err(unread)? {
+        let m = m.map_err(unread)?;
         let c = &m.channel;
         if c.message_encoding != "cdr" || !(a.topics.is_empty() || a.topics.contains(&c.topic)) {
             continue;
@@ -208,9 +263,9 @@ pub fn replay(a: &ReplayArgs) -> anyhow::Result<u64> {
         let k = match by_channel.get(&c.id) {
             Some(k) => *k,
             None => {
-                let topic = TopicName::parse(&c.topic).with_context(|| format!("{}: topic {}", a.file.display(), c.topic))?;
-                let schema = c.schema.as_ref().with_context(|| format!("{}: topic {} has no schema (no type)", a.file.display(), c.topic))?;
-                let type_name = TypeName::parse(&schema.name).with_context(|| format!("{}: the type of {topic}", a.file.display()))?;
+                let topic = TopicName::parse(&c.topic).map_err(|cause| BagError::RecordedTopic { file: a.file.clone(), topic: c.topic.clone(), cause })?;
+                let schema = c.schema.as_ref().ok_or_else(|| BagError::NoSchema { file: a.file.clone(), topic: c.topic.clone() })?;
+                let type_name = TypeName::parse(&schema.name).map_err(|cause| BagError::Type { file: Some(a.file.clone()), topic: topic.clone(), cause })?;
                 eprintln!("ros2 replay: {topic} ({type_name})");
                 writers.push((node.writer(&topic, &type_name, &qos::relay(None))?, topic));
                 by_channel.insert(c.id, writers.len() - 1);
@@ -223,7 +278,9 @@ pub fn replay(a: &ReplayArgs) -> anyhow::Result<u64> {
         }
         messages.push(Recorded { log_time: m.log_time, writer: k, data: m.data[4..].to_vec() });
     }
-    anyhow::ensure!(!messages.is_empty(), "{}: no message of encoding cdr to replay", a.file.display());
+    if messages.is_empty() {
+        return Err(BagError::Empty(a.file.clone()));
+    }
     messages.sort_by_key(|m| m.log_time);
     let all = wait_until(&mut node, Duration::from_secs_f64(a.wait_for_subscribers_s), |n| writers.iter().all(|(_, t)| n.remotes(t, Role::Subscriber).next().is_some()));
     if !all {

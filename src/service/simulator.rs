@@ -23,7 +23,7 @@ use crate::transport::open_node;
 use crate::transport::FrameSource;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
-use anyhow::{Context, Result};
+use crate::service::error::ServiceError;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
@@ -266,12 +266,12 @@ impl Robot {
 }
 
 /// Runs the simulator; returns its report (also `simulator.json`).
-pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
+pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
     crate::service::write_pid(&args.out, "simulator")?;
     let node = open_node(&args.run_id, Role::Simulator)?;
-    let mut port = node.subscriber(Channel::Emulator).context("opening the emulator → simulator port")?;
-    let mut direct = node.subscriber(Channel::Direct).context("opening the console → simulator port")?;
-    let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).context("opening the robot → emulator feedback port")?;
+    let mut port = node.subscriber(Channel::Emulator).map_err(|e| ServiceError::Subscriber("emulator → simulator", e))?;
+    let mut direct = node.subscriber(Channel::Direct).map_err(|e| ServiceError::Subscriber("console → simulator", e))?;
+    let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).map_err(|e| ServiceError::Publisher("robot → emulator feedback", e))?;
     signals::install();
     crate::host::placement::place("simulator", args.pin.core, args.pin.avoid_core)?;
     // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.
@@ -283,7 +283,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     };
     let mut robot = Robot::new(args)?;
     let steal_timer = StealTimer::start();
-    std::fs::write(args.out.join("simulator.ready"), b"").context("writing simulator.ready")?;
+    std::fs::write(args.out.join("simulator.ready"), b"").map_err(|e| ServiceError::Ready("simulator.ready", e))?;
     let t_start = now_ns();
     let mut s = FrameSample::ZERO;
     let mut d = FrameSample::ZERO;
@@ -334,7 +334,6 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport> {
     let _ = feedback_port.send(&FeedbackSample::end_marker(robot.feedback_sent));
     let mut report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
     report.camera = camera.map(|c| c.finish()).transpose()?;
-    let path = args.out.join("simulator.json");
-    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    crate::service::error::write_report(args.out.join("simulator.json"), &report)?;
     Ok(report)
 }

@@ -134,9 +134,9 @@ pub async fn report(State(ui): State<Arc<Ui>>, Path(id): Path<String>) -> Respon
     let page = tokio::task::spawn_blocking(move || {
         let path = out.join("report.html");
         if !path.exists() {
-            crate::html::write(&out)?;
+            crate::html::write(&out).map_err(super::UiError::from)?;
         }
-        std::fs::read_to_string(&path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))
+        std::fs::read_to_string(&path).map_err(|cause| super::UiError::Read { path, cause })
     })
     .await;
     match page {

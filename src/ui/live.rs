@@ -55,12 +55,12 @@ impl Telemetry {
     /// Follows the telemetry of `run_id` with `netfi` until
     /// [`Telemetry::stop`] or the run's emulator ends (until its telemetry
     /// exists, it asks again every 200 ms).
-    pub fn follow(netfi: &Path, run_id: &str) -> anyhow::Result<Telemetry> {
+    pub fn follow(netfi: &Path, run_id: &str) -> Result<Telemetry, super::UiError> {
         let samples = Arc::new(Mutex::new(VecDeque::with_capacity(KEPT)));
         let stop = Arc::new(AtomicBool::new(false));
         let child = Arc::new(AtomicU32::new(0));
         let (s, st, c, exe, id) = (samples.clone(), stop.clone(), child.clone(), netfi.to_path_buf(), run_id.to_string());
-        let thread = std::thread::Builder::new().name("ui-telemetry".into()).spawn(move || watch(&exe, &id, &s, &st, &c))?;
+        let thread = std::thread::Builder::new().name("ui-telemetry".into()).spawn(move || watch(&exe, &id, &s, &st, &c)).map_err(super::UiError::Thread)?;
         Ok(Telemetry { samples, stop, child, thread: Some(thread) })
     }
 

@@ -19,6 +19,7 @@
 
 mod api;
 mod builder;
+pub mod error;
 pub mod guard;
 mod live;
 mod page;
@@ -26,7 +27,7 @@ mod preview;
 mod runs;
 mod study;
 
-use anyhow::Context;
+pub use error::UiError;
 use std::future::IntoFuture;
 use axum::routing::{get, post};
 use axum::Router;
@@ -58,11 +59,11 @@ pub(crate) struct Ui {
 }
 
 /// Serves until SIGINT/SIGTERM; stops the runs it started on the way out.
-pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
+pub fn serve(opts: UiOptions) -> Result<(), UiError> {
     let token = if opts.no_token { None } else { Some(guard::new_token()?) };
     // Checked before anything listens: no token is for loopback only.
     guard::Guard::new(opts.bind, token.clone(), opts.allow_hosts.clone())?;
-    let mask = runs::CpuMask::current().context("reading this process's CPU mask")?;
+    let mask = runs::CpuMask::current().map_err(UiError::Mask)?;
     keep_off_core(opts.emulator_core)?;
     if !opts.bind.ip().is_loopback() {
         eprintln!(
@@ -71,20 +72,19 @@ pub fn serve(opts: UiOptions) -> anyhow::Result<()> {
             opts.bind
         );
     }
-    std::fs::create_dir_all(&opts.out_dir).with_context(|| format!("creating {}", opts.out_dir.display()))?;
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the server's runtime")?;
+    std::fs::create_dir_all(&opts.out_dir).map_err(|e| UiError::Create { path: opts.out_dir.clone(), cause: e })?;
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(UiError::Runtime)?;
     let ui = Arc::new(Ui { runs: runs::Runs::new(mask), opts });
     rt.block_on(async move {
-        let listener =
-            tokio::net::TcpListener::bind(ui.opts.bind).await.with_context(|| format!("listening on {}", ui.opts.bind))?;
-        let addr = listener.local_addr()?;
+        let listener = tokio::net::TcpListener::bind(ui.opts.bind).await.map_err(|e| UiError::Listen { addr: ui.opts.bind, cause: e })?;
+        let addr = listener.local_addr().map_err(|e| UiError::Listen { addr: ui.opts.bind, cause: e })?;
         let guard = Arc::new(guard::Guard::new(addr, token, ui.opts.allow_hosts.clone())?);
         println!("netfi ui on {}", guard.url());
         let app = router(ui.clone(), guard);
         // A signal ends the serving at once: a browser's idle keep-alive
         // connection would hold a graceful shutdown open for ever.
         tokio::select! {
-            served = axum::serve(listener, app).into_future() => served.context("serving")?,
+            served = axum::serve(listener, app).into_future() => served.map_err(UiError::Serve)?,
             () = shutdown() => {}
         }
         ui.runs.stop_all();
@@ -131,7 +131,7 @@ async fn shutdown() {
 
 /// Keeps this process (its threads start after this) off the emulator's
 /// core; on a one-core host that cannot be, and is said loudly.
-fn keep_off_core(emulator_core: usize) -> anyhow::Result<()> {
+fn keep_off_core(emulator_core: usize) -> Result<(), UiError> {
     if crate::host::cores_except(emulator_core).is_none() {
         eprintln!("WARNING: netfi ui shares core {emulator_core} with the runs' emulators: there is no other core");
         return Ok(());

@@ -4,7 +4,7 @@
 //! their reports.
 
 use super::UiOptions;
-use anyhow::{bail, Context};
+use super::UiError;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -129,13 +129,11 @@ impl Start {
     /// The options of `netfi run` this start asks for (after the scenario
     /// and the run's own `--out`, `--run-id`). A choice that names no
     /// preset is an error saying which.
-    fn options(&self) -> anyhow::Result<Vec<String>> {
+    fn options(&self) -> Result<Vec<String>, UiError> {
         let mut a = vec!["--duration-s".to_string(), self.duration_s.to_string()];
-        let preset = |what: &str, name: &str| -> anyhow::Result<String> {
-            match crate::scenario::canonical_name(name) {
-                Some(_) => Ok(name.to_string()),
-                None => bail!("{what} `{name}` is not a preset (presets: {})", crate::scenario::PRESET_NAMES.join(", ")),
-            }
+        let preset = |what: &'static str, name: &str| match crate::scenario::canonical_name(name) {
+            Some(_) => Ok(name.to_string()),
+            None => Err(UiError::NotPreset { what, name: name.to_string() }),
         };
         if let Some(seed) = self.seed {
             a.extend(["--seed".into(), seed.to_string()]);
@@ -156,7 +154,7 @@ impl Start {
         }
         if let Some(c) = self.capture.as_deref().map(str::trim).filter(|c| !c.is_empty()) {
             if !std::path::Path::new(c).is_file() {
-                bail!("capture `{c}`: no such file on this host (give the path of an LZ4 ITP capture, or leave it empty for synthetic motion)");
+                return Err(UiError::NoCapture(c.to_string()));
             }
             a.extend(["--capture".into(), c.to_string()]);
         }
@@ -178,12 +176,12 @@ struct RunCommand {
 /// Checks `argv` (after `netfi run`) as `netfi run` would, before any
 /// process starts: the first paragraph of clap's message, or the
 /// arguments' own check.
-fn check_run_args(argv: &[String]) -> anyhow::Result<()> {
+fn check_run_args(argv: &[String]) -> Result<(), UiError> {
     use clap::Parser;
     let parsed = RunCommand::try_parse_from(std::iter::once("netfi run".to_string()).chain(argv.iter().cloned())).map_err(|e| {
         let text = e.render().to_string();
         let first = text.split("\n\n").next().unwrap_or(&text).trim().trim_start_matches("error: ").to_string();
-        anyhow::anyhow!("{first}")
+        UiError::RunOptions(first)
     })?;
     parsed.run.validate()?;
     Ok(())
@@ -196,10 +194,10 @@ impl Runs {
 
     /// Validates the scenario (the parser's own errors) and the options (as
     /// `netfi run` reads them) and starts `netfi run`; the run's id.
-    pub fn start(&self, opts: &UiOptions, req: &Start) -> anyhow::Result<String> {
+    pub fn start(&self, opts: &UiOptions, req: &Start) -> Result<String, UiError> {
         let scenario = crate::scenario::parse_str(&req.toml, "scenario", "scenario")?.name;
         if !(req.duration_s.is_finite() && req.duration_s > 0.0 && req.duration_s <= 86_400.0) {
-            bail!("the duration must be between 0 and 86400 s, got {}", req.duration_s);
+            return Err(UiError::Duration(req.duration_s));
         }
         // A run started here may be switched to any scenario: its queue
         // keeps release-time order whatever its own scenario.
@@ -208,12 +206,12 @@ impl Runs {
         check_run_args(&[vec!["scenario.toml".to_string()], options.clone()].concat())?;
         let id = format!("ui{}-{}", std::process::id(), self.next.fetch_add(1, Ordering::Relaxed) + 1);
         let out = opts.out_dir.join(&id);
-        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        std::fs::create_dir_all(&out).map_err(|e| UiError::Create { path: out.clone(), cause: e })?;
         let input = out.join("scenario.input.toml");
-        std::fs::write(&input, &req.toml).with_context(|| format!("writing {}", input.display()))?;
-        let log = |name: &str| -> anyhow::Result<std::fs::File> {
+        std::fs::write(&input, &req.toml).map_err(|e| UiError::Write { path: input.clone(), cause: e })?;
+        let log = |name: &str| {
             let p = out.join(name);
-            std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))
+            std::fs::File::create(&p).map_err(|e| UiError::Create { path: p, cause: e })
         };
         let mut cmd = Command::new(&opts.netfi);
         cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id]).args(&options);
@@ -223,7 +221,7 @@ impl Runs {
             .stdout(log("run.stdout")?)
             .stderr(log("run.stderr")?)
             .spawn()
-            .with_context(|| format!("starting {}", opts.netfi.display()))?;
+            .map_err(|e| UiError::Spawn { path: opts.netfi.clone(), cause: e })?;
         let telemetry = super::live::Telemetry::follow(&opts.netfi, &id).ok();
         let started_unix_s = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
         let run = Run {

@@ -29,9 +29,9 @@ fn main() -> std::process::ExitCode {
     let result = match args.command {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
         cli::Command::Run(a) => run(&a),
-        cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()),
-        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r))),
-        cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()),
+        cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()).map_err(Into::into),
+        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r))).map_err(Into::into),
+        cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()).map_err(Into::into),
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),
         cli::Command::Restore(a) => restore::run(a),
@@ -41,7 +41,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Report(a) => report::run(&a),
         cli::Command::Ctl(a) => ctl::run(a),
         cli::Command::Study(a) => study::run(a),
-        cli::Command::Ros2(cmd) => netfi::service::ros2_bag::run(cmd),
+        cli::Command::Ros2(cmd) => netfi::service::ros2_bag::run(cmd).map_err(Into::into),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -74,12 +74,12 @@ fn run(args: &netfi::service::args::RunArgs) -> anyhow::Result<()> {
 /// `netfi ui`: serves until interrupted.
 fn ui(a: cli::UiArgs) -> anyhow::Result<()> {
     let last_core = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).max().unwrap_or(0);
-    netfi::ui::serve(netfi::ui::UiOptions {
+    Ok(netfi::ui::serve(netfi::ui::UiOptions {
         bind: std::net::SocketAddr::new(a.bind, a.port),
         out_dir: a.out,
         netfi: std::env::current_exe()?,
         emulator_core: a.emulator_core.unwrap_or(last_core),
         no_token: a.no_token,
         allow_hosts: a.allow_host,
-    })
+    })?)
 }

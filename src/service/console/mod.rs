@@ -26,7 +26,7 @@ use crate::transport::open_node;
 use crate::transport::FrameSink;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
-use anyhow::{Context, Result};
+use crate::service::error::ServiceError;
 use serde::{Deserialize, Serialize};
 use feedback::FeedbackIn;
 use script::Script;
@@ -282,16 +282,16 @@ impl Streamer<'_> {
 }
 
 /// Runs the console with `args`; returns its report (also `console.json`).
-pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
+pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     args.source.planned()?;
     let seed = crate::service::seeds::given_or_fresh(args.seed);
     let mut script = Script::from_args(args, seed)?;
     let n = script.len(args.source.frames, args.source.duration_s);
     crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
-    let port = node.publisher(Channel::Console).context("opening the console → emulator port")?;
-    let direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).context("opening the console → simulator port")?) };
-    let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).context("opening the emulator → console feedback port")?;
+    let port = node.publisher(Channel::Console).map_err(|e| ServiceError::Publisher("console → emulator", e))?;
+    let direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).map_err(|e| ServiceError::Publisher("console → simulator", e))?) };
+    let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).map_err(|e| ServiceError::Subscriber("emulator → console feedback", e))?;
     let fb = FeedbackIn::new(fb_port)?;
     signals::install();
     crate::host::placement::place("console", args.pin.core, args.pin.avoid_core)?;
@@ -305,7 +305,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     };
     eprintln!("console: {n} frames from {source}, seed {seed}");
     // `netfi run` names a console that never gets here.
-    std::fs::write(args.out.join("console.ready"), b"").context("writing console.ready")?;
+    std::fs::write(args.out.join("console.ready"), b"").map_err(|e| ServiceError::Ready("console.ready", e))?;
     let mut s = Streamer { args, port, direct, fb, lateness: LatencyHistogram::new(), send_errors: 0, sent_unsubscribed: 0, direct_sent: 0, sent: 0 };
     let steal_timer = StealTimer::start();
     let mut stop = signals::StopCheck::new(64, || node.termination_requested());
@@ -317,7 +317,6 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport> {
     if args.live || s.fb.received > 0 {
         eprintln!("{}", s.fb.live_line());
     }
-    let path = args.out.join("console.json");
-    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    crate::service::error::write_report(args.out.join("console.json"), &report)?;
     Ok(report)
 }

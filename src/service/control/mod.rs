@@ -63,24 +63,41 @@ impl ControlHandle {
     }
 }
 
+/// Why live control did not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    #[error(transparent)]
+    Node(#[from] crate::transport::ipc::NodeOpenError),
+    /// The control or telemetry service.
+    #[error(transparent)]
+    Service(#[from] crate::transport::ipc::control::SideOpenError),
+    /// `events.jsonl`.
+    #[error(transparent)]
+    Log(#[from] crate::durable::DurableError),
+    #[error("starting the control thread")]
+    Thread(#[source] std::io::Error),
+    #[error("the control thread ended before opening its services")]
+    Ended,
+}
+
 /// Starts the control thread (before the loop's core is pinned) and
 /// returns the loop's end and the handle. Fails if the control or
 /// telemetry service cannot be opened.
-pub fn start(settings: Settings) -> anyhow::Result<(ControlPort, ControlHandle)> {
+pub fn start(settings: Settings) -> Result<(ControlPort, ControlHandle), StartError> {
     let (cmd_tx, cmd_rx) = rtrb::RingBuffer::new(RING);
     let (app_tx, app_rx) = rtrb::RingBuffer::new(2 * RING);
     let shared = Arc::new(Shared::default());
     let (tel_tx, tel_rx) = mpsc::channel();
     let (ready_tx, ready_rx) = mpsc::channel();
     let server = Server::new(settings, cmd_tx, app_rx, shared.clone(), tel_rx);
-    let thread = std::thread::Builder::new().name("netfi-control".into()).spawn(move || server.run(ready_tx))?;
+    let thread = std::thread::Builder::new().name("netfi-control".into()).spawn(move || server.run(ready_tx)).map_err(StartError::Thread)?;
     match ready_rx.recv() {
         Ok(Ok(())) => {}
         Ok(Err(e)) => {
             let _ = thread.join();
             return Err(e);
         }
-        Err(_) => anyhow::bail!("the control thread ended before opening its services"),
+        Err(_) => return Err(StartError::Ended),
     }
     let port = ControlPort { commands: cmd_rx, applied: app_tx, shared: shared.clone() };
     Ok((port, ControlHandle { shared, thread, telemetry: Some(tel_tx) }))

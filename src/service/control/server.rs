@@ -79,8 +79,8 @@ impl Server {
         Server { settings, commands, applied, shared, telemetry, timeline, events: Vec::new(), log: None, log_failed: false, next_id: 0, sent: Vec::new() }
     }
 
-    pub(super) fn run(mut self, ready: mpsc::Sender<anyhow::Result<()>>) -> Vec<ControlEvent> {
-        let opened = (|| -> anyhow::Result<_> {
+    pub(super) fn run(mut self, ready: mpsc::Sender<Result<(), super::StartError>>) -> Vec<ControlEvent> {
+        let opened = (|| -> Result<_, super::StartError> {
             let node = IpcNode::open(&self.settings.run, Role::Tool)?;
             let server = ControlServer::open(&node)?;
             let publisher = match self.settings.telemetry_interval_ns {

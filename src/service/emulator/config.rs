@@ -12,10 +12,32 @@ use crate::scenario::ScenarioSpec;
 use crate::service::args::{EmulatorArgs, ScenarioArgs, StreamArgs};
 use crate::service::args::streams;
 use crate::service::seeds;
-use crate::transport::{IpcConfig, Payload, RunId};
-use anyhow::Context;
+use crate::scenario::ScenarioError;
+use crate::service::args::ArgsError;
+use crate::service::emulator::ros2_plan::Ros2PlanError;
+use crate::transport::{IpcConfig, Payload, RunId, RunIdError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+
+/// Why the emulator's arguments make no emulator.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error(transparent)]
+    Args(#[from] ArgsError),
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    #[error(transparent)]
+    RunId(#[from] RunIdError),
+    #[error(transparent)]
+    Ros2(#[from] Ros2PlanError),
+    #[error("--queue-capacity must be at least 1 frame")]
+    QueueCapacity,
+    #[error("--streams needs --run-id")]
+    StreamsNeedRunId,
+    /// What went wrong with stream `stream`'s own arguments.
+    #[error("stream {stream}: {cause}")]
+    Stream { stream: usize, cause: Box<ConfigError> },
+}
 
 /// One lane as resolved.
 #[derive(Debug, Clone)]
@@ -84,7 +106,7 @@ fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64
 }
 
 /// The lane of `args` (already its own).
-fn lane(args: EmulatorArgs) -> anyhow::Result<LaneConfig> {
+fn lane(args: EmulatorArgs) -> Result<LaneConfig, ConfigError> {
     let scenario = crate::load::resolve(&args.scenario.scenario)?;
     let seed = seeds::run(args.scenario.seed, &scenario);
     let default_capacity = match args.udp.payload {
@@ -92,13 +114,15 @@ fn lane(args: EmulatorArgs) -> anyhow::Result<LaneConfig> {
         Payload::Itp => crate::service::link::DEFAULT_QUEUE_CAPACITY,
     };
     let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(default_capacity);
-    anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 frame");
+    if queue_capacity < 1 {
+        return Err(ConfigError::QueueCapacity);
+    }
     Ok(LaneConfig { out_dir: args.out.clone(), scenario, seed, queue_capacity, args })
 }
 
 impl EmulatorConfig {
     /// The emulator of `lanes`, placed and controlled as `args` say.
-    pub(crate) fn with_lanes(args: &EmulatorArgs, lanes: Vec<LaneConfig>) -> anyhow::Result<EmulatorConfig> {
+    pub(crate) fn with_lanes(args: &EmulatorArgs, lanes: Vec<LaneConfig>) -> Result<EmulatorConfig, ConfigError> {
         let core = match args.placement.no_pin {
             true => None,
             false => args.placement.core.or_else(|| core_affinity::get_core_ids().and_then(|c| c.last().map(|c| c.id))),
@@ -124,15 +148,17 @@ impl EmulatorConfig {
     }
 
     /// The emulator that `args` ask for (checked).
-    pub fn of(args: &EmulatorArgs) -> anyhow::Result<EmulatorConfig> {
+    pub fn of(args: &EmulatorArgs) -> Result<EmulatorConfig, ConfigError> {
         args.validate()?;
         let lanes = if args.stream.several() {
-            anyhow::ensure!(args.run_id.is_some(), "--streams needs --run-id");
+            if args.run_id.is_none() {
+                return Err(ConfigError::StreamsNeedRunId);
+            }
             let scenarios = args.stream.named_scenarios()?;
             let seed = lane(args.clone())?.seed;
             (0..args.stream.streams as usize)
-                .map(|k| lane(lane_args(args, &scenarios, seed, k)).with_context(|| format!("stream {k}")))
-                .collect::<anyhow::Result<Vec<_>>>()?
+                .map(|k| lane(lane_args(args, &scenarios, seed, k)).map_err(|cause| ConfigError::Stream { stream: k, cause: Box::new(cause) }))
+                .collect::<Result<Vec<_>, _>>()?
         } else {
             vec![lane(args.clone())?]
         };

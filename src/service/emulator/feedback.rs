@@ -11,7 +11,7 @@
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::emulator::opening::{Opening, PathPlan};
+use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
 use crate::service::link::DEFAULT_QUEUE_CAPACITY;
 use crate::service::link::{Arrival, Carried};
 use crate::service::schema::{Account, FeedbackExtra};
@@ -107,7 +107,7 @@ impl Channel for Feedback {
 
 /// The feedback path the arguments ask for: with iceoryx2 on both sides
 /// and unless `--no-feedback`, through `--return-scenario` (default Normal).
-pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
+pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
     let a = o.args;
     let Some(node) = o.t.node.as_ref().filter(|_| !a.udp.ingress.is_udp() && !a.udp.egress.is_udp() && !a.return_path.no_feedback) else { return Ok(None) };
     let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::FEEDBACK_TAG, DEFAULT_QUEUE_CAPACITY)?;

@@ -8,11 +8,11 @@ use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
 use crate::service::emulator::forward::{ConsoleAddr, Forward};
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::path::{Channel, Path};
+use crate::service::emulator::reverse::OpenError;
 use crate::service::emulator::{report, reverse, run, udp_return};
 use crate::service::schema::{BoundEndpoints, EmulatorReport};
 use crate::transport::udp::Arena;
 use crate::transport::{Egress, Ingress, IpcNode};
-use anyhow::Context;
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -29,8 +29,8 @@ struct Opened {
 
 /// Opens lane `l`'s transports and paths (before the loop is pinned: each
 /// path starts its trace writer).
-fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
-    std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
+fn open_lane(l: &LaneConfig) -> Result<Opened, OpenError> {
+    std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
     let t = crate::transport::open(&a.udp.ingress, &a.udp.egress, &a.wiring(l.queue_capacity))?;
     let console = ConsoleAddr::default();
@@ -38,7 +38,7 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
     let reverse = reverse::open_all(&o)?;
     let scenario = Scenario::new(&l.scenario, l.seed)?;
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, l.unsupported()) {
-        anyhow::bail!("scenario `{}`: the `{}` stage applies to ITP frames, not to raw datagrams (--payload raw)", scenario.name(), kind.name());
+        return Err(OpenError::RawStage { scenario: scenario.name().to_string(), stage: kind.name() });
     }
     let bound = report::bound(&t.ingress, &t.egress, a.udp.egress.udp());
     let crate::transport::Transports { ingress, egress, node, arena } = t;
@@ -55,10 +55,10 @@ fn open_lane(l: &LaneConfig) -> anyhow::Result<Opened> {
 }
 
 /// Runs the emulator of `cfg`'s ITP lanes; their reports.
-pub fn main(cfg: &EmulatorConfig) -> anyhow::Result<Vec<EmulatorReport>> {
+pub fn main(cfg: &EmulatorConfig) -> Result<Vec<EmulatorReport>, super::EmulatorError> {
     let mut opened = Vec::with_capacity(cfg.lanes.len());
     for (k, l) in cfg.lanes.iter().enumerate() {
-        opened.push(open_lane(l).with_context(|| format!("stream {k}"))?);
+        opened.push(open_lane(l).map_err(|cause| super::EmulatorError::Stream { stream: k, cause })?);
         say_lane(cfg, k, &opened[k]);
     }
     let (mut lanes, mut nodes, mut ends) = (Vec::new(), Vec::new(), Vec::new());
@@ -84,7 +84,7 @@ pub fn main(cfg: &EmulatorConfig) -> anyhow::Result<Vec<EmulatorReport>> {
         });
         after
     };
-    run::run(cfg, lanes, nodes, udp_side)
+    Ok(run::run(cfg, lanes, nodes, udp_side)?)
 }
 
 /// Says what lane `k` is, as the log shows it.

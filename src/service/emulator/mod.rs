@@ -20,6 +20,11 @@
 //! | `ros2`, `ros2_plan`, `ros2_topic` | lanes of ROS 2 topics: their flags resolved, topics settled and opened, `ros2.json`; the forward and return channels |
 //! | `run` | running lanes of any kind: control, placement, the loop, the reports |
 //! | `report` | `emulator.json`, the joint report of several lanes, `udp.json` |
+//!
+//! Each step has its own error ([`config::ConfigError`],
+//! [`ros2_plan::Ros2PlanError`], [`opening::OpenError`],
+//! [`ros2::TopicError`], [`path::PathError`], [`run::RunError`]);
+//! [`EmulatorError`] is any of them, with the stream or lane it came from.
 
 pub mod busy;
 pub mod config;
@@ -45,10 +50,45 @@ pub use forward::{classify, Forward};
 use crate::service::args::EmulatorArgs;
 use config::EmulatorConfig;
 
+/// Why the emulator did not run to its reports.
+#[derive(Debug, thiserror::Error)]
+pub enum EmulatorError {
+    #[error(transparent)]
+    Config(#[from] config::ConfigError),
+    #[error(transparent)]
+    Ros2Plan(#[from] ros2_plan::Ros2PlanError),
+    #[error(transparent)]
+    Pid(#[from] crate::service::PidError),
+    /// The ROS 2 participant's threads, placed off the loop's core.
+    #[error(transparent)]
+    Place(#[from] crate::host::placement::PlaceError),
+    /// The ROS 2 participant.
+    #[error(transparent)]
+    Dds(#[from] crate::transport::ros2::OpenError),
+    /// A lane of ITP frames that did not open.
+    #[error("stream {stream}")]
+    Stream {
+        stream: usize,
+        #[source]
+        cause: opening::OpenError,
+    },
+    /// A lane of ROS 2 topics that did not open.
+    #[error("lane {lane} ({from} → {to})")]
+    Lane {
+        lane: usize,
+        from: crate::transport::ros2::TopicName,
+        to: crate::transport::ros2::TopicName,
+        #[source]
+        cause: ros2::TopicError,
+    },
+    #[error(transparent)]
+    Run(#[from] run::RunError),
+}
+
 /// Wires the emulator: arguments → lanes → the loop → each lane's report
 /// (and the joint one of several, and `udp.json` where a side is UDP).
 /// Returns lane 0's report.
-pub fn main(args: &EmulatorArgs) -> anyhow::Result<EmulatorReport> {
+pub fn main(args: &EmulatorArgs) -> Result<EmulatorReport, EmulatorError> {
     if args.ros2.on() {
         return Ok(ros2::main(args)?.swap_remove(0));
     }

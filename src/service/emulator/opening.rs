@@ -2,13 +2,74 @@
 //! transports, seed and directory ([`Opening`]), and a reverse path's
 //! scenario, seed and queue resolved once ([`PathPlan`]).
 
-use crate::scenario::{Scenario, ScenarioSpec};
+use crate::scenario::{Scenario, ScenarioError, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
 use crate::service::emulator::forward::ConsoleAddr;
-use crate::service::emulator::path::{Channel, Path};
+use crate::service::emulator::path::{Channel, Path, PathError};
 use crate::transport::Transports;
-use anyhow::Context;
-use std::path::Path as FsPath;
+use std::path::{Path as FsPath, PathBuf};
+
+/// A reverse path's scenario that does not read or does not build, as
+/// `flag name` named it (the runner's check and the emulator's own).
+#[derive(Debug, thiserror::Error)]
+#[error("{flag} {name}")]
+pub struct PathScenarioError {
+    pub flag: &'static str,
+    pub name: String,
+    #[source]
+    pub cause: ScenarioError,
+}
+
+/// Why a lane, or one of its paths, did not open.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    #[error(transparent)]
+    PathScenario(#[from] PathScenarioError),
+    #[error("{flag} {name}: queue_capacity must be at least 1")]
+    QueueCapacity { flag: &'static str, name: String },
+    /// A reverse path around its link.
+    #[error("{flag} {name}")]
+    Path {
+        flag: &'static str,
+        name: String,
+        #[source]
+        cause: PathError,
+    },
+    /// The forward path around its link.
+    #[error(transparent)]
+    Forward(#[from] PathError),
+    /// The lane's own scenario.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    #[error("scenario `{scenario}`: the `{stage}` stage applies to ITP frames, not to raw datagrams (--payload raw)")]
+    RawStage { scenario: String, stage: &'static str },
+    #[error("creating {}", .dir.display())]
+    Dir {
+        dir: PathBuf,
+        #[source]
+        cause: std::io::Error,
+    },
+    /// The ingress and egress.
+    #[error(transparent)]
+    Transports(#[from] crate::transport::open::OpenError),
+    #[error(transparent)]
+    Feedback(#[from] crate::transport::open::FeedbackOpenError),
+    #[error(transparent)]
+    VideoArgs(#[from] crate::service::video::VideoArgsError),
+    #[error("opening the {direction} video port")]
+    VideoPort {
+        direction: &'static str,
+        #[source]
+        cause: crate::transport::ipc::video::VideoOpenError,
+    },
+    #[error("--return-to takes udp://ADDR:PORT")]
+    ReturnTo,
+    #[error("opening the return path")]
+    ReturnPort(#[source] crate::transport::udp::UdpOpenError),
+    /// A file the lane writes at its start.
+    #[error(transparent)]
+    Write(#[from] crate::service::emulator::run::WriteError),
+}
 
 /// What opening a stream's reverse paths needs.
 pub struct Opening<'a> {
@@ -40,21 +101,23 @@ impl PathPlan {
     /// The plan of a reverse path given by `flag` as `name` (default
     /// `Normal`: nothing injected), its seed `given` or derived from the
     /// stream's `seed` by `tag`, its queue the file's or `capacity`.
-    pub fn resolve(flag: &'static str, name: Option<&str>, given: Option<u64>, seed: u64, tag: u64, capacity: usize) -> anyhow::Result<PathPlan> {
+    pub fn resolve(flag: &'static str, name: Option<&str>, given: Option<u64>, seed: u64, tag: u64, capacity: usize) -> Result<PathPlan, OpenError> {
         let name = name.unwrap_or("Normal");
-        let spec = crate::load::resolve(name).with_context(|| format!("{flag} {name}"))?;
+        let spec = crate::load::resolve(name).map_err(|cause| PathScenarioError { flag, name: name.into(), cause })?;
         let seed = crate::service::seeds::derived(given, &spec, seed, tag);
         let queue_capacity = spec.queue_capacity.unwrap_or(capacity);
-        anyhow::ensure!(queue_capacity >= 1, "{flag} {name}: queue_capacity must be at least 1");
+        if queue_capacity < 1 {
+            return Err(OpenError::QueueCapacity { flag, name: name.into() });
+        }
         Ok(PathPlan { flag, spec, seed, queue_capacity })
     }
 
     /// The path of `chan` as planned, its trace in `out_dir` sized for
     /// `expected` items.
-    pub fn open<C: Channel>(&self, chan: C, expected: u64, out_dir: &FsPath) -> anyhow::Result<Path<C>> {
-        let scenario = Scenario::new(&self.spec, self.seed).with_context(|| format!("{} {}", self.flag, self.spec.name))?;
-        let path = Path::new(chan, scenario, self.seed, self.queue_capacity, expected, out_dir, false)
-            .with_context(|| format!("{} {}", self.flag, self.spec.name))?;
+    pub fn open<C: Channel>(&self, chan: C, expected: u64, out_dir: &FsPath) -> Result<Path<C>, OpenError> {
+        let (flag, name) = (self.flag, self.spec.name.clone());
+        let scenario = Scenario::new(&self.spec, self.seed).map_err(|cause| PathScenarioError { flag, name: name.clone(), cause })?;
+        let path = Path::new(chan, scenario, self.seed, self.queue_capacity, expected, out_dir, false).map_err(|cause| OpenError::Path { flag, name, cause })?;
         eprintln!("emulator: {} path through scenario {} seed {}, queue {}", C::NAME, self.spec.name, self.seed, self.queue_capacity);
         Ok(path)
     }

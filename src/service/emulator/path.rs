@@ -23,6 +23,25 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::path::{Path as FsPath, PathBuf};
 
+/// Why a path could not start or finish.
+#[derive(Debug, thiserror::Error)]
+pub enum PathError {
+    /// The link refused the scenario or its queue.
+    #[error(transparent)]
+    Link(#[from] crate::service::link::LinkError),
+    /// The trace (or a histogram log) could not be opened to stream to.
+    #[error(transparent)]
+    Stream(#[from] crate::durable::DurableError),
+    #[error(transparent)]
+    Histograms(#[from] crate::service::link::HistogramWriteError),
+    /// The trace could not be written out at the end.
+    #[error(transparent)]
+    Trace(#[from] crate::trace::TraceError),
+    /// The report as JSON.
+    #[error(transparent)]
+    Report(#[from] serde_json::Error),
+}
+
 /// What a channel's port gave when asked for one item.
 pub enum Take<T> {
     /// An item to decide, stamped with the time it was taken in (its
@@ -195,7 +214,7 @@ impl<C: Channel> Path<C> {
     /// decision-time and release-lateness histograms too, as interval logs
     /// in `out_dir`. Starts the trace's writer thread: build paths before
     /// pinning the loop, then keep their traces off its core.
-    pub fn new(chan: C, scenario: Scenario, seed: u64, queue_capacity: usize, expected: u64, out_dir: &FsPath, hlogs: bool) -> anyhow::Result<Path<C>> {
+    pub fn new(chan: C, scenario: Scenario, seed: u64, queue_capacity: usize, expected: u64, out_dir: &FsPath, hlogs: bool) -> Result<Path<C>, PathError> {
         let mut link = Link::new(scenario, queue_capacity, expected)?;
         let trace_path = out_dir.join(C::TRACE_FILE);
         link.stream_to(&trace_path, hlogs.then_some(out_dir))?;
@@ -336,7 +355,7 @@ impl<C: Channel> Path<C> {
     /// sent), stops the trace writer and writes the trace (and, with
     /// hlogs, the histograms), checks that every item is accounted for,
     /// and reports. `duration_ns` is the time the path ran.
-    pub fn finish(mut self, duration_ns: u64) -> anyhow::Result<PathReport<C::Extra>> {
+    pub fn finish(mut self, duration_ns: u64) -> Result<PathReport<C::Extra>, PathError> {
         let now = now_ns();
         self.release_due(now);
         self.end(now);
@@ -390,7 +409,7 @@ pub trait Reverse {
     /// Keeps the trace writer off `core`.
     fn keep_trace_off_core(&self, core: usize) -> bool;
     /// Finishes the path; its report as JSON, under its channel's name.
-    fn finish(self: Box<Self>, duration_ns: u64) -> anyhow::Result<serde_json::Value>;
+    fn finish(self: Box<Self>, duration_ns: u64) -> Result<serde_json::Value, PathError>;
     /// The path itself, for those who know its channel (tests reach its
     /// ports through it).
     fn as_any_mut(&mut self) -> &mut dyn std::any::Any;
@@ -423,7 +442,7 @@ impl<C: Channel + 'static> Reverse for Path<C> {
         Path::keep_trace_off_core(self, core)
     }
 
-    fn finish(self: Box<Self>, duration_ns: u64) -> anyhow::Result<serde_json::Value> {
+    fn finish(self: Box<Self>, duration_ns: u64) -> Result<serde_json::Value, PathError> {
         Ok(serde_json::to_value(Path::finish(*self, duration_ns)?)?)
     }
 

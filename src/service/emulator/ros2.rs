@@ -23,10 +23,47 @@ use crate::service::schema::EmulatorReport;
 use crate::service::seeds;
 use crate::transport::ros2::qos::{self, Summary};
 use crate::transport::ros2::{Happened, Remote, Role, Ros2Node, TopicName, TypeName};
-use anyhow::{bail, Context};
+use crate::service::emulator::opening::OpenError;
+use crate::transport::ros2::qos::QosParseError;
+use crate::transport::ros2::OpenError as DdsOpenError;
 use rustdds::QosPolicies;
 use std::cell::RefCell;
 use std::rc::Rc;
+
+/// Why a lane's topics did not open: a type or QoS that does not match
+/// what the other side announced, a type that cannot be told, or DDS.
+#[derive(Debug, thiserror::Error)]
+pub enum TopicError {
+    #[error("type mismatch on {from}: --ros2-type gives {given}, but the publisher {publisher} publishes {publishes} (DDS matches by type name: nothing would be relayed)")]
+    PublisherType { from: TopicName, given: TypeName, publisher: String, publishes: String },
+    #[error("type mismatch on {to}: the subscriber {subscriber} expects {expects}, the lane relays {relays} from {from}")]
+    SubscriberType { to: TopicName, subscriber: String, expects: String, relays: TypeName, from: TopicName },
+    #[error("the publisher of {from} announces type `{announced}`, which is not a ROS 2 message type")]
+    NotAType {
+        from: TopicName,
+        announced: String,
+        #[source]
+        cause: crate::transport::ros2::NameError,
+    },
+    #[error("no publisher of {from} found within {seconds:.0} s in ROS 2 domain {domain}: start it first, or give its type (--ros2-type {from}=package/msg/Type)")]
+    NoPublisher { from: TopicName, seconds: f64, domain: u16 },
+    #[error("the publishers of {from} disagree on its type ({types}): give the one to relay with --ros2-type {from}=…")]
+    Disagree { from: TopicName, types: String },
+    #[error("QoS mismatch on {topic}: {why}")]
+    Qos { topic: TopicName, why: qos::QosMismatch },
+    #[error(transparent)]
+    QosText(#[from] QosParseError),
+    #[error(transparent)]
+    Dds(#[from] DdsOpenError),
+    /// The lane's directory, scenario, paths.
+    #[error(transparent)]
+    Open(#[from] OpenError),
+}
+
+/// A type as announced, by its ROS 2 name where it has one.
+fn shown(dds_type: &str) -> String {
+    TypeName::parse(dds_type).map_or(dds_type.to_string(), |t| t.to_string())
+}
 
 /// How a topic was opened: its type and QoS and where they came from.
 #[derive(Debug, Clone)]
@@ -87,7 +124,7 @@ fn named(node: &mut Ros2Node, guid: rustdds::GUID) -> String {
 /// and what is discovered, and checks every publisher of `from` and
 /// subscriber of `to` against them. A mismatch is an error that names both
 /// sides.
-fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) -> anyhow::Result<Opened> {
+fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) -> Result<Opened, TopicError> {
     let given = plan.types.get(from);
     eprintln!("emulator: looking for the publisher of {from} (up to {:.0} s)", plan.discovery_ns as f64 / 1e9);
     let pubs = discover(node, from, plan.discovery_ns);
@@ -97,21 +134,16 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
     let (type_name, type_from) = match (given, &types[..]) {
         (Some(t), _) => {
             if let Some(p) = pubs.iter().find(|p| p.dds_type != t.dds()) {
-                bail!(
-                    "type mismatch on {from}: --ros2-type gives {t}, but the publisher {} publishes {} (DDS matches by type name: nothing would be relayed)",
-                    named(node, p.guid),
-                    TypeName::parse(&p.dds_type).map_or(p.dds_type.clone(), |t| t.to_string())
-                );
+                return Err(TopicError::PublisherType { from: from.clone(), given: t.clone(), publisher: named(node, p.guid), publishes: shown(&p.dds_type) });
             }
             (t.clone(), "command_line")
         }
-        (None, [one]) => (TypeName::parse(one).with_context(|| format!("the publisher of {from} announces type `{one}`, which is not a ROS 2 message type"))?, "publisher"),
-        (None, []) => bail!(
-            "no publisher of {from} found within {:.0} s in ROS 2 domain {}: start it first, or give its type (--ros2-type {from}=package/msg/Type)",
-            plan.discovery_ns as f64 / 1e9,
-            plan.domain
-        ),
-        (None, many) => bail!("the publishers of {from} disagree on its type ({}): give the one to relay with --ros2-type {from}=…", many.join(", ")),
+        (None, [one]) => {
+            let t = TypeName::parse(one).map_err(|cause| TopicError::NotAType { from: from.clone(), announced: one.to_string(), cause })?;
+            (t, "publisher")
+        }
+        (None, []) => return Err(TopicError::NoPublisher { from: from.clone(), seconds: plan.discovery_ns as f64 / 1e9, domain: plan.domain }),
+        (None, many) => return Err(TopicError::Disagree { from: from.clone(), types: many.join(", ") }),
     };
     if pubs.is_empty() {
         eprintln!("emulator: WARNING: no publisher of {from} yet; relaying {type_name} as given");
@@ -127,7 +159,7 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
         if qos::check(&p.qos, &reader_qos, "", "").is_err() {
             let name = named(node, p.guid);
             qos::check(&p.qos, &reader_qos, &format!("the publisher {name} of {from}"), &format!("the emulator's reader (--ros2-qos {from}=…)"))
-                .map_err(|m| anyhow::anyhow!("QoS mismatch on {from}: {m}"))?;
+                .map_err(|why| TopicError::Qos { topic: from.clone(), why })?;
         }
     }
     // The writer offers what the publishers offered (their subscribers
@@ -142,10 +174,10 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
         let bad = s.dds_type != type_name.dds() || qos::check(&qos::writer(&writer_qos), &s.qos, "", "").is_err();
         let name = if bad { named(node, s.guid) } else { continue };
         if s.dds_type != type_name.dds() {
-            bail!("type mismatch on {to}: the subscriber {name} expects {}, the lane relays {type_name} from {from}", TypeName::parse(&s.dds_type).map_or(s.dds_type.clone(), |t| t.to_string()));
+            return Err(TopicError::SubscriberType { to: to.clone(), subscriber: name, expects: shown(&s.dds_type), relays: type_name, from: from.clone() });
         }
         qos::check(&qos::writer(&writer_qos), &s.qos, &format!("the emulator's writer (the QoS of {from}'s publisher, or --ros2-qos {to}=…)"), &format!("the subscriber {name} of {to}"))
-            .map_err(|m| anyhow::anyhow!("QoS mismatch on {to}: {m}"))?;
+            .map_err(|why| TopicError::Qos { topic: to.clone(), why })?;
     }
     let type_hash = pubs.iter().find_map(|p| p.type_hash.clone());
     Ok(Opened { type_name, type_hash, type_from, qos_from, reader_qos, writer_qos })
@@ -156,7 +188,7 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
 /// does not publish before the emulator can relay; with `wait_ns`, the
 /// reader only once `to` has a subscriber of the lane's type (or after
 /// that long), so that nothing is released into nothing.
-fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicName, &TopicName), slots: usize, idle_end_ns: Option<u64>, wait_ns: Option<u64>) -> anyhow::Result<TopicPorts> {
+fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicName, &TopicName), slots: usize, idle_end_ns: Option<u64>, wait_ns: Option<u64>) -> Result<TopicPorts, TopicError> {
     let writer = node.borrow().writer(to, &o.type_name, &o.writer_qos)?;
     if let Some(wait_ns) = wait_ns {
         let t0 = crate::clock::now_ns();
@@ -172,7 +204,7 @@ fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicN
             let other = n.remotes(to, Role::Subscriber).find(|s| s.dds_type != o.type_name.dds()).cloned();
             if let Some(s) = other {
                 let name = named(&mut n, s.guid);
-                bail!("type mismatch on {to}: the subscriber {name} expects {}, the lane relays {} from {from}", TypeName::parse(&s.dds_type).map_or(s.dds_type.clone(), |t| t.to_string()), o.type_name);
+                return Err(TopicError::SubscriberType { to: to.clone(), subscriber: name, expects: shown(&s.dds_type), relays: o.type_name.clone(), from: from.clone() });
             }
             if now - t0 >= wait_ns {
                 eprintln!("emulator: WARNING: no subscriber of {to} within {:.1} s; relaying anyway", wait_ns as f64 / 1e9);
@@ -206,7 +238,7 @@ struct LaneEnd {
 }
 
 /// Settles lane `topics`' type and QoS in each direction.
-fn settle_lane(node: &RefCell<Ros2Node>, plan: &Plan, topics: &LaneTopics) -> anyhow::Result<LaneEnd> {
+fn settle_lane(node: &RefCell<Ros2Node>, plan: &Plan, topics: &LaneTopics) -> Result<LaneEnd, TopicError> {
     let (from, to) = &topics.forward;
     let forward = settle(&mut node.borrow_mut(), plan, from, to)?;
     let ret = topics.ret.as_ref().map(|(from, to)| settle(&mut node.borrow_mut(), plan, from, to)).transpose()?;
@@ -216,15 +248,15 @@ fn settle_lane(node: &RefCell<Ros2Node>, plan: &Plan, topics: &LaneTopics) -> an
 /// Opens a lane as `end` settled it: its channels, its forward path and its
 /// return path (before the loop is pinned: each path starts its trace
 /// writer).
-fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: &LaneTopics, end: &LaneEnd, t0_ns: u64) -> anyhow::Result<Ros2Lane> {
-    std::fs::create_dir_all(&l.out_dir).with_context(|| format!("creating {}", l.out_dir.display()))?;
+fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: &LaneTopics, end: &LaneEnd, t0_ns: u64) -> Result<Ros2Lane, TopicError> {
+    std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
     let (from, to) = &topics.forward;
     let idle_end_ns = a.udp.idle_end_ms.map(|ms| (ms * 1e6) as u64);
     let wait_ns = a.wait_for_peer_s.map(|s| (s * 1e9) as u64);
     let chan = Topic::<Forward>::new(ports(node, plan, &end.forward, (from, to), l.queue_capacity + 1, idle_end_ns, wait_ns)?, node.clone(), t0_ns);
-    let scenario = Scenario::new(&l.scenario, l.seed)?;
-    let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
+    let scenario = Scenario::new(&l.scenario, l.seed).map_err(OpenError::from)?;
+    let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true).map_err(OpenError::from)?;
     let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
     if let (Some((from, to)), Some(o)) = (&topics.ret, &end.ret) {
         let rp = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
@@ -304,7 +336,7 @@ fn topic_report<D: crate::service::emulator::ros2_topic::Direction>(node: &Ros2N
 }
 
 /// Runs the emulator of `args`' ROS 2 lanes; their reports.
-pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
+pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorError> {
     let plan = Plan::of(args)?;
     let cfg = config(args, plan.lanes.len())?;
     crate::service::write_pid(&cfg.out_dir, "emulator")?;
@@ -317,11 +349,14 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
     // Every topic is settled before any is read: a publisher that starts
     // once the emulator subscribes waits for the whole set-up, not for the
     // discovery of another lane's topics.
-    let name = |k: usize| format!("lane {k} ({} → {})", plan.lanes[k].forward.0, plan.lanes[k].forward.1);
-    let ends = plan.lanes.iter().enumerate().map(|(k, t)| settle_lane(&node, &plan, t).with_context(|| name(k))).collect::<anyhow::Result<Vec<_>>>()?;
+    let in_lane = |k: usize| {
+        let (from, to) = plan.lanes[k].forward.clone();
+        move |cause| super::EmulatorError::Lane { lane: k, from, to, cause }
+    };
+    let ends = plan.lanes.iter().enumerate().map(|(k, t)| settle_lane(&node, &plan, t).map_err(in_lane(k))).collect::<Result<Vec<_>, _>>()?;
     let mut lanes = Vec::new();
     for (k, ((l, topics), end)) in cfg.lanes.iter().zip(&plan.lanes).zip(&ends).enumerate() {
-        lanes.push(open_lane(&node, &plan, l, topics, end, t0_ns).with_context(|| name(k))?);
+        lanes.push(open_lane(&node, &plan, l, topics, end, t0_ns).map_err(in_lane(k))?);
         let o = &end.forward;
         eprintln!(
             "emulator: lane {k}: {} → {} ({}, {} QoS {}), scenario {} seed {}, queue {}",
@@ -375,5 +410,5 @@ pub fn main(args: &EmulatorArgs) -> anyhow::Result<Vec<EmulatorReport>> {
         });
         after
     };
-    run::run(&cfg, lanes, nodes, before_finish)
+    Ok(run::run(&cfg, lanes, nodes, before_finish)?)
 }

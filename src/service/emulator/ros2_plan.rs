@@ -4,11 +4,12 @@
 //! rules of several streams ([`config`]).
 
 use crate::service::args::{EmulatorArgs, ScenarioArgs, StreamArgs};
-use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
+use crate::service::emulator::config::{ConfigError, EmulatorConfig, LaneConfig};
 use crate::service::seeds;
+use crate::scenario::ScenarioError;
+use crate::service::args::ArgsError;
 use crate::transport::ros2::qos;
-use crate::transport::ros2::{TopicName, TypeName};
-use anyhow::{bail, Context};
+use crate::transport::ros2::{NameError, TopicName, TypeName};
 use std::collections::BTreeMap;
 
 /// Default release-queue capacity of a ROS 2 lane: 4096 messages (4 s at
@@ -19,6 +20,51 @@ pub const DEFAULT_QUEUE_CAPACITY: usize = 4096;
 /// The most memory a lane's slots may reserve: 64 GiB.
 const SLOTS_BYTES_MAX: usize = 64 << 30;
 
+/// Why the ROS 2 flags make no emulator.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2PlanError {
+    #[error("--ros2-topic relays ROS 2 topics: --ingress and --egress (iceoryx2 or UDP endpoints) do not apply")]
+    UdpEndpoints,
+    #[error("--ros2-topic makes a lane of each pair; --streams does not apply (give --ros2-topic once per lane)")]
+    Streams,
+    #[error("--video-mbps, --no-feedback, --return-to, --no-return and --payload apply to iceoryx2 and UDP lanes, not to ROS 2 topics")]
+    NotForTopics,
+    #[error("--ros2-return given {returns} times for {lanes} lanes (--ros2-topic): the K-th return topic is lane K's")]
+    Returns { returns: usize, lanes: usize },
+    #[error("--ros2-max-bytes must be at least 1")]
+    MaxBytes,
+    #[error("--wait-for-peer-s must be a non-negative number of seconds, got {0}")]
+    WaitForPeer(f64),
+    /// A flag's value without its `=`.
+    #[error("{flag} {text}: expected {expected}")]
+    Shape { flag: &'static str, text: String, expected: &'static str },
+    /// A flag's topic or type name.
+    #[error("{flag} {text}: {cause}")]
+    Name { flag: &'static str, text: String, cause: NameError },
+    #[error("{flag}: {topic} given twice")]
+    Twice { flag: &'static str, topic: TopicName },
+    #[error("{0} relayed onto itself: a lane's output would be its own input")]
+    OntoItself(TopicName),
+    #[error("{0} is read by two lanes (or a lane and a return)")]
+    ReadTwice(TopicName),
+    #[error("--ros2-qos {topic}: {cause}")]
+    Qos { topic: TopicName, cause: qos::QosParseError },
+    #[error("ROS_DOMAIN_ID={text}: not a domain id: {cause}")]
+    DomainEnv { text: String, cause: std::num::ParseIntError },
+    #[error("ROS 2 domain {0}: domain ids go from 0 to 232")]
+    Domain(u16),
+    /// A lane's `--stream-scenario`.
+    #[error(transparent)]
+    Args(#[from] ArgsError),
+    /// A lane's scenario (`lane` is `None` for the run's own).
+    #[error("{}{cause}", lane.map(|k| format!("lane {k}: ")).unwrap_or_default())]
+    Scenario { lane: Option<usize>, cause: ScenarioError },
+    #[error("--queue-capacity must be at least 1 message")]
+    QueueCapacity,
+    #[error("lane {lane}: {slots} slots of --ros2-max-bytes {max_bytes} exceed {gib} GiB; lower --queue-capacity or --ros2-max-bytes")]
+    SlotsTooLarge { lane: usize, slots: usize, max_bytes: usize, gib: usize },
+}
+
 /// One lane's topics, as the arguments name them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LaneTopics {
@@ -27,33 +73,42 @@ pub struct LaneTopics {
 }
 
 /// `IN=OUT`.
-fn pair(flag: &str, text: &str) -> anyhow::Result<(TopicName, TopicName)> {
-    let (a, b) = text.split_once('=').with_context(|| format!("{flag} {text}: expected IN=OUT, two topic names"))?;
-    Ok((TopicName::parse(a.trim()).with_context(|| format!("{flag} {text}"))?, TopicName::parse(b.trim()).with_context(|| format!("{flag} {text}"))?))
+fn pair(flag: &'static str, text: &str) -> Result<(TopicName, TopicName), Ros2PlanError> {
+    let (a, b) = text.split_once('=').ok_or_else(|| Ros2PlanError::Shape { flag, text: text.into(), expected: "IN=OUT, two topic names" })?;
+    Ok((topic(flag, text, a)?, topic(flag, text, b)?))
+}
+
+/// The topic `name` of `flag text`.
+fn topic(flag: &'static str, text: &str, name: &str) -> Result<TopicName, Ros2PlanError> {
+    TopicName::parse(name.trim()).map_err(|cause| Ros2PlanError::Name { flag, text: text.into(), cause })
 }
 
 /// `TOPIC=VALUE` flags, by topic.
-fn by_topic(flag: &str, texts: &[String]) -> anyhow::Result<BTreeMap<TopicName, String>> {
+fn by_topic(flag: &'static str, texts: &[String]) -> Result<BTreeMap<TopicName, String>, Ros2PlanError> {
     let mut m = BTreeMap::new();
     for text in texts {
-        let (t, v) = text.split_once('=').with_context(|| format!("{flag} {text}: expected TOPIC=VALUE"))?;
-        let t = TopicName::parse(t.trim()).with_context(|| format!("{flag} {text}"))?;
-        anyhow::ensure!(m.insert(t.clone(), v.trim().to_string()).is_none(), "{flag}: {t} given twice");
+        let (t, v) = text.split_once('=').ok_or_else(|| Ros2PlanError::Shape { flag, text: text.clone(), expected: "TOPIC=VALUE" })?;
+        let t = topic(flag, text, t)?;
+        if m.insert(t.clone(), v.trim().to_string()).is_some() {
+            return Err(Ros2PlanError::Twice { flag, topic: t });
+        }
     }
     Ok(m)
 }
 
 /// The ROS 2 domain: `given`, else `$ROS_DOMAIN_ID`, else 0.
-pub fn domain(given: Option<u16>) -> anyhow::Result<u16> {
+pub fn domain(given: Option<u16>) -> Result<u16, Ros2PlanError> {
     let domain = match given {
         Some(d) => d,
         None => match std::env::var("ROS_DOMAIN_ID") {
-            Ok(v) if !v.trim().is_empty() => v.trim().parse().with_context(|| format!("ROS_DOMAIN_ID={v}: not a domain id"))?,
+            Ok(v) if !v.trim().is_empty() => v.trim().parse().map_err(|cause| Ros2PlanError::DomainEnv { text: v.clone(), cause })?,
             _ => 0,
         },
     };
     // DDS's default port mapping leaves room for domains 0 to 232.
-    anyhow::ensure!(domain <= 232, "ROS 2 domain {domain}: domain ids go from 0 to 232");
+    if domain > 232 {
+        return Err(Ros2PlanError::Domain(domain));
+    }
     Ok(domain)
 }
 
@@ -71,23 +126,25 @@ pub struct Plan {
 }
 
 impl Plan {
-    pub fn of(a: &EmulatorArgs) -> anyhow::Result<Plan> {
+    pub fn of(a: &EmulatorArgs) -> Result<Plan, Ros2PlanError> {
         let r = &a.ros2;
         if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
-            bail!("--ros2-topic relays ROS 2 topics: --ingress and --egress (iceoryx2 or UDP endpoints) do not apply");
+            return Err(Ros2PlanError::UdpEndpoints);
         }
         if a.stream.streams > 1 {
-            bail!("--ros2-topic makes a lane of each pair; --streams does not apply (give --ros2-topic once per lane)");
+            return Err(Ros2PlanError::Streams);
         }
         if a.video.on() || a.return_path.no_feedback || a.udp.return_to.is_some() || a.udp.no_return || a.udp.payload == crate::transport::Payload::Raw {
-            bail!("--video-mbps, --no-feedback, --return-to, --no-return and --payload apply to iceoryx2 and UDP lanes, not to ROS 2 topics");
+            return Err(Ros2PlanError::NotForTopics);
         }
         if r.ros2_return.len() > r.ros2_topic.len() {
-            bail!("--ros2-return given {} times for {} lanes (--ros2-topic): the K-th return topic is lane K's", r.ros2_return.len(), r.ros2_topic.len());
+            return Err(Ros2PlanError::Returns { returns: r.ros2_return.len(), lanes: r.ros2_topic.len() });
         }
-        anyhow::ensure!(r.ros2_max_bytes >= 1, "--ros2-max-bytes must be at least 1");
+        if r.ros2_max_bytes < 1 {
+            return Err(Ros2PlanError::MaxBytes);
+        }
         if let Some(s) = a.wait_for_peer_s.filter(|s| !(s.is_finite() && *s >= 0.0)) {
-            bail!("--wait-for-peer-s must be a non-negative number of seconds, got {s}");
+            return Err(Ros2PlanError::WaitForPeer(s));
         }
         let mut lanes = Vec::new();
         for (k, text) in r.ros2_topic.iter().enumerate() {
@@ -100,17 +157,24 @@ impl Plan {
         let mut read = std::collections::BTreeSet::new();
         for l in &lanes {
             for (from, to) in std::iter::once(&l.forward).chain(&l.ret) {
-                anyhow::ensure!(from != to, "{from} relayed onto itself: a lane's output would be its own input");
-                anyhow::ensure!(read.insert(from.clone()), "{from} is read by two lanes (or a lane and a return)");
+                if from == to {
+                    return Err(Ros2PlanError::OntoItself(from.clone()));
+                }
+                if !read.insert(from.clone()) {
+                    return Err(Ros2PlanError::ReadTwice(from.clone()));
+                }
             }
         }
         let types = by_topic("--ros2-type", &r.ros2_type)?
             .into_iter()
-            .map(|(t, v)| Ok((t.clone(), TypeName::parse(&v).with_context(|| format!("--ros2-type {t}={v}"))?)))
-            .collect::<anyhow::Result<BTreeMap<_, _>>>()?;
+            .map(|(t, v)| match TypeName::parse(&v) {
+                Ok(n) => Ok((t, n)),
+                Err(cause) => Err(Ros2PlanError::Name { flag: "--ros2-type", text: format!("{t}={v}"), cause }),
+            })
+            .collect::<Result<BTreeMap<_, _>, _>>()?;
         let qos = by_topic("--ros2-qos", &r.ros2_qos)?;
         for (t, text) in &qos {
-            qos::parse(text, &qos::ros_default()).with_context(|| format!("--ros2-qos {t}"))?;
+            qos::parse(text, &qos::ros_default()).map_err(|cause| Ros2PlanError::Qos { topic: t.clone(), cause })?;
         }
         let domain = domain(r.ros2_domain)?;
         Ok(Plan {
@@ -129,29 +193,27 @@ impl Plan {
 /// scenario, seed, queue and directory (by the rules of several streams:
 /// `--stream-scenario K=…`, the seed derived for lane K), the loop's place
 /// and live control.
-pub fn config(args: &EmulatorArgs, lanes: usize) -> anyhow::Result<EmulatorConfig> {
+pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, ConfigError> {
     let mut scenarios = BTreeMap::new();
     for text in &args.stream.stream_scenario {
         let (k, what) = crate::service::args::groups::parse_stream_scenario(text, lanes as u32)?;
         scenarios.insert(k, what);
     }
-    let spec = crate::load::resolve(&args.scenario.scenario)?;
+    let spec = crate::load::resolve(&args.scenario.scenario).map_err(|cause| Ros2PlanError::Scenario { lane: None, cause })?;
     let seed = seeds::run(args.scenario.seed, &spec);
     let mut out = Vec::new();
     for k in 0..lanes {
         let name = scenarios.get(&k).unwrap_or(&args.scenario.scenario).clone();
-        let scenario = crate::load::resolve(&name).with_context(|| format!("lane {k}"))?;
+        let scenario = crate::load::resolve(&name).map_err(|cause| Ros2PlanError::Scenario { lane: Some(k), cause })?;
         let lane_seed = seeds::stream(seed, k);
         let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
-        anyhow::ensure!(queue_capacity >= 1, "--queue-capacity must be at least 1 message");
+        if queue_capacity < 1 {
+            return Err(Ros2PlanError::QueueCapacity.into());
+        }
         let bytes = (queue_capacity + 1).checked_mul(args.ros2.ros2_max_bytes).filter(|b| *b <= SLOTS_BYTES_MAX);
-        anyhow::ensure!(
-            bytes.is_some(),
-            "lane {k}: {} slots of --ros2-max-bytes {} exceed {} GiB; lower --queue-capacity or --ros2-max-bytes",
-            queue_capacity + 1,
-            args.ros2.ros2_max_bytes,
-            SLOTS_BYTES_MAX >> 30
-        );
+        if bytes.is_none() {
+            return Err(Ros2PlanError::SlotsTooLarge { lane: k, slots: queue_capacity + 1, max_bytes: args.ros2.ros2_max_bytes, gib: SLOTS_BYTES_MAX >> 30 }.into());
+        }
         let out_dir = crate::service::args::streams::dir(&args.out, lanes, k);
         let mut lane_args = EmulatorArgs {
             scenario: ScenarioArgs { scenario: name, seed: Some(lane_seed), queue_capacity: args.scenario.queue_capacity },

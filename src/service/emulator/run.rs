@@ -11,12 +11,31 @@ use crate::service::emulator::{report, spin};
 use crate::service::link::{Carried, Link};
 use crate::service::schema::EmulatorReport;
 use crate::service::signals;
+use crate::service::emulator::path::PathError;
 use crate::transport::IpcNode;
-use anyhow::Context;
+
+/// Why the lanes did not run to their reports.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The reordering release queue.
+    #[error(transparent)]
+    Queue(#[from] crate::injector::BuildError),
+    #[error(transparent)]
+    Control(#[from] control::StartError),
+    #[error(transparent)]
+    Place(#[from] crate::host::placement::PlaceError),
+    #[error("writing emulator.ready")]
+    Ready(#[source] std::io::Error),
+    /// A path's end: its trace, histograms or report.
+    #[error(transparent)]
+    Path(#[from] PathError),
+    #[error(transparent)]
+    Write(#[from] WriteError),
+}
 
 /// What a kind of lane does once its report is written (its transport's
 /// own report).
-pub type After = Box<dyn FnOnce(&EmulatorReport) -> anyhow::Result<()>>;
+pub type After = Box<dyn FnOnce(&EmulatorReport) -> Result<(), WriteError>>;
 
 /// Runs `lanes` (with the iceoryx2 nodes they were opened on, which must
 /// outlive their ports) as `cfg` says. `before_finish` is asked, for each
@@ -27,7 +46,7 @@ pub fn run<F: ForwardChannel + 'static>(
     mut lanes: Vec<Lane<F>>,
     nodes: Vec<Option<IpcNode>>,
     mut before_finish: impl FnMut(usize, &Lane<F>) -> After,
-) -> anyhow::Result<Vec<EmulatorReport>> {
+) -> Result<Vec<EmulatorReport>, RunError> {
     let several = cfg.several();
     for l in lanes.iter_mut() {
         // One stream's wait for its release would hold up the others.
@@ -45,7 +64,7 @@ pub fn run<F: ForwardChannel + 'static>(
     // in at once. Said before the set-up, frames queued at the ingress for
     // its length (0.1–0.3 s with a cleared core and a queue and trace sized
     // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
-    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").context("writing emulator.ready")?;
+    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").map_err(RunError::Ready)?;
     let term = nodes.first().and_then(Option::as_ref);
     let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
     let mut reaper = spin::Reaper::new(&nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
@@ -88,7 +107,7 @@ fn conclude<F: ForwardChannel + 'static>(
     isolation: Option<crate::host::isolate::IsolationSummary>,
     events: Vec<crate::service::control::ControlEvent>,
     run: &report::Run,
-) -> anyhow::Result<EmulatorReport> {
+) -> Result<EmulatorReport, PathError> {
     let duration_ns = run.end.duration_ns();
     lane.end_turn(run.end.t_end);
     let busy = lane.loop_busy();
@@ -103,14 +122,27 @@ fn conclude<F: ForwardChannel + 'static>(
     Ok(report::lane_report(fwd, paths, end, run))
 }
 
+/// Why a report file was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    #[error("writing {}", .path.display())]
+    File {
+        path: std::path::PathBuf,
+        #[source]
+        cause: crate::durable::DurableError,
+    },
+}
+
 /// Writes `value` as pretty JSON to `path`, whole or not at all.
-pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
-    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).with_context(|| format!("writing {}", path.display()))
+pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
+    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
 }
 
 /// Writes `<out>/emulator.json` of several lanes: every lane's account and
 /// their total.
-fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: &str) -> anyhow::Result<()> {
+fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: &str) -> Result<(), WriteError> {
     let run_ids: Vec<String> = cfg.lanes.iter().map(|l| l.args.run_id.clone().unwrap_or_default()).collect();
     let dirs: Vec<_> = cfg.lanes.iter().map(|l| l.out_dir.clone()).collect();
     let joint = report::joint(reports, &run_ids, &dirs, ended_by);
@@ -131,7 +163,7 @@ fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: &str)
 /// The live control of the run, when it has one: room for switched phases,
 /// the control thread started and its telemetry tapped from lane 0's trace
 /// (before the loop's core is pinned).
-fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> anyhow::Result<Option<(ControlPort, ControlHandle)>> {
+fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> Result<Option<(ControlPort, ControlHandle)>, control::StartError> {
     let Some((run, telemetry_ms)) = cfg.control.clone() else { return Ok(None) };
     link.injector_mut().reserve_phases(control::PHASE_ROOM);
     let interval_ns = (telemetry_ms > 0).then(|| telemetry_ms.saturating_mul(1_000_000));
@@ -155,7 +187,7 @@ fn start_control<T: Carried>(cfg: &EmulatorConfig, link: &mut Link<T>) -> anyhow
 /// control thread off its core, clears the core if asked, and raises the
 /// thread's priority if asked (`host::placement`, which says loudly what
 /// it could not do).
-fn place<F: ForwardChannel + 'static>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> anyhow::Result<crate::host::placement::Placement> {
+fn place<F: ForwardChannel + 'static>(cfg: &EmulatorConfig, lanes: &[Lane<F>], control: Option<&ControlHandle>) -> Result<crate::host::placement::Placement, crate::host::placement::PlaceError> {
     use crate::host::placement::{place_loop, KeepOff, KeepOffFn, LoopPlacement};
     let several = lanes.len() > 1;
     let names: Vec<Vec<String>> = lanes
@@ -178,5 +210,5 @@ fn place<F: ForwardChannel + 'static>(cfg: &EmulatorConfig, lanes: &[Lane<F>], c
     }
     let keep_off: Vec<&dyn KeepOff> = threads.iter().map(|t| t.as_ref()).collect();
     let want = LoopPlacement { core: cfg.core, isolate: cfg.isolate, rt_priority: cfg.rt_priority };
-    Ok(place_loop("emulator", &want, &keep_off)?)
+    place_loop("emulator", &want, &keep_off)
 }

@@ -16,12 +16,11 @@
 use crate::injector::DropCause;
 use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take};
-use crate::service::emulator::opening::{Opening, PathPlan};
+use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
 use crate::service::schema::{Account, ReturnExtra};
 use crate::transport::udp::{Arena, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
 use crate::transport::{Endpoint, PortError};
-use anyhow::{bail, Context};
 
 /// Default release-queue capacity of the return path (and of the forward
 /// stream in raw mode): 4096 datagrams. Each needs an arena slot of 64 KiB
@@ -154,7 +153,7 @@ impl Channel for UdpReturn {
 }
 
 /// The return path, with UDP on both sides and unless `--no-return`.
-pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
+pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
     let a = o.args;
     let (Some(ingress), Some(egress)) = (o.t.udp_ingress(), o.t.udp_egress()) else { return Ok(None) };
     if a.udp.no_return {
@@ -162,15 +161,15 @@ pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
     }
     let to = match &a.udp.return_to {
         Some(Endpoint::Udp(addr)) => Some(*addr),
-        Some(Endpoint::Iceoryx2) => bail!("--return-to takes udp://ADDR:PORT"),
+        Some(Endpoint::Iceoryx2) => return Err(OpenError::ReturnTo),
         None => None,
     };
     let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::RETURN_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
-    let mut from_robot = egress.try_clone().context("opening the return path")?;
+    let mut from_robot = egress.try_clone().map_err(OpenError::ReturnPort)?;
     if let Some(robot) = a.udp.robot_from {
         from_robot.accept_only(robot);
     }
-    let to_console = ingress.try_clone().context("opening the return path")?;
+    let to_console = ingress.try_clone().map_err(OpenError::ReturnPort)?;
     let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_path.return_scenario.is_some(), plan.queue_capacity);
     Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))
 }

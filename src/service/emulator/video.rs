@@ -17,14 +17,13 @@
 
 use crate::injector::{DropCause, Invalid};
 use crate::service::emulator::path::{Channel, Ending, Path, Reverse, Take, GRACE_NS};
-use crate::service::emulator::opening::{Opening, PathPlan};
+use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
 use crate::service::schema::{Account, VideoExtra};
 use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO_HELD_FRAMES};
 use crate::service::video::VideoArgs;
 use crate::transport::{Channel as Port, IpcNode, PortError};
 use crate::video::{drop_kind, DropKind};
-use anyhow::Context;
 
 /// What the emulator's video link holds: the slot of the borrowed sample,
 /// and what the link and the release need of it.
@@ -154,7 +153,7 @@ impl Channel for Video {
 
 /// The video path, when the run has video (`--video-mbps`) and an iceoryx2
 /// node.
-pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
+pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
     let Some(node) = o.t.node.as_ref() else { return Ok(None) };
     Ok(path(&o.args.video, node, o.seed, o.out_dir)?.map(|p| Box::new(p) as Box<dyn Reverse>))
 }
@@ -162,15 +161,15 @@ pub fn open(o: &Opening) -> anyhow::Result<Option<Box<dyn Reverse>>> {
 /// The video path of `v` on `node` (`None` without video), through
 /// `--video-scenario` (default Normal), its seed derived from `seed` unless
 /// given, its trace in `out_dir`.
-pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path) -> anyhow::Result<Option<Path<Video>>> {
+pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path) -> Result<Option<Path<Video>>, OpenError> {
     if !v.on() {
         return Ok(None);
     }
     v.validate()?;
     let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, crate::service::seeds::VIDEO_TAG, VIDEO_HELD_FRAMES - 1)?;
     plan.queue_capacity = VIDEO_HELD_FRAMES - 1;
-    let source = node.video_subscriber(Port::Video).context("opening the robot → emulator video port")?;
-    let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).context("opening the emulator → console video port")?;
+    let source = node.video_subscriber(Port::Video).map_err(|cause| OpenError::VideoPort { direction: "robot → emulator", cause })?;
+    let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).map_err(|cause| OpenError::VideoPort { direction: "emulator → console", cause })?;
     let chan = Video {
         source,
         sink,

@@ -22,11 +22,13 @@
 //! and a runner that fails or panics stops its children first.
 
 mod assemble;
+mod error;
 mod outdir;
 mod procs;
 mod watch;
 
 pub use crate::service::plan::{fresh_run_id, fresh_seed, DEFAULT_QUEUE_CAPACITY};
+pub use error::RunnerError;
 pub use outdir::{OutDirLock, LOCK_FILE};
 
 use crate::clock::now_ns;
@@ -37,12 +39,14 @@ use crate::service::plan::{Plan, Resolved, Seeds};
 use crate::service::report::RunReport;
 use crate::service::args::streams;
 use crate::service::{seeds, signals};
-use anyhow::{Context, Result};
+use crate::service::emulator::opening::PathScenarioError;
+
+type Result<T> = std::result::Result<T, RunnerError>;
 
 /// A reverse path's scenario (`flag`'s, default Normal: nothing injected).
-fn resolve_path(flag: &str, name: Option<&str>) -> Result<ScenarioSpec> {
+fn resolve_path(flag: &'static str, name: Option<&str>) -> Result<ScenarioSpec> {
     let name = name.unwrap_or("Normal");
-    crate::load::resolve(name).with_context(|| format!("{flag} {name}"))
+    crate::load::resolve(name).map_err(|cause| PathScenarioError { flag, name: name.into(), cause }.into())
 }
 
 /// Every scenario of the run, resolved once and checked with its seed
@@ -53,11 +57,11 @@ fn resolve(args: &RunArgs, run_id: &str) -> Result<(Resolved, u64)> {
     let seed = seeds::run(args.scenario.seed, &spec);
     let mut specs = vec![spec; args.stream.streams as usize];
     for (k, what) in args.stream.named_scenarios()? {
-        specs[k] = crate::load::resolve(&what).with_context(|| format!("--stream-scenario {k}={what}"))?;
+        specs[k] = crate::load::resolve(&what).map_err(|cause| RunnerError::StreamScenario { stream: k, what: what.clone(), cause })?;
     }
     for (k, s) in specs.iter().enumerate() {
-        Scenario::new(s, seeds::stream(seed, k)).with_context(|| format!("the scenario of stream {k}"))?;
-        crate::transport::RunId::new(&streams::run_id(run_id, k)).with_context(|| format!("the run id of stream {k}"))?;
+        Scenario::new(s, seeds::stream(seed, k)).map_err(|e| RunnerError::StreamSeed(k, e))?;
+        crate::transport::RunId::new(&streams::run_id(run_id, k)).map_err(|e| RunnerError::StreamRunId(k, e))?;
     }
     let rp = &args.return_path;
     let return_path = (!rp.no_feedback).then(|| resolve_path("--return-scenario", rp.return_scenario.as_deref())).transpose()?;
@@ -70,7 +74,7 @@ fn check_paths(r: &Resolved, s: &Seeds) -> Result<()> {
     let paths = [("--return-scenario", &r.return_path, s.return_path), ("--video-scenario", &r.video, s.video)];
     for (flag, spec, seed) in paths {
         if let (Some(spec), Some(seed)) = (spec, seed) {
-            Scenario::new(spec, seed).with_context(|| format!("{flag} {}", spec.name))?;
+            Scenario::new(spec, seed).map_err(|cause| PathScenarioError { flag, name: spec.name.clone(), cause })?;
         }
     }
     Ok(())
@@ -92,7 +96,7 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     }
     let plan = Plan::new(args, &resolved, seed, run_id, &host_cores)?;
     check_paths(&resolved, &plan.seeds)?;
-    std::fs::create_dir_all(&plan.out).with_context(|| format!("creating {}", plan.out.display()))?;
+    std::fs::create_dir_all(&plan.out).map_err(|e| RunnerError::Create(plan.out.clone(), e))?;
     let lock = OutDirLock::take(&plan.out)?;
     outdir::clear_marks(&plan)?;
     // What killed runs left (their owners and guardian all dead) is ended

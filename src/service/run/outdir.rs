@@ -4,8 +4,10 @@
 
 use crate::scenario::ScenarioSpec;
 use crate::service::plan::{Plan, StreamPlan};
-use anyhow::{bail, Context, Result};
+use super::RunnerError;
 use std::path::Path;
+
+type Result<T> = std::result::Result<T, RunnerError>;
 
 /// A run's exclusive claim on its output directory: an `flock` on
 /// `<out>/run.lock`, held for the runner's life (the kernel lets it go
@@ -33,7 +35,7 @@ impl OutDirLock {
             .create(true)
             .truncate(false)
             .open(&path)
-            .with_context(|| format!("opening {}", path.display()))?;
+            .map_err(|e| RunnerError::OpenLock(path.clone(), e))?;
         // SAFETY: flock on a descriptor this function owns.
         if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
             let err = std::io::Error::last_os_error();
@@ -41,15 +43,12 @@ impl OutDirLock {
                 let mut text = String::new();
                 let _ = file.read_to_string(&mut text);
                 let owner = text.trim().parse::<u32>().map_or("unknown".to_string(), |p| p.to_string());
-                bail!(
-                    "the output directory {} is in use by another netfi run (pid {owner}); wait for it to end or give another --out",
-                    out.display()
-                );
+                return Err(RunnerError::InUse { out: out.to_path_buf(), owner });
             }
-            return Err(err).with_context(|| format!("locking {}", path.display()));
+            return Err(RunnerError::Lock(path, err));
         }
         file.set_len(0).and_then(|_| file.rewind()).and_then(|_| writeln!(file, "{}", std::process::id()))
-            .with_context(|| format!("writing {}", path.display()))?;
+            .map_err(|e| RunnerError::Write(path.clone(), e))?;
         Ok(OutDirLock { _file: file })
     }
 }
@@ -58,7 +57,7 @@ impl OutDirLock {
 /// run left there (ready, report and pid files) removed.
 pub fn clear_marks(plan: &Plan) -> Result<()> {
     for dir in std::iter::once(&plan.out).chain(plan.streams.iter().map(|s| &s.out)) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|e| RunnerError::Create(dir.clone(), e))?;
         for role in ["console", "emulator", "simulator"] {
             for ext in ["ready", "json", "pid"] {
                 let _ = std::fs::remove_file(dir.join(format!("{role}.{ext}")));
@@ -76,7 +75,7 @@ fn write_run_scenario(spec: &ScenarioSpec, path: &Path, own: &Path) -> Result<()
     use std::io::Write;
     use std::os::unix::fs::OpenOptionsExt;
     let toml = spec.to_toml();
-    std::fs::write(path, &toml).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::write(path, &toml).map_err(|e| RunnerError::Write(path.to_path_buf(), e))?;
     // A file left by an earlier run with this run id (given with --run-id).
     let _ = std::fs::remove_file(own);
     let mut f = std::fs::OpenOptions::new()
@@ -84,8 +83,8 @@ fn write_run_scenario(spec: &ScenarioSpec, path: &Path, own: &Path) -> Result<()
         .create_new(true)
         .mode(0o444)
         .open(own)
-        .with_context(|| format!("creating {}", own.display()))?;
-    f.write_all(toml.as_bytes()).and_then(|_| f.sync_all()).with_context(|| format!("writing {}", own.display()))
+        .map_err(|e| RunnerError::Create(own.to_path_buf(), e))?;
+    f.write_all(toml.as_bytes()).and_then(|_| f.sync_all()).map_err(|e| RunnerError::Write(own.to_path_buf(), e))
 }
 
 /// Writes every stream's scenario where the plan told the emulator to read it.

@@ -8,7 +8,9 @@ use crate::host::guardian::RunGuard;
 use crate::service::plan::Plan;
 use crate::service::report::ProcessEnd;
 use crate::service::supervise::{State, KILL_GRACE};
-use anyhow::{bail, Context, Result};
+use super::RunnerError;
+
+type Result<T> = std::result::Result<T, RunnerError>;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -138,20 +140,21 @@ impl Drop for Proc {
 /// process group of its own (Ctrl-C reaches only the runner), telling it
 /// the runner's pid (it dies with the runner).
 pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, guard: &mut Option<RunGuard>) -> Result<Proc> {
-    let exe = std::env::current_exe().context("locating the netfi executable")?;
+    let exe = std::env::current_exe().map_err(RunnerError::Exe)?;
     let log = out.join(format!("{role}.log"));
-    let file = std::fs::File::create(&log).with_context(|| format!("creating {}", log.display()))?;
+    let file = std::fs::File::create(&log).map_err(|e| RunnerError::Create(log.clone(), e))?;
+    let stdout = file.try_clone().map_err(|e| RunnerError::Create(log.clone(), e))?;
     let child = Command::new(&exe)
         .arg(role)
         .args(&args)
         .stdin(Stdio::null())
-        .stdout(file.try_clone()?)
+        .stdout(stdout)
         .stderr(file)
         .process_group(0)
         .env(crate::host::process::RUNNER_PID_ENV, std::process::id().to_string())
         .env(crate::transport::ipc::IPC_ROOT_ENV, crate::transport::ipc::user_root_dir())
         .spawn()
-        .with_context(|| format!("starting the {role} ({})", exe.display()))?;
+        .map_err(|cause| RunnerError::Spawn { role, exe: exe.clone(), cause })?;
     if let Some(Err(e)) = guard.as_mut().map(|g| g.add(child.id())) {
         eprintln!("WARNING: the {role} is not on the run's record ({e}): if the runner is killed, it ends by the parent-death signal only");
     }
@@ -164,11 +167,11 @@ fn wait_ready(p: &mut Proc, out: &Path, timeout: Duration) -> Result<()> {
     let t0 = Instant::now();
     while !ready.exists() {
         if p.poll() {
-            bail!("the {} ended before it was ready ({}):\n{}", p.role, p.status_text(), tail(&p.log, 20));
+            return Err(RunnerError::EndedEarly { role: p.role, status: p.status_text(), log: tail(&p.log, 20) });
         }
         if t0.elapsed() > timeout {
             p.terminate();
-            bail!("the {} was not ready after {:?}:\n{}", p.role, timeout, tail(&p.log, 20));
+            return Err(RunnerError::NotReady { role: p.role, after: timeout, log: tail(&p.log, 20) });
         }
         std::thread::sleep(Duration::from_millis(5));
     }
