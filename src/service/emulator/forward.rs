@@ -132,17 +132,7 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
     /// and its injected delay.
     #[inline]
     fn release(&mut self, item: &FrameSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        let mut release_ns = 0;
-        let sent = self.sink.send_with(item, |s| {
-            s.release_sched_ns = scheduled_ns;
-            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
-            release_ns = stamp();
-            s.release_ns = release_ns;
-        });
-        match sent {
-            Ok(_) => Ok(release_ns),
-            Err(e) => Err((crate::clock::now_ns(), e)),
-        }
+        crate::service::emulator::path::release_stamped!(self.sink, item, scheduled_ns, stamp)
     }
 
     fn send_end(&mut self, released: u64) {

@@ -23,6 +23,31 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::path::{Path as FsPath, PathBuf};
 
+/// The release of a sample that carries its own stamps (ITP frames,
+/// feedback): `$item` sent on `$sink` (whose `send_with` lets a closure
+/// have the last word on the copy it sends) stamped with its scheduled
+/// release time, its injected delay and, read by `$stamp` immediately
+/// before the send, its actual release time; that time, or the time of the
+/// failure and why. A macro, so that each channel's release compiles to
+/// exactly the code it had when each wrote it out.
+macro_rules! release_stamped {
+    ($sink:expr, $item:expr, $scheduled_ns:expr, $stamp:expr) => {{
+        let (scheduled_ns, stamp): (u64, _) = ($scheduled_ns, $stamp);
+        let mut release_ns = 0;
+        let sent = $sink.send_with($item, |s| {
+            s.release_sched_ns = scheduled_ns;
+            s.injected_delay_ns = scheduled_ns - s.ingress_ns;
+            release_ns = stamp();
+            s.release_ns = release_ns;
+        });
+        match sent {
+            Ok(_) => Ok(release_ns),
+            Err(e) => Err((crate::clock::now_ns(), e)),
+        }
+    }};
+}
+pub(crate) use release_stamped;
+
 /// Why a path could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum PathError {
