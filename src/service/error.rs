@@ -1,7 +1,13 @@
 //! Why the console or the simulator did not run to its report: the steps
 //! both share (their pid file, node, ports, placement, video, ready file
-//! and report), and each one's own.
+//! and report), and each one's own (the console's frames and its wait for
+//! the emulator, the robot's set-up and end).
 
+use crate::capture::CaptureError;
+use crate::durable::DurableError;
+use crate::kinematics::KinematicsConfigError;
+use crate::metrics::IntervalLogError;
+use crate::motion::MotionParamError;
 use std::path::PathBuf;
 
 /// Why a console or a simulator did not run to its report.
@@ -33,18 +39,59 @@ pub enum ServiceError {
     Args(#[from] super::args::ArgsError),
     /// The console's frames.
     #[error(transparent)]
-    Script(#[from] super::console::ScriptError),
+    Script(#[from] ScriptError),
     /// The console's end of the feedback loop, or the robot's kinematics.
     #[error(transparent)]
     Kinematics(#[from] crate::kinematics::KinematicsConfigError),
     /// The console's wait for the emulator.
     #[error(transparent)]
-    Wait(#[from] super::console::WaitError),
+    Wait(#[from] WaitError),
     #[error(transparent)]
-    Robot(#[from] super::simulator::RobotError),
+    Robot(#[from] RobotError),
 }
 
 /// Writes a service's report as pretty JSON, whole or not at all.
 pub(crate) fn write_report(path: PathBuf, report: &impl serde::Serialize) -> Result<(), ServiceError> {
     crate::durable::write_whole(&path, &serde_json::to_vec_pretty(report)?).map_err(|e| ServiceError::Report(path, e))
+}
+
+/// Why the console's frames could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum ScriptError {
+    /// The capture could not be read, or was refused.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// The synthetic motion's parameters were refused.
+    #[error(transparent)]
+    Motion(#[from] MotionParamError),
+}
+
+/// Why the console did not start streaming.
+#[derive(Debug, thiserror::Error)]
+pub enum WaitError {
+    /// No emulator subscribed in time.
+    #[error("no emulator subscribed to netfi/{run_id}/console within {wait_s} s")]
+    NoEmulator {
+        /// The run.
+        run_id: String,
+        /// How long the console waited (`--wait-for-peer-s`).
+        wait_s: f64,
+    },
+    /// Told to stop while waiting.
+    #[error("stopped before streaming")]
+    Stopped,
+}
+
+/// Why the simulator's robot could not be set up or end whole.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// `--stall-ms` out of the kinematics' range.
+    #[error("--stall-ms: {0}")]
+    StallMs(#[source] KinematicsConfigError),
+    /// `received.csv` could not be written whole.
+    #[error(transparent)]
+    Received(#[from] DurableError),
+    /// A histogram log could not be written.
+    #[error(transparent)]
+    Histogram(#[from] IntervalLogError),
 }

@@ -14,33 +14,19 @@ use crate::clock::{now_ns, Wait};
 use crate::frame::ItpView;
 use crate::host::StealTimer;
 use crate::frame::ItpFrame;
-use crate::durable::DurableError;
-use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig, KinematicsConfigError};
-use crate::metrics::{IntervalLog, IntervalLogError, LatencyHistogram, Summary};
+use crate::kinematics::{ChecksumPolicy, Kinematics, KinematicsConfig};
+use crate::metrics::{IntervalLog, LatencyHistogram, Summary};
 use crate::sample::{FeedbackSample, FrameSample, ITP_FRAME_LEN};
 use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSource;
 use crate::service::signals;
 use crate::transport::{Channel, Role};
-use crate::service::error::ServiceError;
+use crate::service::error::{RobotError, ServiceError};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
 
-/// Why the simulator's robot could not be set up or end whole.
-#[derive(Debug, thiserror::Error)]
-pub enum RobotError {
-    /// `--stall-ms` out of the kinematics' range.
-    #[error("--stall-ms: {0}")]
-    StallMs(#[source] KinematicsConfigError),
-    /// `received.csv` could not be written whole.
-    #[error(transparent)]
-    Received(#[from] DurableError),
-    /// A histogram log could not be written.
-    #[error(transparent)]
-    Histogram(#[from] IntervalLogError),
-}
 
 /// The simulator's report, written as `simulator.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -14,7 +14,7 @@
 mod feedback;
 mod script;
 
-pub use script::ScriptError;
+pub use crate::service::error::{ScriptError, WaitError};
 
 use crate::clock::{now_ns, wait_until_ns, Wait};
 use crate::host::StealTimer;
@@ -31,21 +31,6 @@ use serde::{Deserialize, Serialize};
 use feedback::FeedbackIn;
 use script::Script;
 
-/// Why the console did not start streaming.
-#[derive(Debug, thiserror::Error)]
-pub enum WaitError {
-    /// No emulator subscribed in time.
-    #[error("no emulator subscribed to netfi/{run_id}/console within {wait_s} s")]
-    NoEmulator {
-        /// The run.
-        run_id: String,
-        /// How long the console waited (`--wait-for-peer-s`).
-        wait_s: f64,
-    },
-    /// Told to stop while waiting.
-    #[error("stopped before streaming")]
-    Stopped,
-}
 
 /// The console's report, written as `console.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,21 +1,12 @@
 //! Where the console's frames come from: synthetic motion at a fixed rate,
 //! or a capture replayed with its timing or at a fixed rate.
 
-use crate::capture::{self, CaptureError};
-use crate::motion::{MotionGenerator, MotionParamError, MotionParams};
+use crate::capture;
+use crate::service::error::ScriptError;
+use crate::motion::{MotionGenerator, MotionParams};
 use crate::sample::ITP_FRAME_LEN;
 use crate::service::args::ConsoleArgs;
 
-/// Why the console's frames could not be had.
-#[derive(Debug, thiserror::Error)]
-pub enum ScriptError {
-    /// The capture could not be read, or was refused.
-    #[error(transparent)]
-    Capture(#[from] CaptureError),
-    /// The synthetic motion's parameters were refused.
-    #[error(transparent)]
-    Motion(#[from] MotionParamError),
-}
 
 /// Where frames come from: each call gives the frame's planned offset from
 /// the stream's start and its wire bytes.

@@ -14,7 +14,6 @@ use crate::service::args::streams;
 use crate::service::seeds;
 use crate::scenario::ScenarioError;
 use crate::service::args::ArgsError;
-use crate::service::emulator::ros2_plan::Ros2PlanError;
 use crate::transport::{IpcConfig, Payload, RunId, RunIdError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -28,8 +27,6 @@ pub enum ConfigError {
     Scenario(#[from] ScenarioError),
     #[error(transparent)]
     RunId(#[from] RunIdError),
-    #[error(transparent)]
-    Ros2(#[from] Ros2PlanError),
     #[error("--queue-capacity must be at least 1 frame")]
     QueueCapacity,
     #[error("--streams needs --run-id")]

@@ -49,7 +49,7 @@ fn open_lane(l: &LaneConfig) -> Result<Opened, OpenError> {
     }
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
     if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
-        run::write_json(&l.out_dir.join("udp_endpoints.json"), &bound)?;
+        report::write_json(&l.out_dir.join("udp_endpoints.json"), &bound)?;
     }
     Ok(Opened { lane: Lane::new(forward, reverse), node, arena, bound })
 }
@@ -78,7 +78,7 @@ pub fn main(cfg: &EmulatorConfig) -> Result<Vec<EmulatorReport>, super::Emulator
         let after: run::After = Box::new(move |r: &EmulatorReport| {
             let Some(mut u) = u else { return Ok(()) };
             u.return_path = r.process.paths.get(<udp_return::UdpReturn as Channel>::NAME).cloned();
-            run::write_json(&dir.join("udp.json"), &u)?;
+            report::write_json(&dir.join("udp.json"), &u)?;
             eprintln!("{}", report::summary_line(r, &u));
             Ok(())
         });

@@ -68,7 +68,7 @@ pub enum OpenError {
     ReturnPort(#[source] crate::transport::udp::UdpOpenError),
     /// A file the lane writes at its start.
     #[error(transparent)]
-    Write(#[from] crate::service::emulator::run::WriteError),
+    Write(#[from] crate::service::emulator::report::WriteError),
 }
 
 /// What opening a stream's reverse paths needs.

@@ -392,7 +392,7 @@ pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorE
                     (Some(_), Some(sent)) => sent == a.entered + f.lost_before_ingress + f.sent_before_emulator,
                     _ => true,
                 };
-            run::write_json(&dir.join("ros2.json"), &report)?;
+            super::report::write_json(&dir.join("ros2.json"), &report)?;
             eprintln!(
                 "emulator: {} → {}: {} entered, {} delivered, {} dropped {:?}, {} held at end, {} lost before ingress; ended by {}{}",
                 report.forward.from,

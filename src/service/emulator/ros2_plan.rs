@@ -61,6 +61,9 @@ pub enum Ros2PlanError {
     Scenario { lane: Option<usize>, cause: ScenarioError },
     #[error("--queue-capacity must be at least 1 message")]
     QueueCapacity,
+    /// The lanes' placement and control.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
     #[error("lane {lane}: {slots} slots of --ros2-max-bytes {max_bytes} exceed {gib} GiB; lower --queue-capacity or --ros2-max-bytes")]
     SlotsTooLarge { lane: usize, slots: usize, max_bytes: usize, gib: usize },
 }
@@ -193,7 +196,7 @@ impl Plan {
 /// scenario, seed, queue and directory (by the rules of several streams:
 /// `--stream-scenario K=…`, the seed derived for lane K), the loop's place
 /// and live control.
-pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, ConfigError> {
+pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, Ros2PlanError> {
     let mut scenarios = BTreeMap::new();
     for text in &args.stream.stream_scenario {
         let (k, what) = crate::service::args::groups::parse_stream_scenario(text, lanes as u32)?;
@@ -208,11 +211,11 @@ pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, Confi
         let lane_seed = seeds::stream(seed, k);
         let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(DEFAULT_QUEUE_CAPACITY);
         if queue_capacity < 1 {
-            return Err(Ros2PlanError::QueueCapacity.into());
+            return Err(Ros2PlanError::QueueCapacity);
         }
         let bytes = (queue_capacity + 1).checked_mul(args.ros2.ros2_max_bytes).filter(|b| *b <= SLOTS_BYTES_MAX);
         if bytes.is_none() {
-            return Err(Ros2PlanError::SlotsTooLarge { lane: k, slots: queue_capacity + 1, max_bytes: args.ros2.ros2_max_bytes, gib: SLOTS_BYTES_MAX >> 30 }.into());
+            return Err(Ros2PlanError::SlotsTooLarge { lane: k, slots: queue_capacity + 1, max_bytes: args.ros2.ros2_max_bytes, gib: SLOTS_BYTES_MAX >> 30 });
         }
         let out_dir = crate::service::args::streams::dir(&args.out, lanes, k);
         let mut lane_args = EmulatorArgs {
@@ -224,7 +227,7 @@ pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, Confi
         lane_args.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
         out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
     }
-    EmulatorConfig::with_lanes(args, out)
+    Ok(EmulatorConfig::with_lanes(args, out)?)
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use crate::service::link::{Carried, Link};
 use crate::service::schema::EmulatorReport;
 use crate::service::signals;
 use crate::service::emulator::path::PathError;
+use crate::service::emulator::report::{write_json, WriteError};
 use crate::transport::IpcNode;
 
 /// Why the lanes did not run to their reports.
@@ -122,23 +123,6 @@ fn conclude<F: ForwardChannel + 'static>(
     Ok(report::lane_report(fwd, paths, end, run))
 }
 
-/// Why a report file was not written.
-#[derive(Debug, thiserror::Error)]
-pub enum WriteError {
-    #[error(transparent)]
-    Json(#[from] serde_json::Error),
-    #[error("writing {}", .path.display())]
-    File {
-        path: std::path::PathBuf,
-        #[source]
-        cause: crate::durable::DurableError,
-    },
-}
-
-/// Writes `value` as pretty JSON to `path`, whole or not at all.
-pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
-    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
-}
 
 /// Writes `<out>/emulator.json` of several lanes: every lane's account and
 /// their total.
