@@ -3,7 +3,12 @@
 
 use std::process::Command;
 
+/// The path of `netfi` as this package built it.
+pub fn netfi_exe() -> &'static str {
+    env!("CARGO_BIN_EXE_netfi")
+}
+
 /// `netfi`, as this package built it, ready for its arguments.
 pub fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
+    Command::new(netfi_exe())
 }

@@ -32,13 +32,7 @@ use std::time::{Duration, Instant};
 
 use crate::common::machine;
 
-fn netfi_exe() -> &'static str {
-    env!("CARGO_BIN_EXE_netfi")
-}
-
-fn netfi() -> Command {
-    Command::new(netfi_exe())
-}
+use crate::common::netfi::{netfi, netfi_exe};
 
 fn uid() -> u32 {
     // SAFETY: geteuid has no preconditions.

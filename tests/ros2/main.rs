@@ -55,9 +55,9 @@ pub(crate) fn here() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/ros2")
 }
 
-pub(crate) fn netfi() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_netfi"))
-}
+#[path = "../common/netfi.rs"]
+mod netfi_cmd;
+pub(crate) use netfi_cmd::netfi;
 
 pub(crate) fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))

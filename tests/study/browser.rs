@@ -9,7 +9,7 @@ use crate::common::machine;
 use headless_chrome::{Browser, LaunchOptions, Tab};
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 fn browser_or_skip() -> Option<Browser> {
@@ -42,7 +42,7 @@ struct Ui {
 
 impl Ui {
     fn start(out: &std::path::Path) -> Ui {
-        let mut child = Command::new(netfi())
+        let mut child = netfi()
             .args(["ui", "--port", "0", "--no-token", "--out"])
             .arg(out)
             .stdout(Stdio::piped())

@@ -12,13 +12,11 @@ mod pure;
 
 use crate::common::machine;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::time::{Duration, Instant};
 
 
-pub fn netfi() -> &'static str {
-    env!("CARGO_BIN_EXE_netfi")
-}
+pub use crate::common::netfi::netfi;
 
 /// A fresh folder for one test, removed when dropped.
 pub struct Scratch(pub PathBuf);
@@ -54,7 +52,7 @@ pub fn study(args: &[&str]) -> String {
 }
 
 pub fn study_output(args: &[&str]) -> Output {
-    Command::new(netfi()).arg("study").args(args).output().expect("starting netfi")
+    netfi().arg("study").args(args).output().expect("starting netfi")
 }
 
 /// The participant's progress (`status --json`).
@@ -270,7 +268,7 @@ fn kill_study() -> String {
 /// Starts `netfi study next` for `id`; waits until its run streams;
 /// returns the child, the run's pid and the trial's folder.
 fn start_trial(file: &Path, data: &Path, id: &str) -> (std::process::Child, u32, PathBuf) {
-    let child = Command::new(netfi())
+    let child = netfi()
         .args(["study", "next", file.to_str().unwrap(), "--participant", id])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
