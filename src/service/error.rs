@@ -8,7 +8,6 @@ use crate::durable::DurableError;
 use crate::kinematics::KinematicsConfigError;
 use crate::metrics::IntervalLogError;
 use crate::motion::MotionParamError;
-use std::path::PathBuf;
 
 /// Why a console or a simulator did not run to its report.
 #[derive(Debug, thiserror::Error)]
@@ -30,11 +29,9 @@ pub enum ServiceError {
     /// `<role>.ready`.
     #[error("writing {0}")]
     Ready(&'static str, #[source] std::io::Error),
-    /// The report as JSON.
+    /// The report.
     #[error(transparent)]
-    Json(#[from] serde_json::Error),
-    #[error("writing {}", .0.display())]
-    Report(PathBuf, #[source] crate::durable::DurableError),
+    Report(#[from] super::WriteError),
     #[error(transparent)]
     Args(#[from] super::args::ArgsError),
     /// The console's frames.
@@ -48,11 +45,6 @@ pub enum ServiceError {
     Wait(#[from] WaitError),
     #[error(transparent)]
     Robot(#[from] RobotError),
-}
-
-/// Writes a service's report as pretty JSON, whole or not at all.
-pub(crate) fn write_report(path: PathBuf, report: &impl serde::Serialize) -> Result<(), ServiceError> {
-    crate::durable::write_whole(&path, &serde_json::to_vec_pretty(report)?).map_err(|e| ServiceError::Report(path, e))
 }
 
 /// Why the console's frames could not be had.

@@ -55,3 +55,22 @@ pub fn write_pid(out: &std::path::Path, role: &str) -> Result<(), PidError> {
     let path = out.join(format!("{role}.pid"));
     std::fs::write(&path, std::process::id().to_string()).map_err(|source| PidError { what: "writing", path, source })
 }
+
+/// Why a report file was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    #[error("writing {}", .path.display())]
+    File {
+        path: std::path::PathBuf,
+        #[source]
+        cause: crate::durable::DurableError,
+    },
+}
+
+/// Writes `value` as pretty JSON to `path`, whole or not at all (every
+/// service's report).
+pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
+    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
+}

@@ -320,6 +320,6 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
     let _ = feedback_port.send(&FeedbackSample::end_marker(robot.feedback_sent));
     let mut report = robot.finish(args, ended_by, t_start, t_end, steal_timer.stop())?;
     report.camera = camera.map(|c| c.finish()).transpose()?;
-    crate::service::error::write_report(args.out.join("simulator.json"), &report)?;
+    crate::service::write_json(&args.out.join("simulator.json"), &report)?;
     Ok(report)
 }

@@ -302,6 +302,6 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     if args.live || s.fb.received > 0 {
         eprintln!("{}", s.fb.live_line());
     }
-    crate::service::error::write_report(args.out.join("console.json"), &report)?;
+    crate::service::write_json(&args.out.join("console.json"), &report)?;
     Ok(report)
 }

@@ -13,6 +13,8 @@ use crate::transport::{Egress, Ingress};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
+pub use crate::service::{write_json, WriteError};
+
 /// What the loop and the process add to every lane's report.
 pub struct Run<'a> {
     pub end: &'a LoopEnd,
@@ -186,22 +188,4 @@ pub fn summary_line(r: &EmulatorReport, u: &UdpReport) -> String {
         );
     }
     s
-}
-
-/// Why a report file was not written.
-#[derive(Debug, thiserror::Error)]
-pub enum WriteError {
-    #[error(transparent)]
-    Json(#[from] serde_json::Error),
-    #[error("writing {}", .path.display())]
-    File {
-        path: std::path::PathBuf,
-        #[source]
-        cause: crate::durable::DurableError,
-    },
-}
-
-/// Writes `value` as pretty JSON to `path`, whole or not at all.
-pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
-    crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
 }
