@@ -190,10 +190,7 @@ pub fn whole_name(partial: &Path) -> Option<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn dir(name: &str) -> PathBuf {
-        crate::scratch::dir("durable", name)
-    }
+    use crate::scratch::dir;
 
     #[test]
     fn a_file_is_partial_until_committed_then_whole_under_its_name() {

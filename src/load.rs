@@ -161,10 +161,7 @@ fn recording_of_capture(file: &str, bytes: &[u8]) -> Result<Recording, FileError
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn scratch(name: &str) -> PathBuf {
-        crate::scratch::dir("load", name)
-    }
+    use crate::scratch::dir as scratch;
 
     #[test]
     fn only_regular_files_of_bounded_size_are_read() {

@@ -30,6 +30,32 @@ fn forward(link: Link<FrameSample>, source: usize, sink: usize) -> Path<Forward<
     Path::of(link, chan, 0, std::env::temp_dir().join("netfi-alloc-unused.csv"), false)
 }
 
+type MemoryLane = Lane<Forward<MemoryPort, MemoryPort>>;
+
+/// PLM-2 then a 10–20 µs reordering delay: every release path is taken.
+const PLM2_SHORT_REORDER: &str = "[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n";
+
+/// Feeds `lane` `items` items spaced like 200 kHz (5 µs of turns each, so
+/// the 10–20 µs delays release in turn): `feed(lane, i)` puts item `i` in
+/// and says how many came out since the last. No allocation in the second
+/// half, and more than half released.
+fn assert_no_allocation_per_item(lane: &mut MemoryLane, items: u64, what: &str, mut feed: impl FnMut(&mut MemoryLane, u64) -> u64) {
+    let (mut before, mut released) = (0, 0u64);
+    for i in 0..items {
+        if i == items / 2 {
+            before = allocations();
+        }
+        released += feed(lane, i);
+        let t = netfi::clock::now_ns() + 5_000;
+        while netfi::clock::now_ns() < t {
+            lane.turn();
+        }
+    }
+    let n = allocations() - before;
+    assert_eq!(n, 0, "{n} allocations in {} {what}", items / 2);
+    assert!(released > items / 2, "only {released} {what} released");
+}
+
 fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     // The test that held it has just ended: the harness now records its
@@ -99,7 +125,7 @@ fn the_feedback_path_does_not_allocate_per_sample() {
     use netfi::sample::FeedbackSample;
     use netfi::transport::{FeedbackEgress, FeedbackIngress};
     use std::collections::VecDeque;
-    let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
+    let spec = scenario::parse_str(PLM2_SHORT_REORDER, "alloc.toml", "alloc").unwrap();
     let frames = 200_000u64;
     let link = Link::new(Scenario::new(&spec, 5).unwrap(), 1 << 16, frames).unwrap();
     use netfi::service::emulator::feedback::Feedback;
@@ -107,29 +133,19 @@ fn the_feedback_path_does_not_allocate_per_sample() {
     let path = Path::of(link, chan, 5, std::env::temp_dir().join("netfi-alloc-unused.csv"), false);
     let normal = Link::new(Scenario::new(&scenario::parse_str("", "n.toml", "n").unwrap(), 1).unwrap(), 16, 16).unwrap();
     let mut lane = Lane::new(forward(normal, 4, 16), vec![Box::new(path)]);
-    let (mut before, mut released) = (0, 0u64);
-    for i in 0..frames {
-        if i == frames / 2 {
-            before = allocations();
-        }
+    assert_no_allocation_per_item(&mut lane, frames, "feedback samples", |lane, i| {
         let fb = lane.reverse[0].as_any_mut().downcast_mut::<Path<Feedback>>().unwrap();
         let (inp, out) = fb.chan.ports_mut();
+        let mut released = 0;
         if let FeedbackEgress::Memory(q) = out {
-            released += q.len() as u64;
+            released = q.len() as u64;
             q.clear();
         }
         if let FeedbackIngress::Memory(q) = inp {
             q.push_back(FeedbackSample { robot_index: i, send_ns: netfi::clock::now_ns(), ..FeedbackSample::ZERO });
         }
-        // Spaced like 200 kHz feedback: the 10–20 µs delays release in turn.
-        let t = netfi::clock::now_ns() + 5_000;
-        while netfi::clock::now_ns() < t {
-            lane.turn();
-        }
-    }
-    let n = allocations() - before;
-    assert_eq!(n, 0, "{n} allocations in {} feedback samples", frames / 2);
-    assert!(released > frames / 2, "only {released} feedback samples released");
+        released
+    });
 }
 
 #[test]
@@ -166,32 +182,21 @@ fn a_live_switch_and_a_pause_do_not_allocate_in_the_loop() {
 #[test]
 fn the_loop_turn_does_not_allocate_per_frame() {
     let _serial = one_at_a_time();
-    let spec = scenario::parse_str("[[stage]]\npreset = \"PLM-2\"\n[[stage]]\nmodel = \"delay\"\nmin_ms = 0.01\ndist = \"uniform\"\njitter_ms = 0.01\norder = \"reorder\"\n", "alloc.toml", "alloc").unwrap();
+    let spec = scenario::parse_str(PLM2_SHORT_REORDER, "alloc.toml", "alloc").unwrap();
     let frames = 100_000u64;
     let mut lane = Lane::new(forward(Link::new(Scenario::new(&spec, 7).unwrap(), 1 << 16, frames).unwrap(), 4, 1 << 10), Vec::new());
     let mut template = FrameSample::ZERO;
     netfi::frame::ItpFrame::default().write_to_sample(&mut template);
-    let (mut before, mut released) = (0, 0u64);
-    for i in 0..frames {
-        if i == frames / 2 {
-            before = allocations();
-        }
+    assert_no_allocation_per_item(&mut lane, frames, "frames", |lane, i| {
         let ports = &mut lane.forward.chan;
-        released += ports.sink.queue.len() as u64;
+        let released = ports.sink.queue.len() as u64;
         ports.sink.queue.clear();
         let mut sample = template;
         sample.console_index = i;
         sample.send_ns = netfi::clock::now_ns();
         ports.source.queue.push_back(sample);
-        // Spaced like 200 kHz: the 10–20 µs delays release in turn.
-        let t = netfi::clock::now_ns() + 5_000;
-        while netfi::clock::now_ns() < t {
-            lane.turn();
-        }
-    }
-    let n = allocations() - before;
-    assert_eq!(n, 0, "{n} allocations in {} frames", frames / 2);
-    assert!(released > frames / 2, "only {released} frames released");
+        released
+    });
     let busy = lane.loop_busy();
     assert!(busy.busy_turns > 0 && busy.busy_turns < busy.turns, "{busy:?}");
     assert_eq!(busy.frames, frames);

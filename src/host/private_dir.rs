@@ -179,10 +179,7 @@ fn make_fresh(parent: &Path, stem: &str) -> Result<PathBuf, PrivateDirError> {
 mod tests {
     use super::*;
     use std::os::unix::fs::PermissionsExt;
-
-    fn scratch(name: &str) -> PathBuf {
-        crate::scratch::dir("private-dir", name)
-    }
+    use crate::scratch::dir as scratch;
 
     #[test]
     fn the_expected_directory_is_created_private() {

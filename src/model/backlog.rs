@@ -67,6 +67,55 @@ pub(super) fn is_zero(v: &u64) -> bool {
     *v == 0
 }
 
+/// A link stage's parameter struct: its own fields, then the packet fields
+/// both link stages take (as fields of the stage's own, for precise
+/// errors: serde's `flatten` cannot name an unknown field), with
+/// `packet_params()` reading them back and `with_default_packets(own
+/// fields…)` building one with [`PacketParams::default`]'s.
+macro_rules! link_params {
+    ($(#[$m:meta])* pub struct $name:ident { $($(#[$fm:meta])* pub $f:ident: $t:ty,)* }) => {
+        $(#[$m])*
+        pub struct $name {
+            $($(#[$fm])* pub $f: $t,)*
+            #[serde(default = "default_payload", skip_serializing_if = "is_default_payload")]
+            pub payload_bytes: u64,
+            #[serde(default = "default_mtu", skip_serializing_if = "is_default_mtu")]
+            pub mtu_bytes: u64,
+            #[serde(default, skip_serializing_if = "is_zero")]
+            pub overhead_bytes: u64,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub queue_packets: Option<u64>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub queue_bytes: Option<u64>,
+        }
+
+        impl $name {
+            fn with_default_packets($($f: $t),*) -> $name {
+                let p = PacketParams::default();
+                $name {
+                    $($f,)*
+                    payload_bytes: p.payload_bytes,
+                    mtu_bytes: p.mtu_bytes,
+                    overhead_bytes: p.overhead_bytes,
+                    queue_packets: p.queue_packets,
+                    queue_bytes: p.queue_bytes,
+                }
+            }
+
+            fn packet_params(&self) -> PacketParams {
+                PacketParams {
+                    payload_bytes: self.payload_bytes,
+                    mtu_bytes: self.mtu_bytes,
+                    overhead_bytes: self.overhead_bytes,
+                    queue_packets: self.queue_packets,
+                    queue_bytes: self.queue_bytes,
+                }
+            }
+        }
+    };
+}
+pub(super) use link_params;
+
 impl Default for PacketParams {
     fn default() -> Self {
         PacketParams {

@@ -114,11 +114,8 @@ impl Model for GilbertElliott {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::units::prob;
     use rand::SeedableRng;
-
-    fn prob(p: f64) -> Probability {
-        Probability::new(p).unwrap()
-    }
 
     fn params(p: f64, r: Option<f64>, loss_good: Option<f64>, loss_bad: Option<f64>) -> GilbertElliottParams {
         GilbertElliottParams {

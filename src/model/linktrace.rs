@@ -35,7 +35,7 @@
 //! and it refuses a packet larger than one opportunity (here a packet spans
 //! opportunities, and a payload larger than the MTU goes as several).
 
-use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, Backlog, LinkStats, PacketParams, Packets};
+use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, Backlog, LinkStats, PacketParams, Packets};
 use super::{Model, ParamError, StageRng, Verdict};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -144,27 +144,19 @@ impl Schedule {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct LinkTraceParams {
-    /// The trace file, relative to the scenario file.
-    pub file: String,
-    /// Bytes one opportunity carries.
-    #[serde(default = "default_opportunity", skip_serializing_if = "is_default_opportunity")]
-    pub opportunity_bytes: u64,
-    #[serde(default = "default_payload", skip_serializing_if = "is_default_payload")]
-    pub payload_bytes: u64,
-    #[serde(default = "default_mtu", skip_serializing_if = "is_default_mtu")]
-    pub mtu_bytes: u64,
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub overhead_bytes: u64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub queue_packets: Option<u64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub queue_bytes: Option<u64>,
-    /// The parsed trace, filled in by whoever read `file`.
-    #[serde(skip)]
-    pub schedule: Option<Arc<Schedule>>,
+link_params! {
+    #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct LinkTraceParams {
+        /// The trace file, relative to the scenario file.
+        pub file: String,
+        /// Bytes one opportunity carries.
+        #[serde(default = "default_opportunity", skip_serializing_if = "is_default_opportunity")]
+        pub opportunity_bytes: u64,
+        /// The parsed trace, filled in by whoever read `file`.
+        #[serde(skip)]
+        pub schedule: Option<Arc<Schedule>>,
+    }
 }
 
 fn default_opportunity() -> u64 {
@@ -177,27 +169,7 @@ fn is_default_opportunity(v: &u64) -> bool {
 impl LinkTraceParams {
     /// A trace link over `schedule` with the default packets and queue.
     pub fn new(file: impl Into<String>, schedule: Schedule) -> LinkTraceParams {
-        let p = PacketParams::default();
-        LinkTraceParams {
-            file: file.into(),
-            opportunity_bytes: MM_OPPORTUNITY_BYTES,
-            payload_bytes: p.payload_bytes,
-            mtu_bytes: p.mtu_bytes,
-            overhead_bytes: p.overhead_bytes,
-            queue_packets: None,
-            queue_bytes: None,
-            schedule: Some(Arc::new(schedule)),
-        }
-    }
-
-    fn packet_params(&self) -> PacketParams {
-        PacketParams {
-            payload_bytes: self.payload_bytes,
-            mtu_bytes: self.mtu_bytes,
-            overhead_bytes: self.overhead_bytes,
-            queue_packets: self.queue_packets,
-            queue_bytes: self.queue_bytes,
-        }
+        LinkTraceParams::with_default_packets(file.into(), MM_OPPORTUNITY_BYTES, Some(Arc::new(schedule)))
     }
 }
 

@@ -179,11 +179,8 @@ impl Model for Markov4 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::units::prob;
     use rand::{RngExt, SeedableRng};
-
-    fn prob(p: f64) -> Probability {
-        Probability::new(p).unwrap()
-    }
 
     fn params(p13: f64, p31: Option<f64>, p32: Option<f64>, p23: Option<f64>, p14: Option<f64>) -> Markov4Params {
         Markov4Params { p13: prob(p13), p31: p31.map(prob), p32: p32.map(prob), p23: p23.map(prob), p14: p14.map(prob) }

@@ -38,61 +38,33 @@
 //! than the MTU is cut into packets that share its fate (netem sends
 //! whatever the socket gave it, GSO segments included).
 
-use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, Backlog, LinkStats, PacketParams, Packets};
+use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, Backlog, LinkStats, PacketParams, Packets};
 use super::{Model, ParamError, StageRng, Verdict};
 use serde::{Deserialize, Serialize};
 
 /// The fastest link: 1 Tbit/s (so `t · R` fits a u128 for any u64 time).
 pub const MAX_RATE_BIT_S: f64 = 1e12;
 
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct RateParams {
-    /// The bottleneck's rate, a whole number of bit/s from 1 to 10^12.
-    pub rate_bit_s: f64,
-    /// netem's `cellsize`: packets go as whole cells of this many bytes.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cell_bytes: Option<u64>,
-    /// netem's `celloverhead`: bytes each cell adds.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub cell_overhead_bytes: u64,
-    #[serde(default = "default_payload", skip_serializing_if = "is_default_payload")]
-    pub payload_bytes: u64,
-    #[serde(default = "default_mtu", skip_serializing_if = "is_default_mtu")]
-    pub mtu_bytes: u64,
-    #[serde(default, skip_serializing_if = "is_zero")]
-    pub overhead_bytes: u64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub queue_packets: Option<u64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub queue_bytes: Option<u64>,
+link_params! {
+    #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    pub struct RateParams {
+        /// The bottleneck's rate, a whole number of bit/s from 1 to 10^12.
+        pub rate_bit_s: f64,
+        /// netem's `cellsize`: packets go as whole cells of this many bytes.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        pub cell_bytes: Option<u64>,
+        /// netem's `celloverhead`: bytes each cell adds.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        pub cell_overhead_bytes: u64,
+    }
 }
 
 impl RateParams {
     /// A link of `rate_bit_s` with the default packets (124-byte payloads,
     /// 1500-byte MTU, no overhead, 1000 packets of queue).
     pub fn new(rate_bit_s: f64) -> RateParams {
-        let p = PacketParams::default();
-        RateParams {
-            rate_bit_s,
-            cell_bytes: None,
-            cell_overhead_bytes: 0,
-            payload_bytes: p.payload_bytes,
-            mtu_bytes: p.mtu_bytes,
-            overhead_bytes: p.overhead_bytes,
-            queue_packets: None,
-            queue_bytes: None,
-        }
-    }
-
-    fn packet_params(&self) -> PacketParams {
-        PacketParams {
-            payload_bytes: self.payload_bytes,
-            mtu_bytes: self.mtu_bytes,
-            overhead_bytes: self.overhead_bytes,
-            queue_packets: self.queue_packets,
-            queue_bytes: self.queue_bytes,
-        }
+        RateParams::with_default_packets(rate_bit_s, None, 0)
     }
 }
 

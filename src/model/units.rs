@@ -52,6 +52,12 @@ impl Probability {
     }
 }
 
+/// `p` as a [`Probability`], for tests (panics where it is not one).
+#[cfg(test)]
+pub(crate) fn prob(p: f64) -> Probability {
+    Probability::new(p).unwrap()
+}
+
 impl fmt::Display for Probability {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.0)

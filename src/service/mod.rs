@@ -49,6 +49,17 @@ pub struct PidError {
     pub source: std::io::Error,
 }
 
+/// The flags of a service's own binary (`netfi-console`, …), named
+/// `name`: parsed from the command line (clap prints help or the error and
+/// exits), once the process is set to end with the `netfi run` that
+/// started it, if one did.
+pub fn standalone_args<A: clap::Args + clap::FromArgMatches>(name: &'static str, about: &'static str) -> Result<A, crate::host::process::DieWithParentError> {
+    let command = A::augment_args(clap::Command::new(name).version(env!("CARGO_PKG_VERSION")).about(about));
+    let args = A::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit());
+    crate::host::process::die_with_runner()?;
+    Ok(args)
+}
+
 /// Writes `<out>/<role>.pid`, so supervisors and tests can find the process.
 pub fn write_pid(out: &std::path::Path, role: &str) -> Result<(), PidError> {
     std::fs::create_dir_all(out).map_err(|source| PidError { what: "creating", path: out.to_path_buf(), source })?;

@@ -57,6 +57,29 @@ impl Hosts {
     }
 }
 
+impl Hosts {
+    /// [`Hosts::build`], or `None` where this machine cannot (not root, or
+    /// no veth pairs), said on stderr; where `NETFI_REQUIRE_NETNS=1` that
+    /// fails the test instead.
+    pub fn or_skip(tag: &str, default_routes: bool) -> Option<Hosts> {
+        let required = std::env::var("NETFI_REQUIRE_NETNS").as_deref() == Ok("1");
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            assert!(!required, "NETFI_REQUIRE_NETNS=1 but this test does not run as root");
+            eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
+            return None;
+        }
+        match Hosts::build(tag, default_routes) {
+            Ok(h) => Some(h),
+            Err(why) => {
+                assert!(!required, "NETFI_REQUIRE_NETNS=1 but network namespaces joined by veth pairs cannot be made: {why}");
+                eprintln!("skipping: this machine does not allow network namespaces joined by veth pairs: {why}");
+                None
+            }
+        }
+    }
+}
+
 impl Drop for Hosts {
     fn drop(&mut self) {
         // Deleting a namespace deletes the veth ends in it (and so the pairs).

@@ -3,12 +3,10 @@
 //! may run as a command. Each script is run by `sh` with a stand-in `tc`
 //! that records its arguments.
 
+use crate::common::netfi::{netfi, Outcome};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn netfi(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
-}
 
 struct Dir(PathBuf);
 
@@ -67,12 +65,12 @@ fn hostile_interface_names_reach_tc_as_one_word_and_run_nothing() {
     for dev in ["e;>PWNED1", "$(>PWNED2)", "`>PWNED3`", "x'&&>PWNED5", "a\"b$c", "-;>PWNED4", "e;touch PWNED"] {
         if dev.contains(' ') {
             // White space is not an interface name: refused outright.
-            let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
+            let out = netfi().args(["export", "netem", "PLM-1", "--dev", dev]).output().unwrap();
             assert!(!out.status.success(), "{dev:?} accepted");
             assert!(String::from_utf8_lossy(&out.stderr).contains("interface name"), "{dev:?}");
             continue;
         }
-        let out = netfi(&["export", "netem", "PLM-1", &format!("--dev={dev}")]);
+        let out = netfi().args(["export", "netem", "PLM-1", &format!("--dev={dev}")]).output().unwrap();
         assert!(out.status.success(), "{dev:?}: {}", String::from_utf8_lossy(&out.stderr));
         let args = run_script(&d.0, &out.stdout, None);
         assert_eq!(args[..5], ["qdisc", "replace", "dev", dev, "root"], "{dev:?}");
@@ -91,13 +89,12 @@ fn interface_names_follow_the_kernels_grammar() {
         ("a\nb", "'\\n'"),
         ("..", "not interface names"),
     ] {
-        let out = netfi(&["export", "netem", "PLM-1", "--dev", dev]);
+        let out = netfi().args(["export", "netem", "PLM-1", "--dev", dev]).output().unwrap();
         assert!(!out.status.success(), "{dev:?} accepted");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(says), "{dev:?}: {err}");
     }
-    let out = netfi(&["export", "netem", "PLM-1", "--dev", "fifteen-bytes-x"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    netfi().args(["export", "netem", "PLM-1", "--dev", "fifteen-bytes-x"]).ok();
 }
 
 #[test]
@@ -105,8 +102,7 @@ fn a_hostile_scenario_name_stays_in_its_comment() {
     let d = scratch("name");
     let file = d.0.join("s.toml");
     std::fs::write(&file, "name = \"x\\ntouch PWNED5\\r\\ntouch PWNED6 #\"\n[[stage]]\nmodel = \"bernoulli\"\np = 0.1\n").unwrap();
-    let out = netfi(&["export", "netem", file.to_str().unwrap(), "--dev", "veth0"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["export", "netem", file.to_str().unwrap(), "--dev", "veth0"]).ok();
     let script = String::from_utf8(out.stdout.clone()).unwrap();
     assert!(!script.lines().any(|l| l.starts_with("touch")), "{script}");
     let args = run_script(&d.0, &out.stdout, None);
@@ -119,8 +115,7 @@ fn a_hostile_table_dir_is_one_word_and_the_table_lands_in_it() {
     let d = scratch("table");
     let hostile = d.0.join("tables/t'; touch PWNED7; '$(touch PWNED8)");
     std::fs::create_dir_all(&hostile).unwrap();
-    let out = netfi(&["export", "netem", "DLM-2", "--dev", "veth0", "--table-dir", hostile.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["export", "netem", "DLM-2", "--dev", "veth0", "--table-dir", hostile.to_str().unwrap()]).ok();
     let args = run_script(&d.0, &out.stdout, None);
     let dist = args.iter().skip_while(|a| *a != "distribution").nth(1).unwrap().clone();
     assert!(hostile.join(format!("{dist}.dist")).is_file(), "table not written into {}", hostile.display());
@@ -132,8 +127,7 @@ fn a_hostile_table_dir_is_one_word_and_the_table_lands_in_it() {
 #[test]
 fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
     let d = scratch("find");
-    let out = netfi(&["export", "netem", "DLM-2", "--dev", "veth0"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["export", "netem", "DLM-2", "--dev", "veth0"]).ok();
     let script = String::from_utf8_lossy(&out.stdout);
     assert!(script.contains("/usr/lib/x86_64-linux-gnu/tc") && script.contains("/usr/lib/tc"), "{script}");
     // TC_LIB_DIR, when set, wins over the search.
@@ -163,7 +157,7 @@ fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
 fn what_tc_cannot_take_is_refused_with_the_range() {
     let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
     for rate in ["1e12", "1e300", "0", "-5", "NaN", "inf", "0.01"] {
-        let out = netfi(&["export", "netem", "DLM-2", &format!("--rate-hz={rate}")]);
+        let out = netfi().args(["export", "netem", "DLM-2", &format!("--rate-hz={rate}")]).output().unwrap();
         assert!(!out.status.success(), "--rate-hz {rate} accepted: {}", String::from_utf8_lossy(&out.stdout));
         assert!(stderr(&out).contains("expected a frame rate from 0.1 to 1000000 Hz"), "{rate}: {}", stderr(&out));
     }
@@ -176,22 +170,22 @@ fn what_tc_cannot_take_is_refused_with_the_range() {
     // One hour of delay at 1 MHz holds 3.6·10⁹ packets, 4.5·10⁹ with the
     // spare: beyond 2^32 − 1.
     let hour = write("hour.toml", "[[stage]]\nmodel = \"delay\"\nmin_ms = 3600000\n");
-    let out = netfi(&["export", "netem", &hour, "--rate-hz", "1e6"]);
+    let out = netfi().args(["export", "netem", &hour, "--rate-hz", "1e6"]).output().unwrap();
     assert!(!out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
     assert!(stderr(&out).contains("--rate-hz 1000000") && stderr(&out).contains("32-bit `limit` takes (at most 4294967295)"), "{}", stderr(&out));
-    let out = netfi(&["export", "netem", &hour, "--rate-hz", "9e5"]);
+    let out = netfi().args(["export", "netem", &hour, "--rate-hz", "9e5"]).output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("netem limit 4050000001 delay 3600000000us\n"));
     let slot = write("slot.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 2147483648\n");
-    let out = netfi(&["export", "netem", &slot]);
+    let out = netfi().args(["export", "netem", &slot]).output().unwrap();
     assert!(!out.status.success());
     assert!(stderr(&out).contains("`packets` 2147483648: tc keeps it in a signed 32-bit field, so netem takes 0 to 2147483647"), "{}", stderr(&out));
     let bytes = write("bytes.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\nbytes = 2000000000\n");
-    let out = netfi(&["export", "netem", &bytes]);
+    let out = netfi().args(["export", "netem", &bytes]).output().unwrap();
     assert!(!out.status.success());
     assert!(stderr(&out).contains("`bytes` 2000000000") && stderr(&out).contains("netem takes 0 to 2147483647"), "{}", stderr(&out));
     let ok = write("ok.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 2147483647\nbytes = 1604000000\n");
-    let out = netfi(&["export", "netem", &ok]);
+    let out = netfi().args(["export", "netem", &ok]).output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("slot 1000us 2000us packets 2147483647 bytes 2147290323"), "{}", String::from_utf8_lossy(&out.stdout));
 }

@@ -1,17 +1,13 @@
 //! `netfi fit` and `netfi export netem` as a user runs them.
 
+use crate::common::netfi::{netfi, Outcome};
 use crate::common::machine;
-use std::process::Command;
 
-fn netfi(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
-}
 
 #[test]
 fn fit_json_has_the_documented_fields_and_reproduces() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["fit", "loss", "30%", "--seed", "3", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["fit", "loss", "30%", "--seed", "3", "--json"]).ok();
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for key in [
         "model",
@@ -35,21 +31,20 @@ fn fit_json_has_the_documented_fields_and_reproduces() {
     assert!(ci[0].as_f64().unwrap() <= realized && realized <= ci[1].as_f64().unwrap());
     assert!((realized - 0.3).abs() <= 0.005 * 0.3);
     assert_eq!(v["params"]["alpha"].as_array().unwrap().len(), 2);
-    let again = netfi(&["fit", "loss", "0.3", "--seed", "3", "--json", "--threads", "1"]);
+    let again = netfi().args(["fit", "loss", "0.3", "--seed", "3", "--json", "--threads", "1"]).ok();
     assert_eq!(out.stdout, again.stdout);
 }
 
 #[test]
 fn fit_prints_its_seed_and_a_stage() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["fit", "delay", "250ms", "--p99-ms", "900"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["fit", "delay", "250ms", "--p99-ms", "900"]).ok();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains(" seed "), "{stderr}");
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("[[stage]]\nmodel = \"delay\""), "{stdout}");
     assert!(stdout.contains("delay_ms_p99"), "{stdout}");
-    let bad = netfi(&["fit", "outage", "120%"]);
+    let bad = netfi().args(["fit", "outage", "120%"]).output().unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("not a probability"));
 }
@@ -57,9 +52,7 @@ fn fit_prints_its_seed_and_a_stage() {
 #[test]
 fn fit_jitter_takes_mean_p99_law_and_correlation() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["fit", "jitter", "100ms", "--p99-ms", "180", "--dist", "paretonormal", "--correlation", "25%", "--seed", "3", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["fit", "jitter", "100ms", "--p99-ms", "180", "--dist", "paretonormal", "--correlation", "25%", "--seed", "3", "--json"]).json();
     assert_eq!(v["model"], "jitter");
     assert_eq!(v["params"]["dist"], "paretonormal");
     assert_eq!(v["params"]["correlation"], 0.25);
@@ -70,7 +63,7 @@ fn fit_jitter_takes_mean_p99_law_and_correlation() {
         (&["fit", "jitter", "100", "--p99-ms", "80"][..], "above the mean"),
         (&["fit", "jitter", "100", "--p99-ms", "180", "--correlation", "1"][..], "[0, 1)"),
     ] {
-        let bad = netfi(args);
+        let bad = netfi().args(args).output().unwrap();
         assert!(!bad.status.success(), "{args:?}");
         assert!(String::from_utf8_lossy(&bad.stderr).contains(says), "{args:?}: {}", String::from_utf8_lossy(&bad.stderr));
     }
@@ -79,8 +72,7 @@ fn fit_jitter_takes_mean_p99_law_and_correlation() {
 #[test]
 fn export_maps_loss_and_delay_and_says_what_is_approximated() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["export", "netem", "config/scenarios/plm2_dlm2.toml", "--dev", "veth0"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["export", "netem", "config/scenarios/plm2_dlm2.toml", "--dev", "veth0"]).ok();
     let script = String::from_utf8_lossy(&out.stdout);
     let cmd = script.lines().find(|l| l.starts_with("tc qdisc replace dev veth0 root netem")).unwrap();
     assert!(cmd.contains(" loss gemodel ") && cmd.contains(" 100% 0%"), "{cmd}");
@@ -91,8 +83,7 @@ fn export_maps_loss_and_delay_and_says_what_is_approximated() {
     assert!(script.contains("geometric") && script.contains("limit raised"), "{script}");
     assert!(script.contains("<<'NETFI_TABLE'"), "{script}");
 
-    let out = netfi(&["export", "netem", "config/scenarios/netem_markov4.toml"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["export", "netem", "config/scenarios/netem_markov4.toml"]).ok();
     let script = String::from_utf8_lossy(&out.stdout);
     assert!(script.contains(" loss state ") && script.contains("exact"), "{script}");
 }
@@ -101,7 +92,7 @@ fn export_maps_loss_and_delay_and_says_what_is_approximated() {
 fn export_refuses_what_netem_cannot_express() {
     let _machine = machine::not_beside_a_run();
     for (scenario, says) in [("CLM-1", "outage windows"), ("config/scenarios/outage_timeline.toml", "timeline")] {
-        let out = netfi(&["export", "netem", scenario]);
+        let out = netfi().args(["export", "netem", scenario]).output().unwrap();
         assert!(!out.status.success(), "{scenario}");
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(stderr.contains(says), "{scenario}: {stderr}");

@@ -281,39 +281,24 @@ fn skip() -> bool {
     false
 }
 
-#[test]
-fn kill_9_of_the_emulator_leaves_the_host_as_it_was() {
-    if !skip() {
-        kill_matrix_case(Kill::Emulator);
-    }
+/// One test per case of the kill matrix: `name: kill`.
+macro_rules! kill_matrix {
+    ($($name:ident: $kill:expr,)*) => {$(
+        #[test]
+        fn $name() {
+            if !skip() {
+                kill_matrix_case($kill);
+            }
+        }
+    )*};
 }
 
-#[test]
-fn kill_9_of_the_runner_leaves_the_host_as_it_was() {
-    if !skip() {
-        kill_matrix_case(Kill::Runner);
-    }
-}
-
-#[test]
-fn kill_9_of_runner_and_emulator_leaves_the_host_as_it_was() {
-    if !skip() {
-        kill_matrix_case(Kill::RunnerAndEmulator);
-    }
-}
-
-#[test]
-fn kill_9_of_the_guardian_leaves_the_host_as_it_was() {
-    if !skip() {
-        kill_matrix_case(Kill::Guardian);
-    }
-}
-
-#[test]
-fn kill_9_of_everything_is_undone_by_netfi_restore() {
-    if !skip() {
-        kill_matrix_case(Kill::All);
-    }
+kill_matrix! {
+    kill_9_of_the_emulator_leaves_the_host_as_it_was: Kill::Emulator,
+    kill_9_of_the_runner_leaves_the_host_as_it_was: Kill::Runner,
+    kill_9_of_runner_and_emulator_leaves_the_host_as_it_was: Kill::RunnerAndEmulator,
+    kill_9_of_the_guardian_leaves_the_host_as_it_was: Kill::Guardian,
+    kill_9_of_everything_is_undone_by_netfi_restore: Kill::All,
 }
 
 /// A runner started with one CPU allowed (`taskset -c 0`): a requested

@@ -4,26 +4,18 @@
 //! Tests that need the recording look for it at `../shared/data/itp/` beside
 //! the crate and skip, saying so, when it is absent.
 
+use crate::common::netfi::{netfi, Outcome};
 use crate::common::machine;
+use crate::common::scratch::Scratch;
 use lz4_flex::frame::{FrameDecoder, FrameEncoder};
 use netfi::capture::{self, CaptureError, CaptureReader, CaptureRecord, CaptureStats, CaptureWriter, RECORD_LEN};
 use netfi::frame::ItpFrame;
 use netfi::kinematics::{Integrator, KinematicsConfig};
 use netfi::motion::{MotionGenerator, MotionParams};
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use crate::common::shipped_capture;
 
 const MS: u64 = 1_000_000;
-
-fn real_capture() -> Option<PathBuf> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/itp/dvtrainer_peg_transfer.bin");
-    if path.is_file() {
-        Some(path)
-    } else {
-        println!("skipping: the shipped capture {} is absent", path.display());
-        None
-    }
-}
 
 fn decompress(bytes: &[u8]) -> Vec<u8> {
     let mut content = Vec::new();
@@ -49,7 +41,7 @@ fn synthetic(n: usize) -> (Vec<CaptureRecord>, Vec<u8>) {
 #[test]
 fn real_capture_statistics() {
     let _machine = machine::not_beside_a_run();
-    let Some(path) = real_capture() else { return };
+    let Some(path) = shipped_capture() else { return };
     let cap = capture::load(&path).unwrap();
     let s = cap.stats;
     assert_eq!(s.frames, 41_508);
@@ -71,7 +63,7 @@ fn real_capture_statistics() {
 fn real_capture_kinematics() {
     let _machine = machine::not_beside_a_run();
     // Reference numbers computed independently from the decompressed file.
-    let Some(path) = real_capture() else { return };
+    let Some(path) = shipped_capture() else { return };
     let cap = capture::load(&path).unwrap();
     let mut side = Integrator::new(KinematicsConfig::default()).unwrap();
     for r in &cap.records {
@@ -105,7 +97,7 @@ fn motion_model_resembles_the_real_capture() {
     // released share by about 4.3 % (s.d.); the tolerances, ±10 % and ±20 %,
     // allow that at over 4σ plus what a model may keep against a single 80-s
     // recording.
-    let Some(path) = real_capture() else { return };
+    let Some(path) = shipped_capture() else { return };
     let cap = capture::load(&path).unwrap();
     let mut real = Integrator::new(KinematicsConfig::default()).unwrap();
     for r in &cap.records {
@@ -143,7 +135,7 @@ fn motion_model_resembles_the_real_capture() {
 #[test]
 fn real_records_round_trip_byte_exactly() {
     let _machine = machine::not_beside_a_run();
-    let Some(path) = real_capture() else { return };
+    let Some(path) = shipped_capture() else { return };
     let n = 5_000;
     let original = decompress(&std::fs::read(&path).unwrap());
     let records: Vec<_> = CaptureReader::open(&path).unwrap().take(n).collect::<Result<_, _>>().unwrap();
@@ -160,8 +152,7 @@ fn real_records_round_trip_byte_exactly() {
 fn file_round_trip_and_stats() {
     let _machine = machine::not_beside_a_run();
     let (records, _) = synthetic(3_000);
-    let dir = std::env::temp_dir().join(format!("netfi-it-capture-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("it-capture");
     let path = dir.join("synthetic.bin");
     let mut w = CaptureWriter::create(&path).unwrap();
     records.iter().for_each(|r| w.write_record(r).unwrap());
@@ -173,7 +164,6 @@ fn file_round_trip_and_stats() {
     assert_eq!(cap.stats.gap_ns_max, 2 * MS);
     assert!((cap.stats.rate_hz_mean() - 500.0).abs() < 1e-9);
     assert_eq!(cap.stats.checksum_failures, 0);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -215,8 +205,7 @@ fn wrong_length_field_is_reported_with_index_and_offset() {
 fn not_lz4_is_reported_with_the_path() {
     let _machine = machine::not_beside_a_run();
     let (_, bytes) = synthetic(10);
-    let dir = std::env::temp_dir().join(format!("netfi-it-notlz4-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("it-notlz4");
     let path = dir.join("raw-records.bin");
     // The records themselves, uncompressed: a plausible mistake.
     std::fs::write(&path, decompress(&bytes)).unwrap();
@@ -224,7 +213,6 @@ fn not_lz4_is_reported_with_the_path() {
     assert!(matches!(err, CaptureError::Lz4 { record: 0, offset: 0, .. }), "{err:?}");
     let msg = err.to_string();
     assert!(msg.contains("raw-records.bin") && msg.contains("LZ4"), "{msg}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The shipped recording re-packed as a recorder that flushes every 1 000
@@ -234,10 +222,9 @@ fn not_lz4_is_reported_with_the_path() {
 #[test]
 fn the_real_recording_written_in_batches_is_the_same_capture() {
     let _machine = machine::not_beside_a_run();
-    let Some(path) = real_capture() else { return };
+    let Some(path) = shipped_capture() else { return };
     let cap = capture::load(&path).unwrap();
-    let dir = std::env::temp_dir().join(format!("netfi-it-batches-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("it-batches");
     let batched = dir.join("batched.bin");
     let mut w = CaptureWriter::create(&batched).unwrap();
     for (i, r) in cap.records.iter().enumerate() {
@@ -251,13 +238,7 @@ fn the_real_recording_written_in_batches_is_the_same_capture() {
     assert_eq!(again.stats.lz4_frames, 42);
     assert_eq!(again.records, cap.records);
     assert_eq!(CaptureStats { lz4_frames: 1, content_checksum: false, ..again.stats }, cap.stats);
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_netfi"))
-        .args(["scenario", "check", "Normal", "--json", "--capture"])
-        .arg(&batched)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "Normal", "--json", "--capture"]).arg(&batched).json();
     assert_eq!(v["frames"], 41_508);
     // Garbage between frames 21 and 22.
     let bytes = std::fs::read(&batched).unwrap();
@@ -278,5 +259,4 @@ fn the_real_recording_written_in_batches_is_the_same_capture() {
         Err(CaptureError::TrailingBytes { record: 21_000, frame: 21, .. }) => {}
         other => panic!("expected TrailingBytes after frame 21, got {:?}", other.map(|c| c.stats)),
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -5,7 +5,9 @@
 //! beside the repository; the tests that use them skip, saying so, when it
 //! is absent.
 
+use crate::common::netfi::{netfi, Outcome};
 use crate::common::machine;
+use crate::common::scratch::Scratch;
 use netfi::injector::{Fate, Injector};
 use netfi::model::Schedule;
 use netfi::scenario::{parse_str, Scenario};
@@ -14,23 +16,6 @@ use std::path::{Path, PathBuf};
 fn injector(text: &str) -> Injector<()> {
     let spec = parse_str(text, "test.toml", "test").unwrap_or_else(|e| panic!("{e}"));
     Injector::new(Scenario::new(&spec, 1).unwrap(), 1 << 20)
-}
-
-/// A scratch directory of this test's own, removed by [`Scratch::drop`].
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("netfi-links-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 #[test]
@@ -154,7 +139,7 @@ fn per_second_against_trace(schedule: &Schedule, file: &Path, payload: u64, spac
 #[test]
 fn a_synthetic_trace_link_delivers_per_second_what_the_trace_allows() {
     let _machine = machine::not_beside_a_run();
-    let dir = Scratch::new("synthetic");
+    let dir = Scratch::new("links-synthetic");
     // A capacity that changes every 100 ms: 0 to 3 opportunities per ms
     // over a 700 ms period, with silent stretches.
     let mut lines = Vec::new();
@@ -193,7 +178,7 @@ fn a_cellular_trace_link_delivers_per_second_what_the_trace_allows() {
 #[test]
 fn replaying_a_trace_csv_reproduces_its_fates_exactly() {
     let _machine = machine::not_beside_a_run();
-    let dir = Scratch::new("replay");
+    let dir = Scratch::new("links-replay");
     // A recorded run: losses, a reordering jitter, a bottleneck.
     let recorded = "[[stage]]\nmodel = \"bernoulli\"\np = 0.1\n[[stage]]\nmodel = \"jitter\"\nmean_ms = 20\nsd_ms = 5\ndist = \"normal\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\nqueue_packets = 20\n";
     let arrivals: Vec<u64> = (0..20_000u64).map(|i| 1_000 + i * 1_000_000 + (i % 7) * 13_000).collect();
@@ -228,7 +213,7 @@ fn replaying_a_trace_csv_reproduces_its_fates_exactly() {
 #[test]
 fn a_delay_capture_replays_the_delays_it_carries() {
     let _machine = machine::not_beside_a_run();
-    let dir = Scratch::new("capture");
+    let dir = Scratch::new("links-capture");
     let path = dir.0.join("trial.bin");
     let frame = netfi::check::synthetic_frame();
     let mut w = netfi::capture::CaptureWriter::create(&path).unwrap();
@@ -258,16 +243,11 @@ fn a_delay_capture_replays_the_delays_it_carries() {
     assert!(e.to_string().contains("records no delays"), "{e}");
 }
 
-fn netfi(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_netfi")).args(args).output().unwrap()
-}
 
 #[test]
 fn scenario_check_reports_the_link() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "20000", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "20000", "--json"]).json();
     let link = &v["links"][0];
     assert_eq!(link["model"], "rate");
     assert_eq!(link["capacity_bit_s"].as_f64(), Some(1e6));
@@ -283,7 +263,7 @@ fn scenario_check_reports_the_link() {
     // Full queue: 50 packets of 166 bytes at 1 Mbit/s, 66.4 ms.
     let p99 = link["delay_ms"]["p99"].as_f64().unwrap();
     assert!((p99 - 50.0 * 1.328).abs() < 0.1, "{p99}");
-    let table = netfi(&["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "2000"]);
+    let table = netfi().args(["scenario", "check", "config/scenarios/rate_bottleneck.toml", "--frames", "2000"]).output().unwrap();
     let table = String::from_utf8_lossy(&table.stdout);
     assert!(table.contains("utilisation") && table.contains("queue over time"), "{table}");
 }
@@ -291,27 +271,27 @@ fn scenario_check_reports_the_link() {
 #[test]
 fn show_and_export_speak_of_the_link_stages() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi(&["scenario", "show", "config/scenarios/rate_bottleneck.toml"]);
+    let out = netfi().args(["scenario", "show", "config/scenarios/rate_bottleneck.toml"]).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("model = \"rate\"") && text.contains("# phase 1 stage `rate#0`: rate 1000000 bit/s"), "{text}");
-    let out = netfi(&["export", "netem", "config/scenarios/rate_bottleneck.toml"]);
+    let out = netfi().args(["export", "netem", "config/scenarios/rate_bottleneck.toml"]).output().unwrap();
     let script = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(script.contains("netem limit 50 rate 1000000bit\n"), "{script}");
 
-    let dir = Scratch::new("cli");
+    let dir = Scratch::new("links-cli");
     std::fs::write(dir.0.join("one.up"), "1\n").unwrap();
     std::fs::write(dir.0.join("bad.up"), "1\n2\nten\n").unwrap();
     let scenario = dir.0.join("t.toml");
     std::fs::write(&scenario, "[[stage]]\nmodel = \"trace\"\nfile = \"one.up\"\n").unwrap();
     let path = scenario.to_str().unwrap();
-    let show = String::from_utf8_lossy(&netfi(&["scenario", "show", path]).stdout).into_owned();
+    let show = String::from_utf8_lossy(&netfi().args(["scenario", "show", path]).output().unwrap().stdout).into_owned();
     assert!(show.contains("trace of 1 opportunities of 1504 bytes every 1 ms (mean 12.032 Mbit/s)"), "{show}");
-    let out = netfi(&["export", "netem", path]);
+    let out = netfi().args(["export", "netem", path]).output().unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot follow a link trace"));
     std::fs::write(&scenario, "name = \"x\"\n\n[[stage]]\nmodel = \"trace\"\nfile = \"bad.up\"\n").unwrap();
-    let out = netfi(&["scenario", "check", path]);
+    let out = netfi().args(["scenario", "check", path]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("t.toml:5") && err.contains("`bad.up` line 3: not a time") && !err.contains("ten"), "{err}");
 }
@@ -523,13 +503,11 @@ fn nearest_rank(sorted: &[u64], q: f64) -> u64 {
 #[test]
 fn a_trace_link_whose_frames_wait_years_reports_exact_delays() {
     let _machine = machine::not_beside_a_run();
-    let dir = Scratch::new("slow");
+    let dir = Scratch::new("links-slow");
     std::fs::write(dir.0.join("slow.up"), "5\n3600000000\n").unwrap();
     std::fs::write(dir.0.join("slow.toml"), "[[stage]]\nmodel = \"trace\"\nfile = \"slow.up\"\n").unwrap();
     let csv = dir.0.join("trace.csv");
-    let out = netfi(&["scenario", "check", dir.0.join("slow.toml").to_str().unwrap(), "--frames", "2000", "--seed", "1", "--json", "--trace", csv.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", dir.0.join("slow.toml").to_str().unwrap(), "--frames", "2000", "--seed", "1", "--json", "--trace", csv.to_str().unwrap()]).json();
     let mut delays = trace_delays(&csv);
     delays.sort_unstable();
     let year_ns = 31_557_600_000_000_000u64;
@@ -548,7 +526,7 @@ fn a_trace_link_whose_frames_wait_years_reports_exact_delays() {
         let got = link[key].as_f64().unwrap();
         assert!(got >= exact && got <= exact * (1.0 + bound), "link {key} {got} ms, exact {exact} ms");
     }
-    let table = netfi(&["scenario", "check", dir.0.join("slow.toml").to_str().unwrap(), "--frames", "2000", "--seed", "1"]);
+    let table = netfi().args(["scenario", "check", dir.0.join("slow.toml").to_str().unwrap(), "--frames", "2000", "--seed", "1"]).output().unwrap();
     let table = String::from_utf8_lossy(&table.stdout);
     assert!(table.contains("(each at most 0.098 % high)"), "{table}");
 }
@@ -601,7 +579,7 @@ fn a_link_section_agrees_with_the_frames_fates() {
 #[test]
 fn a_replay_stage_names_the_layout_it_read() {
     let _machine = machine::not_beside_a_run();
-    let dir = Scratch::new("layout");
+    let dir = Scratch::new("links-layout");
     let frame = netfi::check::synthetic_frame();
     let mut w = netfi::capture::CaptureWriter::create(dir.0.join("trial.bin")).unwrap();
     let delays: Vec<f32> = (0..2_500u32).map(|i| 0.2 + (i % 97) as f32 * 1e-3).collect();
@@ -614,9 +592,7 @@ fn a_replay_stage_names_the_layout_it_read() {
     w.finish().unwrap();
     std::fs::write(dir.0.join("trial.toml"), "[[stage]]\nmodel = \"replay\"\nfile = \"trial.bin\"\n").unwrap();
     let scenario = dir.0.join("trial.toml");
-    let out = netfi(&["scenario", "check", scenario.to_str().unwrap(), "--frames", "5000", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", scenario.to_str().unwrap(), "--frames", "5000", "--json"]).json();
     let rec = &v["stages"][0]["recording"];
     assert_eq!(rec["kind"], "delay capture");
     assert_eq!(rec["layout"], "time | length | delay (s) | frame");
@@ -625,13 +601,13 @@ fn a_replay_stage_names_the_layout_it_read() {
     let mut ns: Vec<u64> = delays.iter().map(|d| (f64::from(*d) * 1e9).round() as u64).collect();
     ns.sort_unstable();
     assert_eq!(v["delay_ms"]["p50"].as_f64(), Some(nearest_rank(&ns, 0.5) as f64 / 1e6));
-    let table = netfi(&["scenario", "check", scenario.to_str().unwrap(), "--frames", "100"]);
+    let table = netfi().args(["scenario", "check", scenario.to_str().unwrap(), "--frames", "100"]).output().unwrap();
     let table = String::from_utf8_lossy(&table.stdout);
     assert!(table.contains("replays `trial.bin`: delay capture (time | length | delay (s) | frame), 2500 fates"), "{table}");
     // A trace.csv names its columns.
     netfi::trace::write_csv(&dir.0.join("trace.csv"), &[netfi::trace::Row { present: true, release_sched_ns: 5, ..Default::default() }], &[]).unwrap();
     std::fs::write(&scenario, "[[stage]]\nmodel = \"replay\"\nfile = \"trace.csv\"\n").unwrap();
-    let out = netfi(&["scenario", "check", scenario.to_str().unwrap(), "--frames", "10", "--json"]);
+    let out = netfi().args(["scenario", "check", scenario.to_str().unwrap(), "--frames", "10", "--json"]).output().unwrap();
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
     assert_eq!(v["stages"][0]["recording"]["layout"], "columns fate, reason, delay_ns");
 }

@@ -1,13 +1,13 @@
 //! The `netfi scenario` command as a user runs it.
 
 use crate::common::machine;
-use crate::common::netfi::netfi;
+use crate::common::scratch::Scratch;
+use crate::common::netfi::{netfi, Outcome};
 
 #[test]
 fn check_json_has_the_documented_fields() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).ok();
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for key in ["frames", "delivered", "dropped", "loss_rate", "loss_rate_ci95", "loss_run_mean", "delay_ms", "reordered_fraction", "outages", "seed"] {
         assert!(v.get(key).is_some(), "missing `{key}` in {v}");
@@ -23,7 +23,7 @@ fn check_json_has_the_documented_fields() {
     let rate = v["loss_rate"].as_f64().unwrap();
     assert!(ci[0].as_f64().unwrap() < rate && rate < ci[1].as_f64().unwrap());
     // The same seed gives the same report.
-    let again = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).output().unwrap();
+    let again = netfi().args(["scenario", "check", "PLM-2", "--frames", "200000", "--seed", "5", "--json"]).ok();
     assert_eq!(out.stdout, again.stdout);
 }
 
@@ -38,18 +38,18 @@ fn a_run_without_seed_prints_the_seed_it_chose() {
     assert!(table.contains(&format!("seed              {seed}")), "{table}");
 }
 
+/// `netfi scenario check` of a file `name` holding `text`, refused: its
+/// standard error.
+fn refused_scenario(name: &str, text: &str) -> String {
+    let dir = Scratch::new(&format!("cli-refused-{name}"));
+    netfi().args(["scenario", "check"]).arg(dir.file(name, text)).fails()
+}
+
 #[test]
 fn a_bad_scenario_file_is_a_clear_error() {
     let _machine = machine::not_beside_a_run();
-    let dir = std::env::temp_dir().join(format!("netfi-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("bad.toml");
-    std::fs::write(&path, "[[stage]]\nmodel = \"ge_lomax\"\ntransition = [[0.9, 0.05], [0.1, 0.9]]\nalpha = [1.0, 1.0]\nlambda = [1.0, 1.0]\n").unwrap();
-    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("bad.toml:3: stage 1 (ge_lomax): `transition[0]`"), "{stderr}");
-    std::fs::remove_dir_all(&dir).ok();
+    let err = refused_scenario("bad.toml", "[[stage]]\nmodel = \"ge_lomax\"\ntransition = [[0.9, 0.05], [0.1, 0.9]]\nalpha = [1.0, 1.0]\nlambda = [1.0, 1.0]\n");
+    assert!(err.contains("bad.toml:3: stage 1 (ge_lomax): `transition[0]`"), "{err}");
 }
 
 #[test]
@@ -63,26 +63,14 @@ fn values_beyond_their_physical_range_are_refused_with_the_range() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("one year"), "{}", String::from_utf8_lossy(&out.stderr));
 
-    let dir = std::env::temp_dir().join(format!("netfi-cli-range-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("far.toml");
-    std::fs::write(&path, "[[stage]]\nmodel = \"delay\"\nmin_ms = 1e15\n").unwrap();
-    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("far.toml:3: stage 1 (delay): `min_ms`: 1000000000000000 ms is out of range: expected 0 to 3600000 ms (one hour)"), "{stderr}");
+    let err = refused_scenario("far.toml", "[[stage]]\nmodel = \"delay\"\nmin_ms = 1e15\n");
+    assert!(err.contains("far.toml:3: stage 1 (delay): `min_ms`: 1000000000000000 ms is out of range: expected 0 to 3600000 ms (one hour)"), "{err}");
 }
 
 #[test]
 fn a_jitter_scenario_reports_its_exact_model_values() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi()
-        .args(["scenario", "check", "config/scenarios/netem_jitter.toml", "--frames", "50000", "--seed", "2", "--json"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "config/scenarios/netem_jitter.toml", "--frames", "50000", "--seed", "2", "--json"]).json();
     let stage = &v["stages"][1];
     assert_eq!(stage["model"], "jitter");
     // Far from 0 the clamp moves the mean by less than 1e-9 ms.
@@ -103,26 +91,14 @@ fn a_jitter_scenario_reports_its_exact_model_values() {
 #[test]
 fn a_bad_jitter_is_refused_with_file_line_and_field() {
     let _machine = machine::not_beside_a_run();
-    let dir = std::env::temp_dir().join(format!("netfi-cli-jitter-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("jitter.toml");
-    std::fs::write(&path, "[[stage]]\nmodel = \"jitter\"\nmean_ms = 10\nsd_ms = 5\ndist = \"normal\"\ncorrelation = 1\n").unwrap();
-    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("jitter.toml:6: stage 1 (jitter): `correlation`: 1 is out of range: expected a correlation in [0, 1)"), "{stderr}");
+    let err = refused_scenario("jitter.toml", "[[stage]]\nmodel = \"jitter\"\nmean_ms = 10\nsd_ms = 5\ndist = \"normal\"\ncorrelation = 1\n");
+    assert!(err.contains("jitter.toml:6: stage 1 (jitter): `correlation`: 1 is out of range: expected a correlation in [0, 1)"), "{err}");
 }
 
 #[test]
 fn duplication_is_counted_apart() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi()
-        .args(["scenario", "check", "config/scenarios/netem_duplicate.toml", "--frames", "100000", "--seed", "3", "--json"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "config/scenarios/netem_duplicate.toml", "--frames", "100000", "--seed", "3", "--json"]).json();
     let copies = v["duplicated"].as_u64().unwrap();
     let dropped: u64 = v["dropped"].as_object().unwrap().values().map(|n| n.as_u64().unwrap()).sum();
     assert_eq!(100_000 + copies, v["delivered"].as_u64().unwrap() + dropped);
@@ -132,26 +108,14 @@ fn duplication_is_counted_apart() {
     // Copies: 1% of 10^5 frames, binomial sd 31.5; 4 sd either side.
     assert!((874..=1126).contains(&copies), "{copies}");
 
-    let dir = std::env::temp_dir().join(format!("netfi-cli-dup-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("dup.toml");
-    std::fs::write(&path, "[[stage]]\nmodel = \"duplicate\"\n\np = 1.5\n").unwrap();
-    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("dup.toml:4: stage 1 (duplicate): `p`: 1.5 is not a probability"), "{stderr}");
+    let err = refused_scenario("dup.toml", "[[stage]]\nmodel = \"duplicate\"\n\np = 1.5\n");
+    assert!(err.contains("dup.toml:4: stage 1 (duplicate): `p`: 1.5 is not a probability"), "{err}");
 }
 
 #[test]
 fn corruption_reports_what_the_checksum_catches() {
     let _machine = machine::not_beside_a_run();
-    let out = netfi()
-        .args(["scenario", "check", "config/scenarios/netem_corrupt.toml", "--frames", "100000", "--seed", "3", "--json"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "config/scenarios/netem_corrupt.toml", "--frames", "100000", "--seed", "3", "--json"]).json();
     let c = &v["corruption"];
     let (n, caught, passed) = (c["corrupted"].as_u64().unwrap(), c["caught"].as_u64().unwrap(), c["passed"].as_u64().unwrap());
     assert_eq!(caught + passed, n);
@@ -160,15 +124,8 @@ fn corruption_reports_what_the_checksum_catches() {
     // Corruption is not loss: every frame is delivered.
     assert_eq!(v["delivered"], 100_000);
 
-    let dir = std::env::temp_dir().join(format!("netfi-cli-corrupt-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("c.toml");
-    std::fs::write(&path, "[[stage]]\nmodel = \"corrupt\"\np = \"150%\"\n").unwrap();
-    let out = netfi().args(["scenario", "check"]).arg(&path).output().unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("c.toml:3: stage 1 (corrupt): `p`: 1.5 is not a probability"), "{stderr}");
+    let err = refused_scenario("c.toml", "[[stage]]\nmodel = \"corrupt\"\np = \"150%\"\n");
+    assert!(err.contains("c.toml:3: stage 1 (corrupt): `p`: 1.5 is not a probability"), "{err}");
 }
 
 #[test]
@@ -208,12 +165,9 @@ fn check_refuses_an_oversized_queue_with_a_message_not_a_panic() {
 #[test]
 fn check_trace_writes_every_fate_in_a_runs_columns() {
     let _machine = machine::not_beside_a_run();
-    let dir = std::env::temp_dir().join(format!("netfi-check-trace-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("check-trace");
     let path = dir.join("trace.csv");
-    let out = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "5", "--json", "--trace"]).arg(&path).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "5", "--json", "--trace"]).arg(&path).json();
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some(netfi::trace::CSV_HEADER));
@@ -231,7 +185,6 @@ fn check_trace_writes_every_fate_in_a_runs_columns() {
     let bad = netfi().args(["scenario", "check", "PLM-2", "--frames", "2000", "--trace", "/nonexistent-dir/trace.csv"]).output().unwrap();
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("/nonexistent-dir/trace.csv"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The delay percentiles of `scenario check` are exact: the delays of the
@@ -240,16 +193,9 @@ fn check_trace_writes_every_fate_in_a_runs_columns() {
 #[test]
 fn check_delay_percentiles_are_the_exact_ones() {
     let _machine = machine::not_beside_a_run();
-    let dir = std::env::temp_dir().join(format!("netfi-cli-exact-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("cli-exact");
     let csv = dir.join("trace.csv");
-    let out = netfi()
-        .args(["scenario", "check", "config/scenarios/plm2_dlm2.toml", "--frames", "50000", "--seed", "7", "--json", "--trace"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = netfi().args(["scenario", "check", "config/scenarios/plm2_dlm2.toml", "--frames", "50000", "--seed", "7", "--json", "--trace"]).arg(&csv).json();
     let text = std::fs::read_to_string(&csv).unwrap();
     let cols: Vec<&str> = text.lines().next().unwrap().split(',').collect();
     let (fate, delay) = (cols.iter().position(|c| *c == "fate").unwrap(), cols.iter().position(|c| *c == "delay_ns").unwrap());
@@ -267,5 +213,4 @@ fn check_delay_percentiles_are_the_exact_ones() {
         assert_eq!(v["delay_ms"][key].as_f64(), Some(delays[rank - 1] as f64 / 1e6), "{key}");
     }
     assert!(v["delay_ms"].get("error_fraction_max").is_none());
-    std::fs::remove_dir_all(&dir).ok();
 }

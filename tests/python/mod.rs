@@ -69,6 +69,11 @@ struct Run {
 }
 
 impl Run {
+    /// [`Run::new`] where the Python bindings are there (see [`python_ready`]).
+    fn ready(name: &str) -> Option<Run> {
+        python_ready().then(|| Run::new(name))
+    }
+
     fn new(name: &str) -> Run {
         let id = format!("py-{name}-{}", std::process::id());
         let out = std::env::temp_dir().join(format!("netfi-py-{}-{name}", std::process::id()));
@@ -97,6 +102,20 @@ impl Run {
             .spawn()
             .unwrap();
         wait_file(&self.out.join("emulator.ready"));
+        Witness(Some(child))
+    }
+
+    /// `netfi simulator` of this run with `extra`, once ready.
+    fn simulator(&self, extra: &[&str]) -> Witness {
+        let child = netfi()
+            .args(["simulator", "--run-id", &self.id, "--out"])
+            .arg(&self.out)
+            .args(extra)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        wait_file(&self.out.join("simulator.ready"));
         Witness(Some(child))
     }
 
@@ -259,10 +278,7 @@ fn assert_emulator_account(emu: &Value, sent: u64) {
 /// configuration, limits) is the Rust one.
 #[test]
 fn the_python_interface_is_the_rust_one() {
-    if !python_ready() {
-        return;
-    }
-    let run = Run::new("layout");
+    let Some(run) = Run::ready("layout") else { return };
     // No NETFI_IOX_LAYOUT (python_c leaves it out): the module's own default must be this build's.
     let py = python_json(
         &format!(
@@ -375,10 +391,7 @@ fn the_python_root_follows_netfis_order() {
 /// included, on every frame of a synthetic stream and the real capture.
 #[test]
 fn python_itp_frames_are_rust_itp_frames() {
-    if !python_ready() {
-        return;
-    }
-    let run = Run::new("codec");
+    let Some(run) = Run::ready("codec") else { return };
     let o = run_ok(
         python_c("import sys, netfi_iox as n; f = n.ItpFrame(sequence=2**32-1, delx=(2**31-1, -5), dely=(7, 8), delz=(-9, 10), qx=(0.5, -0.25), buttonstate=(1, 2), grasp=(300, -4), surgeon_mode=1).seal(); sys.stdout.buffer.write(f.encode())"),
         "python3 ItpFrame.encode",
@@ -399,11 +412,8 @@ fn python_itp_frames_are_rust_itp_frames() {
 /// the same seed in simulated time).
 #[test]
 fn python_console_through_the_emulator_to_the_python_robot() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("py-py");
+    let Some(run) = Run::ready("py-py") else { return };
     let robot = run.python_robot();
     let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "20000"]);
     let console = python("examples/console.py", &run)
@@ -468,11 +478,8 @@ fn assert_feedback_balanced(e: &Value, r: &Value, c: &Value, commands: u64) {
 /// the console's.
 #[test]
 fn rust_console_through_the_emulator_to_the_python_robot() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("rs-py");
+    let Some(run) = Run::ready("rs-py") else { return };
     let robot = run.python_robot();
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "3000"]);
     let mut console = netfi();
@@ -510,20 +517,9 @@ fn rust_console_through_the_emulator_to_the_python_robot() {
 /// Python console computed right, and follows the direct copies.
 #[test]
 fn python_console_through_the_emulator_to_the_rust_simulator() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("py-rs");
-    let sim = netfi()
-        .args(["simulator", "--run-id", &run.id, "--out"])
-        .arg(&run.out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let sim = Witness(Some(sim));
-    wait_file(&run.out.join("simulator.ready"));
+    let Some(run) = Run::ready("py-rs") else { return };
+    let sim = run.simulator(&[]);
     let emu = run.emulator("PLM-1", &["--seed", "5", "--expected-frames", "3000"]);
     let mut console = python("examples/console.py", &run);
     console.args(["--run-id", &run.id, "--frames", "3000", "--rate-hz", "1000", "--out"]).arg(run.out.join("console.json"));
@@ -554,11 +550,7 @@ fn the_python_console_replays_the_real_capture() {
     if !python_ready() {
         return;
     }
-    let cap = root().join("../shared/data/itp/dvtrainer_peg_transfer.bin");
-    if !cap.exists() {
-        eprintln!("skipping: {} is absent", cap.display());
-        return;
-    }
+    let Some(cap) = crate::common::shipped_capture() else { return };
     let _guard = machine::alone();
     let run = Run::new("replay");
     let robot = run.python_robot();
@@ -587,11 +579,8 @@ fn the_python_console_replays_the_real_capture() {
 /// a message that names both.
 #[test]
 fn a_client_of_another_payload_version_is_refused() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("version");
+    let Some(run) = Run::ready("version") else { return };
     let emu = run.emulator("Normal", &["--seed", "1"]);
     let o = python("../../tests/python/other_version.py", &run).arg(&run.id).output().unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout).to_string();
@@ -618,11 +607,8 @@ fn a_client_of_another_payload_version_is_refused() {
 /// entered the emulator, and the emulator's account closes.
 #[test]
 fn killing_the_python_robot_ends_the_run_with_nothing_unaccounted() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("kill-robot");
+    let Some(run) = Run::ready("kill-robot") else { return };
     let mut robot = run.python_robot();
     let emu = run.emulator("PLM-1", &["--seed", "4", "--expected-frames", "60000"]);
     let console = python("examples/console.py", &run)
@@ -656,11 +642,8 @@ fn killing_the_python_robot_ends_the_run_with_nothing_unaccounted() {
 /// `--wait-for-peer-s` it opens its input only once a robot is there.
 #[test]
 fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("no-robot");
+    let Some(run) = Run::ready("no-robot") else { return };
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "300"]);
     let mut console = python("examples/console.py", &run);
     console.args(["--run-id", &run.id, "--frames", "300", "--rate-hz", "1000", "--no-direct"]);
@@ -702,11 +685,8 @@ fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
 /// payload version, name both versions.
 #[test]
 fn the_rust_refusal_names_both_payload_versions() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("rust-refusal");
+    let Some(run) = Run::ready("rust-refusal") else { return };
     let holder = r#"
 import sys, netfi_iox as n
 class V0(n.FrameSample):
@@ -747,11 +727,8 @@ with n.RunNode(sys.argv[1], "tool") as node:
 /// closes.
 #[test]
 fn bad_input_is_counted_by_kind_and_its_sender_named() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("bad-input");
+    let Some(run) = Run::ready("bad-input") else { return };
     let emu = run.emulator("Normal", &["--seed", "1", "--expected-frames", "40000"]);
     let o = python("../../tests/python/bad_input.py", &run).args([&run.id, "30000"]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -861,11 +838,8 @@ fn video_rows(path: &Path) -> Vec<std::collections::BTreeMap<String, String>> {
 /// camera's bytes, Python the Rust emulator's copy.
 #[test]
 fn the_python_camera_through_the_emulator_to_the_python_viewer_and_netfis_console() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("video-py");
+    let Some(run) = Run::ready("video-py") else { return };
     let viewer = run.python_viewer("60");
     let video = ["--video-mbps", "2", "--video-hz", "60", "--video-gop", "30"];
     let emu = run.emulator("Normal", &[&["--seed", "1", "--no-feedback"][..], &video].concat());
@@ -925,24 +899,11 @@ fn the_python_camera_through_the_emulator_to_the_python_viewer_and_netfis_consol
 /// whole, its sizes the Rust camera's group of pictures.
 #[test]
 fn netfis_camera_through_the_emulator_to_the_python_viewer() {
-    if !python_ready() {
-        return;
-    }
     let _guard = machine::alone();
-    let run = Run::new("video-rs");
+    let Some(run) = Run::ready("video-rs") else { return };
     let viewer = run.python_viewer("60");
     let video = ["--video-mbps", "4", "--video-hz", "60", "--video-gop", "30"];
-    let sim = netfi()
-        .args(["simulator", "--run-id", &run.id])
-        .args(video)
-        .arg("--out")
-        .arg(&run.out)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let sim = Witness(Some(sim));
-    wait_file(&run.out.join("simulator.ready"));
+    let sim = run.simulator(&video);
     let emu = run.emulator("Normal", &[&["--seed", "1"][..], &video].concat());
     let mut console = netfi();
     console.args(["console", "--run-id", &run.id, "--frames", "2000", "--rate-hz", "1000", "--seed", "2", "--out"]).arg(&run.out);
@@ -1016,8 +977,7 @@ fn the_python_capture_reader_reads_every_frame_and_refuses_garbage() {
         assert!(!o.status.success(), "garbage {name} accepted: {}", String::from_utf8_lossy(&o.stdout));
         assert!(String::from_utf8_lossy(&o.stderr).contains("that are not an LZ4 frame"), "{name}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    let real = root().join("../shared/data/itp/dvtrainer_peg_transfer.bin");
-    if real.exists() {
+    if let Some(real) = crate::common::shipped_capture() {
         let cap = netfi::capture::load(&real).unwrap();
         let o = load(&write("real.bin", &cap.records));
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -2,7 +2,7 @@
 //! received through a scenario, recorded as MCAP, then replayed as the
 //! console at its recorded timing.
 
-use crate::{assert_balanced, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{python, trace, u, Case};
 use std::process::Command;
 
 /// A PoseStamped's x (the talker's index), from its CDR with the header.
@@ -42,9 +42,7 @@ fn the_definitions_written_into_mcap_are_those_ros_2_ships() {
 
 #[test]
 fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("bag", py);
+    let Some(c) = Case::start("bag") else { return };
     const N: usize = 300;
     let bag = c.dir.join("robot.mcap");
     let mut talker = c.node("talker.py", "console", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "200", "--type", "pose"]);
@@ -54,11 +52,7 @@ fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
     let mut rec = Command::new(env!("CARGO_BIN_EXE_netfi"));
     rec.args(["ros2", "record"]).arg(&bag).args(["/PSM1/servo_cp", "--idle-end-ms", "1500", "--discovery-s", "60"]);
     let mut rec = c.spawn(rec, "record");
-    talker.done();
-    emu.done();
-    rec.done();
-    let e = c.json("emulator.json");
-    assert_balanced(&e["frames"]);
+    let e = c.finish(&mut [&mut talker, &mut emu, &mut rec]);
     assert_eq!(u(&e["frames"]["entered"]), N as u64);
     // The recording is what was delivered, in release order, byte for byte
     // what the talker's PoseStamped serializes to.

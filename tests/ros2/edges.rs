@@ -2,14 +2,12 @@
 //! QoS that cannot match, bad input, a flooding publisher, nodes that come,
 //! go or are killed.
 
-use crate::{assert_balanced, here, python, wait_file, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{assert_balanced, here, wait_file, u, Case};
 use std::time::{Duration, Instant};
 
 #[test]
 fn a_killed_publisher_ends_the_run_and_the_report_names_it() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("killed", py);
+    let Some(c) = Case::start("killed") else { return };
     let mut listener = c.listener("robot", "/cmd_out", &["--count", "300"]);
     // A talker that stays after its 300 messages until it is killed, with
     // a participant lease of 1 s (Fast DDS's default: 20 s), so that its
@@ -54,9 +52,7 @@ fn refused(c: &Case, args: &[&str]) -> String {
 
 #[test]
 fn a_type_that_differs_from_the_one_given_or_expected_is_refused_with_both_types() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("type", py);
+    let Some(c) = Case::start("type") else { return };
     let _talker = c.node("talker.py", "talker", &["/x", "1", "--wait-subs", "0", "--hang"]);
     let log = refused(&c, &["--scenario", "Normal", "--ros2-topic", "/x=/y", "--ros2-type", "/x=geometry_msgs/msg/PoseStamped"]);
     for says in ["type mismatch on /x", "--ros2-type gives geometry_msgs/msg/PoseStamped", "the publisher /talker publishes std_msgs/msg/String"] {
@@ -74,9 +70,7 @@ fn a_type_that_differs_from_the_one_given_or_expected_is_refused_with_both_types
 
 #[test]
 fn a_qos_that_cannot_match_is_refused_naming_the_policy_and_both_sides() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("qos", py);
+    let Some(c) = Case::start("qos") else { return };
     let _talker = c.node("talker.py", "talker", &["/x", "1", "--qos", "best_effort", "--wait-subs", "0", "--hang"]);
     // The reader asked for more than the publisher offers.
     let log = refused(&c, &["--scenario", "Normal", "--ros2-topic", "/x=/y", "--ros2-qos", "/x=reliable"]);
@@ -93,9 +87,7 @@ fn a_qos_that_cannot_match_is_refused_naming_the_policy_and_both_sides() {
 
 #[test]
 fn bad_input_and_a_publisher_that_leaves_and_another_that_comes_keep_the_emulator_up() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("restart", py);
+    let Some(c) = Case::start("restart") else { return };
     let mut listener = c.listener("listener", "/b", &[]);
     // Every 50th message of the first talker is larger than the emulator
     // relays; the second comes after the first has left, within the
@@ -104,12 +96,8 @@ fn bad_input_and_a_publisher_that_leaves_and_another_that_comes_keep_the_emulato
     let mut emu = c.emulator(&["--scenario", "Normal", "--ros2-topic", "/a=/b", "--ros2-max-bytes", "1024", "--ros2-linger-ms", "8000"]);
     a.done();
     let mut b = c.node("talker.py", "talker_b", &["/a", "100", "--rate-hz", "400", "--first", "200"]);
-    b.done();
-    emu.done();
-    listener.done();
-    let e = c.json("emulator.json");
+    let e = c.finish(&mut [&mut b, &mut emu, &mut listener]);
     let f = &e["frames"];
-    assert_balanced(f);
     assert_eq!((u(&f["entered"]), u(&f["sent_by_console"])), (300, 300), "{f:#}");
     assert_eq!((u(&f["dropped"]["too_large"]), u(&f["bad_input"]["len_oversize"])), (4, 4));
     assert_eq!(f["bad_input"]["from"], serde_json::json!(["/talker_a"]));
@@ -129,19 +117,14 @@ fn bad_input_and_a_publisher_that_leaves_and_another_that_comes_keep_the_emulato
 
 #[test]
 fn a_publisher_faster_than_the_queue_is_counted_as_queue_full() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("flood", py);
+    let Some(c) = Case::start("flood") else { return };
     let mut listener = c.listener("listener", "/b", &[]);
     // DLM-1 holds each message 70 ms or more: at 500 Hz that is 35 or more
     // at once, more than the 8 the queue holds.
     let mut a = c.node("talker.py", "talker", &["/a", "500", "--rate-hz", "500"]);
     let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "2", "--ros2-topic", "/a=/b", "--queue-capacity", "8"]);
-    a.done();
-    emu.done();
-    listener.done();
-    let f = &c.json("emulator.json")["frames"];
-    assert_balanced(f);
+    let e = c.finish(&mut [&mut a, &mut emu, &mut listener]);
+    let f = &e["frames"];
     assert_eq!(u(&f["entered"]), 500);
     assert!(u(&f["dropped"]["queue_full"]) > 0, "{f:#}");
     assert_eq!(c.received("listener").len() as u64, u(&f["delivered"]));
@@ -151,9 +134,7 @@ fn a_publisher_faster_than_the_queue_is_counted_as_queue_full() {
 #[test]
 fn malformed_empty_and_oversized_messages_from_a_raw_dds_writer_are_counted_drops() {
     use netfi::transport::ros2::{qos, Role, Ros2Node, TopicName, TypeName};
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("malformed", py);
+    let Some(c) = Case::start("malformed") else { return };
     let mut listener = c.listener("listener", "/out", &["--type", "pose"]);
     // A DDS writer of this process, not a ROS node: it writes whatever
     // bytes it is given as PoseStamped.
@@ -198,11 +179,8 @@ fn malformed_empty_and_oversized_messages_from_a_raw_dds_writer_are_counted_drop
     std::thread::sleep(Duration::from_millis(500));
     drop(writer);
     drop(node);
-    emu.done();
-    listener.done();
-    let e = c.json("emulator.json");
+    let e = c.finish(&mut [&mut emu, &mut listener]);
     let f = &e["frames"];
-    assert_balanced(f);
     assert_eq!(u(&f["entered"]), 40);
     assert_eq!((u(&f["dropped"]["wrong_size"]), u(&f["dropped"]["too_large"])), (8, 4), "{f:#}");
     let b = &f["bad_input"];

@@ -9,7 +9,7 @@
 //! are documentation ranges that exist only inside these namespaces, which
 //! the test removes again.
 
-use crate::{assert_balanced, index, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{index, trace, u, Case};
 use netns::Hosts;
 
 #[path = "../common/netns.rs"]
@@ -17,24 +17,8 @@ mod netns;
 
 #[test]
 fn console_and_robot_nodes_in_two_network_namespaces_talk_only_through_the_emulator() {
-    let Some(py) = python() else { return };
-    let required = std::env::var("NETFI_REQUIRE_NETNS").as_deref() == Ok("1");
-    // SAFETY: geteuid has no preconditions.
-    if unsafe { libc::geteuid() } != 0 {
-        assert!(!required, "NETFI_REQUIRE_NETNS=1 but this test does not run as root");
-        eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
-        return;
-    }
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let hosts = match Hosts::build("r2", true) {
-        Ok(h) => h,
-        Err(why) => {
-            assert!(!required, "NETFI_REQUIRE_NETNS=1 but network namespaces joined by veth pairs cannot be made: {why}");
-            eprintln!("skipping: this machine does not allow network namespaces joined by veth pairs: {why}");
-            return;
-        }
-    };
-    let c = Case::new("hosts", py);
+    let Some(c) = Case::start("hosts") else { return };
+    let Some(hosts) = Hosts::or_skip("r2", true) else { return };
     const N: usize = 600;
     let robot = Some(hosts.robot.as_str());
     let mut servo = c.listener_in(robot, "robot", "/PSM1/servo_cp", &["--type", "pose"]);
@@ -46,12 +30,7 @@ fn console_and_robot_nodes_in_two_network_namespaces_talk_only_through_the_emula
     // is there, so that across namespaces too no release comes before the
     // robot's reader and the emulator's writer have matched.
     let mut emu = c.emulator_in(Some(&hosts.emu), &["--scenario", "PLM-1", "--seed", "4", "--wait-for-peer-s", "60", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
-    console.done();
-    emu.done();
-    servo.done();
-    direct.done();
-    let e = c.json("emulator.json");
-    assert_balanced(&e["frames"]);
+    let e = c.finish(&mut [&mut console, &mut emu, &mut servo, &mut direct]);
     assert_eq!(u(&e["frames"]["entered"]), N as u64);
     let t = trace(&c, "trace_emulator.csv");
     let fates: Vec<String> = t.iter().map(|r| r["fate"].clone()).collect();

@@ -13,9 +13,8 @@ import time
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 
-from talker import TYPES, msg_type
+from talker import TYPES, msg_type, node_and_qos
 
 
 def index_of(kind, m):
@@ -36,10 +35,7 @@ def main():
     p.add_argument("--name", default="listener")
     a = p.parse_args()
 
-    rclpy.init()
-    node = rclpy.create_node(a.name)
-    rel = ReliabilityPolicy.RELIABLE if a.qos == "reliable" else ReliabilityPolicy.BEST_EFFORT
-    qos = QoSProfile(depth=a.depth, reliability=rel, history=HistoryPolicy.KEEP_LAST)
+    node, qos = node_and_qos(a, a.depth)
     rows = []
 
     def got(m, info):

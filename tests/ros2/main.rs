@@ -30,10 +30,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU16, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-pub(crate) static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// For every process a test starts: Fast DDS (the rclpy nodes' middleware)
 /// with its UDP transport only, without the shared-memory one it adds by
@@ -56,6 +56,7 @@ pub(crate) fn here() -> PathBuf {
 }
 
 #[path = "../common/netfi.rs"]
+#[allow(dead_code)]
 mod netfi_cmd;
 pub(crate) use netfi_cmd::netfi;
 
@@ -138,6 +139,8 @@ pub(crate) struct Case {
     netns: Option<String>,
     /// Fast DDS's shared-memory files before the test's nodes started.
     shm_before: BTreeSet<String>,
+    /// The runs are one at a time; held for the case's life.
+    _one: MutexGuard<'static, ()>,
 }
 
 /// At the test's end (its processes, made before the case, are gone): the
@@ -154,11 +157,26 @@ impl Drop for Case {
 }
 
 impl Case {
-    pub(crate) fn new(name: &str, py: PathBuf) -> Case {
+    /// The case `name`, once no other runs; `None` (the test passes, saying
+    /// why) where there is no rclpy to run its nodes with.
+    pub(crate) fn start(name: &str) -> Option<Case> {
+        let py = python()?;
+        let one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let dir = std::env::temp_dir().join(format!("netfi-ros2-{}-{name}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        Case { dir, domain: domain(), py, netns: None, shm_before: fastdds_shm() }
+        Some(Case { dir, domain: domain(), py, netns: None, shm_before: fastdds_shm(), _one: one })
+    }
+
+    /// Waits for each of `procs` to end successfully, in order; then
+    /// `emulator.json`, whose account must close.
+    pub(crate) fn finish(&self, procs: &mut [&mut Proc]) -> Value {
+        for p in procs {
+            p.done();
+        }
+        let e = self.json("emulator.json");
+        assert_balanced(&e["frames"]);
+        e
     }
 
     fn command(&self, netns: Option<&str>, program: &Path) -> Command {

@@ -3,7 +3,7 @@
 //! (each message's coordinates, written by the talker as it sent them) and
 //! when the emulator took each message in and released it (its trace).
 
-use crate::{assert_balanced, assert_listener_got_what_was_delivered, index, python, rows, trace, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{assert_listener_got_what_was_delivered, index, rows, trace, u, Case};
 use serde_json::Value;
 use std::collections::BTreeMap;
 
@@ -72,19 +72,13 @@ fn sent(c: &Case, name: &str, positions: Option<usize>) -> BTreeMap<u64, Vec<f64
 /// checks the report's motion against the talker's coordinates; the
 /// report's motion.
 fn run(name: &str, kind: &str, type_name: &str, positions: Option<usize>, scenario: &str, seed: u64) -> Option<Value> {
-    let py = python()?;
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new(name, py);
+    let c = Case::start(name)?;
     const N: usize = 600;
     let sent_csv = c.dir.join("talker.sent.csv");
     let mut listener = c.listener("robot", "/arm/servo", &["--type", kind]);
     let mut talker = c.node("talker.py", "talker", &["/arm/measured", &N.to_string(), "--rate-hz", "200", "--type", kind, "--sent", sent_csv.to_str().unwrap()]);
     let mut emu = c.emulator(&["--scenario", scenario, "--seed", &seed.to_string(), "--wait-for-peer-s", "60", "--ros2-topic", "/arm/measured=/arm/servo"]);
-    talker.done();
-    emu.done();
-    listener.done();
-    let e = c.json("emulator.json");
-    assert_balanced(&e["frames"]);
+    let e = c.finish(&mut [&mut talker, &mut emu, &mut listener]);
     assert_eq!(u(&e["frames"]["entered"]), N as u64);
     let r = c.json("ros2.json");
     assert_eq!(r["forward"]["type"], type_name);

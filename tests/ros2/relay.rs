@@ -3,24 +3,18 @@
 //! return topic with its own scenario, seed and account, and the motion
 //! of PoseStamped read on both sides.
 
-use crate::{assert_balanced, assert_listener_got_what_was_delivered, assert_loss_is_the_models, index, python, trace, u, Case, ONE_RUN_AT_A_TIME};
+use crate::{assert_balanced, assert_listener_got_what_was_delivered, assert_loss_is_the_models, index, trace, u, Case};
 use std::collections::BTreeMap;
 
 #[test]
 fn plm2_drops_exactly_what_scenario_check_drops_and_the_listener_gets_the_rest() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("plm2", py);
+    let Some(c) = Case::start("plm2") else { return };
     const N: usize = 1500;
     let mut listener = c.listener("listener", "/chatter_out", &[]);
     let mut talker = c.node("talker.py", "talker", &["/chatter", &N.to_string(), "--rate-hz", "500"]);
     let mut emu = c.emulator(&["--scenario", "PLM-2", "--seed", "3", "--ros2-topic", "/chatter=/chatter_out"]);
-    talker.done();
-    emu.done();
-    listener.done();
-    let e = c.json("emulator.json");
+    let e = c.finish(&mut [&mut talker, &mut emu, &mut listener]);
     let f = &e["frames"];
-    assert_balanced(f);
     assert_eq!((u(&f["entered"]), u(&f["sent_by_console"])), (N as u64, N as u64), "every message entered: {f:#}");
     assert_eq!(u(&f["held_at_end"]), 0);
     let r = c.json("ros2.json");
@@ -65,9 +59,7 @@ fn wall_less_monotonic() -> i64 {
 
 #[test]
 fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("dlm1", py);
+    let Some(c) = Case::start("dlm1") else { return };
     const N: usize = 600;
     let mut listener = c.listener("listener", "/PSM1/servo_cp", &["--type", "pose"]);
     let mut talker = c.node("talker.py", "talker", &["/MTMR/measured_cp", &N.to_string(), "--rate-hz", "200", "--type", "pose"]);
@@ -75,11 +67,7 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
     // The emulator takes the talker's first message only once it has the
     // listener's reader: no release before the listener can match.
     let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "5", "--wait-for-peer-s", "60", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
-    talker.done();
-    emu.done();
-    listener.done();
-    let e = c.json("emulator.json");
-    assert_balanced(&e["frames"]);
+    let e = c.finish(&mut [&mut talker, &mut emu, &mut listener]);
     assert_eq!(u(&e["frames"]["delivered"]), N as u64, "DLM-1 drops nothing");
     assert_eq!(c.json("ros2.json")["forward"]["type"], "geometry_msgs/msg/PoseStamped");
     let t = trace(&c, "trace_emulator.csv");
@@ -143,9 +131,7 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
 
 #[test]
 fn the_return_topic_goes_back_through_its_own_scenario() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("return", py);
+    let Some(c) = Case::start("return") else { return };
     const N: usize = 800;
     let mut console_view = c.listener("console_view", "/MTMR/state", &[]);
     let mut robot = c.listener("robot", "/PSM1/servo_cp", &["--type", "pose"]);
@@ -163,13 +149,7 @@ fn the_return_topic_goes_back_through_its_own_scenario() {
         "--return-scenario",
         "PLM-2",
     ]);
-    state.done();
-    console.done();
-    emu.done();
-    robot.done();
-    console_view.done();
-    let e = c.json("emulator.json");
-    assert_balanced(&e["frames"]);
+    let e = c.finish(&mut [&mut state, &mut console, &mut emu, &mut robot, &mut console_view]);
     assert_eq!(u(&e["frames"]["delivered"]), 200);
     let r = &e["ros2_return"];
     assert_balanced(r);
@@ -190,9 +170,7 @@ fn the_return_topic_goes_back_through_its_own_scenario() {
 
 #[test]
 fn two_lanes_each_with_its_own_scenario_seed_and_account() {
-    let Some(py) = python() else { return };
-    let _one = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let c = Case::new("bimanual", py);
+    let Some(c) = Case::start("bimanual") else { return };
     const N: usize = 800;
     let mut psm1 = c.listener("psm1", "/PSM1/servo_cp", &["--type", "pose"]);
     let mut psm2 = c.listener("psm2", "/PSM2/servo_cp", &["--type", "pose"]);

@@ -77,6 +77,15 @@ def msg_type(kind):
 TYPES = ["string", "pose", "transform", "joint"]
 
 
+def node_and_qos(a, depth):
+    """rclpy started; the node named --name, and the --qos profile keeping
+    the last `depth` messages."""
+    rclpy.init()
+    node = rclpy.create_node(a.name)
+    rel = ReliabilityPolicy.RELIABLE if a.qos == "reliable" else ReliabilityPolicy.BEST_EFFORT
+    return node, QoSProfile(depth=depth, reliability=rel, history=HistoryPolicy.KEEP_LAST)
+
+
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("topic")
@@ -97,10 +106,7 @@ def main():
     p.add_argument("--sent", help="a CSV of each message's index and coordinates, as sent")
     a = p.parse_args()
 
-    rclpy.init()
-    node = rclpy.create_node(a.name)
-    rel = ReliabilityPolicy.RELIABLE if a.qos == "reliable" else ReliabilityPolicy.BEST_EFFORT
-    qos = QoSProfile(depth=a.depth or max(a.count, 1), reliability=rel, history=HistoryPolicy.KEEP_LAST)
+    node, qos = node_and_qos(a, a.depth or max(a.count, 1))
     pub = node.create_publisher(msg_type(a.type), a.topic, qos)
     ex = SingleThreadedExecutor()
     ex.add_node(node)

@@ -51,13 +51,7 @@ fn record_of(emulator: i32) -> Option<PathBuf> {
 /// `run_id` in `out`, and waits until its console streams. Returns the
 /// runner and the emulator's pid.
 fn start_long_run(run_id: &str, out: &Path) -> (std::process::Child, i32) {
-    let child = netfi()
-        .args(["run", "Normal", "--duration-s", PLANNED_S, "--seed", "5", "--run-id", run_id, "--json", "--out"])
-        .arg(out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(out, &["Normal", "--duration-s", PLANNED_S, "--seed", "5", "--run-id", run_id]);
     let emulator = wait_pid(out, "emulator");
     wait_file(&out.join("console.ready"));
     std::thread::sleep(Duration::from_millis(500));
@@ -123,13 +117,7 @@ fn a_killed_console_ends_the_run_at_once() {
 fn a_killed_console_is_reported_and_the_others_finish() {
     let _guard = machine::alone();
     let out = out_dir("kill-console");
-    let child = netfi()
-        .args(["run", "Normal", "--duration-s", "3", "--seed", "7", "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&out, &["Normal", "--duration-s", "3", "--seed", "7"]);
     let pid = wait_pid(&out, "console");
     std::thread::sleep(Duration::from_millis(700));
     // SAFETY: signalling a process this test started (through the runner).
@@ -209,13 +197,7 @@ fn a_flag_out_of_range_starts_nothing() {
 fn the_longest_telemetry_interval_lets_a_run_end() {
     let _guard = machine::alone();
     let out = out_dir("telemetry-hour");
-    let mut child = netfi()
-        .args(["run", "Normal", "--duration-s", "1", "--seed", "2", "--telemetry-ms", "3600000", "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_run(&out, &["Normal", "--duration-s", "1", "--seed", "2", "--telemetry-ms", "3600000"]);
     let status = wait_at_most(&mut child, Duration::from_secs(60)).expect("a 1 s run with an hour's telemetry interval did not end in a minute");
     assert!(status.success());
 }

@@ -3,11 +3,11 @@
 //! real console and simulator; and processes of a run of several streams
 //! killed mid-run.
 
-use super::{allowed_cpus, assert_conserved, core_affinity_count, netfi, out_dir, run, u, wait_pid, Witness};
+use super::{allowed_cpus, assert_conserved, core_affinity_count, netfi, out_dir, run, spawn_run, u, wait_pid, Witness};
 use crate::common::machine;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 /// Duplicate (10%), then corrupt (20%, each frame and copy its own flip),
@@ -146,13 +146,7 @@ fn kill_in_three_streams(name: &str, role: &str, dir: impl Fn(&Path) -> PathBuf)
     // The emulator's core is the last; the witness may run there unless this test may not.
     let cores = core_affinity_count();
     let cleared = cores >= 2 && netfi::host::isolate::parse_list(&cpus_before).unwrap().contains(&(cores - 1));
-    let child = netfi()
-        .args(["run", "Normal", "--streams", "3", "--duration-s", "3", "--seed", "5", "--run-id", &run_id, "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&out, &["Normal", "--streams", "3", "--duration-s", "3", "--seed", "5", "--run-id", &run_id]);
     let emulator = wait_pid(&out, "emulator");
     for k in 0..3 {
         wait_pid(&out.join(format!("stream-{k}")), "console");

@@ -1,7 +1,7 @@
 //! Run integrity: a run owns its output directory, and Ctrl-C to the
 //! terminal's process group ends a run cleanly.
 
-use super::{assert_conserved, netfi, out_dir, u, wait_pid};
+use super::{assert_conserved, netfi, out_dir, spawn_run, u, wait_pid};
 use crate::common::machine;
 use serde_json::Value;
 use std::os::unix::process::CommandExt;
@@ -15,13 +15,7 @@ use std::time::{Duration, Instant};
 fn two_runs_on_one_directory_the_second_is_refused() {
     let _guard = machine::alone();
     let out = out_dir("two-runs");
-    let first = netfi()
-        .args(["run", "Normal", "--duration-s", "3", "--seed", "1", "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let first = spawn_run(&out, &["Normal", "--duration-s", "3", "--seed", "1"]);
     // The first run is streaming.
     wait_pid(&out, "console");
     let second = netfi().args(["run", "PLM-2", "--duration-s", "3", "--seed", "2", "--json", "--out"]).arg(&out).output().unwrap();
@@ -122,13 +116,7 @@ fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
 fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
     let _guard = machine::alone();
     let out = out_dir("kill-emulator-trace");
-    let child = netfi()
-        .args(["run", "Normal", "--duration-s", "6", "--seed", "9", "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&out, &["Normal", "--duration-s", "6", "--seed", "9"]);
     let pid = wait_pid(&out, "emulator");
     wait_pid(&out, "console");
     // At 1 kHz, 3 s of stream: at least the first 2 s are flushed.

@@ -37,6 +37,11 @@ fn run(name: &str, args: &[&str]) -> (Value, bool, PathBuf) {
 }
 
 #[track_caller]
+/// `netfi run ARGS --json --out OUT`, started, its output piped.
+fn spawn_run(out: &Path, args: &[&str]) -> std::process::Child {
+    netfi().arg("run").args(args).args(["--json", "--out"]).arg(out).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+}
+
 fn u(v: &Value) -> u64 {
     match v.as_u64() {
         Some(n) => n,
@@ -231,19 +236,9 @@ fn clm_outages_are_conserved() {
     assert!(lo <= realized && realized <= hi);
 }
 
-fn capture_path() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/itp/dvtrainer_peg_transfer.bin");
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipping: {} is absent", p.display());
-        None
-    }
-}
-
 #[test]
 fn the_real_capture_replays_with_its_timing() {
-    let Some(cap) = capture_path() else { return };
+    let Some(cap) = crate::common::shipped_capture() else { return };
     let (r, ok, _) = run("replay", &["PLM-1", "--capture", cap.to_str().unwrap(), "--duration-s", "3", "--seed", "6"]);
     assert!(ok, "{r:#}");
     assert_conserved(&r);
@@ -369,13 +364,7 @@ fn isolate_clears_the_emulators_core_and_puts_everything_back() {
     // The emulator killed while the core is cleared: the runner restores.
     let _guard = machine::alone();
     let out = out_dir("isolate-kill");
-    let child = netfi()
-        .args(["run", "Normal", "--duration-s", "3", "--seed", "3", "--isolate", "--emulator-core", &core, "--json", "--out"])
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&out, &["Normal", "--duration-s", "3", "--seed", "3", "--isolate", "--emulator-core", &core]);
     let pid = wait_pid(&out, "emulator");
     let t0 = Instant::now();
     while allowed_cpus(witness.id()) == before {

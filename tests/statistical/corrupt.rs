@@ -3,6 +3,7 @@
 //! flip's bit is uniform over the 992 bits (chi-square over the 124 bytes),
 //! and the checksum catches exactly `44/124` of single flips.
 
+use super::Z_TWO_SIDED_0_001;
 use crate::common::machine;
 use netfi::check::{self, Arrivals};
 use netfi::frame::{checksum_covers, CHECKSUM_COVERED_BYTES};
@@ -10,8 +11,6 @@ use netfi::model::{Corrupt, CorruptParams, Model, StageRng, Verdict};
 use netfi::scenario::{parse_str, Scenario};
 use rand::SeedableRng;
 
-/// `z` with `P(|Z| > z) = 0.001`.
-const Z_TWO_SIDED_0_001: f64 = 3.290_527;
 /// The chi-square quantile at 1 − 0.001 for 123 degrees of freedom
 /// (Wilson–Hilferty, within 0.1% here).
 const CHI2_123_0_001: f64 = 177.26;

@@ -1,11 +1,8 @@
 //! `duplicate` (docs/spec.md §3.8) against its law, through the injector, at
 //! α = 0.001 with fixed seeds.
 
+use super::{FRAME_NS, Z_TWO_SIDED_0_001};
 use crate::common::machine;
-
-const FRAME_NS: u64 = 1_000_000;
-/// `z` with `P(|Z| > z) = 0.001`.
-const Z_TWO_SIDED_0_001: f64 = 3.290_527;
 
 /// `duplicate` (docs/spec.md §3.8) in a pipeline, through the injector:
 /// copies per frame match `p`, and the copies meet the later loss stage as

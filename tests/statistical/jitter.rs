@@ -13,18 +13,11 @@
 //! so the kept sample is independent to that precision, and the critical value
 //! is that of its size (40,000).
 
+use super::{FRAME_NS, Z_TWO_SIDED_0_001, T99_TWO_SIDED_0_001, KS_C_0_001};
 use crate::common::machine;
 use netfi::model::jitter::{normal_cdf, normal_quantile, normal_sf, PARETONORMAL_SD};
 use netfi::model::{Jitter, JitterDist, JitterParams, Model, StageRng, Verdict};
 use rand::SeedableRng;
-
-const FRAME_NS: u64 = 1_000_000;
-/// `z` with `P(|Z| > z) = 0.001`.
-const Z_TWO_SIDED_0_001: f64 = 3.290_527;
-/// Kolmogorov's asymptotic `c(α)` for α = 0.001: `√(−ln(α/2)/2)`.
-const KS_C_0_001: f64 = 1.949_5;
-/// Student's `t` with 99 degrees of freedom, two-sided 0.001 (100 batches).
-const T99_TWO_SIDED_0_001: f64 = 3.391_6;
 
 const MEAN_MS: f64 = 100.0;
 const SD_MS: f64 = 20.0;

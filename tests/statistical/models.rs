@@ -8,27 +8,13 @@
 //! outages, with the renewal-cycle ratio estimator; standard errors come from
 //! those, never from an assumed independence of frames.
 
+use super::{FRAME_NS, Z_TWO_SIDED_0_001, Z_ONE_SIDED_0_001, T99_TWO_SIDED_0_001, T99_TWO_SIDED_0_05, KS_C_0_001};
 use crate::common::machine;
 use netfi::model::{
     Bernoulli, BernoulliParams, Delay, DelayParams, GeLomax, GeLomaxParams, GilbertElliott, GilbertElliottParams,
     Markov4, Markov4Params, Model, Order, Outage, OutageParams, Probability, StageRng, Verdict,
 };
 use rand::SeedableRng;
-
-/// Nominal frame interval: 1 kHz.
-const FRAME_NS: u64 = 1_000_000;
-
-/// `z` with `P(|Z| > z) = 0.001`.
-const Z_TWO_SIDED_0_001: f64 = 3.290_527;
-/// `z` with `P(Z > z) = 0.001`.
-const Z_ONE_SIDED_0_001: f64 = 3.090_232;
-/// Student's `t` with 99 degrees of freedom, two-sided 0.001 (100 batches).
-const T99_TWO_SIDED_0_001: f64 = 3.391_6;
-/// Student's `t` with 99 degrees of freedom, two-sided 0.05 (100 batches).
-const T99_TWO_SIDED_0_05: f64 = 1.984_2;
-/// Kolmogorov's `c(α)` with `P(√n·D > c) = α` for α = 0.001, asymptotically:
-/// `√(−ln(α/2)/2)`.
-const KS_C_0_001: f64 = 1.949_5;
 
 fn prob(p: f64) -> Probability {
     Probability::new(p).unwrap()

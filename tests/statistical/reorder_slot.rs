@@ -1,12 +1,10 @@
 //! `reorder` (docs/spec.md §3.10) and `slot` (§3.11) against their laws,
 //! fixed seeds, α = 0.001.
 
+use super::Z_TWO_SIDED_0_001;
 use crate::common::machine;
 use netfi::model::{Model, Reorder, ReorderParams, Slot, SlotParams, StageRng, Verdict};
 use rand::SeedableRng;
-
-/// `z` with `P(|Z| > z) = 0.001`.
-const Z_TWO_SIDED_0_001: f64 = 3.290_527;
 
 fn delay_of(v: Verdict) -> u64 {
     match v {

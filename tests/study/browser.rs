@@ -6,32 +6,13 @@
 
 use super::{netfi, Scratch};
 use crate::common::machine;
-use headless_chrome::{Browser, LaunchOptions, Tab};
+use headless_chrome::{Browser, Tab};
 use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 fn browser_or_skip() -> Option<Browser> {
-    let path = std::env::var_os("NETFI_CHROMIUM").map(PathBuf::from).or_else(|| {
-        let path = std::env::var_os("PATH")?;
-        ["chromium", "chromium-browser", "google-chrome"].iter().flat_map(|n| std::env::split_paths(&path).map(move |d| d.join(n))).find(|p| p.is_file())
-    });
-    let Some(path) = path else {
-        assert!(std::env::var_os("NETFI_REQUIRE_BROWSER").is_none(), "NETFI_REQUIRE_BROWSER is set but no chromium was found");
-        eprintln!("SKIP: no chromium on PATH (set NETFI_CHROMIUM): the study page's browser test did not run");
-        return None;
-    };
-    let opts = LaunchOptions::default_builder()
-        .path(Some(path))
-        .headless(true)
-        .sandbox(false)
-        .window_size(Some((1280, 1400)))
-        .args(vec![std::ffi::OsStr::new("--disable-dev-shm-usage")])
-        .idle_browser_timeout(Duration::from_secs(300))
-        .build()
-        .expect("launch options");
-    Some(Browser::new(opts).expect("starting chromium"))
+    crate::common::browser::launch_or_skip("the study page's browser test", 1400, &[])
 }
 
 /// `netfi ui` on a free loopback port without a token, stopped when dropped.

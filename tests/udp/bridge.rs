@@ -139,10 +139,16 @@ pub(crate) struct Ends {
 
 /// A robot that collects what reaches it, and a console socket.
 pub(crate) fn ends() -> Ends {
+    ends_answering(None)
+}
+
+/// A robot that collects what reaches it and answers each datagram with
+/// `reply` (if any), and a console socket.
+fn ends_answering(reply: Option<Vec<u8>>) -> Ends {
     let robot = socket();
     let egress = format!("udp://{}", robot.local_addr());
     let stop = Arc::new(AtomicBool::new(false));
-    let robot = receiver(robot, stop.clone(), None);
+    let robot = receiver(robot, stop.clone(), reply);
     let console = socket();
     let from = console.local_addr().to_string();
     Ends { console, from, egress, stop, robot }
@@ -272,6 +278,13 @@ fn assert_balanced(e: &Value) {
 }
 
 /// The ingress side: every datagram sent entered or was dropped by the kernel.
+/// The account closes ([`assert_balanced`]) and every datagram sent entered
+/// ([`assert_all_entered`]).
+fn assert_accounted(e: &Value, udp: &Value, sent: u64) {
+    assert_balanced(e);
+    assert_all_entered(e, udp, sent);
+}
+
 fn assert_all_entered(e: &Value, udp: &Value, sent: u64) {
     let kernel = u(&udp["ingress_kernel_drops"]);
     assert_eq!(u(&e["frames"]["entered"]) + kernel, sent, "{udp}");
@@ -299,8 +312,7 @@ fn udp_to_udp_conserves_every_frame_and_realizes_plm2() {
     let (got, robot) = rx.join().unwrap();
 
     assert_eq!(e["ended_by"], "end_marker", "the idle end closes the stream");
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, sent);
+    assert_accounted(&e, &udp, sent);
     assert_eq!(u(&e["frames"]["held_at_end"]), 0);
     let delivered = u(&e["frames"]["delivered"]);
     assert_eq!(got.len() as u64 + robot.kernel_drops().unwrap(), delivered, "the robot got what was released");
@@ -371,8 +383,7 @@ fn udp_to_iceoryx2_feeds_the_simulator() {
     };
     assert!(status.success());
     let s = read_json(&out.join("simulator.json"));
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, sent);
+    assert_accounted(&e, &udp, sent);
     assert!(dropped_total(&e["frames"]) > 0, "PLM-1 drops some of 1500 frames");
     assert_eq!(u(&s["received"]), u(&e["frames"]["delivered"]), "the simulator got every released frame");
     assert_eq!(s["released_by_emulator"], e["frames"]["delivered"]);
@@ -447,8 +458,7 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
         let (e, udp) = emu.finish(Duration::from_secs(30));
         stop.store(true, Ordering::Release);
         let (got, _) = rx.join().unwrap();
-        assert_balanced(&e);
-        assert_all_entered(&e, &udp, sent);
+        assert_accounted(&e, &udp, sent);
         let f = &e["frames"];
         assert_eq!(u(&f["dropped"]["wrong_size"]), 5, "{f}");
         if drop_bad {
@@ -497,8 +507,7 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
     let (e, udp) = emu.finish(Duration::from_secs(30));
     stop.store(true, Ordering::Release);
     let (got, _) = rx.join().unwrap();
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, flood + valid);
+    assert_accounted(&e, &udp, flood + valid);
     let f = &e["frames"];
     let entered = u(&f["entered"]);
     let bad_checksum = f["dropped"].get("bad_checksum").map_or(0, u);
@@ -513,30 +522,20 @@ fn a_flood_of_garbage_is_counted_and_the_emulator_stays_up() {
 fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     let _guard = machine::alone();
     let out = out_dir("raw");
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let console = socket();
-    let from = console.local_addr().to_string();
-    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--payload", "raw", "--idle-end-ms", "1000"]);
     // The robot answers each datagram with a 52-byte feedback frame.
     let feedback: Vec<u8> = (0..52u8).collect();
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), Some(feedback.clone()));
-    let console_stop = Arc::new(AtomicBool::new(false));
-    let console_rx = console.try_clone().unwrap();
-    let replies = receiver(console_rx, console_stop.clone(), None);
+    let Ends { console, from, egress, stop, robot: rx } = ends_answering(Some(feedback.clone()));
+    let replies = receiver(console.try_clone().unwrap(), stop.clone(), None);
+    let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--payload", "raw", "--idle-end-ms", "1000"]);
     let mut datagrams: Vec<Vec<u8>> =
         vec![vec![], vec![0xab], vec![7u8; 1000], (0..60_000u32).map(|i| i as u8).collect()];
     datagrams.extend((0..500u32).map(|i| i.to_le_bytes().repeat(16)));
     let sent = send_paced(&console, emu.ingress(), datagrams.clone(), 10);
     let (e, udp) = emu.finish(Duration::from_secs(30));
     stop.store(true, Ordering::Release);
-    console_stop.store(true, Ordering::Release);
     let (got, _) = rx.join().unwrap();
     let (back, _) = replies.join().unwrap();
-
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, sent);
+    assert_accounted(&e, &udp, sent);
     assert_eq!(u(&e["frames"]["delivered"]), sent, "Normal delivers everything");
     assert_eq!(got, datagrams, "every datagram, byte for byte, in order");
     assert_eq!(udp["payload"], "raw");
@@ -562,26 +561,17 @@ fn a_return_scenario_shapes_the_way_back() {
         "name = \"return loss and delay\"\n\n[[stage]]\nmodel = \"bernoulli\"\np = 0.3\n\n[[stage]]\nmodel = \"delay\"\nmin_ms = 5\ndist = \"none\"\norder = \"fifo\"\n",
     )
     .unwrap();
-    let robot = socket();
-    let egress = format!("udp://{}", robot.local_addr());
-    let console = socket();
-    let from = console.local_addr().to_string();
+    let Ends { console, from, egress, stop, robot: rx } = ends_answering(Some(vec![9u8; 52]));
+    let replies = receiver(console.try_clone().unwrap(), stop.clone(), None);
     let emu = Emulator::bridge(&out, "Normal", "1", &from, &egress, &["--return-scenario", scenario.to_str().unwrap(), "--return-seed", "11", "--idle-end-ms", "400"]);
-    let stop = Arc::new(AtomicBool::new(false));
-    let rx = receiver(robot, stop.clone(), Some(vec![9u8; 52]));
-    let console_stop = Arc::new(AtomicBool::new(false));
-    let replies = receiver(console.try_clone().unwrap(), console_stop.clone(), None);
     let sent = send_paced(&console, emu.ingress(), (0..1000).map(|i| itp(i).to_vec()), 10);
     // Replies are held 5 ms on the way back: let the last ones arrive before
     // the forward stream's idle end stops the loop.
     let (e, udp) = emu.finish(Duration::from_secs(30));
     stop.store(true, Ordering::Release);
-    console_stop.store(true, Ordering::Release);
     let (got, _) = rx.join().unwrap();
     let (back, _) = replies.join().unwrap();
-
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, sent);
+    assert_accounted(&e, &udp, sent);
     assert_eq!(got.len() as u64, sent);
     let r = &udp["return_path"];
     assert_eq!(r["mode"], "scenario");
@@ -615,8 +605,7 @@ fn a_stopped_bridge_reports_what_it_held() {
     stop.store(true, Ordering::Release);
     let (got, _) = rx.join().unwrap();
     assert_eq!(e["ended_by"], "signal");
-    assert_balanced(&e);
-    assert_all_entered(&e, &udp, sent);
+    assert_accounted(&e, &udp, sent);
     assert!(u(&e["frames"]["held_at_end"]) > 0, "{}", e["frames"]);
     assert_eq!(got.len() as u64, u(&e["frames"]["delivered"]));
 }

@@ -55,22 +55,8 @@ fn recv_until(port: &UdpPort, want: usize, timeout: Duration) -> Vec<Vec<u8>> {
 
 #[test]
 fn console_and_robot_in_two_namespaces_talk_only_through_the_emulator() {
-    let required = std::env::var("NETFI_REQUIRE_NETNS").as_deref() == Ok("1");
-    // SAFETY: geteuid has no preconditions.
-    if unsafe { libc::geteuid() } != 0 {
-        assert!(!required, "NETFI_REQUIRE_NETNS=1 but this test does not run as root");
-        eprintln!("skipping: network namespaces need root (or CAP_SYS_ADMIN and CAP_NET_ADMIN)");
-        return;
-    }
     let _guard = machine::alone();
-    let hosts = match Hosts::build("nf", false) {
-        Ok(h) => h,
-        Err(why) => {
-            assert!(!required, "NETFI_REQUIRE_NETNS=1 but network namespaces joined by veth pairs cannot be made: {why}");
-            eprintln!("skipping: this machine does not allow network namespaces joined by veth pairs: {why}");
-            return;
-        }
-    };
+    let Some(hosts) = Hosts::or_skip("nf", false) else { return };
     let console = socket_in(&hosts.console, "192.0.2.1:0").unwrap();
     let robot = socket_in(&hosts.robot, "198.51.100.2:36000").unwrap();
 

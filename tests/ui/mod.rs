@@ -11,7 +11,7 @@
 //! (how docs/ui/ was made).
 
 use headless_chrome::protocol::cdp::Page::CaptureScreenshotFormatOption;
-use headless_chrome::{Browser, LaunchOptions, Tab};
+use headless_chrome::{Browser, Tab};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -21,40 +21,13 @@ use std::sync::Arc;
 use crate::common::machine;
 use std::time::{Duration, Instant};
 
-fn chromium() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("NETFI_CHROMIUM") {
-        return Some(PathBuf::from(p));
-    }
-    let path = std::env::var_os("PATH")?;
-    ["chromium", "chromium-browser", "google-chrome", "google-chrome-stable"]
-        .iter()
-        .flat_map(|name| std::env::split_paths(&path).map(move |d| d.join(name)))
-        .find(|p| p.is_file())
-}
-
 fn browser_or_skip() -> Option<Browser> {
     browser_with_or_skip(&[])
 }
 
 /// Chromium with `extra` command-line switches.
 fn browser_with_or_skip(extra: &[&str]) -> Option<Browser> {
-    let Some(path) = chromium() else {
-        assert!(std::env::var_os("NETFI_REQUIRE_BROWSER").is_none(), "NETFI_REQUIRE_BROWSER is set but no chromium was found");
-        eprintln!("SKIP: no chromium on PATH (set NETFI_CHROMIUM): the browser tests did not run");
-        return None;
-    };
-    let opts = LaunchOptions::default_builder()
-        .path(Some(path))
-        .headless(true)
-        // Root in a container has no user namespace for the sandbox.
-        .sandbox(false)
-        .window_size(Some((1280, 1600)))
-        // Nothing of the browser's in /dev/shm: a test leaves the host as it found it.
-        .args(std::iter::once("--disable-dev-shm-usage").chain(extra.iter().copied()).map(std::ffi::OsStr::new).collect())
-        .idle_browser_timeout(Duration::from_secs(300))
-        .build()
-        .expect("launch options");
-    Some(Browser::new(opts).expect("starting chromium"))
+    crate::common::browser::launch_or_skip("the browser tests", 1600, extra)
 }
 
 /// A `netfi ui` on a free loopback port, stopped (SIGINT) when dropped.

@@ -334,10 +334,7 @@ mod tests {
     use super::*;
     use crate::metrics::Summary;
     use serde_json::json;
-
-    fn dir(name: &str) -> PathBuf {
-        crate::scratch::dir("assemble", name)
-    }
+    use crate::scratch::dir;
 
     /// `emulator.json` of PLM-2 seed 7: 10 frames in, 6 delivered, 3
     /// dropped, 1 held; the console's word `sent`.

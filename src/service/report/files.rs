@@ -29,10 +29,7 @@ fn faults_of(cut: std::io::Result<Vec<PathBuf>>) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn dir(name: &str) -> PathBuf {
-        crate::scratch::dir("report-files", name)
-    }
+    use crate::scratch::dir;
 
     #[test]
     fn cut_files_are_found_in_the_run_and_its_streams_and_whole_ones_are_not() {

@@ -253,12 +253,9 @@ fn read_delays(path: &Path) -> Result<(Delays, Fates), MergeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scratch::dir;
 
     const HEADER: &str = crate::trace::CSV_HEADER;
-
-    fn dir(name: &str) -> PathBuf {
-        crate::scratch::dir("trace-merge", name)
-    }
 
     /// A trace row: index, send, fate, delay, scheduled release, copy.
     fn row(index: u64, send: u64, fate: &str, delay: u64, sched: u64, copy: u8) -> String {
