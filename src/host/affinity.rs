@@ -161,13 +161,15 @@ pub fn format_mask(cpus: &BTreeSet<usize>) -> String {
         .join(",")
 }
 
+/// The set of `cpus`, for tests.
+#[cfg(test)]
+pub(crate) fn set(cpus: &[usize]) -> BTreeSet<usize> {
+    cpus.iter().copied().collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn set(v: &[usize]) -> BTreeSet<usize> {
-        v.iter().copied().collect()
-    }
 
     #[test]
     fn cpu_lists_round_trip() {

@@ -123,10 +123,7 @@ fn narrowed_to_before(state: &IsolationState, online_then: &[usize]) -> BTreeMap
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn set(v: &[usize]) -> BTreeSet<usize> {
-        v.iter().copied().collect()
-    }
+    use crate::host::affinity::set;
 
     #[test]
     fn a_narrowed_mask_maps_back_only_when_unambiguous() {

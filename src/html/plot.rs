@@ -199,12 +199,7 @@ where
     {
         let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(fig.title, ("sans-serif", 18))
-            .margin(12)
-            .margin_right(36)
-            .x_label_area_size(44)
-            .y_label_area_size(76)
+        let mut chart = chart_on(&root, fig.title)
             .build_cartesian_2d(x, y)
             .map_err(|e| e.to_string())?;
         chart
@@ -249,4 +244,12 @@ where
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(buf)
+}
+
+/// A chart as the reports draw them: `title` above, room for both axes'
+/// labels.
+pub(crate) fn chart_on<'a, 'b, DB: DrawingBackend>(root: &'a DrawingArea<DB, plotters::coord::Shift>, title: &str) -> ChartBuilder<'a, 'b, DB> {
+    let mut chart = ChartBuilder::on(root);
+    chart.caption(title, ("sans-serif", 18)).margin(12).margin_right(36).x_label_area_size(44).y_label_area_size(76);
+    chart
 }

@@ -64,28 +64,40 @@ impl fmt::Display for Probability {
     }
 }
 
+/// A value written as a number or as text (`"30%"`, `"250ms"`): `number`
+/// takes the one, `text` the other; `expecting` says what is accepted.
+struct NumberOrText<T> {
+    expecting: &'static str,
+    number: fn(f64) -> Result<T, String>,
+    text: fn(&str) -> Result<T, String>,
+}
+
+impl<T> serde::de::Visitor<'_> for NumberOrText<T> {
+    type Value = T;
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.expecting)
+    }
+    fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<T, E> {
+        (self.number)(v).map_err(E::custom)
+    }
+    fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<T, E> {
+        (self.number)(v as f64).map_err(E::custom)
+    }
+    fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<T, E> {
+        (self.number)(v as f64).map_err(E::custom)
+    }
+    fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<T, E> {
+        (self.text)(v).map_err(E::custom)
+    }
+}
+
 impl<'de> Deserialize<'de> for Probability {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl serde::de::Visitor<'_> for V {
-            type Value = Probability;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a probability: a number in [0, 1] or a percentage like \"30%\"")
-            }
-            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Probability, E> {
-                Probability::new(v).map_err(E::custom)
-            }
-            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Probability, E> {
-                Probability::new(v as f64).map_err(E::custom)
-            }
-            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Probability, E> {
-                Probability::new(v as f64).map_err(E::custom)
-            }
-            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Probability, E> {
-                Probability::parse(v).map_err(E::custom)
-            }
-        }
-        d.deserialize_any(V)
+        d.deserialize_any(NumberOrText {
+            expecting: "a probability: a number in [0, 1] or a percentage like \"30%\"",
+            number: Probability::new,
+            text: Probability::parse,
+        })
     }
 }
 
@@ -115,26 +127,11 @@ impl Millis {
 
 impl<'de> Deserialize<'de> for Millis {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl serde::de::Visitor<'_> for V {
-            type Value = Millis;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a number of milliseconds ≥ 0 (decimals allowed) or a duration with its unit, like \"250ms\" or \"2s\"")
-            }
-            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Millis, E> {
-                Millis::new(v).map_err(E::custom)
-            }
-            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Millis, E> {
-                Millis::new(v as f64).map_err(E::custom)
-            }
-            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Millis, E> {
-                Millis::new(v as f64).map_err(E::custom)
-            }
-            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Millis, E> {
-                parse_duration(v, TimeUnit::Ms).and_then(Millis::new).map_err(E::custom)
-            }
-        }
-        d.deserialize_any(V)
+        d.deserialize_any(NumberOrText {
+            expecting: "a number of milliseconds ≥ 0 (decimals allowed) or a duration with its unit, like \"250ms\" or \"2s\"",
+            number: Millis::new,
+            text: |v| parse_duration(v, TimeUnit::Ms).and_then(Millis::new),
+        })
     }
 }
 

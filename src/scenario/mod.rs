@@ -34,6 +34,7 @@ mod spec;
 mod switch;
 
 pub use parse::{parse_str, parse_str_with, preset, FileError, NoFiles, ScenarioError, ScenarioFiles};
+pub(crate) use parse::write_located;
 pub(crate) use parse::field_of_message;
 pub use presets::preset_stages;
 pub use spec::{PhaseSpec, ScenarioSpec, StageSpec};
@@ -245,21 +246,14 @@ impl Scenario {
             if ps.stages.len() > usize::from(u16::MAX) {
                 return Err(err(loc, None, format!("has {} stages; at most {} are supported", ps.stages.len(), u16::MAX)));
             }
-            let duplicates = ps.stages.iter().filter(|s| s.model.kind() == ModelKind::Duplicate).count();
-            if duplicates > MAX_DUPLICATE_STAGES {
-                return Err(err(
-                    loc,
-                    Some("model".into()),
-                    format!("{duplicates} `duplicate` stages: at most {MAX_DUPLICATE_STAGES} per phase (each may double what reaches it)"),
-                ));
-            }
-            let corrupts = ps.stages.iter().filter(|s| s.model.kind() == ModelKind::Corrupt).count();
-            if corrupts > MAX_CORRUPT_STAGES {
-                return Err(err(
-                    loc,
-                    Some("model".into()),
-                    format!("{corrupts} `corrupt` stages: at most {MAX_CORRUPT_STAGES} per phase"),
-                ));
+            for (kind, most, why) in [
+                (ModelKind::Duplicate, MAX_DUPLICATE_STAGES, " (each may double what reaches it)"),
+                (ModelKind::Corrupt, MAX_CORRUPT_STAGES, ""),
+            ] {
+                let n = ps.stages.iter().filter(|s| s.model.kind() == kind).count();
+                if n > most {
+                    return Err(err(loc, Some("model".into()), format!("{n} `{}` stages: at most {most} per phase{why}", kind.name())));
+                }
             }
             let labels = StageSpec::labels(&ps.stages);
             let mut stages = Vec::with_capacity(ps.stages.len());

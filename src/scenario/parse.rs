@@ -59,19 +59,32 @@ pub struct ScenarioError {
 
 impl fmt::Display for ScenarioError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.origin)?;
-        if let Some(line) = self.line {
-            write!(f, ":{line}")?;
-        }
-        write!(f, ": ")?;
-        if let Some(loc) = &self.location {
-            write!(f, "{loc}: ")?;
-        }
-        if let Some(field) = &self.field {
-            write!(f, "`{field}`: ")?;
-        }
-        write!(f, "{}", self.problem)
+        write_located(f, &self.origin, self.line, self.location.as_deref(), self.field.as_deref(), &self.problem)
     }
+}
+
+/// An error in a file as netfi says it: `origin:line: location: `field`:
+/// problem`, each part there where known (scenario and study files alike).
+pub(crate) fn write_located(
+    f: &mut fmt::Formatter<'_>,
+    origin: &str,
+    line: Option<usize>,
+    location: Option<&str>,
+    field: Option<&str>,
+    problem: &str,
+) -> fmt::Result {
+    write!(f, "{origin}")?;
+    if let Some(line) = line {
+        write!(f, ":{line}")?;
+    }
+    write!(f, ": ")?;
+    if let Some(loc) = location {
+        write!(f, "{loc}: ")?;
+    }
+    if let Some(field) = field {
+        write!(f, "`{field}`: ")?;
+    }
+    write!(f, "{problem}")
 }
 
 impl std::error::Error for ScenarioError {}

@@ -54,7 +54,8 @@ pub struct PidError {
 /// exits), once the process is set to end with the `netfi run` that
 /// started it, if one did.
 pub fn standalone_args<A: clap::Args + clap::FromArgMatches>(name: &'static str, about: &'static str) -> Result<A, crate::host::process::DieWithParentError> {
-    let command = A::augment_args(clap::Command::new(name).version(env!("CARGO_PKG_VERSION")).about(about));
+    // After the flags: a group's own doc would otherwise name the command.
+    let command = A::augment_args(clap::Command::new(name)).version(env!("CARGO_PKG_VERSION")).about(about).long_about(None);
     let args = A::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit());
     crate::host::process::die_with_runner()?;
     Ok(args)

@@ -84,15 +84,7 @@ pub struct StudyFileError {
 
 impl fmt::Display for StudyFileError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.origin)?;
-        if let Some(line) = self.line {
-            write!(f, ":{line}")?;
-        }
-        write!(f, ": ")?;
-        if let Some(field) = &self.field {
-            write!(f, "`{field}`: ")?;
-        }
-        write!(f, "{}", self.problem)
+        crate::scenario::write_located(f, &self.origin, self.line, None, self.field.as_deref(), &self.problem)
     }
 }
 

@@ -399,12 +399,7 @@ fn plot(id: &str, m: &super::summary::MetricSummary) -> Option<String> {
     {
         let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).ok()?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(m.label, ("sans-serif", 18))
-            .margin(12)
-            .margin_right(36)
-            .x_label_area_size(44)
-            .y_label_area_size(76)
+        let mut chart = crate::html::plot::chart_on(&root, m.label)
             .build_cartesian_2d(-0.5..n - 0.5, lo..hi)
             .ok()?;
         let label = |v: &f64| crate::html::plot::whole(*v).and_then(|i| names.get(usize::try_from(i).ok()?).cloned()).unwrap_or_default();

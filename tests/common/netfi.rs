@@ -13,6 +13,34 @@ pub fn netfi() -> Command {
     Command::new(netfi_exe())
 }
 
+/// `netfi ui --port 0 --out OUT ARGS` started, and the URL it says it
+/// serves on (its first line: `netfi ui on URL`).
+pub fn ui(out: &std::path::Path, args: &[&str]) -> (std::process::Child, String) {
+    use std::io::BufRead;
+    let mut child = netfi()
+        .args(["ui", "--port", "0", "--out"])
+        .arg(out)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("starting netfi ui");
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let url = line.trim().strip_prefix("netfi ui on ").unwrap_or_else(|| panic!("unexpected first line `{line}`")).to_string();
+    (child, url)
+}
+
+/// The flags that pin a test's emulator: the last core, where there are
+/// two or more; else `--no-pin`.
+pub fn emulator_pin() -> Vec<String> {
+    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
+    if cores >= 2 {
+        vec!["--core".into(), (cores - 1).to_string()]
+    } else {
+        vec!["--no-pin".into()]
+    }
+}
+
 /// A command run to its end, as the test expects it to end (else the test
 /// fails, saying how it did).
 pub trait Outcome {

@@ -59,16 +59,21 @@ fn real_capture_statistics() {
     assert_eq!(frames[0].sequence, 20_468);
 }
 
-#[test]
-fn real_capture_kinematics() {
-    let _machine = machine::not_beside_a_run();
-    // Reference numbers computed independently from the decompressed file.
-    let Some(path) = shipped_capture() else { return };
-    let cap = capture::load(&path).unwrap();
+/// The shipped capture, and its records' kinematics integrated.
+fn shipped_kinematics() -> Option<(capture::Capture, Integrator)> {
+    let cap = capture::load(shipped_capture()?).unwrap();
     let mut side = Integrator::new(KinematicsConfig::default()).unwrap();
     for r in &cap.records {
         side.push(r.time_ns, &r.frame().unwrap());
     }
+    Some((cap, side))
+}
+
+#[test]
+fn real_capture_kinematics() {
+    let _machine = machine::not_beside_a_run();
+    // Reference numbers computed independently from the decompressed file.
+    let Some((_, side)) = shipped_kinematics() else { return };
     let rep = side.report();
     assert_eq!(rep.frames, 41_508);
     assert_eq!(rep.frames_applied, 41_508 - 1_058);
@@ -97,12 +102,7 @@ fn motion_model_resembles_the_real_capture() {
     // released share by about 4.3 % (s.d.); the tolerances, ±10 % and ±20 %,
     // allow that at over 4σ plus what a model may keep against a single 80-s
     // recording.
-    let Some(path) = shipped_capture() else { return };
-    let cap = capture::load(&path).unwrap();
-    let mut real = Integrator::new(KinematicsConfig::default()).unwrap();
-    for r in &cap.records {
-        real.push(r.time_ns, &r.frame().unwrap());
-    }
+    let Some((cap, real)) = shipped_kinematics() else { return };
     let real_units_per_s = real.report().length_units.map(|l| l / cap.stats.duration_s());
     let real_released = cap.stats.clutch_released_frames as f64 / cap.stats.frames as f64;
 

@@ -10,6 +10,8 @@
 //!
 //! The runs are serialized: each has a busy-waiting emulator pinned to a core.
 
+use crate::common::wait_file;
+use crate::common::netfi::emulator_pin;
 use crate::common::netfi::netfi;
 use netfi::sample::FrameSample;
 use netfi::transport::{Channel, IpcConfig, Role, RunId};
@@ -90,32 +92,27 @@ impl Run {
     }
 
     fn emulator(&self, scenario: &str, extra: &[&str]) -> Witness {
-        let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-        let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
-        let child = netfi()
-            .args(["emulator", "--run-id", &self.id, "--scenario", scenario, "--out"])
-            .arg(&self.out)
-            .args(&pin)
-            .args(extra)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        wait_file(&self.out.join("emulator.ready"));
-        Witness(Some(child))
+        let pin = emulator_pin();
+        let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
+        self.service("emulator", &[&["--scenario", scenario][..], &pin, extra].concat())
     }
 
     /// `netfi simulator` of this run with `extra`, once ready.
     fn simulator(&self, extra: &[&str]) -> Witness {
+        self.service("simulator", extra)
+    }
+
+    /// `netfi ROLE` of this run with `args`, once it says it is ready.
+    fn service(&self, role: &str, args: &[&str]) -> Witness {
         let child = netfi()
-            .args(["simulator", "--run-id", &self.id, "--out"])
+            .args([role, "--run-id", &self.id, "--out"])
             .arg(&self.out)
-            .args(extra)
+            .args(args)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        wait_file(&self.out.join("simulator.ready"));
+        wait_file(&self.out.join(format!("{role}.ready")));
         Witness(Some(child))
     }
 
@@ -195,14 +192,6 @@ impl Drop for Witness {
             let _ = c.kill();
             let _ = c.wait();
         }
-    }
-}
-
-fn wait_file(path: &Path) {
-    let t0 = Instant::now();
-    while !path.exists() {
-        assert!(t0.elapsed() < Duration::from_secs(60), "{} never appeared", path.display());
-        std::thread::sleep(Duration::from_millis(10));
     }
 }
 
@@ -438,12 +427,7 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     assert_eq!(u(&r["received_direct"]), 20000);
     // Realized loss: the model's rate within the run's 95 % interval, and the
     // very drops the scenario gives this seed in simulated time.
-    let exact = e["stages"][0]["loss_rate_model"].as_f64().unwrap();
-    let [lo, hi] = [e["loss_rate_ci95"][0].as_f64().unwrap(), e["loss_rate_ci95"][1].as_f64().unwrap()];
-    assert!(lo <= exact && exact <= hi, "model {exact} outside [{lo}, {hi}]");
-    let check = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "3", "--json"]).output().unwrap();
-    let check: Value = serde_json::from_slice(&check.stdout).unwrap();
-    assert_eq!(check["dropped"]["ge_lomax"], e["frames"]["dropped"]["ge_lomax"]);
+    crate::common::assert_plm2_seed3_is_the_checks(&e);
     assert!(u(&e["frames"]["dropped"]["ge_lomax"]) > 0);
     // The feedback loop, balanced the other way: one feedback per command
     // the robot received, every one through the return scenario (Normal)
@@ -655,8 +639,7 @@ fn frames_released_to_no_robot_are_counted_and_the_emulator_can_wait_for_one() {
     assert_eq!(u(&e["frames"]["delivered_unsubscribed"]), 300, "{e}");
 
     let run = Run::new("wait-robot");
-    let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let pin = emulator_pin();
     let emu = netfi()
         .args(["emulator", "--run-id", &run.id, "--scenario", "Normal", "--seed", "1", "--wait-for-peer-s", "60", "--out"])
         .arg(&run.out)

@@ -5,6 +5,7 @@
 //! the services wrote, with the same sections as a `netfi run`'s, and say
 //! which parts are missing when a client wrote none.
 
+use crate::common::netfi::emulator_pin;
 use super::{copy_dir, netfi, polylines, svg, temp_dir, text_of, the_run};
 use crate::common::machine;
 use std::path::{Path, PathBuf};
@@ -47,19 +48,14 @@ fn the_foreign_run() -> &'static Path {
         let _guard = machine::alone();
         let out = temp_dir("foreign");
         let run_id = format!("html-foreign-{}", std::process::id());
-        let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-        let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+        let pin = emulator_pin();
         let emulator = service("emulator")
             .args(["--run-id", &run_id, "--scenario", "DLM-2", "--seed", "5", "--expected-frames", "1000", "--out"])
             .arg(&out)
             .args(&pin)
             .spawn()
             .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while !out.join("emulator.ready").exists() {
-            assert!(Instant::now() < deadline, "the emulator never got ready");
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        crate::common::wait_file(&out.join("emulator.ready"));
         let robot = service("simulator").args(["--run-id", &run_id, "--out"]).arg(&out).spawn().unwrap();
         let console = service("console").args(["--run-id", &run_id, "--frames", "1000", "--seed", "3", "--out"]).arg(&out).spawn().unwrap();
         finish(console, "console");
@@ -216,11 +212,7 @@ fn a_udp_run_started_by_hand_is_reported_with_its_sockets() {
         .arg(&dir)
         .spawn()
         .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !dir.join("emulator.ready").exists() {
-        assert!(Instant::now() < deadline, "the emulator never got ready");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    crate::common::wait_file(&dir.join("emulator.ready"));
     let done = Arc::new(AtomicBool::new(false));
     let receiving = {
         let done = done.clone();

@@ -58,7 +58,7 @@ pub(crate) fn here() -> PathBuf {
 #[path = "../common/netfi.rs"]
 #[allow(dead_code)]
 mod netfi_cmd;
-pub(crate) use netfi_cmd::netfi;
+pub(crate) use netfi_cmd::{emulator_pin, netfi};
 
 pub(crate) fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a count: {v}"))
@@ -230,8 +230,7 @@ impl Case {
 
     /// `netfi emulator` in this case's domain and directory with `args`.
     pub(crate) fn emulator_in(&self, netns: Option<&str>, args: &[&str]) -> Proc {
-        let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-        let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+        let pin = emulator_pin();
         let mut c = self.command(netns, Path::new(env!("CARGO_BIN_EXE_netfi")));
         c.arg("emulator").args(["--ros2-domain", &self.domain.to_string(), "--out"]).arg(self.dir.join("out")).args(&pin).args(args);
         if !args.contains(&"--ros2-linger-ms") {

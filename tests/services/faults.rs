@@ -5,6 +5,7 @@
 
 use super::{allowed_cpus, assert_conserved, core_affinity_count, netfi, out_dir, run, spawn_run, u, wait_pid, Witness};
 use crate::common::machine;
+use crate::common::scratch::Scratch;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -16,20 +17,16 @@ use std::time::Duration;
 /// the simulator's checksum catches the flips that land in bytes it covers.
 #[test]
 fn duplicates_and_corruption_are_accounted_for_exactly() {
-    let dir = out_dir("dup-corrupt-scenario");
-    std::fs::create_dir_all(&dir).unwrap();
-    let scenario = dir.join("dup_corrupt.toml");
-    std::fs::write(
-        &scenario,
+    let dir = Scratch::new("it-dup-corrupt-scenario");
+    let scenario = dir.file(
+        "dup_corrupt.toml",
         "name = \"dup_corrupt\"\n\
          [[stage]]\nmodel = \"duplicate\"\np = 0.1\n\
          [[stage]]\nmodel = \"corrupt\"\np = 0.2\n\
          [[stage]]\nmodel = \"bernoulli\"\np = 0.05\n\
          [[stage]]\nmodel = \"delay\"\nmin_ms = 1\ndist = \"uniform\"\njitter_ms = 2\norder = \"reorder\"\n",
-    )
-    .unwrap();
+    );
     let (r, ok, out) = run("dup-corrupt", &[scenario.to_str().unwrap(), "--frames", "6000", "--rate-hz", "2000", "--seed", "11"]);
-    std::fs::remove_dir_all(&dir).ok();
     assert!(ok, "{r:#}");
     let f = &r["frames"];
     let dropped: u64 = f["dropped"].as_object().unwrap().values().map(u).sum();
@@ -93,12 +90,9 @@ fn duplicates_and_corruption_are_accounted_for_exactly() {
 /// name before the run starts.
 #[test]
 fn the_feedback_path_duplicates_and_refuses_corruption() {
-    let dir = out_dir("fb-dup-scenarios");
-    std::fs::create_dir_all(&dir).unwrap();
-    let dup = dir.join("fb_dup.toml");
-    std::fs::write(&dup, "name = \"fb_dup\"\n[[stage]]\nmodel = \"duplicate\"\np = 0.2\n[[stage]]\nmodel = \"bernoulli\"\np = 0.05\n").unwrap();
-    let corrupt = dir.join("fb_corrupt.toml");
-    std::fs::write(&corrupt, "name = \"fb_corrupt\"\n[[stage]]\nmodel = \"corrupt\"\np = 0.2\n").unwrap();
+    let dir = Scratch::new("it-fb-dup-scenarios");
+    let dup = dir.file("fb_dup.toml", "name = \"fb_dup\"\n[[stage]]\nmodel = \"duplicate\"\np = 0.2\n[[stage]]\nmodel = \"bernoulli\"\np = 0.05\n");
+    let corrupt = dir.file("fb_corrupt.toml", "name = \"fb_corrupt\"\n[[stage]]\nmodel = \"corrupt\"\np = 0.2\n");
     let (r, ok, _) = run("fb-dup", &["Normal", "--return-scenario", dup.to_str().unwrap(), "--frames", "3000", "--rate-hz", "2000", "--seed", "9"]);
     assert!(ok, "{r:#}");
     let fb = &r["feedback"];
@@ -115,7 +109,6 @@ fn the_feedback_path_duplicates_and_refuses_corruption() {
         let _guard = machine::alone();
         netfi().args(["run", "Normal", "--return-scenario", corrupt.to_str().unwrap(), "--frames", "100", "--seed", "9", "--out"]).arg(&out).output().unwrap()
     };
-    std::fs::remove_dir_all(&dir).ok();
     std::fs::remove_dir_all(&out).ok();
     assert!(!o.status.success());
     let stderr = String::from_utf8_lossy(&o.stderr);

@@ -5,11 +5,14 @@
 //! The runs are serialized: each has a busy-waiting emulator pinned to a
 //! core, and a 2-core machine has room for one at a time.
 
+use crate::common::wait_file;
+use crate::common::netfi::emulator_pin;
 use crate::common::netfi::netfi;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use crate::common::machine;
+use crate::common::scratch::Scratch;
 use std::time::{Duration, Instant};
 
 mod deaths;
@@ -112,12 +115,10 @@ fn normal_delivers_every_frame_and_measures_overhead() {
 /// by second and the time at the link; the HTML report shows them too.
 #[test]
 fn a_rate_link_reports_utilisation_queue_and_queueing_delay() {
-    let dir = out_dir("rate-link-scenario");
-    std::fs::create_dir_all(&dir).unwrap();
-    let scenario = dir.join("rate.toml");
+    let dir = Scratch::new("it-rate-link-scenario");
     // 2 Mbit/s; 124 + 42 = 166 wire bytes a frame, 1 328 bits: 0.664 ms of
     // the link's time each; at 1 kHz the offered load is 1.328 Mbit/s.
-    std::fs::write(&scenario, "name = \"rate\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 2_000_000\noverhead_bytes = 42\n").unwrap();
+    let scenario = dir.file("rate.toml", "name = \"rate\"\n[[stage]]\nmodel = \"rate\"\nrate_bit_s = 2_000_000\noverhead_bytes = 42\n");
     let (r, ok, out) = run("rate-link", &[scenario.to_str().unwrap(), "--duration-s", "2", "--seed", "1"]);
     assert!(ok, "{r:#}");
     assert_conserved(&r);
@@ -172,7 +173,6 @@ fn a_rate_link_reports_utilisation_queue_and_queueing_delay() {
     // And what netfi added over time (end to end and release lateness per bin).
     let at = html.find("id=\"plot-added-over-time\"").expect("no added-over-time plot");
     assert!(html[at..at + html[at..].find("</svg>").unwrap()].contains("<polyline"), "no line in the added-over-time plot");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
@@ -182,13 +182,8 @@ fn plm_loss_is_conserved_and_realizes_the_model() {
     let (r, ok, _) = run("plm", &["PLM-2", "--frames", "20000", "--rate-hz", "5000", "--seed", "3"]);
     assert!(ok, "{r:#}");
     assert_conserved(&r);
-    let exact = r["stages"][0]["loss_rate_model"].as_f64().unwrap();
-    let [lo, hi] = [r["loss_rate_ci95"][0].as_f64().unwrap(), r["loss_rate_ci95"][1].as_f64().unwrap()];
-    assert!(lo <= exact && exact <= hi, "model {exact} outside [{lo}, {hi}]");
     // The same seed in simulated time gives the very same drops.
-    let o = netfi().args(["scenario", "check", "PLM-2", "--frames", "20000", "--seed", "3", "--json"]).output().unwrap();
-    let c: Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(c["dropped"]["ge_lomax"], r["frames"]["dropped"]["ge_lomax"]);
+    crate::common::assert_plm2_seed3_is_the_checks(&r);
 }
 
 #[test]
@@ -277,14 +272,6 @@ fn service(role: &str, run_id: &str, out: &Path, extra: &[&str]) -> std::process
         .unwrap()
 }
 
-fn wait_file(path: &Path) {
-    let t0 = Instant::now();
-    while !path.exists() {
-        assert!(t0.elapsed() < Duration::from_secs(30), "{} never appeared", path.display());
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
-
 #[test]
 fn a_restarted_console_reconnects() {
     let _guard = machine::alone();
@@ -292,8 +279,7 @@ fn a_restarted_console_reconnects() {
     let run_id = format!("it-restart-{}", std::process::id());
     let mut sim = service("simulator", &run_id, &out, &[]);
     wait_file(&out.join("simulator.ready"));
-    let cores = core_affinity_count();
-    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let pin = emulator_pin();
     let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
     let emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal"], pin.as_slice()].concat());
     wait_file(&out.join("emulator.ready"));

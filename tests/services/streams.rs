@@ -1,6 +1,7 @@
 //! Several streams on one emulator (`netfi run --streams N`): each stream's
 //! own scenario, seed, accounting and files, and their total.
 
+use crate::common::netfi::emulator_pin;
 use super::{assert_conserved, netfi, out_dir, run, service, u, wait_file};
 use crate::common::machine;
 use serde_json::Value;
@@ -106,8 +107,7 @@ fn a_standalone_emulator_of_two_streams_notices_a_dead_robot() {
     let nap = ["--nap-us", "200"];
     let mut robots: Vec<Child> = (0..2).map(|k| service("simulator", &ids[k], &dirs[k], &nap)).collect();
     dirs.iter().for_each(|d| wait_file(&d.join("simulator.ready")));
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let pin: Vec<String> = if cores >= 2 { vec!["--core".into(), (cores - 1).to_string()] } else { vec!["--no-pin".into()] };
+    let pin = emulator_pin();
     let pin: Vec<&str> = pin.iter().map(String::as_str).collect();
     let emu = service("emulator", &run_id, &out, &[&["--scenario", "Normal", "--streams", "2"], pin.as_slice()].concat());
     wait_file(&out.join("emulator.ready"));

@@ -4,11 +4,10 @@
 //! Skips with a message where no chromium is installed, unless
 //! `NETFI_REQUIRE_BROWSER` is set (`.ci/run` sets it).
 
-use super::{netfi, Scratch};
+use super::Scratch;
 use crate::common::machine;
 use headless_chrome::{Browser, Tab};
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::Child;
 use std::time::{Duration, Instant};
 
 fn browser_or_skip() -> Option<Browser> {
@@ -23,16 +22,8 @@ struct Ui {
 
 impl Ui {
     fn start(out: &std::path::Path) -> Ui {
-        let mut child = netfi()
-            .args(["ui", "--port", "0", "--no-token", "--out"])
-            .arg(out)
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("starting netfi ui");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let base = line.trim().strip_prefix("netfi ui on ").unwrap_or_else(|| panic!("unexpected first line `{line}`")).trim_end_matches('/').to_string();
-        Ui { child, base }
+        let (child, url) = crate::common::netfi::ui(out, &["--no-token"]);
+        Ui { child, base: url.trim_end_matches('/').to_string() }
     }
 }
 

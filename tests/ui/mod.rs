@@ -12,9 +12,9 @@
 
 use headless_chrome::protocol::cdp::Page::CaptureScreenshotFormatOption;
 use headless_chrome::{Browser, Tab};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
@@ -49,16 +49,7 @@ impl Server {
     fn start_with(args: &[&str]) -> Server {
         static N: AtomicUsize = AtomicUsize::new(0);
         let out = std::env::temp_dir().join(format!("netfi-ui-test-{}-{}", std::process::id(), N.fetch_add(1, Ordering::Relaxed)));
-        let mut child = Command::new(env!("CARGO_BIN_EXE_netfi"))
-            .args(["ui", "--port", "0", "--out"])
-            .arg(&out)
-            .args(args)
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("starting netfi ui");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let url = line.trim().strip_prefix("netfi ui on ").unwrap_or_else(|| panic!("unexpected first line `{line}`")).to_string();
+        let (child, url) = crate::common::netfi::ui(&out, args);
         let rest = url.strip_prefix("http://").unwrap_or_else(|| panic!("not an http URL: {url}"));
         let (addr, query) = rest.split_once("/?").unwrap_or_else(|| panic!("no token in the printed URL {url}"));
         let token = query.strip_prefix("token=").unwrap_or_else(|| panic!("no token in the printed URL {url}")).to_string();

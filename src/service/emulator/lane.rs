@@ -307,8 +307,7 @@ mod tests {
 
     #[test]
     fn a_channel_is_one_impl_and_one_line_of_wiring_and_its_path_accounts_for_every_item() {
-        let dir = std::env::temp_dir().join(format!("netfi-lane-notes-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::dir("notes");
         let mut l = lane(10, &dir);
         let mut notes = Notes::default();
         notes.inbox.extend((0..1000).map(Msg::Note));
@@ -334,8 +333,7 @@ mod tests {
 
     #[test]
     fn a_reverse_path_without_its_marker_ends_after_the_grace_and_a_dead_robot_ends_it_at_once() {
-        let dir = std::env::temp_dir().join(format!("netfi-lane-grace-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::dir("grace");
         let mut l = lane(3, &dir);
         let mut notes = Notes::default();
         notes.inbox.extend((0..5).map(Msg::Note));
