@@ -106,42 +106,42 @@ pub fn checksum(
         .wrapping_add(sequence as i32)
 }
 
-#[inline]
-fn read_u32(b: &[u8]) -> u32 {
-    u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+/// A field's type as the wire carries it: little-endian, per-arm arrays
+/// arm 0 then arm 1.
+trait Wire: Sized {
+    fn read(b: &[u8]) -> Self;
+    fn write(self, b: &mut [u8]);
 }
 
-#[inline]
-fn read_i32(b: &[u8]) -> i32 {
-    i32::from_le_bytes([b[0], b[1], b[2], b[3]])
-}
+macro_rules! wire_scalar {
+    ($($t:ty),*) => {$(
+        impl Wire for $t {
+            #[inline]
+            fn read(b: &[u8]) -> $t {
+                <$t>::from_le_bytes(b[..size_of::<$t>()].try_into().expect("a field of its own width"))
+            }
+            #[inline]
+            fn write(self, b: &mut [u8]) {
+                b[..size_of::<$t>()].copy_from_slice(&self.to_le_bytes());
+            }
+        }
 
-#[inline]
-fn read_f64(b: &[u8]) -> f64 {
-    f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
+        impl Wire for [$t; ARMS] {
+            #[inline]
+            fn read(b: &[u8]) -> [$t; ARMS] {
+                let w = size_of::<$t>();
+                [<$t>::read(&b[..w]), <$t>::read(&b[w..2 * w])]
+            }
+            #[inline]
+            fn write(self, b: &mut [u8]) {
+                let w = size_of::<$t>();
+                self[0].write(&mut b[..w]);
+                self[1].write(&mut b[w..2 * w]);
+            }
+        }
+    )*};
 }
-
-#[inline]
-fn read_i32x2(b: &[u8]) -> [i32; ARMS] {
-    [read_i32(&b[0..4]), read_i32(&b[4..8])]
-}
-
-#[inline]
-fn read_f64x2(b: &[u8]) -> [f64; ARMS] {
-    [read_f64(&b[0..8]), read_f64(&b[8..16])]
-}
-
-#[inline]
-fn write_i32x2(b: &mut [u8], v: [i32; ARMS]) {
-    b[0..4].copy_from_slice(&v[0].to_le_bytes());
-    b[4..8].copy_from_slice(&v[1].to_le_bytes());
-}
-
-#[inline]
-fn write_f64x2(b: &mut [u8], v: [f64; ARMS]) {
-    b[0..8].copy_from_slice(&v[0].to_le_bytes());
-    b[8..16].copy_from_slice(&v[1].to_le_bytes());
-}
+wire_scalar!(u32, i32, f64);
 
 /// Bytes of the frame the checksum covers (docs/spec.md §2): `sequence`, the
 /// six position increments, both `buttonstate`s, `surgeon_mode`, and the
@@ -189,6 +189,63 @@ pub struct ItpView<T: AsRef<[u8]>> {
     buffer: T,
 }
 
+/// Each field of the frame: `getter / setter: type = byte range`, with its
+/// doc; the getters read the view, the setters write it.
+macro_rules! fields {
+    ($($(#[doc = $doc:literal])* $get:ident / $set:ident: $t:ty = $field:ident;)*) => {
+        impl<T: AsRef<[u8]>> ItpView<T> {
+            $(
+                $(#[doc = $doc])*
+                #[inline]
+                pub fn $get(&self) -> $t {
+                    <$t as Wire>::read(self.bytes(field::$field))
+                }
+            )*
+        }
+
+        impl<T: AsRef<[u8]> + AsMut<[u8]>> ItpView<T> {
+            $(
+                #[doc = concat!("Sets [`ItpView::", stringify!($get), "`] as given ([`ItpView::fill_checksum`] makes the checksum agree).")]
+                #[inline]
+                pub fn $set(&mut self, value: $t) {
+                    value.write(self.bytes_mut(field::$field));
+                }
+            )*
+        }
+    };
+}
+
+fields! {
+    /// Console servo counter.
+    sequence / set_sequence: u32 = SEQUENCE;
+    /// Packet type.
+    pactyp / set_pactyp: u32 = PACTYP;
+    /// Protocol version.
+    version / set_version: u32 = VERSION;
+    /// Position increment along x, per arm.
+    delx / set_delx: [i32; ARMS] = DELX;
+    /// Position increment along y, per arm.
+    dely / set_dely: [i32; ARMS] = DELY;
+    /// Position increment along z, per arm.
+    delz / set_delz: [i32; ARMS] = DELZ;
+    /// Rotation increment, x component, per arm.
+    qx / set_qx: [f64; ARMS] = QX;
+    /// Rotation increment, y component, per arm.
+    qy / set_qy: [f64; ARMS] = QY;
+    /// Rotation increment, z component, per arm.
+    qz / set_qz: [f64; ARMS] = QZ;
+    /// Rotation increment, w component, per arm.
+    qw / set_qw: [f64; ARMS] = QW;
+    /// Button state per arm.
+    buttonstate / set_buttonstate: [i32; ARMS] = BUTTONSTATE;
+    /// Absolute grasper command per arm.
+    grasp / set_grasp: [i32; ARMS] = GRASP;
+    /// Clutch state: [`SURGEON_ENGAGED`] or [`SURGEON_DISENGAGED`].
+    surgeon_mode / set_surgeon_mode: i32 = SURGEON_MODE;
+    /// The checksum the frame carries.
+    checksum / set_checksum: i32 = CHECKSUM;
+}
+
 impl<T: AsRef<[u8]>> ItpView<T> {
     /// Wraps a buffer without checking its length. Accessors panic if it is
     /// shorter than a frame; prefer [`ItpView::new_checked`] for untrusted
@@ -224,90 +281,6 @@ impl<T: AsRef<[u8]>> ItpView<T> {
         &self.buffer.as_ref()[f]
     }
 
-    /// Console servo counter.
-    #[inline]
-    pub fn sequence(&self) -> u32 {
-        read_u32(self.bytes(field::SEQUENCE))
-    }
-
-    /// Packet type.
-    #[inline]
-    pub fn pactyp(&self) -> u32 {
-        read_u32(self.bytes(field::PACTYP))
-    }
-
-    /// Protocol version.
-    #[inline]
-    pub fn version(&self) -> u32 {
-        read_u32(self.bytes(field::VERSION))
-    }
-
-    /// Position increment along x, per arm.
-    #[inline]
-    pub fn delx(&self) -> [i32; ARMS] {
-        read_i32x2(self.bytes(field::DELX))
-    }
-
-    /// Position increment along y, per arm.
-    #[inline]
-    pub fn dely(&self) -> [i32; ARMS] {
-        read_i32x2(self.bytes(field::DELY))
-    }
-
-    /// Position increment along z, per arm.
-    #[inline]
-    pub fn delz(&self) -> [i32; ARMS] {
-        read_i32x2(self.bytes(field::DELZ))
-    }
-
-    /// Rotation increment, x component, per arm.
-    #[inline]
-    pub fn qx(&self) -> [f64; ARMS] {
-        read_f64x2(self.bytes(field::QX))
-    }
-
-    /// Rotation increment, y component, per arm.
-    #[inline]
-    pub fn qy(&self) -> [f64; ARMS] {
-        read_f64x2(self.bytes(field::QY))
-    }
-
-    /// Rotation increment, z component, per arm.
-    #[inline]
-    pub fn qz(&self) -> [f64; ARMS] {
-        read_f64x2(self.bytes(field::QZ))
-    }
-
-    /// Rotation increment, w component, per arm.
-    #[inline]
-    pub fn qw(&self) -> [f64; ARMS] {
-        read_f64x2(self.bytes(field::QW))
-    }
-
-    /// Button state per arm.
-    #[inline]
-    pub fn buttonstate(&self) -> [i32; ARMS] {
-        read_i32x2(self.bytes(field::BUTTONSTATE))
-    }
-
-    /// Absolute grasper command per arm.
-    #[inline]
-    pub fn grasp(&self) -> [i32; ARMS] {
-        read_i32x2(self.bytes(field::GRASP))
-    }
-
-    /// Clutch state: [`SURGEON_ENGAGED`] or [`SURGEON_DISENGAGED`].
-    #[inline]
-    pub fn surgeon_mode(&self) -> i32 {
-        read_i32(self.bytes(field::SURGEON_MODE))
-    }
-
-    /// The checksum the frame carries.
-    #[inline]
-    pub fn checksum(&self) -> i32 {
-        read_i32(self.bytes(field::CHECKSUM))
-    }
-
     /// The checksum computed from the frame's fields.
     #[inline]
     pub fn computed_checksum(&self) -> i32 {
@@ -332,90 +305,6 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> ItpView<T> {
     #[inline]
     fn bytes_mut(&mut self, f: field::Field) -> &mut [u8] {
         &mut self.buffer.as_mut()[f]
-    }
-
-    /// Sets the console servo counter.
-    #[inline]
-    pub fn set_sequence(&mut self, value: u32) {
-        self.bytes_mut(field::SEQUENCE).copy_from_slice(&value.to_le_bytes());
-    }
-
-    /// Sets the packet type.
-    #[inline]
-    pub fn set_pactyp(&mut self, value: u32) {
-        self.bytes_mut(field::PACTYP).copy_from_slice(&value.to_le_bytes());
-    }
-
-    /// Sets the protocol version.
-    #[inline]
-    pub fn set_version(&mut self, value: u32) {
-        self.bytes_mut(field::VERSION).copy_from_slice(&value.to_le_bytes());
-    }
-
-    /// Sets the x position increments.
-    #[inline]
-    pub fn set_delx(&mut self, value: [i32; ARMS]) {
-        write_i32x2(self.bytes_mut(field::DELX), value);
-    }
-
-    /// Sets the y position increments.
-    #[inline]
-    pub fn set_dely(&mut self, value: [i32; ARMS]) {
-        write_i32x2(self.bytes_mut(field::DELY), value);
-    }
-
-    /// Sets the z position increments.
-    #[inline]
-    pub fn set_delz(&mut self, value: [i32; ARMS]) {
-        write_i32x2(self.bytes_mut(field::DELZ), value);
-    }
-
-    /// Sets the rotation increments' x components.
-    #[inline]
-    pub fn set_qx(&mut self, value: [f64; ARMS]) {
-        write_f64x2(self.bytes_mut(field::QX), value);
-    }
-
-    /// Sets the rotation increments' y components.
-    #[inline]
-    pub fn set_qy(&mut self, value: [f64; ARMS]) {
-        write_f64x2(self.bytes_mut(field::QY), value);
-    }
-
-    /// Sets the rotation increments' z components.
-    #[inline]
-    pub fn set_qz(&mut self, value: [f64; ARMS]) {
-        write_f64x2(self.bytes_mut(field::QZ), value);
-    }
-
-    /// Sets the rotation increments' w components.
-    #[inline]
-    pub fn set_qw(&mut self, value: [f64; ARMS]) {
-        write_f64x2(self.bytes_mut(field::QW), value);
-    }
-
-    /// Sets the button states.
-    #[inline]
-    pub fn set_buttonstate(&mut self, value: [i32; ARMS]) {
-        write_i32x2(self.bytes_mut(field::BUTTONSTATE), value);
-    }
-
-    /// Sets the grasper commands.
-    #[inline]
-    pub fn set_grasp(&mut self, value: [i32; ARMS]) {
-        write_i32x2(self.bytes_mut(field::GRASP), value);
-    }
-
-    /// Sets the clutch state.
-    #[inline]
-    pub fn set_surgeon_mode(&mut self, value: i32) {
-        self.bytes_mut(field::SURGEON_MODE).copy_from_slice(&value.to_le_bytes());
-    }
-
-    /// Sets the carried checksum as is.
-    #[inline]
-    pub fn set_checksum(&mut self, value: i32) {
-        self.bytes_mut(field::CHECKSUM).copy_from_slice(&value.to_le_bytes());
     }
 
     /// Computes the checksum from the fields and stores it.

@@ -154,9 +154,7 @@ pub struct Delay {
 impl Delay {
     pub fn new(params: &DelayParams) -> Result<Self, ParamError> {
         let dist = params.dist;
-        let not_for = |field: &str| {
-            ParamError::new(field, format!("does not apply to dist = \"{}\"; remove it or change `dist`", dist.name()))
-        };
+        let not_for = |field: &str| ParamError::not_for(field, "dist", dist.name());
         let min_ms = params.min_ms.get();
         at_most_ms("min_ms", min_ms, MAX_DURATION_MS, "one hour")?;
         if let Some(j) = params.jitter_ms {

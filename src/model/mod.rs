@@ -113,6 +113,11 @@ impl ParamError {
     pub fn new(field: impl Into<String>, problem: impl Into<String>) -> Self {
         ParamError { field: field.into(), problem: problem.into() }
     }
+
+    /// `field` was given where `switch = "value"` leaves it no meaning.
+    pub fn not_for(field: &str, switch: &str, value: &str) -> Self {
+        ParamError::new(field, format!("does not apply to {switch} = \"{value}\"; remove it or change `{switch}`"))
+    }
 }
 
 /// One degradation model's per-frame decision.

@@ -163,23 +163,19 @@ pub struct Outage {
 impl Outage {
     pub fn new(params: &OutageParams) -> Result<Self, ParamError> {
         let unit = params.unit;
-        let not_for = |field: &str| {
-            ParamError::new(field, format!("does not apply to unit = \"{}\"; remove it or change `unit`", unit.name()))
-        };
         let p_start = params.p_start.get();
         let start = rand::distr::Bernoulli::new(p_start)
             .map_err(|e| ParamError::new("p_start", format!("{p_start}: {e}; expected a probability in [0, 1]")))?;
+        // The other unit's fields do not apply.
+        let foreign = match unit {
+            OutageUnit::Time => [("min_frames", params.min_frames.is_some()), ("max_frames", params.max_frames.is_some()), ("cooldown_frames", params.cooldown_frames.is_some())],
+            OutageUnit::Frames => [("min_ms", params.min_ms.is_some()), ("max_ms", params.max_ms.is_some()), ("cooldown_ms", params.cooldown_ms.is_some())],
+        };
+        if let Some((name, _)) = foreign.into_iter().find(|&(_, given)| given) {
+            return Err(ParamError::not_for(name, "unit", unit.name()));
+        }
         let clock = match unit {
             OutageUnit::Time => {
-                for (name, given) in [
-                    ("min_frames", params.min_frames.is_some()),
-                    ("max_frames", params.max_frames.is_some()),
-                    ("cooldown_frames", params.cooldown_frames.is_some()),
-                ] {
-                    if given {
-                        return Err(not_for(name));
-                    }
-                }
                 let max_ms = params
                     .max_ms
                     .ok_or_else(|| ParamError::new("max_ms", "missing: the longest window in ms (unit = \"time\")"))?
@@ -212,15 +208,6 @@ impl Outage {
                 }
             }
             OutageUnit::Frames => {
-                for (name, given) in [
-                    ("min_ms", params.min_ms.is_some()),
-                    ("max_ms", params.max_ms.is_some()),
-                    ("cooldown_ms", params.cooldown_ms.is_some()),
-                ] {
-                    if given {
-                        return Err(not_for(name));
-                    }
-                }
                 let max = params.max_frames.ok_or_else(|| {
                     ParamError::new("max_frames", "missing: the longest window in frames (unit = \"frames\")")
                 })?;

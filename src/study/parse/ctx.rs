@@ -25,6 +25,14 @@ impl Ctx<'_> {
         }
     }
 
+    /// The value `raw` names among `choices` (the first where `raw` is
+    /// absent); else an error at `field` saying what is `accepted`.
+    pub(super) fn choice<V: Copy>(&self, raw: Option<&toml::Spanned<String>>, field: &str, choices: &[(&str, V)], accepted: &str) -> Result<V, StudyFileError> {
+        let Some(raw) = raw else { return Ok(choices[0].1) };
+        let given = raw.get_ref().as_str();
+        choices.iter().find(|(name, _)| *name == given).map(|&(_, v)| v).ok_or_else(|| self.err(Some(raw.span()), field, format!("`{given}`: {accepted}")))
+    }
+
     /// The key written on `line` (1-based), if the line is `key = …`.
     pub(super) fn key_on_line(&self, line: usize) -> Option<String> {
         let text = self.text.lines().nth(line.checked_sub(1)?)?;

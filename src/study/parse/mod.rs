@@ -143,37 +143,30 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
 
 fn order(ctx: &Ctx, raw: Option<RawOrder>) -> Result<(BlockOrder, Within), StudyFileError> {
     let Some(raw) = raw else { return Ok((BlockOrder::Latin, Within::Shuffle)) };
-    let order = match raw.blocks.as_ref().map(|b| (b.get_ref().as_str(), b.span())) {
-        None | Some(("latin", _)) => BlockOrder::Latin,
-        Some(("table", _)) => BlockOrder::Table,
-        Some(("fixed", _)) => BlockOrder::Fixed,
-        Some((other, span)) => {
-            return Err(ctx.err(Some(span), "order.blocks", format!("`{other}`: latin (a balanced Latin square), table (each participant's `blocks`) or fixed (the file's order)")))
-        }
-    };
-    let within = match raw.within.as_ref().map(|w| (w.get_ref().as_str(), w.span())) {
-        None | Some(("shuffle", _)) => Within::Shuffle,
-        Some(("fixed", _)) => Within::Fixed,
-        Some((other, span)) => return Err(ctx.err(Some(span), "order.within", format!("`{other}`: shuffle or fixed"))),
-    };
+    let order = ctx.choice(
+        raw.blocks.as_ref(),
+        "order.blocks",
+        &[("latin", BlockOrder::Latin), ("table", BlockOrder::Table), ("fixed", BlockOrder::Fixed)],
+        "latin (a balanced Latin square), table (each participant's `blocks`) or fixed (the file's order)",
+    )?;
+    let within = ctx.choice(raw.within.as_ref(), "order.within", &[("shuffle", Within::Shuffle), ("fixed", Within::Fixed)], "shuffle or fixed")?;
     Ok((order, within))
 }
 
 fn questionnaires(ctx: &Ctx, raw: Option<RawQuestionnaires>) -> Result<Questionnaires, StudyFileError> {
     let Some(raw) = raw else { return Ok(Questionnaires { sus: false, tlx: TlxWhen::None }) };
-    let sus = match raw.sus.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
-        None | Some(("none", _)) => false,
-        Some(("start", _)) => true,
-        Some((other, span)) => return Err(ctx.err(Some(span), "questionnaires.sus", format!("`{other}`: start (a System Usability Scale before the first trial) or none"))),
-    };
-    let tlx = match raw.tlx.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
-        None | Some(("none", _)) => TlxWhen::None,
-        Some(("block", _)) => TlxWhen::Block,
-        Some(("trial", _)) => TlxWhen::Trial,
-        Some((other, span)) => {
-            return Err(ctx.err(Some(span), "questionnaires.tlx", format!("`{other}`: block (a NASA-TLX after each block), trial (after each trial) or none")))
-        }
-    };
+    let sus = ctx.choice(
+        raw.sus.as_ref(),
+        "questionnaires.sus",
+        &[("none", false), ("start", true)],
+        "start (a System Usability Scale before the first trial) or none",
+    )?;
+    let tlx = ctx.choice(
+        raw.tlx.as_ref(),
+        "questionnaires.tlx",
+        &[("none", TlxWhen::None), ("block", TlxWhen::Block), ("trial", TlxWhen::Trial)],
+        "block (a NASA-TLX after each block), trial (after each trial) or none",
+    )?;
     Ok(Questionnaires { sus, tlx })
 }
 
