@@ -118,7 +118,9 @@ macro_rules! wire_scalar {
         impl Wire for $t {
             #[inline]
             fn read(b: &[u8]) -> $t {
-                <$t>::from_le_bytes(b[..size_of::<$t>()].try_into().expect("a field of its own width"))
+                let mut bytes = [0u8; size_of::<$t>()];
+                bytes.copy_from_slice(&b[..size_of::<$t>()]);
+                <$t>::from_le_bytes(bytes)
             }
             #[inline]
             fn write(self, b: &mut [u8]) {
