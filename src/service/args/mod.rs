@@ -10,18 +10,15 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `values` | limits and value parsers |
 //! | `groups` | scenario, source of frames, return path, placement, control, streams |
 //! | `udp` | the emulator's UDP endpoints |
 //! | `ros2` | the emulator's ROS 2 topics |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
-//! | `argv` | the renderer |
 //! | `help` | what a shared flag means to one command |
 //! | `streams` | the run id and directory of each stream of a run |
 //! | `error` | arguments that do not go together |
 
-pub mod argv;
 pub mod error;
 pub mod groups;
 pub mod help;
@@ -30,9 +27,9 @@ pub mod run;
 pub mod streams;
 pub mod services;
 pub mod udp;
-pub mod values;
 
-pub use argv::{Argv, Render};
+pub use crate::flags::{argv, values};
+pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
