@@ -39,7 +39,8 @@ use netfi::service::emulator::video::path;
 use netfi::service::emulator::{lane::Lane, path::Path, Forward};
 use netfi::service::link::Link;
 use netfi::service::video::VideoArgs;
-use netfi::transport::{open_node, Channel, MemoryPort, Role};
+use netfi::transport::ipc::video::{VIDEO, VIDEO_OUT};
+use netfi::transport::{open_node, MemoryPort, Role};
 use serde::Serialize;
 use serde_json::json;
 use std::fmt::Write as _;
@@ -161,8 +162,8 @@ fn video(frames: usize) -> Result<Vec<Case>> {
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let args = VideoArgs { video_mbps: Some(1.0), ..VideoArgs::default() };
     let mut emulator = path(&args, &node, 1, &dir).map_err(|e| anyhow!("the video path: {e}"))?.context("the video path is off")?;
-    let mut camera = node.video_publisher(Channel::Video, args.video_max_bytes).map_err(|e| anyhow!("the camera's port: {e}"))?;
-    let mut console = node.video_subscriber(Channel::VideoOut).map_err(|e| anyhow!("the console's port: {e}"))?;
+    let mut camera = node.video_publisher(VIDEO, args.video_max_bytes).map_err(|e| anyhow!("the camera's port: {e}"))?;
+    let mut console = node.video_subscriber(VIDEO_OUT).map_err(|e| anyhow!("the console's port: {e}"))?;
     let mut cases = Vec::new();
     for size in SIZES {
         let n = if size >= 1 << 20 { frames / 10 } else { frames };

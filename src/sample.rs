@@ -12,6 +12,27 @@ use crate::frame::{FrameError, ItpFrame, ItpView};
 pub use crate::frame::ITP_FRAME_LEN;
 use iceoryx2::prelude::ZeroCopySend;
 
+/// A fixed-size sample a port carries: `#[repr(C)]`, shareable as it is,
+/// with a stable type name (peers refuse a port of another) and an all-zero
+/// value to loan with. A channel that carries a sample of its own
+/// implements this beside it.
+pub trait Payload: ZeroCopySend + Copy + core::fmt::Debug + 'static {
+    /// An all-zero sample.
+    const ZERO: Self;
+    /// The type name peers must agree on.
+    const TYPE_NAME: &'static str;
+}
+
+impl Payload for FrameSample {
+    const ZERO: Self = FrameSample::ZERO;
+    const TYPE_NAME: &'static str = FrameSample::TYPE_NAME;
+}
+
+impl Payload for FeedbackSample {
+    const ZERO: Self = FeedbackSample::ZERO;
+    const TYPE_NAME: &'static str = FeedbackSample::TYPE_NAME;
+}
+
 /// One frame in shared memory: the 124 wire bytes plus the metadata the
 /// injector and the simulator need. All times are CLOCK_MONOTONIC ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]

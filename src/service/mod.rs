@@ -86,3 +86,12 @@ pub enum WriteError {
 pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
     crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
 }
+
+/// Every iceoryx2 port of a run: the frames' own, then each reverse
+/// channel's, towards the emulator and away from it.
+pub fn ports() -> Vec<crate::transport::Port> {
+    use crate::transport::ipc::video::{VIDEO, VIDEO_OUT};
+    use crate::transport::Port;
+    use emulator::feedback::{FEEDBACK, FEEDBACK_OUT};
+    vec![Port::CONSOLE, Port::EMULATOR, Port::DIRECT, FEEDBACK, FEEDBACK_OUT, VIDEO, VIDEO_OUT]
+}

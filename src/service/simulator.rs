@@ -21,7 +21,7 @@ use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSource;
 use crate::service::signals;
-use crate::transport::{Channel, Role};
+use crate::transport::{Port, Role};
 use crate::service::error::{RobotError, ServiceError};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -255,9 +255,9 @@ impl Robot {
 pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
     crate::service::write_pid(&args.out, "simulator")?;
     let node = open_node(&args.run_id, Role::Simulator)?;
-    let mut port = node.subscriber(Channel::Emulator).map_err(|e| ServiceError::Subscriber("emulator → simulator", e))?;
-    let mut direct = node.subscriber(Channel::Direct).map_err(|e| ServiceError::Subscriber("console → simulator", e))?;
-    let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).map_err(|e| ServiceError::Publisher("robot → emulator feedback", e))?;
+    let mut port = node.subscriber(Port::EMULATOR).map_err(|e| ServiceError::Subscriber("emulator → simulator", e))?;
+    let mut direct = node.subscriber(Port::DIRECT).map_err(|e| ServiceError::Subscriber("console → simulator", e))?;
+    let mut feedback_port = node.publisher_of::<FeedbackSample>(crate::service::emulator::feedback::FEEDBACK).map_err(|e| ServiceError::Publisher("robot → emulator feedback", e))?;
     signals::install();
     crate::host::placement::place("simulator", args.pin.core, args.pin.avoid_core)?;
     // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.

@@ -14,7 +14,7 @@ use crate::common::wait_file;
 use crate::common::netfi::emulator_pin;
 use crate::common::netfi::netfi;
 use netfi::sample::FrameSample;
-use netfi::transport::{Channel, IpcConfig, Role, RunId};
+use netfi::transport::{IpcConfig, Role, RunId};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -295,7 +295,7 @@ print(json.dumps({{
         rust_layout(&run.config),
         rust_layout(&run.config)
     );
-    let services: Vec<String> = Channel::ALL.iter().map(|c| run.config.service_name(*c)).collect();
+    let services: Vec<String> = netfi::service::ports().iter().map(|c| run.config.service_name(*c)).collect();
     assert_eq!(py["services"], serde_json::json!(services));
     let nodes: Vec<String> = [Role::Console, Role::Emulator, Role::Simulator, Role::Tool].iter().map(|r| run.config.node_name(*r)).collect();
     assert_eq!(py["nodes"], serde_json::json!(nodes));

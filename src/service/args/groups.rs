@@ -105,6 +105,33 @@ pub struct ReturnArgs {
     pub no_feedback: bool,
 }
 
+impl ReturnArgs {
+    /// Checks the return path's flags against the lane `ingress` →
+    /// `egress`: the feedback loop needs iceoryx2 on both sides, the UDP
+    /// return path UDP on both.
+    pub fn check(&self, ingress: &crate::transport::Endpoint, egress: &crate::transport::Endpoint, t: &crate::transport::TransportArgs) -> Result<(), ArgsError> {
+        use crate::transport::{ipc::Iceoryx2, udp::Udp, Endpoint};
+        let given = self.return_scenario.is_some() || self.return_seed.is_some();
+        if Endpoint::sides::<Iceoryx2>(ingress, egress).both() {
+            return match self.no_feedback && given {
+                true => Err(ArgsError::NoFeedbackWithReturn),
+                false => Ok(()),
+            };
+        }
+        if self.no_feedback {
+            return Err(ArgsError::NoFeedbackNeedsIceoryx2);
+        }
+        let udp = Endpoint::sides::<Udp>(ingress, egress).both();
+        if given && !udp {
+            return Err(ArgsError::ReturnNeedsBothSides);
+        }
+        if given && t.udp.no_return {
+            return Err(ArgsError::NoReturnWithReturn);
+        }
+        Ok(())
+    }
+}
+
 impl Render for ReturnArgs {
     fn render(&self, a: &mut Argv) {
         a.opt("--return-scenario", self.return_scenario.as_ref()).opt("--return-seed", self.return_seed).switch("--no-feedback", self.no_feedback);
@@ -252,5 +279,50 @@ impl Render for StreamArgs {
         for k in &self.stream_scenario {
             a.val("--stream-scenario", k);
         }
+    }
+}
+
+/// The emulator's two sides, of any transport (`netfi emulator`), and when
+/// a stream with no end marker of its own ends.
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct EndsArgs {
+    /// Where frames come from: `iceoryx2` (the console's port) or
+    /// `udp://ADDR:PORT` (a socket bound there; `udp://:PORT` binds loopback).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub ingress: crate::transport::Endpoint,
+    /// Where survivors go: `iceoryx2` (the simulator's port) or
+    /// `udp://ADDR:PORT` (the robot's address).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub egress: crate::transport::Endpoint,
+    /// With a UDP ingress or ROS 2 topics (whose streams have no end marker):
+    /// end the run as if the console had ended, once no frame has arrived for
+    /// this many milliseconds, at most a week (default: run until
+    /// SIGINT/SIGTERM, or, on ROS 2, until the publishers are gone).
+    #[arg(long, value_name = "MS", value_parser = values::idle_end_millis)]
+    pub idle_end_ms: Option<f64>,
+}
+
+impl Default for EndsArgs {
+    /// iceoryx2 on both sides.
+    fn default() -> Self {
+        let iceoryx2: crate::transport::Endpoint = "iceoryx2".parse().expect("iceoryx2 is an endpoint");
+        EndsArgs { ingress: iceoryx2.clone(), egress: iceoryx2, idle_end_ms: None }
+    }
+}
+
+impl EndsArgs {
+    /// Whether both sides are the run's own iceoryx2 ports.
+    pub fn own(&self) -> bool {
+        *self == EndsArgs { idle_end_ms: self.idle_end_ms, ..EndsArgs::default() }
+    }
+}
+
+impl Render for EndsArgs {
+    /// Only what differs from the defaults.
+    fn render(&self, a: &mut Argv) {
+        let d = EndsArgs::default();
+        a.opt("--ingress", (self.ingress != d.ingress).then_some(&self.ingress))
+            .opt("--egress", (self.egress != d.egress).then_some(&self.egress))
+            .opt("--idle-end-ms", self.idle_end_ms);
     }
 }

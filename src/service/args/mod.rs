@@ -2,7 +2,8 @@
 //! `netfi <service>` and the stand-alone `netfi-console`, `netfi-emulator`,
 //! `netfi-simulator`.
 //!
-//! Each group of flags is declared once ([`groups`], [`udp`]) and flattened
+//! Each group of flags is declared once ([`groups`]; a transport's own in
+//! its folder, `crate::transport`) and flattened
 //! into every command that takes it; every numeric flag's range is checked
 //! where it is parsed ([`values`]). Each process's arguments render as the
 //! argv that parses back to them ([`argv`]), which is how `netfi run`
@@ -11,7 +12,6 @@
 //! | file | what |
 //! |---|---|
 //! | `groups` | scenario, source of frames, return path, placement, control, streams |
-//! | `udp` | the emulator's UDP endpoints |
 //! | `ros2` | the emulator's ROS 2 topics |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
@@ -26,16 +26,14 @@ pub mod ros2;
 pub mod run;
 pub mod streams;
 pub mod services;
-pub mod udp;
 
 pub use crate::flags::{argv, values};
 pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
-pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use run::{RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
-pub use udp::UdpArgs;
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
 
 #[cfg(test)]

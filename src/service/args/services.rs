@@ -2,14 +2,12 @@
 
 use super::argv::{Argv, Render};
 use super::error::ArgsError;
-use super::groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
 use super::ros2::Ros2Args;
-use super::udp::UdpArgs;
 use super::values;
 use crate::service::video::VideoArgs;
-use crate::transport::udp::UdpOptions;
-use crate::transport::Wiring;
+use crate::transport::{LaneFlags, TransportArgs, Wiring};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -109,7 +107,9 @@ pub struct EmulatorArgs {
     #[command(flatten)]
     pub return_path: ReturnArgs,
     #[command(flatten)]
-    pub udp: UdpArgs,
+    pub ends: EndsArgs,
+    #[command(flatten)]
+    pub transports: TransportArgs,
     #[command(flatten)]
     pub control: ControlArgs,
     #[command(flatten)]
@@ -130,7 +130,8 @@ impl Render for EmulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .group(&self.return_path)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
-            .group(&self.udp)
+            .group(&self.ends)
+            .group(&self.transports)
             .group(&self.control)
             .group(&self.stream)
             .words(self.video.argv())
@@ -151,7 +152,8 @@ impl EmulatorArgs {
             out: PathBuf::from("out"),
             wait_for_peer_s: None,
             return_path: ReturnArgs::default(),
-            udp: UdpArgs::default(),
+            ends: EndsArgs::default(),
+            transports: TransportArgs::default(),
             control: ControlArgs::default(),
             stream: StreamArgs::default(),
             video: VideoArgs::default(),
@@ -167,51 +169,32 @@ impl EmulatorArgs {
     /// Checks that the options fit the endpoints, with errors that say what
     /// would be accepted.
     pub fn validate(&self) -> Result<(), ArgsError> {
-        let udp = self.udp.any();
-        if self.stream.several() && udp {
+        let own = self.ends.own();
+        if self.stream.several() && !own {
             return Err(ArgsError::StreamsNeedIceoryx2);
         }
         self.video.validate()?;
-        if self.video.on() && udp {
+        if self.video.on() && !own {
             return Err(ArgsError::VideoNeedsIceoryx2);
         }
         if self.video.on() && self.stream.streams > 1 {
             return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
         }
-        if self.wait_for_peer_s.is_some() && self.udp.egress.is_udp() {
-            return Err(ArgsError::WaitForUdpPeer);
-        }
-        let r = &self.return_path;
-        if !udp {
-            if self.run_id.is_none() {
-                return Err(ArgsError::RunIdRequired);
-            }
-            if self.udp.return_to.is_some() || self.udp.no_return {
-                return Err(ArgsError::UdpReturnWithIceoryx2);
-            }
-            if r.no_feedback && (r.return_scenario.is_some() || r.return_seed.is_some()) {
-                return Err(ArgsError::NoFeedbackWithReturn);
-            }
-            return Ok(());
-        }
-        if r.no_feedback {
-            return Err(ArgsError::NoFeedbackNeedsIceoryx2);
-        }
-        self.udp.validate(r.return_scenario.is_some() || r.return_seed.is_some(), self.run_id.is_some())
+        let (ingress, egress) = (&self.ends.ingress, &self.ends.egress);
+        let flags = LaneFlags { run_id: self.run_id.as_deref(), wait_for_peer: self.wait_for_peer_s.is_some(), idle_end: self.ends.idle_end_ms.is_some() };
+        self.transports.check(ingress, egress, flags)?;
+        self.return_path.check(ingress, egress, &self.transports)
     }
 
-    /// How to open the transports, for a release queue of `queue_capacity`.
-    pub fn wiring(&self, queue_capacity: usize) -> Wiring {
-        let u = &self.udp;
+    /// How to open the transports, for a release queue of `queue_capacity`,
+    /// a wait for a receiver cut short by `stop`.
+    pub fn wiring<'a>(&'a self, queue_capacity: usize, stop: &'a dyn Fn() -> bool) -> Wiring<'a> {
         Wiring {
-            run_id: self.run_id.clone(),
-            payload: u.payload,
-            udp: UdpOptions { reuse_address: true, buffer_bytes: Some(u.udp_buffer_bytes) },
-            egress_bind: u.egress_bind,
-            console_from: u.console_from,
+            run_id: self.run_id.as_deref(),
             queue_capacity,
-            idle_end_ns: u.idle_end_ms.map(|ms| (ms * 1e6) as u64),
             wait_for_peer_ns: self.wait_for_peer_s.map(|s| (s * 1e9) as u64),
+            idle_end_ns: self.ends.idle_end_ms.map(|ms| (ms * 1e6) as u64),
+            stop,
         }
     }
 }

@@ -67,7 +67,8 @@ fn an_emulator_parses_back_what_it_renders() {
         out: "o/e".into(),
         wait_for_peer_s: Some(1.5),
         return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
-        udp: UdpArgs::default(),
+        ends: EndsArgs::default(),
+        transports: Default::default(),
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: true },
         stream: StreamArgs::default(),
         video: video(),
@@ -87,19 +88,18 @@ fn an_emulator_parses_back_what_it_renders() {
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e2.to_argv()) else { panic!("{:?}", e2.to_argv()) };
     assert_eq!(format!("{back:?}"), format!("{e2:?}"));
     // A UDP bridge: every UDP flag off its default.
-    let udp = UdpArgs {
-        ingress: "udp://127.0.0.1:4000".parse().unwrap(),
-        egress: "udp://127.0.0.1:4001".parse().unwrap(),
+    let udp = crate::transport::udp::UdpArgs {
         payload: crate::transport::Payload::Raw,
         egress_bind: Some("127.0.0.1:4002".parse().unwrap()),
         console_from: Some("127.0.0.1:4003".parse().unwrap()),
         robot_from: Some("127.0.0.1:4004".parse().unwrap()),
-        return_to: Some("udp://127.0.0.1:4004".parse().unwrap()),
+        return_to: Some("127.0.0.1:4004".parse().unwrap()),
         no_return: false,
-        idle_end_ms: Some(500.5),
         udp_buffer_bytes: 65536,
     };
-    let e3 = EmulatorArgs { udp, video: Default::default(), wait_for_peer_s: None, ..e };
+    let ends = EndsArgs { ingress: "udp://127.0.0.1:4000".parse().unwrap(), egress: "udp://127.0.0.1:4001".parse().unwrap(), idle_end_ms: Some(500.5) };
+    let transports = crate::transport::TransportArgs { udp, ..Default::default() };
+    let e3 = EmulatorArgs { ends, transports, video: Default::default(), wait_for_peer_s: None, ..e };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e3.to_argv()) else { panic!("{:?}", e3.to_argv()) };
     assert_eq!(format!("{back:?}"), format!("{e3:?}"));
     e3.validate().unwrap();
@@ -114,7 +114,7 @@ fn an_emulator_parses_back_what_it_renders() {
         ros2_discovery_s: 2.5,
         ros2_linger_ms: 250.0,
     };
-    let e4 = EmulatorArgs { ros2, udp: UdpArgs::default(), ..e3 };
+    let e4 = EmulatorArgs { ros2, ends: EndsArgs::default(), transports: Default::default(), ..e3 };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e4.to_argv()) else { panic!("{:?}", e4.to_argv()) };
     assert_eq!(format!("{back:?}"), format!("{e4:?}"));
 }

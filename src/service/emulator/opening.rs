@@ -4,7 +4,6 @@
 
 use crate::scenario::{Scenario, ScenarioError, ScenarioSpec};
 use crate::service::args::EmulatorArgs;
-use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Path, PathError};
 use crate::transport::Transports;
 use std::path::{Path as FsPath, PathBuf};
@@ -51,9 +50,11 @@ pub enum OpenError {
     },
     /// The ingress and egress.
     #[error(transparent)]
-    Transports(#[from] crate::transport::open::OpenError),
-    #[error(transparent)]
-    Feedback(#[from] crate::transport::open::FeedbackOpenError),
+    Transports(#[from] crate::transport::OpenError),
+    #[error("opening the emulator → console feedback port: {0}")]
+    FeedbackOut(#[source] crate::transport::PublisherOpenError),
+    #[error("opening the robot → emulator feedback port: {0}")]
+    FeedbackIn(#[source] crate::transport::SubscriberOpenError),
     #[error(transparent)]
     VideoArgs(#[from] crate::service::video::VideoArgsError),
     #[error("opening the {direction} video port")]
@@ -62,8 +63,6 @@ pub enum OpenError {
         #[source]
         cause: crate::transport::ipc::video::VideoOpenError,
     },
-    #[error("--return-to takes udp://ADDR:PORT")]
-    ReturnTo,
     #[error("opening the return path")]
     ReturnPort(#[source] crate::transport::udp::UdpOpenError),
     /// A file the lane writes at its start.
@@ -83,8 +82,6 @@ pub struct Opening<'a> {
     pub expected_frames: u64,
     /// Its directory.
     pub out_dir: &'a FsPath,
-    /// The console's address, once a UDP ingress knows it.
-    pub console: &'a ConsoleAddr,
 }
 
 /// A reverse path's scenario, seed and queue, resolved once.

@@ -252,7 +252,7 @@ fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: 
     std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
     let (from, to) = &topics.forward;
-    let idle_end_ns = a.udp.idle_end_ms.map(|ms| (ms * 1e6) as u64);
+    let idle_end_ns = a.ends.idle_end_ms.map(|ms| (ms * 1e6) as u64);
     let wait_ns = a.wait_for_peer_s.map(|s| (s * 1e9) as u64);
     let chan = Topic::<Forward>::new(ports(node, plan, &end.forward, (from, to), l.queue_capacity + 1, idle_end_ns, wait_ns)?, node.clone(), t0_ns);
     let scenario = Scenario::new(&l.scenario, l.seed).map_err(OpenError::from)?;
@@ -370,7 +370,7 @@ pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorE
             l.queue_capacity
         );
     }
-    let nodes = (0..lanes.len()).map(|_| None).collect();
+    let nodes: Vec<Option<&crate::transport::IpcNode>> = (0..lanes.len()).map(|_| None).collect();
     let before_finish = |k: usize, lane: &Ros2Lane| {
         let topics = &plan.lanes[k];
         let end = &ends[k];
@@ -410,5 +410,5 @@ pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorE
         });
         after
     };
-    Ok(run::run(&cfg, lanes, nodes, before_finish)?)
+    Ok(run::run(&cfg, lanes, &nodes, before_finish)?)
 }

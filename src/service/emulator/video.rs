@@ -20,9 +20,9 @@ use crate::service::emulator::path::{Channel, Ending, Path, Reverse, Take, GRACE
 use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
 use crate::service::schema::{Account, VideoExtra};
-use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO_HELD_FRAMES};
+use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO, VIDEO_HELD_FRAMES, VIDEO_OUT};
 use crate::service::video::VideoArgs;
-use crate::transport::{Channel as Port, IpcNode, PortError};
+use crate::transport::{IpcNode, PortError};
 use crate::video::{drop_kind, DropKind};
 
 /// What the emulator's video link holds: the slot of the borrowed sample,
@@ -154,7 +154,7 @@ impl Channel for Video {
 /// The video path, when the run has video (`--video-mbps`) and an iceoryx2
 /// node.
 pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let Some(node) = o.t.node.as_ref() else { return Ok(None) };
+    let Some(node) = o.t.sessions.iceoryx2.as_ref() else { return Ok(None) };
     Ok(path(&o.args.video, node, o.seed, o.out_dir)?.map(|p| Box::new(p) as Box<dyn Reverse>))
 }
 
@@ -168,8 +168,8 @@ pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path)
     v.validate()?;
     let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, crate::service::seeds::VIDEO_TAG, VIDEO_HELD_FRAMES - 1)?;
     plan.queue_capacity = VIDEO_HELD_FRAMES - 1;
-    let source = node.video_subscriber(Port::Video).map_err(|cause| OpenError::VideoPort { direction: "robot → emulator", cause })?;
-    let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).map_err(|cause| OpenError::VideoPort { direction: "emulator → console", cause })?;
+    let source = node.video_subscriber(VIDEO).map_err(|cause| OpenError::VideoPort { direction: "robot → emulator", cause })?;
+    let sink = node.video_publisher(VIDEO_OUT, v.video_max_bytes).map_err(|cause| OpenError::VideoPort { direction: "emulator → console", cause })?;
     let chan = Video {
         source,
         sink,

@@ -12,7 +12,8 @@ use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
 use crate::service::schema::FeedbackExtra;
 use crate::service::schema::VideoExtra;
-use crate::service::schema::{EmulatorReport, UdpReport};
+use crate::service::schema::EmulatorReport;
+use crate::transport::TransportReports;
 use crate::service::simulator::SimulatorReport;
 use crate::service::video::VideoSection;
 use serde::de::DeserializeOwned;
@@ -72,9 +73,10 @@ pub(super) struct Parts {
     pub console: Option<ConsoleReport>,
     pub emulator: Option<EmulatorReport>,
     pub simulator: Option<SimulatorReport>,
-    /// Written only where a side is UDP: not missing where absent.
-    pub udp: Option<UdpReport>,
-    pub missing: Vec<(&'static str, &'static str, Option<String>)>,
+    /// Each transport's report, written only where a side is of it: not
+    /// missing where absent.
+    pub transports: TransportReports,
+    pub missing: Vec<(&'static str, String, Option<String>)>,
 }
 
 impl Parts {
@@ -84,11 +86,11 @@ impl Parts {
         let console = take(Found::read(&out.join("console.json")), ("console.json", "console"), &mut missing);
         let emulator = take(emulator.unwrap_or_else(|| Found::read(&out.join("emulator.json"))), ("emulator.json", "emulator"), &mut missing);
         let simulator = take(Found::read(&out.join("simulator.json")), ("simulator.json", "simulator"), &mut missing);
-        let udp = match Found::read(&out.join("udp.json")) {
-            Found::Absent => None,
-            found => take(found, ("udp.json", "emulator's UDP side"), &mut missing),
-        };
-        Parts { console, emulator, simulator, udp, missing }
+        let (transports, unread) = TransportReports::read(out);
+        for (file, scheme, why) in unread {
+            missing.push((file, format!("emulator's {} side", scheme.to_uppercase()), Some(why)));
+        }
+        Parts { console, emulator, simulator, transports, missing }
     }
 
     /// A fault for each report the runner expected and did not find.
@@ -101,15 +103,15 @@ impl Parts {
 }
 
 /// The report `found`, or `None` with `(file, role)` and why among the missing.
-fn take<T>(found: Found<T>, (file, role): (&'static str, &'static str), missing: &mut Vec<(&'static str, &'static str, Option<String>)>) -> Option<T> {
+fn take<T>(found: Found<T>, (file, role): (&'static str, &'static str), missing: &mut Vec<(&'static str, String, Option<String>)>) -> Option<T> {
     match found {
         Found::Read(t) => Some(t),
         Found::Absent => {
-            missing.push((file, role, None));
+            missing.push((file, role.to_string(), None));
             None
         }
         Found::Unreadable(why) => {
-            missing.push((file, role, Some(why)));
+            missing.push((file, role.to_string(), Some(why)));
             None
         }
     }
@@ -149,7 +151,7 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
-    let Parts { console, emulator, simulator, udp, missing } = parts;
+    let Parts { console, emulator, simulator, transports, missing } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
@@ -162,7 +164,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
     let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
     let video = VideoSection::join(video_path.as_ref(), console.as_ref().and_then(|c| c.video.as_ref()), simulator.as_ref().and_then(|s| s.camera.as_ref()));
     let mut faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
-    faults.extend(udp.as_ref().and_then(join::udp_fault));
+    faults.extend(transports.faults());
     let e = shaping.as_ref();
     let files = Files {
         out_dir: facts.out.to_path_buf(),
@@ -205,7 +207,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         console,
         emulator,
         simulator,
-        udp,
+        transports,
         streams: None,
     }
 }
@@ -394,7 +396,7 @@ mod tests {
             }),
         );
         let r = RunReport::of_dir(&d).unwrap();
-        assert_eq!(r.udp.as_ref().and_then(|u| u.ingress_kernel_drops), Some(3));
+        assert_eq!(r.transports.udp.as_ref().and_then(|u| u.ingress_kernel_drops), Some(3));
         assert_eq!(r.missing, ["console.json", "simulator.json"], "udp.json is not missing where a run has none");
         assert_eq!(
             r.faults,
@@ -406,7 +408,7 @@ mod tests {
         assert!(text.contains(udp), "{text}");
         std::fs::write(d.join("udp.json"), b"[").unwrap();
         let r = RunReport::of_dir(&d).unwrap();
-        assert!(r.udp.is_none() && r.missing.contains(&"udp.json".to_string()));
+        assert!(r.transports.udp.is_none() && r.missing.contains(&"udp.json".to_string()));
         assert!(r.faults[0].starts_with("no report from the emulator's UDP side: "), "{:?}", r.faults);
         std::fs::remove_dir_all(&d).ok();
     }

@@ -6,7 +6,7 @@ use super::{Corruption, FeedbackSection, FrameAccount, Overhead, RunReport, RunS
 use crate::metrics::Summary;
 use crate::service::console::{ConsoleFeedback, ConsoleReport};
 use crate::service::schema::FeedbackExtra;
-use crate::service::schema::{EmulatorFrames, EmulatorProcess, LinkMeasures, PathReport, UdpReport};
+use crate::service::schema::{EmulatorFrames, EmulatorProcess, LinkMeasures, PathReport};
 use crate::service::simulator::SimulatorReport;
 use crate::service::video::VideoSection;
 use std::collections::BTreeMap;
@@ -148,13 +148,6 @@ pub fn faults(frames: &FrameAccount, feedback: Option<&FeedbackSection>, video: 
         faults.push(format!("{n} frames released by the emulator never reached the simulator"));
     }
     faults
-}
-
-/// Datagrams the kernel dropped at the emulator's UDP ingress (its
-/// receive buffer full): sent, never entered, in no account but this.
-pub fn udp_fault(u: &UdpReport) -> Option<String> {
-    let n = u.ingress_kernel_drops.filter(|n| *n > 0)?;
-    Some(format!("{n} datagrams dropped by the kernel at the emulator's ingress socket {} (its receive buffer full): they never entered", u.ingress))
 }
 
 impl RunStream {

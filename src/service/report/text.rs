@@ -6,7 +6,7 @@ use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, PhaseFigures, P
 use crate::check::{LinkReport, StageReport};
 use crate::metrics::{fmt_ns, Summary};
 use crate::service::control::ControlEvent;
-use crate::service::schema::{LoopBusy, PeerEvent, UdpReport};
+use crate::service::schema::{LoopBusy, PeerEvent};
 use std::collections::BTreeMap;
 
 /// A count, or `?` where it is unknown.
@@ -51,8 +51,8 @@ impl RunReport {
             s += &p.to_text();
         }
         s += &frames_text(&self.frames);
-        if let Some(u) = &self.udp {
-            s += &format!("udp        {}\n", udp_line(u));
+        for (scheme, line) in self.transports.lines() {
+            s += &format!("{scheme:<10} {line}\n");
         }
         s += &loss_text(self.loss_rate.zip(self.loss_rate_ci95), &self.stages, &self.links);
         if !self.phases.is_empty() {
@@ -157,31 +157,6 @@ fn frames_text(f: &FrameAccount) -> String {
 }
 
 pub(super) const BALANCED: &str = "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end";
-
-/// The emulator's UDP side on one line: its sockets, what came in, what
-/// the kernel dropped before it, and the senders it refused.
-pub fn udp_line(u: &UdpReport) -> String {
-    let bound = |a: Option<std::net::SocketAddr>, how: &str| a.map_or(String::new(), |a| format!(" ({how} {a})"));
-    let mut s = format!(
-        "ingress {}{}, egress {}{}, payload {}: {} datagrams in, {} dropped by the kernel before ingress; console {}",
-        u.ingress,
-        bound(u.ingress_local, "bound"),
-        u.egress,
-        bound(u.egress_local, "from"),
-        serde_json::to_value(u.payload).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default(),
-        opt(u.datagrams_in),
-        opt(u.ingress_kernel_drops),
-        u.console.map_or("?".into(), |c| c.to_string())
-    );
-    if u.foreign_sender > 0 {
-        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
-        s += &format!("; {} datagrams from other senders refused: {}", u.foreign_sender, who.join(", "));
-        if u.foreign_unnamed > 0 {
-            s += &format!(" and {} from others", u.foreign_unnamed);
-        }
-    }
-    s
-}
 
 /// The realized loss, each stage's share of it, and the link stages.
 pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], links: &[LinkReport]) -> String {

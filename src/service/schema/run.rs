@@ -4,7 +4,6 @@
 //! `service::report` joins the services' reports into one.
 
 use super::emulator::{EmulatorProcess, PeerEvent, WithPaths};
-use super::udp::UdpReport;
 use crate::check::StageReport;
 use crate::host::Steal;
 use crate::metrics::Summary;
@@ -272,11 +271,12 @@ pub struct RunReport {
     /// stages, delays, overhead, peer events, files).
     pub emulator: Option<WithPaths<EmulatorProcess>>,
     pub simulator: Option<SimulatorReport>,
-    /// The emulator's UDP side (`udp.json`), in a run with one: its
-    /// sockets, what the kernel dropped before the emulator took it, and
-    /// the senders it refused.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub udp: Option<UdpReport>,
+    /// Each transport's part of the emulator's report, under the
+    /// transport's name, where it has one (`udp`: the sockets, what the
+    /// kernel dropped before the emulator took it, and the senders it
+    /// refused).
+    #[serde(flatten)]
+    pub transports: crate::transport::TransportReports,
     /// A run of several streams (`--streams N`): each stream and the
     /// total; the fields above are then stream 0's.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -26,7 +26,7 @@ use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, PortFactory as
 use iceoryx2::sample::Sample;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use super::{Channel, FrameRecvError, FrameSendError, Ipc, IpcConfig, RunId, MAX_NODES_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL};
+use super::{FrameRecvError, Port, Role, FrameSendError, Ipc, IpcConfig, RunId, MAX_NODES_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL};
 use crate::sample::VideoHeader;
 
 /// Frames a video subscriber's queue holds (about 1 s at 60 Hz).
@@ -42,12 +42,16 @@ pub const DEFAULT_VIDEO_MAX_BYTES: usize = 4 << 20;
 
 type VideoService = PortFactory<Ipc, [u8], VideoHeader>;
 
-fn open_video_service(node: &Node<Ipc>, config: &IpcConfig, channel: Channel) -> Result<VideoService, VideoOpenError> {
+/// Robot → emulator: video frames, `[u8]` with a [`VideoHeader`].
+pub const VIDEO: Port = Port::new("video", Role::Simulator, Role::Emulator);
+/// Emulator → console: the video frames that survived the video scenario.
+pub const VIDEO_OUT: Port = Port::new("video_out", Role::Emulator, Role::Console);
+
+fn open_video_service(node: &Node<Ipc>, config: &IpcConfig, channel: Port) -> Result<VideoService, VideoOpenError> {
     let name = ServiceName::new(&config.service_name(channel)).expect("a validated run id always forms a valid service name");
-    let (subscribers, borrowed) = match channel {
-        Channel::Video => (1, VIDEO_HELD_FRAMES),
-        _ => (MAX_SUBSCRIBERS_PER_CHANNEL, 1),
-    };
+    // The emulator holds the frames it takes off `video` borrowed while
+    // its link delays them.
+    let (subscribers, borrowed) = if channel == VIDEO { (1, VIDEO_HELD_FRAMES) } else { (MAX_SUBSCRIBERS_PER_CHANNEL, 1) };
     node.service_builder(&name)
         .publish_subscribe::<[u8]>()
         .user_header::<VideoHeader>()
@@ -93,7 +97,7 @@ pub struct VideoPublisher {
     port: Publisher<Ipc, [u8], VideoHeader>,
     service: VideoService,
     run: RunId,
-    channel: Channel,
+    channel: Port,
     max_len: usize,
 }
 
@@ -104,7 +108,7 @@ impl std::fmt::Debug for VideoPublisher {
 }
 
 impl VideoPublisher {
-    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Channel, max_len: usize) -> Result<Self, VideoOpenError> {
+    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Port, max_len: usize) -> Result<Self, VideoOpenError> {
         let service = open_video_service(node, config, channel)?;
         let port = service
             .publisher_builder()
@@ -214,7 +218,7 @@ pub struct VideoSubscriber {
     port: Subscriber<Ipc, [u8], VideoHeader>,
     service: VideoService,
     run: RunId,
-    channel: Channel,
+    channel: Port,
 }
 
 impl std::fmt::Debug for VideoSubscriber {
@@ -224,7 +228,7 @@ impl std::fmt::Debug for VideoSubscriber {
 }
 
 impl VideoSubscriber {
-    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Channel) -> Result<Self, VideoOpenError> {
+    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Port) -> Result<Self, VideoOpenError> {
         let service = open_video_service(node, config, channel)?;
         let err = |e: String| VideoOpenError { service: config.service_name(channel), what: e };
         let port = service.subscriber_builder().buffer_size(VIDEO_BUFFER_FRAMES).create().map_err(|e| err(e.to_string()))?;

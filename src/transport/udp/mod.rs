@@ -31,9 +31,20 @@
 //! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
 //! raw-mode [`Arena`]) are in [`frames`].
 
+pub mod args;
 pub mod frames;
 pub mod peers;
+pub mod report;
+pub mod transport;
+pub use args::{Payload, UdpArgs, UdpArgsError};
 pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
+pub use report::{BoundEndpoints, ForeignSender, UdpReport};
+pub use transport::{ConsoleAddr, ConsoleUnnamed, Udp, UdpSession, UdpSideError, RAW_DEFAULT_QUEUE_CAPACITY};
+
+/// The name of the return path (what the robot sends back, relayed to the
+/// console) in a lane's reports: its key in `emulator.json`'s paths and
+/// `udp.json`'s `return_path`.
+pub const RETURN_PATH: &str = "return";
 pub use peers::{ConsolePolicy, ConsolePolicyError, ForeignSenders, Refused, RefusedSender, FOREIGN_SENDERS_NAMED};
 
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
