@@ -13,7 +13,7 @@ use crate::transport::Wiring;
 use clap::Args;
 use std::path::PathBuf;
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct ConsoleArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -62,7 +62,7 @@ impl Render for ConsoleArgs {
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.video);
     }
 }
 
@@ -73,7 +73,7 @@ impl ConsoleArgs {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 #[command(
     mut_arg("scenario", |a| a.long("scenario").help(help::EMULATOR_SCENARIO)),
     mut_arg("return_scenario", |a| a.help(help::EMULATOR_RETURN[0])),
@@ -133,7 +133,7 @@ impl Render for EmulatorArgs {
             .group(&self.udp)
             .group(&self.control)
             .group(&self.stream)
-            .words(self.video.argv())
+            .group(&self.video)
             .group(&self.ros2);
     }
 }
@@ -216,7 +216,7 @@ impl EmulatorArgs {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct SimulatorArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -254,7 +254,7 @@ impl Render for SimulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.video);
     }
 }
 
