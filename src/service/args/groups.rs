@@ -218,7 +218,8 @@ impl Default for ControlArgs {
 
 impl Render for ControlArgs {
     fn render(&self, a: &mut Argv) {
-        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue)
+        a.unless_default("--telemetry-ms", self.telemetry_ms, ControlArgs::default().telemetry_ms)
+            .switch("--reorder-queue", self.reorder_queue)
             .switch("--fifo-queue", self.fifo_queue)
             .switch("--no-control", self.no_control);
     }

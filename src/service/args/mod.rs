@@ -7,7 +7,8 @@
 //! into every command that takes it; every numeric flag's range is checked
 //! where it is parsed ([`values`]). Each process's arguments render as the
 //! argv that parses back to them ([`argv`]), which is how `netfi run`
-//! starts the services.
+//! starts the services, and how the UI, a study and the benchmarks start
+//! `netfi run` and `netfi emulator`.
 //!
 //! | file | what |
 //! |---|---|
@@ -32,7 +33,7 @@ pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
-pub use run::{RunArgs, RunPlacement};
+pub use run::{refusal, RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
 

@@ -1,12 +1,14 @@
 //! `netfi run`'s arguments: the groups it shares with the services, and
 //! its own.
 
+use super::argv::{self, Argv, Render};
 use super::error::ArgsError;
 use super::groups::{ControlArgs, EmulatorPlacement, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
 use super::values;
 use crate::service::video::VideoArgs;
-use clap::Args;
+use clap::{Args, CommandFactory, Parser};
+use std::ffi::OsString;
 use std::path::PathBuf;
 
 /// Where each process of a run runs.
@@ -52,7 +54,10 @@ impl RunPlacement {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+/// `netfi run`'s arguments: one run, as a value. It renders as the argv
+/// that parses back to it ([`RunArgs::to_argv`], [`RunArgs::from_argv`]),
+/// which is how the UI, a study and the benchmarks start runs.
+#[derive(Debug, Clone, PartialEq, Args)]
 #[command(mut_arg("seed", |a| a.help(help::RUN_SEED)), mut_arg("no_feedback", |a| a.help(help::RUN_NO_FEEDBACK)))]
 pub struct RunArgs {
     #[command(flatten)]
@@ -91,7 +96,103 @@ pub struct RunArgs {
     pub video: VideoArgs,
 }
 
+impl Render for RunPlacement {
+    /// The emulator's `--core` is `--emulator-core` here.
+    fn render(&self, a: &mut Argv) {
+        let e = &self.emulator;
+        a.opt("--emulator-core", e.core)
+            .switch("--no-pin", e.no_pin)
+            .opt("--rt-priority", e.rt_priority)
+            .switch("--isolate", e.isolate)
+            .switch("--no-isolate", self.no_isolate)
+            .opt("--console-core", self.console_core)
+            .opt("--simulator-core", self.simulator_core);
+    }
+}
+
+impl Render for RunArgs {
+    /// The scenario positional first, then only what differs from the
+    /// defaults. A scenario that reads as a flag (`-x.toml`) goes last,
+    /// after `--`.
+    fn render(&self, a: &mut Argv) {
+        let s = &self.scenario;
+        let dashed = s.scenario.starts_with('-');
+        if !dashed {
+            a.words([s.scenario.clone()]);
+        }
+        a.opt("--seed", s.seed)
+            .opt("--queue-capacity", s.queue_capacity)
+            .group(&self.source)
+            .group(&self.placement)
+            .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .opt("--out", self.out.as_ref().map(|p| p.display()))
+            .opt("--report-json", self.report_json.as_ref().map(|p| p.display()))
+            .opt("--run-id", self.run_id.as_ref())
+            .switch("--json", self.json)
+            .group(&self.return_path)
+            .switch("--no-direct", self.no_direct)
+            .group(&self.control)
+            .group(&self.stream)
+            .group(&self.video);
+        if dashed {
+            a.words(["--".to_string(), s.scenario.clone()]);
+        }
+    }
+}
+
+/// `netfi run`'s command line without the program's name, read as `netfi
+/// run` reads it.
+#[derive(Parser)]
+#[command(name = "netfi run", no_binary_name = true)]
+struct RunCommand {
+    #[command(flatten)]
+    run: RunArgs,
+}
+
 impl RunArgs {
+    /// A run of `scenario`, everything else at its default (as `netfi run
+    /// SCENARIO`).
+    pub fn new(scenario: impl Into<String>) -> RunArgs {
+        RunArgs {
+            scenario: ScenarioArgs::named(scenario),
+            source: SourceArgs::default(),
+            placement: RunPlacement::default(),
+            drop_bad_checksum: false,
+            out: None,
+            report_json: None,
+            run_id: None,
+            json: false,
+            return_path: ReturnArgs::default(),
+            no_direct: false,
+            control: ControlArgs::default(),
+            stream: StreamArgs::default(),
+            video: VideoArgs::default(),
+        }
+    }
+
+    /// The argv after `netfi run` that starts this run.
+    pub fn to_argv(&self) -> Vec<String> {
+        argv::render(self)
+    }
+
+    /// The run that `argv` (the words after `netfi run`) asks for, read as
+    /// `netfi run` reads it: clap's error where it refuses them (see
+    /// [`refusal`]). The flags' own ranges are checked; what
+    /// [`RunArgs::validate`] checks is not.
+    pub fn from_argv<I, T>(argv: I) -> Result<RunArgs, clap::Error>
+    where
+        I: IntoIterator<Item = T>,
+        T: Into<OsString> + Clone,
+    {
+        RunCommand::try_parse_from(argv).map(|c| c.run)
+    }
+
+    /// `netfi run`'s command as clap declares it: each argument's id (its
+    /// field's name), flag and aliases.
+    pub fn command() -> clap::Command {
+        RunCommand::command()
+    }
+
     /// Checks what the flags' own parsers cannot: the video flags, video
     /// with one stream, and a stream that fits in a run.
     pub fn validate(&self) -> Result<(), ArgsError> {
@@ -102,4 +203,11 @@ impl RunArgs {
         self.stream.named_scenarios()?;
         self.source.planned().map(|_| ())
     }
+}
+
+/// Why clap refused a command line, in one line: the first paragraph of
+/// its message, without `error: ` (no usage, no hint to `--help`).
+pub fn refusal(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    text.split("\n\n").next().unwrap_or(&text).trim().trim_start_matches("error: ").to_string()
 }

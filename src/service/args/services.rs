@@ -11,7 +11,7 @@ use crate::transport::{LaneFlags, TransportArgs, Wiring};
 use clap::Args;
 use std::path::PathBuf;
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct ConsoleArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -60,7 +60,7 @@ impl Render for ConsoleArgs {
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.video);
     }
 }
 
@@ -71,7 +71,7 @@ impl ConsoleArgs {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 #[command(
     mut_arg("scenario", |a| a.long("scenario").help(help::EMULATOR_SCENARIO)),
     mut_arg("return_scenario", |a| a.help(help::EMULATOR_RETURN[0])),
@@ -134,7 +134,7 @@ impl Render for EmulatorArgs {
             .group(&self.transports)
             .group(&self.control)
             .group(&self.stream)
-            .words(self.video.argv())
+            .group(&self.video)
             .group(&self.ros2);
     }
 }
@@ -199,7 +199,7 @@ impl EmulatorArgs {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct SimulatorArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -237,7 +237,7 @@ impl Render for SimulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.video);
     }
 }
 

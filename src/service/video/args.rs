@@ -1,5 +1,6 @@
 //! The video stream's flags, the same for `netfi run` and each service.
 
+use crate::flags::{Argv, Render};
 use crate::transport::ipc::video::DEFAULT_VIDEO_MAX_BYTES;
 use crate::video::{Gop, GopError};
 use clap::Args;
@@ -25,7 +26,7 @@ pub enum VideoArgsError {
 pub const MAX_VIDEO_MAX_BYTES: usize = crate::model::backlog::MAX_PAYLOAD_BYTES as usize;
 
 /// The video stream's flags, the same for `netfi run` and each service.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct VideoArgs {
     /// Add a synthetic camera on the robot side streaming video back to the
     /// console at this mean bit rate, Mbit/s (default: no video).
@@ -95,29 +96,18 @@ impl VideoArgs {
         }
         Ok(())
     }
-
-    /// The flags as an argv (nothing when off).
-    pub fn argv(&self) -> Vec<String> {
-        let Some(mbps) = self.video_mbps else { return Vec::new() };
-        let mut a = vec![
-            "--video-mbps".to_string(),
-            mbps.to_string(),
-            "--video-hz".into(),
-            self.video_hz.to_string(),
-            "--video-gop".into(),
-            self.video_gop.to_string(),
-            "--video-key-ratio".into(),
-            self.video_key_ratio.to_string(),
-            "--video-max-bytes".into(),
-            self.video_max_bytes.to_string(),
-        ];
-        if let Some(s) = &self.video_scenario {
-            a.extend(["--video-scenario".to_string(), s.clone()]);
-        }
-        if let Some(s) = self.video_seed {
-            a.extend(["--video-seed".to_string(), s.to_string()]);
-        }
-        a
-    }
 }
 
+impl Render for VideoArgs {
+    /// Only what differs from the defaults: nothing when off.
+    fn render(&self, a: &mut Argv) {
+        let d = VideoArgs::default();
+        a.opt("--video-mbps", self.video_mbps)
+            .unless_default("--video-hz", self.video_hz, d.video_hz)
+            .unless_default("--video-gop", self.video_gop, d.video_gop)
+            .unless_default("--video-key-ratio", self.video_key_ratio, d.video_key_ratio)
+            .unless_default("--video-max-bytes", self.video_max_bytes, d.video_max_bytes)
+            .opt("--video-scenario", self.video_scenario.as_ref())
+            .opt("--video-seed", self.video_seed);
+    }
+}
