@@ -22,7 +22,8 @@ use common::ends::IpcEnds;
 use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::{CostRow, Out};
 use common::process::{fresh_run_id, summary, Build, EmulatorSpec, ForgetRuns, OneBuild};
-use netfi::service::args::{streams, UdpArgs};
+use netfi::service::args::streams;
+use netfi::transport::udp::UdpArgs;
 use common::table::{ns, Spread};
 use netfi::metrics::difference;
 use serde::Serialize;
@@ -98,6 +99,7 @@ fn point(a: &Args, p: &Placement, build: &Build, out: &Out, n: usize, rep: usize
         run_id: Some(&run_id),
         feedback: false,
         queue_capacity: None,
+        ends: Default::default(),
         udp: UdpArgs::default(),
         streams: n as u32,
     };

@@ -127,7 +127,7 @@ fn the_feedback_path_does_not_allocate_per_sample() {
     let spec = scenario::parse_str(PLM2_SHORT_REORDER, "alloc.toml", "alloc").unwrap();
     let frames = 200_000u64;
     let link = Link::new(Scenario::new(&spec, 5).unwrap(), 1 << 16, frames).unwrap();
-    use netfi::service::emulator::feedback::Feedback;
+    use netfi::service::channel::feedback::Feedback;
     type Memory = MemoryPort<FeedbackSample>;
     let chan = Feedback::new(Memory::with_capacity(4), Memory::with_capacity(1 << 17));
     let path = Path::of(link, chan, 5, std::env::temp_dir().join("netfi-alloc-unused.csv"), false);

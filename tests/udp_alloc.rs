@@ -10,7 +10,7 @@ use netfi::service::emulator::forward::Forward;
 use netfi::transport::udp::ConsoleAddr;
 use netfi::service::emulator::lane::Lane;
 use netfi::service::emulator::path::Path;
-use netfi::service::emulator::udp_return::UdpReturn;
+use netfi::service::channel::feedback::UdpReturn;
 use netfi::service::link::Link;
 use netfi::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;

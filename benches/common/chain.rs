@@ -15,7 +15,8 @@ use crate::common::process::{at, fresh_run_id, summary, Build, EmulatorSpec, For
 use crate::common::table::{Map, KEYS};
 use anyhow::Result;
 use netfi::metrics::{difference, Summary};
-use netfi::service::args::UdpArgs;
+use netfi::service::args::EndsArgs;
+use netfi::transport::udp::UdpArgs;
 use netfi::transport::Payload;
 use serde::Serialize;
 use serde_json::Value;
@@ -146,6 +147,7 @@ pub fn run_chain(build: &Build, out: &Out, p: &Placement, iv: &Interval) -> Resu
         run_id: None,
         feedback: false,
         queue_capacity: iv.queue_capacity,
+        ends: EndsArgs::default(),
         udp: UdpArgs::default(),
         streams: 1,
     };
@@ -218,15 +220,8 @@ fn drive_ipc(build: &Build, p: &Placement, iv: &Interval, spec: EmulatorSpec) ->
 /// the send times are kept in a table by sequence.
 fn drive_udp(build: &Build, p: &Placement, iv: &Interval, mut spec: EmulatorSpec, slots: u64) -> Result<(Drive, Value)> {
     let rx_chain = loopback_port()?;
-    spec.udp = UdpArgs {
-        ingress: "udp://127.0.0.1:0".parse()?,
-        egress: format!("udp://{}", rx_chain.local_addr()).parse()?,
-        payload: Payload::Itp,
-        no_return: true,
-        idle_end_ms: Some(300.0),
-        console_from: Some("first".parse()?),
-        ..UdpArgs::default()
-    };
+    spec.ends = EndsArgs { ingress: "udp://127.0.0.1:0".parse()?, egress: format!("udp://{}", rx_chain.local_addr()).parse()?, idle_end_ms: Some(300.0) };
+    spec.udp = UdpArgs { payload: Payload::Itp, no_return: true, console_from: Some("first".parse()?), ..UdpArgs::default() };
     let emu = build.emulator(&spec, p)?;
     let ingress = emu.udp_ingress()?;
     let (core, rt) = (p.bench_core, p.rt_priority);

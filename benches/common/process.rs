@@ -12,7 +12,8 @@ use crate::common::args::{check_interrupted, stopped, Common, Cores, Placement, 
 use crate::common::out::Out;
 use anyhow::{bail, Context, Result};
 use netfi::metrics::Summary;
-use netfi::service::args::{EmulatorArgs, RunArgs, UdpArgs};
+use netfi::service::args::{EmulatorArgs, EndsArgs, RunArgs};
+use netfi::transport::udp::UdpArgs;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -233,8 +234,9 @@ pub struct EmulatorSpec<'a> {
     /// Keep the iceoryx2 feedback loop open (off: the forward path alone).
     pub feedback: bool,
     pub queue_capacity: Option<usize>,
-    /// The endpoints and the UDP bridge's options (default: iceoryx2 on
-    /// both sides).
+    /// The endpoints (default: iceoryx2 on both sides).
+    pub ends: EndsArgs,
+    /// The UDP bridge's options.
     pub udp: UdpArgs,
     /// Console → robot streams through the one emulator.
     pub streams: u32,
@@ -250,11 +252,12 @@ impl EmulatorSpec<'_> {
         e.expected_frames = self.expected_frames;
         // Live control and telemetry are served under a run id.
         e.control.no_control = self.run_id.is_none();
-        e.return_path.no_feedback = self.run_id.is_some() && !self.feedback;
+        e.channels.feedback.no_feedback = self.run_id.is_some() && !self.feedback;
         e.placement.core = p.emulator_core;
         e.placement.no_pin = p.emulator_core.is_none();
         e.placement.rt_priority = p.rt_priority;
-        e.udp = self.udp.clone();
+        e.ends = self.ends.clone();
+        e.transports.udp = self.udp.clone();
         e.stream.streams = self.streams;
         e
     }

@@ -19,6 +19,7 @@
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
+pub mod channel;
 pub mod console;
 pub mod control;
 pub mod emulator;
@@ -34,7 +35,6 @@ pub mod signals;
 pub mod simulator;
 pub mod supervise;
 pub mod telemetry;
-pub mod video;
 
 /// Why `<out>/<role>.pid` could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -90,8 +90,8 @@ pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Resu
 /// Every iceoryx2 port of a run: the frames' own, then each reverse
 /// channel's, towards the emulator and away from it.
 pub fn ports() -> Vec<crate::transport::Port> {
-    use crate::transport::ipc::video::{VIDEO, VIDEO_OUT};
     use crate::transport::Port;
-    use emulator::feedback::{FEEDBACK, FEEDBACK_OUT};
-    vec![Port::CONSOLE, Port::EMULATOR, Port::DIRECT, FEEDBACK, FEEDBACK_OUT, VIDEO, VIDEO_OUT]
+    let mut ports = vec![Port::CONSOLE, Port::EMULATOR, Port::DIRECT];
+    ports.extend(channel::channel_ports());
+    ports
 }

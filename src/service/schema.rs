@@ -24,4 +24,4 @@ pub mod run;
 
 pub use emulator::{BadInput, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, LoopBusy, PeerEvent, Shaping, WithPaths};
 pub use path::{Account, LinkMeasures, PathReport};
-pub use paths::{FeedbackExtra, ForwardExtra, ReturnExtra, VideoExtra};
+pub use paths::ForwardExtra;

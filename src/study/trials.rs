@@ -356,7 +356,7 @@ mod tests {
         // What the file adds comes along, the study's own settings kept.
         let spec = TrialSpec { run_args: vec!["--no-isolate".into(), "--return-scenario".into(), "DLM-1".into()], ..spec };
         let with = trial_run(&spec, "PLM-1", Some(Path::new("/data/c.lz4")), Path::new("/data/P1/trial-01"), 3, "study-r1").unwrap();
-        assert!(with.placement.no_isolate && with.return_path.return_scenario.as_deref() == Some("DLM-1"));
-        assert_eq!(RunArgs { placement: run.placement.clone(), return_path: run.return_path.clone(), ..with }, run);
+        assert!(with.placement.no_isolate && with.channels.feedback.return_scenario.as_deref() == Some("DLM-1"));
+        assert_eq!(RunArgs { placement: run.placement.clone(), channels: run.channels.clone(), ..with }, run);
     }
 }

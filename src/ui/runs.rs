@@ -144,13 +144,13 @@ impl Start {
         a.source.rate_hz = self.rate_hz;
         match self.return_scenario.as_deref() {
             None | Some("") => {}
-            Some("none") => a.return_path.no_feedback = true,
-            Some(name) => a.return_path.return_scenario = Some(preset("the return scenario", name)?),
+            Some("none") => a.channels.feedback.no_feedback = true,
+            Some(name) => a.channels.feedback.return_scenario = Some(preset("the return scenario", name)?),
         }
         if let Some(v) = self.video_mbps {
-            a.video.video_mbps = Some(v);
+            a.channels.video.video_mbps = Some(v);
             if let Some(name) = self.video_scenario.as_deref().filter(|n| !n.is_empty()) {
-                a.video.video_scenario = Some(preset("the video scenario", name)?);
+                a.channels.video.video_scenario = Some(preset("the video scenario", name)?);
             }
         }
         if let Some(c) = self.capture.as_deref().map(str::trim).filter(|c| !c.is_empty()) {
@@ -404,7 +404,7 @@ fn tail(text: &str, n: usize) -> String {
 mod tests {
     use super::*;
     use crate::service::args::{RunPlacement, SourceArgs};
-    use crate::service::video::VideoArgs;
+    use crate::service::channel::video::VideoArgs;
 
     /// A start of two and a half seconds at 500 Hz, seed 7, nothing else.
     fn start() -> Start {
@@ -417,16 +417,16 @@ mod tests {
         let mut want = RunArgs::new(SCENARIO_FILE);
         want.scenario.seed = Some(7);
         want.source = SourceArgs { rate_hz: Some(500.0), duration_s: Some(2.5), ..SourceArgs::default() };
-        want.return_path.return_scenario = Some("PLM-1".into());
-        want.video.video_mbps = Some(2.0);
-        want.video.video_scenario = Some("DLM-1".into());
+        want.channels.feedback.return_scenario = Some("PLM-1".into());
+        want.channels.video.video_mbps = Some(2.0);
+        want.channels.video.video_scenario = Some("DLM-1".into());
         want.placement.no_isolate = true;
         assert_eq!(s.run_args().unwrap(), want);
         check_run_args(&want).unwrap();
         // `none`: no feedback path; a video scenario only with video.
         let run = Start { return_scenario: Some("none".into()), video_scenario: Some("DLM-1".into()), isolate: Some(true), ..start() }.run_args().unwrap();
-        assert!(run.return_path.no_feedback && run.return_path.return_scenario.is_none());
-        assert_eq!(run.video, VideoArgs::default());
+        assert!(run.channels.feedback.no_feedback && run.channels.feedback.return_scenario.is_none());
+        assert_eq!(run.channels.video, VideoArgs::default());
         assert_eq!(run.placement, RunPlacement::default());
     }
 

@@ -88,56 +88,6 @@ impl Render for SourceArgs {
     }
 }
 
-/// What comes back from the robot: `netfi run` and `netfi emulator`.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
-pub struct ReturnArgs {
-    /// Pass the robot's feedback back to the console through this scenario
-    /// (file or preset; default Normal: nothing injected).
-    #[arg(long, value_name = "SCENARIO")]
-    pub return_scenario: Option<String>,
-    /// Seed of the return scenario (default: the file's, else derived from
-    /// the run's seed; printed).
-    #[arg(long)]
-    pub return_seed: Option<u64>,
-    /// No feedback path: the robot's feedback is not carried back to the
-    /// console (iceoryx2 on both sides).
-    #[arg(long, conflicts_with_all = ["return_scenario", "return_seed"])]
-    pub no_feedback: bool,
-}
-
-impl ReturnArgs {
-    /// Checks the return path's flags against the lane `ingress` →
-    /// `egress`: the feedback loop needs iceoryx2 on both sides, the UDP
-    /// return path UDP on both.
-    pub fn check(&self, ingress: &crate::transport::Endpoint, egress: &crate::transport::Endpoint, t: &crate::transport::TransportArgs) -> Result<(), ArgsError> {
-        use crate::transport::{ipc::Iceoryx2, udp::Udp, Endpoint};
-        let given = self.return_scenario.is_some() || self.return_seed.is_some();
-        if Endpoint::sides::<Iceoryx2>(ingress, egress).both() {
-            return match self.no_feedback && given {
-                true => Err(ArgsError::NoFeedbackWithReturn),
-                false => Ok(()),
-            };
-        }
-        if self.no_feedback {
-            return Err(ArgsError::NoFeedbackNeedsIceoryx2);
-        }
-        let udp = Endpoint::sides::<Udp>(ingress, egress).both();
-        if given && !udp {
-            return Err(ArgsError::ReturnNeedsBothSides);
-        }
-        if given && t.udp.no_return {
-            return Err(ArgsError::NoReturnWithReturn);
-        }
-        Ok(())
-    }
-}
-
-impl Render for ReturnArgs {
-    fn render(&self, a: &mut Argv) {
-        a.opt("--return-scenario", self.return_scenario.as_ref()).opt("--return-seed", self.return_seed).switch("--no-feedback", self.no_feedback);
-    }
-}
-
 /// Where a console or a robot runs.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
 pub struct PinArgs {

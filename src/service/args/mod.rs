@@ -12,7 +12,7 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `groups` | scenario, source of frames, return path, placement, control, streams |
+//! | `groups` | scenario, source of frames, the lane's endpoints, placement, control, streams (a reverse channel's own are in its folder, `crate::service::channel`) |
 //! | `ros2` | the emulator's ROS 2 topics |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
@@ -31,7 +31,7 @@ pub mod services;
 pub use crate::flags::{argv, values};
 pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
-pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
 pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use run::{refusal, RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};

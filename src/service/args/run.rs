@@ -3,10 +3,10 @@
 
 use super::argv::{self, Argv, Render};
 use super::error::ArgsError;
-use super::groups::{ControlArgs, EmulatorPlacement, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
 use super::values;
-use crate::service::video::VideoArgs;
+use crate::service::channel::{ChannelArgs, LaneShape};
 use clap::{Args, CommandFactory, Parser};
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -82,7 +82,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub json: bool,
     #[command(flatten)]
-    pub return_path: ReturnArgs,
+    pub channels: ChannelArgs,
     /// Do not send the direct (baseline) copy of each frame to the simulator:
     /// halves the console's and simulator's work at very high rates, at the
     /// price of the in-run baseline and the console-side kinematics.
@@ -92,8 +92,6 @@ pub struct RunArgs {
     pub control: ControlArgs,
     #[command(flatten)]
     pub stream: StreamArgs,
-    #[command(flatten)]
-    pub video: VideoArgs,
 }
 
 impl Render for RunPlacement {
@@ -129,11 +127,10 @@ impl Render for RunArgs {
             .opt("--report-json", self.report_json.as_ref().map(|p| p.display()))
             .opt("--run-id", self.run_id.as_ref())
             .switch("--json", self.json)
-            .group(&self.return_path)
+            .group(&self.channels)
             .switch("--no-direct", self.no_direct)
             .group(&self.control)
-            .group(&self.stream)
-            .group(&self.video);
+            .group(&self.stream);
         if dashed {
             a.words(["--".to_string(), s.scenario.clone()]);
         }
@@ -162,11 +159,10 @@ impl RunArgs {
             report_json: None,
             run_id: None,
             json: false,
-            return_path: ReturnArgs::default(),
+            channels: ChannelArgs::default(),
             no_direct: false,
             control: ControlArgs::default(),
             stream: StreamArgs::default(),
-            video: VideoArgs::default(),
         }
     }
 
@@ -193,13 +189,12 @@ impl RunArgs {
         RunCommand::command()
     }
 
-    /// Checks what the flags' own parsers cannot: the video flags, video
-    /// with one stream, and a stream that fits in a run.
+    /// Checks what the flags' own parsers cannot: each reverse channel's
+    /// flags against the run's lanes (netfi's own console and robot over
+    /// iceoryx2), and a stream that fits in a run.
     pub fn validate(&self) -> Result<(), ArgsError> {
-        self.video.validate()?;
-        if self.video.on() && self.stream.streams > 1 {
-            return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
-        }
+        let (ends, transports) = (EndsArgs::default(), crate::transport::TransportArgs::default());
+        self.channels.check(&LaneShape { ingress: &ends.ingress, egress: &ends.egress, transports: &transports, streams: self.stream.streams })?;
         self.stream.named_scenarios()?;
         self.source.planned().map(|_| ())
     }

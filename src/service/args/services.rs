@@ -2,11 +2,11 @@
 
 use super::argv::{Argv, Render};
 use super::error::ArgsError;
-use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
 use super::ros2::Ros2Args;
 use super::values;
-use crate::service::video::VideoArgs;
+use crate::service::channel::{ChannelArgs, ChannelEndArgs, LaneShape};
 use crate::transport::{LaneFlags, TransportArgs, Wiring};
 use clap::Args;
 use std::path::PathBuf;
@@ -45,7 +45,7 @@ pub struct ConsoleArgs {
     #[arg(long, value_name = "US", value_parser = values::nap_us())]
     pub nap_us: Option<u64>,
     #[command(flatten)]
-    pub video: VideoArgs,
+    pub channels: ChannelEndArgs,
 }
 
 impl Render for ConsoleArgs {
@@ -60,7 +60,7 @@ impl Render for ConsoleArgs {
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
             .opt("--nap-us", self.nap_us)
-            .group(&self.video);
+            .group(&self.channels);
     }
 }
 
@@ -105,7 +105,7 @@ pub struct EmulatorArgs {
     #[arg(long, value_name = "S", value_parser = values::wait_seconds)]
     pub wait_for_peer_s: Option<f64>,
     #[command(flatten)]
-    pub return_path: ReturnArgs,
+    pub channels: ChannelArgs,
     #[command(flatten)]
     pub ends: EndsArgs,
     #[command(flatten)]
@@ -114,8 +114,6 @@ pub struct EmulatorArgs {
     pub control: ControlArgs,
     #[command(flatten)]
     pub stream: StreamArgs,
-    #[command(flatten)]
-    pub video: VideoArgs,
     #[command(flatten)]
     pub ros2: Ros2Args,
 }
@@ -128,13 +126,12 @@ impl Render for EmulatorArgs {
             .val("--expected-frames", self.expected_frames)
             .group(&self.placement)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
-            .group(&self.return_path)
+            .group(&self.channels)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
             .group(&self.ends)
             .group(&self.transports)
             .group(&self.control)
             .group(&self.stream)
-            .group(&self.video)
             .group(&self.ros2);
     }
 }
@@ -151,12 +148,11 @@ impl EmulatorArgs {
             expected_frames: 100_000,
             out: PathBuf::from("out"),
             wait_for_peer_s: None,
-            return_path: ReturnArgs::default(),
+            channels: ChannelArgs::default(),
             ends: EndsArgs::default(),
             transports: TransportArgs::default(),
             control: ControlArgs::default(),
             stream: StreamArgs::default(),
-            video: VideoArgs::default(),
             ros2: Ros2Args::default(),
         }
     }
@@ -169,21 +165,18 @@ impl EmulatorArgs {
     /// Checks that the options fit the endpoints, with errors that say what
     /// would be accepted.
     pub fn validate(&self) -> Result<(), ArgsError> {
-        let own = self.ends.own();
-        if self.stream.several() && !own {
+        if self.stream.several() && !self.ends.own() {
             return Err(ArgsError::StreamsNeedIceoryx2);
         }
-        self.video.validate()?;
-        if self.video.on() && !own {
-            return Err(ArgsError::VideoNeedsIceoryx2);
-        }
-        if self.video.on() && self.stream.streams > 1 {
-            return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
-        }
+        self.channels.check(&self.lane_shape())?;
         let (ingress, egress) = (&self.ends.ingress, &self.ends.egress);
         let flags = LaneFlags { run_id: self.run_id.as_deref(), wait_for_peer: self.wait_for_peer_s.is_some(), idle_end: self.ends.idle_end_ms.is_some() };
-        self.transports.check(ingress, egress, flags)?;
-        self.return_path.check(ingress, egress, &self.transports)
+        Ok(self.transports.check(ingress, egress, flags)?)
+    }
+
+    /// The lanes' shape, as the reverse channels see it.
+    pub fn lane_shape(&self) -> LaneShape<'_> {
+        LaneShape { ingress: &self.ends.ingress, egress: &self.ends.egress, transports: &self.transports, streams: self.stream.streams }
     }
 
     /// How to open the transports, for a release queue of `queue_capacity`,
@@ -225,7 +218,7 @@ pub struct SimulatorArgs {
     #[arg(long, value_name = "US", value_parser = values::nap_us())]
     pub nap_us: Option<u64>,
     #[command(flatten)]
-    pub video: VideoArgs,
+    pub channels: ChannelEndArgs,
 }
 
 impl Render for SimulatorArgs {
@@ -237,7 +230,7 @@ impl Render for SimulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
             .opt("--nap-us", self.nap_us)
-            .group(&self.video);
+            .group(&self.channels);
     }
 }
 

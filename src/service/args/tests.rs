@@ -1,4 +1,6 @@
 use super::*;
+use crate::service::channel::feedback::ReturnArgs;
+use crate::service::channel::{ChannelArgs, ChannelEndArgs};
 use clap::{CommandFactory, Parser};
 
 /// The four commands that take these arguments, as the `netfi` command
@@ -22,8 +24,8 @@ fn parse(role: &str, argv: &[String]) -> Result<Cmd, clap::Error> {
 }
 
 /// Video on, every one of its flags off its default.
-fn video() -> crate::service::video::VideoArgs {
-    crate::service::video::VideoArgs {
+fn video() -> crate::service::channel::video::VideoArgs {
+    crate::service::channel::video::VideoArgs {
         video_mbps: Some(2.5),
         video_hz: 30.0,
         video_gop: 12,
@@ -47,7 +49,7 @@ fn a_console_parses_back_what_it_renders() {
         feedback_wait_s: 0.0,
         live: true,
         nap_us: Some(0),
-        video: video(),
+        channels: ChannelEndArgs { video: video(), ..Default::default() },
     };
     let Ok(Cmd::Console(back)) = parse("console", &c.to_argv()) else { panic!("{:?}", c.to_argv()) };
     assert_eq!(back, c);
@@ -66,12 +68,11 @@ fn an_emulator_parses_back_what_it_renders() {
         expected_frames: 1234,
         out: "o/e".into(),
         wait_for_peer_s: Some(1.5),
-        return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
         ends: EndsArgs::default(),
         transports: Default::default(),
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: true },
         stream: StreamArgs::default(),
-        video: video(),
         ros2: Default::default(),
     };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e.to_argv()) else { panic!("{:?}", e.to_argv()) };
@@ -80,8 +81,7 @@ fn an_emulator_parses_back_what_it_renders() {
     let streams = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] };
     let e2 = EmulatorArgs {
         stream: streams,
-        video: Default::default(),
-        return_path: ReturnArgs { no_feedback: true, ..Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
         placement: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: false },
         ..e.clone()
     };
@@ -99,7 +99,7 @@ fn an_emulator_parses_back_what_it_renders() {
     };
     let ends = EndsArgs { ingress: "udp://127.0.0.1:4000".parse().unwrap(), egress: "udp://127.0.0.1:4001".parse().unwrap(), idle_end_ms: Some(500.5) };
     let transports = crate::transport::TransportArgs { udp, ..Default::default() };
-    let e3 = EmulatorArgs { ends, transports, video: Default::default(), wait_for_peer_s: None, ..e };
+    let e3 = EmulatorArgs { ends, transports, channels: ChannelArgs { video: Default::default(), ..e.channels.clone() }, wait_for_peer_s: None, ..e };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e3.to_argv()) else { panic!("{:?}", e3.to_argv()) };
     assert_eq!(back, e3);
     e3.validate().unwrap();
@@ -129,7 +129,7 @@ fn a_simulator_parses_back_what_it_renders() {
         spin: true,
         out: "o/s".into(),
         nap_us: Some(300),
-        video: video(),
+        channels: ChannelEndArgs { video: video(), ..Default::default() },
     };
     let Ok(Cmd::Simulator(back)) = parse("simulator", &s.to_argv()) else { panic!("{:?}", s.to_argv()) };
     assert_eq!(back, s);
@@ -151,11 +151,10 @@ fn a_run_parses_back_what_it_renders() {
         report_json: Some("o/r.json".into()),
         run_id: Some("r9".into()),
         json: true,
-        return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
         no_direct: true,
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: false },
         stream: StreamArgs::default(),
-        video: video(),
     };
     assert_eq!(RunArgs::from_argv(r.to_argv()).unwrap(), r, "{:?}", r.to_argv());
     let Ok(Cmd::Run(back)) = parse("run", &r.to_argv()) else { panic!("{:?}", r.to_argv()) };
@@ -165,9 +164,8 @@ fn a_run_parses_back_what_it_renders() {
         scenario: ScenarioArgs::named("-odd.toml"),
         source: SourceArgs { frames: Some(17), duration_s: None, ..r.source.clone() },
         placement: RunPlacement { emulator: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: true }, ..Default::default() },
-        return_path: ReturnArgs { no_feedback: true, ..Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
         stream: StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] },
-        video: Default::default(),
         ..r
     };
     assert_eq!(RunArgs::from_argv(r2.to_argv()).unwrap(), r2, "{:?}", r2.to_argv());

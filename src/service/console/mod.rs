@@ -59,7 +59,7 @@ pub struct ConsoleReport {
     pub feedback: Option<ConsoleFeedback>,
     /// The video as it came back through the emulator, when the run has video.
     #[serde(default)]
-    pub video: Option<crate::service::video::ReceivedVideo>,
+    pub video: Option<crate::service::channel::video::ReceivedVideo>,
 }
 
 /// What the console saw of the robot's feedback.
@@ -276,12 +276,12 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     let node = open_node(&args.run_id, Role::Console)?;
     let port = node.publisher(Port::CONSOLE).map_err(|e| ServiceError::Publisher("console → emulator", e))?;
     let direct = if args.no_direct { None } else { Some(node.publisher(Port::DIRECT).map_err(|e| ServiceError::Publisher("console → simulator", e))?) };
-    let fb_port = node.subscriber_of::<FeedbackSample>(crate::service::emulator::feedback::FEEDBACK_OUT).map_err(|e| ServiceError::Subscriber("emulator → console feedback", e))?;
+    let fb_port = node.subscriber_of::<FeedbackSample>(crate::service::channel::feedback::FEEDBACK_OUT).map_err(|e| ServiceError::Subscriber("emulator → console feedback", e))?;
     let fb = FeedbackIn::new(fb_port)?;
     signals::install();
     crate::host::placement::place("console", args.pin.core, args.pin.avoid_core)?;
     // After the placement, whose CPU mask its thread inherits: off the emulator's core.
-    let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
+    let video = crate::service::channel::video::receiver(&args.run_id, &args.channels.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
     let source = match &args.source.capture {

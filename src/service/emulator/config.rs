@@ -96,7 +96,7 @@ fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64
         stream: StreamArgs::default(),
         ..args.clone()
     };
-    lane.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
+    lane.channels.map_seeds(|s| seeds::stream(s, k));
     lane
 }
 

@@ -8,8 +8,8 @@ use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
 use crate::service::emulator::forward::Forward;
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::path::Path;
-use crate::service::emulator::reverse::OpenError;
-use crate::service::emulator::{report, reverse, run};
+use crate::service::emulator::opening::{OpenError, Opening};
+use crate::service::emulator::{report, run};
 use crate::service::schema::EmulatorReport;
 use crate::transport::{Egress, Ingress, Sessions};
 
@@ -22,8 +22,9 @@ fn open_lane(l: &LaneConfig, stop: &dyn Fn() -> bool) -> Result<(ItpLane, Sessio
     std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
     let t = crate::transport::open(&a.ends.ingress, &a.ends.egress, &a.transports, &a.wiring(l.queue_capacity, stop))?;
-    let o = reverse::Opening { args: a, t: &t, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir };
-    let reverse = reverse::open_all(&o)?;
+    let shape = a.lane_shape();
+    let o = Opening { shape, sessions: &t.sessions, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir };
+    let reverse = a.channels.open_all(&shape, &o)?;
     let scenario = Scenario::new(&l.scenario, l.seed)?;
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, l.unsupported()) {
         return Err(OpenError::RawStage { scenario: scenario.name().to_string(), stage: kind.name() });

@@ -259,7 +259,8 @@ fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: 
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true).map_err(OpenError::from)?;
     let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
     if let (Some((from, to)), Some(o)) = (&topics.ret, &end.ret) {
-        let rp = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
+        let r = &a.channels.feedback;
+        let rp = PathPlan::resolve("--return-scenario", r.return_scenario.as_deref(), r.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
         let chan = Topic::<Return>::new(ports(node, plan, o, (from, to), rp.queue_capacity + 1, None, None)?, node.clone(), t0_ns);
         reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
     }

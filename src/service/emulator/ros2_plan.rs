@@ -137,7 +137,7 @@ impl Plan {
         if a.stream.streams > 1 {
             return Err(Ros2PlanError::Streams);
         }
-        if a.video.on() || a.return_path.no_feedback || a.transports != crate::transport::TransportArgs::default() {
+        if a.channels.video.on() || a.channels.feedback.no_feedback || a.transports != crate::transport::TransportArgs::default() {
             return Err(Ros2PlanError::NotForTopics);
         }
         if r.ros2_return.len() > r.ros2_topic.len() {
@@ -224,7 +224,7 @@ pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, Ros2P
             stream: StreamArgs::default(),
             ..args.clone()
         };
-        lane_args.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
+        lane_args.channels.map_seeds(|s| seeds::stream(s, k));
         out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
     }
     Ok(EmulatorConfig::with_lanes(args, out)?)

@@ -16,11 +16,9 @@ fn normal() -> ScenarioSpec {
 /// What the runner resolves for `args`: its scenario for every stream,
 /// Normal for the paths that are on.
 fn resolved(args: &RunArgs) -> Resolved {
-    Resolved {
-        streams: vec![normal(); args.stream.streams as usize],
-        return_path: (!args.return_path.no_feedback).then(normal),
-        video: args.video.on().then(normal),
-    }
+    let (ends, transports) = (crate::service::args::EndsArgs::default(), crate::transport::TransportArgs::default());
+    let shape = crate::service::channel::LaneShape { ingress: &ends.ingress, egress: &ends.egress, transports: &transports, streams: args.stream.streams };
+    Resolved { streams: vec![normal(); args.stream.streams as usize], paths: args.channels.wants(&shape).into_iter().map(|(c, w)| (c, w, normal())).collect() }
 }
 
 fn plan(argv: &[&str], host: &[usize]) -> Plan {
@@ -87,21 +85,21 @@ fn the_emulator_is_told_every_seed_the_runner_decided() {
     let p = plan(&["Normal", "--video-mbps", "2"], &[0, 1]);
     let e = &p.emulator;
     assert_eq!(e.scenario.seed, Some(7));
-    assert_eq!(e.return_path.return_seed, Some(seeds::feedback(None, &normal(), 7)));
-    assert_eq!(e.video.video_seed, Some(seeds::video(None, &normal(), 7)));
+    assert_eq!(e.channels.feedback.return_seed, Some(seeds::feedback(None, &normal(), 7)));
+    assert_eq!(e.channels.video.video_seed, Some(seeds::video(None, &normal(), 7)));
     assert_eq!(e.scenario.scenario, p.streams[0].own_scenario.display().to_string(), "the emulator reads the run's own copy");
     // A seed given, or the return scenario's own, wins over the rule.
     let p = plan(&["Normal", "--return-seed", "5"], &[0, 1]);
-    assert_eq!(p.emulator.return_path.return_seed, Some(5));
+    assert_eq!(p.emulator.channels.feedback.return_seed, Some(5));
     let a = run_args(&["Normal"]);
     let mut r = resolved(&a);
-    r.return_path.as_mut().unwrap().seed = Some(11);
-    assert_eq!(Plan::new(&a, &r, 7, "r1".into(), &[0, 1]).unwrap().emulator.return_path.return_seed, Some(11));
+    r.paths[0].2.seed = Some(11);
+    assert_eq!(Plan::new(&a, &r, 7, "r1".into(), &[0, 1]).unwrap().emulator.channels.feedback.return_seed, Some(11));
     // Without feedback, no seed for it and the emulator is told.
     let p = plan(&["Normal", "--no-feedback"], &[0, 1]);
-    assert_eq!((p.emulator.return_path.return_seed, p.emulator.return_path.no_feedback), (None, true));
+    assert_eq!((p.emulator.channels.feedback.return_seed, p.emulator.channels.feedback.no_feedback), (None, true));
     assert!(p.emulator.to_argv().contains(&"--no-feedback".to_string()));
-    assert_eq!(p.seeds.video, None);
+    assert_eq!(p.seeds.paths.get("video"), None);
 }
 
 #[test]
@@ -116,7 +114,7 @@ fn each_stream_has_its_run_id_seed_directory_and_scenario_copy() {
     assert_eq!(p.emulator.stream.streams, 3);
     assert_eq!(p.emulator.stream.stream_scenario[1], format!("2={}", s2.own_scenario.display()));
     // Each lane derives its return seed from its own seed, as before.
-    assert_eq!(p.emulator.return_path.return_seed, None);
+    assert_eq!(p.emulator.channels.feedback.return_seed, None);
 }
 
 #[test]

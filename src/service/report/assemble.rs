@@ -6,16 +6,14 @@
 use super::delay::delay_check;
 use super::phases::{self, RunTimeline};
 use super::trace_merge::{merge_trace, Source};
-use super::{files, join, FeedbackSection, Files, ProcessEnd, RunReport, RunStream, RunStreams};
+use super::{files, join, Files, ProcessEnd, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
 use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
-use crate::service::schema::FeedbackExtra;
-use crate::service::schema::VideoExtra;
 use crate::service::schema::EmulatorReport;
 use crate::transport::TransportReports;
 use crate::service::simulator::SimulatorReport;
-use crate::service::video::VideoSection;
+use crate::service::channel::{ChannelSections, Sources};
 use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
 
@@ -157,16 +155,13 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         None => (None, None),
     };
     let frames = join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref());
-    let feedback = emulator
-        .as_ref()
-        .and_then(|e| e.path::<FeedbackExtra>("feedback"))
-        .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent), stopped));
-    let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
-    let video = VideoSection::join(video_path.as_ref(), console.as_ref().and_then(|c| c.video.as_ref()), simulator.as_ref().and_then(|s| s.camera.as_ref()));
-    let mut faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
+    let sources = Sources { emulator: emulator.as_ref(), console: console.as_ref(), simulator: simulator.as_ref(), stopped };
+    let channels = ChannelSections::join(sources);
+    let mut faults = channels.faults();
+    faults.extend(join::faults(&frames));
     faults.extend(transports.faults());
     let e = shaping.as_ref();
-    let files = Files {
+    let mut files = Files {
         out_dir: facts.out.to_path_buf(),
         scenario: facts.scenario_path.map(Path::to_path_buf),
         trace: None,
@@ -174,9 +169,10 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
         end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
         report_json: facts.out.join("report.json"),
-        video_trace: video_path.as_ref().map(|v| v.trace_path.clone()),
-        video_received: console.as_ref().and_then(|c| c.video.as_ref()).and_then(|v| v.received_csv.clone()),
+        video_trace: None,
+        video_received: None,
     };
+    channels.files(sources, &mut files);
     RunReport {
         provenance: None,
         delay_check: None,
@@ -195,8 +191,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
         overhead_ns: join::overhead(e.map(|e| &e.link), simulator.as_ref()),
         kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
-        feedback,
-        video,
+        channels,
         processes,
         faults,
         missing: missing.iter().map(|(file, _, _)| file.to_string()).collect(),

@@ -2,7 +2,7 @@
 //! a function of what it shows, so that the stand-alone emulator's own
 //! report (`emulator_text`) shares those the emulator knows.
 
-use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
+use super::{DelayCheck, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
 use crate::check::{LinkReport, StageReport};
 use crate::metrics::{fmt_ns, Summary};
 use crate::service::control::ControlEvent;
@@ -10,7 +10,7 @@ use crate::service::schema::{LoopBusy, PeerEvent};
 use std::collections::BTreeMap;
 
 /// A count, or `?` where it is unknown.
-pub(super) fn opt(v: Option<u64>) -> String {
+pub fn opt(v: Option<u64>) -> String {
     v.map_or("?".to_string(), |x| x.to_string())
 }
 
@@ -24,8 +24,8 @@ pub fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
     }
 }
 
-/// A latency distribution's percentiles on one line.
-fn line(p: &Option<Summary>) -> String {
+/// A summary's percentiles on one line, `-` when there is none.
+pub fn line(p: &Option<Summary>) -> String {
     match p {
         Some(p) => format!(
             "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",
@@ -69,12 +69,7 @@ impl RunReport {
         if let Some(k) = &self.kinematics {
             s += &kinematics_text(k);
         }
-        if let Some(fb) = &self.feedback {
-            s += &fb.to_text();
-        }
-        if let Some(v) = &self.video {
-            s += &v.to_text();
-        }
+        s += &self.channels.text();
         s += &self.host_text();
         s += &happenings_text(&self.peer_events, &self.events);
         for fault in &self.faults {
@@ -356,45 +351,6 @@ pub(super) fn happenings_text(peers: &[PeerEvent], events: &[ControlEvent]) -> S
         s += &format!("control    t={:.3}s {}\n", e.t_s, e.what);
     }
     s
-}
-
-impl FeedbackSection {
-    /// The feedback loop's lines of the text report.
-    pub(super) fn to_text(&self) -> String {
-        let mut s = format!(
-            "feedback   return scenario {} (seed {}): sent by robot {}  entered {}  delivered {}  received {}  held at end {}; dropped {}\n",
-            self.return_scenario,
-            self.seed,
-            opt(self.sent_by_robot),
-            self.entered,
-            self.delivered,
-            opt(self.received_by_console),
-            self.held_at_end,
-            dropped_list(&self.dropped)
-        );
-        if self.duplicated > 0 {
-            s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
-        }
-        if self.not_taken_at_stop + self.unread_at_stop > 0 {
-            s += &format!(
-                "  in flight at the stop: {} sent by the robot after the emulator stopped, {} delivered after the console stopped reading\n",
-                self.not_taken_at_stop, self.unread_at_stop
-            );
-        }
-        s += &format!(
-            "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
-            if self.balanced { "balanced" } else { "NOT balanced" },
-            self.loss_rate,
-            self.loss_rate_ci95[0],
-            self.loss_rate_ci95[1]
-        );
-        s += &format!("  round trip        {}\n", line(&self.round_trip_ns));
-        s += &format!("  emulator's share  {}\n", line(&self.emulator_share_ns));
-        if let (Some(f), Some(m)) = (self.divergence_final_mm, self.divergence_max_mm) {
-            s += &format!("  live divergence   arm 0 final {:.2} mm (max {:.2}), arm 1 final {:.2} mm (max {:.2})\n", f[0], m[0], f[1], m[1]);
-        }
-        s
-    }
 }
 
 impl Provenance {

@@ -63,19 +63,17 @@ fn resolve(args: &RunArgs, run_id: &str) -> Result<(Resolved, u64)> {
         Scenario::new(s, seeds::stream(seed, k)).map_err(|e| RunnerError::StreamSeed(k, e))?;
         crate::transport::RunId::new(&streams::run_id(run_id, k)).map_err(|e| RunnerError::StreamRunId(k, e))?;
     }
-    let rp = &args.return_path;
-    let return_path = (!rp.no_feedback).then(|| resolve_path("--return-scenario", rp.return_scenario.as_deref())).transpose()?;
-    let video = args.video.on().then(|| resolve_path("--video-scenario", args.video.video_scenario.as_deref())).transpose()?;
-    Ok((Resolved { streams: specs, return_path, video }, seed))
+    let (ends, transports) = (crate::service::args::EndsArgs::default(), crate::transport::TransportArgs::default());
+    let shape = crate::service::channel::LaneShape { ingress: &ends.ingress, egress: &ends.egress, transports: &transports, streams: args.stream.streams };
+    let paths = args.channels.wants(&shape).into_iter().map(|(c, w)| Ok((c, resolve_path(w.flag, w.scenario.as_deref())?, w))).collect::<Result<Vec<_>>>()?;
+    let paths = paths.into_iter().map(|(c, spec, w)| (c, w, spec)).collect();
+    Ok((Resolved { streams: specs, paths }, seed))
 }
 
 /// Checks the reverse paths' scenarios with the seeds decided for them.
 fn check_paths(r: &Resolved, s: &Seeds) -> Result<()> {
-    let paths = [("--return-scenario", &r.return_path, s.return_path), ("--video-scenario", &r.video, s.video)];
-    for (flag, spec, seed) in paths {
-        if let (Some(spec), Some(seed)) = (spec, seed) {
-            Scenario::new(spec, seed).map_err(|cause| PathScenarioError { flag, name: spec.name.clone(), cause })?;
-        }
+    for (c, w, spec) in &r.paths {
+        Scenario::new(spec, s.paths[c]).map_err(|cause| PathScenarioError { flag: w.flag, name: spec.name.clone(), cause })?;
     }
     Ok(())
 }

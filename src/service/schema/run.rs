@@ -145,47 +145,6 @@ pub struct DelayCheck {
     pub injected_within_model_band: Option<bool>,
 }
 
-/// The feedback loop robot → emulator → console: what the return scenario
-/// did, every feedback sample accounted for, and the round trip.
-///
-/// `sent_by_robot = entered + not_taken_at_stop`, `entered + duplicated =
-/// delivered + dropped + held_at_end`, `delivered = received_by_console +
-/// unread_at_stop`: `balanced`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeedbackSection {
-    pub return_scenario: String,
-    pub seed: u64,
-    pub sent_by_robot: Option<u64>,
-    pub entered: u64,
-    pub delivered: u64,
-    /// Copies made by `duplicate` stages of the return scenario.
-    #[serde(default)]
-    pub duplicated: u64,
-    pub dropped: BTreeMap<String, u64>,
-    pub held_at_end: u64,
-    pub received_by_console: Option<u64>,
-    /// In a stopped run: samples the robot sent after the emulator had
-    /// stopped taking them, and samples the emulator delivered after the
-    /// console had stopped reading (the processes stop console first,
-    /// robot last). Both 0 in a run that ended on its own.
-    #[serde(default)]
-    pub not_taken_at_stop: u64,
-    #[serde(default)]
-    pub unread_at_stop: u64,
-    pub balanced: bool,
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub injected_delay_ns: Summary,
-    /// Command sent → the robot's feedback naming it received, at the console.
-    pub round_trip_ns: Option<Summary>,
-    /// The emulator's own share of each round trip (both directions).
-    pub emulator_share_ns: Option<Summary>,
-    /// The robot's position (from its feedback) against the console's,
-    /// per arm, mm: at the last feedback, and the most seen.
-    pub divergence_final_mm: Option<[f64; 2]>,
-    pub divergence_max_mm: Option<[f64; 2]>,
-}
-
 /// Where a run comes from, so that a trial can be matched to its video and
 /// robot logs: the netfi version, the command line as run, when it started
 /// (wall clock, UTC), its seed and the host.
@@ -243,12 +202,10 @@ pub struct RunReport {
     /// Delays seen vs drawn vs the analytic law (scenarios that delay).
     pub delay_check: Option<DelayCheck>,
     pub kinematics: Option<serde_json::Value>,
-    /// The feedback loop, when it was open.
-    #[serde(default)]
-    pub feedback: Option<FeedbackSection>,
-    /// The video stream, when the run has one (`--video-mbps`).
-    #[serde(default)]
-    pub video: Option<crate::service::video::VideoSection>,
+    /// Each reverse channel's section, under its name, where the run had
+    /// it (`feedback`: the feedback loop; `video`: the video stream).
+    #[serde(flatten)]
+    pub channels: crate::service::channel::ChannelSections,
     pub processes: Vec<ProcessEnd>,
     /// What went wrong: dead processes, frames lost between processes,
     /// files cut short (`NAME.partial`).

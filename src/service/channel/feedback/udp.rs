@@ -15,10 +15,12 @@
 
 use crate::injector::DropCause;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take};
-use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
+use super::{ReturnArgs, ReturnExtra, ReturnOpenError};
+use crate::service::channel::declare::ChannelOpen;
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, ReturnExtra};
-use crate::transport::udp::{Arena, ConsoleAddr, PeerAddr, UdpPort, ARENA_SLOT_BYTES, RAW_DEFAULT_QUEUE_CAPACITY};
+use crate::service::schema::Account;
+use crate::transport::udp::{Arena, ConsoleAddr, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
 use crate::transport::PortError;
 
 /// A return datagram held by the link.
@@ -145,19 +147,15 @@ impl Channel for UdpReturn {
     }
 }
 
-/// The return path, with UDP on both sides and unless `--no-return`.
-pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let a = o.args;
-    let Some(session) = o.t.sessions.udp.as_ref() else { return Ok(None) };
-    let u = &a.transports.udp;
-    if u.no_return {
-        return Ok(None);
-    }
-    let Some((mut from_robot, to_console)) = session.return_ports().map_err(OpenError::ReturnPort)? else { return Ok(None) };
-    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::RETURN_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
+/// The return path of a lane with UDP on both sides, as `plan` settled it.
+pub fn open(a: &ReturnArgs, plan: &PathPlan, o: &Opening) -> Result<Box<dyn Reverse>, ChannelOpen<ReturnOpenError>> {
+    let session = o.sessions.udp.as_ref().expect("the UDP return path is asked for with UDP on both sides");
+    let u = &o.shape.transports.udp;
+    let port = |cause| ChannelOpen::Own(ReturnOpenError::ReturnPort(cause));
+    let (mut from_robot, to_console) = session.return_ports().map_err(port)?.expect("both sides are UDP");
     if let Some(robot) = u.robot_from {
         from_robot.accept_only(robot);
     }
-    let chan = UdpReturn::new(from_robot, to_console, u.return_to, session.console.clone(), a.return_path.return_scenario.is_some(), plan.queue_capacity);
-    Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))
+    let chan = UdpReturn::new(from_robot, to_console, u.return_to, session.console.clone(), a.return_scenario.is_some(), plan.queue_capacity);
+    Ok(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?))
 }

@@ -11,11 +11,15 @@
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
-use crate::service::link::DEFAULT_QUEUE_CAPACITY;
+use super::{FeedbackExtra, ReturnOpenError};
+use crate::service::channel::declare::ChannelOpen;
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, FeedbackExtra};
+use crate::service::schema::Account;
 use crate::transport::{FramePublisher, FrameSink, FrameSource, FrameSubscriber, Port, PortError, Role};
+
+/// The feedback path's name: its key in `emulator.json`'s paths.
+pub const NAME: &str = "feedback";
 
 /// Robot → emulator: the robot's feedback, one per command it received.
 pub const FEEDBACK: Port = Port::new("feedback", Role::Simulator, Role::Emulator);
@@ -56,7 +60,7 @@ impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Feedback<S, K
 impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Channel for Feedback<S, K> {
     type Item = FeedbackSample;
     type Extra = FeedbackExtra;
-    const NAME: &'static str = "feedback";
+    const NAME: &'static str = NAME;
     const TRACE_FILE: &'static str = "trace_feedback.csv";
     const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
 
@@ -101,15 +105,11 @@ impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Channel for F
     }
 }
 
-/// The feedback path the arguments ask for: with iceoryx2 on both sides
-/// and unless `--no-feedback`, through `--return-scenario` (default Normal).
-pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let a = o.args;
-    let own = crate::transport::Endpoint::sides::<crate::transport::ipc::Iceoryx2>(&a.ends.ingress, &a.ends.egress).both();
-    let Some(node) = o.t.sessions.iceoryx2.as_ref().filter(|_| own && !a.return_path.no_feedback) else { return Ok(None) };
-    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::FEEDBACK_TAG, DEFAULT_QUEUE_CAPACITY)?;
-    let sink = node.publisher_of::<FeedbackSample>(FEEDBACK_OUT).map_err(|cause| OpenError::FeedbackOut(cause))?;
-    let source = node.subscriber_of::<FeedbackSample>(FEEDBACK).map_err(|cause| OpenError::FeedbackIn(cause))?;
-    Ok(Some(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?)))
+/// The feedback path of a lane with iceoryx2 on both sides, as `plan`
+/// settled it.
+pub fn open(plan: &PathPlan, o: &Opening) -> Result<Box<dyn Reverse>, ChannelOpen<ReturnOpenError>> {
+    let node = o.sessions.iceoryx2.as_ref().expect("the feedback path is asked for with iceoryx2 on both sides");
+    let sink = node.publisher_of::<FeedbackSample>(FEEDBACK_OUT).map_err(|cause| ChannelOpen::Own(ReturnOpenError::FeedbackOut(cause)))?;
+    let source = node.subscriber_of::<FeedbackSample>(FEEDBACK).map_err(|cause| ChannelOpen::Own(ReturnOpenError::FeedbackIn(cause)))?;
+    Ok(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?))
 }
-

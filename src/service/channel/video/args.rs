@@ -14,6 +14,15 @@ pub enum VideoArgsError {
     /// A video option without the video stream.
     #[error("--video-scenario and --video-seed need --video-mbps (the video stream is off)")]
     OptionsWithoutVideo,
+    /// Video over another transport than iceoryx2.
+    #[error("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's")]
+    NeedsIceoryx2,
+    /// Video with several streams.
+    #[error("--video-mbps goes with one stream: the video path is stream 0's, and --streams {streams} asks for more")]
+    OneStream {
+        /// The streams asked for.
+        streams: u32,
+    },
     /// A largest payload out of range.
     #[error("--video-max-bytes must be from 1 to {MAX_VIDEO_MAX_BYTES} bytes, got {got}")]
     MaxBytes {
