@@ -15,7 +15,7 @@
 //! | `control`, `telemetry` | live control of a running emulator, and its telemetry, off the loop |
 //! | `video` | the video stream's flags, the robot's camera, the console's receiver |
 //! | `console`, `simulator` | the two ends of a local run |
-//! | `ros2_bag` | `netfi ros2 record` and `replay`: ROS 2 topics as MCAP |
+//! | `ros2` | `netfi ros2 record` and `replay`: ROS 2 topics as MCAP (`bag`) |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
@@ -27,7 +27,7 @@ pub mod error;
 pub mod link;
 pub mod plan;
 pub mod report;
-pub mod ros2_bag;
+pub mod ros2;
 pub mod run;
 pub mod schema;
 pub mod seeds;

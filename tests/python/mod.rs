@@ -743,7 +743,7 @@ fn the_python_video_header_is_the_rust_one() {
     if !python_ready() {
         return;
     }
-    use netfi::sample::VideoHeader;
+    use netfi::transport::ipc::video::VideoHeader;
     use netfi::transport::ipc::video::{DEFAULT_VIDEO_MAX_BYTES, VIDEO_BUFFER_FRAMES, VIDEO_HELD_FRAMES, VIDEO_INITIAL_SLICE_BYTES};
     let gops = [(8e6, 60.0, 30u32, 8.0), (2e6, 5.0, 5, 8.0), (1e6, 60.0, 1, 1.0), (3.3e6, 59.94, 12, 5.5), (8e6, 10.0, 10, 8.0)];
     let script = format!(

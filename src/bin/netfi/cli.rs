@@ -59,7 +59,7 @@ pub enum Command {
     Study(crate::study::StudyArgs),
     /// Record ROS 2 topics as MCAP, and replay a recording at its timing.
     #[command(subcommand)]
-    Ros2(netfi::service::ros2_bag::Ros2Cmd),
+    Ros2(netfi::service::ros2::bag::Ros2Cmd),
 }
 
 #[derive(Debug, Args)]

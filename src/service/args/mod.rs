@@ -13,7 +13,6 @@
 //! | file | what |
 //! |---|---|
 //! | `groups` | scenario, source of frames, the lane's endpoints, placement, control, streams (a reverse channel's own are in its folder, `crate::service::channel`) |
-//! | `ros2` | the emulator's ROS 2 topics |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
 //! | `help` | what a shared flag means to one command |
@@ -23,7 +22,6 @@
 pub mod error;
 pub mod groups;
 pub mod help;
-pub mod ros2;
 pub mod run;
 pub mod streams;
 pub mod services;
@@ -32,7 +30,6 @@ pub use crate::flags::{argv, values};
 pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
-pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use run::{refusal, RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};

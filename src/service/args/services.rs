@@ -4,7 +4,7 @@ use super::argv::{Argv, Render};
 use super::error::ArgsError;
 use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
-use super::ros2::Ros2Args;
+use crate::transport::ros2::Ros2Args;
 use super::values;
 use crate::service::channel::{ChannelArgs, ChannelEndArgs, LaneShape};
 use crate::transport::{LaneFlags, TransportArgs, Wiring};

@@ -104,7 +104,7 @@ fn an_emulator_parses_back_what_it_renders() {
     assert_eq!(back, e3);
     e3.validate().unwrap();
     // ROS 2 lanes: every ROS 2 flag off its default.
-    let ros2 = Ros2Args {
+    let ros2 = crate::transport::ros2::Ros2Args {
         ros2_topic: vec!["/MTMR/measured_cp=/PSM1/servo_cp".into(), "/MTML/measured_cp=/PSM2/servo_cp".into()],
         ros2_return: vec!["/PSM1/measured_cp=/MTMR/state".into()],
         ros2_type: vec!["/MTMR/measured_cp=geometry_msgs/msg/PoseStamped".into()],

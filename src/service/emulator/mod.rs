@@ -18,12 +18,12 @@
 //! | `busy` | the loop's busy time and the capacity it implies |
 //! | `config` | the arguments resolved once: each lane's scenario, seed and queue |
 //! | `itp` | lanes of ITP frames over iceoryx2 and UDP: their transports opened, `udp.json` |
-//! | `ros2`, `ros2_plan`, `ros2_topic` | lanes of ROS 2 topics: their flags resolved, topics settled and opened, `ros2.json`; the forward and return channels |
+//! | `ros2/` | lanes of ROS 2 topics: their flags resolved (`plan`), topics settled and opened, `ros2.json`; the forward and return channels (`topic`) |
 //! | `run` | running lanes of any kind: control, placement, the loop, the reports |
 //! | `report` | `emulator.json`, the joint report of several lanes, `udp.json` |
 //!
 //! Each step has its own error ([`config::ConfigError`],
-//! [`ros2_plan::Ros2PlanError`], [`opening::OpenError`],
+//! [`ros2::plan::Ros2PlanError`], [`opening::OpenError`],
 //! [`ros2::TopicError`], [`path::PathError`], [`run::RunError`]);
 //! [`EmulatorError`] is any of them, with the stream or lane it came from.
 
@@ -36,8 +36,6 @@ pub mod opening;
 pub mod path;
 pub mod report;
 pub mod ros2;
-pub mod ros2_plan;
-pub mod ros2_topic;
 pub mod run;
 pub mod spin;
 
@@ -53,7 +51,7 @@ pub enum EmulatorError {
     #[error(transparent)]
     Config(#[from] config::ConfigError),
     #[error(transparent)]
-    Ros2Plan(#[from] ros2_plan::Ros2PlanError),
+    Ros2Plan(#[from] ros2::plan::Ros2PlanError),
     #[error(transparent)]
     Pid(#[from] crate::service::PidError),
     /// The ROS 2 participant's threads, placed off the loop's core.

@@ -24,8 +24,8 @@ static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
 pub struct IpcNode {
     /// Dropped by hand first in `Drop`, so the run's last node can then
     /// remove the run's management segment.
-    node: ManuallyDrop<Node<Ipc>>,
-    config: IpcConfig,
+    pub(super) node: ManuallyDrop<Node<Ipc>>,
+    pub(super) config: IpcConfig,
     role: Role,
     startup_cleanup: CleanupReport,
 }
@@ -173,21 +173,6 @@ impl IpcNode {
     /// Opens a subscribing end of `channel` carrying payload `T`.
     pub fn subscriber_of<T: IpcPayload>(&self, channel: Port) -> Result<FrameSubscriber<T>, SubscriberOpenError> {
         let s = FrameSubscriber::open(&self.node, &self.config, channel);
-        make_private(self.config.prefix());
-        s
-    }
-
-    /// Opens the publishing end of a video channel (`video`, `video_out`)
-    /// for payloads of at most `max_len` bytes.
-    pub fn video_publisher(&self, channel: Port, max_len: usize) -> Result<super::video::VideoPublisher, super::video::VideoOpenError> {
-        let p = super::video::VideoPublisher::open(&self.node, &self.config, channel, max_len);
-        make_private(self.config.prefix());
-        p
-    }
-
-    /// Opens the subscribing end of a video channel.
-    pub fn video_subscriber(&self, channel: Port) -> Result<super::video::VideoSubscriber, super::video::VideoOpenError> {
-        let s = super::video::VideoSubscriber::open(&self.node, &self.config, channel);
         make_private(self.config.prefix());
         s
     }

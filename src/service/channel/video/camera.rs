@@ -3,7 +3,7 @@
 
 use super::{spawn, VideoArgs, VideoError, Worker};
 use crate::clock::now_ns;
-use crate::sample::VideoHeader;
+use crate::transport::ipc::video::VideoHeader;
 use crate::transport::ipc::video::VIDEO;
 use crate::transport::Role;
 use serde::{Deserialize, Serialize};

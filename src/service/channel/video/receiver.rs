@@ -5,7 +5,7 @@ use super::camera::pattern;
 use super::{spawn, VideoArgs, VideoError, Worker};
 use crate::clock::now_ns;
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::sample::VideoHeader;
+use crate::transport::ipc::video::VideoHeader;
 use crate::transport::ipc::video::VideoSubscriber;
 use crate::transport::ipc::video::VIDEO_OUT;
 use crate::transport::Role;

@@ -9,14 +9,18 @@
 //! `emulator.json`, `ros2.json` says what the lane relayed with which QoS,
 //! who came and left, and why its stream ended.
 
+
+pub mod plan;
+pub mod topic;
+
 use crate::scenario::Scenario;
 use crate::service::args::EmulatorArgs;
 use crate::service::emulator::config::LaneConfig;
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::opening::PathPlan;
 use crate::service::emulator::path::{Path, Reverse};
-use crate::service::emulator::ros2_plan::{config, LaneTopics, Plan, DEFAULT_QUEUE_CAPACITY};
-use crate::service::emulator::ros2_topic::{Forward, Return, Topic, TopicPorts};
+use crate::service::emulator::ros2::plan::{config, LaneTopics, Plan, DEFAULT_QUEUE_CAPACITY};
+use crate::service::emulator::ros2::topic::{Forward, Return, Topic, TopicPorts};
 use crate::service::emulator::run;
 use crate::service::schema::ros2::{EndpointSeen, EventRow, Ros2Report, TopicReport};
 use crate::service::schema::EmulatorReport;
@@ -309,7 +313,7 @@ fn seen(node: &Ros2Node, from: &TopicName, to: &TopicName, t0_ns: u64) -> (Vec<E
 }
 
 /// `ros2.json`'s part of one direction.
-fn topic_report<D: crate::service::emulator::ros2_topic::Direction>(node: &Ros2Node, o: &Opened, chan: Option<&Topic<D>>, from: &TopicName, to: &TopicName, max_bytes: usize, t0_ns: u64) -> TopicReport {
+fn topic_report<D: crate::service::emulator::ros2::topic::Direction>(node: &Ros2Node, o: &Opened, chan: Option<&Topic<D>>, from: &TopicName, to: &TopicName, max_bytes: usize, t0_ns: u64) -> TopicReport {
     let (endpoints, events) = seen(node, from, to, t0_ns);
     let (slots, _, high) = chan.map_or((0, 0, 0), |c| c.slots());
     TopicReport {

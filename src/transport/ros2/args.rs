@@ -3,8 +3,8 @@
 //! the domain and the limits. `crate::service::emulator::ros2` resolves
 //! them.
 
-use super::argv::{Argv, Render};
-use super::values::{millis, seconds};
+use crate::flags::values::{millis, seconds};
+use crate::flags::{Argv, Render};
 use clap::Args;
 
 /// The emulator's ROS 2 flags (`netfi emulator --ros2-topic …`).

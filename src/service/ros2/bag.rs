@@ -21,8 +21,9 @@
 //!   `--rate`), publishes each topic with its recorded type, and skips, with
 //!   a count, messages in an encapsulation other than little-endian CDR.
 
-use crate::service::args::{millis, seconds, DEFAULT_MAX_BYTES};
-use crate::service::emulator::ros2_plan::{domain, Ros2PlanError};
+use crate::service::args::{millis, seconds};
+use crate::transport::ros2::DEFAULT_MAX_BYTES;
+use crate::service::emulator::ros2::plan::{domain, Ros2PlanError};
 use crate::transport::ros2::{port::unix_ns, qos, NameError, OpenError, Payload, Role, Ros2Node, Slots, TakeError, TopicName, TypeName};
 use clap::{Args, Subcommand};
 use std::cell::RefCell;
