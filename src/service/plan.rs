@@ -6,7 +6,8 @@
 //! [`seeds`](crate::service::seeds)) and handed to the processes.
 
 use crate::scenario::ScenarioSpec;
-use crate::service::args::{ArgsError, ConsoleArgs, EmulatorArgs, EmulatorPlacement, PinArgs, RunArgs, SimulatorArgs};
+use crate::service::args::run::LAB_ROBOT_WAIT_S;
+use crate::service::args::{ArgsError, ConsoleArgs, EmulatorArgs, EmulatorPlacement, Peer, PinArgs, RunArgs, SimulatorArgs};
 use crate::service::channel::Want;
 use std::collections::BTreeMap;
 use crate::service::args::streams;
@@ -69,8 +70,10 @@ pub struct StreamPlan {
     pub scenario_path: PathBuf,
     /// The copy the emulator reads, this run's own.
     pub own_scenario: PathBuf,
-    pub console: ConsoleArgs,
-    pub simulator: SimulatorArgs,
+    /// netfi's own console, when it plays the console (`None`: the lab's).
+    pub console: Option<ConsoleArgs>,
+    /// netfi's own robot, when it plays the robot (`None`: the lab's).
+    pub simulator: Option<SimulatorArgs>,
 }
 
 /// Where each process runs: a core of its own, or (`None`) not pinned.
@@ -113,6 +116,10 @@ pub struct Plan {
     /// Where stream 0's scenario is kept for people.
     pub scenario_path: PathBuf,
     pub planned_s: f64,
+    /// When the run ends by the clock (the planned end of netfi's own
+    /// console's stream, or the duration a run of the lab's console was
+    /// given); `None`: when the lab's console ends it, or on Ctrl-C.
+    pub until_s: Option<f64>,
     pub expected_frames: u64,
     pub cores: Cores,
     pub emulator: EmulatorArgs,
@@ -134,7 +141,11 @@ impl Plan {
         let emulator = emulator(args, &streams, cores, &seeds, expected_frames, &out);
         let s0 = &streams[0];
         let (spec, scenario_path) = (s0.spec.clone(), s0.scenario_path.clone());
-        Ok(Plan { run_id, out, spec, seed, seeds, scenario_path, planned_s, expected_frames, cores, emulator, streams })
+        let until_s = match args.peers.console() {
+            Peer::Own => Some(planned_s),
+            Peer::Lab => args.source.duration_s,
+        };
+        Ok(Plan { run_id, out, spec, seed, seeds, scenario_path, planned_s, until_s, expected_frames, cores, emulator, streams })
     }
 }
 
@@ -183,6 +194,8 @@ impl Run<'_> {
             channels: args.channels.end_args(),
         };
         let (scenario_path, own_scenario) = (out.join("scenario.toml"), out.join(format!("scenario.{run_id}.toml")));
+        let console = (args.peers.console() == Peer::Own).then_some(console);
+        let simulator = (args.peers.robot() == Peer::Own).then_some(simulator);
         StreamPlan { index: k, run_id, out, spec, seed, scenario_path, own_scenario, console, simulator }
     }
 }
@@ -213,6 +226,14 @@ fn emulator(args: &RunArgs, streams: &[StreamPlan], cores: Cores, seeds: &Seeds,
         }
     }
     e.control = args.control.clone();
+    // Where the emulator meets the lab's programs, and how long it waits
+    // for the lab's robot on iceoryx2.
+    let p = &args.peers;
+    e.ends = p.ends.clone();
+    e.transports = p.transports.clone();
+    e.ros2 = p.ros2.clone();
+    let robot_subscribes = p.ends.egress.of::<crate::transport::ipc::Iceoryx2>().is_some() && !p.ros2.on();
+    e.wait_for_peer_s = p.wait_for_peer_s.or((p.robot() == Peer::Lab && robot_subscribes).then_some(LAB_ROBOT_WAIT_S));
     e.stream.streams = streams.len() as u32;
     e.stream.stream_scenario = streams.iter().skip(1).map(|s| format!("{}={}", s.index, s.own_scenario.display())).collect();
     e

@@ -21,6 +21,22 @@ pub enum ArgsError {
     /// A transport's flags that do not fit the lane.
     #[error(transparent)]
     Transport(#[from] crate::transport::TransportArgsError),
+    /// netfi's own console or robot at an endpoint other than iceoryx2.
+    #[error("netfi's own {end} speaks iceoryx2 only, and {flag} is {at}: give --{end} lab to join the lab's {end} there")]
+    OwnEndElsewhere {
+        /// `console` or `robot`.
+        end: &'static str,
+        /// The flag of its side.
+        flag: &'static str,
+        /// What that side is.
+        at: String,
+    },
+    /// The lab's programs with several streams.
+    #[error("--streams {streams}: the lab's console and robot join one stream (several arms: --ros2-topic once per arm)")]
+    LabStreams {
+        /// The streams asked for.
+        streams: u32,
+    },
     /// A run that would last longer than a run may.
     #[error("--frames {frames} at {rate_hz} Hz would stream for {seconds} s; a run lasts at most a week ({max_s} s)")]
     TooLong {

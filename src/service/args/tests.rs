@@ -155,6 +155,7 @@ fn a_run_parses_back_what_it_renders() {
         no_direct: true,
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: false },
         stream: StreamArgs::default(),
+        peers: PeersArgs::default(),
     };
     assert_eq!(RunArgs::from_argv(r.to_argv()).unwrap(), r, "{:?}", r.to_argv());
     let Ok(Cmd::Run(back)) = parse("run", &r.to_argv()) else { panic!("{:?}", r.to_argv()) };

@@ -42,6 +42,9 @@ pub struct RunnerView {
     pub processes: Vec<ProcessEnd>,
     pub faults: Vec<String>,
     pub interrupted: bool,
+    /// The roles the lab's own programs played (`console`, `simulator`):
+    /// their reports are not the run's to have.
+    pub lab: Vec<&'static str>,
 }
 
 /// One service's report in a run's directory.
@@ -93,7 +96,14 @@ impl Parts {
 
     /// A fault for each report the runner expected and did not find.
     pub(super) fn faults(&self) -> impl Iterator<Item = String> + '_ {
-        self.missing.iter().map(|(_, role, why)| match why {
+        self.faults_but(&[])
+    }
+
+    /// A fault for each report the runner expected and did not find, but
+    /// the absent reports of the roles in `lab` (played by the lab's own
+    /// programs).
+    pub(super) fn faults_but<'a>(&'a self, lab: &'a [&'static str]) -> impl Iterator<Item = String> + 'a {
+        self.missing.iter().filter(move |(_, role, why)| !(why.is_none() && lab.contains(&role.as_str()))).map(|(_, role, why)| match why {
             None => format!("no report from the {role}"),
             Some(why) => format!("no report from the {role}: {why}"),
         })
@@ -238,7 +248,8 @@ impl RunReport {
     /// faults. The emulator's trace is joined into `trace.csv` and removed.
     pub fn assemble_run(facts: &RunFacts, mut runner: RunnerView) -> RunReport {
         let parts = Parts::read(facts.out, None);
-        runner.faults.extend(parts.faults());
+        let lab = std::mem::take(&mut runner.lab);
+        runner.faults.extend(parts.faults_but(&lab));
         assemble(facts, parts, runner, Source::Consume)
     }
 
@@ -310,7 +321,7 @@ impl RunReport {
         // Without a runner, a missing console or robot report is no fault
         // (a foreign client writes none); one that cannot be read is.
         let faults = parts.faults().zip(&parts.missing).filter(|(_, (_, _, why))| why.is_some()).map(|(f, _)| f).collect();
-        let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false };
+        let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false, lab: Vec::new() };
         Ok(assemble(&facts, parts, runner, Source::Keep))
     }
 }

@@ -53,6 +53,8 @@ impl RunReport {
             seed: plan.seed,
             scenario_path: Some(&plan.scenario_path),
         };
-        RunReport::assemble_run(&facts, RunnerView { duration_s, steal, processes, faults, interrupted })
+        let s0 = &plan.streams[0];
+        let lab = [("console", s0.console.is_none()), ("simulator", s0.simulator.is_none())].into_iter().filter(|(_, lab)| *lab).map(|(role, _)| role).collect();
+        RunReport::assemble_run(&facts, RunnerView { duration_s, steal, processes, faults, interrupted, lab })
     }
 }

@@ -111,6 +111,15 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     Ok((plan, lock))
 }
 
+/// Where netfi's own end runs, or that the lab's program plays it.
+fn end(own: bool, core: Option<usize>) -> String {
+    match (own, core) {
+        (false, _) => "(the lab's)".into(),
+        (true, None) => "(shared)".into(),
+        (true, Some(c)) => c.to_string(),
+    }
+}
+
 /// Keeps the runner off the emulator's core and says what runs where.
 fn announce(plan: &Plan) -> Result<()> {
     let cores = plan.cores;
@@ -126,8 +135,8 @@ fn announce(plan: &Plan) -> Result<()> {
         plan.spec.name,
         plan.seed,
         cores.emulator.map_or("(not pinned)".into(), |c| c.to_string()),
-        cores.console.map_or("(shared)".into(), |c| c.to_string()),
-        cores.simulator.map_or("(shared)".into(), |c| c.to_string()),
+        end(plan.streams[0].console.is_some(), cores.console),
+        end(plan.streams[0].simulator.is_some(), cores.simulator),
         plan.out.display()
     );
     Ok(())
