@@ -38,7 +38,7 @@ fn video() -> crate::service::video::VideoArgs {
 fn a_console_parses_back_what_it_renders() {
     let c = ConsoleArgs {
         run_id: "r9".into(),
-        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()) },
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()), capture_max_records: Some(5000) },
         seed: Some(u64::MAX),
         pin: PinArgs { core: None, avoid_core: Some(3) },
         out: "o/c".into(),
