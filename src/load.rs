@@ -138,13 +138,16 @@ pub fn resolve(arg: &str) -> Result<ScenarioSpec, ScenarioError> {
 /// stages and phases name it.
 pub struct DirFiles {
     dir: PathBuf,
-    traces: RefCell<HashMap<FileId, Arc<Schedule>>>,
+    traces: Shared<FileId, Schedule>,
     /// By file and the records a capture is read up to.
-    recordings: RefCell<HashMap<(FileId, Option<u64>), Arc<Recording>>>,
+    recordings: Shared<(FileId, Option<u64>), Recording>,
 }
 
 /// A file's identity: its device and inode.
 type FileId = (u64, u64);
+
+/// What was parsed of the files read, by key.
+type Shared<K, T> = RefCell<HashMap<K, Arc<T>>>;
 
 impl DirFiles {
     pub fn new(dir: impl Into<PathBuf>) -> DirFiles {
