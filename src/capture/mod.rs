@@ -165,7 +165,9 @@ impl Capture {
 /// What reading a capture through [`scan`] found: its layout and counts.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Scanned {
+    /// The record layout found.
     pub layout: RecordLayout,
+    /// The counts over every record.
     pub stats: CaptureStats,
 }
 
