@@ -177,6 +177,11 @@ pub struct ReplayParams {
     /// The recording (a `trace.csv`, or a delay-trial capture), relative to
     /// the scenario file.
     pub file: String,
+    /// The most records read of a delay capture (`file`): 1 to
+    /// [`MAX_FATES`]; default the capture reader's (4,194,304, as
+    /// `--capture-max-records`). A capture with more is refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_records: Option<u64>,
     /// The parsed recording, filled in by whoever read `file`.
     #[serde(skip)]
     pub recording: Option<Arc<Recording>>,
@@ -184,7 +189,7 @@ pub struct ReplayParams {
 
 impl ReplayParams {
     pub fn new(file: impl Into<String>, recording: Recording) -> ReplayParams {
-        ReplayParams { file: file.into(), recording: Some(Arc::new(recording)) }
+        ReplayParams { file: file.into(), max_records: None, recording: Some(Arc::new(recording)) }
     }
 }
 

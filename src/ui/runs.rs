@@ -154,9 +154,7 @@ impl Start {
             }
         }
         if let Some(c) = self.capture.as_deref().map(str::trim).filter(|c| !c.is_empty()) {
-            if !std::path::Path::new(c).is_file() {
-                return Err(UiError::NoCapture(c.to_string()));
-            }
+            check_capture(c)?;
             a.source.capture = Some(PathBuf::from(c));
         }
         if self.isolate == Some(false) {
@@ -164,6 +162,16 @@ impl Start {
         }
         Ok(a)
     }
+}
+
+/// Reads the capture `path` as the run's console will (a regular file, up
+/// to the default record limit, checked whole), so that a capture the run
+/// would refuse is refused before it starts, with the console's reason.
+fn check_capture(path: &str) -> Result<(), UiError> {
+    if !std::path::Path::new(path).exists() {
+        return Err(UiError::NoCapture(path.to_string()));
+    }
+    crate::capture::load(path).map(drop).map_err(UiError::Capture)
 }
 
 /// Checks `run` as `netfi run` would read its argv, before any process
@@ -440,5 +448,33 @@ mod tests {
         assert!(e.starts_with("invalid value '1000000000' for '--rate-hz"), "{e}");
         let e = check_run_args(&Start { video_scenario: Some("x".into()), ..start() }.run_args().unwrap());
         assert!(e.is_ok(), "a video scenario without video is left out: {e:?}");
+    }
+
+    /// The capture field is read as the run's console will read it: a
+    /// FIFO is refused at once (not waited on), a damaged file with the
+    /// reader's reason, before any process starts.
+    #[test]
+    fn the_capture_field_is_refused_as_the_console_would_refuse_it() {
+        let dir = crate::scratch::dir("capture-field");
+        let options = |c: &std::path::Path| {
+            serde_json::from_value::<Start>(serde_json::json!({ "toml": "", "duration_s": 1.0, "seed": null, "capture": c })).unwrap().run_args()
+        };
+        let good = dir.join("good.lz4");
+        let mut w = crate::capture::CaptureWriter::create(&good).unwrap();
+        w.write_frame(1, &crate::frame::ItpFrame::default().with_checksum()).unwrap();
+        w.finish().unwrap();
+        let a = options(&good).unwrap();
+        assert_eq!(a.source.capture.as_deref(), Some(good.as_path()));
+        assert!(matches!(options(&dir.join("absent.lz4")), Err(UiError::NoCapture(_))));
+        let fifo = dir.join("fifo.lz4");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let e = options(&fifo).unwrap_err().to_string();
+        assert!(e.contains("a FIFO: only regular files are read"), "{e}");
+        std::fs::write(dir.join("text.lz4"), b"not a capture").unwrap();
+        let e = options(&dir.join("text.lz4")).unwrap_err().to_string();
+        assert!(e.contains("text.lz4") && e.contains("LZ4"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -241,6 +241,11 @@ fn the_real_capture_replays_with_its_timing() {
     // About 517 Hz for 3 s of the recording.
     assert!((1300..=1800).contains(&sent), "{sent}");
     assert_eq!(r["console"]["source"].as_str().map(|s| s.starts_with("capture:")), Some(true));
+    // The recording has no LZ4 content checksum: the report says what of
+    // it no checksum covers.
+    let note = &r["console"]["capture"];
+    assert_eq!((note["records"].as_u64(), note["content_checksum"].as_bool()), (Some(41_508), Some(false)), "{note:#}");
+    assert_eq!(note["unverified"][0], "time_ns");
     // Every frame of the recording has a valid checksum.
     assert_eq!(u(&r["simulator"]["bad_checksum"]), 0);
 }

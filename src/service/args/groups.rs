@@ -57,6 +57,11 @@ pub struct SourceArgs {
     /// Replay a recorded capture (LZ4 ITP records) instead of synthetic motion.
     #[arg(long)]
     pub capture: Option<PathBuf>,
+    /// The most records of --capture read, 1 to 2^32 (default 4194304, 2^22:
+    /// 70 min at 1 kHz, about 600 MB in memory); a capture with more is
+    /// refused before more of it is read.
+    #[arg(long, value_name = "RECORDS", requires = "capture", value_parser = values::capture_max_records())]
+    pub capture_max_records: Option<u64>,
 }
 
 impl SourceArgs {
@@ -84,7 +89,8 @@ impl Render for SourceArgs {
         a.opt("--rate-hz", self.rate_hz)
             .opt("--frames", self.frames)
             .opt("--duration-s", self.duration_s)
-            .opt("--capture", self.capture.as_ref().map(|c| c.display()));
+            .opt("--capture", self.capture.as_ref().map(|c| c.display()))
+            .opt("--capture-max-records", self.capture_max_records);
     }
 }
 

@@ -40,7 +40,7 @@ fn video() -> crate::service::channel::video::VideoArgs {
 fn a_console_parses_back_what_it_renders() {
     let c = ConsoleArgs {
         run_id: "r9".into(),
-        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()) },
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()), capture_max_records: Some(5000) },
         seed: Some(u64::MAX),
         pin: PinArgs { core: None, avoid_core: Some(3) },
         out: "o/c".into(),
@@ -139,7 +139,7 @@ fn a_simulator_parses_back_what_it_renders() {
 fn a_run_parses_back_what_it_renders() {
     let r = RunArgs {
         scenario: ScenarioArgs { scenario: "config/scenarios/x.toml".into(), seed: Some(3), queue_capacity: Some(77) },
-        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()) },
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()), capture_max_records: Some(5000) },
         placement: RunPlacement {
             emulator: EmulatorPlacement { core: Some(1), no_pin: false, rt_priority: Some(5), isolate: false },
             no_isolate: true,

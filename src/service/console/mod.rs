@@ -38,6 +38,10 @@ pub struct ConsoleReport {
     pub frames_sent: u64,
     /// `synthetic` or `capture:<path>`.
     pub source: String,
+    /// The capture replayed: its records, layout, and whether its content
+    /// is verified (the fields that are not, without a content checksum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub capture: Option<crate::capture::CaptureNote>,
     /// Mean send rate achieved.
     pub rate_hz: f64,
     pub seed: u64,
@@ -250,6 +254,7 @@ impl Streamer<'_> {
         ConsoleReport {
             frames_sent: self.sent,
             source,
+            capture: None,
             rate_hz: if duration_s > 0.0 { self.sent as f64 / duration_s } else { 0.0 },
             seed,
             duration_s,
@@ -270,7 +275,7 @@ impl Streamer<'_> {
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     args.source.planned()?;
     let seed = crate::service::seeds::given_or_fresh(args.seed);
-    let mut script = Script::from_args(args, seed)?;
+    let (mut script, capture) = Script::from_args(args, seed)?;
     let n = script.len(args.source.frames, args.source.duration_s);
     crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
@@ -298,7 +303,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     s.end();
     let fb_ended = wait_for_feedback(&mut s.fb, s.sent, args, &mut stop);
     let video = video.map(|v| v.finish()).transpose()?;
-    let report = ConsoleReport { video, ..s.report(source, seed, &streamed, fb_ended, steal_timer.stop()) };
+    let report = ConsoleReport { video, capture, ..s.report(source, seed, &streamed, fb_ended, steal_timer.stop()) };
     if args.live || s.fb.received > 0 {
         eprintln!("{}", s.fb.live_line());
     }

@@ -57,7 +57,7 @@ pub(super) enum Found<T> {
 impl<T: DeserializeOwned> Found<T> {
     /// Reads `path`.
     pub(super) fn read(path: &Path) -> Found<T> {
-        match std::fs::read(path) {
+        match crate::load::read_file(path) {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Found::Absent,
             Err(e) => Found::Unreadable(format!("reading {}: {e}", path.display())),
             Ok(bytes) => match serde_json::from_slice(&bytes) {

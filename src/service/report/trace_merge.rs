@@ -80,7 +80,7 @@ impl Receipts {
         let cut = !whole.exists();
         let path = if cut { partial_path(&whole) } else { whole };
         let mut r = Receipts::default();
-        let Ok(f) = std::fs::File::open(&path) else { return Ok(r) };
+        let Ok(f) = crate::load::open_regular(&path) else { return Ok(r) };
         let mut reader = std::io::BufReader::new(f);
         let mut line = String::new();
         let mut header = true;
@@ -176,7 +176,7 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let mut delays = Delays::default();
     let mut fates = Fates::default();
-    let rows = std::io::BufReader::new(std::fs::File::open(input).map_err(read_err)?).lines();
+    let rows = std::io::BufReader::new(crate::load::open_regular(input).map_err(read_err)?).lines();
     for (n, line) in rows.enumerate() {
         let line = line.map_err(read_err)?;
         if n > 0 {
@@ -236,7 +236,7 @@ fn read_delays(path: &Path) -> Result<(Delays, Fates), MergeError> {
     let read_err = |source| MergeError::Read { path: path.to_path_buf(), source };
     let mut delays = Delays::default();
     let mut fates = Fates::default();
-    for line in std::io::BufReader::new(std::fs::File::open(path).map_err(read_err)?).lines().skip(1) {
+    for line in std::io::BufReader::new(crate::load::open_regular(path).map_err(read_err)?).lines().skip(1) {
         let line = line.map_err(read_err)?;
         fate(&line, &mut fates);
         let cols: Vec<&str> = line.split(',').collect();

@@ -250,7 +250,7 @@ pub fn replay(a: &ReplayArgs) -> Result<u64, BagError> {
     if !(a.rate.is_finite() && a.rate > 0.0) {
         return Err(BagError::Rate(a.rate));
     }
-    let bytes = std::fs::read(&a.file).map_err(|e| BagError::Read(a.file.clone(), e))?;
+    let bytes = crate::load::read_file(&a.file).map_err(|e| BagError::Read(a.file.clone(), e))?;
     let mut node = Ros2Node::open(domain(a.ros2_domain)?)?;
     let (mut writers, mut by_channel, mut messages) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut skipped = 0u64;

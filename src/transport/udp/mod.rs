@@ -25,7 +25,9 @@
 //!   ingress takes only its console's frames ([`ConsolePolicy`]) and its
 //!   return path only the robot's datagrams (the egress port accepts only
 //!   the robot's address). Unlike `connect(2)`, what is refused is counted,
-//!   and a handle made by [`UdpPort::try_clone`] keeps the peer.
+//!   and a handle made by [`UdpPort::try_clone`] keeps the peer. An IPv4
+//!   peer is the same peer when a dual-stack socket (bound to `[::]`) sees
+//!   it as an IPv4-mapped address ([`peers::same_sender`]).
 //!
 //! Sockets here know nothing about frames, scenarios or the emulator; the
 //! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
@@ -321,7 +323,7 @@ impl UdpPort {
     pub fn recv_from(&self, buf: &mut [u8]) -> Result<Option<Datagram>, UdpRecvError> {
         for _ in 0..REFUSED_PER_RECEIVE {
             match self.recv_any(buf)? {
-                Some(d) if self.peer.as_ref().is_some_and(|p| p.addr() != d.from) => {
+                Some(d) if self.peer.as_ref().is_some_and(|p| !peers::same_sender(p.addr(), d.from)) => {
                     let mut r = self.refused.get();
                     r.count(d.from);
                     self.refused.set(r);
