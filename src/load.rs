@@ -129,6 +129,31 @@ pub fn resolve(arg: &str) -> Result<ScenarioSpec, ScenarioError> {
     })
 }
 
+/// [`resolve`], with every file the scenario's stages name (link traces,
+/// recordings) made absolute: the spec can then be written anywhere (a
+/// run's output directory) and read again from there, and names the very
+/// files that were read. A preset names none.
+pub fn resolve_anchored(arg: &str) -> Result<ScenarioSpec, ScenarioError> {
+    let mut spec = resolve(arg)?;
+    if preset(arg).is_some() {
+        return Ok(spec);
+    }
+    let dir = Path::new(arg).parent().unwrap_or(Path::new("."));
+    for file in spec.files_mut() {
+        *file = anchored(dir, file).map_err(|problem| ScenarioError { origin: arg.to_string(), line: None, location: None, field: Some("file".into()), problem })?;
+    }
+    Ok(spec)
+}
+
+/// `file` as a scenario in `dir` names it, as an absolute path: the file
+/// itself with links followed, or (a file gone since it was read) the
+/// path made absolute as it is.
+fn anchored(dir: &Path, file: &str) -> Result<String, String> {
+    let path = dir.join(file);
+    let absolute = path.canonicalize().or_else(|_| std::path::absolute(&path)).map_err(|e| format!("`{file}`: cannot be made absolute: {e}"))?;
+    absolute.into_os_string().into_string().map_err(|p| format!("`{file}`: its absolute path `{}` is not UTF-8 text, which a scenario file cannot name", p.to_string_lossy()))
+}
+
 /// The files a scenario names, read from a directory (absolute names as
 /// they are). Errors name the file as written in the scenario, and the line
 /// (link traces, `trace.csv`) or record (captures) that is wrong.

@@ -461,6 +461,9 @@ fn wrong_sizes_and_checksums_are_counted_then_dropped_or_passed() {
         assert_accounted(&e, &udp, sent);
         let f = &e["frames"];
         assert_eq!(u(&f["dropped"]["wrong_size"]), 5, "{f}");
+        // The loss figure is the scenario's (Normal: none): the malformed
+        // frames never reached it.
+        assert_eq!((e["loss_rate"].as_f64(), e["loss_rate_ci95"][0].as_f64()), (Some(0.0), Some(0.0)), "{e:#}");
         if drop_bad {
             assert_eq!(u(&f["dropped"]["bad_checksum"]), 4, "{f}");
             assert_eq!(u(&f["delivered"]), 10);

@@ -201,10 +201,11 @@ fn print_outcome(r: &CheckReport) {
     for (reason, n) in &r.dropped {
         println!("dropped           {n} by {reason}");
     }
-    println!(
-        "loss rate         {:.5}  95% CI [{:.5}, {:.5}]",
-        r.loss_rate, r.loss_rate_ci95[0], r.loss_rate_ci95[1]
-    );
+    let bound = |x: f64| netfi::metrics::fmt_rate(x, 5);
+    println!("loss rate         {:.5}  95% CI [{}, {}]", r.loss_rate, bound(r.loss_rate_ci95[0]), bound(r.loss_rate_ci95[1]));
+    if let Some(u) = r.loss_rate_unseen_model.filter(|u| *u >= 0.000005) {
+        println!("                  (the upper end adds the {u:.5} the models lose in bursts longer than a run this long likely meets)");
+    }
     println!("mean loss run     {:.3} frames", r.loss_run_mean);
     let d = &r.delay_ms;
     let precision = d.error_fraction_max.map(|_| format!("  ({})", d.precision())).unwrap_or_default();

@@ -194,6 +194,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
+        loss_rate_unseen_model: e.and_then(|e| e.link.loss_rate_unseen_model),
         phases: Vec::new(),
         phases_unknown: None,
         stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),

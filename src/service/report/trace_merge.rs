@@ -25,6 +25,7 @@ pub const TRACE: &str = "trace.csv";
 const SEND_COLUMN: usize = 3;
 const INGRESS_COLUMN: usize = 4;
 const FATE_COLUMN: usize = 5;
+const REASON_COLUMN: usize = 6;
 const DELAY_COLUMN: usize = 9;
 const RELEASE_SCHED_COLUMN: usize = 10;
 const COPY_COLUMN: usize = 13;
@@ -207,13 +208,18 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
 }
 
 /// Adds a row's frame to `fates`: its ingress time and whether it was
-/// dropped; a copy's row (a `copy` other than 0) and a row that does not
-/// parse add nothing.
+/// dropped; a copy's row (a `copy` other than 0), a malformed frame's
+/// (dropped before the scenario: not a fate the scenario gave) and a row
+/// that does not parse add nothing.
 fn fate(line: &str, fates: &mut Fates) {
     let cols: Vec<&str> = line.split(',').collect();
     let original = cols.get(COPY_COLUMN).is_none_or(|c| c.is_empty() || *c == "0");
+    let malformed = cols.get(REASON_COLUMN).is_some_and(|r| crate::injector::Invalid::of_reason(r).is_some());
     if let (true, Some(t), Some(f)) = (original, column(&cols, INGRESS_COLUMN), cols.get(FATE_COLUMN)) {
-        fates.push(t, *f == "dropped");
+        match malformed {
+            true => fates.entered(t),
+            false => fates.push(t, *f == "dropped"),
+        }
     }
 }
 

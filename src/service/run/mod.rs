@@ -53,11 +53,13 @@ fn resolve_path(flag: &'static str, name: Option<&str>) -> Result<ScenarioSpec> 
 /// (so a bad one fails before any process starts), each stream's run id
 /// checked; and the run's seed.
 fn resolve(args: &RunArgs, run_id: &str) -> Result<(Resolved, u64)> {
-    let spec = crate::load::resolve(&args.scenario.scenario)?;
+    // Anchored: the emulator reads its copy in the output directory, and
+    // the files the stages name are where the scenario file is.
+    let spec = crate::load::resolve_anchored(&args.scenario.scenario)?;
     let seed = seeds::run(args.scenario.seed, &spec);
     let mut specs = vec![spec; args.stream.streams as usize];
     for (k, what) in args.stream.named_scenarios()? {
-        specs[k] = crate::load::resolve(&what).map_err(|cause| RunnerError::StreamScenario { stream: k, what: what.clone(), cause })?;
+        specs[k] = crate::load::resolve_anchored(&what).map_err(|cause| RunnerError::StreamScenario { stream: k, what: what.clone(), cause })?;
     }
     for (k, s) in specs.iter().enumerate() {
         Scenario::new(s, seeds::stream(seed, k)).map_err(|e| RunnerError::StreamSeed(k, e))?;

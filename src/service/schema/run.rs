@@ -177,10 +177,17 @@ pub struct RunReport {
     #[serde(default)]
     pub stopped: bool,
     pub frames: FrameAccount,
-    /// The whole run's realized loss; where the run had several phases or
-    /// live switches it mixes their conditions (see `phases`).
+    /// The whole run's realized loss: the scenario's drops over the frames
+    /// it decided (malformed frames, dropped before it, are in neither);
+    /// where the run had several phases or live switches it mixes their
+    /// conditions (see `phases`).
     pub loss_rate: Option<f64>,
     pub loss_rate_ci95: Option<[f64; 2]>,
+    /// The models' loss in bursts longer than the run likely met, included
+    /// in the upper end of `loss_rate_ci95` (docs/spec.md §5); absent where
+    /// no stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     /// Each stretch of the run under one condition, in time order, where
     /// the run had phases, live switches or pauses (absent otherwise).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -270,6 +277,11 @@ pub struct PhaseFigures {
     /// stretch's frames in order).
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
+    /// The models' loss in bursts longer than the stretch likely met,
+    /// included in the upper end of `loss_rate_ci95`; absent where no
+    /// stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     /// The phase's long-run loss by its model, where it has exactly one
     /// stage that drops and its model's loss is known (0 when paused).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -4,7 +4,7 @@
 //! it and the robot's own count.
 
 use super::super::declare::Sources;
-use crate::metrics::Summary;
+use crate::metrics::{fmt_rate, Summary};
 use crate::service::console::ConsoleFeedback;
 use crate::service::report::{dropped_list, line, opt};
 use crate::service::schema::PathReport;
@@ -165,11 +165,11 @@ impl FeedbackSection {
             );
         }
         s += &format!(
-            "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
+            "  accounting {}; loss {:.4}, 95% CI [{}, {}]\n",
             if self.balanced { "balanced" } else { "NOT balanced" },
             self.loss_rate,
-            self.loss_rate_ci95[0],
-            self.loss_rate_ci95[1]
+            fmt_rate(self.loss_rate_ci95[0], 4),
+            fmt_rate(self.loss_rate_ci95[1], 4)
         );
         s += &format!("  round trip        {}\n", line(&self.round_trip_ns));
         s += &format!("  emulator's share  {}\n", line(&self.emulator_share_ns));
