@@ -22,10 +22,10 @@ pub fn or_skip(relative: &str, what: &str) -> Option<PathBuf> {
     }
     assert!(
         std::env::var_os("NETFI_REQUIRE_DATA").is_none(),
-        "NETFI_REQUIRE_DATA is set but {what} is absent: no {} (the shared data belongs at ../shared/data beside the checkout)",
+        "NETFI_REQUIRE_DATA is set but there is no {} ({what}; the shared data belongs at ../shared/data beside the checkout)",
         path.display()
     );
-    eprintln!("skipping: {what} is absent: no {}", path.display());
+    eprintln!("skipping: there is no {} ({what})", path.display());
     None
 }
 

@@ -144,10 +144,11 @@ fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
     // before tc runs, naming where it looked.
     let path = d.0.join("netem.sh");
     std::fs::write(&path, &local).unwrap();
+    std::fs::remove_file(d.0.join("tc.args")).unwrap();
     let o = Command::new("sh")
         .arg(&path)
         .env_remove("TC_LIB_DIR")
-        .env("PATH", d.0.join("bin"))
+        .env("PATH", format!("{}:{}", d.0.join("bin").display(), std::env::var("PATH").unwrap_or_default()))
         .env("NETFI_TC_ARGS", d.0.join("tc.args"))
         .output()
         .unwrap();
