@@ -134,18 +134,36 @@ fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
     let tables = d.0.join("tables");
     run_script(&d.0, &out.stdout, Some(&tables));
     assert_eq!(std::fs::read_dir(&tables).unwrap().count(), 1);
+    // The search itself, whatever this machine has installed: the script
+    // with each directory it searches moved into the test's own.
+    let searched = ["/usr/lib/x86_64-linux-gnu/tc", "/usr/lib/aarch64-linux-gnu/tc", "/usr/lib64/tc", "/usr/lib/tc"];
+    let moved: Vec<PathBuf> = (0..searched.len()).map(|k| d.0.join(format!("searched-{k}"))).collect();
+    let local = searched.iter().zip(&moved).fold(script.to_string(), |s, (from, to)| s.replace(from, to.to_str().unwrap()));
+    assert!(searched.iter().all(|p| !local.contains(p)), "{local}");
     // Where no directory of the list has tc's tables, the script stops
     // before tc runs, naming where it looked.
-    if !["/usr/lib/x86_64-linux-gnu/tc", "/usr/lib/aarch64-linux-gnu/tc", "/usr/lib64/tc", "/usr/lib/tc"]
-        .iter()
-        .any(|p| Path::new(p).join("normal.dist").is_file())
-    {
-        let path = d.0.join("netem.sh");
-        std::fs::write(&path, &out.stdout).unwrap();
-        let o = Command::new("sh").arg(&path).env_remove("TC_LIB_DIR").env("PATH", d.0.join("bin")).output().unwrap();
-        assert!(!o.status.success());
-        assert!(String::from_utf8_lossy(&o.stderr).contains("looked in"));
+    let path = d.0.join("netem.sh");
+    std::fs::write(&path, &local).unwrap();
+    std::fs::remove_file(d.0.join("tc.args")).unwrap();
+    let o = Command::new("sh")
+        .arg(&path)
+        .env_remove("TC_LIB_DIR")
+        .env("PATH", format!("{}:{}", d.0.join("bin").display(), std::env::var("PATH").unwrap_or_default()))
+        .env("NETFI_TC_ARGS", d.0.join("tc.args"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("looked in") && err.contains(moved[0].to_str().unwrap()), "{err}");
+    assert!(!d.0.join("tc.args").exists(), "tc ran without its tables");
+    // Where some have them, the first of the list that has them is used.
+    for k in [2, 3] {
+        std::fs::create_dir_all(&moved[k]).unwrap();
+        std::fs::write(moved[k].join("normal.dist"), "").unwrap();
     }
+    assert!(!run_script(&d.0, local.as_bytes(), None).is_empty());
+    let tables = |k: usize| std::fs::read_dir(&moved[k]).unwrap().filter(|e| e.as_ref().unwrap().file_name() != "normal.dist").count();
+    assert_eq!((tables(2), tables(3)), (1, 0), "the table goes to the first directory found");
 }
 
 /// What tc cannot take is refused, naming the flag or field and the range

@@ -2,7 +2,8 @@
 //! motion model against what that recording contains.
 //!
 //! Tests that need the recording look for it at `../shared/data/itp/` beside
-//! the crate and skip, saying so, when it is absent.
+//! the crate and skip, saying so, when it is absent (fail, where
+//! `NETFI_REQUIRE_DATA` is set: [`crate::common::data`]).
 
 use crate::common::netfi::{netfi, Outcome};
 use crate::common::machine;
@@ -13,7 +14,7 @@ use netfi::frame::ItpFrame;
 use netfi::kinematics::{Integrator, KinematicsConfig};
 use netfi::motion::{MotionGenerator, MotionParams};
 use std::io::{Read, Write};
-use crate::common::shipped_capture;
+use crate::common::data::shipped_capture;
 
 const MS: u64 = 1_000_000;
 

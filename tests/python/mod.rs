@@ -534,7 +534,7 @@ fn the_python_console_replays_the_real_capture() {
     if !python_ready() {
         return;
     }
-    let Some(cap) = crate::common::shipped_capture() else { return };
+    let Some(cap) = crate::common::data::shipped_capture() else { return };
     let _guard = machine::alone();
     let run = Run::new("replay");
     let robot = run.python_robot();
@@ -960,7 +960,7 @@ fn the_python_capture_reader_reads_every_frame_and_refuses_garbage() {
         assert!(!o.status.success(), "garbage {name} accepted: {}", String::from_utf8_lossy(&o.stdout));
         assert!(String::from_utf8_lossy(&o.stderr).contains("that are not an LZ4 frame"), "{name}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    if let Some(real) = crate::common::shipped_capture() {
+    if let Some(real) = crate::common::data::shipped_capture() {
         let cap = netfi::capture::load(&real).unwrap();
         let o = load(&write("real.bin", &cap.records));
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

@@ -234,7 +234,7 @@ fn clm_outages_are_conserved() {
 
 #[test]
 fn the_real_capture_replays_with_its_timing() {
-    let Some(cap) = crate::common::shipped_capture() else { return };
+    let Some(cap) = crate::common::data::shipped_capture() else { return };
     let (r, ok, _) = run("replay", &["PLM-1", "--capture", cap.to_str().unwrap(), "--duration-s", "3", "--seed", "6"]);
     assert!(ok, "{r:#}");
     assert_conserved(&r);
