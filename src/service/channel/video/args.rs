@@ -108,7 +108,8 @@ impl VideoArgs {
 }
 
 impl Render for VideoArgs {
-    /// Only what differs from the defaults: nothing when off.
+    /// Only what differs from the defaults: nothing for a run without
+    /// video whose other video flags are left alone.
     fn render(&self, a: &mut Argv) {
         let d = VideoArgs::default();
         a.opt("--video-mbps", self.video_mbps)
