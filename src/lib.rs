@@ -24,6 +24,7 @@ pub mod injector;
 pub mod kinematics;
 pub mod model;
 pub mod motion;
+pub mod regular;
 pub mod ros2msg;
 pub mod sample;
 pub mod scenario;

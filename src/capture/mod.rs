@@ -175,7 +175,7 @@ pub struct Scanned {
 /// checks it by the rule in the module docs: any malformed record or LZ4
 /// frame, bytes after a frame that begin no other, a file without
 /// records, or damage ([`CaptureStats::refusal`]) is an error. Only a
-/// regular file is read ([`crate::load::open_regular`]).
+/// regular file is read ([`crate::regular::open_regular`]).
 pub fn load(path: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     load_with(path, CaptureLimits::default())
 }

@@ -147,11 +147,11 @@ pub struct CaptureReader<R: Read> {
 }
 
 impl CaptureReader<BufReader<File>> {
-    /// Opens a capture file: a regular file only ([`crate::load::open_regular`];
+    /// Opens a capture file: a regular file only ([`crate::regular::open_regular`];
     /// a FIFO or a device is refused, not waited on).
     pub fn open(path: impl AsRef<Path>) -> Result<Self, CaptureError> {
         let path = path.as_ref();
-        let file = crate::load::open_regular(path)
+        let file = crate::regular::open_regular(path)
             .map_err(|source| CaptureError::Open { path: Some(path.to_path_buf()), source })?;
         Ok(CaptureReader::new(BufReader::new(file)).with_path(path))
     }

@@ -13,6 +13,8 @@ mod histogram;
 mod interval;
 mod summary;
 
+pub mod text;
+
 pub use histogram::LatencyHistogram;
 pub use interval::{IntervalLog, IntervalLogError, INTERVAL_NS};
 pub use summary::{difference, fmt_fraction, fmt_ns, fmt_ns_signed, fmt_rate, Summary};

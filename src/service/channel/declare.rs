@@ -10,37 +10,15 @@
 //! keyed by the channel's name.
 
 use crate::flags::Render;
-use crate::service::console::ConsoleReport;
 use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
 use crate::service::emulator::path::Reverse;
-use crate::service::schema::run::Files;
 use crate::service::schema::{EmulatorProcess, WithPaths};
-use crate::service::simulator::SimulatorReport;
-use crate::transport::{Endpoint, Port, TransportArgs};
+use crate::transport::Port;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::fmt;
 
-/// What a channel's flags are checked against and its paths decided on: a
-/// lane's two endpoints and its transports' flags.
-#[derive(Clone, Copy)]
-pub struct LaneShape<'a> {
-    /// Where frames come from.
-    pub ingress: &'a Endpoint,
-    /// Where they go.
-    pub egress: &'a Endpoint,
-    /// The transports' flags.
-    pub transports: &'a TransportArgs,
-    /// The streams the emulator serves.
-    pub streams: u32,
-}
-
-impl LaneShape<'_> {
-    /// Whether both sides are of transport `T`.
-    pub fn both<T: crate::transport::Transport>(&self) -> bool {
-        Endpoint::sides::<T>(self.ingress, self.egress).both()
-    }
-}
+pub use crate::service::emulator::opening::LaneShape;
 
 /// A reverse path a lane has, as its channel asks for it: its name (its
 /// key in `emulator.json`'s paths, and its trace file's), the flag that
@@ -66,15 +44,34 @@ impl Want {
 }
 
 /// What a run report's section of a channel is joined from: the
-/// services' reports, and whether the run was stopped (what was in flight
-/// at the stop is counted as such).
+/// services' reports (the console's and the robot's as written: each
+/// channel reads the part it writes there), and whether the run was
+/// stopped (what was in flight at the stop is counted as such).
 #[derive(Clone, Copy)]
 pub struct Sources<'a> {
     /// The emulator's report less its shaping: the process and its paths.
     pub emulator: Option<&'a WithPaths<EmulatorProcess>>,
-    pub console: Option<&'a ConsoleReport>,
-    pub simulator: Option<&'a SimulatorReport>,
+    /// `console.json`, where the run has it.
+    pub console: Option<&'a serde_json::Value>,
+    /// `simulator.json`, where the run has it.
+    pub simulator: Option<&'a serde_json::Value>,
     pub stopped: bool,
+}
+
+impl Sources<'_> {
+    /// The console's report's `key`, as a `T`, where it has one.
+    pub fn console_part<T: DeserializeOwned>(&self, key: &str) -> Option<T> {
+        part(self.console, key)
+    }
+
+    /// The robot's report's `key`, as a `T`, where it has one.
+    pub fn simulator_part<T: DeserializeOwned>(&self, key: &str) -> Option<T> {
+        part(self.simulator, key)
+    }
+}
+
+fn part<T: DeserializeOwned>(report: Option<&serde_json::Value>, key: &str) -> Option<T> {
+    report?.get(key).filter(|v| !v.is_null()).and_then(|v| T::deserialize(v).ok())
 }
 
 /// A reverse channel of the emulator (robot → console), declared once: its
@@ -116,8 +113,10 @@ pub trait ReverseChannel: 'static {
     fn faults(_s: &Self::Section) -> Vec<String> {
         Vec::new()
     }
-    /// The files of the run the section names.
-    fn files(_s: &Self::Section, _sources: Sources, _files: &mut Files) {}
+    /// The files of the run the section names, by name (`<channel>_…`).
+    fn files(_s: &Self::Section, _sources: Sources) -> Vec<(&'static str, std::path::PathBuf)> {
+        Vec::new()
+    }
 }
 
 /// Why a channel's path could not be opened: as any path, or the channel's
@@ -267,9 +266,15 @@ macro_rules! channels {
                 out
             }
 
-            /// The files the sections name.
-            pub fn files(&self, sources: $crate::service::channel::declare::Sources, files: &mut $crate::service::schema::run::Files) {
-                $( if let Some(x) = &self.$field { <$T as $crate::service::channel::declare::ReverseChannel>::files(x, sources, files); } )+
+            /// The files the sections name, by name.
+            pub fn files(&self, sources: $crate::service::channel::declare::Sources) -> std::collections::BTreeMap<String, std::path::PathBuf> {
+                let mut out = std::collections::BTreeMap::new();
+                $(
+                    if let Some(x) = &self.$field {
+                        out.extend(<$T as $crate::service::channel::declare::ReverseChannel>::files(x, sources).into_iter().map(|(k, v)| (k.to_string(), v)));
+                    }
+                )+
+                out
             }
         }
     };

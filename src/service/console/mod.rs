@@ -66,29 +66,7 @@ pub struct ConsoleReport {
     pub video: Option<crate::service::channel::video::ReceivedVideo>,
 }
 
-/// What the console saw of the robot's feedback.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ConsoleFeedback {
-    /// Feedback samples received on `feedback_out`.
-    pub received: u64,
-    /// Feedback the emulator said it released (from its end marker).
-    pub sent_by_emulator: Option<u64>,
-    /// Feedback naming a command this console never sent.
-    pub unknown_command: u64,
-    /// `end_marker`, `no_emulator` (nobody published feedback), `timeout`
-    /// or `signal`.
-    pub ended_by: String,
-    /// Command sent → the robot's feedback naming it received.
-    pub round_trip_ns: Summary,
-    /// The emulator's own share of each round trip: both directions'
-    /// release − take − injected delay.
-    pub emulator_share_ns: Summary,
-    /// Robot position (from its feedback) against the console's own pose
-    /// after the same command, per arm, mm.
-    pub divergence_final_mm: [f64; 2],
-    pub divergence_max_mm: [f64; 2],
-    pub round_trip_hlog: Option<std::path::PathBuf>,
-}
+pub use crate::service::channel::feedback::ConsoleFeedback;
 
 /// Waits for the emulator to subscribe to the console port.
 fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::transport::IpcNode, args: &ConsoleArgs) -> Result<(), WaitError> {

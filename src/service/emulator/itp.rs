@@ -16,25 +16,35 @@ use crate::transport::{Egress, Ingress, Sessions};
 /// A lane of ITP frames.
 pub type ItpLane = Lane<Forward<Ingress, Egress>>;
 
+/// Why a lane of ITP frames did not open: its transports, forward path or
+/// files, or one of its reverse paths.
+#[derive(Debug, thiserror::Error)]
+pub enum LaneError {
+    #[error(transparent)]
+    Open(#[from] OpenError),
+    #[error(transparent)]
+    Channel(#[from] crate::service::channel::ChannelOpenError),
+}
+
 /// Opens lane `l`'s transports and paths (before the loop is pinned: each
 /// path starts its trace writer); what its transports keep open beside.
-fn open_lane(l: &LaneConfig, stop: &dyn Fn() -> bool) -> Result<(ItpLane, Sessions), OpenError> {
+fn open_lane(l: &LaneConfig, stop: &dyn Fn() -> bool) -> Result<(ItpLane, Sessions), LaneError> {
     std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
-    let t = crate::transport::open(&a.ends.ingress, &a.ends.egress, &a.transports, &a.wiring(l.queue_capacity, stop))?;
+    let t = crate::transport::open(&a.ends.ingress, &a.ends.egress, &a.transports, &a.wiring(l.queue_capacity, stop)).map_err(OpenError::from)?;
     let shape = a.lane_shape();
     let o = Opening { shape, sessions: &t.sessions, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir };
     let reverse = a.channels.open_all(&shape, &o)?;
-    let scenario = Scenario::new(&l.scenario, l.seed)?;
+    let scenario = Scenario::new(&l.scenario, l.seed).map_err(OpenError::from)?;
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, l.unsupported()) {
-        return Err(OpenError::RawStage { scenario: scenario.name().to_string(), stage: kind.name() });
+        return Err(OpenError::RawStage { scenario: scenario.name().to_string(), stage: kind.name() }.into());
     }
     for (file, value) in t.sessions.at_start() {
-        report::write_json(&l.out_dir.join(file), &value)?;
+        report::write_json(&l.out_dir.join(file), &value).map_err(OpenError::from)?;
     }
     let crate::transport::Transports { ingress, egress, sessions } = t;
     let chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
-    let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
+    let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true).map_err(OpenError::from)?;
     Ok((Lane::new(forward, reverse), sessions))
 }
 

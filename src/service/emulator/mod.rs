@@ -65,7 +65,7 @@ pub enum EmulatorError {
     Stream {
         stream: usize,
         #[source]
-        cause: opening::OpenError,
+        cause: itp::LaneError,
     },
     /// A lane of ROS 2 topics that did not open.
     #[error("lane {lane} ({from} → {to})")]

@@ -49,24 +49,37 @@ pub enum OpenError {
     /// The ingress and egress.
     #[error(transparent)]
     Transports(#[from] crate::transport::OpenError),
-    /// A reverse path.
-    #[error(transparent)]
-    Channel(Box<crate::service::channel::ChannelOpenError>),
+
     /// A file the lane writes at its start.
     #[error(transparent)]
     Write(#[from] crate::service::emulator::report::WriteError),
 }
 
-impl From<crate::service::channel::ChannelOpenError> for OpenError {
-    fn from(e: crate::service::channel::ChannelOpenError) -> Self {
-        OpenError::Channel(Box::new(e))
+/// What a channel's flags are checked against and its paths decided on: a
+/// lane's two endpoints and its transports' flags.
+#[derive(Clone, Copy)]
+pub struct LaneShape<'a> {
+    /// Where frames come from.
+    pub ingress: &'a crate::transport::Endpoint,
+    /// Where they go.
+    pub egress: &'a crate::transport::Endpoint,
+    /// The transports' flags.
+    pub transports: &'a crate::transport::TransportArgs,
+    /// The streams the emulator serves.
+    pub streams: u32,
+}
+
+impl LaneShape<'_> {
+    /// Whether both sides are of transport `T`.
+    pub fn both<T: crate::transport::Transport>(&self) -> bool {
+        crate::transport::Endpoint::sides::<T>(self.ingress, self.egress).both()
     }
 }
 
 /// What opening a stream's reverse paths needs.
 pub struct Opening<'a> {
     /// The lane: its endpoints and its transports' flags.
-    pub shape: crate::service::channel::LaneShape<'a>,
+    pub shape: LaneShape<'a>,
     /// What its transports keep open.
     pub sessions: &'a crate::transport::Sessions,
     /// Its seed (the reverse paths' seeds are derived from it).

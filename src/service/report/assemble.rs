@@ -165,13 +165,14 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         None => (None, None),
     };
     let frames = join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref());
-    let sources = Sources { emulator: emulator.as_ref(), console: console.as_ref(), simulator: simulator.as_ref(), stopped };
+    let (console_json, simulator_json) = (console.as_ref().and_then(|c| serde_json::to_value(c).ok()), simulator.as_ref().and_then(|s| serde_json::to_value(s).ok()));
+    let sources = Sources { emulator: emulator.as_ref(), console: console_json.as_ref(), simulator: simulator_json.as_ref(), stopped };
     let channels = ChannelSections::join(sources);
     let mut faults = channels.faults();
     faults.extend(join::faults(&frames));
     faults.extend(transports.faults());
     let e = shaping.as_ref();
-    let mut files = Files {
+    let files = Files {
         out_dir: facts.out.to_path_buf(),
         scenario: facts.scenario_path.map(Path::to_path_buf),
         trace: None,
@@ -179,10 +180,8 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
         end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
         report_json: facts.out.join("report.json"),
-        video_trace: None,
-        video_received: None,
+        channels: channels.files(sources),
     };
-    channels.files(sources, &mut files);
     RunReport {
         provenance: None,
         delay_check: None,

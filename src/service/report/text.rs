@@ -4,41 +4,12 @@
 
 use super::{DelayCheck, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
 use crate::check::{LinkReport, StageReport};
+pub use crate::metrics::text::{dropped_list, line, opt};
 use crate::metrics::{fmt_ns, fmt_ns_signed, fmt_rate, Summary};
 use crate::service::control::ControlEvent;
 use crate::service::schema::{LoopBusy, PeerEvent};
 use std::collections::BTreeMap;
 
-/// A count, or `?` where it is unknown.
-pub fn opt(v: Option<u64>) -> String {
-    v.map_or("?".to_string(), |x| x.to_string())
-}
-
-/// `N by CAUSE, …`, or `none`.
-pub fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
-    let d: Vec<String> = dropped.iter().map(|(k, v)| format!("{v} by {k}")).collect();
-    if d.is_empty() {
-        "none".into()
-    } else {
-        d.join(", ")
-    }
-}
-
-/// A summary's percentiles on one line, `-` when there is none.
-pub fn line(p: &Option<Summary>) -> String {
-    match p {
-        Some(p) => format!(
-            "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",
-            fmt_ns(p.p50),
-            fmt_ns(p.p90),
-            fmt_ns(p.p99),
-            fmt_ns(p.p999),
-            fmt_ns(p.p9999),
-            fmt_ns(p.max)
-        ),
-        None => "unavailable".into(),
-    }
-}
 
 impl RunReport {
     /// The report as a person reads it.
@@ -112,8 +83,9 @@ impl RunReport {
         for h in [&f.decision_hlog, &f.lateness_hlog, &f.end_to_end_hlog].into_iter().flatten() {
             s += &format!("  histogram {}\n", h.display());
         }
-        for v in [&f.video_trace, &f.video_received].into_iter().flatten() {
-            s += &format!("  video     {}\n", v.display());
+        for (name, v) in &f.channels {
+            let channel = name.split('_').next().unwrap_or(name);
+            s += &format!("  {channel:<9} {}\n", v.display());
         }
         s += &format!("  report    {}\n", f.report_json.display());
         s

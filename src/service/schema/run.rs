@@ -110,12 +110,11 @@ pub struct Files {
     pub lateness_hlog: Option<PathBuf>,
     pub end_to_end_hlog: Option<PathBuf>,
     pub report_json: PathBuf,
-    /// The emulator's video trace (`trace_video.csv`), when the run has video.
-    #[serde(default)]
-    pub video_trace: Option<PathBuf>,
-    /// The console's record of the video it received (`video_received.csv`).
-    #[serde(default)]
-    pub video_received: Option<PathBuf>,
+    /// The files of the reverse channels, by name (`video_trace`: the
+    /// emulator's video trace; `video_received`: the console's record of
+    /// the video it received), where the run had them.
+    #[serde(flatten)]
+    pub channels: BTreeMap<String, PathBuf>,
 }
 
 /// One quantile of the delay law: as the model gives it, as the emulator

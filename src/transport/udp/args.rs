@@ -55,7 +55,7 @@ pub struct UdpArgs {
 
 /// `--return-to`: a UDP endpoint.
 fn return_to(text: &str) -> Result<SocketAddr, String> {
-    match super::transport::parse(text) {
+    match super::addr::parse(text) {
         Some(Ok(a)) => Ok(a),
         Some(Err(e)) => Err(e.to_string()),
         None => Err("--return-to takes udp://ADDR:PORT".into()),

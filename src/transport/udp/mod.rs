@@ -33,6 +33,7 @@
 //! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
 //! raw-mode [`Arena`]) are in [`frames`].
 
+pub mod addr;
 pub mod args;
 pub mod frames;
 pub mod peers;

@@ -14,7 +14,7 @@ pub mod section;
 pub mod udp;
 
 pub use iceoryx2::{Feedback, FEEDBACK, FEEDBACK_OUT};
-pub use section::{FeedbackExtra, FeedbackSection, ReturnExtra};
+pub use section::{ConsoleFeedback, FeedbackExtra, FeedbackSection, ReturnExtra};
 pub use udp::UdpReturn;
 
 use super::declare::{ChannelOpen, LaneShape, NoEndArgs, ReverseChannel, Sources, Want};

@@ -5,8 +5,7 @@
 
 use super::super::declare::Sources;
 use crate::metrics::{fmt_rate, Summary};
-use crate::service::console::ConsoleFeedback;
-use crate::service::report::{dropped_list, line, opt};
+use crate::metrics::text::{dropped_list, line, opt};
 use crate::service::schema::PathReport;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -35,6 +34,30 @@ pub struct ReturnExtra {
     /// Datagrams at the egress socket from others than the robot: refused.
     #[serde(default)]
     pub refused: crate::transport::udp::Refused,
+}
+
+/// What the console saw of the robot's feedback.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConsoleFeedback {
+    /// Feedback samples received on `feedback_out`.
+    pub received: u64,
+    /// Feedback the emulator said it released (from its end marker).
+    pub sent_by_emulator: Option<u64>,
+    /// Feedback naming a command this console never sent.
+    pub unknown_command: u64,
+    /// `end_marker`, `no_emulator` (nobody published feedback), `timeout`
+    /// or `signal`.
+    pub ended_by: String,
+    /// Command sent → the robot's feedback naming it received.
+    pub round_trip_ns: Summary,
+    /// The emulator's own share of each round trip: both directions'
+    /// release − take − injected delay.
+    pub emulator_share_ns: Summary,
+    /// Robot position (from its feedback) against the console's own pose
+    /// after the same command, per arm, mm.
+    pub divergence_final_mm: [f64; 2],
+    pub divergence_max_mm: [f64; 2],
+    pub round_trip_hlog: Option<std::path::PathBuf>,
 }
 
 /// The feedback loop robot → emulator → console: what the return scenario
@@ -78,11 +101,13 @@ pub struct FeedbackSection {
     pub divergence_max_mm: Option<[f64; 2]>,
 }
 
-/// The run's feedback section, where the emulator had a feedback path.
+/// The run's feedback section, where the emulator had a feedback path: the
+/// console's report's `feedback`, the robot's `feedback_sent`.
 pub fn join(s: Sources) -> Option<FeedbackSection> {
     let e = s.emulator?.path::<FeedbackExtra>(super::iceoryx2::NAME)?;
-    let console = s.console.and_then(|c| c.feedback.as_ref());
-    Some(FeedbackSection::join(&e, console, s.simulator.map(|s| s.feedback_sent), s.stopped))
+    let console: Option<ConsoleFeedback> = s.console_part("feedback");
+    let robot_sent = s.simulator.and_then(|r| r.get("feedback_sent")).and_then(serde_json::Value::as_u64);
+    Some(FeedbackSection::join(&e, console.as_ref(), robot_sent, s.stopped))
 }
 
 impl FeedbackSection {

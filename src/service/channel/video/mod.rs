@@ -30,7 +30,6 @@ use std::sync::Arc;
 use super::declare::{ChannelOpen, LaneShape, ReverseChannel, Sources, Want};
 use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::emulator::path::Reverse;
-use crate::service::schema::run::Files;
 use crate::transport::ipc::video::{VIDEO, VIDEO_HELD_FRAMES, VIDEO_OUT};
 use crate::transport::ipc::Iceoryx2;
 
@@ -90,7 +89,7 @@ impl ReverseChannel for Video {
 
     fn section(s: Sources) -> Option<VideoSection> {
         let e = s.emulator.and_then(|e| e.path::<VideoExtra>(NAME));
-        VideoSection::join(e.as_ref(), s.console.and_then(|c| c.video.as_ref()), s.simulator.and_then(|s| s.camera.as_ref()))
+        VideoSection::join(e.as_ref(), s.console_part::<ReceivedVideo>("video").as_ref(), s.simulator_part::<CameraReport>("camera").as_ref())
     }
 
     fn text(s: &VideoSection) -> String {
@@ -103,10 +102,10 @@ impl ReverseChannel for Video {
 
     /// The emulator's video trace, and the console's record of what it
     /// received.
-    fn files(_s: &VideoSection, sources: Sources, files: &mut Files) {
-        let e = sources.emulator.and_then(|e| e.path::<VideoExtra>(NAME));
-        files.video_trace = e.map(|v| v.trace_path);
-        files.video_received = sources.console.and_then(|c| c.video.as_ref()).and_then(|v| v.received_csv.clone());
+    fn files(_s: &VideoSection, sources: Sources) -> Vec<(&'static str, std::path::PathBuf)> {
+        let trace = sources.emulator.and_then(|e| e.path::<VideoExtra>(NAME)).map(|v| ("video_trace", v.trace_path));
+        let received = sources.console_part::<ReceivedVideo>("video").and_then(|v| v.received_csv).map(|p| ("video_received", p));
+        trace.into_iter().chain(received).collect()
     }
 }
 

@@ -82,7 +82,7 @@ impl VideoSection {
                 f.whole,
                 f.damaged,
                 f.lost,
-                crate::service::report::dropped_list(&self.dropped),
+                crate::metrics::text::dropped_list(&self.dropped),
                 self.held_at_end
             )
         })
