@@ -7,6 +7,7 @@
 //!
 //! | file | what |
 //! |---|---|
+//! | `ended` | why a process's stream or loop ended (`ended_by`) |
 //! | `path` | the account every link keeps, what it measured, a path's report |
 //! | `paths` | what each direction adds to its path's report |
 //! | `emulator` | `emulator.json`: the shaping, the process, the reverse paths; several streams |
@@ -18,6 +19,7 @@
 //! `simulator.json`) stand beside their services.
 
 pub mod emulator;
+pub mod ended;
 pub mod path;
 pub mod paths;
 pub mod ros2;
@@ -25,6 +27,7 @@ pub mod run;
 pub mod udp;
 
 pub use emulator::{BadInput, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, LoopBusy, PeerEvent, Shaping, WithPaths};
+pub use ended::Ended;
 pub use path::{Account, LinkMeasures, PathReport};
 pub use paths::{FeedbackExtra, ForwardExtra, ReturnExtra, VideoExtra};
 pub use udp::{BoundEndpoints, ForeignSender, UdpReport};
