@@ -368,11 +368,33 @@ impl Releases {
     }
 }
 
-impl Model for Delay {
+/// A stage that only delays (`delay`, `jitter`): it draws a delay, and
+/// its [`Releases`] hold the frame under `fifo`. Its decision is that,
+/// written once ([`Model`] for every such stage).
+pub(crate) trait DelayStage {
+    /// Draws one delay in ns (without the `fifo` hold).
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64;
+
+    /// The stage's release order and last release.
+    fn releases(&mut self) -> &mut Releases;
+}
+
+impl<M: DelayStage> Model for M {
     #[inline]
     fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let delay_ns = self.sample_ns(rng);
-        self.releases.pass(t_ns, delay_ns)
+        let delay_ns = self.draw_ns(rng);
+        self.releases().pass(t_ns, delay_ns)
+    }
+}
+
+impl DelayStage for Delay {
+    #[inline]
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
+        self.sample_ns(rng)
+    }
+
+    fn releases(&mut self) -> &mut Releases {
+        &mut self.releases
     }
 }
 

@@ -65,9 +65,9 @@
 //! With `sd_ms = 0` the delay is the constant `mean_ms` and the stage draws
 //! nothing. Otherwise one standard normal (ziggurat) per frame.
 
-use super::delay::{Order, Releases};
+use super::delay::{DelayStage, Order, Releases};
 use super::units::{at_most_ms, ms_to_ns, MAX_DURATION_MS};
-use super::{Millis, Model, ParamError, Probability, StageRng, Verdict};
+use super::{Millis, ParamError, Probability, StageRng};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
@@ -458,17 +458,21 @@ impl Jitter {
     }
 }
 
-impl Model for Jitter {
+impl DelayStage for Jitter {
     #[inline]
-    fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let delay_ns = self.sample_ns(rng);
-        self.releases.pass(t_ns, delay_ns)
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
+        self.sample_ns(rng)
+    }
+
+    fn releases(&mut self) -> &mut Releases {
+        &mut self.releases
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::{Model, Verdict};
     use rand::SeedableRng;
 
     fn jitter(mean_ms: f64, sd_ms: f64, dist: JitterDist) -> JitterParams {
