@@ -135,7 +135,7 @@ impl FeedbackIngress {
                     Ok(true)
                 }
                 Ok(None) => Ok(false),
-                Err(e) => Err(PortError { port: format!("netfi/{}/{}", p.run_id(), p.channel()), message: e.to_string() }),
+                Err(e) => Err(PortError { port: p.run_id().resource_name(p.channel()), message: e.to_string() }),
             },
             FeedbackIngress::Memory(q) => match q.pop_front() {
                 Some(s) => {
@@ -164,7 +164,7 @@ impl FeedbackEgress {
         match self {
             FeedbackEgress::Iceoryx2(p) => p
                 .send_from(sample, stamp)
-                .map_err(|e| PortError { port: format!("netfi/{}/{}", p.run_id(), p.channel()), message: e.to_string() }),
+                .map_err(|e| PortError { port: p.run_id().resource_name(p.channel()), message: e.to_string() }),
             FeedbackEgress::Memory(q) => {
                 let mut s = *sample;
                 stamp(&mut s);

@@ -116,7 +116,7 @@ impl FrameSource for FrameSubscriber {
                 Ok(true)
             }
             Ok(None) => Ok(false),
-            Err(e) => Err(PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() }),
+            Err(e) => Err(PortError { port: self.run_id().resource_name(self.channel()), message: e.to_string() }),
         }
     }
 
@@ -130,7 +130,7 @@ impl FrameSink for FramePublisher {
     fn send_with(&mut self, sample: &FrameSample, stamp: impl FnOnce(&mut FrameSample)) -> Result<Option<usize>, PortError> {
         FramePublisher::send_from(self, sample, stamp)
             .map(Some)
-            .map_err(|e: FrameSendError| PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() })
+            .map_err(|e: FrameSendError| PortError { port: self.run_id().resource_name(self.channel()), message: e.to_string() })
     }
 
     fn peers(&mut self) -> Option<usize> {
