@@ -264,26 +264,6 @@ impl Delay {
         }
         0.5 * (lo + hi)
     }
-
-    /// Draws one delay `D` in ns (without the `fifo` hold).
-    #[inline]
-    pub fn sample_ns(&self, rng: &mut StageRng) -> u64 {
-        let x_ms = match &self.jitter {
-            Jitter::None => return self.min_ns,
-            Jitter::Hyperexp { components, pick_thresholds, mean_ms } => {
-                let i = if *components == 1 {
-                    0
-                } else {
-                    let r = u53(rng);
-                    pick_thresholds.iter().take(components - 1).filter(|&&t| r >= t).count()
-                };
-                let e: f64 = rng.sample(rand_distr::Exp1);
-                e * mean_ms[i]
-            }
-            Jitter::Uniform { width_ms } => rng.random::<f64>() * width_ms,
-        };
-        self.min_ns.saturating_add(ms_to_ns(x_ms))
-    }
 }
 
 /// Validates the hyperexponential's lists; returns the sampler and `Σ w_i/λ_i`.
@@ -388,9 +368,24 @@ impl<M: DelayStage> Model for M {
 }
 
 impl DelayStage for Delay {
+    /// Draws one delay `D` in ns (without the `fifo` hold).
     #[inline]
     fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
-        self.sample_ns(rng)
+        let x_ms = match &self.jitter {
+            Jitter::None => return self.min_ns,
+            Jitter::Hyperexp { components, pick_thresholds, mean_ms } => {
+                let i = if *components == 1 {
+                    0
+                } else {
+                    let r = u53(rng);
+                    pick_thresholds.iter().take(components - 1).filter(|&&t| r >= t).count()
+                };
+                let e: f64 = rng.sample(rand_distr::Exp1);
+                e * mean_ms[i]
+            }
+            Jitter::Uniform { width_ms } => rng.random::<f64>() * width_ms,
+        };
+        self.min_ns.saturating_add(ms_to_ns(x_ms))
     }
 
     fn releases(&mut self) -> &mut Releases {
@@ -561,9 +556,9 @@ mod tests {
     #[test]
     fn zero_weight_component_is_never_picked() {
         // Component 0 has weight 0 and a huge mean; component 1 a mean of 1 ns.
-        let d = Delay::new(&hyper(0.0, &[0.0, 1.0], &[1e-9, 1e6], Order::Reorder)).unwrap();
+        let mut d = Delay::new(&hyper(0.0, &[0.0, 1.0], &[1e-9, 1e6], Order::Reorder)).unwrap();
         let mut rng = StageRng::seed_from_u64(4);
-        assert!((0..100_000).all(|_| d.sample_ns(&mut rng) < 1_000_000));
+        assert!((0..100_000).all(|_| d.draw_ns(&mut rng) < 1_000_000));
     }
 
     #[test]

@@ -441,11 +441,13 @@ impl Jitter {
         }
         sum * step / 3.0
     }
+}
 
+impl DelayStage for Jitter {
     /// Draws one delay in ns (without the `fifo` hold), moving the AR(1)
     /// state.
     #[inline]
-    pub fn sample_ns(&mut self, rng: &mut StageRng) -> u64 {
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
         if self.sd_ms == 0.0 {
             return ms_to_ns(self.mean_ms);
         }
@@ -455,13 +457,6 @@ impl Jitter {
         let d_ms = self.mean_ms + self.sd_ms * self.dist.standard(z);
         // `clamp` keeps NaN out: h is finite or +∞ for finite z.
         ms_to_ns(d_ms.clamp(0.0, MAX_DRAW_MS))
-    }
-}
-
-impl DelayStage for Jitter {
-    #[inline]
-    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
-        self.sample_ns(rng)
     }
 
     fn releases(&mut self) -> &mut Releases {
@@ -649,7 +644,7 @@ mod tests {
     fn delays_are_never_negative() {
         let mut j = Jitter::new(&jitter(1.0, 50.0, JitterDist::Paretonormal).with_correlation(0.5).unwrap()).unwrap();
         let mut rng = StageRng::seed_from_u64(9);
-        let zeros = (0..10_000).filter(|_| j.sample_ns(&mut rng) == 0).count();
+        let zeros = (0..10_000).filter(|_| j.draw_ns(&mut rng) == 0).count();
         // P(D = 0) is about 0.45 here; all that matters is that the clamp bites.
         assert!(zeros > 1000, "{zeros}");
     }
