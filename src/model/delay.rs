@@ -388,6 +388,7 @@ impl DelayStage for Delay {
         self.min_ns.saturating_add(ms_to_ns(x_ms))
     }
 
+    #[inline]
     fn releases(&mut self) -> &mut Releases {
         &mut self.releases
     }

@@ -459,6 +459,7 @@ impl DelayStage for Jitter {
         ms_to_ns(d_ms.clamp(0.0, MAX_DRAW_MS))
     }
 
+    #[inline]
     fn releases(&mut self) -> &mut Releases {
         &mut self.releases
     }

@@ -301,6 +301,7 @@ impl LinkTrace {
 }
 
 impl LinkStage for LinkTrace {
+    #[inline]
     fn queue(&mut self) -> &mut LinkQueue {
         &mut self.queue
     }

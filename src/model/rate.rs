@@ -164,6 +164,7 @@ impl Rate {
 }
 
 impl LinkStage for Rate {
+    #[inline]
     fn queue(&mut self) -> &mut LinkQueue {
         &mut self.queue
     }
