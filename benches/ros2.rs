@@ -39,6 +39,7 @@
 //! else `python3`) the latency part says so and is skipped.
 
 use clap::Parser;
+use netfi::service::args::EmulatorArgs;
 use netfi::transport::ros2::{port::unix_ns, qos, Payload, Role, Ros2Node, Slots, TopicName, TypeName};
 use serde_json::{json, Value};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -357,13 +358,20 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         Talker::Rust => None,
     };
     let cores = core_affinity::get_core_ids().map_or(1, |c| c.len());
-    let pin = if cores >= 2 { vec!["--core".to_string(), (cores - 1).to_string()] } else { vec!["--no-pin".to_string()] };
+    let mut emulator = EmulatorArgs::new(None, "Normal");
+    emulator.scenario.seed = Some(1);
+    emulator.ros2.ros2_topic = vec!["/bench=/bench_out".into()];
+    emulator.ros2.ros2_domain = Some(domain);
+    emulator.ros2.ros2_linger_ms = 300.0;
+    emulator.expected_frames = messages as u64;
+    emulator.out = dir.join("out");
+    emulator.placement.core = (cores >= 2).then(|| cores - 1);
+    emulator.placement.no_pin = cores < 2;
     let f = std::fs::File::create(dir.join("emulator.log"))?;
     let mut emu = Kill(
         Command::new(env!("CARGO_BIN_EXE_netfi"))
-            .args(["emulator", "--scenario", "Normal", "--seed", "1", "--ros2-topic", "/bench=/bench_out", "--ros2-domain", &domain_s, "--ros2-linger-ms", "300", "--expected-frames", &n, "--out"])
-            .arg(dir.join("out"))
-            .args(&pin)
+            .arg("emulator")
+            .args(emulator.to_argv())
             .env(UDP_ONLY.0, UDP_ONLY.1)
             .stdout(f.try_clone()?)
             .stderr(f)

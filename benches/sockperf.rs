@@ -23,6 +23,9 @@ use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::Out;
 use common::process::{read_json, Build, EmulatorSpec, OneBuild};
 use common::table::{header, median_map, row, Map};
+use netfi::service::args::EndsArgs;
+use netfi::transport::udp::UdpArgs;
+use netfi::transport::Payload;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::path::Path;
@@ -95,9 +98,9 @@ fn interval(a: &Args, p: &Placement, build: &Build, out: &Out, rep: usize) -> Re
     std::thread::sleep(Duration::from_millis(300));
     let result = (|| -> Result<Value> {
         let direct = ping_pong(p.bench_core, port, a.seconds, &dir.join("direct.log"))?;
-        let egress = format!("udp://127.0.0.1:{port}");
-        let extra = ["--payload", "raw", "--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--console-from", "first"].map(String::from).to_vec();
-        let spec = EmulatorSpec { scenario: "Normal", dir: &dir, expected_frames: a.seconds * 200_000, run_id: None, feedback: false, queue_capacity: None, extra };
+        let ends = EndsArgs { ingress: "udp://127.0.0.1:0".parse()?, egress: format!("udp://127.0.0.1:{port}").parse()?, idle_end_ms: None };
+        let udp = UdpArgs { payload: Payload::Raw, console_from: Some("first".parse()?), ..UdpArgs::default() };
+        let spec = EmulatorSpec { scenario: "Normal", dir: &dir, expected_frames: a.seconds * 200_000, run_id: None, feedback: false, queue_capacity: None, ends, udp, streams: 1 };
         let emu = build.emulator(&spec, p)?;
         let via = ping_pong(p.bench_core, emu.udp_ingress()?.port(), a.seconds, &dir.join("through.log"))?;
         let report = emu.finish(Duration::ZERO)?;

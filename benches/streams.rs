@@ -21,7 +21,9 @@ use common::drive::{drive, slots_for, Routes};
 use common::ends::IpcEnds;
 use common::host::{clear_core, pin, restore_core, HostTimer};
 use common::out::{CostRow, Out};
-use common::process::{fresh_run_id, stream_run_id, summary, Build, EmulatorSpec, ForgetRuns, OneBuild};
+use common::process::{fresh_run_id, summary, Build, EmulatorSpec, ForgetRuns, OneBuild};
+use netfi::service::args::streams;
+use netfi::transport::udp::UdpArgs;
 use common::table::{ns, Spread};
 use netfi::metrics::difference;
 use serde::Serialize;
@@ -90,10 +92,20 @@ fn point(a: &Args, p: &Placement, build: &Build, out: &Out, n: usize, rep: usize
     let dir = out.run_dir(&format!("streams-{n}-r{rep}"))?;
     let run_id = fresh_run_id();
     let (_, slots) = slots_for(RATE_HZ, a.seconds, Routes::Alternate);
-    let spec = EmulatorSpec { scenario: "Normal", dir: &dir, expected_frames: slots / 2 + 16, run_id: Some(&run_id), feedback: false, queue_capacity: None, extra: vec!["--streams".into(), n.to_string()] };
-    let _forget = ForgetRuns((0..n).map(|k| stream_run_id(&run_id, k)).collect());
+    let spec = EmulatorSpec {
+        scenario: "Normal",
+        dir: &dir,
+        expected_frames: slots / 2 + 16,
+        run_id: Some(&run_id),
+        feedback: false,
+        queue_capacity: None,
+        ends: Default::default(),
+        udp: UdpArgs::default(),
+        streams: n as u32,
+    };
+    let _forget = ForgetRuns((0..n).map(|k| streams::run_id(&run_id, k)).collect());
     let emu = build.emulator(&spec, p)?;
-    let mut ends = (0..n).map(|k| IpcEnds::open(&stream_run_id(&run_id, k))).collect::<Result<Vec<_>>>()?;
+    let mut ends = (0..n).map(|k| IpcEnds::open(&streams::run_id(&run_id, k))).collect::<Result<Vec<_>>>()?;
     let host = HostTimer::start(p.quiet);
     let d = drive(&mut ends, RATE_HZ, a.seconds, 200_000_000, true, Routes::Alternate);
     let host = host.stop();

@@ -3,7 +3,11 @@
 //!
 //! Definitions used in the report:
 //! - `loss_rate`: dropped / frames, with a 95% batch-means interval
-//!   ([`crate::stats::BatchMeans`]) that accounts for bursts.
+//!   ([`crate::stats::BatchMeans`]) that accounts for bursts, its upper
+//!   end raised by `loss_rate_unseen_model` ([`unseen_loss_rate`]): the
+//!   loss in bursts longer than the run likely met, which heavy-tailed
+//!   burst laws (`ge_lomax` with `α < 2`: infinite variance) hide from any
+//!   spread of the run's own.
 //! - `loss_run_mean`: mean length of maximal runs of consecutive dropped
 //!   frames, in ingress order.
 //! - `delay_ms`: the injected delay of delivered frames (release − ingress);
@@ -316,6 +320,11 @@ pub struct CheckReport {
     pub dropped: BTreeMap<String, u64>,
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
+    /// The models' long-run loss in bursts longer than a run of this
+    /// length likely met ([`unseen_loss_rate`]), included in the upper end
+    /// of `loss_rate_ci95`; absent where no stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     pub loss_run_mean: f64,
     pub delay_ms: DelayStats,
     pub reordered_fraction: f64,
@@ -675,10 +684,11 @@ impl Tally {
         let delivered = counts.released;
         // Runs of drops are counted over the originals' fates, copies apart.
         let dropped_total = self.batches.events();
-        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
+        let scenario = inj.scenario();
+        let unseen = unseen_loss_rate(scenario, self.batches.trials());
+        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95_with(unseen);
         let delay_ms = self.delay_ms(delivered);
         let interval_ns = arrivals.mean_interval_ns();
-        let scenario = inj.scenario();
         let (stages, outages) = stage_reports(scenario, interval_ns);
         CheckReport {
             scenario: scenario.name().to_string(),
@@ -690,6 +700,7 @@ impl Tally {
             dropped: inj.drops_by_reason().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
             loss_rate,
             loss_rate_ci95,
+            loss_rate_unseen_model: (unseen > 0.0).then_some(unseen),
             loss_run_mean: if self.runs > 0 { dropped_total as f64 / self.runs as f64 } else { 0.0 },
             delay_ms,
             reordered_fraction: if delivered > 0 { self.release.reordered as f64 / delivered as f64 } else { 0.0 },
@@ -701,6 +712,20 @@ impl Tally {
             links: links.reports(scenario),
         }
     }
+}
+
+/// The long-run loss that `frames` frames through `scenario` (as far as they
+/// went: each stage's own frames) are unlikely to have sampled, as a
+/// fraction of `frames`: each stage's [`crate::model::AnyModel::unseen_loss_rate`]
+/// over the frames that reached it, weighted by their share. What a loss
+/// interval from the run's own spread adds to its upper end (a
+/// heavy-tailed `ge_lomax`'s longest bursts; 0 for other models).
+pub fn unseen_loss_rate(scenario: &Scenario, frames: u64) -> f64 {
+    if frames == 0 {
+        return 0.0;
+    }
+    let stages = scenario.phases().iter().flat_map(|p| p.stages());
+    stages.map(|st| st.reached() as f64 / frames as f64 * st.model().unseen_loss_rate(st.reached())).sum()
 }
 
 /// Per-stage outcome of a scenario so far, and its outage windows, with the

@@ -45,6 +45,14 @@ pub enum Invalid {
 }
 
 impl Invalid {
+    /// Every reason a frame is refused before the scenario.
+    pub const ALL: [Invalid; 4] = [Invalid::WrongSize, Invalid::BadChecksum, Invalid::BadFlags, Invalid::TooLarge];
+
+    /// The reason a report or a trace names `reason` by, if it is one of these.
+    pub fn of_reason(reason: &str) -> Option<Invalid> {
+        Invalid::ALL.into_iter().find(|i| i.name() == reason)
+    }
+
     pub const fn name(self) -> &'static str {
         match self {
             Invalid::WrongSize => "wrong_size",

@@ -18,6 +18,7 @@
 pub mod capture;
 pub mod check;
 pub mod fit;
+pub mod flags;
 pub mod frame;
 pub mod injector;
 pub mod kinematics;

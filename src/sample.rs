@@ -12,6 +12,27 @@ use crate::frame::{FrameError, ItpFrame, ItpView};
 pub use crate::frame::ITP_FRAME_LEN;
 use iceoryx2::prelude::ZeroCopySend;
 
+/// A fixed-size sample a port carries: `#[repr(C)]`, shareable as it is,
+/// with a stable type name (peers refuse a port of another) and an all-zero
+/// value to loan with. A channel that carries a sample of its own
+/// implements this beside it.
+pub trait Payload: ZeroCopySend + Copy + core::fmt::Debug + 'static {
+    /// An all-zero sample.
+    const ZERO: Self;
+    /// The type name peers must agree on.
+    const TYPE_NAME: &'static str;
+}
+
+impl Payload for FrameSample {
+    const ZERO: Self = FrameSample::ZERO;
+    const TYPE_NAME: &'static str = FrameSample::TYPE_NAME;
+}
+
+impl Payload for FeedbackSample {
+    const ZERO: Self = FeedbackSample::ZERO;
+    const TYPE_NAME: &'static str = FeedbackSample::TYPE_NAME;
+}
+
 /// One frame in shared memory: the 124 wire bytes plus the metadata the
 /// injector and the simulator need. All times are CLOCK_MONOTONIC ns.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
@@ -190,57 +211,6 @@ impl Default for FeedbackSample {
     }
 }
 
-/// The user header of a video frame on the video channels (`video`,
-/// `video_out`): the payload is the frame's bytes, a `[u8]` slice of `len`
-/// bytes; this header travels beside it (docs/interface.md, "Video").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("netfi::VideoHeader.v1")]
-#[repr(C)]
-pub struct VideoHeader {
-    /// Camera send time, stamped just before publishing.
-    pub send_ns: u64,
-    /// The camera's frame counter (0, 1, 2, …); in the end marker, the
-    /// number of frames sent.
-    pub frame_index: u64,
-    /// Assigned by the emulator when the frame enters it (0, 1, 2, …).
-    pub ingress_index: u64,
-    /// Time the emulator took the frame off `video`.
-    pub ingress_ns: u64,
-    /// Scheduled release time (ingress + injected delay).
-    pub release_sched_ns: u64,
-    /// Actual release time, stamped just before publishing on `video_out`.
-    pub release_ns: u64,
-    /// Payload bytes (the slice's length).
-    pub len: u32,
-    /// [`VideoHeader::FLAG_END`], [`VideoHeader::FLAG_KEY`].
-    pub flags: u32,
-    /// The frame's place in its group of pictures (0: the key frame).
-    pub gop_index: u32,
-    /// Zero.
-    pub _reserved: u32,
-}
-
-const _: () = assert!(core::mem::size_of::<VideoHeader>() == 64);
-const _: () = assert!(core::mem::align_of::<VideoHeader>() == 8);
-
-impl VideoHeader {
-    /// The iceoryx2 type name of the header; must match between processes.
-    pub const TYPE_NAME: &'static str = "netfi::VideoHeader.v1";
-    /// The end of the video stream: not a frame, no payload.
-    pub const FLAG_END: u32 = 1;
-    /// A key frame (the first of its group of pictures).
-    pub const FLAG_KEY: u32 = 2;
-
-    /// An end marker after `sent` frames.
-    pub fn end_marker(sent: u64) -> VideoHeader {
-        VideoHeader { frame_index: sent, flags: VideoHeader::FLAG_END, ..VideoHeader::default() }
-    }
-
-    /// Whether this is the end marker.
-    pub fn is_end(&self) -> bool {
-        self.flags & VideoHeader::FLAG_END != 0
-    }
-}
 
 impl ItpFrame {
     /// Writes the frame into a shared-memory sample's wire bytes and sets its
@@ -290,17 +260,6 @@ mod tests {
         assert_eq!(ItpFrame::from_sample(&s), Ok(f));
         s.len = 100;
         assert_eq!(ItpFrame::from_sample(&s), Err(FrameError::WrongLength { expected: 124, found: 100 }));
-    }
-
-    #[test]
-    fn video_header_type_name_and_offsets_are_pinned() {
-        // SAFETY: type_name only returns the attribute's string.
-        assert_eq!(unsafe { VideoHeader::type_name() }, VideoHeader::TYPE_NAME);
-        let h = VideoHeader::default();
-        let base = &h as *const _ as usize;
-        assert_eq!(&h.ingress_index as *const _ as usize - base, 16);
-        assert_eq!(&h.len as *const _ as usize - base, 48);
-        assert_eq!(&h.gop_index as *const _ as usize - base, 56);
     }
 
     #[test]

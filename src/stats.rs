@@ -20,6 +20,12 @@ pub fn t975(df: usize) -> f64 {
     }
 }
 
+/// The exact 95 % upper bound on a rate of which `n` independent trials saw
+/// no event (one-sided Clopper–Pearson): `1 − 0.05^(1/n)`, about `3/n`.
+pub fn none_seen_upper_ci95(n: u64) -> f64 {
+    -((0.05f64).ln() / n as f64).exp_m1()
+}
+
 /// Counts of events (e.g. drops) over consecutive batches of trials (frames),
 /// for a confidence interval on the event rate that accounts for correlation
 /// between neighbouring trials (bursts): the method of batch means.
@@ -75,8 +81,24 @@ impl BatchMeans {
     /// The rate and its 95% interval. Batch means over 64 batches, halved
     /// (merging neighbours) while the batch means' lag-1 autocorrelation is
     /// significant, down to 8 batches. With no event (or only events) the
-    /// interval is the "rule of three" bound `[0, 3/n]` (resp. `[1 − 3/n, 1]`).
+    /// interval is the exact (Clopper–Pearson) one-sided bound
+    /// `[0, 1 − 0.05^(1/n)]`, about `3/n` (the "rule of three"; resp.
+    /// `[0.05^(1/n), 1]`).
     pub fn rate_ci95(&self) -> (f64, [f64; 2]) {
+        self.rate_ci95_with(0.0)
+    }
+
+    /// [`BatchMeans::rate_ci95`] with `unseen_rate` added to the upper end:
+    /// the long-run rate of events a run of this length is unlikely to have
+    /// sampled (a heavy-tailed model's longest bursts,
+    /// [`crate::model::AnyModel::unseen_loss_rate`]), which no spread of the
+    /// run's own can show.
+    pub fn rate_ci95_with(&self, unseen_rate: f64) -> (f64, [f64; 2]) {
+        let (rate, [lo, hi]) = self.rate_ci95_seen();
+        (rate, [lo, (hi + unseen_rate).min(1.0)])
+    }
+
+    fn rate_ci95_seen(&self) -> (f64, [f64; 2]) {
         let n = self.n;
         if n == 0 {
             return (0.0, [0.0, 1.0]);
@@ -84,10 +106,10 @@ impl BatchMeans {
         let events = self.events();
         let rate = events as f64 / n as f64;
         if events == 0 {
-            return (0.0, [0.0, (3.0 / n as f64).min(1.0)]);
+            return (0.0, [0.0, none_seen_upper_ci95(n)]);
         }
         if events == n {
-            return (1.0, [(1.0 - 3.0 / n as f64).max(0.0), 1.0]);
+            return (1.0, [1.0 - none_seen_upper_ci95(n), 1.0]);
         }
         let used = self.trials.iter().rposition(|t| *t > 0).map_or(0, |i| i + 1);
         let mut batches = 64usize.min(used);
@@ -334,6 +356,20 @@ mod tests {
         for _ in 0..1000 {
             bm.record(false);
         }
-        assert_eq!(bm.rate_ci95(), (0.0, [0.0, 0.003]));
+        let (rate, [lo, hi]) = bm.rate_ci95();
+        assert_eq!((rate, lo), (0.0, 0.0));
+        // (1 − hi)^1000 = 0.05: the exact bound, about 3/1000.
+        assert!(((1.0 - hi).powi(1000) - 0.05).abs() < 1e-12 && (hi - 0.003).abs() < 1e-5, "{hi}");
+        // Far beyond 4 decimals, the bound is still about 3/n.
+        let n = 10_000_000u64;
+        assert!((none_seen_upper_ci95(n) * n as f64 - 2.995_732).abs() < 1e-5);
+        let mut all = BatchMeans::new(10);
+        (0..10).for_each(|_| all.record(true));
+        let (rate_all, [lo_all, hi_all]) = all.rate_ci95();
+        assert_eq!((rate_all, hi_all), (1.0, 1.0));
+        assert!((lo_all.powi(10) - 0.05).abs() < 1e-12, "{lo_all}");
+        // What a run could not have seen widens the upper end only.
+        assert_eq!(bm.rate_ci95_with(0.01).1, [0.0, hi + 0.01]);
+        assert_eq!(all.rate_ci95_with(0.01).1, [lo_all, 1.0]);
     }
 }

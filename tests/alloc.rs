@@ -123,27 +123,22 @@ fn the_emulator_link_does_not_allocate_per_frame() {
 fn the_feedback_path_does_not_allocate_per_sample() {
     let _serial = one_at_a_time();
     use netfi::sample::FeedbackSample;
-    use netfi::transport::{FeedbackEgress, FeedbackIngress};
-    use std::collections::VecDeque;
+    use netfi::transport::MemoryPort;
     let spec = scenario::parse_str(PLM2_SHORT_REORDER, "alloc.toml", "alloc").unwrap();
     let frames = 200_000u64;
     let link = Link::new(Scenario::new(&spec, 5).unwrap(), 1 << 16, frames).unwrap();
-    use netfi::service::emulator::feedback::Feedback;
-    let chan = Feedback::new(FeedbackIngress::Memory(VecDeque::with_capacity(4)), FeedbackEgress::Memory(VecDeque::with_capacity(1 << 17)));
+    use netfi::service::channel::feedback::Feedback;
+    type Memory = MemoryPort<FeedbackSample>;
+    let chan = Feedback::new(Memory::with_capacity(4), Memory::with_capacity(1 << 17));
     let path = Path::of(link, chan, 5, std::env::temp_dir().join("netfi-alloc-unused.csv"), false);
     let normal = Link::new(Scenario::new(&scenario::parse_str("", "n.toml", "n").unwrap(), 1).unwrap(), 16, 16).unwrap();
     let mut lane = Lane::new(forward(normal, 4, 16), vec![Box::new(path)]);
     assert_no_allocation_per_item(&mut lane, frames, "feedback samples", |lane, i| {
-        let fb = lane.reverse[0].as_any_mut().downcast_mut::<Path<Feedback>>().unwrap();
+        let fb = lane.reverse[0].as_any_mut().downcast_mut::<Path<Feedback<Memory, Memory>>>().unwrap();
         let (inp, out) = fb.chan.ports_mut();
-        let mut released = 0;
-        if let FeedbackEgress::Memory(q) = out {
-            released = q.len() as u64;
-            q.clear();
-        }
-        if let FeedbackIngress::Memory(q) = inp {
-            q.push_back(FeedbackSample { robot_index: i, send_ns: netfi::clock::now_ns(), ..FeedbackSample::ZERO });
-        }
+        let released = out.queue.len() as u64;
+        out.queue.clear();
+        inp.queue.push_back(FeedbackSample { robot_index: i, send_ns: netfi::clock::now_ns(), ..FeedbackSample::ZERO });
         released
     });
 }

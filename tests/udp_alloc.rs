@@ -6,10 +6,11 @@
 //! allocator is process-wide; everything runs on one thread.
 
 use netfi::scenario::{self, Scenario};
-use netfi::service::emulator::forward::{ConsoleAddr, Forward};
+use netfi::service::emulator::forward::Forward;
+use netfi::transport::udp::ConsoleAddr;
 use netfi::service::emulator::lane::Lane;
 use netfi::service::emulator::path::Path;
-use netfi::service::emulator::udp_return::UdpReturn;
+use netfi::service::channel::feedback::UdpReturn;
 use netfi::service::link::Link;
 use netfi::transport::udp::{Arena, ConsolePolicy, PeerAddr, UdpOptions, UdpPort, UdpSink, UdpSource};
 use std::cell::RefCell;
@@ -56,17 +57,16 @@ fn allocations_in_steady_state(
     // As `transport::open` sets them up: each side takes datagrams from its
     // one peer (the filter is on the receive path the loop turns).
     egress.accept_only(robot.local_addr());
-    let source = UdpSource::new(bind(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()));
+    let shared = ConsoleAddr::default();
+    let source = UdpSource::new(bind(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()), shared.clone());
     let (from_robot, to_console) = (egress.try_clone().unwrap(), source.port().try_clone().unwrap());
     let to_bridge = PeerAddr::new(source.local_addr());
-    let shared = ConsoleAddr::default();
     let unused = std::env::temp_dir().join("netfi-udp-alloc-unused.csv");
     let back = scenario::parse_str(return_scenario.unwrap_or(""), "return.toml", "return").unwrap();
     let chan = UdpReturn::new(from_robot, to_console, None, shared.clone(), return_scenario.is_some(), capacity);
     let ret = Path::of(Link::new(Scenario::new(&back, 4).unwrap(), capacity, datagrams).unwrap(), chan, 4, unused.clone(), false);
     let sink = UdpSink::new(egress, robot.local_addr(), Some(arena));
-    let mut chan = Forward::new(source, sink, false, true);
-    chan.share_console(shared);
+    let chan = Forward::new(source, sink, false, true);
     let fwd = Path::of(Link::new(Scenario::new(&spec, 3).unwrap(), capacity, datagrams).unwrap(), chan, 3, unused, false);
     let mut lane = Lane::new(fwd, vec![Box::new(ret)]);
     let payload = [0x5au8; 300];

@@ -15,6 +15,9 @@ use crate::common::process::{at, fresh_run_id, summary, Build, EmulatorSpec, For
 use crate::common::table::{Map, KEYS};
 use anyhow::Result;
 use netfi::metrics::{difference, Summary};
+use netfi::service::args::EndsArgs;
+use netfi::transport::udp::UdpArgs;
+use netfi::transport::Payload;
 use serde::Serialize;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -137,7 +140,17 @@ pub fn run_chain(build: &Build, out: &Out, p: &Placement, iv: &Interval) -> Resu
     let dir = out.run_dir(&iv.name)?;
     let (_, slots) = slots_for(iv.rate_hz, iv.seconds, iv.routes);
     let expected = slots / if iv.routes == Routes::Alternate { 2 } else { 1 } + 16;
-    let spec = EmulatorSpec { scenario: iv.scenario, dir: &dir, expected_frames: expected, run_id: None, feedback: false, queue_capacity: iv.queue_capacity, extra: Vec::new() };
+    let spec = EmulatorSpec {
+        scenario: iv.scenario,
+        dir: &dir,
+        expected_frames: expected,
+        run_id: None,
+        feedback: false,
+        queue_capacity: iv.queue_capacity,
+        ends: EndsArgs::default(),
+        udp: UdpArgs::default(),
+        streams: 1,
+    };
     let host = HostTimer::start(p.quiet);
     let (d, report) = match iv.transport {
         Transport::Iceoryx2 => drive_ipc(build, p, iv, spec)?,
@@ -207,8 +220,8 @@ fn drive_ipc(build: &Build, p: &Placement, iv: &Interval, spec: EmulatorSpec) ->
 /// the send times are kept in a table by sequence.
 fn drive_udp(build: &Build, p: &Placement, iv: &Interval, mut spec: EmulatorSpec, slots: u64) -> Result<(Drive, Value)> {
     let rx_chain = loopback_port()?;
-    let egress = format!("udp://{}", rx_chain.local_addr());
-    spec.extra = ["--ingress", "udp://127.0.0.1:0", "--egress", &egress, "--payload", "itp", "--no-return", "--idle-end-ms", "300", "--console-from", "first"].map(String::from).to_vec();
+    spec.ends = EndsArgs { ingress: "udp://127.0.0.1:0".parse()?, egress: format!("udp://{}", rx_chain.local_addr()).parse()?, idle_end_ms: Some(300.0) };
+    spec.udp = UdpArgs { payload: Payload::Itp, no_return: true, console_from: Some("first".parse()?), ..UdpArgs::default() };
     let emu = build.emulator(&spec, p)?;
     let ingress = emu.udp_ingress()?;
     let (core, rt) = (p.bench_core, p.rt_priority);

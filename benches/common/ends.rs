@@ -8,7 +8,7 @@ use netfi::clock::now_ns;
 use netfi::frame::ItpFrame;
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::udp::{PeerAddr, UdpOptions, UdpPort, DEFAULT_UDP_BUFFER_BYTES};
-use netfi::transport::{Channel, FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Role, RunId};
+use netfi::transport::{FramePublisher, FrameSubscriber, IpcConfig, IpcNode, Port, Role, RunId};
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
@@ -78,10 +78,10 @@ impl IpcEnds {
         let console = IpcNode::open(&cfg, Role::Console)?;
         let simulator = IpcNode::open(&cfg, Role::Simulator)?;
         keep_signals();
-        let to_emulator = console.publisher(Channel::Console)?;
-        let direct_tx = console.publisher(Channel::Direct)?;
-        let from_emulator = simulator.subscriber(Channel::Emulator)?;
-        let direct_rx = simulator.subscriber(Channel::Direct)?;
+        let to_emulator = console.publisher(Port::CONSOLE)?;
+        let direct_tx = console.publisher(Port::DIRECT)?;
+        let from_emulator = simulator.subscriber(Port::EMULATOR)?;
+        let direct_rx = simulator.subscriber(Port::DIRECT)?;
         let mut ends = IpcEnds { _console: console, _simulator: simulator, to_emulator, direct_tx, from_emulator, direct_rx };
         let t0 = Instant::now();
         while ends.to_emulator.peers_connected() == 0 || ends.from_emulator.peers_connected() == 0 || ends.direct_tx.peers_connected() == 0 {

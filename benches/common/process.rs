@@ -4,12 +4,16 @@
 //!
 //! Everything here goes through the command line and the files a run
 //! writes, not through the library: a benchmark can time a build of
-//! another commit beside this one.
+//! another commit beside this one. The command lines are this build's
+//! arguments rendered ([`RunArgs`], [`EmulatorArgs`]): only what differs
+//! from the defaults, which a build of another commit reads the same.
 
 use crate::common::args::{check_interrupted, stopped, Common, Cores, Placement, NETFI};
 use crate::common::out::Out;
 use anyhow::{bail, Context, Result};
 use netfi::metrics::Summary;
+use netfi::service::args::{EmulatorArgs, EndsArgs, RunArgs};
+use netfi::transport::udp::UdpArgs;
 use serde::Serialize;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -45,11 +49,17 @@ impl Build {
     }
 
     /// `netfi run SCENARIO` at `rate_hz` for `seconds` (seed 1) writing to
-    /// `dir`, with `extra` flags; its `report.json`. The per-frame files are
-    /// removed after (large at high rates).
+    /// `dir`, with `extra` flags (as given, for every build); its
+    /// `report.json`. The per-frame files are removed after (large at high
+    /// rates).
     pub fn run(&self, dir: &Path, scenario: &str, rate_hz: f64, seconds: f64, extra: &[String]) -> Result<Value> {
+        let mut run = RunArgs::new(scenario);
+        run.source.rate_hz = Some(rate_hz);
+        run.source.duration_s = Some(seconds);
+        run.scenario.seed = Some(1);
+        run.out = Some(dir.to_path_buf());
         let mut cmd = Command::new(&self.netfi);
-        cmd.args(["run", scenario, "--rate-hz", &rate_hz.to_string(), "--duration-s", &seconds.to_string(), "--seed", "1", "--out"]).arg(dir).args(extra);
+        cmd.arg("run").args(run.to_argv()).args(extra);
         let status = wait(spawn_logged(cmd, &dir.join("run.log"))?)?;
         check_interrupted()?;
         let report = read_json(&dir.join("report.json")).with_context(|| format!("netfi run ({}: {status}); see {}", self.label, dir.join("run.log").display()))?;
@@ -71,7 +81,14 @@ impl Build {
 
     /// Starts `netfi emulator` as `spec` says, and waits until it is ready.
     pub fn emulator(&self, spec: &EmulatorSpec, p: &Placement) -> Result<Emulator> {
-        Emulator::spawn(&self.netfi, spec.dir, &spec.argv(p))
+        self.emulator_of(&spec.args(p))
+    }
+
+    /// Starts `netfi emulator ARGS`, and waits until it is ready (in
+    /// `args.out`).
+    pub fn emulator_of(&self, args: &EmulatorArgs) -> Result<Emulator> {
+        let argv: Vec<String> = std::iter::once("emulator".to_string()).chain(args.to_argv()).collect();
+        Emulator::spawn(&self.netfi, &args.out, &argv)
     }
 }
 
@@ -205,16 +222,6 @@ pub fn fresh_run_id() -> String {
     format!("b{:x}x{}", t & 0xff_ffff_ffff, N.fetch_add(1, Ordering::Relaxed))
 }
 
-/// Stream `k`'s run id and directory in a run of several streams (as
-/// `netfi emulator --streams` names them).
-pub fn stream_run_id(run_id: &str, k: usize) -> String {
-    if k == 0 {
-        run_id.to_string()
-    } else {
-        format!("{run_id}-s{k}")
-    }
-}
-
 /// What an emulator the benchmark starts runs: `scenario` with seed 1,
 /// writing to `dir`, on the placement's core.
 pub struct EmulatorSpec<'a> {
@@ -222,40 +229,37 @@ pub struct EmulatorSpec<'a> {
     pub dir: &'a Path,
     pub expected_frames: u64,
     /// iceoryx2 on both sides, this run's ports; `None`: the endpoints are
-    /// in `extra`.
+    /// UDP ones (`udp`).
     pub run_id: Option<&'a str>,
     /// Keep the iceoryx2 feedback loop open (off: the forward path alone).
     pub feedback: bool,
     pub queue_capacity: Option<usize>,
-    /// Further flags: UDP endpoints, `--streams`, a return scenario.
-    pub extra: Vec<String>,
+    /// The endpoints (default: iceoryx2 on both sides).
+    pub ends: EndsArgs,
+    /// The UDP bridge's options.
+    pub udp: UdpArgs,
+    /// Console → robot streams through the one emulator.
+    pub streams: u32,
 }
 
 impl EmulatorSpec<'_> {
-    /// The argv after the binary.
-    pub fn argv(&self, p: &Placement) -> Vec<String> {
-        let mut a: Vec<String> = vec!["emulator".into(), "--scenario".into(), self.scenario.into(), "--seed".into(), "1".into()];
-        a.extend(["--out".into(), self.dir.display().to_string(), "--expected-frames".into(), self.expected_frames.to_string()]);
-        match self.run_id {
-            Some(id) => a.extend(["--run-id".to_string(), id.to_string()]),
-            // Live control and telemetry are served under a run id.
-            None => a.push("--no-control".into()),
-        }
-        if self.run_id.is_some() && !self.feedback {
-            a.push("--no-feedback".into());
-        }
-        match p.emulator_core {
-            Some(c) => a.extend(["--core".to_string(), c.to_string()]),
-            None => a.push("--no-pin".into()),
-        }
-        if let Some(r) = p.rt_priority {
-            a.extend(["--rt-priority".to_string(), r.to_string()]);
-        }
-        if let Some(q) = self.queue_capacity {
-            a.extend(["--queue-capacity".to_string(), q.to_string()]);
-        }
-        a.extend(self.extra.iter().cloned());
-        a
+    /// The emulator's arguments.
+    pub fn args(&self, p: &Placement) -> EmulatorArgs {
+        let mut e = EmulatorArgs::new(self.run_id.map(str::to_string), self.scenario);
+        e.scenario.seed = Some(1);
+        e.scenario.queue_capacity = self.queue_capacity;
+        e.out = self.dir.to_path_buf();
+        e.expected_frames = self.expected_frames;
+        // Live control and telemetry are served under a run id.
+        e.control.no_control = self.run_id.is_none();
+        e.channels.feedback.no_feedback = self.run_id.is_some() && !self.feedback;
+        e.placement.core = p.emulator_core;
+        e.placement.no_pin = p.emulator_core.is_none();
+        e.placement.rt_priority = p.rt_priority;
+        e.ends = self.ends.clone();
+        e.transports.udp = self.udp.clone();
+        e.stream.streams = self.streams;
+        e
     }
 }
 

@@ -13,7 +13,7 @@ use netfi::clock::now_ns;
 use netfi::metrics::{LatencyHistogram, Summary};
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::udp::PeerAddr;
-use netfi::transport::{Channel, IpcConfig, IpcNode, Role, RunId};
+use netfi::transport::{IpcConfig, IpcNode, Port, Role, RunId};
 use serde::Serialize;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -75,7 +75,7 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
         pin(f.rx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&rid)?), Role::Simulator)?;
         keep_signals();
-        let mut sub = node.subscriber(Channel::Direct)?;
+        let mut sub = node.subscriber(Port::DIRECT)?;
         let _ = ready_tx.send(());
         let (mut h, mut n) = (LatencyHistogram::new(), 0u64);
         loop {
@@ -98,7 +98,7 @@ fn floor_ipc(f: Floor) -> Result<Measured> {
         pin(f.tx_core, f.rt);
         let node = IpcNode::open(&IpcConfig::new(RunId::new(&run_id)?), Role::Console)?;
         keep_signals();
-        let mut publ = node.publisher(Channel::Direct)?;
+        let mut publ = node.publisher(Port::DIRECT)?;
         let t = Instant::now();
         while publ.peers_connected() == 0 {
             anyhow::ensure!(t.elapsed() < Duration::from_secs(10), "the floor receiver did not attach");

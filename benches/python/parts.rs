@@ -9,6 +9,9 @@ use crate::common::process::{fresh_run_id, read_json, Build, Emulator, EmulatorS
 use crate::windows::{Sampler, Window};
 use crate::args::Args;
 use anyhow::{bail, Context, Result};
+use netfi::service::args::EndsArgs;
+use netfi::transport::udp::UdpArgs;
+use netfi::transport::Payload;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -110,7 +113,7 @@ pub fn run(a: &Args, p: &Placement, build: &Build, out: &Out, transport: &'stati
     let (emu, robot, routes) = if transport == "iceoryx2" {
         let run_id = fresh_run_id();
         let ids = vec!["--run-id".to_string(), run_id.clone(), "--direct-run-id".into(), format!("{run_id}-direct")];
-        let emu = start_emulator(a, p, build, &dir, Some(&run_id), Vec::new())?;
+        let emu = start_emulator(a, p, build, &dir, Some(&run_id), EndsArgs::default(), UdpArgs::default())?;
         let mut robot = python(a, "robot.py", &dir, "robot", p.other_core, &robot_args(&ids))?;
         ready(&mut robot, &ready_path)?;
         (emu, robot, ids)
@@ -120,8 +123,9 @@ pub fn run(a: &Args, p: &Placement, build: &Build, out: &Out, transport: &'stati
         let mut robot = python(a, "robot.py", &dir, "robot", p.other_core, &robot_args(&[]))?;
         let ports = ready(&mut robot, &ready_path)?;
         let port = |k: &str| ports[k].as_u64().with_context(|| format!("robot.ready: no {k} port"));
-        let udp = ["--ingress".into(), "udp://127.0.0.1:0".into(), "--egress".into(), format!("udp://127.0.0.1:{}", port("chain")?), "--payload".into(), "itp".into(), "--idle-end-ms".into(), "500".into(), "--console-from".into(), "first".into()];
-        let emu = start_emulator(a, p, build, &dir, None, udp.to_vec())?;
+        let ends = EndsArgs { ingress: "udp://127.0.0.1:0".parse()?, egress: format!("udp://127.0.0.1:{}", port("chain")?).parse()?, idle_end_ms: Some(500.0) };
+        let udp = UdpArgs { payload: Payload::Itp, console_from: Some("first".parse()?), ..UdpArgs::default() };
+        let emu = start_emulator(a, p, build, &dir, None, ends, udp)?;
         let routes = vec!["--chain-to".into(), emu.udp_ingress()?.to_string(), "--direct-to".into(), format!("127.0.0.1:{}", port("direct")?)];
         (emu, robot, routes)
     };
@@ -149,12 +153,13 @@ pub fn run(a: &Args, p: &Placement, build: &Build, out: &Out, transport: &'stati
 
 /// `netfi emulator` with Normal both ways (the forward scenario, and the
 /// feedback loop's or the UDP return path's), on the emulator's core.
-fn start_emulator(a: &Args, p: &Placement, build: &Build, dir: &Path, run_id: Option<&str>, mut extra: Vec<String>) -> Result<Emulator> {
-    extra.extend(["--return-scenario".to_string(), "Normal".to_string()]);
+fn start_emulator(a: &Args, p: &Placement, build: &Build, dir: &Path, run_id: Option<&str>, ends: EndsArgs, udp: UdpArgs) -> Result<Emulator> {
     let expected = (a.rate_hz * (a.seconds + 1.0)) as u64 + 16;
     let emu_dir = dir.join("emulator");
-    let spec = EmulatorSpec { scenario: "Normal", dir: &emu_dir, expected_frames: expected, run_id, feedback: true, queue_capacity: None, extra };
-    build.emulator(&spec, p)
+    let spec = EmulatorSpec { scenario: "Normal", dir: &emu_dir, expected_frames: expected, run_id, feedback: true, queue_capacity: None, ends, udp, streams: 1 };
+    let mut args = spec.args(p);
+    args.channels.feedback.return_scenario = Some("Normal".into());
+    build.emulator_of(&args)
 }
 
 fn records<const N: usize>(path: &Path) -> Result<Vec<[i64; N]>> {

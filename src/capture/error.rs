@@ -41,8 +41,7 @@ pub enum CaptureError {
         #[source]
         source: lz4_flex::frame::Error,
     },
-    /// Reading the underlying file failed (including a compressed stream that
-    /// ends in the middle of an LZ4 block).
+    /// Reading the underlying file failed.
     #[error("{}: record {record} at byte {offset}: read failed: {source}", Origin(.path))]
     Read {
         path: Option<PathBuf>,
@@ -74,6 +73,29 @@ pub enum CaptureError {
         needed: usize,
         /// Bytes present before the content ended.
         found: usize,
+    },
+    /// The file ends inside an LZ4 frame's header, block or checksum: it
+    /// was cut short there. `file_bytes` is where, in the file (its
+    /// length); `record` the records read whole before it.
+    #[error("{}: the file was cut short: it ends at byte {file_bytes} of the file, inside LZ4 frame {frame} (from 1); \
+             the {record} record(s) before it were whole", Origin(.path))]
+    Cut {
+        path: Option<PathBuf>,
+        record: u64,
+        /// The frame cut, counted from 1.
+        frame: u64,
+        /// Where the file ends, in compressed bytes.
+        file_bytes: u64,
+    },
+    /// More records than the limit the capture is read with: refused when
+    /// the first byte of the record beyond it is read.
+    #[error("{}: more than {max_records} records, the most it is read with (default {default}): \
+             --capture-max-records, or a replay stage's `max_records`, raises the limit",
+            Origin(.path), default = super::DEFAULT_MAX_RECORDS)]
+    TooManyRecords {
+        path: Option<PathBuf>,
+        /// The limit read with.
+        max_records: u64,
     },
     /// The file holds no records at all.
     #[error("{}: contains no records", Origin(.path))]

@@ -8,7 +8,7 @@ use std::io::{self, BufReader, Read};
 use std::path::{Path, PathBuf};
 
 /// The LZ4 frame format's magic number, little-endian on the wire.
-pub(super) const LZ4_MAGIC: [u8; 4] = [0x04, 0x22, 0x4d, 0x18];
+pub const LZ4_MAGIC: [u8; 4] = [0x04, 0x22, 0x4d, 0x18];
 /// The magic numbers of LZ4's skippable frames, `0x184D2A50`–`0x184D2A5F`,
 /// without their low four bits.
 const LZ4_SKIPPABLE_MAGIC: u32 = 0x184D_2A50;
@@ -31,11 +31,26 @@ fn read_full<R: Read>(reader: &mut R, buf: &mut [u8]) -> io::Result<usize> {
     Ok(filled)
 }
 
+/// The file under the decoder, counting the bytes taken from it.
+struct Counting<R> {
+    inner: R,
+    /// Bytes read from `inner` so far.
+    bytes_read: u64,
+}
+
+impl<R: Read> Read for Counting<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.bytes_read += n as u64;
+        Ok(n)
+    }
+}
+
 /// The compressed stream under the decoder: counts what the decoder has
 /// taken, hands back bytes the reader looked at ahead (the magic number of
 /// the next frame), and notes each frame's FLG byte as it goes by.
 struct Tap<R> {
-    inner: R,
+    inner: Counting<R>,
     /// Compressed bytes handed to the decoder so far.
     consumed: u64,
     /// Bytes read ahead of the decoder, handed to it first.
@@ -57,7 +72,13 @@ struct Tap<R> {
 
 impl<R: Read> Tap<R> {
     fn new(inner: R) -> Tap<R> {
-        Tap { inner, consumed: 0, back: [0; 4], back_len: 0, back_pos: 0, flg_at: None, frames: 0, all_checksummed: true, eof: false }
+        Tap { inner: Counting { inner, bytes_read: 0 }, consumed: 0, back: [0; 4], back_len: 0, back_pos: 0, flg_at: None, frames: 0, all_checksummed: true, eof: false }
+    }
+
+    /// Where the decoder is in the file: the bytes read from it, less
+    /// those read ahead and not yet handed over.
+    fn file_offset(&self) -> u64 {
+        self.inner.bytes_read - u64::from(self.back_len - self.back_pos)
     }
 
     /// Hands `bytes` (read ahead from `inner`) to the decoder before
@@ -114,6 +135,8 @@ pub struct CaptureReader<R: Read> {
     ahead_pos: usize,
     /// Whether the first frame has been looked for.
     started: bool,
+    /// The most records read; the next one is refused.
+    max_records: u64,
     /// The last frame has ended and nothing follows: the decoder is not
     /// asked again.
     content_ended: bool,
@@ -124,10 +147,11 @@ pub struct CaptureReader<R: Read> {
 }
 
 impl CaptureReader<BufReader<File>> {
-    /// Opens a capture file.
+    /// Opens a capture file: a regular file only ([`crate::load::open_regular`];
+    /// a FIFO or a device is refused, not waited on).
     pub fn open(path: impl AsRef<Path>) -> Result<Self, CaptureError> {
         let path = path.as_ref();
-        let file = File::open(path)
+        let file = crate::load::open_regular(path)
             .map_err(|source| CaptureError::Open { path: Some(path.to_path_buf()), source })?;
         Ok(CaptureReader::new(BufReader::new(file)).with_path(path))
     }
@@ -146,6 +170,7 @@ impl<R: Read> CaptureReader<R> {
             ahead: Vec::new(),
             ahead_pos: 0,
             started: false,
+            max_records: u64::MAX,
             content_ended: false,
             boundary_error: None,
         }
@@ -154,6 +179,19 @@ impl<R: Read> CaptureReader<R> {
     /// Names the stream's file in error messages.
     pub fn with_path(mut self, path: impl AsRef<Path>) -> Self {
         self.path = Some(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// The file named in error messages, if any.
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    /// Reads at most `max_records` records: a record beyond them is
+    /// [`CaptureError::TooManyRecords`] as soon as its first byte is read
+    /// (default: no limit; a reader keeps nothing per record).
+    pub fn with_max_records(mut self, max_records: u64) -> Self {
+        self.max_records = max_records;
         self
     }
 
@@ -238,6 +276,14 @@ impl<R: Read> CaptureReader<R> {
 
     fn read_error(&self, e: io::Error) -> CaptureError {
         let (path, record, offset) = (self.path.clone(), self.record, self.offset);
+        if e.kind() == io::ErrorKind::UnexpectedEof {
+            // The decoder wanted bytes of a frame (its header, a block, a
+            // checksum) that the file does not have.
+            // A file cut inside its first magic number has begun no frame
+            // yet: it is cut in the first.
+            let tap = self.decoder.get_ref();
+            return CaptureError::Cut { path, record, frame: tap.frames.max(1), file_bytes: tap.file_offset() };
+        }
         match lz4_flex::frame::Error::from(e) {
             lz4_flex::frame::Error::IoError(source) => CaptureError::Read { path, record, offset, source },
             source => CaptureError::Lz4 { path, record, offset, source },
@@ -337,6 +383,9 @@ impl<R: Read> CaptureReader<R> {
         let got = self.read_content(&mut header[..header_len])?;
         if got == 0 {
             return Ok(None);
+        }
+        if self.record >= self.max_records {
+            return Err(CaptureError::TooManyRecords { path: self.path.clone(), max_records: self.max_records });
         }
         if got < header_len {
             return Err(self.truncated(header_len, got));

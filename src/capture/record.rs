@@ -12,7 +12,7 @@ pub const RECORD_LEN: usize = RECORD_HEADER_LEN + FRAME_LEN;
 pub const DELAY_RECORD_HEADER_LEN: usize = 14;
 
 /// The two record layouts a capture may use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordLayout {
     /// `u64 time_ns | u16 len | u8 dropped | payload`: netfi's and the

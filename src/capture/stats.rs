@@ -1,7 +1,8 @@
 //! What a capture holds, counted record by record, and when it is refused.
 
-use super::{CaptureRecord, MAX_GAP_NS, MAX_STEP_BACKWARD_NS};
+use super::{CaptureRecord, RecordLayout, MAX_GAP_NS, MAX_STEP_BACKWARD_NS};
 use crate::frame::SURGEON_ENGAGED;
+use std::path::Path;
 
 /// Summary of a capture, built record by record with [`CaptureStats::push`].
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
@@ -135,4 +136,73 @@ impl CaptureStats {
 /// `longest_ns`, in words; `None` when there are none.
 fn over_limit(count: u64, what: &str, limit_ns: u64, place: &str, longest_ns: u64) -> Option<String> {
     (count > 0).then(|| format!("{count} {what} of more than {} s{place} (longest {:.3} s)", limit_ns / 1_000_000_000, longest_ns as f64 * 1e-9))
+}
+
+/// The ITP frame's fields its checksum leaves out (docs/spec.md §2), with
+/// their byte ranges: a change there passes the frame's check.
+pub const FRAME_FIELDS_UNCHECKED: [(&str, std::ops::Range<usize>); 7] =
+    [("pactyp", 4..8), ("version", 8..12), ("Qx", 36..52), ("Qy", 52..68), ("Qz", 68..84), ("Qw", 84..100), ("grasp", 108..116)];
+
+/// What no checksum covers in a capture of `layout` without an LZ4 content
+/// checksum: the record header's time stamp and its flag or delay (the
+/// length is checked: it must be one frame), and the frame fields the ITP
+/// checksum leaves out.
+pub fn unverified_fields(layout: RecordLayout) -> Vec<String> {
+    let flag = match layout {
+        RecordLayout::Dropped => "dropped",
+        RecordLayout::Delay => "delay_s",
+    };
+    ["time_ns", flag].into_iter().map(String::from).chain(FRAME_FIELDS_UNCHECKED.iter().map(|(f, _)| format!("frame.{f}"))).collect()
+}
+
+/// What a loaded capture is, for reports (`scenario check --json`, the
+/// console's report) and stderr: its file, size, layout, and whether its
+/// content is verified, with the fields that are not.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CaptureNote {
+    /// The file, as named.
+    pub path: String,
+    /// Records read.
+    pub records: u64,
+    /// The record layout found.
+    pub layout: RecordLayout,
+    /// LZ4 frames in the file.
+    pub lz4_frames: u64,
+    /// Whether every LZ4 frame carries a content checksum (all matched:
+    /// the file is as written).
+    pub content_checksum: bool,
+    /// The fields no checksum covers ([`unverified_fields`]); empty with a
+    /// content checksum.
+    pub unverified: Vec<String>,
+}
+
+impl CaptureNote {
+    /// The note of a capture read from `path`.
+    pub fn new(path: &Path, layout: RecordLayout, stats: &CaptureStats) -> CaptureNote {
+        CaptureNote {
+            path: path.display().to_string(),
+            records: stats.frames,
+            layout,
+            lz4_frames: stats.lz4_frames,
+            content_checksum: stats.content_checksum,
+            unverified: if stats.content_checksum { Vec::new() } else { unverified_fields(layout) },
+        }
+    }
+
+    /// The warning to print when the content is not verified.
+    pub fn unverified_warning(&self) -> Option<String> {
+        if self.content_checksum {
+            return None;
+        }
+        let (header, frame): (Vec<&str>, Vec<&str>) = self.unverified.iter().map(String::as_str).partition(|f| !f.starts_with("frame."));
+        let frame: Vec<&str> = frame.iter().map(|f| f.trim_start_matches("frame.")).collect();
+        Some(format!(
+            "capture `{}` has no LZ4 content checksum, so nothing shows it is as written: each frame's ITP checksum was checked, \
+             but not the records' {}, nor the frame fields the ITP checksum leaves out ({}); damage there is read as recorded \
+             (a time stamp is refused only beyond a 1 s step back or a 60 s gap)",
+            self.path,
+            header.join(" and "),
+            frame.join(", ")
+        ))
+    }
 }

@@ -295,3 +295,95 @@ fn payload_too_long_is_an_error() {
         Err(CaptureError::PayloadTooLong { length: 70_000, record: 0, .. })
     ));
 }
+
+/// A capture is read up to its limit of records: exactly the limit is
+/// read, one more is refused when it begins; what is kept never outgrows
+/// the limit (a repeated record packs millions into a small file).
+#[test]
+fn records_beyond_the_limit_are_refused_and_never_kept() {
+    let r = CaptureRecord::new(1_000, &frame(1, 1));
+    for n in [1usize, 999, 1000, 1001, 2500] {
+        let bytes = capture_bytes(&vec![r; n]);
+        let limits = CaptureLimits::records(1000);
+        match parse_with(&bytes, limits) {
+            Ok(cap) => {
+                assert!(n <= 1000, "{n} records read under a limit of 1000");
+                assert_eq!(cap.records.len(), n);
+                assert!(cap.records.capacity() <= 1000, "{n}: capacity {}", cap.records.capacity());
+            }
+            Err(CaptureError::TooManyRecords { max_records: 1000, path: None }) => assert!(n > 1000, "{n} refused"),
+            Err(e) => panic!("{n}: {e}"),
+        }
+        // The same limit for a reader whose records are not kept.
+        let mut seen = 0u64;
+        let scanned = scan(CaptureReader::new(&bytes[..]), limits, |_| seen += 1);
+        assert_eq!(scanned.is_ok(), n <= 1000, "{n}");
+        assert_eq!(seen, n.min(1000) as u64);
+    }
+    let e = parse_with(&capture_bytes(&[r; 3]), CaptureLimits::records(2)).unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "capture stream: more than 2 records, the most it is read with (default 4194304): --capture-max-records, or a replay stage's `max_records`, raises the limit"
+    );
+    assert_eq!(CaptureLimits::default().max_records, 1 << 22);
+    assert_eq!(CaptureLimits::records(2).max_content_bytes(), 2 * 138 + 14);
+}
+
+/// A file cut inside an LZ4 frame (its header, a block, the checksum) says
+/// it was cut and where in the file, not a decompressed offset.
+#[test]
+fn a_file_cut_inside_a_block_says_where_the_file_ends() {
+    let (_, bytes) = batched(300, 300);
+    for cut in [3, 6, bytes.len() / 2, bytes.len() - 2] {
+        match parse(&bytes[..cut]) {
+            Err(CaptureError::Cut { file_bytes, frame: 1, .. }) => assert_eq!(file_bytes, cut as u64),
+            other => panic!("cut at {cut} of {}: {:?}", bytes.len(), other.map(|c| c.stats)),
+        }
+    }
+    let e = parse(&bytes[..bytes.len() / 2]).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("capture stream: the file was cut short: it ends at byte {} of the file, inside LZ4 frame 1", bytes.len() / 2)), "{e}");
+    assert!(!e.contains("fill whole buffer"), "{e}");
+}
+
+/// Without a content checksum, the record header's time and flag or
+/// delay, and the frame bytes the ITP checksum leaves out, are named as
+/// unverified; the names cover exactly the bytes no checksum covers.
+#[test]
+fn what_no_checksum_covers_is_named() {
+    let uncovered: Vec<usize> = (0..FRAME_LEN).filter(|&b| !crate::frame::checksum_covers(b)).collect();
+    let named: Vec<usize> = FRAME_FIELDS_UNCHECKED.iter().flat_map(|(_, r)| r.clone()).collect();
+    assert_eq!(named, uncovered);
+    let r = CaptureRecord::new(5, &frame(1, 1));
+    let with = parse(&capture_bytes(&[r; 3])).unwrap().note();
+    assert!(with.content_checksum && with.unverified.is_empty() && with.unverified_warning().is_none(), "{with:?}");
+    let mut content = Vec::new();
+    for _ in 0..3 {
+        content.extend_from_slice(&5u64.to_be_bytes());
+        content.extend_from_slice(&124u16.to_be_bytes());
+        content.push(0);
+        content.extend_from_slice(&r.payload);
+    }
+    let without = parse(&lz4(&content)).unwrap().note();
+    assert!(!without.content_checksum);
+    assert_eq!(without.unverified, ["time_ns", "dropped", "frame.pactyp", "frame.version", "frame.Qx", "frame.Qy", "frame.Qz", "frame.Qw", "frame.grasp"]);
+    let w = without.unverified_warning().unwrap();
+    assert!(w.contains("no LZ4 content checksum") && w.contains("time_ns and dropped") && w.contains("(pactyp, version, Qx, Qy, Qz, Qw, grasp)"), "{w}");
+    assert_eq!(unverified_fields(RecordLayout::Delay)[..2], ["time_ns", "delay_s"]);
+    let json = serde_json::to_value(&without).unwrap();
+    assert_eq!(json["layout"], "dropped");
+    assert_eq!(serde_json::from_value::<CaptureNote>(json).unwrap(), without);
+}
+
+/// A FIFO given as a capture is refused at once, not waited on.
+#[test]
+fn a_fifo_is_refused_without_waiting_for_a_writer() {
+    let dir = crate::scratch::dir("capture-fifo");
+    let fifo = dir.join("fifo.bin");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let e = load(&fifo).unwrap_err().to_string();
+    assert!(e.contains("fifo.bin") && e.contains("a FIFO: only regular files are read"), "{e}");
+    assert!(load("/dev/null").unwrap_err().to_string().contains("a device"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

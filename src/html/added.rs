@@ -18,7 +18,7 @@ pub(super) fn kinematics(r: &RunReport) -> Result<Markup, HtmlError> {
     let arm = |key: &str| [f(&k["divergence"][0][key]), f(&k["divergence"][1][key])];
     let (final_mm, max_mm) = (arm("final_mm"), arm("max_mm"));
     let plot = figures::divergence(final_mm, max_mm)?;
-    let live = r.feedback.as_ref().and_then(|fb| fb.divergence_final_mm.zip(fb.divergence_max_mm));
+    let live = r.channels.feedback.as_ref().and_then(|fb| fb.divergence_final_mm.zip(fb.divergence_max_mm));
     Ok(html! {
         section #kinematics {
             h2 { "Kinematics: console vs robot, per arm" }
@@ -56,7 +56,7 @@ const PERCENTILE_HEADER: [&str; 6] = ["frames", "p50", "p90", "p99", "p99.9", "m
 
 /// The feedback loop robot → emulator → console, and its round trip.
 pub(super) fn feedback(r: &RunReport) -> Markup {
-    let Some(fb) = &r.feedback else {
+    let Some(fb) = &r.channels.feedback else {
         return html! { section #feedback { h2 { "Feedback round trip" } (none("no feedback path in this run")) } };
     };
     let opt = |v: Option<u64>| v.map_or("?".to_string(), |x| x.to_string());

@@ -110,7 +110,7 @@ pub fn read_hlog(path: &Path) -> Result<Histogram<u64>, HtmlError> {
 pub fn read_hlog_intervals(path: &Path) -> Result<(Histogram<u64>, Vec<IntervalPoint>), HtmlError> {
     use base64::Engine;
     use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
-    let bytes = std::fs::read(path).map_err(|e| HtmlError::read(path, e))?;
+    let bytes = crate::load::read_file(path).map_err(|e| HtmlError::read(path, e))?;
     let mut total: Option<Histogram<u64>> = None;
     let mut points = Vec::new();
     let mut de = hdrhistogram::serialization::Deserializer::new();
@@ -150,7 +150,7 @@ fn scenario(dir: &Path, report: &RunReport) -> Result<(Option<crate::scenario::S
     match &report.files.scenario {
         Some(_) => {
             let path = dir.join("scenario.toml");
-            let text = std::fs::read_to_string(&path).map_err(|e| HtmlError::read(&path, e))?;
+            let text = crate::load::open_regular(&path).and_then(std::io::read_to_string).map_err(|e| HtmlError::read(&path, e))?;
             let spec = crate::load::parse_file(&path).map_err(|e| HtmlError::malformed(&path, e.to_string()))?;
             Ok((Some(spec), Some(text)))
         }

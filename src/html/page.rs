@@ -188,8 +188,8 @@ fn summary(r: &RunReport) -> Markup {
             @if !r.faults.is_empty() {
                 ul #faults { @for fault in &r.faults { li.fault { (fault) } } }
             }
-            @if let Some(u) = &r.udp {
-                p #udp { "UDP: " (crate::service::report::udp_line(u)) "." }
+            @for (scheme, line) in r.transports.lines() {
+                p id=(scheme) { (scheme.to_uppercase()) ": " (line) "." }
             }
             @if !r.missing.is_empty() {
                 p #missing.none { "Not in the run's directory: " (r.missing.join(", ")) " (the figures that need them are unknown)." }

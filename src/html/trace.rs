@@ -178,7 +178,7 @@ impl TraceSummary {
 /// run's stretches under one condition begin. A row that does not parse is
 /// an error naming the file and the line.
 pub fn summarize(path: &Path, bin_ns: u64, stretches_ns: &[u64]) -> Result<TraceSummary, HtmlError> {
-    let file = std::fs::File::open(path).map_err(|e| HtmlError::read(path, e))?;
+    let file = crate::load::open_regular(path).map_err(|e| HtmlError::read(path, e))?;
     let mut lines = std::io::BufReader::with_capacity(1 << 16, file).lines();
     let header = lines.next().transpose().map_err(|e| HtmlError::read(path, e))?.unwrap_or_default();
     let cols = Header::parse(&header);

@@ -6,7 +6,7 @@ use maud::{html, Markup};
 
 /// The section; a line saying so for a run without video.
 pub fn section(r: &RunReport) -> Markup {
-    let Some(v) = &r.video else {
+    let Some(v) = &r.channels.video else {
         return html! { section #video { h2 { "Video" } p #no-video.none { "no video in this run" } } };
     };
     let f = &v.frames;

@@ -15,7 +15,7 @@ mod summary;
 
 pub use histogram::LatencyHistogram;
 pub use interval::{IntervalLog, IntervalLogError, INTERVAL_NS};
-pub use summary::{difference, fmt_fraction, fmt_ns, Summary};
+pub use summary::{difference, fmt_fraction, fmt_ns, fmt_ns_signed, fmt_rate, Summary};
 
 use hdrhistogram::serialization::interval_log::{IntervalLogWriter, IntervalLogWriterBuilder};
 use hdrhistogram::serialization::V2DeflateSerializer;

@@ -82,6 +82,30 @@ pub fn fmt_ns(ns: u64) -> String {
     }
 }
 
+/// A signed duration in ns (a difference of two), as [`fmt_ns`] writes
+/// its size.
+pub fn fmt_ns_signed(ns: i64) -> String {
+    let size = fmt_ns(ns.unsigned_abs());
+    if ns < 0 {
+        format!("-{size}")
+    } else {
+        size
+    }
+}
+
+/// A rate in [0, 1] to `decimals` places, or, for one above 0 that those
+/// places would show as 0 (the upper bound of a loss-free run's interval,
+/// about 3/n), to two significant digits: a bound never reads as 0 when it
+/// is not.
+pub fn fmt_rate(rate: f64, decimals: usize) -> String {
+    let text = format!("{rate:.decimals$}");
+    if rate > 0.0 && text.parse::<f64>() == Ok(0.0) {
+        let digits = (1 - rate.log10().floor() as i32).max(0) as usize;
+        return format!("{rate:.digits$}");
+    }
+    text
+}
+
 /// A fraction as a percentage to two significant digits (`0.098 %`).
 pub fn fmt_fraction(f: f64) -> String {
     let pct = f * 100.0;
@@ -97,3 +121,17 @@ pub fn difference(a: &Summary, b: &Summary, keys: &[&str]) -> std::collections::
         .collect()
 }
 
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_and_rates_read_in_their_units() {
+        assert_eq!([fmt_ns_signed(106), fmt_ns_signed(1_038_200), fmt_ns_signed(-4_702_720)], ["106 ns", "1.038 ms", "-4.703 ms"]);
+        assert_eq!(fmt_ns_signed(i64::MIN), "-9223372036.855 s");
+        // A bound above 0 never reads as 0; one that reads as itself keeps its places.
+        assert_eq!([fmt_rate(0.0, 4), fmt_rate(0.0003, 4), fmt_rate(3.0e-6, 4), fmt_rate(2.9957e-6, 5), fmt_rate(1.0, 4)], ["0.0000", "0.0003", "0.0000030", "0.0000030", "1.0000"]);
+        assert_eq!(fmt_rate(0.00004999, 4), "0.000050");
+    }
+}

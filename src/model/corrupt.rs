@@ -293,12 +293,16 @@ mod tests {
         let mut none = Corrupt::new(&CorruptParams::per_byte(0.0).unwrap()).unwrap();
         assert!((0..1000).all(|t| none.decide(t, &mut rng) == Verdict::PASS));
         let mut some = Corrupt::new(&CorruptParams::per_byte(0.05).unwrap()).unwrap();
+        let mut corrupted = 0;
         for t in 0..10_000 {
             if let Verdict::Corrupt(h) = some.decide(t, &mut rng) {
                 let bytes: Vec<u16> = h.bits().iter().map(|b| b / 8).collect();
                 assert!(bytes.windows(2).all(|w| w[0] < w[1]) && bytes.iter().all(|&b| b < 124), "{bytes:?}");
+                corrupted += 1;
             }
         }
+        // 1 − 0.95^124 ≈ 99.8 % of frames have a byte flipped.
+        assert!(corrupted > 9_000, "{corrupted} of 10 000 frames corrupted");
     }
 
     #[test]

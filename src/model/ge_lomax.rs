@@ -47,6 +47,12 @@ use serde::{Deserialize, Serialize};
 /// intermediate states).
 pub const MAX_STATES: usize = 4;
 
+/// The expected number of bursts longer than `K` in a run, for the `K` of
+/// [`GeLomax::unseen_loss_rate`]: ln 40, so that a run meets at least one
+/// with probability 1 − e^(−ln 40) = 97.5 % (bursts longer than `K` come
+/// as a Poisson stream, rare and far apart).
+pub const UNSEEN_BURSTS: f64 = 3.688_879_454_113_936;
+
 /// How far a transition row may be from summing to 1.
 const ROW_SUM_TOLERANCE: f64 = 1e-9;
 
@@ -248,8 +254,7 @@ impl GeLomax {
     /// bursts are heavy-tailed.
     pub fn loss_rate_exact(&self) -> f64 {
         let n = self.states;
-        let q = self.draw_kernel();
-        let pi = long_run(&q, &self.transition[0], n);
+        let pi = self.draw_states();
         let mut dropped = 0.0;
         let mut frames = 0.0;
         for (s, &weight) in pi.iter().enumerate().take(n) {
@@ -264,6 +269,61 @@ impl GeLomax {
             frames += weight * (mean + 1.0);
         }
         dropped / frames
+    }
+
+    /// The long-run loss a run of `frames` frames through this stage is
+    /// unlikely to have sampled: the fraction of frames dropped at burst
+    /// positions beyond `K`, where `K` is the shortest length whose longer
+    /// bursts the run meets at least once with probability 97.5 % (their
+    /// expected number, `frames · c · Σ π_s P_s(b > K)`, is at most
+    /// [`UNSEEN_BURSTS`] = ln 40; `c` bursts a frame, `π` the draw states).
+    /// That part is `c · Σ π_s Σ_{k>K} P_s(b ≥ k)`.
+    ///
+    /// Why it matters: with `α < 2` burst lengths have infinite variance,
+    /// the loss of a finite run falls short of the long-run loss more often
+    /// than not, and an interval from the run's own spread (batch means)
+    /// cannot see what its longest bursts would have added. The realized
+    /// loss is the loss up to `K` (whose spread the run does show) plus
+    /// what lies beyond, which is at least 0: so the long-run loss is at
+    /// most the loss up to `K` plus this part, which the interval adds to
+    /// its upper end. For light tails (the PLM presets' `α ≈ 4`) it is
+    /// small against the interval. 1 where a visited state has `α ≤ 1`
+    /// (the long-run loss is then 1).
+    pub fn unseen_loss_rate(&self, frames: u64) -> f64 {
+        let n = self.states;
+        let pi = self.draw_states();
+        let visited: Vec<usize> = (0..n).filter(|&s| pi[s] > 0.0).collect();
+        if visited.iter().any(|&s| self.alpha[s] <= 1.0) {
+            return 1.0;
+        }
+        let cycle: f64 = visited.iter().map(|&s| pi[s] * (self.mean_burst(s) + 1.0)).sum();
+        let longer = |k: u64| frames as f64 / cycle * visited.iter().map(|&s| pi[s] * self.burst_survival(s, k + 1)).sum::<f64>();
+        // The smallest K with `longer(K) ≤ UNSEEN_BURSTS`: `longer` falls
+        // with K; doubling, then halving the bracket.
+        let (mut lo, mut hi) = (0u64, 1u64);
+        if longer(0) > UNSEEN_BURSTS {
+            while longer(hi) > UNSEEN_BURSTS && hi < 1 << 62 {
+                (lo, hi) = (hi, hi * 2);
+            }
+            while hi - lo > 1 {
+                let mid = lo + (hi - lo) / 2;
+                if longer(mid) > UNSEEN_BURSTS {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+        } else {
+            hi = 0;
+        }
+        let beyond: f64 = visited.iter().map(|&s| pi[s] * survival_sum(self.alpha[s], self.lambda[s], (hi + 1) as f64)).sum();
+        (beyond / cycle).min(1.0)
+    }
+
+    /// The long-run distribution of the chain's state at the frames where a
+    /// burst is drawn (`π` of the module docs).
+    fn draw_states(&self) -> [f64; MAX_STATES] {
+        long_run(&self.draw_kernel(), &self.transition[0], self.states)
     }
 
     /// `Q[s, s'] = Σ_b pmf_s(b) (P^(b+1))[s, s']`: the state of the next burst
@@ -499,11 +559,17 @@ fn euler_maclaurin_accurate(alpha: f64, lambda: f64, x0: f64, h: f64) -> bool {
 
 /// `E[b] = Σ_{k≥1} (1 + k/λ)^(−α)`; infinite for `α ≤ 1`.
 pub(crate) fn mean_floored_lomax(alpha: f64, lambda: f64) -> f64 {
+    survival_sum(alpha, lambda, 1.0)
+}
+
+/// `Σ_{k≥k0} (1 + k/λ)^(−α)` for a whole `k0 ≥ 1`: term by term until
+/// Euler–Maclaurin is accurate, then by it; infinite for `α ≤ 1`.
+fn survival_sum(alpha: f64, lambda: f64, k0: f64) -> f64 {
     if alpha <= 1.0 {
         return f64::INFINITY;
     }
     let mut sum = 0.0;
-    let mut k = 1.0;
+    let mut k = k0;
     loop {
         if euler_maclaurin_accurate(alpha, lambda, k, 1.0) {
             return sum + survival_sum_from(alpha, lambda, k);
@@ -629,6 +695,36 @@ mod tests {
         let bursts: Vec<u64> = (0..16).map(|_| heavy.sample_burst(0, &mut rng)).collect();
         assert_eq!(bursts, PINNED_BURSTS);
     }
+    #[test]
+    fn the_unseen_loss_is_the_loss_beyond_the_bursts_a_run_likely_meets() {
+        // One state: bursts are drawn every E[b] + 1 frames.
+        let (alpha, lambda, frames) = (1.5, 0.8, 50_000u64);
+        let m = GeLomax::new(&params(vec![vec![1.0]], vec![alpha], vec![lambda])).unwrap();
+        let cycle = m.mean_burst(0) + 1.0;
+        // Brute force: the first K whose longer bursts number at most ln 40
+        // in the run, and the drops beyond it (the sum to 10^7 and its
+        // tail by the integral, which is far below the tolerance there).
+        let k = (0u64..).find(|&k| frames as f64 / cycle * survival(alpha, lambda, (k + 1) as f64) <= UNSEEN_BURSTS).unwrap();
+        let to = 10_000_000u64;
+        let head: f64 = (k + 1..to).map(|j| survival(alpha, lambda, j as f64)).sum();
+        let tail = lambda / (alpha - 1.0) * survival(alpha - 1.0, lambda, to as f64 - 0.5);
+        let expected = (head + tail) / cycle;
+        let got = m.unseen_loss_rate(frames);
+        assert!((got - expected).abs() < 1e-8 * expected, "{got} vs {expected} (K = {k})");
+        // A run too short to have met any burst sees none of the loss; longer
+        // runs see more of it.
+        assert!((m.unseen_loss_rate(0) - m.loss_rate_exact()).abs() < 1e-12);
+        let more: Vec<f64> = [1_000, 10_000, 100_000, 1_000_000].iter().map(|&n| m.unseen_loss_rate(n)).collect();
+        assert!(more.windows(2).all(|w| w[1] < w[0]), "{more:?}");
+        // Light tails (the PLM presets' α ≈ 4.4) leave little unseen: at
+        // 10^6 frames a twentieth of PLM-1's interval (its half-width
+        // there is about 0.001).
+        let light = GeLomax::new(&plm1()).unwrap().unseen_loss_rate(1_000_000);
+        assert!(light > 0.0 && light < 5e-5, "{light}");
+        // A visited state with α ≤ 1 loses everything in the long run.
+        assert_eq!(GeLomax::new(&plm([1.0, 4.0], [1.0, 1.0])).unwrap().unseen_loss_rate(1 << 40), 1.0);
+    }
+
     const PINNED_FATES: &str = "..............................x.........................x.......";
     const PINNED_BURSTS: [u64; 16] = [0, 1, 10, 3, 64, 4, 10, 2, 109, 0, 0, 1, 11, 0, 4, 0];
 

@@ -340,6 +340,20 @@ impl AnyModel {
         }
     }
 
+    /// The long-run loss a run of `frames` frames through this stage is
+    /// unlikely to have sampled, to be added to the upper end of a loss
+    /// interval built from the run's own spread: the part of `ge_lomax`'s
+    /// loss in bursts longer than the run likely met
+    /// ([`GeLomax::unseen_loss_rate`]). 0 for the other models, whose
+    /// bursts (geometric, or outage windows of bounded length) leave
+    /// nothing a run's spread misses.
+    pub fn unseen_loss_rate(&self, frames: u64) -> f64 {
+        match self {
+            AnyModel::GeLomax(m) => m.unseen_loss_rate(frames),
+            _ => 0.0,
+        }
+    }
+
     /// Outage windows opened so far and their total drawn length (all zero
     /// for other models).
     pub fn outage_windows(&self) -> OutageWindows {

@@ -177,6 +177,11 @@ pub struct ReplayParams {
     /// The recording (a `trace.csv`, or a delay-trial capture), relative to
     /// the scenario file.
     pub file: String,
+    /// The most records read of a delay capture (`file`): 1 to
+    /// [`MAX_FATES`]; default the capture reader's (4,194,304, as
+    /// `--capture-max-records`). A capture with more is refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_records: Option<u64>,
     /// The parsed recording, filled in by whoever read `file`.
     #[serde(skip)]
     pub recording: Option<Arc<Recording>>,
@@ -184,7 +189,7 @@ pub struct ReplayParams {
 
 impl ReplayParams {
     pub fn new(file: impl Into<String>, recording: Recording) -> ReplayParams {
-        ReplayParams { file: file.into(), recording: Some(Arc::new(recording)) }
+        ReplayParams { file: file.into(), max_records: None, recording: Some(Arc::new(recording)) }
     }
 }
 
@@ -235,12 +240,15 @@ impl Replay {
 impl Model for Replay {
     #[inline]
     fn decide(&mut self, _t_ns: u64, _rng: &mut StageRng) -> Verdict {
-        let fate = self.recording.fates[self.next];
-        self.next += 1;
+        // The recording starts again when a frame comes after its last fate
+        // was used, not when that fate is used: a run of exactly `N` frames
+        // used each fate once and started nothing again.
         if self.next == self.recording.fates.len() {
             self.next = 0;
             self.wraps += 1;
         }
+        let fate = self.recording.fates[self.next];
+        self.next += 1;
         if fate == DROPPED {
             Verdict::Drop
         } else {
@@ -267,6 +275,22 @@ mod tests {
         let got: Vec<Verdict> = (0..4).map(|i| m.decide(i, &mut rng)).collect();
         assert_eq!(got, [Verdict::Pass { delay_ns: 5000 }, Verdict::Drop, Verdict::Pass { delay_ns: 7 }, Verdict::Pass { delay_ns: 5000 }]);
         assert_eq!(m.wraps(), 1);
+    }
+
+    #[test]
+    fn started_again_counts_the_frames_that_came_after_the_last_fate() {
+        let rec = Recording::from_delays_s(&[0.001, 0.002, 0.003]).unwrap();
+        let mut m = Replay::new(&ReplayParams::new("d.bin", rec)).unwrap();
+        let mut rng = <StageRng as rand::SeedableRng>::seed_from_u64(1);
+        let mut decided = 0;
+        // (frames decided so far, times started again)
+        for (frames, wraps) in [(1, 0), (2, 0), (3, 0), (4, 1), (6, 1), (7, 2), (9, 2), (10, 3)] {
+            while decided < frames {
+                m.decide(0, &mut rng);
+                decided += 1;
+            }
+            assert_eq!(m.wraps(), wraps, "after {frames} frames of a 3-fate recording");
+        }
     }
 
     #[test]

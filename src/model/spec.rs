@@ -50,6 +50,16 @@ impl ModelSpec {
         }
     }
 
+    /// The file the stage reads (a link trace, a recording), as the
+    /// scenario names it; `None` for a stage that reads none.
+    pub fn file_mut(&mut self) -> Option<&mut String> {
+        match self {
+            ModelSpec::LinkTrace(p) => Some(&mut p.file),
+            ModelSpec::Replay(p) => Some(&mut p.file),
+            _ => None,
+        }
+    }
+
     /// Validates the parameters and builds the model.
     pub fn build(&self) -> Result<AnyModel, ParamError> {
         Ok(match self {

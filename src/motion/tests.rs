@@ -50,6 +50,7 @@ fn value_stability() {
 #[test]
 fn frames_are_well_formed() {
     let params = MotionParams { sequence_start: u32::MAX - 2, ..MotionParams::peg_transfer(517.0) };
+    let mut released = 0;
     for (k, f) in MotionGenerator::new(params, 3).unwrap().take(100_000).enumerate() {
         assert_eq!(f.sequence, (u32::MAX - 2).wrapping_add(k as u32));
         assert!(f.has_valid_checksum());
@@ -59,8 +60,10 @@ fn frames_are_well_formed() {
         assert!(f.surgeon_mode == SURGEON_ENGAGED || f.surgeon_mode == SURGEON_DISENGAGED);
         if !f.clutch_engaged() {
             assert_eq!((f.delx, f.dely, f.delz), ([0; 2], [0; 2], [0; 2]));
+            released += 1;
         }
     }
+    assert!(released > 0, "the clutch was never released: its frames were not checked");
 }
 
 #[test]

@@ -37,7 +37,8 @@ use crate::model::ModelSpec;
 use crate::model::ModelKind;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
-use crate::model::{Recording, Schedule};
+use crate::model::replay::MAX_FATES;
+use crate::model::{Recording, ReplayParams, Schedule};
 use std::fmt;
 use std::sync::Arc;
 use toml::Spanned;
@@ -154,8 +155,9 @@ impl fmt::Display for FileError {
 pub trait ScenarioFiles {
     /// The link trace `file` names (relative to the scenario file).
     fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError>;
-    /// The recording `file` names (a `trace.csv` or a delay capture).
-    fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError>;
+    /// The recording `file` names (a `trace.csv` or a delay capture, read
+    /// up to `max_records` records, or the capture reader's default).
+    fn recording(&self, file: &str, max_records: Option<u64>) -> Result<Arc<Recording>, FileError>;
 }
 
 /// No files: a scenario given as text alone cannot name any.
@@ -171,7 +173,7 @@ impl ScenarioFiles for NoFiles {
     fn link_trace(&self, file: &str) -> Result<Arc<Schedule>, FileError> {
         Err(NoFiles::refuse(file))
     }
-    fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError> {
+    fn recording(&self, file: &str, _max_records: Option<u64>) -> Result<Arc<Recording>, FileError> {
         Err(NoFiles::refuse(file))
     }
 }
@@ -299,7 +301,7 @@ fn parse_stages(ctx: &Ctx, raw: Vec<Spanned<toml::Table>>, phase: Option<usize>)
 fn read_files(ctx: &Ctx, model: &mut ModelSpec) -> Result<(), FileError> {
     match model {
         ModelSpec::LinkTrace(p) => p.schedule = Some(ctx.files.link_trace(&p.file)?),
-        ModelSpec::Replay(p) => p.recording = Some(ctx.files.recording(&p.file)?),
+        ModelSpec::Replay(p) => p.recording = Some(ctx.files.recording(&p.file, p.max_records)?),
         _ => {}
     }
     Ok(())
@@ -372,6 +374,11 @@ fn parse_stage(ctx: &Ctx, loc: &str, st: Spanned<toml::Table>) -> Result<Vec<Sta
                 ModelKind::Replay => ModelSpec::Replay(params(ctx, &span, &loc, t)?),
             };
             let mut model = model;
+            if let ModelSpec::Replay(ReplayParams { max_records: Some(n), .. }) = &model {
+                if !(1..=MAX_FATES as u64).contains(n) {
+                    return Err(ctx.err(ctx.key_line(span, "max_records").or(header_line), Some(&loc), Some("max_records"), format!("{n}: expected 1 to {MAX_FATES} records")));
+                }
+            }
             read_files(ctx, &mut model).map_err(|e| ctx.err(ctx.key_line(span.clone(), "file").or(header_line), Some(&loc), Some("file"), e.to_string()))?;
             if let Err(e) = model.build() {
                 let key = e.field.split(['[', '.']).next().unwrap_or(&e.field).to_string();
@@ -729,7 +736,7 @@ mod tests {
                 .map(Arc::new)
                 .map_err(|e| FileError { file: file.into(), at: e.line.map(|l| format!("line {l}")), problem: e.problem })
         }
-        fn recording(&self, file: &str) -> Result<Arc<Recording>, FileError> {
+        fn recording(&self, file: &str, _max_records: Option<u64>) -> Result<Arc<Recording>, FileError> {
             Recording::parse_trace_csv(self.get(file)?).map(Arc::new).map_err(|e| FileError { file: file.into(), at: e.at, problem: e.problem })
         }
     }

@@ -77,6 +77,12 @@ impl ScenarioSpec {
         }
     }
 
+    /// The names of the files its stages read (link traces, recordings),
+    /// every phase's, for the shell to rewrite (`load::resolve_anchored`).
+    pub fn files_mut(&mut self) -> impl Iterator<Item = &mut String> {
+        self.phases.iter_mut().flat_map(|p| p.stages.iter_mut()).filter_map(|s| s.model.file_mut())
+    }
+
     /// The scenario as TOML, in the form the parser reads back: top-level
     /// `[[stage]]` tables for a single phase, `[[phase]]` tables otherwise.
     pub fn to_toml(&self) -> String {

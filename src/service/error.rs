@@ -25,7 +25,7 @@ pub enum ServiceError {
     #[error(transparent)]
     Place(#[from] crate::host::placement::PlaceError),
     #[error(transparent)]
-    Video(#[from] super::video::VideoError),
+    Video(#[from] super::channel::video::VideoError),
     /// `<role>.ready`.
     #[error("writing {0}")]
     Ready(&'static str, #[source] std::io::Error),

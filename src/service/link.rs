@@ -236,6 +236,9 @@ impl<T: Carried> Link<T> {
         let copies = self.inj.scenario().copies();
         // Copies a later stage or a full queue dropped.
         let copies_dropped = (copies.made() - u64::from(entered.copies)) as u8;
+        // The loss figure is over the frames the scenario decided: a
+        // malformed frame ([`Link::reject`]) never reached it.
+        self.batches.record(matches!(entered.fate, Fate::Dropped(_)));
         self.record(now, entered, arrival, copies_dropped);
         for k in 0..usize::from(entered.copies) {
             // The copies that fit the queue are the first ones made: once
@@ -269,7 +272,6 @@ impl<T: Carried> Link<T> {
             Fate::Scheduled { release_ns, .. } => (None, release_ns),
             Fate::Dropped(cause) => (Some(cause), 0),
         };
-        self.batches.record(dropped.is_some());
         self.trace.push(TraceEvent::Ingress {
             ingress_index: entered.ingress_index,
             sequence: a.sequence,
@@ -345,7 +347,8 @@ impl<T: Carried> Link<T> {
         let counts = self.inj.counts();
         assert!(counts.balanced(), "frame accounting broken: {counts:?}");
         let written = self.writer.finish(trace_path)?;
-        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95();
+        let unseen = crate::check::unseen_loss_rate(self.inj.scenario(), self.batches.trials());
+        let (loss_rate, loss_rate_ci95) = self.batches.rate_ci95_with(unseen);
         let interval_ns = if counts.entered > 1 { duration_ns as f64 / counts.entered as f64 } else { 0.0 };
         let (stages, _) = stage_reports(self.inj.scenario(), interval_ns);
         Ok(LinkEnd {
@@ -364,6 +367,7 @@ impl<T: Carried> Link<T> {
             measures: LinkMeasures {
                 loss_rate,
                 loss_rate_ci95,
+                loss_rate_unseen_model: (unseen > 0.0).then_some(unseen),
                 stages,
                 injected_delay_ns: self.injected.summary(),
                 ingress_wait_ns: self.ingress_wait.summary(),

@@ -15,10 +15,11 @@
 //! | `control`, `telemetry` | live control of a running emulator, and its telemetry, off the loop |
 //! | `video` | the video stream's flags, the robot's camera, the console's receiver |
 //! | `console`, `simulator` | the two ends of a local run |
-//! | `ros2_bag` | `netfi ros2 record` and `replay`: ROS 2 topics as MCAP |
+//! | `ros2` | `netfi ros2 record` and `replay`: ROS 2 topics as MCAP (`bag`) |
 //! | `plan`, `supervise`, `run`, `report` | `netfi run`: what runs where; when to stop what; the processes; the joined report |
 
 pub mod args;
+pub mod channel;
 pub mod console;
 pub mod control;
 pub mod emulator;
@@ -26,7 +27,7 @@ pub mod error;
 pub mod link;
 pub mod plan;
 pub mod report;
-pub mod ros2_bag;
+pub mod ros2;
 pub mod run;
 pub mod schema;
 pub mod seeds;
@@ -34,7 +35,6 @@ pub mod signals;
 pub mod simulator;
 pub mod supervise;
 pub mod telemetry;
-pub mod video;
 
 /// Why `<out>/<role>.pid` could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -85,4 +85,13 @@ pub enum WriteError {
 /// service's report).
 pub fn write_json(path: &std::path::Path, value: &impl serde::Serialize) -> Result<(), WriteError> {
     crate::durable::write_whole(path, &serde_json::to_vec_pretty(value)?).map_err(|cause| WriteError::File { path: path.to_path_buf(), cause })
+}
+
+/// Every iceoryx2 port of a run: the frames' own, then each reverse
+/// channel's, towards the emulator and away from it.
+pub fn ports() -> Vec<crate::transport::Port> {
+    use crate::transport::Port;
+    let mut ports = vec![Port::CONSOLE, Port::EMULATOR, Port::DIRECT];
+    ports.extend(channel::channel_ports());
+    ports
 }

@@ -6,7 +6,10 @@
 //! [`seeds`](crate::service::seeds)) and handed to the processes.
 
 use crate::scenario::ScenarioSpec;
-use crate::service::args::{ArgsError, ConsoleArgs, EmulatorArgs, EmulatorPlacement, PinArgs, ReturnArgs, RunArgs, SimulatorArgs};
+use crate::service::args::run::LAB_ROBOT_WAIT_S;
+use crate::service::args::{ArgsError, ConsoleArgs, EmulatorArgs, EmulatorPlacement, Peer, PinArgs, RunArgs, SimulatorArgs};
+use crate::service::channel::Want;
+use std::collections::BTreeMap;
 use crate::service::args::streams;
 use crate::service::seeds;
 use std::path::{Path, PathBuf};
@@ -28,35 +31,29 @@ const CONSOLE_WAIT_FOR_PEER_S: f64 = 10.0;
 const CONSOLE_FEEDBACK_WAIT_S: f64 = 5.0;
 
 /// What the runner resolved before planning: every stream's scenario
-/// (stream 0 first), and the return and video paths' when they are on.
+/// (stream 0 first), and each reverse path stream 0 has (by channel, as
+/// the channel asks for it) with its scenario.
 #[derive(Debug, Clone)]
 pub struct Resolved {
     pub streams: Vec<ScenarioSpec>,
-    pub return_path: Option<ScenarioSpec>,
-    pub video: Option<ScenarioSpec>,
+    pub paths: Vec<(&'static str, Want, ScenarioSpec)>,
 }
 
 /// Every seed of a run, decided once.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Seeds {
     /// The run's, which is stream 0's.
     pub run: u64,
-    /// Stream 0's feedback path's, when the run has one.
-    pub return_path: Option<u64>,
-    /// The video path's, when the run has video.
-    pub video: Option<u64>,
+    /// Stream 0's reverse paths', by channel.
+    pub paths: BTreeMap<&'static str, u64>,
 }
 
 impl Seeds {
-    /// The seeds of a run of `args` whose seed is `run` and whose paths'
-    /// scenarios are `r`'s.
-    pub fn of(args: &RunArgs, run: u64, r: &Resolved) -> Seeds {
-        let rp = &args.return_path;
-        Seeds {
-            run,
-            return_path: r.return_path.as_ref().map(|spec| seeds::feedback(rp.return_seed, spec, run)),
-            video: r.video.as_ref().map(|spec| seeds::video(args.video.video_seed, spec, run)),
-        }
+    /// The seeds of a run whose seed is `run` and whose paths are `r`'s:
+    /// each path's given, else its scenario file's, else derived from the
+    /// run's by its channel's tag.
+    pub fn of(run: u64, r: &Resolved) -> Seeds {
+        Seeds { run, paths: r.paths.iter().map(|(c, w, spec)| (*c, seeds::derived(w.seed, spec, run, w.tag))).collect() }
     }
 }
 
@@ -73,8 +70,10 @@ pub struct StreamPlan {
     pub scenario_path: PathBuf,
     /// The copy the emulator reads, this run's own.
     pub own_scenario: PathBuf,
-    pub console: ConsoleArgs,
-    pub simulator: SimulatorArgs,
+    /// netfi's own console, when it plays the console (`None`: the lab's).
+    pub console: Option<ConsoleArgs>,
+    /// netfi's own robot, when it plays the robot (`None`: the lab's).
+    pub simulator: Option<SimulatorArgs>,
 }
 
 /// Where each process runs: a core of its own, or (`None`) not pinned.
@@ -117,6 +116,10 @@ pub struct Plan {
     /// Where stream 0's scenario is kept for people.
     pub scenario_path: PathBuf,
     pub planned_s: f64,
+    /// When the run ends by the clock (the planned end of netfi's own
+    /// console's stream, or the duration a run of the lab's console was
+    /// given); `None`: when the lab's console ends it, or on Ctrl-C.
+    pub until_s: Option<f64>,
     pub expected_frames: u64,
     pub cores: Cores,
     pub emulator: EmulatorArgs,
@@ -132,13 +135,17 @@ impl Plan {
         let out = args.out.clone().unwrap_or_else(|| PathBuf::from("out").join(&run_id));
         let (planned_s, expected_frames) = frames(args)?;
         let cores = cores(args, host_cores);
-        let seeds = Seeds::of(args, seed, r);
+        let seeds = Seeds::of(seed, r);
         let run = Run { args, cores, run_id: &run_id, out: &out, seed, n: r.streams.len() };
         let streams: Vec<StreamPlan> = r.streams.iter().enumerate().map(|(k, spec)| run.stream(k, spec.clone())).collect();
-        let emulator = emulator(args, &streams, cores, seeds, expected_frames, &out);
+        let emulator = emulator(args, &streams, cores, &seeds, expected_frames, &out);
         let s0 = &streams[0];
         let (spec, scenario_path) = (s0.spec.clone(), s0.scenario_path.clone());
-        Ok(Plan { run_id, out, spec, seed, seeds, scenario_path, planned_s, expected_frames, cores, emulator, streams })
+        let until_s = match args.peers.console() {
+            Peer::Own => Some(planned_s),
+            Peer::Lab => args.source.duration_s,
+        };
+        Ok(Plan { run_id, out, spec, seed, seeds, scenario_path, planned_s, until_s, expected_frames, cores, emulator, streams })
     }
 }
 
@@ -173,7 +180,7 @@ impl Run<'_> {
             feedback_wait_s: CONSOLE_FEEDBACK_WAIT_S,
             live: false,
             nap_us,
-            video: args.video.clone(),
+            channels: args.channels.end_args(),
         };
         let simulator = SimulatorArgs {
             run_id: run_id.clone(),
@@ -184,16 +191,18 @@ impl Run<'_> {
             spin: cores.simulator.is_some() && n == 1,
             out: out.clone(),
             nap_us,
-            video: args.video.clone(),
+            channels: args.channels.end_args(),
         };
         let (scenario_path, own_scenario) = (out.join("scenario.toml"), out.join(format!("scenario.{run_id}.toml")));
+        let console = (args.peers.console() == Peer::Own).then_some(console);
+        let simulator = (args.peers.robot() == Peer::Own).then_some(simulator);
         StreamPlan { index: k, run_id, out, spec, seed, scenario_path, own_scenario, console, simulator }
     }
 }
 
 /// The emulator's arguments: every stream's scenario as the run's own
 /// copy, and every seed decided.
-fn emulator(args: &RunArgs, streams: &[StreamPlan], cores: Cores, seeds: Seeds, expected_frames: u64, out: &Path) -> EmulatorArgs {
+fn emulator(args: &RunArgs, streams: &[StreamPlan], cores: Cores, seeds: &Seeds, expected_frames: u64, out: &Path) -> EmulatorArgs {
     let mut e = EmulatorArgs::new(Some(streams[0].run_id.clone()), streams[0].own_scenario.display().to_string());
     e.scenario.seed = Some(seeds.run);
     e.scenario.queue_capacity = args.scenario.queue_capacity;
@@ -208,16 +217,25 @@ fn emulator(args: &RunArgs, streams: &[StreamPlan], cores: Cores, seeds: Seeds, 
     e.drop_bad_checksum = args.drop_bad_checksum;
     e.expected_frames = expected_frames;
     e.out = out.to_path_buf();
-    let rp = &args.return_path;
-    // Several streams: each lane's return seed follows from its own seed
-    // by the same rule in the emulator, unless one was given for all.
-    let return_seed = if streams.len() == 1 { seeds.return_path } else { rp.return_seed };
-    e.return_path = ReturnArgs { return_scenario: rp.return_scenario.clone(), return_seed, no_feedback: rp.no_feedback };
+    e.channels = args.channels.clone();
+    // Several streams: each lane's reverse paths' seeds follow from its own
+    // seed by the same rule in the emulator, unless one was given for all.
+    if streams.len() == 1 {
+        for (c, seed) in &seeds.paths {
+            *e.channels.seed_mut(c).expect("a channel of the registry") = Some(*seed);
+        }
+    }
     e.control = args.control.clone();
+    // Where the emulator meets the lab's programs, and how long it waits
+    // for the lab's robot on iceoryx2.
+    let p = &args.peers;
+    e.ends = p.ends.clone();
+    e.transports = p.transports.clone();
+    e.ros2 = p.ros2.clone();
+    let robot_subscribes = p.ends.egress.of::<crate::transport::ipc::Iceoryx2>().is_some() && !p.ros2.on();
+    e.wait_for_peer_s = p.wait_for_peer_s.or((p.robot() == Peer::Lab && robot_subscribes).then_some(LAB_ROBOT_WAIT_S));
     e.stream.streams = streams.len() as u32;
     e.stream.stream_scenario = streams.iter().skip(1).map(|s| format!("{}={}", s.index, s.own_scenario.display())).collect();
-    e.video = args.video.clone();
-    e.video.video_seed = seeds.video;
     e
 }
 

@@ -11,7 +11,6 @@
 //! | `path` | the account every link keeps, what it measured, a path's report |
 //! | `paths` | what each direction adds to its path's report |
 //! | `emulator` | `emulator.json`: the shaping, the process, the reverse paths; several streams |
-//! | `udp` | `udp.json` and `udp_endpoints.json` |
 //! | `ros2` | `ros2.json`, and what the ROS 2 channels add to their paths' reports |
 //! | `run` | `report.json`: the run report (`service::report` assembles it) |
 //!
@@ -24,10 +23,8 @@ pub mod path;
 pub mod paths;
 pub mod ros2;
 pub mod run;
-pub mod udp;
 
 pub use emulator::{BadInput, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, LoopBusy, PeerEvent, Shaping, WithPaths};
 pub use ended::Ended;
 pub use path::{Account, LinkMeasures, PathReport};
-pub use paths::{FeedbackExtra, ForwardExtra, ReturnExtra, VideoExtra};
-pub use udp::{BoundEndpoints, ForeignSender, UdpReport};
+pub use paths::ForwardExtra;

@@ -21,7 +21,7 @@ use crate::service::args::SimulatorArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSource;
 use crate::service::signals;
-use crate::transport::{Channel, Role};
+use crate::transport::{Port, Role};
 use crate::service::error::{RobotError, ServiceError};
 use crate::service::schema::Ended;
 use serde::{Deserialize, Serialize};
@@ -67,7 +67,7 @@ pub struct SimulatorReport {
     pub feedback_errors: u64,
     /// The camera, when the run has video.
     #[serde(default)]
-    pub camera: Option<crate::service::video::CameraReport>,
+    pub camera: Option<crate::service::channel::video::CameraReport>,
 }
 
 /// The robot's feedback after the command `s` (frame `f`): the command it
@@ -256,13 +256,13 @@ impl Robot {
 pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
     crate::service::write_pid(&args.out, "simulator")?;
     let node = open_node(&args.run_id, Role::Simulator)?;
-    let mut port = node.subscriber(Channel::Emulator).map_err(|e| ServiceError::Subscriber("emulator → simulator", e))?;
-    let mut direct = node.subscriber(Channel::Direct).map_err(|e| ServiceError::Subscriber("console → simulator", e))?;
-    let mut feedback_port = node.publisher_of::<FeedbackSample>(Channel::Feedback).map_err(|e| ServiceError::Publisher("robot → emulator feedback", e))?;
+    let mut port = node.subscriber(Port::EMULATOR).map_err(|e| ServiceError::Subscriber("emulator → simulator", e))?;
+    let mut direct = node.subscriber(Port::DIRECT).map_err(|e| ServiceError::Subscriber("console → simulator", e))?;
+    let mut feedback_port = node.publisher_of::<FeedbackSample>(crate::service::channel::feedback::FEEDBACK).map_err(|e| ServiceError::Publisher("robot → emulator feedback", e))?;
     signals::install();
     crate::host::placement::place("simulator", args.pin.core, args.pin.avoid_core)?;
     // Started after the placement, whose CPU mask its thread inherits: off the emulator's core.
-    let camera = crate::service::video::camera(&args.run_id, &args.video)?;
+    let camera = crate::service::channel::video::camera(&args.run_id, &args.channels.video)?;
     let wait = match (args.spin, args.nap_us) {
         (true, _) => Wait::Spin,
         (false, Some(us)) => Wait::Nap(us * 1000),

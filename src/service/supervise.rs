@@ -30,6 +30,13 @@
 //! role each ([`State::of_group`]): the role has died once none of them
 //! runs and one failed, so one stream's dead console leaves the others
 //! streaming to their end.
+//!
+//! A role the lab's own program plays ([`State::Lab`]: the run started no
+//! process for it) is nothing to stop or wait for: the emulator ends when
+//! the lab's console ends its stream (its end marker; an idle end on a
+//! stream that has none), or is stopped on Ctrl-C, or at the planned end
+//! when the run was given a duration; a lab's run has no hard deadline
+//! otherwise.
 
 use std::time::Duration;
 
@@ -41,26 +48,36 @@ pub enum State {
     Succeeded,
     /// Ended otherwise (exit status, signal).
     Failed,
+    /// Played by the lab's own program, not a process of the run.
+    Lab,
 }
 
 impl State {
+    /// A process of the run that has ended.
     fn ended(self) -> bool {
+        matches!(self, State::Succeeded | State::Failed)
+    }
+
+    /// Nothing of the run's left to wait for: ended, or the lab's.
+    fn gone(self) -> bool {
         self != State::Running
     }
 
     /// The state of one role's processes together (the consoles or the
     /// robots of a run of several streams): running while any runs, then
-    /// failed if any failed.
+    /// failed if any failed; the lab's when the run has none.
     pub fn of_group(states: impl IntoIterator<Item = State>) -> State {
-        let (mut running, mut failed) = (false, false);
+        let (mut any, mut running, mut failed) = (false, false, false);
         for s in states {
+            any = true;
             running |= s == State::Running;
             failed |= s == State::Failed;
         }
-        match (running, failed) {
-            (true, _) => State::Running,
-            (false, true) => State::Failed,
-            (false, false) => State::Succeeded,
+        match (any, running, failed) {
+            (false, _, _) => State::Lab,
+            (_, true, _) => State::Running,
+            (_, false, true) => State::Failed,
+            _ => State::Succeeded,
         }
     }
 }
@@ -117,9 +134,10 @@ pub struct Orders {
 /// The runner's policy, with what it remembers between looks.
 #[derive(Debug, Clone)]
 pub struct Supervisor {
-    planned: Duration,
+    /// When the run is to end (`None`: when its lab console ends it).
+    planned: Option<Duration>,
     drain_grace: Duration,
-    hard_deadline: Duration,
+    hard_deadline: Option<Duration>,
     interrupted: bool,
     stalled: bool,
     console_ended_at: Option<Duration>,
@@ -162,11 +180,17 @@ impl Supervisor {
     /// A run whose stream is planned to last `planned_s` seconds (finite,
     /// at most a week: checked where the flags are parsed).
     pub fn new(planned_s: f64) -> Supervisor {
-        let planned = Duration::from_secs_f64(planned_s + 1.0);
+        Supervisor::until(Some(planned_s))
+    }
+
+    /// A run that lasts `planned_s` seconds, or, without one, until its
+    /// (lab's) console ends its stream or a person stops it.
+    pub fn until(planned_s: Option<f64>) -> Supervisor {
+        let planned = planned_s.map(|s| Duration::from_secs_f64(s + 1.0));
         Supervisor {
             planned,
             drain_grace: DRAIN_GRACE,
-            hard_deadline: planned + DRAIN_GRACE + Duration::from_secs(60),
+            hard_deadline: planned.map(|p| p + DRAIN_GRACE + Duration::from_secs(60)),
             interrupted: false,
             stalled: false,
             console_ended_at: None,
@@ -195,7 +219,7 @@ impl Supervisor {
     /// The orders after one look.
     pub fn look(&mut self, s: Seen) -> Orders {
         let mut o = Orders::default();
-        let (c, e, m) = (s.console.ended(), s.emulator.ended(), s.simulator.ended());
+        let (c, e, m) = (s.console.gone(), s.emulator.gone(), s.simulator.gone());
         let stuck = !self.stalled && !s.consoles_ready && s.console == State::Running && s.now > CONSOLE_READY;
         if stuck {
             self.stalled = true;
@@ -205,7 +229,7 @@ impl Supervisor {
             self.interrupted = true;
             o.stop.console = true;
         }
-        if c && self.console_ended_at.is_none() {
+        if s.console.ended() && self.console_ended_at.is_none() {
             self.console_ended_at = Some(s.now);
         }
         if e && self.emulator_ended_at.is_none() {
@@ -222,7 +246,7 @@ impl Supervisor {
             Some(t) => self.wind_down(s, t, &mut o),
             None => self.go_on(s, &mut o),
         }
-        if s.now > self.hard_deadline {
+        if self.hard_deadline.is_some_and(|d| s.now > d) {
             o.kill = Roles::ALL;
             o.done = true;
         }
@@ -232,18 +256,24 @@ impl Supervisor {
 
     /// No process died: the stream goes to its end, or to the Ctrl-C.
     fn go_on(&self, s: Seen, o: &mut Orders) {
-        let (c, e) = (s.console.ended(), s.emulator.ended());
+        let (c, e) = (s.console.gone(), s.emulator.gone());
         let since = |t: Option<Duration>| t.map(|t| s.now.saturating_sub(t));
+        let due = self.planned.is_some_and(|p| s.now >= p);
         if !e && self.interrupted && c {
+            o.stop.emulator = true;
+        }
+        // The lab's console ends the stream itself; a run given a duration
+        // ends at it.
+        if !e && s.console == State::Lab && due {
             o.stop.emulator = true;
         }
         if !e && since(self.console_ended_at).is_some_and(|d| d > self.drain_grace) {
             o.stop.emulator = true;
         }
-        if e && !s.simulator.ended() && since(self.emulator_ended_at).is_some_and(|d| d > SIMULATOR_GRACE) {
+        if e && !s.simulator.gone() && since(self.emulator_ended_at).is_some_and(|d| d > SIMULATOR_GRACE) {
             o.stop.simulator = true;
         }
-        if e && !c && (self.interrupted || s.now >= self.planned) {
+        if e && !c && (self.interrupted || due) {
             o.stop.console = true;
         }
     }

@@ -17,7 +17,7 @@
 //! duration_s = 600                # the longest a trial runs; the experimenter stops it sooner
 //! capture = "console.bin"         # replay a recording instead of the synthetic console
 //! rate_hz = 1000
-//! run_args = ["--no-isolate"]     # any other `netfi run` options, as given
+//! run_args = ["--no-isolate"]     # any other `netfi run` options, as `netfi run` reads them
 //!
 //! [order]
 //! blocks = "latin"                # latin (balanced Latin square) | table | fixed
@@ -48,8 +48,10 @@
 //! blocks = ["free", "packet loss"]  # only with order.blocks = "table"
 //! ```
 
+use crate::service::args::RunArgs;
 use std::collections::BTreeMap;
 use std::fmt;
+use std::path::Path;
 
 /// The most participants, conditions per block, trials per condition and
 /// trials per participant a study file may name: far beyond any lab study,
@@ -64,10 +66,21 @@ pub const MAX_TRIAL_S: f64 = 86_400.0;
 /// The longest name or id (it becomes a folder name).
 pub const MAX_NAME_LEN: usize = 64;
 
-/// The `netfi run` options a study decides for each trial, which
-/// `run_args` may therefore not give.
-pub const RESERVED_RUN_ARGS: [&str; 10] =
-    ["--out", "--seed", "--run-id", "--json", "--duration-s", "--duration", "--frames", "--capture", "--report-json", "--rate-hz"];
+/// The `netfi run` arguments a study decides for each trial, by clap's ids
+/// of [`RunArgs`]' fields, with the study file's field that gives each
+/// instead (`None`: the study sets it itself); `run_args` may not give
+/// them. Their flags are the command's ([`RunArgs::command`]).
+pub const STUDY_RUN_ARGS: [(&str, Option<&str>); 9] = [
+    ("out", None),
+    ("seed", None),
+    ("run_id", None),
+    ("json", None),
+    ("duration_s", Some("trial.duration_s")),
+    ("frames", None),
+    ("capture", Some("trial.capture")),
+    ("report_json", None),
+    ("rate_hz", Some("trial.rate_hz")),
+];
 
 /// A study file that could not be read, with where and why.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -120,8 +133,23 @@ pub struct TrialSpec {
     pub capture: Option<String>,
     /// `--rate-hz`.
     pub rate_hz: Option<f64>,
-    /// Other `netfi run` options, passed as given.
+    /// Other `netfi run` options, as given (checked as `netfi run` reads
+    /// them when the file is read).
     pub run_args: Vec<String>,
+}
+
+impl TrialSpec {
+    /// A trial's `netfi run` of `scenario`: this spec's duration and rate,
+    /// the capture (`capture`: the file as the shell resolves it), and the
+    /// options of `run_args`, read as `netfi run` reads them. What the study
+    /// sets for each trial alone ([`STUDY_RUN_ARGS`]) is left to the caller.
+    pub fn run(&self, scenario: &str, capture: Option<&Path>) -> Result<RunArgs, clap::Error> {
+        let mut own = RunArgs::new(scenario);
+        own.source.duration_s = self.duration_s;
+        own.source.rate_hz = self.rate_hz;
+        own.source.capture = capture.map(Path::to_path_buf);
+        RunArgs::from_argv(own.to_argv().into_iter().chain(self.run_args.iter().cloned()))
+    }
 }
 
 /// One condition: its name (a folder and column name) and what it runs.

@@ -9,10 +9,11 @@
 //! runner dies (`PR_SET_PDEATHSIG`), so no run outlives the trial it
 //! belongs to.
 
-use super::file::ConditionSource;
+use super::file::{ConditionSource, TrialSpec};
 use super::metrics::{figures, outages, Figures, TraceFrame, METRICS};
 use super::questionnaire;
 use super::schedule::Due;
+use crate::service::args::{self, RunArgs};
 use super::store::{claim, now_utc, read_json, save_state, write_json, Attempt, AttemptState, Next, OpenStudy, StudyError};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
@@ -141,22 +142,28 @@ fn scenario_arg(s: &OpenStudy, source: &ConditionSource, out: &Path) -> Result<S
     })
 }
 
+/// A trial's `netfi run` of `scenario`: the study file's (its trial spec,
+/// the capture resolved) and what the study sets for each trial
+/// ([`super::file::STUDY_RUN_ARGS`]): its output in `out`, its seed, its
+/// run id, a JSON report.
+fn trial_run(spec: &TrialSpec, scenario: &str, capture: Option<&Path>, out: &Path, seed: u64, run_id: &str) -> Result<RunArgs, StudyError> {
+    // The file's `run_args` were read as `netfi run` reads them when the
+    // study was opened.
+    let mut run = spec.run(scenario, capture).map_err(|e| StudyError::State(format!("trial.run_args: {}", args::refusal(&e))))?;
+    run.out = Some(absolute(out));
+    run.scenario.seed = Some(seed);
+    run.run_id = Some(run_id.to_string());
+    run.json = true;
+    Ok(run)
+}
+
 /// The trial's `netfi run`: its own process group, its output in `out`,
 /// stopped (SIGTERM) if its runner dies.
 fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u64, run_id: &str) -> Result<Command, StudyError> {
+    let capture = s.capture.as_deref().map(absolute);
+    let run = trial_run(&s.study.trial, scenario, capture.as_deref(), out, seed, run_id)?;
     let mut cmd = Command::new(netfi);
-    cmd.arg("run").arg(scenario).arg("--out").arg(absolute(out)).arg("--seed").arg(seed.to_string());
-    cmd.args(["--run-id", run_id, "--json"]);
-    if let Some(d) = s.study.trial.duration_s {
-        cmd.arg("--duration-s").arg(d.to_string());
-    }
-    if let Some(c) = &s.capture {
-        cmd.arg("--capture").arg(absolute(c));
-    }
-    if let Some(r) = s.study.trial.rate_hz {
-        cmd.arg("--rate-hz").arg(r.to_string());
-    }
-    cmd.args(&s.study.trial.run_args);
+    cmd.arg("run").args(run.to_argv());
     let file = |n: &str| std::fs::File::create(out.join(n)).map_err(|source| StudyError::Io { path: out.join(n), source });
     cmd.stdin(Stdio::null()).stdout(file("run.stdout")?).stderr(file("run.stderr")?).process_group(0);
     // SAFETY: prctl is async-signal-safe; it only sets this child's parent-death signal.
@@ -326,4 +333,31 @@ pub fn load_figures(out: &Path) -> Option<Figures> {
     let figs = trial_figures(out, &report).ok()?;
     let _ = write_json(&path, &figs);
     Some(figs.ordered())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::study::file::STUDY_RUN_ARGS;
+
+    #[test]
+    fn what_a_study_sets_for_each_trial_is_what_run_args_may_not_give() {
+        let spec = TrialSpec { duration_s: Some(60.0), capture: Some("c.lz4".into()), rate_hz: Some(500.0), run_args: vec![] };
+        let run = trial_run(&spec, "PLM-1", Some(Path::new("/data/c.lz4")), Path::new("/data/P1/trial-01"), 3, "study-r1").unwrap();
+        let cmd = RunArgs::command();
+        let m = cmd.clone().try_get_matches_from(run.to_argv()).unwrap();
+        let given: Vec<&str> = cmd.get_arguments().map(|a| a.get_id().as_str()).filter(|id| m.value_source(id) == Some(clap::parser::ValueSource::CommandLine)).collect();
+        assert_eq!(given.len(), 8, "{given:?}");
+        for id in given.iter().filter(|id| **id != "scenario") {
+            assert!(STUDY_RUN_ARGS.iter().any(|(own, _)| own == id), "the study sets `{id}`, which `run_args` may give");
+        }
+        for (id, _) in STUDY_RUN_ARGS {
+            assert!(cmd.get_arguments().any(|a| a.get_id() == id), "`{id}` is no argument of `netfi run`");
+        }
+        // What the file adds comes along, the study's own settings kept.
+        let spec = TrialSpec { run_args: vec!["--no-isolate".into(), "--return-scenario".into(), "DLM-1".into()], ..spec };
+        let with = trial_run(&spec, "PLM-1", Some(Path::new("/data/c.lz4")), Path::new("/data/P1/trial-01"), 3, "study-r1").unwrap();
+        assert!(with.placement.no_isolate && with.channels.feedback.return_scenario.as_deref() == Some("DLM-1"));
+        assert_eq!(RunArgs { placement: run.placement.clone(), channels: run.channels.clone(), ..with }, run);
+    }
 }

@@ -6,9 +6,12 @@
 //! exported here. The sans-IO core never depends on this module.
 //!
 //! A service sees a transport through two traits, [`FrameSource`] and
-//! [`FrameSink`] ([`ports`]). The emulator's two sides are values:
-//! [`Ingress`] and [`Egress`] are enums over iceoryx2, UDP and an in-memory
-//! queue, and [`open`] opens both from two [`Endpoint`]s.
+//! [`FrameSink`] ([`ports`]). Each transport is a folder with a
+//! [`Transport`] impl ([`declare`]: its endpoint scheme, flags, opener and
+//! report), listed once in [`registry`]; the emulator's two sides are the
+//! registry's values: [`Endpoint`] (parsed by each transport's scheme),
+//! [`Ingress`] and [`Egress`] (enums over the transports, written by the
+//! registry), opened together by [`open`].
 //!
 //! # Contract
 //!
@@ -17,10 +20,11 @@
 //!   file prefix `netfi_<run>_`, taken from an explicit configuration
 //!   ([`IpcConfig`]); no iceoryx2 configuration file is ever read, so two runs
 //!   on one host (or two tests in one process) never see each other.
-//! - Three channels per run, each one publish/subscribe service carrying
-//!   [`FrameSample`](crate::sample::FrameSample): [`Channel::Console`]
-//!   (console → emulator), [`Channel::Emulator`] (emulator → simulator) and
-//!   [`Channel::Direct`] (console → simulator, the baseline hop).
+//! - Three ports per run for its frames, each one publish/subscribe
+//!   service carrying [`FrameSample`](crate::sample::FrameSample):
+//!   [`Port::CONSOLE`] (console → emulator), [`Port::EMULATOR`] (emulator →
+//!   simulator) and [`Port::DIRECT`] (console → simulator, the baseline
+//!   hop); a reverse channel declares its own.
 //! - Sending and receiving a frame allocate nothing and never block: a full
 //!   subscriber queue is reported to the publisher as
 //!   [`FrameSendError::QueueFull`] and counted, never overwritten silently.
@@ -32,19 +36,24 @@
 
 #![warn(missing_docs)]
 
+pub mod declare;
 pub mod endpoint;
 pub mod ipc;
 pub mod open;
 pub mod ports;
+pub mod registry;
 pub mod ros2;
 pub mod udp;
 
-pub use endpoint::{Endpoint, EndpointError, Payload};
-pub use open::{cleanup_stale, open, open_feedback, open_node, ConsoleUnnamed, Egress, FeedbackEgress, FeedbackIngress, Ingress, Transports, Wiring};
+pub use declare::{LaneFlags, Sides, Transport, Wiring};
+pub use endpoint::EndpointError;
+pub use open::{cleanup_stale, open_node, NodeError};
 pub use ports::{FrameSink, FrameSource, MemoryPort, PortError};
+pub use registry::{open, Egress, Endpoint, Ingress, OpenError, Sessions, TransportArgs, TransportArgsError, TransportReports, Transports, ENDPOINT_SYNTAX};
+pub use udp::Payload;
 
 pub use ipc::{
-    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, Channel, CleanupError, CleanupReport,
+    cleanup_dead_nodes, cleanup_dead_runs, set_log_level, CleanupError, Port, CleanupReport,
     DeadPeer, FailedCleanup, FramePublisher, FrameRecvError, FrameSendError, FrameSubscriber,
     IpcConfig, IpcLogLevel, IpcNode, IpcPayload, NodeOpenError, PublisherOpenError, PublisherStats, Role,
     RunId, RunIdError, ServiceOpenError, SubscriberOpenError, SubscriberStats, MAX_NODES_PER_CHANNEL,

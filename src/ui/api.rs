@@ -81,9 +81,11 @@ pub async fn parse(Json(ParseRequest { toml: body }): Json<ParseRequest>) -> Res
 /// `POST /api/runs` `{toml, duration_s, seed, rate_hz, return_scenario,
 /// video_mbps, video_scenario, capture, isolate}`: starts a run; `{id}`.
 pub async fn start(State(ui): State<Arc<Ui>>, Json(req): Json<Start>) -> Response {
-    match ui.runs.start(&ui.opts, &req) {
-        Ok(id) => Json(serde_json::json!({ "id": id })).into_response(),
-        Err(e) => unprocessable(e),
+    // Off the server's thread: a capture is read whole to be checked.
+    match tokio::task::spawn_blocking(move || ui.runs.start(&ui.opts, &req)).await {
+        Ok(Ok(id)) => Json(serde_json::json!({ "id": id })).into_response(),
+        Ok(Err(e)) => unprocessable(e),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}")).into_response(),
     }
 }
 

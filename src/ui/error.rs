@@ -40,6 +40,10 @@ pub enum UiError {
     NotPreset { what: &'static str, name: String },
     #[error("capture `{0}`: no such file on this host (give the path of an LZ4 ITP capture, or leave it empty for synthetic motion)")]
     NoCapture(String),
+    /// The capture given is refused, as the run's console would refuse it
+    /// (not a regular file, damaged, more records than the default limit).
+    #[error(transparent)]
+    Capture(crate::capture::CaptureError),
     /// `netfi run`'s options as its command line reads them (clap's first
     /// paragraph).
     #[error("{0}")]

@@ -5,6 +5,7 @@
 
 use super::UiOptions;
 use super::UiError;
+use crate::service::args::{refusal, RunArgs};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -125,65 +126,60 @@ pub(crate) struct Start {
     pub isolate: Option<bool>,
 }
 
+/// What `netfi run` is given as the scenario until the run has its folder.
+const SCENARIO_FILE: &str = "scenario.toml";
+
 impl Start {
-    /// The options of `netfi run` this start asks for (after the scenario
-    /// and the run's own `--out`, `--run-id`). A choice that names no
+    /// The `netfi run` this start asks for (its scenario a stand-in, its
+    /// own `--out` and `--run-id` not yet given). A choice that names no
     /// preset is an error saying which.
-    fn options(&self) -> Result<Vec<String>, UiError> {
-        let mut a = vec!["--duration-s".to_string(), self.duration_s.to_string()];
+    fn run_args(&self) -> Result<RunArgs, UiError> {
         let preset = |what: &'static str, name: &str| match crate::scenario::canonical_name(name) {
             Some(_) => Ok(name.to_string()),
             None => Err(UiError::NotPreset { what, name: name.to_string() }),
         };
-        if let Some(seed) = self.seed {
-            a.extend(["--seed".into(), seed.to_string()]);
-        }
-        if let Some(r) = self.rate_hz {
-            a.extend(["--rate-hz".into(), r.to_string()]);
-        }
+        let mut a = RunArgs::new(SCENARIO_FILE);
+        a.source.duration_s = Some(self.duration_s);
+        a.scenario.seed = self.seed;
+        a.source.rate_hz = self.rate_hz;
         match self.return_scenario.as_deref() {
             None | Some("") => {}
-            Some("none") => a.push("--no-feedback".into()),
-            Some(name) => a.extend(["--return-scenario".into(), preset("the return scenario", name)?]),
+            Some("none") => a.channels.feedback.no_feedback = true,
+            Some(name) => a.channels.feedback.return_scenario = Some(preset("the return scenario", name)?),
         }
         if let Some(v) = self.video_mbps {
-            a.extend(["--video-mbps".into(), v.to_string()]);
+            a.channels.video.video_mbps = Some(v);
             if let Some(name) = self.video_scenario.as_deref().filter(|n| !n.is_empty()) {
-                a.extend(["--video-scenario".into(), preset("the video scenario", name)?]);
+                a.channels.video.video_scenario = Some(preset("the video scenario", name)?);
             }
         }
         if let Some(c) = self.capture.as_deref().map(str::trim).filter(|c| !c.is_empty()) {
-            if !std::path::Path::new(c).is_file() {
-                return Err(UiError::NoCapture(c.to_string()));
-            }
-            a.extend(["--capture".into(), c.to_string()]);
+            check_capture(c)?;
+            a.source.capture = Some(PathBuf::from(c));
         }
         if self.isolate == Some(false) {
-            a.push("--no-isolate".into());
+            a.placement.no_isolate = true;
         }
         Ok(a)
     }
 }
 
-/// `netfi run`'s arguments, read as the command line reads them.
-#[derive(clap::Parser)]
-#[command(name = "netfi run")]
-struct RunCommand {
-    #[command(flatten)]
-    run: crate::service::args::RunArgs,
+/// Reads the capture `path` as the run's console will (a regular file, up
+/// to the default record limit, checked whole), so that a capture the run
+/// would refuse is refused before it starts, with the console's reason.
+fn check_capture(path: &str) -> Result<(), UiError> {
+    if !std::path::Path::new(path).exists() {
+        return Err(UiError::NoCapture(path.to_string()));
+    }
+    crate::capture::load(path).map(drop).map_err(UiError::Capture)
 }
 
-/// Checks `argv` (after `netfi run`) as `netfi run` would, before any
-/// process starts: the first paragraph of clap's message, or the
-/// arguments' own check.
-fn check_run_args(argv: &[String]) -> Result<(), UiError> {
-    use clap::Parser;
-    let parsed = RunCommand::try_parse_from(std::iter::once("netfi run".to_string()).chain(argv.iter().cloned())).map_err(|e| {
-        let text = e.render().to_string();
-        let first = text.split("\n\n").next().unwrap_or(&text).trim().trim_start_matches("error: ").to_string();
-        UiError::RunOptions(first)
-    })?;
-    parsed.run.validate()?;
+/// Checks `run` as `netfi run` would read its argv, before any process
+/// starts: the flags' ranges (clap's first paragraph), then the arguments'
+/// own check.
+fn check_run_args(run: &RunArgs) -> Result<(), UiError> {
+    let parsed = RunArgs::from_argv(run.to_argv()).map_err(|e| UiError::RunOptions(refusal(&e)))?;
+    parsed.validate()?;
     Ok(())
 }
 
@@ -201,9 +197,9 @@ impl Runs {
         }
         // A run started here may be switched to any scenario: its queue
         // keeps release-time order whatever its own scenario.
-        let mut options = req.options()?;
-        options.push("--reorder-queue".into());
-        check_run_args(&[vec!["scenario.toml".to_string()], options.clone()].concat())?;
+        let mut run = req.run_args()?;
+        run.control.reorder_queue = true;
+        check_run_args(&run)?;
         let id = format!("ui{}-{}", std::process::id(), self.next.fetch_add(1, Ordering::Relaxed) + 1);
         let out = opts.out_dir.join(&id);
         std::fs::create_dir_all(&out).map_err(|e| UiError::Create { path: out.clone(), cause: e })?;
@@ -214,7 +210,10 @@ impl Runs {
             std::fs::File::create(&p).map_err(|e| UiError::Create { path: p, cause: e })
         };
         let mut cmd = Command::new(&opts.netfi);
-        cmd.arg("run").arg(&input).arg("--out").arg(&out).args(["--run-id", &id]).args(&options);
+        run.scenario.scenario = input.display().to_string();
+        run.out = Some(out.clone());
+        run.run_id = Some(id.clone());
+        cmd.arg("run").args(run.to_argv());
         self.mask.give(&mut cmd);
         let child = cmd
             .stdin(Stdio::null())
@@ -407,4 +406,75 @@ fn tail(text: &str, n: usize) -> String {
         start += 1;
     }
     text[start..].to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::service::args::{RunPlacement, SourceArgs};
+    use crate::service::channel::video::VideoArgs;
+
+    /// A start of two and a half seconds at 500 Hz, seed 7, nothing else.
+    fn start() -> Start {
+        Start { toml: String::new(), duration_s: 2.5, seed: Some(7), rate_hz: Some(500.0), return_scenario: None, video_mbps: None, video_scenario: None, capture: None, isolate: None }
+    }
+
+    #[test]
+    fn a_start_is_the_run_it_asks_for() {
+        let s = Start { return_scenario: Some("PLM-1".into()), video_mbps: Some(2.0), video_scenario: Some("DLM-1".into()), isolate: Some(false), ..start() };
+        let mut want = RunArgs::new(SCENARIO_FILE);
+        want.scenario.seed = Some(7);
+        want.source = SourceArgs { rate_hz: Some(500.0), duration_s: Some(2.5), ..SourceArgs::default() };
+        want.channels.feedback.return_scenario = Some("PLM-1".into());
+        want.channels.video.video_mbps = Some(2.0);
+        want.channels.video.video_scenario = Some("DLM-1".into());
+        want.placement.no_isolate = true;
+        assert_eq!(s.run_args().unwrap(), want);
+        check_run_args(&want).unwrap();
+        // `none`: no feedback path; a video scenario only with video.
+        let run = Start { return_scenario: Some("none".into()), video_scenario: Some("DLM-1".into()), isolate: Some(true), ..start() }.run_args().unwrap();
+        assert!(run.channels.feedback.no_feedback && run.channels.feedback.return_scenario.is_none());
+        assert_eq!(run.channels.video, VideoArgs::default());
+        assert_eq!(run.placement, RunPlacement::default());
+    }
+
+    #[test]
+    fn a_start_netfi_run_would_refuse_is_refused_in_its_words() {
+        let e = Start { return_scenario: Some("PLM-9".into()), ..start() }.run_args().unwrap_err();
+        assert!(matches!(e, UiError::NotPreset { what: "the return scenario", .. }), "{e}");
+        let e = Start { capture: Some("/nonexistent/capture.lz4".into()), ..start() }.run_args().unwrap_err();
+        assert!(matches!(e, UiError::NoCapture(_)), "{e}");
+        let e = check_run_args(&Start { rate_hz: Some(1e9), ..start() }.run_args().unwrap()).unwrap_err().to_string();
+        assert!(e.starts_with("invalid value '1000000000' for '--rate-hz"), "{e}");
+        let e = check_run_args(&Start { video_scenario: Some("x".into()), ..start() }.run_args().unwrap());
+        assert!(e.is_ok(), "a video scenario without video is left out: {e:?}");
+    }
+
+    /// The capture field is read as the run's console will read it: a
+    /// FIFO is refused at once (not waited on), a damaged file with the
+    /// reader's reason, before any process starts.
+    #[test]
+    fn the_capture_field_is_refused_as_the_console_would_refuse_it() {
+        let dir = crate::scratch::dir("capture-field");
+        let options = |c: &std::path::Path| {
+            serde_json::from_value::<Start>(serde_json::json!({ "toml": "", "duration_s": 1.0, "seed": null, "capture": c })).unwrap().run_args()
+        };
+        let good = dir.join("good.lz4");
+        let mut w = crate::capture::CaptureWriter::create(&good).unwrap();
+        w.write_frame(1, &crate::frame::ItpFrame::default().with_checksum()).unwrap();
+        w.finish().unwrap();
+        let a = options(&good).unwrap();
+        assert_eq!(a.source.capture.as_deref(), Some(good.as_path()));
+        assert!(matches!(options(&dir.join("absent.lz4")), Err(UiError::NoCapture(_))));
+        let fifo = dir.join("fifo.lz4");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let e = options(&fifo).unwrap_err().to_string();
+        assert!(e.contains("a FIFO: only regular files are read"), "{e}");
+        std::fs::write(dir.join("text.lz4"), b"not a capture").unwrap();
+        let e = options(&dir.join("text.lz4")).unwrap_err().to_string();
+        assert!(e.contains("text.lz4") && e.contains("LZ4"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

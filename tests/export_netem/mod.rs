@@ -134,25 +134,43 @@ fn without_a_table_dir_the_script_finds_tcs_or_says_where_it_looked() {
     let tables = d.0.join("tables");
     run_script(&d.0, &out.stdout, Some(&tables));
     assert_eq!(std::fs::read_dir(&tables).unwrap().count(), 1);
+    // The search itself, whatever this machine has installed: the script
+    // with each directory it searches moved into the test's own.
+    let searched = ["/usr/lib/x86_64-linux-gnu/tc", "/usr/lib/aarch64-linux-gnu/tc", "/usr/lib64/tc", "/usr/lib/tc"];
+    let moved: Vec<PathBuf> = (0..searched.len()).map(|k| d.0.join(format!("searched-{k}"))).collect();
+    let local = searched.iter().zip(&moved).fold(script.to_string(), |s, (from, to)| s.replace(from, to.to_str().unwrap()));
+    assert!(searched.iter().all(|p| !local.contains(p)), "{local}");
     // Where no directory of the list has tc's tables, the script stops
     // before tc runs, naming where it looked.
-    if !["/usr/lib/x86_64-linux-gnu/tc", "/usr/lib/aarch64-linux-gnu/tc", "/usr/lib64/tc", "/usr/lib/tc"]
-        .iter()
-        .any(|p| Path::new(p).join("normal.dist").is_file())
-    {
-        let path = d.0.join("netem.sh");
-        std::fs::write(&path, &out.stdout).unwrap();
-        let o = Command::new("sh").arg(&path).env_remove("TC_LIB_DIR").env("PATH", d.0.join("bin")).output().unwrap();
-        assert!(!o.status.success());
-        assert!(String::from_utf8_lossy(&o.stderr).contains("looked in"));
+    let path = d.0.join("netem.sh");
+    std::fs::write(&path, &local).unwrap();
+    std::fs::remove_file(d.0.join("tc.args")).unwrap();
+    let o = Command::new("sh")
+        .arg(&path)
+        .env_remove("TC_LIB_DIR")
+        .env("PATH", format!("{}:{}", d.0.join("bin").display(), std::env::var("PATH").unwrap_or_default()))
+        .env("NETFI_TC_ARGS", d.0.join("tc.args"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("looked in") && err.contains(moved[0].to_str().unwrap()), "{err}");
+    assert!(!d.0.join("tc.args").exists(), "tc ran without its tables");
+    // Where some have them, the first of the list that has them is used.
+    for k in [2, 3] {
+        std::fs::create_dir_all(&moved[k]).unwrap();
+        std::fs::write(moved[k].join("normal.dist"), "").unwrap();
     }
+    assert!(!run_script(&d.0, local.as_bytes(), None).is_empty());
+    let tables = |k: usize| std::fs::read_dir(&moved[k]).unwrap().filter(|e| e.as_ref().unwrap().file_name() != "normal.dist").count();
+    assert_eq!((tables(2), tables(3)), (1, 0), "the table goes to the first directory found");
 }
 
 /// What tc cannot take is refused, naming the flag or field and the range
 /// it accepts: a frame rate beyond the physical range (`--rate-hz 1e12`
-/// once wrote `limit 1593117369386`, `1e300` wrote `limit 1000`), a queue
-/// limit beyond tc's 32-bit `limit`, and a slot budget beyond tc's signed
-/// 32-bit fields. Values just inside are accepted.
+/// once wrote `limit 1593117369386`, `1e300` wrote `limit 1000`), a delay
+/// or jitter beyond tc's 32-bit tick fields, and a slot budget beyond tc's
+/// signed 32-bit fields. Values just inside are accepted.
 #[test]
 fn what_tc_cannot_take_is_refused_with_the_range() {
     let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
@@ -167,15 +185,31 @@ fn what_tc_cannot_take_is_refused_with_the_range() {
         std::fs::write(&p, text).unwrap();
         p.to_str().unwrap().to_owned()
     };
-    // One hour of delay at 1 MHz holds 3.6·10⁹ packets, 4.5·10⁹ with the
-    // spare: beyond 2^32 − 1.
-    let hour = write("hour.toml", "[[stage]]\nmodel = \"delay\"\nmin_ms = 3600000\n");
-    let out = netfi().args(["export", "netem", &hour, "--rate-hz", "1e6"]).output().unwrap();
-    assert!(!out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
-    assert!(stderr(&out).contains("--rate-hz 1000000") && stderr(&out).contains("32-bit `limit` takes (at most 4294967295)"), "{}", stderr(&out));
-    let out = netfi().args(["export", "netem", &hour, "--rate-hz", "9e5"]).output().unwrap();
+    // tc (iproute2 before 6.10) keeps `delay` and `jitter` in 32-bit
+    // fields of ticks, 15.625 a µs: at most 274,877,906 µs. An hour's delay
+    // once exported as `delay 3600000000us`, which tc refuses, stopping the
+    // script. Each field that gives netem's delay or jitter is named.
+    let limit = "at most 274877906 µs (274.878 s)";
+    for (name, stage, what) in [
+        ("hour", "model = \"delay\"\nmin_ms = 3600000", "stage 1 (delay): netem's `delay` would be 3600000000 µs (from `min_ms`)"),
+        ("over", "model = \"delay\"\nmin_ms = 274877.9066", "netem's `delay` would be 274877907 µs (from `min_ms`)"),
+        ("uniform", "model = \"delay\"\nmin_ms = 1\ndist = \"uniform\"\njitter_ms = 600000", "netem's `delay` would be 300001000 µs (from `min_ms` + `jitter_ms` / 2)"),
+        ("jitter", "model = \"jitter\"\nmean_ms = 10\nsd_ms = 300000\ndist = \"normal\"", "stage 1 (jitter): netem's `jitter` would be 300000000 µs (from `sd_ms` / 1.0000"),
+        ("reorder", "model = \"reorder\"\np = 0.1\ndelay_ms = 300000", "stage 1 (reorder): netem's `delay` would be 300000000 µs (from `delay_ms`)"),
+    ] {
+        let path = write(&format!("{name}.toml"), &format!("[[stage]]\n{stage}\n"));
+        let out = netfi().args(["export", "netem", &path]).output().unwrap();
+        assert!(!out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stdout));
+        assert!(stderr(&out).contains(what) && stderr(&out).contains(limit), "{name}: {}", stderr(&out));
+    }
+    // The longest delay tc takes is exported, and its script runs; its
+    // queue at 10⁶ Hz (3.4·10⁸ packets) fits tc's 32-bit `limit`.
+    let longest = write("longest.toml", "[[stage]]\nmodel = \"delay\"\nmin_ms = 274877.906\n");
+    let out = netfi().args(["export", "netem", &longest, "--rate-hz", "1e6"]).output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(String::from_utf8_lossy(&out.stdout).contains("netem limit 4050000001 delay 3600000000us\n"));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("netem limit 343597384 delay 274877906us\n"), "{}", String::from_utf8_lossy(&out.stdout));
+    let args = run_script(&d.0, &out.stdout, None);
+    assert_eq!(args[args.len() - 2..], ["delay", "274877906us"]);
     let slot = write("slot.toml", "[[stage]]\nmodel = \"slot\"\nmin_ms = 1\nmax_ms = 2\npackets = 2147483648\n");
     let out = netfi().args(["export", "netem", &slot]).output().unwrap();
     assert!(!out.status.success());

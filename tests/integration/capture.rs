@@ -2,7 +2,8 @@
 //! motion model against what that recording contains.
 //!
 //! Tests that need the recording look for it at `../shared/data/itp/` beside
-//! the crate and skip, saying so, when it is absent.
+//! the crate and skip, saying so, when it is absent (fail, where
+//! `NETFI_REQUIRE_DATA` is set: [`crate::common::data`]).
 
 use crate::common::netfi::{netfi, Outcome};
 use crate::common::machine;
@@ -13,7 +14,7 @@ use netfi::frame::ItpFrame;
 use netfi::kinematics::{Integrator, KinematicsConfig};
 use netfi::motion::{MotionGenerator, MotionParams};
 use std::io::{Read, Write};
-use crate::common::shipped_capture;
+use crate::common::data::shipped_capture;
 
 const MS: u64 = 1_000_000;
 
@@ -259,4 +260,141 @@ fn the_real_recording_written_in_batches_is_the_same_capture() {
         Err(CaptureError::TrailingBytes { record: 21_000, frame: 21, .. }) => {}
         other => panic!("expected TrailingBytes after frame 21, got {:?}", other.map(|c| c.stats)),
     }
+}
+
+/// A capture file of `n` copies of one record, written with the LZ4
+/// content checksum, streamed (the content is never held whole).
+fn repeated(path: &std::path::Path, n: u64) {
+    let r = CaptureRecord::new(1_000, &MotionGenerator::new(MotionParams::peg_transfer(500.0), 5).unwrap().next_frame());
+    let mut w = CaptureWriter::create(path).unwrap();
+    for _ in 0..n {
+        w.write_record(&r).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// `netfi scenario check` with `args`, its address space bounded to
+/// `max_bytes`: what it asks of memory beyond that fails.
+fn check_within(max_bytes: u64, args: &[&str]) -> std::process::Output {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = netfi();
+    cmd.args(["scenario", "check"]).args(args);
+    // SAFETY: setrlimit only, between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            let lim = libc::rlimit { rlim_cur: max_bytes, rlim_max: max_bytes };
+            if libc::setrlimit(libc::RLIMIT_AS, &lim) == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
+        });
+    }
+    cmd.output().unwrap()
+}
+
+/// One record repeated more times than a capture is read up to (2^22 + 1
+/// of them, 2.3 MB of LZ4): refused, naming the limit, with what is kept
+/// bounded by it. Such a file (40·10⁶ records in 22 MB) once asked for
+/// 4.8 GB and aborted; here the address space is held to 1 GiB, which the
+/// 0.6 GB the limit allows fits and the 1.2 GB of the next doubling (what
+/// a reader without the limit asks for at record 2^22 + 1) does not.
+#[test]
+fn a_capture_beyond_the_record_limit_is_refused_before_it_is_kept() {
+    let _machine = machine::not_beside_a_run();
+    let dir = Scratch::new("it-limit");
+    let big = dir.join("big.lz4");
+    repeated(&big, netfi::capture::DEFAULT_MAX_RECORDS + 1);
+    let path = big.to_str().unwrap();
+    let out = check_within(1 << 30, &["Normal", "--capture", path]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("big.lz4`: more than 4194304 records, the most it is read with (default 4194304)") && stderr.contains("--capture-max-records"), "{stderr}");
+    // Raised, the same file is read (here only to its count: 1 000 + 1
+    // records under a limit of 1 000, then 1 001).
+    let small = dir.join("small.lz4");
+    repeated(&small, 1_001);
+    let small = small.to_str().unwrap();
+    let e = netfi().args(["scenario", "check", "Normal", "--capture", small, "--capture-max-records", "1000"]).fails();
+    assert!(e.contains("more than 1000 records"), "{e}");
+    let v = netfi().args(["scenario", "check", "Normal", "--json", "--capture", small, "--capture-max-records", "1001"]).json();
+    assert_eq!(v["frames"], 1_001);
+    let e = netfi().args(["scenario", "check", "Normal", "--capture-max-records", "10"]).fails();
+    assert!(e.contains("--capture"), "the limit alone is refused: {e}");
+    let e = netfi().args(["scenario", "check", "Normal", "--capture", small, "--capture-max-records", "0"]).fails();
+    assert!(e.contains("--capture-max-records"), "{e}");
+}
+
+/// A FIFO given as the capture is refused at once (no writer is waited
+/// for), as a device and a directory are.
+#[test]
+fn a_fifo_capture_is_refused_at_once() {
+    let _machine = machine::not_beside_a_run();
+    let dir = Scratch::new("it-fifo");
+    let fifo = dir.join("capture.fifo");
+    let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    for (path, what) in [(fifo.to_str().unwrap(), "a FIFO"), ("/dev/zero", "a device"), (dir.to_str().unwrap(), "a directory")] {
+        let mut child = netfi()
+            .args(["scenario", "check", "Normal", "--capture", path])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed() > std::time::Duration::from_secs(20) {
+                let _ = child.kill();
+                panic!("`--capture {path}` still waits after 20 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && stderr.contains(&format!("{what}: only regular files are read")), "{path}: {stderr}");
+    }
+}
+
+/// A capture without an LZ4 content checksum is read, and said to be
+/// unverified, on stderr and in `scenario check --json`, naming the fields
+/// no checksum covers; one with it is said to be verified.
+#[test]
+fn a_capture_without_a_content_checksum_is_said_to_be_unverified() {
+    let _machine = machine::not_beside_a_run();
+    let dir = Scratch::new("it-unverified");
+    let (_, checked) = synthetic(50);
+    let plain = compress(&decompress(&checked));
+    for (name, bytes, verified) in [("checked.lz4", checked, true), ("plain.lz4", plain, false)] {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out = netfi().args(["scenario", "check", "Normal", "--json", "--capture"]).arg(&path).ok();
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let note = &v["capture"];
+        assert_eq!(note["path"], path.to_str().unwrap());
+        assert_eq!((note["records"].as_u64(), note["layout"].as_str()), (Some(50), Some("dropped")));
+        assert_eq!(note["content_checksum"], verified, "{note:#}");
+        let unverified: Vec<&str> = note["unverified"].as_array().unwrap().iter().map(|f| f.as_str().unwrap()).collect();
+        if verified {
+            assert!(unverified.is_empty() && !stderr.contains("content checksum"), "{note:#}\n{stderr}");
+        } else {
+            assert_eq!(unverified, ["time_ns", "dropped", "frame.pactyp", "frame.version", "frame.Qx", "frame.Qy", "frame.Qz", "frame.Qw", "frame.grasp"]);
+            assert!(stderr.contains(&format!("WARNING: capture `{}` has no LZ4 content checksum", path.display())) && stderr.contains("time_ns and dropped"), "{stderr}");
+        }
+        // The report's own figures are where they were.
+        assert_eq!(v["frames"], 50);
+    }
+}
+
+/// A capture cut inside an LZ4 block says it was cut and where the file
+/// ends (once: `read failed: failed to fill whole buffer` at a decompressed
+/// offset larger than the file).
+#[test]
+fn a_capture_cut_inside_a_block_says_where_the_file_ends() {
+    let _machine = machine::not_beside_a_run();
+    let dir = Scratch::new("it-cut");
+    let (_, bytes) = synthetic(2_000);
+    let cut = bytes.len() / 2;
+    let path = dir.join("cut.lz4");
+    std::fs::write(&path, &bytes[..cut]).unwrap();
+    let e = netfi().args(["scenario", "check", "Normal", "--capture"]).arg(&path).fails();
+    assert!(e.contains(&format!("the file was cut short: it ends at byte {cut} of the file, inside LZ4 frame 1")), "{e}");
+    assert!(!e.contains("fill whole buffer"), "{e}");
 }

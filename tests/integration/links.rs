@@ -3,15 +3,17 @@
 //!
 //! The shared Mahimahi traces are looked for at `../shared/data/traces/`
 //! beside the repository; the tests that use them skip, saying so, when it
-//! is absent.
+//! is absent (fail, where `NETFI_REQUIRE_DATA` is set:
+//! [`crate::common::data`]).
 
 use crate::common::netfi::{netfi, Outcome};
+use crate::common::data;
 use crate::common::machine;
 use crate::common::scratch::Scratch;
 use netfi::injector::{Fate, Injector};
 use netfi::model::Schedule;
 use netfi::scenario::{parse_str, Scenario};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 fn injector(text: &str) -> Injector<()> {
     let spec = parse_str(text, "test.toml", "test").unwrap_or_else(|e| panic!("{e}"));
@@ -163,11 +165,7 @@ fn a_synthetic_trace_link_delivers_per_second_what_the_trace_allows() {
 #[test]
 fn a_cellular_trace_link_delivers_per_second_what_the_trace_allows() {
     let _machine = machine::not_beside_a_run();
-    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/traces/TMobile-LTE-short.up");
-    if !file.exists() {
-        eprintln!("skipped: the shared Mahimahi traces are not at {}", file.display());
-        return;
-    }
+    let Some(file) = data::trace("TMobile-LTE-short.up") else { return };
     let schedule = Schedule::parse(&std::fs::read_to_string(&file).unwrap()).unwrap();
     // 1500-byte payloads every 40 µs: 300 Mbit/s, beyond the trace's peaks.
     for (s, (diff, allowed)) in per_second_against_trace(&schedule, &file, 1500, 40_000, 8).into_iter().enumerate() {
@@ -308,8 +306,8 @@ fn shipped_scenarios_that_read_files_parse_build_run_and_print_back() {
             continue;
         }
         let text = std::fs::read_to_string(&path).unwrap();
-        if text.contains("shared/data/") && !dir.join("../../../../shared/data/traces").exists() {
-            eprintln!("skipped {}: the shared Mahimahi traces are absent", path.display());
+        // (`../../../../shared/data/` from this folder is `data::dir()`.)
+        if text.contains("shared/data/") && data::or_skip("traces", &format!("the shared Mahimahi traces {} reads", path.display())).is_none() {
             continue;
         }
         let s = netfi::load::parse_file(&path).unwrap_or_else(|e| panic!("{e}"));
@@ -596,8 +594,9 @@ fn a_replay_stage_names_the_layout_it_read() {
     let rec = &v["stages"][0]["recording"];
     assert_eq!(rec["kind"], "delay capture");
     assert_eq!(rec["layout"], "time | length | delay (s) | frame");
-    assert_eq!((rec["file"].as_str(), rec["fates"].as_u64(), rec["wraps"].as_u64()), (Some("trial.bin"), Some(2_500), Some(2)));
-    // Every recorded delay, in order, twice: the exact median of them.
+    assert_eq!((rec["file"].as_str(), rec["fates"].as_u64(), rec["wraps"].as_u64()), (Some("trial.bin"), Some(2_500), Some(1)));
+    // Every recorded delay, in order, twice (started again once): the
+    // exact median of them.
     let mut ns: Vec<u64> = delays.iter().map(|d| (f64::from(*d) * 1e9).round() as u64).collect();
     ns.sort_unstable();
     assert_eq!(v["delay_ms"]["p50"].as_f64(), Some(nearest_rank(&ns, 0.5) as f64 / 1e6));

@@ -14,7 +14,7 @@ use crate::common::wait_file;
 use crate::common::netfi::emulator_pin;
 use crate::common::netfi::netfi;
 use netfi::sample::FrameSample;
-use netfi::transport::{Channel, IpcConfig, Role, RunId};
+use netfi::transport::{IpcConfig, Role, RunId};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -295,7 +295,7 @@ print(json.dumps({{
         rust_layout(&run.config),
         rust_layout(&run.config)
     );
-    let services: Vec<String> = Channel::ALL.iter().map(|c| run.config.service_name(*c)).collect();
+    let services: Vec<String> = netfi::service::ports().iter().map(|c| run.config.service_name(*c)).collect();
     assert_eq!(py["services"], serde_json::json!(services));
     let nodes: Vec<String> = [Role::Console, Role::Emulator, Role::Simulator, Role::Tool].iter().map(|r| run.config.node_name(*r)).collect();
     assert_eq!(py["nodes"], serde_json::json!(nodes));
@@ -534,7 +534,7 @@ fn the_python_console_replays_the_real_capture() {
     if !python_ready() {
         return;
     }
-    let Some(cap) = crate::common::shipped_capture() else { return };
+    let Some(cap) = crate::common::data::shipped_capture() else { return };
     let _guard = machine::alone();
     let run = Run::new("replay");
     let robot = run.python_robot();
@@ -743,7 +743,7 @@ fn the_python_video_header_is_the_rust_one() {
     if !python_ready() {
         return;
     }
-    use netfi::sample::VideoHeader;
+    use netfi::transport::ipc::video::VideoHeader;
     use netfi::transport::ipc::video::{DEFAULT_VIDEO_MAX_BYTES, VIDEO_BUFFER_FRAMES, VIDEO_HELD_FRAMES, VIDEO_INITIAL_SLICE_BYTES};
     let gops = [(8e6, 60.0, 30u32, 8.0), (2e6, 5.0, 5, 8.0), (1e6, 60.0, 1, 1.0), (3.3e6, 59.94, 12, 5.5), (8e6, 10.0, 10, 8.0)];
     let script = format!(
@@ -960,7 +960,7 @@ fn the_python_capture_reader_reads_every_frame_and_refuses_garbage() {
         assert!(!o.status.success(), "garbage {name} accepted: {}", String::from_utf8_lossy(&o.stdout));
         assert!(String::from_utf8_lossy(&o.stderr).contains("that are not an LZ4 frame"), "{name}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    if let Some(real) = crate::common::shipped_capture() {
+    if let Some(real) = crate::common::data::shipped_capture() {
         let cap = netfi::capture::load(&real).unwrap();
         let o = load(&write("real.bin", &cap.records));
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

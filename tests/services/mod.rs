@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 mod deaths;
 mod faults;
 mod integrity;
+mod shipped;
 mod streams;
 mod video;
 
@@ -233,7 +234,7 @@ fn clm_outages_are_conserved() {
 
 #[test]
 fn the_real_capture_replays_with_its_timing() {
-    let Some(cap) = crate::common::shipped_capture() else { return };
+    let Some(cap) = crate::common::data::shipped_capture() else { return };
     let (r, ok, _) = run("replay", &["PLM-1", "--capture", cap.to_str().unwrap(), "--duration-s", "3", "--seed", "6"]);
     assert!(ok, "{r:#}");
     assert_conserved(&r);
@@ -241,6 +242,11 @@ fn the_real_capture_replays_with_its_timing() {
     // About 517 Hz for 3 s of the recording.
     assert!((1300..=1800).contains(&sent), "{sent}");
     assert_eq!(r["console"]["source"].as_str().map(|s| s.starts_with("capture:")), Some(true));
+    // The recording has no LZ4 content checksum: the report says what of
+    // it no checksum covers.
+    let note = &r["console"]["capture"];
+    assert_eq!((note["records"].as_u64(), note["content_checksum"].as_bool()), (Some(41_508), Some(false)), "{note:#}");
+    assert_eq!(note["unverified"][0], "time_ns");
     // Every frame of the recording has a valid checksum.
     assert_eq!(u(&r["simulator"]["bad_checksum"]), 0);
 }

@@ -24,3 +24,4 @@ mod models;
 mod presets;
 mod reorder_slot;
 mod links;
+mod loss_interval;

@@ -144,6 +144,11 @@ fn bad_study_files_are_refused_naming_the_line_and_field() {
         (&format!("{base}colour = [3]\n"), "s.toml:7: `participant[1].colour`", "a string, a number or a boolean"),
         (&format!("{base}[[participant]]\nid = \"P1\"\n"), "s.toml:8: `participant[2].id`", "two participants"),
         (&format!("{base}[trial]\nrun_args = [\"--no-isolate\", \"--seed\", \"3\"]\n"), "s.toml:8: `trial.run_args[2]`", "--seed"),
+        (&format!("{base}[trial]\nrun_args = [\"--duration=3\"]\n"), "s.toml:8: `trial.run_args[1]`", "`--duration`: write it as `trial.duration_s`"),
+        (&format!("{base}[trial]\nrun_args = [\"--no-isolat\"]\n"), "s.toml:8: `trial.run_args[1]`", "unexpected argument '--no-isolat' found"),
+        (&format!("{base}[trial]\nrun_args = [\n  \"--no-isolate\",\n  \"--rt-priority\", \"0\",\n]\n"), "s.toml:10: `trial.run_args[2]`", "invalid value '0' for '--rt-priority"),
+        (&format!("{base}[trial]\nrun_args = [\"--no-isolate\", \"extra\"]\n"), "s.toml:8: `trial.run_args[2]`", "unexpected argument 'extra'"),
+        (&format!("{base}[trial]\nrun_args = [\"--video-mbps\", \"2\", \"--streams\", \"2\"]\n"), "s.toml:8: `trial.run_args`", "goes with one stream"),
         (&format!("{base}[trial]\nduration_s = -1\n"), "s.toml:8: `trial.duration_s`", "more than 0"),
         (&format!("{base}[[condition]]\nname = \"x\"\nstage = [{{ model = \"bernoulli\", p = 2 }}]\n"), "s.toml:9: `condition[1].stage`", "`p`"),
         (&format!("seed = 1\n[order]\nblocks = \"table\"\n{tables}"), "s.toml:7: `participant[1].blocks`", "missing"),
@@ -159,6 +164,13 @@ fn bad_study_files_are_refused_naming_the_line_and_field() {
         assert!(e.contains(words), "expected `{words}` in: {e}");
     }
     assert!(parse_study(&base, "s.toml", "s").is_ok());
+    let ok = parse_study(&format!("{base}[trial]\nrun_args = [\"--no-isolate\", \"--return-scenario=DLM-1\", \"--video-mbps\", \"2\"]\n"), "s.toml", "s").unwrap();
+    assert_eq!(ok.trial.run_args, ["--no-isolate", "--return-scenario=DLM-1", "--video-mbps", "2"], "kept as written");
+    let e = parse_study(&format!("{base}[trial]\nrun_args = [\"--seed=3\"]\n"), "s.toml", "s").unwrap_err().to_string();
+    assert_eq!(
+        e,
+        "s.toml:8: `trial.run_args[1]`: `--seed`: the study sets it for each trial (the study decides --out, --seed, --run-id, --json, --duration-s, --duration, --frames, --capture, --report-json, --rate-hz)"
+    );
 }
 
 /// Student's sleep data (Cushny and Peebles, 1905), as R ships it

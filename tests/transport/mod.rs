@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use netfi::sample::{FrameSample, ITP_FRAME_LEN};
 use netfi::transport::{
-    cleanup_dead_nodes, cleanup_dead_runs, Channel, FrameSendError, IpcConfig, IpcNode,
+    cleanup_dead_nodes, cleanup_dead_runs, Port, FrameSendError, IpcConfig, IpcNode,
     PublisherOpenError, Role, RunId, ServiceOpenError, SubscriberOpenError, MAX_SUBSCRIBERS_PER_CHANNEL,
     SUBSCRIBER_BUFFER_FRAMES,
 };
@@ -102,8 +102,8 @@ fn wait_until(what: &str, mut cond: impl FnMut() -> bool) {
 fn frames_arrive_intact_and_in_order() {
     let config = unique_config("order");
     let node = IpcNode::open(&config, Role::Tool).unwrap();
-    let mut sub = node.subscriber(Channel::Console).unwrap();
-    let mut publisher = node.publisher(Channel::Console).unwrap();
+    let mut sub = node.subscriber(Port::CONSOLE).unwrap();
+    let mut publisher = node.publisher(Port::CONSOLE).unwrap();
     assert_eq!(publisher.peers_connected(), 1);
     assert_eq!(sub.peers_connected(), 1);
     assert_eq!(sub.capacity(), SUBSCRIBER_BUFFER_FRAMES);
@@ -133,8 +133,8 @@ fn frames_arrive_intact_and_in_order() {
 fn send_with_starts_from_a_zeroed_sample() {
     let config = unique_config("zero");
     let node = IpcNode::open(&config, Role::Tool).unwrap();
-    let mut sub = node.subscriber(Channel::Emulator).unwrap();
-    let mut publisher = node.publisher(Channel::Emulator).unwrap();
+    let mut sub = node.subscriber(Port::EMULATOR).unwrap();
+    let mut publisher = node.publisher(Port::EMULATOR).unwrap();
     // Fill the pool's samples with non-zero content first, so that a sample
     // reused without zeroing would show through.
     for i in 0..64 {
@@ -161,8 +161,8 @@ fn send_with_starts_from_a_zeroed_sample() {
 fn recv_with_lends_the_sample_in_place() {
     let config = unique_config("view");
     let node = IpcNode::open(&config, Role::Tool).unwrap();
-    let mut sub = node.subscriber(Channel::Console).unwrap();
-    let mut publisher = node.publisher(Channel::Console).unwrap();
+    let mut sub = node.subscriber(Port::CONSOLE).unwrap();
+    let mut publisher = node.publisher(Port::CONSOLE).unwrap();
     assert_eq!(sub.recv_with(|f| f.console_index).unwrap(), None);
     publisher.send(&frame(42)).unwrap();
     let got = sub.recv_with(|f| (f.console_index, f.payload().to_vec()));
@@ -180,12 +180,12 @@ fn concurrent_runs_do_not_see_each_other() {
     assert_ne!(config_a.prefix(), config_b.prefix());
     let node_a = IpcNode::open(&config_a, Role::Tool).unwrap();
     let node_b = IpcNode::open(&config_b, Role::Tool).unwrap();
-    let mut sub_a = node_a.subscriber(Channel::Console).unwrap();
-    let mut sub_b = node_b.subscriber(Channel::Console).unwrap();
+    let mut sub_a = node_a.subscriber(Port::CONSOLE).unwrap();
+    let mut sub_b = node_b.subscriber(Port::CONSOLE).unwrap();
     // One publisher per channel and run: the second run's publisher must not
     // take the first run's slot.
-    let mut pub_a = node_a.publisher(Channel::Console).unwrap();
-    let mut pub_b = node_b.publisher(Channel::Console).unwrap();
+    let mut pub_a = node_a.publisher(Port::CONSOLE).unwrap();
+    let mut pub_b = node_b.publisher(Port::CONSOLE).unwrap();
     assert_eq!(pub_a.peers_connected(), 1);
     assert_eq!(pub_b.peers_connected(), 1);
 
@@ -209,8 +209,8 @@ fn concurrent_runs_do_not_see_each_other() {
 fn burst_beyond_the_queue(attached: bool) {
     let config = unique_config(if attached { "burst-a" } else { "burst-u" });
     let node = IpcNode::open(&config, Role::Tool).unwrap();
-    let mut sub = node.subscriber(Channel::Console).unwrap();
-    let mut publisher = node.publisher(Channel::Console).unwrap();
+    let mut sub = node.subscriber(Port::CONSOLE).unwrap();
+    let mut publisher = node.publisher(Port::CONSOLE).unwrap();
     if attached {
         assert_eq!(sub.try_recv().unwrap(), None);
     }
@@ -224,7 +224,7 @@ fn burst_beyond_the_queue(attached: bool) {
             Err(FrameSendError::QueueFull {
                 channel, capacity, ..
             }) => {
-                assert_eq!(channel, Channel::Console);
+                assert_eq!(channel, Port::CONSOLE);
                 assert_eq!(capacity, SUBSCRIBER_BUFFER_FRAMES);
                 assert!(i >= SUBSCRIBER_BUFFER_FRAMES as u64, "frame {i} refused");
                 refused += 1;
@@ -265,12 +265,12 @@ fn burst_beyond_the_queue_of_an_unattached_subscriber_is_refused_and_counted() {
 fn sending_without_subscriber_is_counted() {
     let config = unique_config("nosub");
     let node = IpcNode::open(&config, Role::Console).unwrap();
-    let mut publisher = node.publisher(Channel::Console).unwrap();
+    let mut publisher = node.publisher(Port::CONSOLE).unwrap();
     assert_eq!(publisher.peers_connected(), 0);
     assert_eq!(publisher.send(&frame(0)).unwrap(), 0);
     assert_eq!(publisher.stats().unsubscribed, 1);
     // A late subscriber gets no history: commands are never replayed.
-    let mut sub = node.subscriber(Channel::Console).unwrap();
+    let mut sub = node.subscriber(Port::CONSOLE).unwrap();
     assert_eq!(sub.try_recv().unwrap(), None);
     assert_eq!(publisher.send(&frame(1)).unwrap(), 1);
     assert_eq!(sub.try_recv().unwrap(), Some(frame(1)));
@@ -280,21 +280,21 @@ fn sending_without_subscriber_is_counted() {
 fn port_limits_are_enforced_with_clear_errors() {
     let config = unique_config("limits");
     let node = IpcNode::open(&config, Role::Tool).unwrap();
-    let _first = node.publisher(Channel::Console).unwrap();
-    let err = node.publisher(Channel::Console).unwrap_err();
+    let _first = node.publisher(Port::CONSOLE).unwrap();
+    let err = node.publisher(Port::CONSOLE).unwrap_err();
     assert!(
         matches!(err, PublisherOpenError::PublisherTaken { .. }),
         "{err:?}"
     );
     let message = err.to_string();
-    let service = config.service_name(Channel::Console);
+    let service = config.service_name(Port::CONSOLE);
     assert!(message.contains(&service), "{message}");
     assert!(message.contains("console"), "{message}");
 
     let _subs: Vec<_> = (0..MAX_SUBSCRIBERS_PER_CHANNEL)
-        .map(|_| node.subscriber(Channel::Console).unwrap())
+        .map(|_| node.subscriber(Port::CONSOLE).unwrap())
         .collect();
-    let err = node.subscriber(Channel::Console).unwrap_err();
+    let err = node.subscriber(Port::CONSOLE).unwrap_err();
     assert!(
         matches!(err, SubscriberOpenError::SubscribersTaken { .. }),
         "{err:?}"
@@ -313,37 +313,37 @@ fn a_channel_of_another_sample_type_is_refused() {
         .create::<ipc::Service>()
         .unwrap();
     let _service = other
-        .service_builder(&ServiceName::new(&config.service_name(Channel::Console)).unwrap())
+        .service_builder(&ServiceName::new(&config.service_name(Port::CONSOLE)).unwrap())
         .publish_subscribe::<u64>()
         .create()
         .unwrap();
 
     let node = IpcNode::open(&config, Role::Console).unwrap();
-    let err = node.publisher(Channel::Console).unwrap_err();
+    let err = node.publisher(Port::CONSOLE).unwrap_err();
     assert!(
         matches!(err, PublisherOpenError::Open(ServiceOpenError::Incompatible { .. })),
         "{err:?}"
     );
     assert!(err
         .to_string()
-        .contains(&config.service_name(Channel::Console)));
-    let err = node.subscriber(Channel::Console).unwrap_err();
+        .contains(&config.service_name(Port::CONSOLE)));
+    let err = node.subscriber(Port::CONSOLE).unwrap_err();
     assert!(
         matches!(err, SubscriberOpenError::Open(ServiceOpenError::Incompatible { .. })),
         "{err:?}"
     );
     // The other channel is unaffected.
-    node.publisher(Channel::Emulator).unwrap();
+    node.publisher(Port::EMULATOR).unwrap();
 }
 
 #[test]
 fn gracefully_restarted_publisher_reconnects() {
     let config = unique_config("restart");
     let consumer = IpcNode::open(&config, Role::Emulator).unwrap();
-    let mut sub = consumer.subscriber(Channel::Console).unwrap();
+    let mut sub = consumer.subscriber(Port::CONSOLE).unwrap();
     for generation in 0..3u64 {
         let producer = IpcNode::open(&config, Role::Console).unwrap();
-        let mut publisher = producer.publisher(Channel::Console).unwrap();
+        let mut publisher = producer.publisher(Port::CONSOLE).unwrap();
         assert_eq!(sub.peers_connected(), 1);
         // Polling attaches the subscriber to the new publisher.
         assert_eq!(sub.try_recv().unwrap(), None);
@@ -389,14 +389,14 @@ fn child_process_entry() {
     let node = IpcNode::open(&config, role).unwrap();
     match mode {
         "subscribe" => {
-            let _sub = node.subscriber(Channel::Emulator).unwrap();
+            let _sub = node.subscriber(Port::EMULATOR).unwrap();
             println!("READY");
             loop {
                 std::thread::sleep(Duration::from_secs(1));
             }
         }
         "publish" => {
-            let mut publisher = node.publisher(Channel::Console).unwrap();
+            let mut publisher = node.publisher(Port::CONSOLE).unwrap();
             for i in 0..CHILD_FRAMES {
                 publisher.send(&frame(i)).unwrap();
             }
@@ -505,7 +505,7 @@ fn killed_publisher_is_reaped_and_can_be_replaced() {
     let _machine = machine::not_beside_a_run();
     let config = unique_config("kill");
     let node = IpcNode::open(&config, Role::Emulator).unwrap();
-    let mut sub = node.subscriber(Channel::Console).unwrap();
+    let mut sub = node.subscriber(Port::CONSOLE).unwrap();
 
     let child = ChildPeer::spawn("publish", &config);
     let child_pid = child.pid();
@@ -532,7 +532,7 @@ fn killed_publisher_is_reaped_and_can_be_replaced() {
     // connects and its frames arrive.
     let console = IpcNode::open(&config, Role::Console).unwrap();
     assert!(console.startup_cleanup().is_clean());
-    let mut publisher = console.publisher(Channel::Console).unwrap();
+    let mut publisher = console.publisher(Port::CONSOLE).unwrap();
     assert_eq!(sub.peers_connected(), 1);
     assert_eq!(publisher.send(&frame(77)).unwrap(), 1);
     assert_eq!(sub.try_recv().unwrap(), Some(frame(77)));
@@ -545,7 +545,7 @@ fn killed_subscriber_is_reported_then_reaped() {
     let _machine = machine::not_beside_a_run();
     let config = unique_config("killsub");
     let node = IpcNode::open(&config, Role::Emulator).unwrap();
-    let mut publisher = node.publisher(Channel::Emulator).unwrap();
+    let mut publisher = node.publisher(Port::EMULATOR).unwrap();
     let child = ChildPeer::spawn("subscribe", &config);
     let child_pid = child.pid();
     assert_eq!(publisher.peers_connected(), 1);
@@ -571,7 +571,7 @@ fn killed_subscriber_is_reported_then_reaped() {
 
     // A restarted simulator receives from the next frame on.
     let simulator = IpcNode::open(&config, Role::Simulator).unwrap();
-    let mut sub = simulator.subscriber(Channel::Emulator).unwrap();
+    let mut sub = simulator.subscriber(Port::EMULATOR).unwrap();
     assert_eq!(publisher.send(&frame(2)).unwrap(), 1);
     assert_eq!(sub.try_recv().unwrap(), Some(frame(2)));
     assert_eq!(sub.try_recv().unwrap(), None);
@@ -596,7 +596,7 @@ fn leftovers_of_a_killed_run_are_removed_at_start_up() {
         "{:?}",
         node.startup_cleanup()
     );
-    let _publisher = node.publisher(Channel::Console).unwrap();
+    let _publisher = node.publisher(Port::CONSOLE).unwrap();
 }
 
 #[test]
@@ -641,7 +641,7 @@ fn a_dead_runs_files_are_removed_and_a_live_ones_kept() {
     let live = unique_config("sweep-live");
     let dead = unique_config("sweep-dead");
     let node = IpcNode::open(&live, Role::Simulator).unwrap();
-    let _sub = node.subscriber(Channel::Emulator).unwrap();
+    let _sub = node.subscriber(Port::EMULATOR).unwrap();
     ChildPeer::spawn("publish", &dead).kill_9();
     let long_ago = std::time::SystemTime::now() - Duration::from_secs(3600);
     let stray = |config: &IpcConfig| {
@@ -682,7 +682,7 @@ fn node_open_reports_what_it_cleaned() {
     assert!(shown.starts_with("console ("), "{shown}");
     assert!(shown.ends_with(&format!("pid {pid})")), "{shown}");
     // The publisher slot of the killed console is free.
-    let _publisher = node.publisher(Channel::Console).unwrap();
+    let _publisher = node.publisher(Port::CONSOLE).unwrap();
 }
 
 /// The signals a process catches, from `/proc/<pid>/status`.
@@ -776,7 +776,7 @@ fn latency_one_hop_between_threads() {
     let receiver_config = config.clone();
     let receiver = std::thread::spawn(move || {
         let node = IpcNode::open(&receiver_config, Role::Simulator).unwrap();
-        let mut sub = node.subscriber(Channel::Console).unwrap();
+        let mut sub = node.subscriber(Port::CONSOLE).unwrap();
         ready_tx.send(()).unwrap();
         let sched_before = thread_schedstat();
         let mut histogram = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).unwrap();
@@ -805,7 +805,7 @@ fn latency_one_hop_between_threads() {
     ready_rx.recv().unwrap();
 
     let node = IpcNode::open(&config, Role::Console).unwrap();
-    let mut publisher = node.publisher(Channel::Console).unwrap();
+    let mut publisher = node.publisher(Port::CONSOLE).unwrap();
     wait_until("the receiver to connect", || {
         publisher.peers_connected() == 1
     });
@@ -852,8 +852,8 @@ fn latency_one_hop_between_threads() {
 
     // The transport's own cost, free of scheduling: one frame sent and
     // received back to back on one thread.
-    let mut local_pub = node.publisher(Channel::Emulator).unwrap();
-    let mut local_sub = node.subscriber(Channel::Emulator).unwrap();
+    let mut local_pub = node.publisher(Port::EMULATOR).unwrap();
+    let mut local_sub = node.subscriber(Port::EMULATOR).unwrap();
     let mut cost = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).unwrap();
     for i in 0..WARMUP + SAMPLES {
         let start = Instant::now();

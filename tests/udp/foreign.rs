@@ -189,3 +189,56 @@ fn a_robot_answering_from_another_port_is_refused_unless_named_with_robot_from()
         }
     }
 }
+
+/// Whether a socket bound to `[::]` here also takes IPv4 datagrams (IPv6
+/// on, `net.ipv6.bindv6only` 0, Linux's default); the error says why not.
+fn dual_stack() -> Result<(), String> {
+    if std::fs::read_to_string("/proc/sys/net/ipv6/bindv6only").is_ok_and(|v| v.trim() != "0") {
+        return Err("net.ipv6.bindv6only is set: a socket on [::] takes no IPv4".into());
+    }
+    std::net::UdpSocket::bind("[::]:0").map(drop).map_err(|e| format!("no IPv6 socket: {e}"))
+}
+
+/// A dual-stack wildcard (`[::]`) gives an IPv4 sender as an IPv4-mapped
+/// address (`[::ffff:127.0.0.1]:P`). Named by their IPv4 addresses, the
+/// console (`--console-from`) and the robot (the egress address, and
+/// `--robot-from`) are the same peers: every frame and every reply goes
+/// through, nothing is refused. Each of 100 console frames was once
+/// refused as `[::ffff:127.0.0.1]:P`.
+#[test]
+fn ipv4_peers_of_a_dual_stack_wildcard_are_taken_as_their_ipv4_selves() {
+    if let Err(why) = dual_stack() {
+        eprintln!("skipped: {why}");
+        return;
+    }
+    for robot_from in [false, true] {
+        let _guard = machine::alone();
+        let out = out_dir(if robot_from { "dual-stack-robot-from" } else { "dual-stack" });
+        let (robot, console) = (socket(), socket());
+        let (egress, from, robot_addr) = (format!("udp://{}", robot.local_addr()), console.local_addr().to_string(), robot.local_addr().to_string());
+        let mut args = vec!["--scenario", "Normal", "--seed", "1", "--ingress", "udp://[::]:0", "--console-from", &from, "--egress", &egress, "--egress-bind", "[::]:0", "--idle-end-ms", "1000"];
+        if robot_from {
+            args.extend(["--robot-from", &robot_addr]);
+        }
+        let emu = Emulator::start(&out, &args);
+        let on_v4 = |a: std::net::SocketAddr| std::net::SocketAddr::from(([127, 0, 0, 1], a.port()));
+        assert!(emu.ingress().ip().is_unspecified() && emu.ingress().is_ipv6(), "{}", emu.ingress());
+        let feedback: Vec<u8> = (0..52u8).collect();
+        let stop = Arc::new(AtomicBool::new(false));
+        let robot_rx = receiver(robot, stop.clone(), Some(feedback.clone()));
+        let console_rx = receiver(console.try_clone().unwrap(), stop.clone(), None);
+        let sent = send_paced(&console, on_v4(emu.ingress()), frames(0..100), 10);
+        let (e, udp) = emu.finish(Duration::from_secs(30));
+        stop.store(true, Ordering::Release);
+        let (got, _) = robot_rx.join().unwrap();
+        let (back, _) = console_rx.join().unwrap();
+        assert_eq!(u(&udp["foreign_sender"]), 0, "the console was refused: {udp:#}");
+        assert_eq!(u(&e["frames"]["entered"]), sent, "{}", e["frames"]);
+        assert_eq!(got.len() as u64, sent, "the robot got every frame");
+        let r = &udp["return_path"];
+        assert_eq!(u(&r["refused"]["datagrams"]), 0, "the robot was refused: {r:#}");
+        assert_eq!(u(&r["received"]), sent, "{r:#}");
+        assert_eq!(back.len() as u64, sent, "the console got every reply: {r:#}");
+        assert!(back.iter().all(|b| *b == feedback));
+    }
+}

@@ -59,7 +59,7 @@ pub enum Command {
     Study(crate::study::StudyArgs),
     /// Record ROS 2 topics as MCAP, and replay a recording at its timing.
     #[command(subcommand)]
-    Ros2(netfi::service::ros2_bag::Ros2Cmd),
+    Ros2(netfi::service::ros2::bag::Ros2Cmd),
 }
 
 #[derive(Debug, Args)]
@@ -134,6 +134,10 @@ pub struct CheckArgs {
     /// Use the arrival times of a recorded capture instead of a fixed rate.
     #[arg(long, conflicts_with_all = ["frames", "rate_hz"])]
     pub capture: Option<PathBuf>,
+    /// The most records of --capture read, 1 to 2^32 (default 4194304,
+    /// 2^22); a capture with more is refused before more of it is read.
+    #[arg(long, value_name = "RECORDS", requires = "capture", value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(1..=netfi::service::args::values::MAX_CAPTURE_RECORDS))]
+    pub capture_max_records: Option<u64>,
     /// Seed of the scenario's random streams (default: the file's, else random; always printed).
     #[arg(long)]
     pub seed: Option<u64>,

@@ -89,7 +89,9 @@ fn target(arg: &str) -> Result<Target> {
     }
     let path = std::path::Path::new(arg);
     if path.is_file() {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = netfi::load::open_regular(path)
+            .and_then(std::io::read_to_string)
+            .with_context(|| format!("reading {}", path.display()))?;
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         return Ok(Target::Toml { text, origin: arg.to_string(), name });
     }

@@ -184,7 +184,9 @@ fn generate(args: &FitDbArgs) -> Result<()> {
 }
 
 fn verify(path: &Path, args: &FitDbArgs) -> Result<()> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = netfi::load::open_regular(path)
+        .and_then(std::io::read_to_string)
+        .with_context(|| format!("reading {}", path.display()))?;
     let database = Database::parse(&text)?;
     let entries = database.entries();
     let threads = threads(args.threads);

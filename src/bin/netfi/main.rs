@@ -41,7 +41,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Report(a) => report::run(&a),
         cli::Command::Ctl(a) => ctl::run(a),
         cli::Command::Study(a) => study::run(a),
-        cli::Command::Ros2(cmd) => netfi::service::ros2_bag::run(cmd).map_err(Into::into),
+        cli::Command::Ros2(cmd) => netfi::service::ros2::bag::run(cmd).map_err(Into::into),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

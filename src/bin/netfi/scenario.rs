@@ -36,10 +36,17 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
     // Refused here with the scheduler's own message, before the checker's
     // queue is built.
     netfi::scheduler::ReleaseQueue::<()>::check_capacity(netfi::scheduler::QueueOrder::Reorder, queue_capacity)?;
+    let mut capture_note = None;
     let arrivals = match &args.capture {
         Some(path) => {
-            let cap = netfi::capture::load(path).with_context(|| format!("reading capture {}", path.display()))?;
+            let limits = args.capture_max_records.map_or_else(netfi::capture::CaptureLimits::default, netfi::capture::CaptureLimits::records);
+            let cap = netfi::capture::load_with(path, limits).with_context(|| format!("reading capture {}", path.display()))?;
             eprintln!("capture {}: {} records, layout `{}`", path.display(), cap.records.len(), cap.layout.describe());
+            let note = cap.note();
+            for w in note.unverified_warning().into_iter().chain(cap.stats.warnings()) {
+                eprintln!("WARNING: {w}");
+            }
+            capture_note = Some(note);
             let t0 = cap.records.first().map_or(0, |r| r.time_ns);
             let mut times: Vec<u64> = cap.records.iter().map(|r| r.time_ns.saturating_sub(t0)).collect();
             // Wall-clock captures can step backwards; the injector's clock cannot.
@@ -76,11 +83,21 @@ fn check_cmd(args: CheckArgs) -> Result<()> {
         w.finish()?;
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        println!("{}", serde_json::to_string_pretty(&CheckJson { report: &report, capture: capture_note })?);
     } else {
         print_table(&report);
     }
     Ok(())
+}
+
+/// `scenario check --json`: the report, and the capture the arrivals came
+/// from (what of it is unverified), when there is one.
+#[derive(serde::Serialize)]
+struct CheckJson<'a> {
+    #[serde(flatten)]
+    report: &'a CheckReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    capture: Option<netfi::capture::CaptureNote>,
 }
 
 /// What the link and replay stages hold, for `scenario show` (comments
@@ -184,10 +201,11 @@ fn print_outcome(r: &CheckReport) {
     for (reason, n) in &r.dropped {
         println!("dropped           {n} by {reason}");
     }
-    println!(
-        "loss rate         {:.5}  95% CI [{:.5}, {:.5}]",
-        r.loss_rate, r.loss_rate_ci95[0], r.loss_rate_ci95[1]
-    );
+    let bound = |x: f64| netfi::metrics::fmt_rate(x, 5);
+    println!("loss rate         {:.5}  95% CI [{}, {}]", r.loss_rate, bound(r.loss_rate_ci95[0]), bound(r.loss_rate_ci95[1]));
+    if let Some(u) = r.loss_rate_unseen_model.filter(|u| *u >= 0.000005) {
+        println!("                  (the upper end adds the {u:.5} the models lose in bursts longer than a run this long likely meets)");
+    }
     println!("mean loss run     {:.3} frames", r.loss_run_mean);
     let d = &r.delay_ms;
     let precision = d.error_fraction_max.map(|_| format!("  ({})", d.precision())).unwrap_or_default();

@@ -57,6 +57,11 @@ pub struct SourceArgs {
     /// Replay a recorded capture (LZ4 ITP records) instead of synthetic motion.
     #[arg(long)]
     pub capture: Option<PathBuf>,
+    /// The most records of --capture read, 1 to 2^32 (default 4194304, 2^22:
+    /// 70 min at 1 kHz, about 600 MB in memory); a capture with more is
+    /// refused before more of it is read.
+    #[arg(long, value_name = "RECORDS", requires = "capture", value_parser = values::capture_max_records())]
+    pub capture_max_records: Option<u64>,
 }
 
 impl SourceArgs {
@@ -84,30 +89,8 @@ impl Render for SourceArgs {
         a.opt("--rate-hz", self.rate_hz)
             .opt("--frames", self.frames)
             .opt("--duration-s", self.duration_s)
-            .opt("--capture", self.capture.as_ref().map(|c| c.display()));
-    }
-}
-
-/// What comes back from the robot: `netfi run` and `netfi emulator`.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Args)]
-pub struct ReturnArgs {
-    /// Pass the robot's feedback back to the console through this scenario
-    /// (file or preset; default Normal: nothing injected).
-    #[arg(long, value_name = "SCENARIO")]
-    pub return_scenario: Option<String>,
-    /// Seed of the return scenario (default: the file's, else derived from
-    /// the run's seed; printed).
-    #[arg(long)]
-    pub return_seed: Option<u64>,
-    /// No feedback path: the robot's feedback is not carried back to the
-    /// console (iceoryx2 on both sides).
-    #[arg(long, conflicts_with_all = ["return_scenario", "return_seed"])]
-    pub no_feedback: bool,
-}
-
-impl Render for ReturnArgs {
-    fn render(&self, a: &mut Argv) {
-        a.opt("--return-scenario", self.return_scenario.as_ref()).opt("--return-seed", self.return_seed).switch("--no-feedback", self.no_feedback);
+            .opt("--capture", self.capture.as_ref().map(|c| c.display()))
+            .opt("--capture-max-records", self.capture_max_records);
     }
 }
 
@@ -191,7 +174,8 @@ impl Default for ControlArgs {
 
 impl Render for ControlArgs {
     fn render(&self, a: &mut Argv) {
-        a.val("--telemetry-ms", self.telemetry_ms).switch("--reorder-queue", self.reorder_queue)
+        a.unless_default("--telemetry-ms", self.telemetry_ms, ControlArgs::default().telemetry_ms)
+            .switch("--reorder-queue", self.reorder_queue)
             .switch("--fifo-queue", self.fifo_queue)
             .switch("--no-control", self.no_control);
     }
@@ -252,5 +236,50 @@ impl Render for StreamArgs {
         for k in &self.stream_scenario {
             a.val("--stream-scenario", k);
         }
+    }
+}
+
+/// The emulator's two sides, of any transport (`netfi emulator`), and when
+/// a stream with no end marker of its own ends.
+#[derive(Debug, Clone, PartialEq, Args)]
+pub struct EndsArgs {
+    /// Where frames come from: `iceoryx2` (the console's port) or
+    /// `udp://ADDR:PORT` (a socket bound there; `udp://:PORT` binds loopback).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub ingress: crate::transport::Endpoint,
+    /// Where survivors go: `iceoryx2` (the simulator's port) or
+    /// `udp://ADDR:PORT` (the robot's address).
+    #[arg(long, default_value = "iceoryx2", value_name = "ENDPOINT")]
+    pub egress: crate::transport::Endpoint,
+    /// With a UDP ingress or ROS 2 topics (whose streams have no end marker):
+    /// end the run as if the console had ended, once no frame has arrived for
+    /// this many milliseconds, at most a week (default: run until
+    /// SIGINT/SIGTERM, or, on ROS 2, until the publishers are gone).
+    #[arg(long, value_name = "MS", value_parser = values::idle_end_millis)]
+    pub idle_end_ms: Option<f64>,
+}
+
+impl Default for EndsArgs {
+    /// iceoryx2 on both sides.
+    fn default() -> Self {
+        let iceoryx2: crate::transport::Endpoint = "iceoryx2".parse().expect("iceoryx2 is an endpoint");
+        EndsArgs { ingress: iceoryx2.clone(), egress: iceoryx2, idle_end_ms: None }
+    }
+}
+
+impl EndsArgs {
+    /// Whether both sides are the run's own iceoryx2 ports.
+    pub fn own(&self) -> bool {
+        *self == EndsArgs { idle_end_ms: self.idle_end_ms, ..EndsArgs::default() }
+    }
+}
+
+impl Render for EndsArgs {
+    /// Only what differs from the defaults.
+    fn render(&self, a: &mut Argv) {
+        let d = EndsArgs::default();
+        a.opt("--ingress", (self.ingress != d.ingress).then_some(&self.ingress))
+            .opt("--egress", (self.egress != d.egress).then_some(&self.egress))
+            .opt("--idle-end-ms", self.idle_end_ms);
     }
 }

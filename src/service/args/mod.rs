@@ -2,43 +2,36 @@
 //! `netfi <service>` and the stand-alone `netfi-console`, `netfi-emulator`,
 //! `netfi-simulator`.
 //!
-//! Each group of flags is declared once ([`groups`], [`udp`]) and flattened
+//! Each group of flags is declared once ([`groups`]; a transport's own in
+//! its folder, `crate::transport`) and flattened
 //! into every command that takes it; every numeric flag's range is checked
 //! where it is parsed ([`values`]). Each process's arguments render as the
 //! argv that parses back to them ([`argv`]), which is how `netfi run`
-//! starts the services.
+//! starts the services, and how the UI, a study and the benchmarks start
+//! `netfi run` and `netfi emulator`.
 //!
 //! | file | what |
 //! |---|---|
-//! | `values` | limits and value parsers |
-//! | `groups` | scenario, source of frames, return path, placement, control, streams |
-//! | `udp` | the emulator's UDP endpoints |
-//! | `ros2` | the emulator's ROS 2 topics |
+//! | `groups` | scenario, source of frames, the lane's endpoints, placement, control, streams (a reverse channel's own are in its folder, `crate::service::channel`) |
 //! | `services` | `ConsoleArgs`, `EmulatorArgs`, `SimulatorArgs` |
 //! | `run` | `RunArgs` |
-//! | `argv` | the renderer |
 //! | `help` | what a shared flag means to one command |
 //! | `streams` | the run id and directory of each stream of a run |
 //! | `error` | arguments that do not go together |
 
-pub mod argv;
 pub mod error;
 pub mod groups;
 pub mod help;
-pub mod ros2;
 pub mod run;
 pub mod streams;
 pub mod services;
-pub mod udp;
-pub mod values;
 
-pub use argv::{Argv, Render};
+pub use crate::flags::{argv, values};
+pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
-pub use groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
-pub use ros2::{Ros2Args, DEFAULT_MAX_BYTES};
-pub use run::{RunArgs, RunPlacement};
+pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
+pub use run::{refusal, Peer, PeersArgs, RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
-pub use udp::UdpArgs;
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
 
 #[cfg(test)]

@@ -2,18 +2,16 @@
 
 use super::argv::{Argv, Render};
 use super::error::ArgsError;
-use super::groups::{ControlArgs, EmulatorPlacement, PinArgs, ReturnArgs, ScenarioArgs, SourceArgs, StreamArgs};
+use super::groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
 use super::help;
-use super::ros2::Ros2Args;
-use super::udp::UdpArgs;
+use crate::transport::ros2::Ros2Args;
 use super::values;
-use crate::service::video::VideoArgs;
-use crate::transport::udp::UdpOptions;
-use crate::transport::Wiring;
+use crate::service::channel::{ChannelArgs, ChannelEndArgs, LaneShape};
+use crate::transport::{LaneFlags, TransportArgs, Wiring};
 use clap::Args;
 use std::path::PathBuf;
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct ConsoleArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -47,7 +45,7 @@ pub struct ConsoleArgs {
     #[arg(long, value_name = "US", value_parser = values::nap_us())]
     pub nap_us: Option<u64>,
     #[command(flatten)]
-    pub video: VideoArgs,
+    pub channels: ChannelEndArgs,
 }
 
 impl Render for ConsoleArgs {
@@ -62,7 +60,7 @@ impl Render for ConsoleArgs {
             .val("--feedback-wait-s", self.feedback_wait_s)
             .switch("--live", self.live)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.channels);
     }
 }
 
@@ -73,7 +71,7 @@ impl ConsoleArgs {
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 #[command(
     mut_arg("scenario", |a| a.long("scenario").help(help::EMULATOR_SCENARIO)),
     mut_arg("return_scenario", |a| a.help(help::EMULATOR_RETURN[0])),
@@ -107,15 +105,15 @@ pub struct EmulatorArgs {
     #[arg(long, value_name = "S", value_parser = values::wait_seconds)]
     pub wait_for_peer_s: Option<f64>,
     #[command(flatten)]
-    pub return_path: ReturnArgs,
+    pub channels: ChannelArgs,
     #[command(flatten)]
-    pub udp: UdpArgs,
+    pub ends: EndsArgs,
+    #[command(flatten)]
+    pub transports: TransportArgs,
     #[command(flatten)]
     pub control: ControlArgs,
     #[command(flatten)]
     pub stream: StreamArgs,
-    #[command(flatten)]
-    pub video: VideoArgs,
     #[command(flatten)]
     pub ros2: Ros2Args,
 }
@@ -128,12 +126,12 @@ impl Render for EmulatorArgs {
             .val("--expected-frames", self.expected_frames)
             .group(&self.placement)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
-            .group(&self.return_path)
+            .group(&self.channels)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
-            .group(&self.udp)
+            .group(&self.ends)
+            .group(&self.transports)
             .group(&self.control)
             .group(&self.stream)
-            .words(self.video.argv())
             .group(&self.ros2);
     }
 }
@@ -150,11 +148,11 @@ impl EmulatorArgs {
             expected_frames: 100_000,
             out: PathBuf::from("out"),
             wait_for_peer_s: None,
-            return_path: ReturnArgs::default(),
-            udp: UdpArgs::default(),
+            channels: ChannelArgs::default(),
+            ends: EndsArgs::default(),
+            transports: TransportArgs::default(),
             control: ControlArgs::default(),
             stream: StreamArgs::default(),
-            video: VideoArgs::default(),
             ros2: Ros2Args::default(),
         }
     }
@@ -167,56 +165,34 @@ impl EmulatorArgs {
     /// Checks that the options fit the endpoints, with errors that say what
     /// would be accepted.
     pub fn validate(&self) -> Result<(), ArgsError> {
-        let udp = self.udp.any();
-        if self.stream.several() && udp {
+        if self.stream.several() && !self.ends.own() {
             return Err(ArgsError::StreamsNeedIceoryx2);
         }
-        self.video.validate()?;
-        if self.video.on() && udp {
-            return Err(ArgsError::VideoNeedsIceoryx2);
-        }
-        if self.video.on() && self.stream.streams > 1 {
-            return Err(ArgsError::VideoOneStream { streams: self.stream.streams });
-        }
-        if self.wait_for_peer_s.is_some() && self.udp.egress.is_udp() {
-            return Err(ArgsError::WaitForUdpPeer);
-        }
-        let r = &self.return_path;
-        if !udp {
-            if self.run_id.is_none() {
-                return Err(ArgsError::RunIdRequired);
-            }
-            if self.udp.return_to.is_some() || self.udp.no_return {
-                return Err(ArgsError::UdpReturnWithIceoryx2);
-            }
-            if r.no_feedback && (r.return_scenario.is_some() || r.return_seed.is_some()) {
-                return Err(ArgsError::NoFeedbackWithReturn);
-            }
-            return Ok(());
-        }
-        if r.no_feedback {
-            return Err(ArgsError::NoFeedbackNeedsIceoryx2);
-        }
-        self.udp.validate(r.return_scenario.is_some() || r.return_seed.is_some(), self.run_id.is_some())
+        self.channels.check(&self.lane_shape())?;
+        let (ingress, egress) = (&self.ends.ingress, &self.ends.egress);
+        let flags = LaneFlags { run_id: self.run_id.as_deref(), wait_for_peer: self.wait_for_peer_s.is_some(), idle_end: self.ends.idle_end_ms.is_some() };
+        Ok(self.transports.check(ingress, egress, flags)?)
     }
 
-    /// How to open the transports, for a release queue of `queue_capacity`.
-    pub fn wiring(&self, queue_capacity: usize) -> Wiring {
-        let u = &self.udp;
+    /// The lanes' shape, as the reverse channels see it.
+    pub fn lane_shape(&self) -> LaneShape<'_> {
+        LaneShape { ingress: &self.ends.ingress, egress: &self.ends.egress, transports: &self.transports, streams: self.stream.streams }
+    }
+
+    /// How to open the transports, for a release queue of `queue_capacity`,
+    /// a wait for a receiver cut short by `stop`.
+    pub fn wiring<'a>(&'a self, queue_capacity: usize, stop: &'a dyn Fn() -> bool) -> Wiring<'a> {
         Wiring {
-            run_id: self.run_id.clone(),
-            payload: u.payload,
-            udp: UdpOptions { reuse_address: true, buffer_bytes: Some(u.udp_buffer_bytes) },
-            egress_bind: u.egress_bind,
-            console_from: u.console_from,
+            run_id: self.run_id.as_deref(),
             queue_capacity,
-            idle_end_ns: u.idle_end_ms.map(|ms| (ms * 1e6) as u64),
             wait_for_peer_ns: self.wait_for_peer_s.map(|s| (s * 1e9) as u64),
+            idle_end_ns: self.ends.idle_end_ms.map(|ms| (ms * 1e6) as u64),
+            stop,
         }
     }
 }
 
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct SimulatorArgs {
     /// Run id shared by the three processes (letters, digits, '-', '_').
     #[arg(long)]
@@ -242,7 +218,7 @@ pub struct SimulatorArgs {
     #[arg(long, value_name = "US", value_parser = values::nap_us())]
     pub nap_us: Option<u64>,
     #[command(flatten)]
-    pub video: VideoArgs,
+    pub channels: ChannelEndArgs,
 }
 
 impl Render for SimulatorArgs {
@@ -254,7 +230,7 @@ impl Render for SimulatorArgs {
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .val("--stall-ms", self.stall_ms)
             .opt("--nap-us", self.nap_us)
-            .words(self.video.argv());
+            .group(&self.channels);
     }
 }
 

@@ -1,4 +1,6 @@
 use super::*;
+use crate::service::channel::feedback::ReturnArgs;
+use crate::service::channel::{ChannelArgs, ChannelEndArgs};
 use clap::{CommandFactory, Parser};
 
 /// The four commands that take these arguments, as the `netfi` command
@@ -22,8 +24,8 @@ fn parse(role: &str, argv: &[String]) -> Result<Cmd, clap::Error> {
 }
 
 /// Video on, every one of its flags off its default.
-fn video() -> crate::service::video::VideoArgs {
-    crate::service::video::VideoArgs {
+fn video() -> crate::service::channel::video::VideoArgs {
+    crate::service::channel::video::VideoArgs {
         video_mbps: Some(2.5),
         video_hz: 30.0,
         video_gop: 12,
@@ -38,7 +40,7 @@ fn video() -> crate::service::video::VideoArgs {
 fn a_console_parses_back_what_it_renders() {
     let c = ConsoleArgs {
         run_id: "r9".into(),
-        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()) },
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()), capture_max_records: Some(5000) },
         seed: Some(u64::MAX),
         pin: PinArgs { core: None, avoid_core: Some(3) },
         out: "o/c".into(),
@@ -47,13 +49,13 @@ fn a_console_parses_back_what_it_renders() {
         feedback_wait_s: 0.0,
         live: true,
         nap_us: Some(0),
-        video: video(),
+        channels: ChannelEndArgs { video: video(), ..Default::default() },
     };
     let Ok(Cmd::Console(back)) = parse("console", &c.to_argv()) else { panic!("{:?}", c.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{c:?}"));
+    assert_eq!(back, c);
     let frames = ConsoleArgs { source: SourceArgs { frames: Some(17), duration_s: None, ..c.source.clone() }, pin: PinArgs { core: Some(2), avoid_core: None }, ..c };
     let Ok(Cmd::Console(back)) = parse("console", &frames.to_argv()) else { panic!("{:?}", frames.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{frames:?}"));
+    assert_eq!(back, frames);
 }
 
 #[test]
@@ -66,45 +68,43 @@ fn an_emulator_parses_back_what_it_renders() {
         expected_frames: 1234,
         out: "o/e".into(),
         wait_for_peer_s: Some(1.5),
-        return_path: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false },
-        udp: UdpArgs::default(),
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
+        ends: EndsArgs::default(),
+        transports: Default::default(),
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: true },
         stream: StreamArgs::default(),
-        video: video(),
         ros2: Default::default(),
     };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e.to_argv()) else { panic!("{:?}", e.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{e:?}"));
+    assert_eq!(back, e);
     // Several streams, no feedback, unpinned.
     let streams = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] };
     let e2 = EmulatorArgs {
         stream: streams,
-        video: Default::default(),
-        return_path: ReturnArgs { no_feedback: true, ..Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
         placement: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: false },
         ..e.clone()
     };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e2.to_argv()) else { panic!("{:?}", e2.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{e2:?}"));
+    assert_eq!(back, e2);
     // A UDP bridge: every UDP flag off its default.
-    let udp = UdpArgs {
-        ingress: "udp://127.0.0.1:4000".parse().unwrap(),
-        egress: "udp://127.0.0.1:4001".parse().unwrap(),
+    let udp = crate::transport::udp::UdpArgs {
         payload: crate::transport::Payload::Raw,
         egress_bind: Some("127.0.0.1:4002".parse().unwrap()),
         console_from: Some("127.0.0.1:4003".parse().unwrap()),
         robot_from: Some("127.0.0.1:4004".parse().unwrap()),
-        return_to: Some("udp://127.0.0.1:4004".parse().unwrap()),
+        return_to: Some("127.0.0.1:4004".parse().unwrap()),
         no_return: false,
-        idle_end_ms: Some(500.5),
         udp_buffer_bytes: 65536,
     };
-    let e3 = EmulatorArgs { udp, video: Default::default(), wait_for_peer_s: None, ..e };
+    let ends = EndsArgs { ingress: "udp://127.0.0.1:4000".parse().unwrap(), egress: "udp://127.0.0.1:4001".parse().unwrap(), idle_end_ms: Some(500.5) };
+    let transports = crate::transport::TransportArgs { udp, ..Default::default() };
+    let e3 = EmulatorArgs { ends, transports, channels: ChannelArgs { video: Default::default(), ..e.channels.clone() }, wait_for_peer_s: None, ..e };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e3.to_argv()) else { panic!("{:?}", e3.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{e3:?}"));
+    assert_eq!(back, e3);
     e3.validate().unwrap();
     // ROS 2 lanes: every ROS 2 flag off its default.
-    let ros2 = Ros2Args {
+    let ros2 = crate::transport::ros2::Ros2Args {
         ros2_topic: vec!["/MTMR/measured_cp=/PSM1/servo_cp".into(), "/MTML/measured_cp=/PSM2/servo_cp".into()],
         ros2_return: vec!["/PSM1/measured_cp=/MTMR/state".into()],
         ros2_type: vec!["/MTMR/measured_cp=geometry_msgs/msg/PoseStamped".into()],
@@ -114,9 +114,9 @@ fn an_emulator_parses_back_what_it_renders() {
         ros2_discovery_s: 2.5,
         ros2_linger_ms: 250.0,
     };
-    let e4 = EmulatorArgs { ros2, udp: UdpArgs::default(), ..e3 };
+    let e4 = EmulatorArgs { ros2, ends: EndsArgs::default(), transports: Default::default(), ..e3 };
     let Ok(Cmd::Emulator(back)) = parse("emulator", &e4.to_argv()) else { panic!("{:?}", e4.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{e4:?}"));
+    assert_eq!(back, e4);
 }
 
 #[test]
@@ -129,10 +129,164 @@ fn a_simulator_parses_back_what_it_renders() {
         spin: true,
         out: "o/s".into(),
         nap_us: Some(300),
-        video: video(),
+        channels: ChannelEndArgs { video: video(), ..Default::default() },
     };
     let Ok(Cmd::Simulator(back)) = parse("simulator", &s.to_argv()) else { panic!("{:?}", s.to_argv()) };
-    assert_eq!(format!("{back:?}"), format!("{s:?}"));
+    assert_eq!(back, s);
+}
+
+#[test]
+fn a_run_parses_back_what_it_renders() {
+    let r = RunArgs {
+        scenario: ScenarioArgs { scenario: "config/scenarios/x.toml".into(), seed: Some(3), queue_capacity: Some(77) },
+        source: SourceArgs { rate_hz: Some(250.5), frames: None, duration_s: Some(1.25), capture: Some("c.lz4".into()), capture_max_records: Some(5000) },
+        placement: RunPlacement {
+            emulator: EmulatorPlacement { core: Some(1), no_pin: false, rt_priority: Some(5), isolate: false },
+            no_isolate: true,
+            console_core: Some(0),
+            simulator_core: Some(2),
+        },
+        drop_bad_checksum: true,
+        out: Some("o/r".into()),
+        report_json: Some("o/r.json".into()),
+        run_id: Some("r9".into()),
+        json: true,
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
+        no_direct: true,
+        control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: false },
+        stream: StreamArgs::default(),
+        peers: PeersArgs::default(),
+    };
+    assert_eq!(RunArgs::from_argv(r.to_argv()).unwrap(), r, "{:?}", r.to_argv());
+    let Ok(Cmd::Run(back)) = parse("run", &r.to_argv()) else { panic!("{:?}", r.to_argv()) };
+    assert_eq!(back, r, "as `netfi run` reads it");
+    // Several streams, no feedback, unpinned, the scenario a word that reads as a flag.
+    let r2 = RunArgs {
+        scenario: ScenarioArgs::named("-odd.toml"),
+        source: SourceArgs { frames: Some(17), duration_s: None, ..r.source.clone() },
+        placement: RunPlacement { emulator: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: true }, ..Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
+        stream: StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] },
+        ..r
+    };
+    assert_eq!(RunArgs::from_argv(r2.to_argv()).unwrap(), r2, "{:?}", r2.to_argv());
+    // A run at its defaults is its scenario alone.
+    assert_eq!(RunArgs::new("Normal").to_argv(), ["Normal"]);
+    assert_eq!(RunArgs::from_argv(["Normal"]).unwrap(), RunArgs::new("Normal"), "RunArgs::new gives clap's defaults");
+}
+
+#[test]
+fn a_refused_run_says_what_clap_says_in_one_line() {
+    let e = RunArgs::from_argv(["Normal", "--rt-priority", "0"]).unwrap_err();
+    let said = refusal(&e);
+    assert!(said.starts_with("invalid value '0' for '--rt-priority <RT_PRIORITY>'"), "{said}");
+    assert!(!said.contains('\n') && !said.contains("Usage"), "{said}");
+    assert_eq!(refusal(&RunArgs::from_argv(["Normal", "--no-isolat"]).unwrap_err()), "unexpected argument '--no-isolat' found");
+}
+
+/// A command of `T`'s arguments alone.
+fn command_of<T: clap::Args>() -> clap::Command {
+    T::augment_args(clap::Command::new("netfi").no_binary_name(true))
+}
+
+/// The words that give `arg` the values `values` (none: a switch; a
+/// positional: the values alone).
+fn words_of(arg: &clap::Arg, values: &[String]) -> Vec<String> {
+    match arg.get_long() {
+        None => values.to_vec(),
+        Some(long) if values.is_empty() => vec![format!("--{long}")],
+        Some(long) => values.iter().flat_map(|v| [format!("--{long}"), v.clone()]).collect(),
+    }
+}
+
+/// Values to try for `arg`, numbered `n` so that no two arguments are
+/// given the same: a switch takes none; otherwise its possible values,
+/// then numbers, endpoints and addresses; a repeatable flag two of each.
+fn candidates(arg: &clap::Arg, n: usize) -> Vec<Vec<String>> {
+    use clap::ArgAction;
+    if matches!(arg.get_action(), ArgAction::SetTrue) {
+        return vec![Vec::new()];
+    }
+    let one = |n: usize| -> Vec<String> {
+        let mut v: Vec<String> = arg.get_possible_values().iter().map(|p| p.get_name().to_string()).collect();
+        for k in n..n + 3 {
+            v.extend([format!("{k}.25"), k.to_string(), format!("udp://127.0.0.1:{}", 4000 + k), format!("127.0.0.1:{}", 4000 + k)]);
+        }
+        v
+    };
+    match arg.get_action() {
+        ArgAction::Append => one(n).into_iter().zip(one(n + 100)).map(|(a, b)| vec![a, b]).collect(),
+        _ => one(n).into_iter().map(|v| vec![v]).collect(),
+    }
+}
+
+/// Walks every argument of `T`'s command: gives each a value off its
+/// default (the first candidate that parses and changes the value), puts
+/// them into as few argvs as parse with each argument kept (none
+/// conflicting with or overriding another), and for each argv: parse,
+/// render, parse again; the two values are equal, and every argument given
+/// is in the rendered argv. An argument added without its renderer, or
+/// rendered under another's flag or value, fails here.
+fn every_argument_renders<T>()
+where
+    T: clap::Args + clap::FromArgMatches + Render + PartialEq + std::fmt::Debug,
+{
+    use clap::parser::ValueSource;
+    let name = std::any::type_name::<T>();
+    let cmd = command_of::<T>();
+    let parse = |argv: &[String]| -> Result<(clap::ArgMatches, T), clap::Error> {
+        let m = cmd.clone().try_get_matches_from(argv)?;
+        let v = T::from_arg_matches(&m)?;
+        Ok((m, v))
+    };
+    let given = |m: &clap::ArgMatches, a: &clap::Arg| m.value_source(a.get_id().as_str()) == Some(ValueSource::CommandLine);
+    let args: Vec<(usize, &clap::Arg)> = cmd.get_arguments().enumerate().map(|(n, a)| (n + 2, a)).collect();
+    assert!(args.len() >= 6, "{name}: {} arguments", args.len());
+    let (required, optional): (Vec<_>, Vec<_>) = args.iter().copied().partition(|(_, a)| a.is_required_set());
+    let head: Vec<String> = required.iter().flat_map(|&(n, a)| words_of(a, &candidates(a, n)[0])).collect();
+    let (_, base) = parse(&head).unwrap_or_else(|e| panic!("{name}: the required arguments alone {head:?}: {e}"));
+    let with = |words: &[&Vec<String>]| [vec![head.clone()], words.iter().map(|w| w.to_vec()).collect()].concat().concat();
+    let mut groups: Vec<Vec<(&clap::Arg, Vec<String>)>> = Vec::new();
+    for &(n, a) in &optional {
+        let w = candidates(a, n)
+            .iter()
+            .map(|v| words_of(a, v))
+            .find(|w| parse(&with(&[w])).is_ok_and(|(_, v)| v != base))
+            .unwrap_or_else(|| panic!("{name}: no candidate value of `{}` parses to a value off the default", a.get_id()));
+        let fits = |g: &Vec<(&clap::Arg, Vec<String>)>| {
+            let words: Vec<&Vec<String>> = g.iter().map(|(_, w)| w).chain([&w]).collect();
+            parse(&with(&words)).is_ok_and(|(m, _)| g.iter().map(|(a, _)| *a).chain([a]).all(|a| given(&m, a)))
+        };
+        match groups.iter_mut().find(|g| fits(g)) {
+            Some(g) => g.push((a, w)),
+            None => groups.push(vec![(a, w)]),
+        }
+    }
+    let mut seen = 0;
+    for g in &groups {
+        let argv = with(&g.iter().map(|(_, w)| w).collect::<Vec<_>>());
+        let (_, first) = parse(&argv).unwrap();
+        let rendered = super::argv::render(&first);
+        let (m, again) = parse(&rendered).unwrap_or_else(|e| panic!("{name}: {rendered:?} does not parse: {e}"));
+        assert_eq!(again, first, "{name}: {argv:?} rendered as {rendered:?}");
+        for a in required.iter().map(|&(_, a)| a).chain(g.iter().map(|(a, _)| *a)) {
+            assert!(given(&m, a), "{name}: `{}` is not in the rendered {rendered:?} (given {argv:?})", a.get_id());
+        }
+        seen += g.len();
+    }
+    assert_eq!(seen + required.len(), args.len(), "{name}: every argument walked");
+}
+
+#[test]
+fn every_argument_of_the_run_renders_and_parses_back() {
+    every_argument_renders::<RunArgs>();
+}
+
+#[test]
+fn every_argument_of_the_services_renders_and_parses_back() {
+    every_argument_renders::<ConsoleArgs>();
+    every_argument_renders::<EmulatorArgs>();
+    every_argument_renders::<SimulatorArgs>();
 }
 
 #[test]

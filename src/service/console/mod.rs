@@ -25,7 +25,7 @@ use crate::service::args::ConsoleArgs;
 use crate::transport::open_node;
 use crate::transport::FrameSink;
 use crate::service::signals;
-use crate::transport::{Channel, Role};
+use crate::transport::{Port, Role};
 use crate::service::error::ServiceError;
 use crate::service::schema::Ended;
 use serde::{Deserialize, Serialize};
@@ -39,6 +39,10 @@ pub struct ConsoleReport {
     pub frames_sent: u64,
     /// `synthetic` or `capture:<path>`.
     pub source: String,
+    /// The capture replayed: its records, layout, and whether its content
+    /// is verified (the fields that are not, without a content checksum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub capture: Option<crate::capture::CaptureNote>,
     /// Mean send rate achieved.
     pub rate_hz: f64,
     pub seed: u64,
@@ -60,7 +64,7 @@ pub struct ConsoleReport {
     pub feedback: Option<ConsoleFeedback>,
     /// The video as it came back through the emulator, when the run has video.
     #[serde(default)]
-    pub video: Option<crate::service::video::ReceivedVideo>,
+    pub video: Option<crate::service::channel::video::ReceivedVideo>,
 }
 
 /// What the console saw of the robot's feedback.
@@ -251,6 +255,7 @@ impl Streamer<'_> {
         ConsoleReport {
             frames_sent: self.sent,
             source,
+            capture: None,
             rate_hz: if duration_s > 0.0 { self.sent as f64 / duration_s } else { 0.0 },
             seed,
             duration_s,
@@ -271,18 +276,18 @@ impl Streamer<'_> {
 pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     args.source.planned()?;
     let seed = crate::service::seeds::given_or_fresh(args.seed);
-    let mut script = Script::from_args(args, seed)?;
+    let (mut script, capture) = Script::from_args(args, seed)?;
     let n = script.len(args.source.frames, args.source.duration_s);
     crate::service::write_pid(&args.out, "console")?;
     let node = open_node(&args.run_id, Role::Console)?;
-    let port = node.publisher(Channel::Console).map_err(|e| ServiceError::Publisher("console → emulator", e))?;
-    let direct = if args.no_direct { None } else { Some(node.publisher(Channel::Direct).map_err(|e| ServiceError::Publisher("console → simulator", e))?) };
-    let fb_port = node.subscriber_of::<FeedbackSample>(Channel::FeedbackOut).map_err(|e| ServiceError::Subscriber("emulator → console feedback", e))?;
+    let port = node.publisher(Port::CONSOLE).map_err(|e| ServiceError::Publisher("console → emulator", e))?;
+    let direct = if args.no_direct { None } else { Some(node.publisher(Port::DIRECT).map_err(|e| ServiceError::Publisher("console → simulator", e))?) };
+    let fb_port = node.subscriber_of::<FeedbackSample>(crate::service::channel::feedback::FEEDBACK_OUT).map_err(|e| ServiceError::Subscriber("emulator → console feedback", e))?;
     let fb = FeedbackIn::new(fb_port)?;
     signals::install();
     crate::host::placement::place("console", args.pin.core, args.pin.avoid_core)?;
     // After the placement, whose CPU mask its thread inherits: off the emulator's core.
-    let video = crate::service::video::receiver(&args.run_id, &args.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
+    let video = crate::service::channel::video::receiver(&args.run_id, &args.channels.video, &args.out, 2.0 * crate::service::emulator::path::GRACE_NS as f64 / 1e9)?;
     // Wait for the emulator to subscribe, so the first frames are not lost.
     wait_for_emulator(&port, &node, args)?;
     let source = match &args.source.capture {
@@ -299,7 +304,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     s.end();
     let fb_ended = wait_for_feedback(&mut s.fb, s.sent, args, &mut stop);
     let video = video.map(|v| v.finish()).transpose()?;
-    let report = ConsoleReport { video, ..s.report(source, seed, &streamed, fb_ended, steal_timer.stop()) };
+    let report = ConsoleReport { video, capture, ..s.report(source, seed, &streamed, fb_ended, steal_timer.stop()) };
     if args.live || s.fb.received > 0 {
         eprintln!("{}", s.fb.live_line());
     }

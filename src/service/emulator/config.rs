@@ -14,7 +14,7 @@ use crate::service::args::streams;
 use crate::service::seeds;
 use crate::scenario::ScenarioError;
 use crate::service::args::ArgsError;
-use crate::transport::{IpcConfig, Payload, RunId, RunIdError};
+use crate::transport::{IpcConfig, RunId, RunIdError};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -50,17 +50,15 @@ pub struct LaneConfig {
 }
 
 impl LaneConfig {
-    /// Whether a sample flagged raw may come (UDP raw payloads).
+    /// Whether a sample with an opaque payload may come (UDP raw payloads).
     pub fn accept_raw(&self) -> bool {
-        self.args.udp.payload == Payload::Raw
+        self.args.transports.opaque(&self.args.ends.ingress, &self.args.ends.egress)
     }
 
     /// The stages this lane's frames cannot go through, beyond those its
-    /// channel refuses: a raw sample's bytes live in the UDP source's
-    /// arena, freed at its release, so a copy would be sent from a freed
-    /// slot, and a flip would miss.
+    /// channel refuses: what its transports cannot apply.
     pub fn unsupported(&self) -> &'static [ModelKind] {
-        if self.accept_raw() { &[ModelKind::Duplicate, ModelKind::Corrupt] } else { &[] }
+        self.args.transports.unsupported(&self.args.ends.ingress, &self.args.ends.egress)
     }
 }
 
@@ -98,7 +96,7 @@ fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64
         stream: StreamArgs::default(),
         ..args.clone()
     };
-    lane.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
+    lane.channels.map_seeds(|s| seeds::stream(s, k));
     lane
 }
 
@@ -106,10 +104,7 @@ fn lane_args(args: &EmulatorArgs, scenarios: &BTreeMap<usize, String>, seed: u64
 fn lane(args: EmulatorArgs) -> Result<LaneConfig, ConfigError> {
     let scenario = crate::load::resolve(&args.scenario.scenario)?;
     let seed = seeds::run(args.scenario.seed, &scenario);
-    let default_capacity = match args.udp.payload {
-        Payload::Raw => crate::service::emulator::udp_return::RAW_DEFAULT_QUEUE_CAPACITY,
-        Payload::Itp => crate::service::link::DEFAULT_QUEUE_CAPACITY,
-    };
+    let default_capacity = args.transports.default_queue_capacity(&args.ends.ingress, &args.ends.egress).unwrap_or(crate::service::link::DEFAULT_QUEUE_CAPACITY);
     let queue_capacity = args.scenario.queue_capacity.or(scenario.queue_capacity).unwrap_or(default_capacity);
     if queue_capacity < 1 {
         return Err(ConfigError::QueueCapacity);

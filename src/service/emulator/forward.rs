@@ -11,9 +11,6 @@ use crate::service::emulator::path::{Channel, Ending, Take};
 use crate::service::link::Arrival;
 use crate::service::schema::{Account, BadInput, ForwardExtra};
 use crate::transport::{FrameSink, FrameSource, PortError};
-use std::cell::Cell;
-use std::net::SocketAddr;
-use std::rc::Rc;
 
 
 /// The most frames one poll of the forward stream takes in: a burst is
@@ -23,10 +20,6 @@ use std::rc::Rc;
 /// least every 64 decisions (about 10 µs at 150 ns a frame), and releases
 /// do not wait for the batch at all: it ends as soon as one is due.
 pub const TAKE_MAX: usize = 64;
-
-/// Where a UDP console's address is shared with the return path, once
-/// known.
-pub type ConsoleAddr = Rc<Cell<Option<SocketAddr>>>;
 
 /// The console → robot direction's ports and checks.
 pub struct Forward<S, K> {
@@ -40,8 +33,6 @@ pub struct Forward<S, K> {
     bad_checksum_passed: u64,
     /// Bad input by kind.
     pub bad_input: BadInput,
-    /// Where the console's address goes once a UDP source knows it.
-    console: Option<ConsoleAddr>,
 }
 
 impl<S: FrameSource, K: FrameSink> Forward<S, K> {
@@ -57,15 +48,8 @@ impl<S: FrameSource, K: FrameSink> Forward<S, K> {
             accept_raw,
             bad_checksum_passed: 0,
             bad_input: BadInput::default(),
-            console: None,
         }
     }
-
-    /// Tells `console` the console's address once the source knows it.
-    pub fn share_console(&mut self, console: ConsoleAddr) {
-        self.console = Some(console);
-    }
-
 }
 
 impl<S: FrameSource, K: FrameSink> ForwardChannel for Forward<S, K> {
@@ -102,9 +86,6 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
                 let t = clock();
                 sample.ingress_index = next_ingress_index;
                 sample.ingress_ns = t;
-                if let Some(c) = self.console.as_ref().filter(|c| c.get().is_none()) {
-                    c.set(self.source.sender().map(|a| a.addr()));
-                }
                 let arrival = |sequence| Arrival { sequence, console_index: sample.console_index, send_ns: sample.send_ns };
                 match classify(sample, self.drop_bad_checksum, self.accept_raw, &mut self.bad_input) {
                     Ok((seq, bad)) => {

@@ -5,109 +5,84 @@
 
 use crate::scenario::Scenario;
 use crate::service::emulator::config::{EmulatorConfig, LaneConfig};
-use crate::service::emulator::forward::{ConsoleAddr, Forward};
+use crate::service::emulator::forward::Forward;
 use crate::service::emulator::lane::Lane;
-use crate::service::emulator::path::{Channel, Path};
-use crate::service::emulator::reverse::OpenError;
-use crate::service::emulator::{report, reverse, run, udp_return};
-use crate::service::schema::{BoundEndpoints, EmulatorReport};
-use crate::transport::udp::Arena;
-use crate::transport::{Egress, Ingress, IpcNode};
-use std::cell::RefCell;
-use std::rc::Rc;
+use crate::service::emulator::path::Path;
+use crate::service::emulator::opening::{OpenError, Opening};
+use crate::service::emulator::{report, run};
+use crate::service::schema::EmulatorReport;
+use crate::transport::{Egress, Ingress, Sessions};
 
 /// A lane of ITP frames.
 pub type ItpLane = Lane<Forward<Ingress, Egress>>;
 
-/// A lane as opened, and what its end needs of its transports.
-struct Opened {
-    lane: ItpLane,
-    node: Option<IpcNode>,
-    arena: Option<Rc<RefCell<Arena>>>,
-    bound: BoundEndpoints,
-}
-
 /// Opens lane `l`'s transports and paths (before the loop is pinned: each
-/// path starts its trace writer).
-fn open_lane(l: &LaneConfig) -> Result<Opened, OpenError> {
+/// path starts its trace writer); what its transports keep open beside.
+fn open_lane(l: &LaneConfig, stop: &dyn Fn() -> bool) -> Result<(ItpLane, Sessions), OpenError> {
     std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
-    let t = crate::transport::open(&a.udp.ingress, &a.udp.egress, &a.wiring(l.queue_capacity))?;
-    let console = ConsoleAddr::default();
-    let o = reverse::Opening { args: a, t: &t, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir, console: &console };
-    let reverse = reverse::open_all(&o)?;
+    let t = crate::transport::open(&a.ends.ingress, &a.ends.egress, &a.transports, &a.wiring(l.queue_capacity, stop))?;
+    let shape = a.lane_shape();
+    let o = Opening { shape, sessions: &t.sessions, seed: l.seed, expected_frames: a.expected_frames, out_dir: &l.out_dir };
+    let reverse = a.channels.open_all(&shape, &o)?;
     let scenario = Scenario::new(&l.scenario, l.seed)?;
     if let Some(kind) = crate::service::link::unsupported_stage(&scenario, l.unsupported()) {
         return Err(OpenError::RawStage { scenario: scenario.name().to_string(), stage: kind.name() });
     }
-    let bound = report::bound(&t.ingress, &t.egress, a.udp.egress.udp());
-    let crate::transport::Transports { ingress, egress, node, arena } = t;
-    let udp_in = matches!(ingress, Ingress::Udp(_));
-    let mut chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
-    if udp_in {
-        chan.share_console(console);
+    for (file, value) in t.sessions.at_start() {
+        report::write_json(&l.out_dir.join(file), &value)?;
     }
+    let crate::transport::Transports { ingress, egress, sessions } = t;
+    let chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true)?;
-    if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
-        report::write_json(&l.out_dir.join("udp_endpoints.json"), &bound)?;
-    }
-    Ok(Opened { lane: Lane::new(forward, reverse), node, arena, bound })
+    Ok((Lane::new(forward, reverse), sessions))
 }
 
 /// Runs the emulator of `cfg`'s ITP lanes; their reports.
 pub fn main(cfg: &EmulatorConfig) -> Result<Vec<EmulatorReport>, super::EmulatorError> {
-    let mut opened = Vec::with_capacity(cfg.lanes.len());
+    let (mut lanes, mut sessions) = (Vec::with_capacity(cfg.lanes.len()), Vec::with_capacity(cfg.lanes.len()));
+    let stop = crate::service::signals::stop_requested;
     for (k, l) in cfg.lanes.iter().enumerate() {
-        opened.push(open_lane(l).map_err(|cause| super::EmulatorError::Stream { stream: k, cause })?);
-        say_lane(cfg, k, &opened[k]);
+        let (lane, s) = open_lane(l, &stop).map_err(|cause| super::EmulatorError::Stream { stream: k, cause })?;
+        say_lane(cfg, k, &s);
+        lanes.push(lane);
+        sessions.push(s);
     }
-    let (mut lanes, mut nodes, mut ends) = (Vec::new(), Vec::new(), Vec::new());
-    for o in opened {
-        lanes.push(o.lane);
-        nodes.push(o.node);
-        ends.push((o.arena, o.bound));
-    }
-    // The UDP side of each lane, read before its paths finish and written
-    // beside its report.
-    let udp_side = |k: usize, lane: &ItpLane| {
+    // Each transport's report of a lane, made before its paths finish, and
+    // written beside its report with what it says of the reverse paths.
+    let reports = |k: usize, lane: &ItpLane| {
         let l = &cfg.lanes[k];
-        let (arena, bound) = &ends[k];
-        let u = (l.args.udp.ingress.is_udp() || l.args.udp.egress.is_udp())
-            .then(|| report::udp_report(&l.args, &lane.forward.chan.source, arena.as_ref().map(|a| a.borrow()).as_deref(), bound));
+        let a = &l.args;
+        let mut t = sessions[k].reports(&a.transports, (&a.ends.ingress, &a.ends.egress), &lane.forward.chan.source, &lane.forward.chan.sink);
         let dir = l.out_dir.clone();
         let after: run::After = Box::new(move |r: &EmulatorReport| {
-            let Some(mut u) = u else { return Ok(()) };
-            u.return_path = r.process.paths.get(<udp_return::UdpReturn as Channel>::NAME).cloned();
-            report::write_json(&dir.join("udp.json"), &u)?;
-            eprintln!("{}", report::summary_line(r, &u));
+            if t.is_empty() {
+                return Ok(());
+            }
+            t.attach(&r.process.paths);
+            for (file, value) in t.files() {
+                report::write_json(&dir.join(file), &value)?;
+            }
+            eprintln!("{}{}", report::summary_line(r), t.summary());
             Ok(())
         });
         after
     };
-    Ok(run::run(cfg, lanes, nodes, udp_side)?)
+    let nodes: Vec<Option<&crate::transport::IpcNode>> = sessions.iter().map(|s| s.iceoryx2.as_ref()).collect();
+    let reports = run::run(cfg, lanes, &nodes, reports)?;
+    // What the transports kept open outlives the ports.
+    drop(sessions);
+    Ok(reports)
 }
 
 /// Says what lane `k` is, as the log shows it.
-fn say_lane(cfg: &EmulatorConfig, k: usize, o: &Opened) {
+fn say_lane(cfg: &EmulatorConfig, k: usize, s: &Sessions) {
     let l = &cfg.lanes[k];
     let a = &l.args;
     if cfg.several() {
         eprintln!("emulator: stream {k}: run {} scenario {} seed {}", a.run_id.as_deref().unwrap_or("?"), l.scenario.name, l.seed);
-    } else if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
-        eprintln!(
-            "emulator: scenario {} seed {}, queue {}, core {:?}; ingress {}{}, egress {}{}, payload {:?}",
-            l.scenario.name,
-            l.seed,
-            l.queue_capacity,
-            cfg.core,
-            a.udp.ingress,
-            o.bound.ingress.map_or(String::new(), |x| format!(" (bound {x})")),
-            a.udp.egress,
-            o.bound.egress_local.map_or(String::new(), |x| format!(" (from {x})")),
-            a.udp.payload,
-        );
-    } else {
-        eprintln!("emulator: scenario {} seed {}, queue {}, core {:?}", l.scenario.name, l.seed, l.queue_capacity, cfg.core);
+        return;
     }
+    let sides = s.describe(&a.transports, (&a.ends.ingress, &a.ends.egress)).map_or(String::new(), |d| format!("; {d}"));
+    eprintln!("emulator: scenario {} seed {}, queue {}, core {:?}{sides}", l.scenario.name, l.seed, l.queue_capacity, cfg.core);
 }
-

@@ -1,6 +1,7 @@
 //! The emulator service: one loop, pinned to one core, over N ≥ 1 lanes
 //! (streams). A lane is a forward path (console → robot) and its reverse
-//! paths (the robot's feedback, the camera's video, the UDP return); a
+//! paths (each a channel of `crate::service::channel`: the robot's
+//! feedback, the camera's video, the UDP return); a
 //! path is one [`Link`](crate::service::link::Link) between the ports of a
 //! [`Channel`](path::Channel), written once ([`path`]). Each turn of a
 //! lane releases what is due, polls its reverse paths and takes every
@@ -10,39 +11,33 @@
 //! | file | what |
 //! |---|---|
 //! | `path` | the path around a link, generic over its channel; the reverse paths' object |
-//! | `forward`, `feedback`, `video`, `udp_return` | the channels, one file each |
-//! | `opening`, `reverse` | what opening a reverse path needs; the list of them |
+//! | `forward` | the forward channel (the reverse ones are `crate::service::channel`'s) |
+//! | `opening` | what opening a reverse path needs |
 //! | `lane` | one stream: its forward path, its reverse paths, its turn and its end |
 //! | `spin` | the one loop over the lanes, and the reaper of dead peers |
 //! | `busy` | the loop's busy time and the capacity it implies |
 //! | `config` | the arguments resolved once: each lane's scenario, seed and queue |
 //! | `itp` | lanes of ITP frames over iceoryx2 and UDP: their transports opened, `udp.json` |
-//! | `ros2`, `ros2_plan`, `ros2_topic` | lanes of ROS 2 topics: their flags resolved, topics settled and opened, `ros2.json`; the forward and return channels |
+//! | `ros2/` | lanes of ROS 2 topics: their flags resolved (`plan`), topics settled and opened, `ros2.json`; the forward and return channels (`topic`) |
 //! | `run` | running lanes of any kind: control, placement, the loop, the reports |
 //! | `report` | `emulator.json`, the joint report of several lanes, `udp.json` |
 //!
 //! Each step has its own error ([`config::ConfigError`],
-//! [`ros2_plan::Ros2PlanError`], [`opening::OpenError`],
+//! [`ros2::plan::Ros2PlanError`], [`opening::OpenError`],
 //! [`ros2::TopicError`], [`path::PathError`], [`run::RunError`]);
 //! [`EmulatorError`] is any of them, with the stream or lane it came from.
 
 pub mod busy;
 pub mod config;
-pub mod feedback;
 pub mod forward;
 pub mod itp;
 pub mod lane;
 pub mod opening;
 pub mod path;
 pub mod report;
-pub mod reverse;
 pub mod ros2;
-pub mod ros2_plan;
-pub mod ros2_topic;
 pub mod run;
 pub mod spin;
-pub mod udp_return;
-pub mod video;
 
 pub use crate::service::schema::{BadInput, EmulatorReport, LoopBusy};
 pub use forward::{classify, Forward};
@@ -56,7 +51,7 @@ pub enum EmulatorError {
     #[error(transparent)]
     Config(#[from] config::ConfigError),
     #[error(transparent)]
-    Ros2Plan(#[from] ros2_plan::Ros2PlanError),
+    Ros2Plan(#[from] ros2::plan::Ros2PlanError),
     #[error(transparent)]
     Pid(#[from] crate::service::PidError),
     /// The ROS 2 participant's threads, placed off the loop's core.

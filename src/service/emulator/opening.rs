@@ -1,12 +1,9 @@
-//! What opening a stream's reverse paths needs: the stream's arguments,
+//! What opening a stream's reverse paths needs: the lane's shape, its
 //! transports, seed and directory ([`Opening`]), and a reverse path's
 //! scenario, seed and queue resolved once ([`PathPlan`]).
 
 use crate::scenario::{Scenario, ScenarioError, ScenarioSpec};
-use crate::service::args::EmulatorArgs;
-use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Path, PathError};
-use crate::transport::Transports;
 use std::path::{Path as FsPath, PathBuf};
 
 /// A reverse path's scenario that does not read or does not build, as
@@ -51,40 +48,33 @@ pub enum OpenError {
     },
     /// The ingress and egress.
     #[error(transparent)]
-    Transports(#[from] crate::transport::open::OpenError),
+    Transports(#[from] crate::transport::OpenError),
+    /// A reverse path.
     #[error(transparent)]
-    Feedback(#[from] crate::transport::open::FeedbackOpenError),
-    #[error(transparent)]
-    VideoArgs(#[from] crate::service::video::VideoArgsError),
-    #[error("opening the {direction} video port")]
-    VideoPort {
-        direction: &'static str,
-        #[source]
-        cause: crate::transport::ipc::video::VideoOpenError,
-    },
-    #[error("--return-to takes udp://ADDR:PORT")]
-    ReturnTo,
-    #[error("opening the return path")]
-    ReturnPort(#[source] crate::transport::udp::UdpOpenError),
+    Channel(Box<crate::service::channel::ChannelOpenError>),
     /// A file the lane writes at its start.
     #[error(transparent)]
     Write(#[from] crate::service::emulator::report::WriteError),
 }
 
+impl From<crate::service::channel::ChannelOpenError> for OpenError {
+    fn from(e: crate::service::channel::ChannelOpenError) -> Self {
+        OpenError::Channel(Box::new(e))
+    }
+}
+
 /// What opening a stream's reverse paths needs.
 pub struct Opening<'a> {
-    /// The stream's own arguments.
-    pub args: &'a EmulatorArgs,
-    /// Its transports, open.
-    pub t: &'a Transports,
+    /// The lane: its endpoints and its transports' flags.
+    pub shape: crate::service::channel::LaneShape<'a>,
+    /// What its transports keep open.
+    pub sessions: &'a crate::transport::Sessions,
     /// Its seed (the reverse paths' seeds are derived from it).
     pub seed: u64,
     /// Items expected, to size each trace and loss interval.
     pub expected_frames: u64,
     /// Its directory.
     pub out_dir: &'a FsPath,
-    /// The console's address, once a UDP ingress knows it.
-    pub console: &'a ConsoleAddr,
 }
 
 /// A reverse path's scenario, seed and queue, resolved once.

@@ -1,15 +1,13 @@
 //! The emulator's reports, assembled from what its paths and its loop
-//! return: each lane's `emulator.json` ([`EmulatorReport`]), the joint one
-//! of several lanes ([`EmulatorStreams`]), and the UDP side (`udp.json`).
+//! return: each lane's `emulator.json` ([`EmulatorReport`]) and the joint
+//! one of several lanes ([`EmulatorStreams`]). A transport writes its own
+//! beside them (`crate::transport::TransportReports`).
 
 use crate::host::isolate::IsolationSummary;
 use crate::service::control::ControlEvent;
 use crate::service::schema::ForwardExtra;
 use crate::service::emulator::spin::LoopEnd;
-use crate::service::schema::{
-    BoundEndpoints, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, Ended, ForeignSender, LoopBusy, PathReport, PeerEvent, Shaping, UdpReport, WithPaths,
-};
-use crate::transport::{Egress, Ingress};
+use crate::service::schema::{EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, Ended, LoopBusy, PathReport, PeerEvent, Shaping, WithPaths};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -112,53 +110,12 @@ pub fn joint(reports: &[EmulatorReport], run_ids: &[String], dirs: &[PathBuf], e
     }
 }
 
-/// The endpoints of a lane's transports as bound.
-pub fn bound(ingress: &Ingress, egress: &Egress, egress_peer: Option<std::net::SocketAddr>) -> BoundEndpoints {
-    BoundEndpoints {
-        ingress: match ingress {
-            Ingress::Udp(s) => Some(s.port().local_addr()),
-            _ => None,
-        },
-        egress_local: match egress {
-            Egress::Udp(s) => Some(s.port().local_addr()),
-            _ => None,
-        },
-        egress_peer,
-    }
-}
-
-/// The UDP side of a lane that has ended: its sockets, what the ingress
-/// took and refused, the raw arena, the return path's report.
-pub fn udp_report(args: &crate::service::args::EmulatorArgs, ingress: &Ingress, arena: Option<&crate::transport::udp::Arena>, bound: &BoundEndpoints) -> UdpReport {
-    let source = match ingress {
-        Ingress::Udp(s) => Some(s),
-        _ => None,
-    };
-    UdpReport {
-        ingress: args.udp.ingress.to_string(),
-        egress: args.udp.egress.to_string(),
-        payload: args.udp.payload,
-        ingress_local: bound.ingress,
-        egress_local: bound.egress_local,
-        datagrams_in: source.map(|s| s.taken()),
-        ingress_kernel_drops: source.and_then(|s| s.port().kernel_drops()),
-        ingress_buffer_bytes: source.and_then(|s| s.port().buffer_bytes().0),
-        console: source.and_then(|s| s.console()),
-        foreign_sender: source.map_or(0, |s| s.foreign().total),
-        foreign_senders: source.map(|s| s.foreign().named().map(|(addr, datagrams)| ForeignSender { addr, datagrams }).collect()).unwrap_or_default(),
-        foreign_unnamed: source.map_or(0, |s| s.foreign().unnamed),
-        arena_slots: arena.map(|a| a.slots()),
-        arena_high_water: arena.map(|a| a.high_water()),
-        return_path: None,
-    }
-}
-
-/// One line for the log: what came in, what went out, what the kernel and
-/// the return path did.
-pub fn summary_line(r: &EmulatorReport, u: &UdpReport) -> String {
+/// One line for the log: what came in, what went out, and how the lane
+/// ended (a transport's report adds its own after it).
+pub fn summary_line(r: &EmulatorReport) -> String {
     let (f, p) = (&r.process.frames, &r.process);
     let a = &f.account;
-    let mut s = format!(
+    format!(
         "emulator: {} entered, {} delivered, {} dropped {:?}, {} held at end; ended by {}",
         a.entered,
         a.delivered,
@@ -166,26 +123,5 @@ pub fn summary_line(r: &EmulatorReport, u: &UdpReport) -> String {
         a.dropped,
         a.held_at_end,
         p.ended_by
-    );
-    if let Some(k) = u.ingress_kernel_drops.filter(|k| *k > 0) {
-        s += &format!("; {k} datagrams dropped by the kernel before ingress");
-    }
-    if u.foreign_sender > 0 {
-        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
-        s += &format!("; {} datagrams from foreign senders dropped (foreign_sender): {}", u.foreign_sender, who.join(", "));
-    }
-    if let Some(rp) = &u.return_path {
-        let n = |k: &str| rp[k].as_u64().unwrap_or(0);
-        let dropped: u64 = rp["dropped"].as_object().map_or(0, |d| d.values().filter_map(|v| v.as_u64()).sum());
-        s += &format!(
-            "; return path ({}): {} received, {} delivered, {} dropped, {} held, {} unroutable",
-            rp["mode"].as_str().unwrap_or("?"),
-            n("received"),
-            n("delivered"),
-            dropped,
-            n("held_at_end"),
-            n("unroutable")
-        );
-    }
-    s
+    )
 }

@@ -45,7 +45,7 @@ pub type After = Box<dyn FnOnce(&EmulatorReport) -> Result<(), WriteError>>;
 pub fn run<F: ForwardChannel + 'static>(
     cfg: &EmulatorConfig,
     mut lanes: Vec<Lane<F>>,
-    nodes: Vec<Option<IpcNode>>,
+    nodes: &[Option<&IpcNode>],
     mut before_finish: impl FnMut(usize, &Lane<F>) -> After,
 ) -> Result<Vec<EmulatorReport>, RunError> {
     let several = cfg.several();
@@ -66,9 +66,9 @@ pub fn run<F: ForwardChannel + 'static>(
     // its length (0.1–0.3 s with a cleared core and a queue and trace sized
     // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
     std::fs::write(cfg.out_dir.join("emulator.ready"), b"").map_err(RunError::Ready)?;
-    let term = nodes.first().and_then(Option::as_ref);
+    let term = nodes.first().copied().flatten();
     let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
-    let mut reaper = spin::Reaper::new(&nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
+    let mut reaper = spin::Reaper::new(nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
     let look = |died: &mut [bool]| {
         if stop.requested() {
             return spin::Look::Stop;
@@ -92,8 +92,6 @@ pub fn run<F: ForwardChannel + 'static>(
         after(&r)?;
         reports.push(r);
     }
-    // The nodes outlive the ports.
-    drop(nodes);
     if several {
         write_joint(cfg, &reports, end.ended_by)?;
     }

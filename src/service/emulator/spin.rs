@@ -152,9 +152,9 @@ pub struct Reaper<'a> {
 
 impl<'a> Reaper<'a> {
     /// A reaper of the lanes' `nodes`; one that never reaps unless `alone`.
-    pub fn new(nodes: &'a [Option<IpcNode>], alone: bool) -> Self {
+    pub fn new(nodes: &[Option<&'a IpcNode>], alone: bool) -> Self {
         let dead = vec![Vec::new(); nodes.len()];
-        let nodes = if alone { nodes.iter().map(Option::as_ref).collect() } else { Vec::new() };
+        let nodes = if alone { nodes.to_vec() } else { Vec::new() };
         Reaper { nodes, next: 0, next_ns: now_ns(), dead }
     }
 

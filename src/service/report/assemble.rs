@@ -6,15 +6,14 @@
 use super::delay::delay_check;
 use super::phases::{self, RunTimeline};
 use super::trace_merge::{merge_trace, Source};
-use super::{files, join, FeedbackSection, Files, ProcessEnd, RunReport, RunStream, RunStreams};
+use super::{files, join, Files, ProcessEnd, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
 use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
-use crate::service::schema::FeedbackExtra;
-use crate::service::schema::VideoExtra;
-use crate::service::schema::{EmulatorReport, UdpReport};
+use crate::service::schema::EmulatorReport;
+use crate::transport::TransportReports;
 use crate::service::simulator::SimulatorReport;
-use crate::service::video::VideoSection;
+use crate::service::channel::{ChannelSections, Sources};
 use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
 
@@ -43,6 +42,9 @@ pub struct RunnerView {
     pub processes: Vec<ProcessEnd>,
     pub faults: Vec<String>,
     pub interrupted: bool,
+    /// The roles the lab's own programs played (`console`, `simulator`):
+    /// their reports are not the run's to have.
+    pub lab: Vec<&'static str>,
 }
 
 /// One service's report in a run's directory.
@@ -55,7 +57,7 @@ pub(super) enum Found<T> {
 impl<T: DeserializeOwned> Found<T> {
     /// Reads `path`.
     pub(super) fn read(path: &Path) -> Found<T> {
-        match std::fs::read(path) {
+        match crate::load::read_file(path) {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Found::Absent,
             Err(e) => Found::Unreadable(format!("reading {}: {e}", path.display())),
             Ok(bytes) => match serde_json::from_slice(&bytes) {
@@ -72,9 +74,10 @@ pub(super) struct Parts {
     pub console: Option<ConsoleReport>,
     pub emulator: Option<EmulatorReport>,
     pub simulator: Option<SimulatorReport>,
-    /// Written only where a side is UDP: not missing where absent.
-    pub udp: Option<UdpReport>,
-    pub missing: Vec<(&'static str, &'static str, Option<String>)>,
+    /// Each transport's report, written only where a side is of it: not
+    /// missing where absent.
+    pub transports: TransportReports,
+    pub missing: Vec<(&'static str, String, Option<String>)>,
 }
 
 impl Parts {
@@ -84,16 +87,23 @@ impl Parts {
         let console = take(Found::read(&out.join("console.json")), ("console.json", "console"), &mut missing);
         let emulator = take(emulator.unwrap_or_else(|| Found::read(&out.join("emulator.json"))), ("emulator.json", "emulator"), &mut missing);
         let simulator = take(Found::read(&out.join("simulator.json")), ("simulator.json", "simulator"), &mut missing);
-        let udp = match Found::read(&out.join("udp.json")) {
-            Found::Absent => None,
-            found => take(found, ("udp.json", "emulator's UDP side"), &mut missing),
-        };
-        Parts { console, emulator, simulator, udp, missing }
+        let (transports, unread) = TransportReports::read(out);
+        for (file, scheme, why) in unread {
+            missing.push((file, format!("emulator's {} side", scheme.to_uppercase()), Some(why)));
+        }
+        Parts { console, emulator, simulator, transports, missing }
     }
 
     /// A fault for each report the runner expected and did not find.
     pub(super) fn faults(&self) -> impl Iterator<Item = String> + '_ {
-        self.missing.iter().map(|(_, role, why)| match why {
+        self.faults_but(&[])
+    }
+
+    /// A fault for each report the runner expected and did not find, but
+    /// the absent reports of the roles in `lab` (played by the lab's own
+    /// programs).
+    pub(super) fn faults_but<'a>(&'a self, lab: &'a [&'static str]) -> impl Iterator<Item = String> + 'a {
+        self.missing.iter().filter(move |(_, role, why)| !(why.is_none() && lab.contains(&role.as_str()))).map(|(_, role, why)| match why {
             None => format!("no report from the {role}"),
             Some(why) => format!("no report from the {role}: {why}"),
         })
@@ -101,15 +111,15 @@ impl Parts {
 }
 
 /// The report `found`, or `None` with `(file, role)` and why among the missing.
-fn take<T>(found: Found<T>, (file, role): (&'static str, &'static str), missing: &mut Vec<(&'static str, &'static str, Option<String>)>) -> Option<T> {
+fn take<T>(found: Found<T>, (file, role): (&'static str, &'static str), missing: &mut Vec<(&'static str, String, Option<String>)>) -> Option<T> {
     match found {
         Found::Read(t) => Some(t),
         Found::Absent => {
-            missing.push((file, role, None));
+            missing.push((file, role.to_string(), None));
             None
         }
         Found::Unreadable(why) => {
-            missing.push((file, role, Some(why)));
+            missing.push((file, role.to_string(), Some(why)));
             None
         }
     }
@@ -149,22 +159,19 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
-    let Parts { console, emulator, simulator, udp, missing } = parts;
+    let Parts { console, emulator, simulator, transports, missing } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
     };
     let frames = join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref());
-    let feedback = emulator
-        .as_ref()
-        .and_then(|e| e.path::<FeedbackExtra>("feedback"))
-        .map(|f| FeedbackSection::join(&f, console.as_ref().and_then(|c| c.feedback.as_ref()), simulator.as_ref().map(|s| s.feedback_sent), stopped));
-    let video_path = emulator.as_ref().and_then(|e| e.path::<VideoExtra>("video"));
-    let video = VideoSection::join(video_path.as_ref(), console.as_ref().and_then(|c| c.video.as_ref()), simulator.as_ref().and_then(|s| s.camera.as_ref()));
-    let mut faults = join::faults(&frames, feedback.as_ref(), video.as_ref());
-    faults.extend(udp.as_ref().and_then(join::udp_fault));
+    let sources = Sources { emulator: emulator.as_ref(), console: console.as_ref(), simulator: simulator.as_ref(), stopped };
+    let channels = ChannelSections::join(sources);
+    let mut faults = channels.faults();
+    faults.extend(join::faults(&frames));
+    faults.extend(transports.faults());
     let e = shaping.as_ref();
-    let files = Files {
+    let mut files = Files {
         out_dir: facts.out.to_path_buf(),
         scenario: facts.scenario_path.map(Path::to_path_buf),
         trace: None,
@@ -172,9 +179,10 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         lateness_hlog: e.and_then(|e| e.lateness_hlog.clone()),
         end_to_end_hlog: simulator.as_ref().and_then(|s| s.end_to_end_hlog.clone()),
         report_json: facts.out.join("report.json"),
-        video_trace: video_path.as_ref().map(|v| v.trace_path.clone()),
-        video_received: console.as_ref().and_then(|c| c.video.as_ref()).and_then(|v| v.received_csv.clone()),
+        video_trace: None,
+        video_received: None,
     };
+    channels.files(sources, &mut files);
     RunReport {
         provenance: None,
         delay_check: None,
@@ -186,6 +194,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
+        loss_rate_unseen_model: e.and_then(|e| e.link.loss_rate_unseen_model),
         phases: Vec::new(),
         phases_unknown: None,
         stages: e.map(|e| e.link.stages.clone()).unwrap_or_default(),
@@ -193,8 +202,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
         overhead_ns: join::overhead(e.map(|e| &e.link), simulator.as_ref()),
         kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()),
-        feedback,
-        video,
+        channels,
         processes,
         faults,
         missing: missing.iter().map(|(file, _, _)| file.to_string()).collect(),
@@ -205,7 +213,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         console,
         emulator,
         simulator,
-        udp,
+        transports,
         streams: None,
     }
 }
@@ -241,7 +249,8 @@ impl RunReport {
     /// faults. The emulator's trace is joined into `trace.csv` and removed.
     pub fn assemble_run(facts: &RunFacts, mut runner: RunnerView) -> RunReport {
         let parts = Parts::read(facts.out, None);
-        runner.faults.extend(parts.faults());
+        let lab = std::mem::take(&mut runner.lab);
+        runner.faults.extend(parts.faults_but(&lab));
         assemble(facts, parts, runner, Source::Consume)
     }
 
@@ -313,7 +322,7 @@ impl RunReport {
         // Without a runner, a missing console or robot report is no fault
         // (a foreign client writes none); one that cannot be read is.
         let faults = parts.faults().zip(&parts.missing).filter(|(_, (_, _, why))| why.is_some()).map(|(f, _)| f).collect();
-        let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false };
+        let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false, lab: Vec::new() };
         Ok(assemble(&facts, parts, runner, Source::Keep))
     }
 }
@@ -394,7 +403,7 @@ mod tests {
             }),
         );
         let r = RunReport::of_dir(&d).unwrap();
-        assert_eq!(r.udp.as_ref().and_then(|u| u.ingress_kernel_drops), Some(3));
+        assert_eq!(r.transports.udp.as_ref().and_then(|u| u.ingress_kernel_drops), Some(3));
         assert_eq!(r.missing, ["console.json", "simulator.json"], "udp.json is not missing where a run has none");
         assert_eq!(
             r.faults,
@@ -406,7 +415,7 @@ mod tests {
         assert!(text.contains(udp), "{text}");
         std::fs::write(d.join("udp.json"), b"[").unwrap();
         let r = RunReport::of_dir(&d).unwrap();
-        assert!(r.udp.is_none() && r.missing.contains(&"udp.json".to_string()));
+        assert!(r.transports.udp.is_none() && r.missing.contains(&"udp.json".to_string()));
         assert!(r.faults[0].starts_with("no report from the emulator's UDP side: "), "{:?}", r.faults);
         std::fs::remove_dir_all(&d).ok();
     }

@@ -3,7 +3,7 @@
 //! tell, the forward stream's loss, delays and overhead, each reverse
 //! path's account, its files), in the run report's words.
 
-use super::text::{busy_text, dropped_list, emulator_overhead_text, happenings_text, injected_text, loss_text, opt, BALANCED};
+use super::text::{busy_text, dropped_list, emulator_overhead_text, happenings_text, injected_text, opt, stages_text, LossLine, BALANCED};
 use crate::service::schema::{EmulatorFrames, EmulatorReport, LinkMeasures, LoopBusy, PathReport};
 
 /// The stand-alone emulator's own report as a person reads it: its frames and whether they
@@ -45,6 +45,7 @@ pub fn emulator_text(r: &EmulatorReport) -> String {
         );
     }
     s += &emulator_accounting_text(f);
+    s += &LossLine { rate: l.loss_rate, ci95: l.loss_rate_ci95, unseen: l.loss_rate_unseen_model, entered: Some(a.entered), dropped: &a.dropped, stages: &l.stages }.text();
     s += &emulator_shaping_text(l, p.busy.as_ref());
     for (name, path) in p.paths.keys().filter_map(|n| Some((n, p.path::<serde_json::Map<String, serde_json::Value>>(n)?))) {
         s += &path_text(name, &path);
@@ -74,9 +75,9 @@ fn emulator_accounting_text(f: &EmulatorFrames) -> String {
     format!("accounting NOT balanced ({})\n", why.join("; "))
 }
 
-/// The forward stream's loss, delays and overhead, as the emulator measured them.
+/// The forward stream's stages, delays and overhead, as the emulator measured them.
 fn emulator_shaping_text(l: &LinkMeasures, busy: Option<&LoopBusy>) -> String {
-    let mut s = loss_text(Some((l.loss_rate, l.loss_rate_ci95)), &l.stages, &l.links);
+    let mut s = stages_text(&l.stages, &l.links);
     s += &injected_text(&Some(l.injected_delay_ns));
     s += &emulator_overhead_text(&Some(l.ingress_wait_ns), &Some(l.decision_ns), &Some(l.release_lateness_ns));
     if let Some(b) = busy {
@@ -157,7 +158,7 @@ mod tests {
         assert_eq!(lines[1], "frames     sent by console 10  entered 10  delivered 6  held at end 1");
         assert_eq!(lines[2], "dropped    3 by ge_lomax");
         assert_eq!(lines[3], format!("accounting {BALANCED}"));
-        assert!(text.contains("loss       0.3000 realized, 95% CI [0.1000, 0.5000]\n"), "{text}");
+        assert!(text.contains("loss       0.3000 realized: the scenario's drops of the 10 frames it decided, 95% CI [0.1000, 0.5000]\n"), "{text}");
         assert!(text.contains("path       feedback: scenario Normal (seed 3): entered 6  delivered 5  held at end 0; dropped none; NOT balanced\n"), "{text}");
         assert!(text.contains("peer       t=0.500s console connected: 1\n"), "{text}");
         assert!(text.contains("  trace     /run/trace_emulator.csv\n") && text.contains("  feedback  /run/trace_feedback.csv\n"), "{text}");

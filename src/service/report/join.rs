@@ -2,13 +2,11 @@
 //! reports alone (no file, no clock). Where a report is missing, what needs
 //! it is unknown (`None`) and the account is not balanced.
 
-use super::{Corruption, FeedbackSection, FrameAccount, Overhead, RunReport, RunStream, RunStreams, StreamsTotal};
+use super::{Corruption, FrameAccount, Overhead, RunReport, RunStream, RunStreams, StreamsTotal};
 use crate::metrics::Summary;
-use crate::service::console::{ConsoleFeedback, ConsoleReport};
-use crate::service::schema::FeedbackExtra;
-use crate::service::schema::{EmulatorFrames, EmulatorProcess, LinkMeasures, PathReport, UdpReport};
+use crate::service::console::ConsoleReport;
+use crate::service::schema::{EmulatorFrames, EmulatorProcess, LinkMeasures};
 use crate::service::simulator::SimulatorReport;
-use crate::service::video::VideoSection;
 use std::collections::BTreeMap;
 
 /// Every frame from the console's send to the robot's receive: the three
@@ -50,51 +48,6 @@ pub fn corruption(frames: &EmulatorFrames, simulator: Option<&SimulatorReport>) 
     Some(Corruption { corrupted: a.corrupted, delivered: a.corrupted_delivered, caught, passed: caught.map(|c| a.corrupted_delivered - c) })
 }
 
-impl FeedbackSection {
-    /// Joins the emulator's feedback path, the console's view of it and
-    /// the robot's own count of what it sent (`robot_sent`, from its
-    /// report): that count stands where the robot's end marker did not
-    /// reach the emulator before it stopped waiting for it. In a run that
-    /// was `stopped`, the processes stop console first and robot last:
-    /// what the robot sent after the emulator stopped, and what the
-    /// emulator delivered after the console stopped reading, were in
-    /// flight at the stop and are counted as such.
-    pub fn join(e: &PathReport<FeedbackExtra>, c: Option<&ConsoleFeedback>, robot_sent: Option<u64>, stopped: bool) -> FeedbackSection {
-        let received_by_console = c.map(|c| c.received);
-        let sent_by_robot = e.extra.sent_by_robot.or(robot_sent);
-        let a = &e.account;
-        let (mut not_taken_at_stop, mut unread_at_stop) = (0, 0);
-        if stopped {
-            not_taken_at_stop = sent_by_robot.map_or(0, |s| s.saturating_sub(a.entered));
-            unread_at_stop = received_by_console.map_or(0, |r| a.delivered.saturating_sub(r));
-        }
-        let balanced = sent_by_robot == Some(a.entered + not_taken_at_stop)
-            && a.closes()
-            && received_by_console.map(|r| r + unread_at_stop) == Some(a.delivered);
-        FeedbackSection {
-            return_scenario: e.scenario.clone(),
-            seed: e.seed,
-            sent_by_robot,
-            entered: a.entered,
-            delivered: a.delivered,
-            duplicated: a.duplicated,
-            dropped: a.dropped.clone(),
-            held_at_end: a.held_at_end,
-            received_by_console,
-            not_taken_at_stop,
-            unread_at_stop,
-            balanced,
-            loss_rate: e.measures.loss_rate,
-            loss_rate_ci95: e.measures.loss_rate_ci95,
-            injected_delay_ns: e.measures.injected_delay_ns,
-            round_trip_ns: c.map(|c| c.round_trip_ns).filter(|s| s.count > 0),
-            emulator_share_ns: c.map(|c| c.emulator_share_ns).filter(|s| s.count > 0),
-            divergence_final_mm: c.map(|c| c.divergence_final_mm),
-            divergence_max_mm: c.map(|c| c.divergence_max_mm),
-        }
-    }
-}
-
 /// What netfi itself added: the emulator's own figures (`link`, its
 /// forward path's) and the robot's end-to-end ones; the difference to the
 /// direct hop where both were measured.
@@ -116,31 +69,10 @@ pub fn difference(a: &Summary, b: &Summary) -> BTreeMap<String, i64> {
     crate::metrics::difference(a, b, &["p50", "p90", "p99", "p999"])
 }
 
-/// What the joins show went wrong: a reverse path or the frames not
-/// balanced, frames lost between the processes.
-pub fn faults(frames: &FrameAccount, feedback: Option<&FeedbackSection>, video: Option<&VideoSection>) -> Vec<String> {
+/// What the frame account shows went wrong: frames lost between the
+/// processes.
+pub fn faults(frames: &FrameAccount) -> Vec<String> {
     let mut faults = Vec::new();
-    if let Some(f) = feedback.filter(|f| !f.balanced) {
-        faults.push(format!(
-            "feedback not balanced: the robot sent {}, {} entered the emulator, {} were delivered, the console received {}",
-            super::text::opt(f.sent_by_robot),
-            f.entered,
-            f.delivered,
-            super::text::opt(f.received_by_console)
-        ));
-    }
-    if let Some(v) = video.filter(|v| !v.balanced) {
-        let f = &v.frames;
-        faults.push(format!(
-            "video not balanced: {} frames through the emulator ({} whole, {} damaged, {} lost), dropped {}, held at end {}",
-            f.sent,
-            f.whole,
-            f.damaged,
-            f.lost,
-            super::text::dropped_list(&v.dropped),
-            v.held_at_end
-        ));
-    }
     if let Some(n) = frames.lost_before_emulator.filter(|n| *n > 0) {
         faults.push(format!("{n} frames sent by the console never entered the emulator"));
     }
@@ -148,13 +80,6 @@ pub fn faults(frames: &FrameAccount, feedback: Option<&FeedbackSection>, video: 
         faults.push(format!("{n} frames released by the emulator never reached the simulator"));
     }
     faults
-}
-
-/// Datagrams the kernel dropped at the emulator's UDP ingress (its
-/// receive buffer full): sent, never entered, in no account but this.
-pub fn udp_fault(u: &UdpReport) -> Option<String> {
-    let n = u.ingress_kernel_drops.filter(|n| *n > 0)?;
-    Some(format!("{n} datagrams dropped by the kernel at the emulator's ingress socket {} (its receive buffer full): they never entered", u.ingress))
 }
 
 impl RunStream {
@@ -256,7 +181,7 @@ pub(super) mod tests {
         assert!(f.balanced);
         assert_eq!(f.dropped["ge_lomax"], 3);
         assert_eq!(f.corruption, None);
-        assert!(faults(&f, None, None).is_empty());
+        assert!(faults(&f).is_empty());
     }
 
     #[test]
@@ -265,11 +190,11 @@ pub(super) mod tests {
         let before = account(Some(&console(12)), Some(&e), Some(&simulator(6, 0)));
         assert_eq!(before.lost_before_emulator, Some(2));
         assert!(!before.balanced);
-        assert_eq!(faults(&before, None, None), ["2 frames sent by the console never entered the emulator"]);
+        assert_eq!(faults(&before), ["2 frames sent by the console never entered the emulator"]);
         let after = account(Some(&console(10)), Some(&emulator(10, 6, 3, 1, Some(10))), Some(&simulator(5, 0)));
         assert_eq!(after.lost_after_emulator, Some(1));
         assert!(!after.balanced);
-        assert_eq!(faults(&after, None, None), ["1 frames released by the emulator never reached the simulator"]);
+        assert_eq!(faults(&after), ["1 frames released by the emulator never reached the simulator"]);
         // Counts that agree between processes but an emulator account that does not close.
         let open = account(Some(&console(10)), Some(&emulator(10, 6, 3, 0, Some(10))), Some(&simulator(6, 0)));
         assert_eq!((open.lost_before_emulator, open.lost_after_emulator), (Some(0), Some(0)));
@@ -287,7 +212,7 @@ pub(super) mod tests {
         let no_robot = account(Some(&console(10)), Some(&e), None);
         assert_eq!((no_robot.received, no_robot.lost_after_emulator), (None, None));
         assert!(!no_robot.balanced);
-        assert!(faults(&no_robot, None, None).is_empty(), "unknown is not lost");
+        assert!(faults(&no_robot).is_empty(), "unknown is not lost");
         let no_emulator = account(Some(&console(10)), None, Some(&simulator(6, 0)));
         assert_eq!((no_emulator.entered, no_emulator.held_at_end, no_emulator.lost_before_emulator), (None, None, None));
         assert!(!no_emulator.balanced);
@@ -320,74 +245,6 @@ pub(super) mod tests {
         assert_eq!((c.caught, c.passed), (None, None));
         e.frames.account.corrupted = 0;
         assert_eq!(corruption(&e.frames, Some(&simulator(10, 5))), None);
-    }
-
-    fn feedback_path(entered: u64, delivered: u64, sent_by_robot: Option<u64>) -> PathReport<FeedbackExtra> {
-        serde_json::from_value(json!({
-            "scenario": "Normal", "seed": 3, "queue_order": "fifo", "queue_capacity": 16,
-            "entered": entered, "delivered": delivered, "dropped": {"bernoulli": entered - delivered}, "held_at_end": 0,
-            "delivered_unsubscribed": 0, "balanced": true, "loss_rate": 0.0, "loss_rate_ci95": [0.0, 0.1], "stages": [],
-            "injected_delay_ns": Summary::default(), "ingress_wait_ns": Summary::default(), "decision_ns": Summary::default(),
-            "release_lateness_ns": Summary::default(), "send_errors": 0, "receive_errors": 0, "trace_path": "trace_feedback.csv",
-            "sent_by_robot": sent_by_robot
-        }))
-        .unwrap()
-    }
-
-    fn console_feedback(received: u64) -> ConsoleFeedback {
-        let rtt = Summary { count: received, p50: 1_000, ..Summary::default() };
-        serde_json::from_value(json!({
-            "received": received, "sent_by_emulator": received, "unknown_command": 0, "ended_by": "end_marker",
-            "round_trip_ns": rtt, "emulator_share_ns": Summary::default(), "divergence_final_mm": [0.5, 0.25],
-            "divergence_max_mm": [1.0, 0.5], "round_trip_hlog": null
-        }))
-        .unwrap()
-    }
-
-    #[test]
-    fn feedback_balances_from_the_robot_through_the_emulator_to_the_console() {
-        let f = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(8)), Some(10), false);
-        assert!(f.balanced, "{f:?}");
-        assert_eq!((f.return_scenario.as_str(), f.seed, f.dropped["bernoulli"]), ("Normal", 3, 2));
-        assert_eq!(f.round_trip_ns.map(|s| s.p50), Some(1_000));
-        assert_eq!(f.emulator_share_ns, None, "an empty distribution is none");
-        assert_eq!(f.divergence_max_mm, Some([1.0, 0.5]));
-        assert!(faults(&account(None, None, None), Some(&f), None).is_empty());
-        // The robot's end marker did not reach the emulator: its own count stands.
-        let late = FeedbackSection::join(&feedback_path(10, 8, None), Some(&console_feedback(8)), Some(10), false);
-        assert_eq!(late.sent_by_robot, Some(10));
-        assert!(late.balanced);
-        // The console received less than was delivered.
-        let short = FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(7)), Some(10), false);
-        assert!(!short.balanced);
-        let fault = &faults(&account(None, None, None), Some(&short), None)[0];
-        assert_eq!(fault, "feedback not balanced: the robot sent 10, 10 entered the emulator, 8 were delivered, the console received 7");
-        // The robot sent more than entered.
-        assert!(!FeedbackSection::join(&feedback_path(10, 8, Some(11)), Some(&console_feedback(8)), None, false).balanced);
-        // No console report: what it received is unknown, and said so.
-        let foreign = FeedbackSection::join(&feedback_path(10, 8, Some(10)), None, None, false);
-        assert_eq!((foreign.received_by_console, foreign.round_trip_ns, foreign.balanced), (None, None, false));
-        let fault = &faults(&account(None, None, None), Some(&foreign), None)[0];
-        assert!(fault.ends_with("the console received ?"), "{fault}");
-    }
-
-    #[test]
-    fn a_stopped_run_accounts_the_feedback_in_flight_at_the_stop() {
-        // The console stopped reading with one sample delivered to it, and
-        // the robot sent two after the emulator stopped taking them.
-        let stopped = FeedbackSection::join(&feedback_path(10, 8, Some(12)), Some(&console_feedback(7)), Some(12), true);
-        assert!(stopped.balanced, "{stopped:?}");
-        assert_eq!((stopped.not_taken_at_stop, stopped.unread_at_stop), (2, 1));
-        // The same counts in a run that ended on its own are lost samples.
-        let ended = FeedbackSection::join(&feedback_path(10, 8, Some(12)), Some(&console_feedback(7)), Some(12), false);
-        assert!(!ended.balanced);
-        assert_eq!((ended.not_taken_at_stop, ended.unread_at_stop), (0, 0));
-        // A stop explains nothing the other way: a console that received
-        // more than was delivered, or an emulator account that does not close.
-        assert!(!FeedbackSection::join(&feedback_path(10, 8, Some(10)), Some(&console_feedback(9)), Some(10), true).balanced);
-        let mut open = feedback_path(10, 8, Some(10));
-        open.account.held_at_end = 1;
-        assert!(!FeedbackSection::join(&open, Some(&console_feedback(8)), Some(10), true).balanced);
     }
 
     #[test]

@@ -32,7 +32,7 @@ pub use delay::Law;
 pub use phases::RunTimeline;
 pub use files::{cut_files, write_whole, WriteError};
 pub use join::{account, corruption, difference, overhead};
-pub use text::{busy_text, dropped_list, phase_title, udp_line};
+pub use text::{busy_text, dropped_list, line, opt, phase_title};
 pub use emulator_text::emulator_text;
 
 use crate::host::Steal;
@@ -53,6 +53,8 @@ impl RunReport {
             seed: plan.seed,
             scenario_path: Some(&plan.scenario_path),
         };
-        RunReport::assemble_run(&facts, RunnerView { duration_s, steal, processes, faults, interrupted })
+        let s0 = &plan.streams[0];
+        let lab = [("console", s0.console.is_none()), ("simulator", s0.simulator.is_none())].into_iter().filter(|(_, lab)| *lab).map(|(role, _)| role).collect();
+        RunReport::assemble_run(&facts, RunnerView { duration_s, steal, processes, faults, interrupted, lab })
     }
 }

@@ -143,16 +143,25 @@ fn action(e: &ControlEvent) -> Result<Act, String> {
 }
 
 /// Each frame's ingress time (ns, CLOCK_MONOTONIC) and whether it was
-/// dropped, in ingress order, packed in one word each (copies left out).
+/// dropped, in ingress order, packed in one word each (copies and
+/// malformed frames left out); and the first frame's ingress time.
 #[derive(Debug, Default, Clone)]
 pub struct Fates {
     words: Vec<u64>,
+    origin_ns: Option<u64>,
 }
 
 impl Fates {
-    /// Adds a frame that entered at `ingress_ns`.
+    /// Adds a frame the scenario decided, which entered at `ingress_ns`.
     pub fn push(&mut self, ingress_ns: u64, dropped: bool) {
+        self.entered(ingress_ns);
         self.words.push((ingress_ns << 1) | u64::from(dropped));
+    }
+
+    /// Notes a frame that entered at `ingress_ns`, decided or not (a
+    /// malformed one, refused before the scenario, starts the timeline too).
+    pub fn entered(&mut self, ingress_ns: u64) {
+        self.origin_ns.get_or_insert(ingress_ns);
     }
 
     #[cfg(test)]
@@ -162,7 +171,7 @@ impl Fates {
 
     /// The first frame's ingress time: the origin of the run's timeline.
     pub fn origin_ns(&self) -> Option<u64> {
-        self.words.first().map(|w| w >> 1)
+        self.origin_ns
     }
 
     fn iter(&self) -> impl Iterator<Item = (u64, bool)> + '_ {
@@ -199,7 +208,8 @@ pub fn figures(timeline: &RunTimeline, fates: &Fates, delays: &Delays, stages: &
             let p = &timeline.phases[st.phase];
             let mut bm = BatchMeans::new(d.len() as u64);
             d.iter().for_each(|x| bm.record(*x));
-            let (loss_rate, ci) = bm.rate_ci95();
+            let unseen = if st.paused { 0.0 } else { unseen_loss_rate(p, stages, st.phase + 1, bm.trials()) };
+            let (loss_rate, ci) = bm.rate_ci95_with(unseen);
             let law = if st.paused { None } else { laws[st.phase].as_ref() };
             PhaseFigures {
                 run_phase: st.phase + 1,
@@ -213,11 +223,28 @@ pub fn figures(timeline: &RunTimeline, fates: &Fates, delays: &Delays, stages: &
                 dropped: bm.events(),
                 loss_rate,
                 loss_rate_ci95: ci,
+                loss_rate_unseen_model: (unseen > 0.0).then_some(unseen),
                 loss_rate_model: if st.paused { Some(0.0) } else { phase_loss_model(stages, st.phase + 1) },
                 delay_check: delay_check_against(law, delays, law.is_some()),
             }
         })
         .collect()
+}
+
+/// [`crate::check::unseen_loss_rate`] for `frames` frames of a stretch of
+/// the run's phase `run_phase` (from 1), `p`: each stage's share of the
+/// phase's frames as the run's stage counts give it.
+fn unseen_loss_rate(p: &TimelinePhase, stages: &[StageReport], run_phase: usize, frames: u64) -> f64 {
+    let own: Vec<&StageReport> = stages.iter().filter(|s| s.phase == run_phase).collect();
+    let first = own.first().map_or(0, |s| s.reached);
+    let specs = &p.spec.phases[p.phase].stages;
+    own.iter()
+        .filter_map(|r| {
+            let share = if first > 0 { r.reached as f64 / first as f64 } else { 1.0 };
+            let model = specs.get(r.stage.checked_sub(1)?)?.model.build().ok()?;
+            Some(share * model.unseen_loss_rate((frames as f64 * share).round() as u64))
+        })
+        .sum()
 }
 
 /// The long-run loss of the run's phase `phase` (from 1) by its models:

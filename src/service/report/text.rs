@@ -2,15 +2,15 @@
 //! a function of what it shows, so that the stand-alone emulator's own
 //! report (`emulator_text`) shares those the emulator knows.
 
-use super::{DelayCheck, FeedbackSection, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
+use super::{DelayCheck, FrameAccount, Overhead, PhaseFigures, Provenance, RunReport, RunStreams};
 use crate::check::{LinkReport, StageReport};
-use crate::metrics::{fmt_ns, Summary};
+use crate::metrics::{fmt_ns, fmt_ns_signed, fmt_rate, Summary};
 use crate::service::control::ControlEvent;
-use crate::service::schema::{LoopBusy, PeerEvent, UdpReport};
+use crate::service::schema::{LoopBusy, PeerEvent};
 use std::collections::BTreeMap;
 
 /// A count, or `?` where it is unknown.
-pub(super) fn opt(v: Option<u64>) -> String {
+pub fn opt(v: Option<u64>) -> String {
     v.map_or("?".to_string(), |x| x.to_string())
 }
 
@@ -24,8 +24,8 @@ pub fn dropped_list(dropped: &BTreeMap<String, u64>) -> String {
     }
 }
 
-/// A latency distribution's percentiles on one line.
-fn line(p: &Option<Summary>) -> String {
+/// A summary's percentiles on one line, `-` when there is none.
+pub fn line(p: &Option<Summary>) -> String {
     match p {
         Some(p) => format!(
             "p50 {}  p90 {}  p99 {}  p99.9 {}  p99.99 {}  max {}",
@@ -51,10 +51,14 @@ impl RunReport {
             s += &p.to_text();
         }
         s += &frames_text(&self.frames);
-        if let Some(u) = &self.udp {
-            s += &format!("udp        {}\n", udp_line(u));
+        for (scheme, line) in self.transports.lines() {
+            s += &format!("{scheme:<10} {line}\n");
         }
-        s += &loss_text(self.loss_rate.zip(self.loss_rate_ci95), &self.stages, &self.links);
+        if let Some((rate, ci95)) = self.loss_rate.zip(self.loss_rate_ci95) {
+            let f = &self.frames;
+            s += &LossLine { rate, ci95, unseen: self.loss_rate_unseen_model, entered: f.entered, dropped: &f.dropped, stages: &self.stages }.text();
+        }
+        s += &stages_text(&self.stages, &self.links);
         if !self.phases.is_empty() {
             s += &phases_text(&self.phases);
         }
@@ -69,12 +73,7 @@ impl RunReport {
         if let Some(k) = &self.kinematics {
             s += &kinematics_text(k);
         }
-        if let Some(fb) = &self.feedback {
-            s += &fb.to_text();
-        }
-        if let Some(v) = &self.video {
-            s += &v.to_text();
-        }
+        s += &self.channels.text();
         s += &self.host_text();
         s += &happenings_text(&self.peer_events, &self.events);
         for fault in &self.faults {
@@ -158,37 +157,53 @@ fn frames_text(f: &FrameAccount) -> String {
 
 pub(super) const BALANCED: &str = "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end";
 
-/// The emulator's UDP side on one line: its sockets, what came in, what
-/// the kernel dropped before it, and the senders it refused.
-pub fn udp_line(u: &UdpReport) -> String {
-    let bound = |a: Option<std::net::SocketAddr>, how: &str| a.map_or(String::new(), |a| format!(" ({how} {a})"));
-    let mut s = format!(
-        "ingress {}{}, egress {}{}, payload {}: {} datagrams in, {} dropped by the kernel before ingress; console {}",
-        u.ingress,
-        bound(u.ingress_local, "bound"),
-        u.egress,
-        bound(u.egress_local, "from"),
-        serde_json::to_value(u.payload).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default(),
-        opt(u.datagrams_in),
-        opt(u.ingress_kernel_drops),
-        u.console.map_or("?".into(), |c| c.to_string())
-    );
-    if u.foreign_sender > 0 {
-        let who: Vec<String> = u.foreign_senders.iter().map(|f| format!("{} ({})", f.addr, f.datagrams)).collect();
-        s += &format!("; {} datagrams from other senders refused: {}", u.foreign_sender, who.join(", "));
-        if u.foreign_unnamed > 0 {
-            s += &format!(" and {} from others", u.foreign_unnamed);
-        }
-    }
-    s
+/// The realized loss of a direction: what its scenario dropped of the
+/// frames it decided, the figure its models' loss compares with.
+pub(super) struct LossLine<'a> {
+    pub rate: f64,
+    pub ci95: [f64; 2],
+    /// The models' loss the interval's upper end adds for bursts longer
+    /// than the run likely met.
+    pub unseen: Option<f64>,
+    /// Frames that entered, and every drop by reason (malformed frames',
+    /// dropped before the scenario, among them).
+    pub entered: Option<u64>,
+    pub dropped: &'a BTreeMap<String, u64>,
+    pub stages: &'a [StageReport],
 }
 
-/// The realized loss, each stage's share of it, and the link stages.
-pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], links: &[LinkReport]) -> String {
-    let mut s = String::new();
-    if let Some((l, [lo, hi])) = loss {
-        s += &format!("loss       {:.4} realized, 95% CI [{lo:.4}, {hi:.4}]\n", l);
+impl LossLine<'_> {
+    pub fn text(&self) -> String {
+        let [lo, hi] = self.ci95;
+        let malformed: Vec<(&String, &u64)> = self.dropped.iter().filter(|(k, n)| crate::injector::Invalid::of_reason(k).is_some() && **n > 0).collect();
+        let refused: u64 = malformed.iter().map(|(_, n)| **n).sum();
+        let decided = self.entered.map_or(String::new(), |e| format!(" of the {} frames it decided", e.saturating_sub(refused)));
+        let model = self.model().map_or(String::new(), |m| format!("; model {m:.4}"));
+        let mut s = format!("loss       {:.4} realized: the scenario's drops{decided}, 95% CI [{}, {}]{model}\n", self.rate, fmt_rate(lo, 4), fmt_rate(hi, 4));
+        if let Some(u) = self.unseen.filter(|u| *u >= 0.00005) {
+            s += &format!("           (the upper end adds the {u:.4} the models lose in bursts longer than a run this long likely meets)\n");
+        }
+        if refused > 0 {
+            let each: Vec<String> = malformed.iter().map(|(k, n)| format!("{n} {k}")).collect();
+            s += &format!("           {refused} malformed frames ({}) were dropped before the scenario: not in this figure\n", each.join(", "));
+        }
+        s
     }
+
+    /// The scenario's long-run loss by its models, where it has one phase
+    /// and every stage's model loss is known: `1 − Π(1 − m_i)`.
+    fn model(&self) -> Option<f64> {
+        if self.stages.is_empty() || self.stages.iter().any(|s| s.phase != 1) {
+            return None;
+        }
+        self.stages.iter().try_fold(1.0, |pass, s| Some(pass * (1.0 - s.loss_rate_model?))).map(|pass| 1.0 - pass)
+    }
+}
+
+/// Each stage's share of the loss (and what a `replay` stage replays), and
+/// the link stages.
+pub(super) fn stages_text(stages: &[StageReport], links: &[LinkReport]) -> String {
+    let mut s = String::new();
     for st in stages {
         let model = match (st.loss_rate_model, st.delay_ms_model) {
             (_, Some(d)) => format!("model mean delay {d:.3} ms"),
@@ -196,6 +211,9 @@ pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], l
             _ => String::new(),
         };
         s += &format!("  phase {} stage {} {:<14} reached {:>9} dropped {:>9} ({:.4})  {model}\n", st.phase, st.stage, st.label, st.reached, st.dropped, st.loss_rate);
+        if let Some(rec) = &st.recording {
+            s += &format!("    {}\n", rec.text());
+        }
     }
     for l in links {
         s += &format!(
@@ -222,14 +240,14 @@ pub(super) fn loss_text(loss: Option<(f64, [f64; 2])>, stages: &[StageReport], l
 fn phases_text(phases: &[PhaseFigures]) -> String {
     let mut s = "phases     each stretch under one condition (the whole-run loss above mixes them)\n".to_string();
     for p in phases {
-        s += &format!("  {}  {}: {} frames, dropped {}, loss {:.4} [{:.4}, {:.4}]{}\n",
+        s += &format!("  {}  {}: {} frames, dropped {}, loss {:.4} [{}, {}]{}\n",
             span_text(p),
             phase_title(p),
             p.frames,
             p.dropped,
             p.loss_rate,
-            p.loss_rate_ci95[0],
-            p.loss_rate_ci95[1],
+            fmt_rate(p.loss_rate_ci95[0], 4),
+            fmt_rate(p.loss_rate_ci95[1], 4),
             p.loss_rate_model.map_or(String::new(), |m| format!(", model {m:.4}")),
         );
         if let Some(dc) = &p.delay_check {
@@ -289,7 +307,8 @@ fn overhead_text(o: &Overhead, busy: Option<&LoopBusy>) -> String {
     s += &format!("  end-to-end extra  {}\n", line(&o.end_to_end_extra));
     s += &format!("  direct hop        {}\n", line(&o.direct_hop));
     if let Some(a) = &o.added_over_direct {
-        s += &format!("  added over direct p50 {} ns  p99 {} ns  p99.9 {} ns\n", a["p50"], a["p99"], a["p999"]);
+        let at = |k: &str| a.get(k).map_or("?".to_string(), |v| fmt_ns_signed(*v));
+        s += &format!("  added over direct p50 {}  p99 {}  p99.9 {}\n", at("p50"), at("p99"), at("p999"));
         if a.values().any(|v| *v < 0) {
             s += "    (each a difference of the two lines above at that percentile, not a per-frame figure: negative\n     where the direct hop's own tail is longer; release lateness is the emulator's per-frame cost)\n";
         }
@@ -383,45 +402,6 @@ pub(super) fn happenings_text(peers: &[PeerEvent], events: &[ControlEvent]) -> S
     s
 }
 
-impl FeedbackSection {
-    /// The feedback loop's lines of the text report.
-    pub(super) fn to_text(&self) -> String {
-        let mut s = format!(
-            "feedback   return scenario {} (seed {}): sent by robot {}  entered {}  delivered {}  received {}  held at end {}; dropped {}\n",
-            self.return_scenario,
-            self.seed,
-            opt(self.sent_by_robot),
-            self.entered,
-            self.delivered,
-            opt(self.received_by_console),
-            self.held_at_end,
-            dropped_list(&self.dropped)
-        );
-        if self.duplicated > 0 {
-            s += &format!("  duplicated {} copies made (delivered may exceed entered by these)\n", self.duplicated);
-        }
-        if self.not_taken_at_stop + self.unread_at_stop > 0 {
-            s += &format!(
-                "  in flight at the stop: {} sent by the robot after the emulator stopped, {} delivered after the console stopped reading\n",
-                self.not_taken_at_stop, self.unread_at_stop
-            );
-        }
-        s += &format!(
-            "  accounting {}; loss {:.4}, 95% CI [{:.4}, {:.4}]\n",
-            if self.balanced { "balanced" } else { "NOT balanced" },
-            self.loss_rate,
-            self.loss_rate_ci95[0],
-            self.loss_rate_ci95[1]
-        );
-        s += &format!("  round trip        {}\n", line(&self.round_trip_ns));
-        s += &format!("  emulator's share  {}\n", line(&self.emulator_share_ns));
-        if let (Some(f), Some(m)) = (self.divergence_final_mm, self.divergence_max_mm) {
-            s += &format!("  live divergence   arm 0 final {:.2} mm (max {:.2}), arm 1 final {:.2} mm (max {:.2})\n", f[0], m[0], f[1], m[1]);
-        }
-        s
-    }
-}
-
 impl Provenance {
     fn to_text(&self) -> String {
         format!("provenance netfi {} on {}, started {} (seed {})\n  command  {}\n", self.version, self.host, self.started_utc, self.seed, self.command_line)
@@ -465,5 +445,44 @@ impl RunStreams {
             if t.balanced { "yes" } else { "NO" }
         );
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stage(phase: usize, model: Option<f64>) -> StageReport {
+        serde_json::from_value(serde_json::json!({
+            "phase": phase, "stage": 1, "label": "ge_lomax#0", "model": "ge_lomax", "reached": 100, "dropped": 30,
+            "loss_rate": 0.3, "loss_rate_model": model, "delay_ms_model": null
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_loss_line_is_the_scenarios_against_its_model_with_malformed_frames_apart() {
+        let dropped: BTreeMap<String, u64> = [("ge_lomax".to_string(), 30), ("wrong_size".to_string(), 10), ("bad_checksum".to_string(), 2)].into();
+        let stages = [stage(1, Some(0.3042))];
+        let line = LossLine { rate: 0.3, ci95: [0.25, 0.36], unseen: Some(0.0227), entered: Some(112), dropped: &dropped, stages: &stages };
+        let text = line.text();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], "loss       0.3000 realized: the scenario's drops of the 100 frames it decided, 95% CI [0.2500, 0.3600]; model 0.3042");
+        assert_eq!(lines[1], "           (the upper end adds the 0.0227 the models lose in bursts longer than a run this long likely meets)");
+        assert_eq!(lines[2], "           12 malformed frames (2 bad_checksum, 10 wrong_size) were dropped before the scenario: not in this figure");
+        // No malformed frame, nothing unseen, several phases (no one model):
+        // one line; a loss-free run's upper bound never reads as 0.
+        let (none, two) = (BTreeMap::new(), [stage(1, Some(0.1)), stage(2, Some(0.2))]);
+        let quiet = LossLine { rate: 0.0, ci95: [0.0, 2.9957e-6], unseen: None, entered: Some(1_000_000), dropped: &none, stages: &two };
+        assert_eq!(quiet.text(), "loss       0.0000 realized: the scenario's drops of the 1000000 frames it decided, 95% CI [0.0000, 0.0000030]\n");
+    }
+
+    #[test]
+    fn what_netfi_adds_over_the_direct_hop_reads_in_the_report_s_units() {
+        let added: BTreeMap<String, i64> = [("p50".to_string(), 106), ("p99".to_string(), 1_038_200), ("p999".to_string(), -4_702_720)].into();
+        let o = Overhead { ingress_wait: None, decision: None, release_lateness: None, end_to_end_extra: None, direct_hop: None, added_over_direct: Some(added) };
+        let text = overhead_text(&o, None);
+        assert!(text.contains("  added over direct p50 106 ns  p99 1.038 ms  p99.9 -4.703 ms\n"), "{text}");
+        assert!(text.contains("negative\n     where the direct hop's own tail is longer"), "{text}");
     }
 }

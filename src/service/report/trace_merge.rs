@@ -73,7 +73,7 @@ impl Receipts {
         let cut = !whole.exists();
         let path = if cut { partial_path(&whole) } else { whole };
         let mut r = Receipts::default();
-        let Ok(f) = std::fs::File::open(&path) else { return Ok(r) };
+        let Ok(f) = crate::load::open_regular(&path) else { return Ok(r) };
         let mut reader = std::io::BufReader::new(f);
         let mut line = String::new();
         let mut header = true;
@@ -169,7 +169,7 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
     let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
     let mut delays = Delays::default();
     let mut fates = Fates::default();
-    let rows = std::io::BufReader::new(std::fs::File::open(input).map_err(read_err)?).lines();
+    let rows = std::io::BufReader::new(crate::load::open_regular(input).map_err(read_err)?).lines();
     for (n, line) in rows.enumerate() {
         let line = line.map_err(read_err)?;
         if n > 0 {
@@ -200,13 +200,18 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
 }
 
 /// Adds a row's frame to `fates`: its ingress time and whether it was
-/// dropped; a copy's row (a `copy` other than 0) and a row that does not
-/// parse add nothing.
+/// dropped; a copy's row (a `copy` other than 0), a malformed frame's
+/// (dropped before the scenario: not a fate the scenario gave) and a row
+/// that does not parse add nothing.
 fn fate(line: &str, fates: &mut Fates) {
     let cols: Vec<&str> = line.split(',').collect();
     let original = Column::Copy.of(&cols).is_none_or(|c| c.is_empty() || c == "0");
+    let malformed = Column::Reason.of(&cols).is_some_and(|r| crate::injector::Invalid::of_reason(r).is_some());
     if let (true, Some(t), Some(f)) = (original, number(&cols, Column::IngressNs), Column::Fate.of(&cols)) {
-        fates.push(t, f == "dropped");
+        match malformed {
+            true => fates.entered(t),
+            false => fates.push(t, f == "dropped"),
+        }
     }
 }
 
@@ -230,7 +235,7 @@ fn read_delays(path: &Path) -> Result<(Delays, Fates), MergeError> {
     let read_err = |source| MergeError::Read { path: path.to_path_buf(), source };
     let mut delays = Delays::default();
     let mut fates = Fates::default();
-    for line in std::io::BufReader::new(std::fs::File::open(path).map_err(read_err)?).lines().skip(1) {
+    for line in std::io::BufReader::new(crate::load::open_regular(path).map_err(read_err)?).lines().skip(1) {
         let line = line.map_err(read_err)?;
         fate(&line, &mut fates);
         let cols: Vec<&str> = line.split(',').collect();

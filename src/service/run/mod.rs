@@ -53,29 +53,29 @@ fn resolve_path(flag: &'static str, name: Option<&str>) -> Result<ScenarioSpec> 
 /// (so a bad one fails before any process starts), each stream's run id
 /// checked; and the run's seed.
 fn resolve(args: &RunArgs, run_id: &str) -> Result<(Resolved, u64)> {
-    let spec = crate::load::resolve(&args.scenario.scenario)?;
+    // Anchored: the emulator reads its copy in the output directory, and
+    // the files the stages name are where the scenario file is.
+    let spec = crate::load::resolve_anchored(&args.scenario.scenario)?;
     let seed = seeds::run(args.scenario.seed, &spec);
     let mut specs = vec![spec; args.stream.streams as usize];
     for (k, what) in args.stream.named_scenarios()? {
-        specs[k] = crate::load::resolve(&what).map_err(|cause| RunnerError::StreamScenario { stream: k, what: what.clone(), cause })?;
+        specs[k] = crate::load::resolve_anchored(&what).map_err(|cause| RunnerError::StreamScenario { stream: k, what: what.clone(), cause })?;
     }
     for (k, s) in specs.iter().enumerate() {
         Scenario::new(s, seeds::stream(seed, k)).map_err(|e| RunnerError::StreamSeed(k, e))?;
         crate::transport::RunId::new(&streams::run_id(run_id, k)).map_err(|e| RunnerError::StreamRunId(k, e))?;
     }
-    let rp = &args.return_path;
-    let return_path = (!rp.no_feedback).then(|| resolve_path("--return-scenario", rp.return_scenario.as_deref())).transpose()?;
-    let video = args.video.on().then(|| resolve_path("--video-scenario", args.video.video_scenario.as_deref())).transpose()?;
-    Ok((Resolved { streams: specs, return_path, video }, seed))
+    let (ends, transports) = (crate::service::args::EndsArgs::default(), crate::transport::TransportArgs::default());
+    let shape = crate::service::channel::LaneShape { ingress: &ends.ingress, egress: &ends.egress, transports: &transports, streams: args.stream.streams };
+    let paths = args.channels.wants(&shape).into_iter().map(|(c, w)| Ok((c, resolve_path(w.flag, w.scenario.as_deref())?, w))).collect::<Result<Vec<_>>>()?;
+    let paths = paths.into_iter().map(|(c, spec, w)| (c, w, spec)).collect();
+    Ok((Resolved { streams: specs, paths }, seed))
 }
 
 /// Checks the reverse paths' scenarios with the seeds decided for them.
 fn check_paths(r: &Resolved, s: &Seeds) -> Result<()> {
-    let paths = [("--return-scenario", &r.return_path, s.return_path), ("--video-scenario", &r.video, s.video)];
-    for (flag, spec, seed) in paths {
-        if let (Some(spec), Some(seed)) = (spec, seed) {
-            Scenario::new(spec, seed).map_err(|cause| PathScenarioError { flag, name: spec.name.clone(), cause })?;
-        }
+    for (c, w, spec) in &r.paths {
+        Scenario::new(spec, s.paths[c]).map_err(|cause| PathScenarioError { flag: w.flag, name: spec.name.clone(), cause })?;
     }
     Ok(())
 }
@@ -113,6 +113,15 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     Ok((plan, lock))
 }
 
+/// Where netfi's own end runs, or that the lab's program plays it.
+fn end(own: bool, core: Option<usize>) -> String {
+    match (own, core) {
+        (false, _) => "(the lab's)".into(),
+        (true, None) => "(shared)".into(),
+        (true, Some(c)) => c.to_string(),
+    }
+}
+
 /// Keeps the runner off the emulator's core and says what runs where.
 fn announce(plan: &Plan) -> Result<()> {
     let cores = plan.cores;
@@ -128,8 +137,8 @@ fn announce(plan: &Plan) -> Result<()> {
         plan.spec.name,
         plan.seed,
         cores.emulator.map_or("(not pinned)".into(), |c| c.to_string()),
-        cores.console.map_or("(shared)".into(), |c| c.to_string()),
-        cores.simulator.map_or("(shared)".into(), |c| c.to_string()),
+        end(plan.streams[0].console.is_some(), cores.console),
+        end(plan.streams[0].simulator.is_some(), cores.simulator),
         plan.out.display()
     );
     Ok(())

@@ -211,23 +211,33 @@ fn start_one(role: &'static str, args: Vec<String>, core: Option<usize>, out: &P
     Ok(p)
 }
 
-/// Starts the simulators, the emulator and the consoles, each kind once
-/// the one before is ready. Those started are stopped (as their handles
-/// are dropped) if one fails to start. Each is put on the run's record
-/// `guard` (its guardian ends them if the runner is killed).
+/// Starts the simulators, the emulator and the consoles (netfi's own,
+/// where they play the robot and the console: the lab's programs are not
+/// the run's to start), each kind once the one before is ready. Those
+/// started are stopped (as their handles are dropped) if one fails to
+/// start. Each is put on the run's record `guard` (its guardian ends them
+/// if the runner is killed).
 pub fn start(plan: &Plan, guard: &mut Option<RunGuard>) -> Result<Procs> {
     let (out, cores) = (&plan.out, plan.cores);
     let mut simulators = Vec::new();
-    for s in &plan.streams {
-        simulators.push(start_one("simulator", s.simulator.to_argv(), cores.simulator, &s.out, Duration::from_secs(30), guard)?);
+    for (s, args) in plan.streams.iter().filter_map(|s| Some((s, s.simulator.as_ref()?))) {
+        simulators.push(start_one("simulator", args.to_argv(), cores.simulator, &s.out, Duration::from_secs(30), guard)?);
     }
     // Each stream's link, queue, trace and feedback path are set up before
     // the emulator is ready: a second or so each on a loaded machine.
-    let ready = Duration::from_secs(30 + 2 * plan.streams.len() as u64);
+    // The emulator says it is ready once it has the lab's robot, when it
+    // waits for it.
+    let ready = Duration::from_secs(30 + 2 * plan.streams.len() as u64) + Duration::from_secs_f64(plan.emulator.wait_for_peer_s.unwrap_or(0.0));
+    if let Some(s) = plan.emulator.wait_for_peer_s {
+        eprintln!("waiting up to {s} s for the lab's robot at {}", plan.emulator.ends.egress);
+    }
     let emulator = start_one("emulator", plan.emulator.to_argv(), cores.emulator, out, ready, guard)?;
     let mut procs = Procs { consoles: Vec::new(), emulator, simulators };
-    for s in &plan.streams {
-        procs.consoles.push(spawn("console", s.console.to_argv(), cores.console, &s.out, guard)?);
+    for (s, args) in plan.streams.iter().filter_map(|s| Some((s, s.console.as_ref()?))) {
+        procs.consoles.push(spawn("console", args.to_argv(), cores.console, &s.out, guard)?);
+    }
+    if plan.streams[0].console.is_none() {
+        eprintln!("taking the lab's console at {}", if plan.emulator.ros2.on() { "the ROS 2 topics".to_string() } else { plan.emulator.ends.ingress.to_string() });
     }
     Ok(procs)
 }

@@ -44,10 +44,10 @@ struct Consoles {
 /// stopped at a person's request (Ctrl-C, SIGTERM; not stuck consoles).
 pub fn supervise(plan: &Plan, procs: &mut Procs) -> bool {
     let started = Instant::now();
-    let mut policy = Supervisor::new(plan.planned_s);
+    let mut policy = Supervisor::until(plan.until_s);
     let ipcs: Vec<_> = plan.streams.iter().filter_map(|s| RunId::new(&s.run_id).ok().map(IpcConfig::new)).collect();
     let mut last_reap = Instant::now();
-    let mut consoles = Consoles { ready: plan.streams.iter().map(|s| s.out.join("console.ready")).collect(), all_ready: false };
+    let mut consoles = Consoles { ready: plan.streams.iter().filter(|s| s.console.is_some()).map(|s| s.out.join("console.ready")).collect(), all_ready: false };
     let mut ended = 0;
     loop {
         std::thread::sleep(LOOK_EVERY);

@@ -61,8 +61,17 @@ impl Account {
 /// and what it cost.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LinkMeasures {
+    /// The scenario's drops over the frames it decided: a malformed frame
+    /// (`wrong_size`, `bad_checksum`, `bad_flags`, `too_large`), dropped
+    /// before the scenario, is in neither. The figure the models' loss
+    /// compares with.
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
+    /// The models' loss in bursts longer than the run likely met
+    /// (`check::unseen_loss_rate`), included in the upper end of
+    /// `loss_rate_ci95`; absent where no stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     pub stages: Vec<crate::check::StageReport>,
     /// Injected delay of released items.
     pub injected_delay_ns: Summary,

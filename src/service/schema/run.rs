@@ -4,7 +4,6 @@
 //! `service::report` joins the services' reports into one.
 
 use super::emulator::{EmulatorProcess, PeerEvent, WithPaths};
-use super::udp::UdpReport;
 use crate::check::StageReport;
 use crate::host::Steal;
 use crate::metrics::Summary;
@@ -146,47 +145,6 @@ pub struct DelayCheck {
     pub injected_within_model_band: Option<bool>,
 }
 
-/// The feedback loop robot → emulator → console: what the return scenario
-/// did, every feedback sample accounted for, and the round trip.
-///
-/// `sent_by_robot = entered + not_taken_at_stop`, `entered + duplicated =
-/// delivered + dropped + held_at_end`, `delivered = received_by_console +
-/// unread_at_stop`: `balanced`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeedbackSection {
-    pub return_scenario: String,
-    pub seed: u64,
-    pub sent_by_robot: Option<u64>,
-    pub entered: u64,
-    pub delivered: u64,
-    /// Copies made by `duplicate` stages of the return scenario.
-    #[serde(default)]
-    pub duplicated: u64,
-    pub dropped: BTreeMap<String, u64>,
-    pub held_at_end: u64,
-    pub received_by_console: Option<u64>,
-    /// In a stopped run: samples the robot sent after the emulator had
-    /// stopped taking them, and samples the emulator delivered after the
-    /// console had stopped reading (the processes stop console first,
-    /// robot last). Both 0 in a run that ended on its own.
-    #[serde(default)]
-    pub not_taken_at_stop: u64,
-    #[serde(default)]
-    pub unread_at_stop: u64,
-    pub balanced: bool,
-    pub loss_rate: f64,
-    pub loss_rate_ci95: [f64; 2],
-    pub injected_delay_ns: Summary,
-    /// Command sent → the robot's feedback naming it received, at the console.
-    pub round_trip_ns: Option<Summary>,
-    /// The emulator's own share of each round trip (both directions).
-    pub emulator_share_ns: Option<Summary>,
-    /// The robot's position (from its feedback) against the console's,
-    /// per arm, mm: at the last feedback, and the most seen.
-    pub divergence_final_mm: Option<[f64; 2]>,
-    pub divergence_max_mm: Option<[f64; 2]>,
-}
-
 /// Where a run comes from, so that a trial can be matched to its video and
 /// robot logs: the netfi version, the command line as run, when it started
 /// (wall clock, UTC), its seed and the host.
@@ -219,10 +177,17 @@ pub struct RunReport {
     #[serde(default)]
     pub stopped: bool,
     pub frames: FrameAccount,
-    /// The whole run's realized loss; where the run had several phases or
-    /// live switches it mixes their conditions (see `phases`).
+    /// The whole run's realized loss: the scenario's drops over the frames
+    /// it decided (malformed frames, dropped before it, are in neither);
+    /// where the run had several phases or live switches it mixes their
+    /// conditions (see `phases`).
     pub loss_rate: Option<f64>,
     pub loss_rate_ci95: Option<[f64; 2]>,
+    /// The models' loss in bursts longer than the run likely met, included
+    /// in the upper end of `loss_rate_ci95` (docs/spec.md §5); absent where
+    /// no stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     /// Each stretch of the run under one condition, in time order, where
     /// the run had phases, live switches or pauses (absent otherwise).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -244,12 +209,10 @@ pub struct RunReport {
     /// Delays seen vs drawn vs the analytic law (scenarios that delay).
     pub delay_check: Option<DelayCheck>,
     pub kinematics: Option<serde_json::Value>,
-    /// The feedback loop, when it was open.
-    #[serde(default)]
-    pub feedback: Option<FeedbackSection>,
-    /// The video stream, when the run has one (`--video-mbps`).
-    #[serde(default)]
-    pub video: Option<crate::service::video::VideoSection>,
+    /// Each reverse channel's section, under its name, where the run had
+    /// it (`feedback`: the feedback loop; `video`: the video stream).
+    #[serde(flatten)]
+    pub channels: crate::service::channel::ChannelSections,
     pub processes: Vec<ProcessEnd>,
     /// What went wrong: dead processes, frames lost between processes,
     /// files cut short (`NAME.partial`).
@@ -272,11 +235,12 @@ pub struct RunReport {
     /// stages, delays, overhead, peer events, files).
     pub emulator: Option<WithPaths<EmulatorProcess>>,
     pub simulator: Option<SimulatorReport>,
-    /// The emulator's UDP side (`udp.json`), in a run with one: its
-    /// sockets, what the kernel dropped before the emulator took it, and
-    /// the senders it refused.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub udp: Option<UdpReport>,
+    /// Each transport's part of the emulator's report, under the
+    /// transport's name, where it has one (`udp`: the sockets, what the
+    /// kernel dropped before the emulator took it, and the senders it
+    /// refused).
+    #[serde(flatten)]
+    pub transports: crate::transport::TransportReports,
     /// A run of several streams (`--streams N`): each stream and the
     /// total; the fields above are then stream 0's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -313,6 +277,11 @@ pub struct PhaseFigures {
     /// stretch's frames in order).
     pub loss_rate: f64,
     pub loss_rate_ci95: [f64; 2],
+    /// The models' loss in bursts longer than the stretch likely met,
+    /// included in the upper end of `loss_rate_ci95`; absent where no
+    /// stage has such bursts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_rate_unseen_model: Option<f64>,
     /// The phase's long-run loss by its model, where it has exactly one
     /// stage that drops and its model's loss is known (0 when paused).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -128,3 +128,30 @@ fn past_the_hard_deadline_everything_is_killed() {
     let mut s = Supervisor::new(10.0);
     assert!(s.look(seen(100.0, Succeeded, Running, Running)).kill == Roles::default(), "11 + 30 + 60 s not yet passed");
 }
+
+#[test]
+fn a_run_of_the_lab_s_console_and_robot_ends_with_its_emulator() {
+    // No duration: the lab's console ends the stream; nothing else to stop.
+    let mut s = Supervisor::until(None);
+    assert_eq!(State::of_group([]), Lab);
+    assert_eq!(s.look(seen(1.0, Lab, Running, Lab)), Orders::default());
+    assert_eq!(s.look(seen(100_000.0, Lab, Running, Lab)), Orders::default(), "no hard deadline");
+    assert_eq!(s.look(seen(100_001.0, Lab, Succeeded, Lab)), Orders { done: true, ..Orders::default() });
+    assert!(!s.interrupted() && !s.died());
+    // Ctrl-C goes straight to the emulator.
+    let mut s = Supervisor::until(None);
+    let o = s.look(Seen { stop_requested: true, ..seen(2.0, Lab, Running, Lab) });
+    assert!(o.stop.emulator && s.stopped_on_request(), "{o:?}");
+    // A duration ends it at the planned end.
+    let mut s = Supervisor::until(Some(5.0));
+    assert_eq!(s.look(seen(5.5, Lab, Running, Lab)), Orders::default());
+    assert!(s.look(seen(6.1, Lab, Running, Lab)).stop.emulator);
+    // netfi's own robot behind the lab's console: stopped once the emulator ended.
+    let mut s = Supervisor::until(None);
+    assert_eq!(s.look(seen(3.0, Lab, Succeeded, Running)), Orders::default());
+    assert_eq!(s.look(seen(8.5, Lab, Succeeded, Running)), stop(false, false, true));
+    // The emulator died: the run ends, nothing of the lab's is touched.
+    let mut s = Supervisor::until(None);
+    let o = s.look(seen(1.0, Lab, Failed, Lab));
+    assert!(o.done, "{o:?}");
+}

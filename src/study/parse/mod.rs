@@ -6,10 +6,11 @@ mod raw;
 
 use super::file::{
     BlockOrder, Condition, ConditionSource, Block, Participant, Questionnaires, Study, StudyFileError, TlxWhen, TrialSpec, Within,
-    MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, RESERVED_RUN_ARGS,
+    MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, STUDY_RUN_ARGS,
 };
 use super::square::MAX_BLOCKS;
 use crate::scenario::{canonical_name, PRESET_NAMES};
+use crate::service::args::{refusal, RunArgs};
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use toml::Spanned;
@@ -121,24 +122,63 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
         }
         r => r.map(Spanned::into_inner),
     };
-    for (i, a) in raw.run_args.iter().enumerate() {
-        let flag = a.get_ref().split('=').next().unwrap_or_default();
-        if RESERVED_RUN_ARGS.contains(&flag) {
-            let own = match flag {
-                "--capture" => "write it as `trial.capture`",
-                "--rate-hz" => "write it as `trial.rate_hz`",
-                "--duration-s" | "--duration" => "write it as `trial.duration_s`",
-                _ => "the study sets it for each trial",
-            };
-            return Err(ctx.err(Some(a.span()), format!("trial.run_args[{}]", i + 1), format!("`{flag}`: {own} (the study decides {})", RESERVED_RUN_ARGS.join(", "))));
-        }
-    }
+    refuse_what_the_study_sets(ctx, &raw.run_args)?;
     if let Some(c) = &raw.capture {
         if c.trim().is_empty() {
             return Err(ctx.err(None, "trial.capture", "empty: a capture file, relative to the study file"));
         }
     }
-    Ok(TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.into_iter().map(Spanned::into_inner).collect() })
+    let spec = TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.iter().map(|a| a.get_ref().clone()).collect() };
+    check_run_args(ctx, &spec, &raw.run_args)?;
+    Ok(spec)
+}
+
+/// Refuses a `run_args` word that gives what the study decides for each
+/// trial ([`STUDY_RUN_ARGS`]), by its flag or an alias as `netfi run`
+/// declares them, saying where the file gives it instead.
+fn refuse_what_the_study_sets(ctx: &Ctx, run_args: &[Spanned<String>]) -> Result<(), StudyFileError> {
+    let cmd = RunArgs::command();
+    let flags = |arg: &clap::Arg| -> Vec<String> { arg.get_long().into_iter().chain(arg.get_all_aliases().unwrap_or_default()).map(|f| format!("--{f}")).collect() };
+    let reserved: Vec<(&clap::Arg, Option<&str>)> = STUDY_RUN_ARGS
+        .iter()
+        .map(|(id, instead)| (cmd.get_arguments().find(|a| a.get_id() == id).unwrap_or_else(|| panic!("`{id}` is no argument of `netfi run`")), *instead))
+        .collect();
+    for (i, a) in run_args.iter().enumerate() {
+        let flag = a.get_ref().split('=').next().unwrap_or_default();
+        if let Some((_, instead)) = reserved.iter().find(|(arg, _)| flags(arg).iter().any(|f| f == flag)) {
+            let own = match instead {
+                Some(field) => format!("write it as `{field}`"),
+                None => "the study sets it for each trial".to_string(),
+            };
+            let all: Vec<String> = reserved.iter().flat_map(|(arg, _)| flags(arg)).collect();
+            return Err(ctx.err(Some(a.span()), format!("trial.run_args[{}]", i + 1), format!("`{flag}`: {own} (the study decides {})", all.join(", "))));
+        }
+    }
+    Ok(())
+}
+
+/// Reads the trial's `netfi run` as `netfi run` will (a preset for its
+/// scenario): clap's refusal, at the word it names, else the run's own
+/// check.
+fn check_run_args(ctx: &Ctx, spec: &TrialSpec, run_args: &[Spanned<String>]) -> Result<(), StudyFileError> {
+    let Some(first) = run_args.first() else { return Ok(()) };
+    let capture = spec.capture.as_deref().map(std::path::Path::new);
+    let at = |i: usize| (Some(run_args[i].span()), format!("trial.run_args[{}]", i + 1));
+    let run = spec.run("Normal", capture).map_err(|e| {
+        // clap names the word it refused: a flag (with its value's name),
+        // or the value itself.
+        let named: Vec<String> = [clap::error::ContextKind::InvalidArg, clap::error::ContextKind::InvalidValue]
+            .into_iter()
+            .filter_map(|k| match e.get(k) {
+                Some(clap::error::ContextValue::String(s)) => s.split(' ').next().map(str::to_string),
+                _ => None,
+            })
+            .collect();
+        let i = named.iter().find_map(|n| run_args.iter().position(|a| a.get_ref() == n || a.get_ref().split('=').next() == Some(n.as_str())));
+        let (span, field) = i.map_or((Some(first.span()), "trial.run_args".to_string()), at);
+        ctx.err(span, field, refusal(&e))
+    })?;
+    run.validate().map_err(|e| ctx.err(Some(first.span()), "trial.run_args", e.to_string()))
 }
 
 fn order(ctx: &Ctx, raw: Option<RawOrder>) -> Result<(BlockOrder, Within), StudyFileError> {

@@ -1,6 +1,6 @@
 //! The explicit iceoryx2 configuration of one run, and iceoryx2's log level.
 
-use super::names::{Channel, Role, RunId};
+use super::names::{Port, Role, RunId};
 use super::root::{user_prefix, user_root_dir};
 use super::{
     HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES, SUBSCRIBER_BUFFER_FRAMES,
@@ -69,7 +69,7 @@ impl IpcConfig {
     }
 
     /// The service name of `channel`: `netfi/<run>/<channel>`.
-    pub fn service_name(&self, channel: Channel) -> String {
+    pub fn service_name(&self, channel: Port) -> String {
         self.run.resource_name(channel)
     }
 

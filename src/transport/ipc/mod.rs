@@ -86,6 +86,7 @@ mod publisher;
 mod root;
 mod service;
 mod subscriber;
+mod transport;
 pub mod video;
 
 pub use config::{set_log_level, IpcConfig, IpcLogLevel};
@@ -93,7 +94,8 @@ pub use liveness::{
     cleanup_dead_nodes, cleanup_dead_runs, remove_dead_run_files, remove_run_segment_if_unused, CleanupError, CleanupReport, DeadPeer,
     FailedCleanup,
 };
-pub use names::{Channel, Role, RunId, RunIdError};
+pub use names::{Port, Role, RunId, RunIdError};
+pub use transport::{Iceoryx2, Iceoryx2Args, Iceoryx2ArgsError, Iceoryx2OpenError};
 pub use node::{IpcNode, NodeOpenError};
 pub use publisher::{FramePublisher, FrameSendError, PublisherOpenError, PublisherStats};
 pub use root::{user_root_dir, user_root_dir_resolved, IPC_ROOT_ENV};
@@ -106,24 +108,8 @@ use root::{ensure_user_root_dir, user_prefix, FILE_PREFIX};
 /// The iceoryx2 service type of every port (see the module docs).
 type Ipc = iceoryx2::service::ipc::Service;
 
-/// A payload a channel carries: a fixed-size `#[repr(C)]` sample with a
-/// stable type name and an all-zero value to loan with.
-pub trait IpcPayload: iceoryx2::prelude::ZeroCopySend + Copy + core::fmt::Debug + 'static {
-    /// An all-zero sample.
-    const ZERO: Self;
-    /// The iceoryx2 type name.
-    const TYPE_NAME: &'static str;
-}
-
-impl IpcPayload for crate::sample::FrameSample {
-    const ZERO: Self = crate::sample::FrameSample::ZERO;
-    const TYPE_NAME: &'static str = crate::sample::FrameSample::TYPE_NAME;
-}
-
-impl IpcPayload for crate::sample::FeedbackSample {
-    const ZERO: Self = crate::sample::FeedbackSample::ZERO;
-    const TYPE_NAME: &'static str = crate::sample::FeedbackSample::TYPE_NAME;
-}
+/// A payload a port carries ([`crate::sample::Payload`]).
+pub use crate::sample::Payload as IpcPayload;
 
 /// Capacity of each subscriber's queue, in frames. A receiver can stall for
 /// `SUBSCRIBER_BUFFER_FRAMES / rate` (163 ms at 100 kHz) without loss.

@@ -96,70 +96,50 @@ pub enum RunIdError {
     },
 }
 
-/// One hop of the pipeline, carried by one publish/subscribe service.
+/// One hop of a run, carried by one publish/subscribe service
+/// `netfi/<run>/<name>`: its name, and the roles that publish and
+/// subscribe on it (so a dead peer is reported by role). The frames' own
+/// hops are here; a reverse channel declares its ports with its channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Channel {
-    /// Console → emulator: the frames as the console sent them.
-    Console,
-    /// Emulator → simulator: the frames that survived the scenario.
-    Emulator,
-    /// Console → simulator directly: the same frames without the emulator,
-    /// the baseline hop measured in the same run.
-    Direct,
-    /// Robot → emulator: the robot's feedback
-    /// ([`FeedbackSample`](crate::sample::FeedbackSample)), one per command
-    /// it received.
-    Feedback,
-    /// Emulator → console: the feedback that survived the return scenario.
-    FeedbackOut,
-    /// Robot → emulator: video frames, `[u8]` with a
-    /// [`VideoHeader`](crate::sample::VideoHeader) ([`video`]).
-    Video,
-    /// Emulator → console: the video frames that survived the video scenario.
-    VideoOut,
+pub struct Port {
+    name: &'static str,
+    producer: Role,
+    consumer: Role,
 }
 
-impl Channel {
-    /// Every channel: the pipeline in order, the direct baseline, then the
-    /// feedback loop.
-    pub const ALL: [Channel; 7] =
-        [Channel::Console, Channel::Emulator, Channel::Direct, Channel::Feedback, Channel::FeedbackOut, Channel::Video, Channel::VideoOut];
+impl Port {
+    /// The port `name`, published by `producer`, subscribed by `consumer`.
+    pub const fn new(name: &'static str, producer: Role, consumer: Role) -> Port {
+        Port { name, producer, consumer }
+    }
+
+    /// Console → emulator: the frames as the console sent them.
+    pub const CONSOLE: Port = Port::new("console", Role::Console, Role::Emulator);
+    /// Emulator → simulator: the frames that survived the scenario.
+    pub const EMULATOR: Port = Port::new("emulator", Role::Emulator, Role::Simulator);
+    /// Console → simulator directly: the same frames without the emulator,
+    /// the baseline hop measured in the same run.
+    pub const DIRECT: Port = Port::new("direct", Role::Console, Role::Simulator);
 
     /// The last component of the service name.
     pub fn as_str(self) -> &'static str {
-        match self {
-            Channel::Console => "console",
-            Channel::Emulator => "emulator",
-            Channel::Direct => "direct",
-            Channel::Feedback => "feedback",
-            Channel::FeedbackOut => "feedback_out",
-            Channel::Video => "video",
-            Channel::VideoOut => "video_out",
-        }
+        self.name
     }
 
-    /// The role that publishes on this channel.
+    /// The role that publishes on this port.
     pub fn producer(self) -> Role {
-        match self {
-            Channel::Console | Channel::Direct => Role::Console,
-            Channel::Emulator | Channel::FeedbackOut | Channel::VideoOut => Role::Emulator,
-            Channel::Feedback | Channel::Video => Role::Simulator,
-        }
+        self.producer
     }
 
-    /// The role that subscribes to this channel.
+    /// The role that subscribes to this port.
     pub fn consumer(self) -> Role {
-        match self {
-            Channel::Console | Channel::Feedback | Channel::Video => Role::Emulator,
-            Channel::Emulator | Channel::Direct => Role::Simulator,
-            Channel::FeedbackOut | Channel::VideoOut => Role::Console,
-        }
+        self.consumer
     }
 }
 
-impl fmt::Display for Channel {
+impl fmt::Display for Port {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
+        f.write_str(self.name)
     }
 }
 

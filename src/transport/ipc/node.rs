@@ -12,7 +12,7 @@ use iceoryx2::prelude::{NodeBuilder, NodeName, SignalHandlingMode};
 use super::liveness::{cleanup_dead_nodes, CleanupError, CleanupReport};
 use super::publisher::{FramePublisher, PublisherOpenError};
 use super::subscriber::{FrameSubscriber, SubscriberOpenError};
-use super::{init_log_level, Channel, Ipc, IpcConfig, IpcPayload, Role};
+use super::{init_log_level, Port, Ipc, IpcConfig, IpcPayload, Role};
 
 /// Latched once SIGINT or SIGTERM has been seen: iceoryx2 reports a signal
 /// only once, and every node of the process must keep seeing the request.
@@ -24,8 +24,8 @@ static TERMINATION_REQUESTED: AtomicBool = AtomicBool::new(false);
 pub struct IpcNode {
     /// Dropped by hand first in `Drop`, so the run's last node can then
     /// remove the run's management segment.
-    node: ManuallyDrop<Node<Ipc>>,
-    config: IpcConfig,
+    pub(super) node: ManuallyDrop<Node<Ipc>>,
+    pub(super) config: IpcConfig,
     role: Role,
     startup_cleanup: CleanupReport,
 }
@@ -152,13 +152,13 @@ impl IpcNode {
 
     /// Opens the publishing end of `channel`, creating the channel if this
     /// process is the first to use it.
-    pub fn publisher(&self, channel: Channel) -> Result<FramePublisher, PublisherOpenError> {
+    pub fn publisher(&self, channel: Port) -> Result<FramePublisher, PublisherOpenError> {
         self.publisher_of::<crate::sample::FrameSample>(channel)
     }
 
     /// Opens the publishing end of `channel` carrying payload `T` (the
     /// feedback channels carry [`FeedbackSample`](crate::sample::FeedbackSample)).
-    pub fn publisher_of<T: IpcPayload>(&self, channel: Channel) -> Result<FramePublisher<T>, PublisherOpenError> {
+    pub fn publisher_of<T: IpcPayload>(&self, channel: Port) -> Result<FramePublisher<T>, PublisherOpenError> {
         let p = FramePublisher::open(&self.node, &self.config, channel);
         make_private(self.config.prefix());
         p
@@ -166,28 +166,13 @@ impl IpcNode {
 
     /// Opens a subscribing end of `channel`, creating the channel if this
     /// process is the first to use it.
-    pub fn subscriber(&self, channel: Channel) -> Result<FrameSubscriber, SubscriberOpenError> {
+    pub fn subscriber(&self, channel: Port) -> Result<FrameSubscriber, SubscriberOpenError> {
         self.subscriber_of::<crate::sample::FrameSample>(channel)
     }
 
     /// Opens a subscribing end of `channel` carrying payload `T`.
-    pub fn subscriber_of<T: IpcPayload>(&self, channel: Channel) -> Result<FrameSubscriber<T>, SubscriberOpenError> {
+    pub fn subscriber_of<T: IpcPayload>(&self, channel: Port) -> Result<FrameSubscriber<T>, SubscriberOpenError> {
         let s = FrameSubscriber::open(&self.node, &self.config, channel);
-        make_private(self.config.prefix());
-        s
-    }
-
-    /// Opens the publishing end of a video channel (`video`, `video_out`)
-    /// for payloads of at most `max_len` bytes.
-    pub fn video_publisher(&self, channel: Channel, max_len: usize) -> Result<super::video::VideoPublisher, super::video::VideoOpenError> {
-        let p = super::video::VideoPublisher::open(&self.node, &self.config, channel, max_len);
-        make_private(self.config.prefix());
-        p
-    }
-
-    /// Opens the subscribing end of a video channel.
-    pub fn video_subscriber(&self, channel: Channel) -> Result<super::video::VideoSubscriber, super::video::VideoOpenError> {
-        let s = super::video::VideoSubscriber::open(&self.node, &self.config, channel);
         make_private(self.config.prefix());
         s
     }

@@ -11,7 +11,7 @@ use std::mem::MaybeUninit;
 use super::service::{open_checked, ServiceOpenError};
 use super::IpcPayload;
 use super::{
-    Channel, Ipc, IpcConfig, RunId, MAX_PUBLISHERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES,
+    Port, Ipc, IpcConfig, RunId, MAX_PUBLISHERS_PER_CHANNEL, PUBLISHER_MAX_LOANED_SAMPLES,
     SUBSCRIBER_BUFFER_FRAMES,
 };
 use crate::sample::FrameSample;
@@ -28,7 +28,7 @@ pub struct FramePublisher<T: IpcPayload = FrameSample> {
     port: Publisher<Ipc, T, ()>,
     service: PortFactory<Ipc, T, ()>,
     run: RunId,
-    channel: Channel,
+    channel: Port,
     stats: PublisherStats,
 }
 
@@ -112,7 +112,7 @@ pub enum FrameSendError {
         /// The run.
         run: RunId,
         /// The channel.
-        channel: Channel,
+        channel: Port,
         /// The consumer role of the channel.
         consumer: &'static str,
         /// The queue capacity in frames.
@@ -126,7 +126,7 @@ pub enum FrameSendError {
         /// The run.
         run: RunId,
         /// The channel.
-        channel: Channel,
+        channel: Port,
         /// The iceoryx2 failure.
         #[source]
         source: LoanError,
@@ -138,7 +138,7 @@ pub enum FrameSendError {
         /// The run.
         run: RunId,
         /// The channel.
-        channel: Channel,
+        channel: Port,
         /// The iceoryx2 failure.
         #[source]
         source: SendError,
@@ -149,7 +149,7 @@ impl<T: IpcPayload> FramePublisher<T> {
     pub(super) fn open(
         node: &Node<Ipc>,
         config: &IpcConfig,
-        channel: Channel,
+        channel: Port,
     ) -> Result<Self, PublisherOpenError> {
         let service_name = config.service_name(channel);
         let run = config.run_id();
@@ -280,7 +280,7 @@ impl<T: IpcPayload> FramePublisher<T> {
     }
 
     /// The channel this publisher sends on.
-    pub fn channel(&self) -> Channel {
+    pub fn channel(&self) -> Port {
         self.channel
     }
 

@@ -9,7 +9,7 @@ use iceoryx2::service::builder::publish_subscribe::{
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use super::{
-    Channel, Ipc, IpcConfig, HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL,
+    Port, Ipc, IpcConfig, HISTORY_FRAMES, MAX_NODES_PER_CHANNEL, MAX_PUBLISHERS_PER_CHANNEL,
     MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES, SUBSCRIBER_MAX_BORROWED_SAMPLES,
 };
 use super::IpcPayload;
@@ -21,7 +21,7 @@ use super::IpcPayload;
 pub(super) fn open_service<T: IpcPayload>(
     node: &Node<Ipc>,
     config: &IpcConfig,
-    channel: Channel,
+    channel: Port,
 ) -> Result<PortFactory<Ipc, T, ()>, PublishSubscribeOpenOrCreateError> {
     let name = ServiceName::new(&config.service_name(channel))
         .expect("a validated run id always forms a valid service name");
@@ -76,7 +76,7 @@ pub enum ServiceOpenError {
 pub(super) fn open_checked<T: IpcPayload>(
     node: &Node<Ipc>,
     config: &IpcConfig,
-    channel: Channel,
+    channel: Port,
 ) -> Result<PortFactory<Ipc, T, ()>, ServiceOpenError> {
     open_service(node, config, channel).map_err(|source| {
         let (service, run) = (config.service_name(channel), config.run_id().to_string());
@@ -114,7 +114,7 @@ pub(super) fn is_incompatible(e: &PublishSubscribeOpenOrCreateError) -> bool {
 /// What the existing service of `channel` carries against what this build
 /// speaks, for a refusal's message: both payload type names, sizes and
 /// alignments (read from the service's static configuration).
-pub(super) fn mismatch<T: IpcPayload>(config: &IpcConfig, channel: Channel) -> String {
+pub(super) fn mismatch<T: IpcPayload>(config: &IpcConfig, channel: Port) -> String {
     use iceoryx2::prelude::MessagingPattern;
     use iceoryx2::service::Service as _;
     let ours = format!("{} ({} bytes, aligned to {})", T::TYPE_NAME, core::mem::size_of::<T>(), core::mem::align_of::<T>());

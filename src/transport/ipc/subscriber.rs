@@ -10,7 +10,7 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use super::service::{open_checked, ServiceOpenError};
 use super::IpcPayload;
 use super::{
-    Channel, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
+    Port, Ipc, IpcConfig, RunId, MAX_SUBSCRIBERS_PER_CHANNEL, SUBSCRIBER_BUFFER_FRAMES,
 };
 use crate::sample::FrameSample;
 
@@ -22,7 +22,7 @@ pub struct FrameSubscriber<T: IpcPayload = FrameSample> {
     port: Subscriber<Ipc, T, ()>,
     service: PortFactory<Ipc, T, ()>,
     run: RunId,
-    channel: Channel,
+    channel: Port,
     stats: SubscriberStats,
     config: IpcConfig,
 }
@@ -95,7 +95,7 @@ pub enum FrameRecvError {
         /// The run.
         run: RunId,
         /// The channel.
-        channel: Channel,
+        channel: Port,
         /// The iceoryx2 failure.
         #[source]
         source: ReceiveError,
@@ -106,7 +106,7 @@ impl<T: IpcPayload> FrameSubscriber<T> {
     pub(super) fn open(
         node: &Node<Ipc>,
         config: &IpcConfig,
-        channel: Channel,
+        channel: Port,
     ) -> Result<Self, SubscriberOpenError> {
         let service_name = config.service_name(channel);
         let run = config.run_id();
@@ -222,7 +222,7 @@ impl<T: IpcPayload> FrameSubscriber<T> {
     }
 
     /// The channel this subscriber receives from.
-    pub fn channel(&self) -> Channel {
+    pub fn channel(&self) -> Port {
         self.channel
     }
 

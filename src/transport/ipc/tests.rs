@@ -40,7 +40,7 @@ fn config_is_explicit_and_prefixed_per_run() {
     let root = user_root_dir();
     assert_eq!(config.iceoryx2().global.root_path().to_string(), root.to_string_lossy());
     assert!(private_dir::is_private(&root));
-    assert_eq!(config.service_name(Channel::Console), "netfi/r1/console");
+    assert_eq!(config.service_name(Port::CONSOLE), "netfi/r1/console");
     assert_eq!(config.node_name(Role::Simulator), "netfi/r1/simulator");
     assert_eq!(
         config.role_of_node_name("netfi/r1/emulator"),

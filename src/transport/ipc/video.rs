@@ -26,8 +26,60 @@ use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, PortFactory as
 use iceoryx2::sample::Sample;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use super::{Channel, FrameRecvError, FrameSendError, Ipc, IpcConfig, RunId, MAX_NODES_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL};
-use crate::sample::VideoHeader;
+use super::{FrameRecvError, Port, Role, FrameSendError, Ipc, IpcConfig, RunId, MAX_NODES_PER_CHANNEL, MAX_SUBSCRIBERS_PER_CHANNEL};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// The user header of a video frame on the video channels (`video`,
+/// `video_out`): the payload is the frame's bytes, a `[u8]` slice of `len`
+/// bytes; this header travels beside it (docs/interface.md, "Video").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("netfi::VideoHeader.v1")]
+#[repr(C)]
+pub struct VideoHeader {
+    /// Camera send time, stamped just before publishing.
+    pub send_ns: u64,
+    /// The camera's frame counter (0, 1, 2, …); in the end marker, the
+    /// number of frames sent.
+    pub frame_index: u64,
+    /// Assigned by the emulator when the frame enters it (0, 1, 2, …).
+    pub ingress_index: u64,
+    /// Time the emulator took the frame off `video`.
+    pub ingress_ns: u64,
+    /// Scheduled release time (ingress + injected delay).
+    pub release_sched_ns: u64,
+    /// Actual release time, stamped just before publishing on `video_out`.
+    pub release_ns: u64,
+    /// Payload bytes (the slice's length).
+    pub len: u32,
+    /// [`VideoHeader::FLAG_END`], [`VideoHeader::FLAG_KEY`].
+    pub flags: u32,
+    /// The frame's place in its group of pictures (0: the key frame).
+    pub gop_index: u32,
+    /// Zero.
+    pub _reserved: u32,
+}
+
+const _: () = assert!(core::mem::size_of::<VideoHeader>() == 64);
+const _: () = assert!(core::mem::align_of::<VideoHeader>() == 8);
+
+impl VideoHeader {
+    /// The iceoryx2 type name of the header; must match between processes.
+    pub const TYPE_NAME: &'static str = "netfi::VideoHeader.v1";
+    /// The end of the video stream: not a frame, no payload.
+    pub const FLAG_END: u32 = 1;
+    /// A key frame (the first of its group of pictures).
+    pub const FLAG_KEY: u32 = 2;
+
+    /// An end marker after `sent` frames.
+    pub fn end_marker(sent: u64) -> VideoHeader {
+        VideoHeader { frame_index: sent, flags: VideoHeader::FLAG_END, ..VideoHeader::default() }
+    }
+
+    /// Whether this is the end marker.
+    pub fn is_end(&self) -> bool {
+        self.flags & VideoHeader::FLAG_END != 0
+    }
+}
 
 /// Frames a video subscriber's queue holds (about 1 s at 60 Hz).
 pub const VIDEO_BUFFER_FRAMES: usize = 64;
@@ -42,12 +94,16 @@ pub const DEFAULT_VIDEO_MAX_BYTES: usize = 4 << 20;
 
 type VideoService = PortFactory<Ipc, [u8], VideoHeader>;
 
-fn open_video_service(node: &Node<Ipc>, config: &IpcConfig, channel: Channel) -> Result<VideoService, VideoOpenError> {
+/// Robot → emulator: video frames, `[u8]` with a [`VideoHeader`].
+pub const VIDEO: Port = Port::new("video", Role::Simulator, Role::Emulator);
+/// Emulator → console: the video frames that survived the video scenario.
+pub const VIDEO_OUT: Port = Port::new("video_out", Role::Emulator, Role::Console);
+
+fn open_video_service(node: &Node<Ipc>, config: &IpcConfig, channel: Port) -> Result<VideoService, VideoOpenError> {
     let name = ServiceName::new(&config.service_name(channel)).expect("a validated run id always forms a valid service name");
-    let (subscribers, borrowed) = match channel {
-        Channel::Video => (1, VIDEO_HELD_FRAMES),
-        _ => (MAX_SUBSCRIBERS_PER_CHANNEL, 1),
-    };
+    // The emulator holds the frames it takes off `video` borrowed while
+    // its link delays them.
+    let (subscribers, borrowed) = if channel == VIDEO { (1, VIDEO_HELD_FRAMES) } else { (MAX_SUBSCRIBERS_PER_CHANNEL, 1) };
     node.service_builder(&name)
         .publish_subscribe::<[u8]>()
         .user_header::<VideoHeader>()
@@ -93,7 +149,7 @@ pub struct VideoPublisher {
     port: Publisher<Ipc, [u8], VideoHeader>,
     service: VideoService,
     run: RunId,
-    channel: Channel,
+    channel: Port,
     max_len: usize,
 }
 
@@ -104,7 +160,7 @@ impl std::fmt::Debug for VideoPublisher {
 }
 
 impl VideoPublisher {
-    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Channel, max_len: usize) -> Result<Self, VideoOpenError> {
+    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Port, max_len: usize) -> Result<Self, VideoOpenError> {
         let service = open_video_service(node, config, channel)?;
         let port = service
             .publisher_builder()
@@ -214,7 +270,7 @@ pub struct VideoSubscriber {
     port: Subscriber<Ipc, [u8], VideoHeader>,
     service: VideoService,
     run: RunId,
-    channel: Channel,
+    channel: Port,
 }
 
 impl std::fmt::Debug for VideoSubscriber {
@@ -224,7 +280,7 @@ impl std::fmt::Debug for VideoSubscriber {
 }
 
 impl VideoSubscriber {
-    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Channel) -> Result<Self, VideoOpenError> {
+    pub(super) fn open(node: &Node<Ipc>, config: &IpcConfig, channel: Port) -> Result<Self, VideoOpenError> {
         let service = open_video_service(node, config, channel)?;
         let err = |e: String| VideoOpenError { service: config.service_name(channel), what: e };
         let port = service.subscriber_builder().buffer_size(VIDEO_BUFFER_FRAMES).create().map_err(|e| err(e.to_string()))?;
@@ -246,5 +302,38 @@ impl VideoSubscriber {
     /// Publishers registered on the channel (0 or 1).
     pub fn peers_connected(&self) -> usize {
         self.service.dynamic_config().number_of_publishers()
+    }
+}
+
+impl super::IpcNode {
+    /// Opens the publishing end of a video channel (`video`, `video_out`)
+    /// for payloads of at most `max_len` bytes.
+    pub fn video_publisher(&self, channel: Port, max_len: usize) -> Result<VideoPublisher, VideoOpenError> {
+        let p = VideoPublisher::open(&self.node, &self.config, channel, max_len);
+        super::node::make_private(self.config.prefix());
+        p
+    }
+
+    /// Opens the subscribing end of a video channel.
+    pub fn video_subscriber(&self, channel: Port) -> Result<VideoSubscriber, VideoOpenError> {
+        let s = VideoSubscriber::open(&self.node, &self.config, channel);
+        super::node::make_private(self.config.prefix());
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn video_header_type_name_and_offsets_are_pinned() {
+        // SAFETY: type_name only returns the attribute's string.
+        assert_eq!(unsafe { VideoHeader::type_name() }, VideoHeader::TYPE_NAME);
+        let h = VideoHeader::default();
+        let base = &h as *const _ as usize;
+        assert_eq!(&h.ingress_index as *const _ as usize - base, 16);
+        assert_eq!(&h.len as *const _ as usize - base, 48);
+        assert_eq!(&h.gop_index as *const _ as usize - base, 56);
     }
 }

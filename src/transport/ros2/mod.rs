@@ -19,12 +19,14 @@
 //!   QoS; who left and why; who cannot match and why) is polled off the hot
 //!   path ([`Ros2Node::poll`]).
 
+pub mod args;
 pub mod names;
 pub mod node;
 pub mod port;
 pub mod qos;
 pub mod senders;
 
+pub use args::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use names::{NameError, TopicName, TypeName};
 pub use node::{GraphEvent, Happened, OpenError, Remote, Role, Ros2Node};
 pub use port::{unix_ns, Payload, Reader, Slots, TakeError, Taken, WriteFailure, Writer};

@@ -124,6 +124,8 @@ fn port_error(port: &UdpPort, e: impl fmt::Display) -> PortError {
 pub struct UdpSource {
     port: UdpPort,
     arena: Option<Rc<RefCell<Arena>>>,
+    /// The console's address, shared with the return path once known.
+    console: super::ConsoleAddr,
     taken: u64,
     idle_end_ns: Option<u64>,
     last_rx_ns: u64,
@@ -132,13 +134,17 @@ pub struct UdpSource {
 
 impl UdpSource {
     /// A source taking ITP frames (`arena: None`) or raw datagrams (into
-    /// `arena`) off `port`, from the console `console` names.
-    pub fn new(mut port: UdpPort, arena: Option<Rc<RefCell<Arena>>>, console: ConsolePolicy) -> UdpSource {
-        match console {
-            ConsolePolicy::Named(addr) => port.accept_only(addr),
+    /// `arena`) off `port`, from the console `policy` names; the console's
+    /// address goes into `console` once known.
+    pub fn new(mut port: UdpPort, arena: Option<Rc<RefCell<Arena>>>, policy: ConsolePolicy, console: super::ConsoleAddr) -> UdpSource {
+        match policy {
+            ConsolePolicy::Named(addr) => {
+                port.accept_only(addr);
+                console.set(Some(addr));
+            }
             ConsolePolicy::FirstDatagram => {}
         }
-        UdpSource { port, arena, taken: 0, idle_end_ns: None, last_rx_ns: 0, ended: false }
+        UdpSource { port, arena, console, taken: 0, idle_end_ns: None, last_rx_ns: 0, ended: false }
     }
 
     /// The datagrams from other senders, refused.
@@ -191,6 +197,7 @@ impl UdpSource {
     #[cold]
     fn pair(&mut self, from: SocketAddr) {
         self.port.accept_only(from);
+        self.console.set(Some(from));
         eprintln!(
             "emulator: UDP ingress udp://{} paired with its first sender, udp://{from}, as the console (--console-from first); \
              datagrams from any other address are refused and counted",
@@ -252,8 +259,12 @@ impl FrameSource for UdpSource {
     }
 
     #[inline]
-    fn sender(&self) -> Option<&PeerAddr> {
-        self.port.peer()
+    fn sender(&self) -> Option<SocketAddr> {
+        self.port.peer().map(PeerAddr::addr)
+    }
+
+    fn senders(&mut self) -> Vec<String> {
+        self.sender().map(|a| vec![format!("udp://{a}")]).unwrap_or_default()
     }
 
     #[inline]
@@ -364,7 +375,7 @@ mod tests {
     #[test]
     fn an_itp_source_keeps_the_true_length_and_a_raw_one_the_slot() {
         let console = loopback();
-        let mut itp = UdpSource::new(loopback(), None, ConsolePolicy::FirstDatagram);
+        let mut itp = UdpSource::new(loopback(), None, ConsolePolicy::FirstDatagram, Default::default());
         let to = PeerAddr::new(itp.local_addr());
         console.send_to(&[1u8; 300], &to).unwrap();
         let s = recv_one(&mut itp);
@@ -383,7 +394,7 @@ mod tests {
         assert_eq!(itp.foreign().named().collect::<Vec<_>>(), vec![(stranger.local_addr(), 1)]);
 
         let arena = Rc::new(RefCell::new(Arena::new(2)));
-        let mut raw = UdpSource::new(loopback(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()));
+        let mut raw = UdpSource::new(loopback(), Some(arena.clone()), ConsolePolicy::Named(console.local_addr()), Default::default());
         console.send_to(&[3u8; 2000], &PeerAddr::new(raw.local_addr())).unwrap();
         let s = recv_one(&mut raw);
         assert!(s.is_raw());
@@ -424,7 +435,7 @@ mod tests {
     #[test]
     fn an_idle_source_ends_the_stream_once() {
         let console = loopback();
-        let mut src = UdpSource::new(loopback(), None, ConsolePolicy::Named(console.local_addr())).with_idle_end(1_000_000);
+        let mut src = UdpSource::new(loopback(), None, ConsolePolicy::Named(console.local_addr()), Default::default()).with_idle_end(1_000_000);
         let mut s = FrameSample::ZERO;
         std::thread::sleep(std::time::Duration::from_millis(3));
         assert!(!src.try_recv(&mut s).unwrap(), "no end before the first datagram");

@@ -25,15 +25,28 @@
 //!   ingress takes only its console's frames ([`ConsolePolicy`]) and its
 //!   return path only the robot's datagrams (the egress port accepts only
 //!   the robot's address). Unlike `connect(2)`, what is refused is counted,
-//!   and a handle made by [`UdpPort::try_clone`] keeps the peer.
+//!   and a handle made by [`UdpPort::try_clone`] keeps the peer. An IPv4
+//!   peer is the same peer when a dual-stack socket (bound to `[::]`) sees
+//!   it as an IPv4-mapped address ([`peers::same_sender`]).
 //!
 //! Sockets here know nothing about frames, scenarios or the emulator; the
 //! frame source and sink over them ([`UdpSource`], [`UdpSink`], with the
 //! raw-mode [`Arena`]) are in [`frames`].
 
+pub mod args;
 pub mod frames;
 pub mod peers;
+pub mod report;
+pub mod transport;
+pub use args::{Payload, UdpArgs, UdpArgsError};
 pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
+pub use report::{BoundEndpoints, ForeignSender, UdpReport};
+pub use transport::{ConsoleAddr, ConsoleUnnamed, Udp, UdpSession, UdpSideError, RAW_DEFAULT_QUEUE_CAPACITY};
+
+/// The name of the return path (what the robot sends back, relayed to the
+/// console) in a lane's reports: its key in `emulator.json`'s paths and
+/// `udp.json`'s `return_path`.
+pub const RETURN_PATH: &str = "return";
 pub use peers::{ConsolePolicy, ConsolePolicyError, ForeignSenders, Refused, RefusedSender, FOREIGN_SENDERS_NAMED};
 
 use socket2::{Domain, Protocol, SockAddr, Socket, Type};
@@ -310,7 +323,7 @@ impl UdpPort {
     pub fn recv_from(&self, buf: &mut [u8]) -> Result<Option<Datagram>, UdpRecvError> {
         for _ in 0..REFUSED_PER_RECEIVE {
             match self.recv_any(buf)? {
-                Some(d) if self.peer.as_ref().is_some_and(|p| p.addr() != d.from) => {
+                Some(d) if self.peer.as_ref().is_some_and(|p| !peers::same_sender(p.addr(), d.from)) => {
                     let mut r = self.refused.get();
                     r.count(d.from);
                     self.refused.set(r);

@@ -56,6 +56,16 @@ impl FromStr for ConsolePolicy {
     }
 }
 
+/// Whether datagrams from `from` come from `peer`. A socket bound to
+/// IPv6's wildcard (`[::]`) also takes IPv4 datagrams, and gives their
+/// senders as IPv4-mapped addresses (`[::ffff:127.0.0.1]:5`): such an
+/// address is the same sender as its IPv4 self, however either was
+/// named.
+#[inline]
+pub fn same_sender(peer: SocketAddr, from: SocketAddr) -> bool {
+    peer.port() == from.port() && peer.ip().to_canonical() == from.ip().to_canonical()
+}
+
 /// How many distinct refused senders are named in a report; datagrams from
 /// further ones are counted together.
 pub const FOREIGN_SENDERS_NAMED: usize = 16;
@@ -76,6 +86,8 @@ impl ForeignSenders {
     /// Counts one datagram from `from`.
     #[inline]
     pub fn count(&mut self, from: SocketAddr) {
+        // An IPv4 sender is named as such, also on a dual-stack socket.
+        let from = SocketAddr::new(from.ip().to_canonical(), from.port());
         self.total += 1;
         for slot in self.named.iter_mut() {
             match slot {
@@ -144,6 +156,22 @@ mod tests {
             let e = bad.parse::<ConsolePolicy>().unwrap_err();
             assert!(e.to_string().contains("ADDR:PORT") && e.to_string().contains("`first`"), "{e}");
         }
+    }
+
+    #[test]
+    fn an_ipv4_mapped_sender_is_its_ipv4_self_and_nothing_else() {
+        let v4: SocketAddr = "127.0.0.1:4000".parse().unwrap();
+        let mapped: SocketAddr = "[::ffff:127.0.0.1]:4000".parse().unwrap();
+        assert!(same_sender(v4, mapped) && same_sender(mapped, v4) && same_sender(mapped, mapped) && same_sender(v4, v4));
+        for other in ["[::ffff:127.0.0.1]:4001", "[::ffff:127.0.0.2]:4000", "[::1]:4000", "[::127.0.0.1]:4000", "127.0.0.2:4000"] {
+            assert!(!same_sender(v4, other.parse().unwrap()), "{other}");
+        }
+        let v6: SocketAddr = "[2001:db8::1]:4000".parse().unwrap();
+        assert!(same_sender(v6, v6) && !same_sender(v6, "[2001:db8::2]:4000".parse().unwrap()));
+        let mut f = ForeignSenders::default();
+        f.count(mapped);
+        f.count(v4);
+        assert_eq!(f.report().senders, [RefusedSender { addr: v4, datagrams: 2 }]);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! `delay` and `jitter` as netem's `delay`: its own tables, or a
 //! distribution table of its own.
 
-use super::{pct, time_us};
+use super::{pct, tick_time_us};
 use anyhow::{bail, Result};
 use netfi::fit::family::Hyperexp;
 use netfi::model::{DelayDist, DelayParams, Jitter, JitterDist, JitterParams, Order};
@@ -14,7 +14,7 @@ const NETEM_DIST_SCALE: f64 = 8192.0;
 /// `jitter` as netem's `delay … distribution …`: the command text, the
 /// note, and the longest delay netem can give (mean + 4 sigma, its tables'
 /// reach).
-pub(super) fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)> {
+pub(super) fn jitter_as_netem(p: &JitterParams, label: &str) -> Result<(String, String, f64)> {
     let j = Jitter::new(p).map_err(|e| anyhow::anyhow!("{e}"))?;
     // The standard deviation of netem's table variate for each law.
     let table_sd = match p.dist {
@@ -24,7 +24,11 @@ pub(super) fn jitter_as_netem(p: &JitterParams) -> Result<(String, String, f64)>
     };
     let sigma_ms = p.sd_ms / table_sd;
     let rho = p.correlation.get();
-    let mut text = format!("delay {} {}", time_us(p.mean_ms.get()), time_us(sigma_ms));
+    let mut text = format!(
+        "delay {} {}",
+        tick_time_us(label, "delay", "`mean_ms`", p.mean_ms.get())?,
+        tick_time_us(label, "jitter", &format!("`sd_ms` / {table_sd:.4}, netem's {} table's spread", p.dist.name()), sigma_ms)?
+    );
     if rho > 0.0 {
         text.push(' ');
         text.push_str(&pct(rho));
@@ -63,11 +67,15 @@ pub(super) fn delay_as_netem(p: &DelayParams, label: &str) -> Result<(String, St
         ""
     };
     match p.dist {
-        DelayDist::None => Ok((format!("delay {}", time_us(min)), "exact (constant delay)".into(), min, None)),
+        DelayDist::None => Ok((format!("delay {}", tick_time_us(label, "delay", "`min_ms`", min)?), "exact (constant delay)".into(), min, None)),
         DelayDist::Uniform => {
             let j = p.jitter_ms.map_or(0.0, |j| j.get());
             Ok((
-                format!("delay {} {}", time_us(min + j / 2.0), time_us(j / 2.0)),
+                format!(
+                    "delay {} {}",
+                    tick_time_us(label, "delay", "`min_ms` + `jitter_ms` / 2", min + j / 2.0)?,
+                    tick_time_us(label, "jitter", "`jitter_ms` / 2", j / 2.0)?
+                ),
                 format!("exact up to microseconds (netem's default uniform jitter, mean ± half-width){fifo}"),
                 min + j,
                 None,
@@ -136,7 +144,11 @@ fn hyperexp_as_netem(p: &DelayParams, label: &str, fifo: &str) -> Result<(String
     );
     let longest = realized.iter().copied().fold(0.0, f64::max);
     Ok((
-        format!("delay {} {} distribution {name}", time_us(mean), time_us(scale)),
+        format!(
+            "delay {} {} distribution {name}",
+            tick_time_us(label, "delay", "the mean, `min_ms` + the hyperexponential's", mean)?,
+            tick_time_us(label, "jitter", "the table's scale, from `weights` and `rates_per_ms`", scale)?
+        ),
         note,
         longest,
         Some((name, body)),

@@ -155,6 +155,27 @@ fn time_us(ms: f64) -> String {
     format!("{}us", (ms * 1e3).round() as u64)
 }
 
+/// The longest `delay` or `jitter` tc takes, in µs. iproute2 before 6.10
+/// (Debian 12 ships 6.1) keeps both in netem's 32-bit fields of scheduler
+/// ticks, 15.625 a µs (`/proc/net/psched`'s 1000/64), and refuses a time
+/// whose ticks do not fit: ⌊2^32 / 15.625⌋ µs, about 274.9 s. `slot`'s
+/// times are 64-bit and not bounded so.
+const TC_TICK_TIME_US_MAX: u64 = 274_877_906;
+
+/// [`time_us`] for netem's `delay` or `jitter` (`what`), which stage
+/// field(s) `fields` gave; refused beyond [`TC_TICK_TIME_US_MAX`], where
+/// tc would stop the script.
+fn tick_time_us(label: &str, what: &str, fields: &str, ms: f64) -> Result<String> {
+    let us = (ms * 1e3).round();
+    if us > TC_TICK_TIME_US_MAX as f64 {
+        bail!(
+            "{label}: netem's `{what}` would be {us:.0} µs (from {fields}), beyond what tc takes: iproute2 before 6.10 keeps delay and jitter in 32-bit fields of scheduler ticks, so at most {TC_TICK_TIME_US_MAX} µs ({:.3} s)",
+            TC_TICK_TIME_US_MAX as f64 / 1e6
+        );
+    }
+    Ok(time_us(ms))
+}
+
 
 #[cfg(test)]
 mod tests;

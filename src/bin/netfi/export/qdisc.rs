@@ -3,7 +3,7 @@
 use super::delay::{delay_as_netem, jitter_as_netem};
 use super::link::{rate_as_netem, slot_line};
 use super::loss::{corrupt_line, ge_lomax_as_gilbert};
-use super::{pct, tc_field, time_us, stage_label, TC_U32_MAX};
+use super::{pct, stage_label, tc_field, tick_time_us, TC_U32_MAX};
 use anyhow::{bail, Result};
 use netfi::scenario::{ModelSpec, StageSpec};
 
@@ -26,7 +26,8 @@ pub(super) struct Netem {
     rate_limit: Option<u64>,
     /// A generated distribution table: its name and its file.
     pub(super) table: Option<(String, String)>,
-    longest_delay_ms: f64,
+    /// The longest delay netem will give, ms.
+    pub(super) longest_delay_ms: f64,
 }
 
 impl Netem {
@@ -100,7 +101,7 @@ impl Netem {
                 text
             }
             ModelSpec::Jitter(p) => {
-                let (text, n, longest) = jitter_as_netem(p)?;
+                let (text, n, longest) = jitter_as_netem(p, label)?;
                 note(&mut self.notes, n);
                 self.longest_delay_ms = self.longest_delay_ms.max(longest);
                 text
@@ -118,7 +119,7 @@ impl Netem {
                 tc_field(label, "gap", p.gap, TC_U32_MAX)?;
                 note(&mut self.notes, "exact (delay … reorder … gap …)".into());
                 self.longest_delay_ms = self.longest_delay_ms.max(p.delay_ms.get());
-                format!("delay {} reorder {} gap {}", time_us(p.delay_ms.get()), pct(p.p.get()), p.gap)
+                format!("delay {} reorder {} gap {}", tick_time_us(label, "delay", "`delay_ms`", p.delay_ms.get())?, pct(p.p.get()), p.gap)
             }
             ModelSpec::Slot(p) => slot_line(p, label, &mut self.notes)?,
             ModelSpec::Rate(p) => {

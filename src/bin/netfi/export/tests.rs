@@ -1,6 +1,7 @@
 use super::delay::{delay_as_netem, TABLE_SIZE};
 use super::loss::{corrupt_line, ge_lomax_as_gilbert};
 use super::pct;
+use super::qdisc::Netem;
 use netfi::fit::family::mean_loss_run_exact;
 use netfi::model::{DelayDist, DelayParams, GeLomax, GeLomaxParams, Millis, Order};
 
@@ -58,4 +59,18 @@ fn corrupt_per_byte_becomes_the_per_packet_rate() {
     assert!(notes[0].contains("approximated") && notes[0].contains("per packet"), "{notes:?}");
     let p = netfi::model::CorruptParams::new(0.02).unwrap();
     assert_eq!(corrupt_line(&p, "s", &mut notes), "corrupt 2%");
+}
+
+/// The queue an export sizes is refused beyond tc's 32-bit `limit`. Delays
+/// tc takes (at most 274.9 s, four tables' sigma beyond the mean) hold
+/// at most 1.7·10⁹ packets at 10⁶ Hz, so only a longer hold reaches it.
+#[test]
+fn a_queue_beyond_tcs_32_bit_limit_is_refused() {
+    let mut n = Netem::default();
+    n.longest_delay_ms = 3_600_000.0;
+    let e = n.queue_limit(1e6).unwrap_err().to_string();
+    assert!(e.contains("--rate-hz 1000000") && e.contains("32-bit `limit` takes (at most 4294967295)"), "{e}");
+    let mut n = Netem::default();
+    n.longest_delay_ms = 3_600_000.0;
+    assert_eq!(n.queue_limit(9e5).unwrap(), 4_050_000_001);
 }

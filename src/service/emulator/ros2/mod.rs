@@ -9,14 +9,18 @@
 //! `emulator.json`, `ros2.json` says what the lane relayed with which QoS,
 //! who came and left, and why its stream ended.
 
+
+pub mod plan;
+pub mod topic;
+
 use crate::scenario::Scenario;
 use crate::service::args::EmulatorArgs;
 use crate::service::emulator::config::LaneConfig;
 use crate::service::emulator::lane::Lane;
 use crate::service::emulator::opening::PathPlan;
 use crate::service::emulator::path::{Path, Reverse};
-use crate::service::emulator::ros2_plan::{config, LaneTopics, Plan, DEFAULT_QUEUE_CAPACITY};
-use crate::service::emulator::ros2_topic::{Forward, Return, Topic, TopicPorts};
+use crate::service::emulator::ros2::plan::{config, LaneTopics, Plan, DEFAULT_QUEUE_CAPACITY};
+use crate::service::emulator::ros2::topic::{Forward, Return, Topic, TopicPorts};
 use crate::service::emulator::run;
 use crate::service::schema::ros2::{EndpointSeen, EventRow, Ros2Report, TopicReport};
 use crate::service::schema::EmulatorReport;
@@ -252,14 +256,15 @@ fn open_lane(node: &Rc<RefCell<Ros2Node>>, plan: &Plan, l: &LaneConfig, topics: 
     std::fs::create_dir_all(&l.out_dir).map_err(|cause| OpenError::Dir { dir: l.out_dir.clone(), cause })?;
     let a = &l.args;
     let (from, to) = &topics.forward;
-    let idle_end_ns = a.udp.idle_end_ms.map(|ms| (ms * 1e6) as u64);
+    let idle_end_ns = a.ends.idle_end_ms.map(|ms| (ms * 1e6) as u64);
     let wait_ns = a.wait_for_peer_s.map(|s| (s * 1e9) as u64);
     let chan = Topic::<Forward>::new(ports(node, plan, &end.forward, (from, to), l.queue_capacity + 1, idle_end_ns, wait_ns)?, node.clone(), t0_ns);
     let scenario = Scenario::new(&l.scenario, l.seed).map_err(OpenError::from)?;
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true).map_err(OpenError::from)?;
     let mut reverse: Vec<Box<dyn Reverse>> = Vec::new();
     if let (Some((from, to)), Some(o)) = (&topics.ret, &end.ret) {
-        let rp = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
+        let r = &a.channels.feedback;
+        let rp = PathPlan::resolve("--return-scenario", r.return_scenario.as_deref(), r.return_seed, l.seed, seeds::ROS2_RETURN_TAG, DEFAULT_QUEUE_CAPACITY)?;
         let chan = Topic::<Return>::new(ports(node, plan, o, (from, to), rp.queue_capacity + 1, None, None)?, node.clone(), t0_ns);
         reverse.push(Box::new(rp.open(chan, a.expected_frames, &l.out_dir)?));
     }
@@ -308,7 +313,7 @@ fn seen(node: &Ros2Node, from: &TopicName, to: &TopicName, t0_ns: u64) -> (Vec<E
 }
 
 /// `ros2.json`'s part of one direction.
-fn topic_report<D: crate::service::emulator::ros2_topic::Direction>(node: &Ros2Node, o: &Opened, chan: Option<&Topic<D>>, from: &TopicName, to: &TopicName, max_bytes: usize, t0_ns: u64) -> TopicReport {
+fn topic_report<D: crate::service::emulator::ros2::topic::Direction>(node: &Ros2Node, o: &Opened, chan: Option<&Topic<D>>, from: &TopicName, to: &TopicName, max_bytes: usize, t0_ns: u64) -> TopicReport {
     let (endpoints, events) = seen(node, from, to, t0_ns);
     let (slots, _, high) = chan.map_or((0, 0, 0), |c| c.slots());
     TopicReport {
@@ -370,7 +375,7 @@ pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorE
             l.queue_capacity
         );
     }
-    let nodes = (0..lanes.len()).map(|_| None).collect();
+    let nodes: Vec<Option<&crate::transport::IpcNode>> = (0..lanes.len()).map(|_| None).collect();
     let before_finish = |k: usize, lane: &Ros2Lane| {
         let topics = &plan.lanes[k];
         let end = &ends[k];
@@ -410,5 +415,5 @@ pub fn main(args: &EmulatorArgs) -> Result<Vec<EmulatorReport>, super::EmulatorE
         });
         after
     };
-    Ok(run::run(&cfg, lanes, nodes, before_finish)?)
+    Ok(run::run(&cfg, lanes, &nodes, before_finish)?)
 }

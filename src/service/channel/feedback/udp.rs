@@ -14,19 +14,14 @@
 //! freed when the datagram is sent or dropped.
 
 use crate::injector::DropCause;
-use crate::service::emulator::forward::ConsoleAddr;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take};
-use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
+use super::{ReturnArgs, ReturnExtra, ReturnOpenError};
+use crate::service::channel::declare::ChannelOpen;
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, ReturnExtra};
-use crate::transport::udp::{Arena, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
-use crate::transport::{Endpoint, PortError};
-
-/// Default release-queue capacity of the return path (and of the forward
-/// stream in raw mode): 4096 datagrams. Each needs an arena slot of 64 KiB
-/// of address space (256 MiB in all, of which only the pages datagrams
-/// touch become resident).
-pub const RAW_DEFAULT_QUEUE_CAPACITY: usize = 4096;
+use crate::service::schema::Account;
+use crate::transport::udp::{Arena, ConsoleAddr, PeerAddr, UdpPort, ARENA_SLOT_BYTES};
+use crate::transport::PortError;
 
 /// A return datagram held by the link.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -80,7 +75,7 @@ impl UdpReturn {
 impl Channel for UdpReturn {
     type Item = Held;
     type Extra = ReturnExtra;
-    const NAME: &'static str = "return";
+    const NAME: &'static str = crate::transport::udp::RETURN_PATH;
     const TRACE_FILE: &'static str = "trace_return.csv";
     const ENDING: Ending = Ending::WithForward;
 
@@ -152,24 +147,15 @@ impl Channel for UdpReturn {
     }
 }
 
-/// The return path, with UDP on both sides and unless `--no-return`.
-pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let a = o.args;
-    let (Some(ingress), Some(egress)) = (o.t.udp_ingress(), o.t.udp_egress()) else { return Ok(None) };
-    if a.udp.no_return {
-        return Ok(None);
-    }
-    let to = match &a.udp.return_to {
-        Some(Endpoint::Udp(addr)) => Some(*addr),
-        Some(Endpoint::Iceoryx2) => return Err(OpenError::ReturnTo),
-        None => None,
-    };
-    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::RETURN_TAG, RAW_DEFAULT_QUEUE_CAPACITY)?;
-    let mut from_robot = egress.try_clone().map_err(OpenError::ReturnPort)?;
-    if let Some(robot) = a.udp.robot_from {
+/// The return path of a lane with UDP on both sides, as `plan` settled it.
+pub fn open(a: &ReturnArgs, plan: &PathPlan, o: &Opening) -> Result<Box<dyn Reverse>, ChannelOpen<ReturnOpenError>> {
+    let session = o.sessions.udp.as_ref().expect("the UDP return path is asked for with UDP on both sides");
+    let u = &o.shape.transports.udp;
+    let port = |cause| ChannelOpen::Own(ReturnOpenError::ReturnPort(cause));
+    let (mut from_robot, to_console) = session.return_ports().map_err(port)?.expect("both sides are UDP");
+    if let Some(robot) = u.robot_from {
         from_robot.accept_only(robot);
     }
-    let to_console = ingress.try_clone().map_err(OpenError::ReturnPort)?;
-    let chan = UdpReturn::new(from_robot, to_console, to, o.console.clone(), a.return_path.return_scenario.is_some(), plan.queue_capacity);
-    Ok(Some(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?)))
+    let chan = UdpReturn::new(from_robot, to_console, u.return_to, session.console.clone(), a.return_scenario.is_some(), plan.queue_capacity);
+    Ok(Box::new(plan.open(chan, o.expected_frames, o.out_dir)?))
 }

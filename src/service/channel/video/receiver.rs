@@ -5,9 +5,10 @@ use super::camera::pattern;
 use super::{spawn, VideoArgs, VideoError, Worker};
 use crate::clock::now_ns;
 use crate::metrics::{LatencyHistogram, Summary};
-use crate::sample::VideoHeader;
+use crate::transport::ipc::video::VideoHeader;
 use crate::transport::ipc::video::VideoSubscriber;
-use crate::transport::{Channel, Role};
+use crate::transport::ipc::video::VIDEO_OUT;
+use crate::transport::Role;
 use crate::video::Freezes;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -58,7 +59,7 @@ pub fn receiver(run_id: &str, args: &VideoArgs, out: &Path, wait_s: f64) -> Resu
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let w = spawn("netfi-video-rx", move |stop| {
         let node = crate::transport::open_node(&run_id, Role::Console)?;
-        let port = node.video_subscriber(Channel::VideoOut).map_err(|source| VideoError::Port { direction: "emulator → console", source })?;
+        let port = node.video_subscriber(VIDEO_OUT).map_err(|source| VideoError::Port { direction: "emulator → console", source })?;
         let _ = ready_tx.send(());
         run_receiver(port, Received::new(hz, log), wait_ns, &stop)
     })?;

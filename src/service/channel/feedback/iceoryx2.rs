@@ -11,11 +11,20 @@
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
 use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
-use crate::service::link::DEFAULT_QUEUE_CAPACITY;
+use super::{FeedbackExtra, ReturnOpenError};
+use crate::service::channel::declare::ChannelOpen;
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, FeedbackExtra};
-use crate::transport::{FeedbackEgress, FeedbackIngress, PortError};
+use crate::service::schema::Account;
+use crate::transport::{FramePublisher, FrameSink, FrameSource, FrameSubscriber, Port, PortError, Role};
+
+/// The feedback path's name: its key in `emulator.json`'s paths.
+pub const NAME: &str = "feedback";
+
+/// Robot → emulator: the robot's feedback, one per command it received.
+pub const FEEDBACK: Port = Port::new("feedback", Role::Simulator, Role::Emulator);
+/// Emulator → console: the feedback that survived the return scenario.
+pub const FEEDBACK_OUT: Port = Port::new("feedback_out", Role::Emulator, Role::Console);
 
 impl Carried for FeedbackSample {
     /// A copy of feedback is a second release of the same sample; a flip
@@ -28,29 +37,30 @@ impl Carried for FeedbackSample {
     }
 }
 
-/// The feedback direction's ports.
-pub struct Feedback {
-    source: FeedbackIngress,
-    sink: FeedbackEgress,
+/// The feedback direction's ports: the robot's iceoryx2 ports, or any
+/// source and sink of feedback samples (tests drive in-memory ones).
+pub struct Feedback<S = FrameSubscriber<FeedbackSample>, K = FramePublisher<FeedbackSample>> {
+    source: S,
+    sink: K,
     sample: FeedbackSample,
 }
 
-impl Feedback {
+impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Feedback<S, K> {
     /// The feedback channel from `source` to `sink`.
-    pub fn new(source: FeedbackIngress, sink: FeedbackEgress) -> Feedback {
+    pub fn new(source: S, sink: K) -> Feedback<S, K> {
         Feedback { source, sink, sample: FeedbackSample::ZERO }
     }
 
-    /// The two ports (tests drive in-memory ones).
-    pub fn ports_mut(&mut self) -> (&mut FeedbackIngress, &mut FeedbackEgress) {
+    /// The two ports.
+    pub fn ports_mut(&mut self) -> (&mut S, &mut K) {
         (&mut self.source, &mut self.sink)
     }
 }
 
-impl Channel for Feedback {
+impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Channel for Feedback<S, K> {
     type Item = FeedbackSample;
     type Extra = FeedbackExtra;
-    const NAME: &'static str = "feedback";
+    const NAME: &'static str = NAME;
     const TRACE_FILE: &'static str = "trace_feedback.csv";
     const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
 
@@ -95,13 +105,11 @@ impl Channel for Feedback {
     }
 }
 
-/// The feedback path the arguments ask for: with iceoryx2 on both sides
-/// and unless `--no-feedback`, through `--return-scenario` (default Normal).
-pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let a = o.args;
-    let Some(node) = o.t.node.as_ref().filter(|_| !a.udp.ingress.is_udp() && !a.udp.egress.is_udp() && !a.return_path.no_feedback) else { return Ok(None) };
-    let plan = PathPlan::resolve("--return-scenario", a.return_path.return_scenario.as_deref(), a.return_path.return_seed, o.seed, crate::service::seeds::FEEDBACK_TAG, DEFAULT_QUEUE_CAPACITY)?;
-    let (source, sink) = crate::transport::open_feedback(node)?;
-    Ok(Some(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?)))
+/// The feedback path of a lane with iceoryx2 on both sides, as `plan`
+/// settled it.
+pub fn open(plan: &PathPlan, o: &Opening) -> Result<Box<dyn Reverse>, ChannelOpen<ReturnOpenError>> {
+    let node = o.sessions.iceoryx2.as_ref().expect("the feedback path is asked for with iceoryx2 on both sides");
+    let sink = node.publisher_of::<FeedbackSample>(FEEDBACK_OUT).map_err(|cause| ChannelOpen::Own(ReturnOpenError::FeedbackOut(cause)))?;
+    let source = node.subscriber_of::<FeedbackSample>(FEEDBACK).map_err(|cause| ChannelOpen::Own(ReturnOpenError::FeedbackIn(cause)))?;
+    Ok(Box::new(plan.open(Feedback::new(source, sink), o.expected_frames, o.out_dir)?))
 }
-

@@ -21,8 +21,9 @@
 //!   `--rate`), publishes each topic with its recorded type, and skips, with
 //!   a count, messages in an encapsulation other than little-endian CDR.
 
-use crate::service::args::{millis, seconds, DEFAULT_MAX_BYTES};
-use crate::service::emulator::ros2_plan::{domain, Ros2PlanError};
+use crate::service::args::{millis, seconds};
+use crate::transport::ros2::DEFAULT_MAX_BYTES;
+use crate::service::emulator::ros2::plan::{domain, Ros2PlanError};
 use crate::transport::ros2::{port::unix_ns, qos, NameError, OpenError, Payload, Role, Ros2Node, Slots, TakeError, TopicName, TypeName};
 use clap::{Args, Subcommand};
 use std::cell::RefCell;
@@ -249,7 +250,7 @@ pub fn replay(a: &ReplayArgs) -> Result<u64, BagError> {
     if !(a.rate.is_finite() && a.rate > 0.0) {
         return Err(BagError::Rate(a.rate));
     }
-    let bytes = std::fs::read(&a.file).map_err(|e| BagError::Read(a.file.clone(), e))?;
+    let bytes = crate::load::read_file(&a.file).map_err(|e| BagError::Read(a.file.clone(), e))?;
     let mut node = Ros2Node::open(domain(a.ros2_domain)?)?;
     let (mut writers, mut by_channel, mut messages) = (Vec::new(), BTreeMap::new(), Vec::new());
     let mut skipped = 0u64;

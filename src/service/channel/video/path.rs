@@ -17,13 +17,30 @@
 
 use crate::injector::{DropCause, Invalid};
 use crate::service::emulator::path::{Channel, Ending, Path, Reverse, Take, GRACE_NS};
-use crate::service::emulator::opening::{OpenError, Opening, PathPlan};
+use crate::service::channel::declare::ChannelOpen;
+use crate::service::emulator::opening::{Opening, PathPlan};
 use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, VideoExtra};
-use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO_HELD_FRAMES};
-use crate::service::video::VideoArgs;
-use crate::transport::{Channel as Port, IpcNode, PortError};
+use crate::service::schema::Account;
+use serde::{Deserialize, Serialize};
+use crate::transport::ipc::video::{VideoPublisher, VideoSample, VideoSubscriber, VIDEO, VIDEO_HELD_FRAMES, VIDEO_OUT};
+use super::VideoArgs;
+use crate::transport::{IpcNode, PortError};
 use crate::video::{drop_kind, DropKind};
+
+/// What the video channel adds to its path's report: `entered = delivered
+/// + dropped + held_at_end`, and every drop is damaged or lost.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VideoExtra {
+    pub max_bytes: usize,
+    /// Frames the camera said it sent (from its end marker).
+    pub sent_by_camera: Option<u64>,
+    /// Dropped frames of several packets taken by a loss stage.
+    pub dropped_damaged: u64,
+    /// Dropped frames lost whole.
+    pub dropped_lost: u64,
+    pub bytes_entered: u64,
+    pub bytes_delivered: u64,
+}
 
 /// What the emulator's video link holds: the slot of the borrowed sample,
 /// and what the link and the release need of it.
@@ -43,7 +60,7 @@ impl Carried for VideoItem {
 }
 
 /// The video direction's ports and the samples it holds borrowed.
-pub struct Video {
+pub struct VideoPorts {
     source: VideoSubscriber,
     sink: VideoPublisher,
     slots: Vec<Option<VideoSample>>,
@@ -56,10 +73,10 @@ pub struct Video {
     unsubscribed: u64,
 }
 
-impl Channel for Video {
+impl Channel for VideoPorts {
     type Item = VideoItem;
     type Extra = VideoExtra;
-    const NAME: &'static str = "video";
+    const NAME: &'static str = super::NAME;
     const TRACE_FILE: &'static str = "trace_video.csv";
     const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
 
@@ -151,26 +168,32 @@ impl Channel for Video {
     }
 }
 
-/// The video path, when the run has video (`--video-mbps`) and an iceoryx2
-/// node.
-pub fn open(o: &Opening) -> Result<Option<Box<dyn Reverse>>, OpenError> {
-    let Some(node) = o.t.node.as_ref() else { return Ok(None) };
-    Ok(path(&o.args.video, node, o.seed, o.out_dir)?.map(|p| Box::new(p) as Box<dyn Reverse>))
+/// Why the video path's ports could not be opened.
+#[derive(Debug, thiserror::Error)]
+#[error("opening the {direction} video port")]
+pub struct VideoPortError {
+    /// `robot → emulator` or `emulator → console`.
+    pub direction: &'static str,
+    #[source]
+    pub cause: crate::transport::ipc::video::VideoOpenError,
 }
 
-/// The video path of `v` on `node` (`None` without video), through
-/// `--video-scenario` (default Normal), its seed derived from `seed` unless
-/// given, its trace in `out_dir`.
-pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path) -> Result<Option<Path<Video>>, OpenError> {
-    if !v.on() {
-        return Ok(None);
-    }
-    v.validate()?;
-    let mut plan = PathPlan::resolve("--video-scenario", v.video_scenario.as_deref(), v.video_seed, seed, crate::service::seeds::VIDEO_TAG, VIDEO_HELD_FRAMES - 1)?;
+/// The video path of a lane with iceoryx2 on both sides, as `plan`
+/// settled it.
+pub fn open(v: &VideoArgs, plan: &PathPlan, o: &Opening) -> Result<Box<dyn Reverse>, ChannelOpen<VideoPortError>> {
+    let node = o.sessions.iceoryx2.as_ref().expect("the video path is asked for with iceoryx2 on both sides");
+    Ok(Box::new(path(v, node, plan, o.out_dir)?))
+}
+
+/// The video path of `v` on `node`, as `plan` settled it (its queue holds
+/// one frame fewer than the emulator may borrow), its trace in `out_dir`.
+pub fn path(v: &VideoArgs, node: &IpcNode, plan: &PathPlan, out_dir: &std::path::Path) -> Result<Path<VideoPorts>, ChannelOpen<VideoPortError>> {
+    let mut plan = plan.clone();
     plan.queue_capacity = VIDEO_HELD_FRAMES - 1;
-    let source = node.video_subscriber(Port::Video).map_err(|cause| OpenError::VideoPort { direction: "robot → emulator", cause })?;
-    let sink = node.video_publisher(Port::VideoOut, v.video_max_bytes).map_err(|cause| OpenError::VideoPort { direction: "emulator → console", cause })?;
-    let chan = Video {
+    let port = |direction| move |cause| ChannelOpen::Own(VideoPortError { direction, cause });
+    let source = node.video_subscriber(VIDEO).map_err(port("robot → emulator"))?;
+    let sink = node.video_publisher(VIDEO_OUT, v.video_max_bytes).map_err(port("emulator → console"))?;
+    let chan = VideoPorts {
         source,
         sink,
         slots: (0..VIDEO_HELD_FRAMES).map(|_| None).collect(),
@@ -183,5 +206,5 @@ pub fn path(v: &VideoArgs, node: &IpcNode, seed: u64, out_dir: &std::path::Path)
         unsubscribed: 0,
     };
     // An hour at 60 Hz sizes the trace.
-    Ok(Some(plan.open(chan, 3600 * 60, out_dir)?))
+    Ok(plan.open(chan, 3600 * 60, out_dir)?)
 }

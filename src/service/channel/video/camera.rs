@@ -3,8 +3,9 @@
 
 use super::{spawn, VideoArgs, VideoError, Worker};
 use crate::clock::now_ns;
-use crate::sample::VideoHeader;
-use crate::transport::{Channel, Role};
+use crate::transport::ipc::video::VideoHeader;
+use crate::transport::ipc::video::VIDEO;
+use crate::transport::Role;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -42,7 +43,7 @@ fn run_camera(run_id: &str, args: &VideoArgs, stop: &AtomicBool) -> Result<Camer
     let node = crate::transport::open_node(run_id, Role::Simulator)?;
     // The camera writes what its sizes say; the run's maximum is the emulator's check.
     let max = args.video_max_bytes.max(gop.key_bytes as usize);
-    let mut port = node.video_publisher(Channel::Video, max).map_err(|source| VideoError::Port { direction: "robot → emulator", source })?;
+    let mut port = node.video_publisher(VIDEO, max).map_err(|source| VideoError::Port { direction: "robot → emulator", source })?;
     let mut r = CameraReport {
         frame_hz: args.video_hz,
         gop_frames: gop.frames,

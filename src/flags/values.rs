@@ -109,6 +109,14 @@ pub fn frames() -> RangedU64ValueParser<u64> {
     RangedU64ValueParser::new().range(1..=MAX_RUN_FRAMES)
 }
 
+/// The highest `--capture-max-records`: 2^32 records.
+pub const MAX_CAPTURE_RECORDS: u64 = 1 << 32;
+
+/// `--capture-max-records`: 1 to [`MAX_CAPTURE_RECORDS`].
+pub fn capture_max_records() -> RangedU64ValueParser<u64> {
+    RangedU64ValueParser::new().range(1..=MAX_CAPTURE_RECORDS)
+}
+
 /// A core number: 0 to [`MAX_CORE`].
 pub fn core() -> RangedU64ValueParser<usize> {
     RangedU64ValueParser::new().range(0..=MAX_CORE)

@@ -1,5 +1,6 @@
 //! The video stream's flags, the same for `netfi run` and each service.
 
+use crate::flags::{Argv, Render};
 use crate::transport::ipc::video::DEFAULT_VIDEO_MAX_BYTES;
 use crate::video::{Gop, GopError};
 use clap::Args;
@@ -13,6 +14,15 @@ pub enum VideoArgsError {
     /// A video option without the video stream.
     #[error("--video-scenario and --video-seed need --video-mbps (the video stream is off)")]
     OptionsWithoutVideo,
+    /// Video over another transport than iceoryx2.
+    #[error("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's")]
+    NeedsIceoryx2,
+    /// Video with several streams.
+    #[error("--video-mbps goes with one stream: the video path is stream 0's, and --streams {streams} asks for more")]
+    OneStream {
+        /// The streams asked for.
+        streams: u32,
+    },
     /// A largest payload out of range.
     #[error("--video-max-bytes must be from 1 to {MAX_VIDEO_MAX_BYTES} bytes, got {got}")]
     MaxBytes {
@@ -25,7 +35,7 @@ pub enum VideoArgsError {
 pub const MAX_VIDEO_MAX_BYTES: usize = crate::model::backlog::MAX_PAYLOAD_BYTES as usize;
 
 /// The video stream's flags, the same for `netfi run` and each service.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct VideoArgs {
     /// Add a synthetic camera on the robot side streaming video back to the
     /// console at this mean bit rate, Mbit/s (default: no video).
@@ -95,29 +105,19 @@ impl VideoArgs {
         }
         Ok(())
     }
-
-    /// The flags as an argv (nothing when off).
-    pub fn argv(&self) -> Vec<String> {
-        let Some(mbps) = self.video_mbps else { return Vec::new() };
-        let mut a = vec![
-            "--video-mbps".to_string(),
-            mbps.to_string(),
-            "--video-hz".into(),
-            self.video_hz.to_string(),
-            "--video-gop".into(),
-            self.video_gop.to_string(),
-            "--video-key-ratio".into(),
-            self.video_key_ratio.to_string(),
-            "--video-max-bytes".into(),
-            self.video_max_bytes.to_string(),
-        ];
-        if let Some(s) = &self.video_scenario {
-            a.extend(["--video-scenario".to_string(), s.clone()]);
-        }
-        if let Some(s) = self.video_seed {
-            a.extend(["--video-seed".to_string(), s.to_string()]);
-        }
-        a
-    }
 }
 
+impl Render for VideoArgs {
+    /// Only what differs from the defaults: nothing for a run without
+    /// video whose other video flags are left alone.
+    fn render(&self, a: &mut Argv) {
+        let d = VideoArgs::default();
+        a.opt("--video-mbps", self.video_mbps)
+            .unless_default("--video-hz", self.video_hz, d.video_hz)
+            .unless_default("--video-gop", self.video_gop, d.video_gop)
+            .unless_default("--video-key-ratio", self.video_key_ratio, d.video_key_ratio)
+            .unless_default("--video-max-bytes", self.video_max_bytes, d.video_max_bytes)
+            .opt("--video-scenario", self.video_scenario.as_ref())
+            .opt("--video-seed", self.video_seed);
+    }
+}

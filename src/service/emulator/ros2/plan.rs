@@ -24,7 +24,7 @@ const SLOTS_BYTES_MAX: usize = 64 << 30;
 #[derive(Debug, thiserror::Error)]
 pub enum Ros2PlanError {
     #[error("--ros2-topic relays ROS 2 topics: --ingress and --egress (iceoryx2 or UDP endpoints) do not apply")]
-    UdpEndpoints,
+    Endpoints,
     #[error("--ros2-topic makes a lane of each pair; --streams does not apply (give --ros2-topic once per lane)")]
     Streams,
     #[error("--video-mbps, --no-feedback, --return-to, --no-return and --payload apply to iceoryx2 and UDP lanes, not to ROS 2 topics")]
@@ -131,13 +131,13 @@ pub struct Plan {
 impl Plan {
     pub fn of(a: &EmulatorArgs) -> Result<Plan, Ros2PlanError> {
         let r = &a.ros2;
-        if a.udp.ingress.is_udp() || a.udp.egress.is_udp() {
-            return Err(Ros2PlanError::UdpEndpoints);
+        if a.ends.ingress != crate::service::args::EndsArgs::default().ingress || a.ends.egress != crate::service::args::EndsArgs::default().egress {
+            return Err(Ros2PlanError::Endpoints);
         }
         if a.stream.streams > 1 {
             return Err(Ros2PlanError::Streams);
         }
-        if a.video.on() || a.return_path.no_feedback || a.udp.return_to.is_some() || a.udp.no_return || a.udp.payload == crate::transport::Payload::Raw {
+        if a.channels.video.on() || a.channels.feedback.no_feedback || a.transports != crate::transport::TransportArgs::default() {
             return Err(Ros2PlanError::NotForTopics);
         }
         if r.ros2_return.len() > r.ros2_topic.len() {
@@ -224,7 +224,7 @@ pub fn config(args: &EmulatorArgs, lanes: usize) -> Result<EmulatorConfig, Ros2P
             stream: StreamArgs::default(),
             ..args.clone()
         };
-        lane_args.return_path.return_seed = args.return_path.return_seed.map(|s| seeds::stream(s, k));
+        lane_args.channels.map_seeds(|s| seeds::stream(s, k));
         out.push(LaneConfig { args: lane_args, scenario, seed: lane_seed, queue_capacity, out_dir });
     }
     Ok(EmulatorConfig::with_lanes(args, out)?)

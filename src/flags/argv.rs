@@ -42,7 +42,7 @@ impl Argv {
         self
     }
 
-    /// Words rendered elsewhere (the video flags).
+    /// Words as they are: a positional argument, or flags for another build.
     pub fn words(&mut self, words: impl IntoIterator<Item = String>) -> &mut Self {
         self.0.extend(words);
         self

@@ -3,12 +3,12 @@
 //! the domain and the limits. `crate::service::emulator::ros2` resolves
 //! them.
 
-use super::argv::{Argv, Render};
-use super::values::{millis, seconds};
+use crate::flags::values::{millis, seconds};
+use crate::flags::{Argv, Render};
 use clap::Args;
 
 /// The emulator's ROS 2 flags (`netfi emulator --ros2-topic …`).
-#[derive(Debug, Clone, Default, PartialEq, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct Ros2Args {
     /// Relay the messages of ROS 2 topic IN to topic OUT (any message type,
     /// byte for byte) through the scenario; repeatable: each pair is a lane
@@ -52,6 +52,22 @@ pub struct Ros2Args {
 
 /// Default `--ros2-max-bytes`: 64 KiB.
 pub const DEFAULT_MAX_BYTES: usize = 1 << 16;
+
+impl Default for Ros2Args {
+    /// No ROS 2 lanes; the limits at their defaults.
+    fn default() -> Self {
+        Ros2Args {
+            ros2_topic: Vec::new(),
+            ros2_return: Vec::new(),
+            ros2_type: Vec::new(),
+            ros2_qos: Vec::new(),
+            ros2_domain: None,
+            ros2_max_bytes: DEFAULT_MAX_BYTES,
+            ros2_discovery_s: 10.0,
+            ros2_linger_ms: 1000.0,
+        }
+    }
+}
 
 impl Ros2Args {
     /// Whether the emulator relays ROS 2 topics.

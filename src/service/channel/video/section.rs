@@ -3,7 +3,8 @@
 
 use super::{CameraReport, ReceivedVideo};
 use crate::metrics::Summary;
-use crate::service::schema::{PathReport, VideoExtra};
+use super::VideoExtra;
+use crate::service::schema::PathReport;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -68,6 +69,22 @@ impl VideoSection {
             bytes_delivered: e.extra.bytes_delivered,
             stages: serde_json::to_value(&e.measures.stages).unwrap_or_default(),
             balanced,
+        })
+    }
+
+    /// What is wrong when the section does not balance.
+    pub fn fault(&self) -> Option<String> {
+        (!self.balanced).then(|| {
+            let f = &self.frames;
+            format!(
+                "video not balanced: {} frames through the emulator ({} whole, {} damaged, {} lost), dropped {}, held at end {}",
+                f.sent,
+                f.whole,
+                f.damaged,
+                f.lost,
+                crate::service::report::dropped_list(&self.dropped),
+                self.held_at_end
+            )
         })
     }
 
