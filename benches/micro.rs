@@ -28,10 +28,16 @@ fn decisions(c: &mut Criterion) {
         ("gilbert_elliott", "[[stage]]\nmodel = \"gilbert_elliott\"\np = 0.01\nr = 0.1\nloss_bad = 0.7\nloss_good = 0.001\n"),
         ("delay DLM-2", "[[stage]]\npreset = \"DLM-2\"\n"),
         ("outage CLM-2", "[[stage]]\npreset = \"CLM-2\"\n"),
+        ("jitter", "[[stage]]\nmodel = \"jitter\"\nmean_ms = 20\nsd_ms = 5\ndist = \"normal\"\ncorrelation = 0.5\n"),
+        ("rate", "[[stage]]\nmodel = \"rate\"\nrate_bit_s = 1e6\n"),
     ];
+    // A trace link's file is read by the shell: its schedule given here,
+    // one opportunity a millisecond.
+    let schedule: String = (1..=1000).map(|ms| format!("{ms}\n")).collect();
+    let trace = ModelSpec::LinkTrace(netfi::model::LinkTraceParams::new("bench", netfi::model::Schedule::parse(&schedule).unwrap()));
     let mut g = c.benchmark_group("decide");
-    for (name, text) in cases {
-        let mut m = model(text);
+    let models = cases.into_iter().map(|(name, text)| (name, model(text))).chain([("trace", trace.build().unwrap())]);
+    for (name, mut m) in models {
         let mut rng = StageRng::seed_from_u64(1);
         let mut t = 0u64;
         g.bench_function(name, |b| {

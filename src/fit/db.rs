@@ -128,6 +128,14 @@ pub struct Entry<P> {
     pub params: P,
 }
 
+impl<P> Entry<P> {
+    /// The same entry with its parameters mapped by `f`.
+    pub fn map<Q>(self, f: impl FnOnce(P) -> Q) -> Entry<Q> {
+        let Entry { target, model, exact, realized, realized_ci95, seed, confirm_seed, frames, windows, tool_version, params } = self;
+        Entry { target, model, exact, realized, realized_ci95, seed, confirm_seed, frames, windows, tool_version, params: f(params) }
+    }
+}
+
 /// The whole database.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -309,39 +317,19 @@ impl Database {
 
     /// Every entry, for checks that treat all kinds alike.
     pub fn entries(&self) -> Vec<EntryView> {
-        fn view<P>(kind: Kind, e: &Entry<P>, spec: ModelSpec) -> EntryView {
-            EntryView {
-                kind,
-                target: e.target,
-                spec,
-                exact: e.exact,
-                realized: e.realized,
-                realized_ci95: e.realized_ci95,
-                seed: e.seed,
-                confirm_seed: e.confirm_seed,
-                frames: e.frames,
-            }
-        }
         let mut out = Vec::new();
-        out.extend(self.loss.iter().map(|e| view(Kind::Loss, e, ModelSpec::GeLomax(e.params.clone()))));
-        out.extend(self.delay.iter().map(|e| view(Kind::Delay, e, ModelSpec::Delay(e.params.clone()))));
-        out.extend(self.outage.iter().map(|e| view(Kind::Outage, e, ModelSpec::Outage(e.params.clone()))));
+        out.extend(self.loss.iter().map(|e| EntryView { kind: Kind::Loss, entry: e.clone().map(ModelSpec::GeLomax) }));
+        out.extend(self.delay.iter().map(|e| EntryView { kind: Kind::Delay, entry: e.clone().map(ModelSpec::Delay) }));
+        out.extend(self.outage.iter().map(|e| EntryView { kind: Kind::Outage, entry: e.clone().map(ModelSpec::Outage) }));
         out
     }
 }
 
-/// One entry of any kind.
+/// One entry of any kind, its parameters as a model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EntryView {
     pub kind: Kind,
-    pub target: f64,
-    pub spec: ModelSpec,
-    pub exact: f64,
-    pub realized: f64,
-    pub realized_ci95: [f64; 2],
-    pub seed: u64,
-    pub confirm_seed: u64,
-    pub frames: u64,
+    pub entry: Entry<ModelSpec>,
 }
 
 /// How many combined standard errors an independent re-simulation may be
@@ -351,7 +339,7 @@ pub const CONSISTENCY_Z: f64 = 4.5;
 
 impl EntryView {
     fn name(&self) -> String {
-        format!("{} {}", self.kind.name(), Grid::of(self.kind).show(self.target))
+        format!("{} {}", self.kind.name(), Grid::of(self.kind).show(self.entry.target))
     }
 
     /// Without simulating: the parameters are valid, their closed-form value
@@ -359,26 +347,26 @@ impl EntryView {
     /// and the stored realized value is within the tolerance.
     pub fn check_stored(&self) -> Result<(), String> {
         let interval = (1e9 / super::DEFAULT_FRAME_RATE_HZ).round() as u64;
-        let exact = super::family::metrics_exact(&self.spec, &[self.kind.primary()], interval)
+        let exact = super::family::metrics_exact(&self.entry.params, &[self.kind.primary()], interval)
             .ok_or_else(|| format!("{}: parameters invalid", self.name()))?[0];
-        if (exact - self.exact).abs() > 1e-9 * self.exact.abs() {
-            return Err(format!("{}: closed form gives {exact}, the entry says {}", self.name(), self.exact));
+        if (exact - self.entry.exact).abs() > 1e-9 * self.entry.exact.abs() {
+            return Err(format!("{}: closed form gives {exact}, the entry says {}", self.name(), self.entry.exact));
         }
-        let rel = |v: f64| ((v - self.target) / self.target).abs();
+        let rel = |v: f64| ((v - self.entry.target) / self.entry.target).abs();
         if rel(exact) > super::TOLERANCE_REL / 5.0 {
             return Err(format!("{}: closed form {exact} is {:.3}% off", self.name(), rel(exact) * 100.0));
         }
-        if rel(self.realized) > super::TOLERANCE_REL {
+        if rel(self.entry.realized) > super::TOLERANCE_REL {
             return Err(format!(
                 "{}: realized {} is {:.3}% off",
                 self.name(),
-                self.realized,
-                rel(self.realized) * 100.0
+                self.entry.realized,
+                rel(self.entry.realized) * 100.0
             ));
         }
-        let [lo, hi] = self.realized_ci95;
-        if !(lo <= self.realized && self.realized <= hi) {
-            return Err(format!("{}: realized {} outside its own interval [{lo}, {hi}]", self.name(), self.realized));
+        let [lo, hi] = self.entry.realized_ci95;
+        if !(lo <= self.entry.realized && self.entry.realized <= hi) {
+            return Err(format!("{}: realized {} outside its own interval [{lo}, {hi}]", self.name(), self.entry.realized));
         }
         Ok(())
     }
@@ -386,17 +374,17 @@ impl EntryView {
     /// Re-simulating with the stored confirmation seed gives the stored
     /// value, interval and frame count exactly.
     pub fn check_reproduces(&self) -> Result<(), String> {
-        let (e, frames) = self.confirm(self.confirm_seed).map_err(|e| format!("{}: {e}", self.name()))?;
-        if e.value != self.realized || e.ci95 != self.realized_ci95 || frames != self.frames {
+        let (e, frames) = self.confirm(self.entry.confirm_seed).map_err(|e| format!("{}: {e}", self.name()))?;
+        if e.value != self.entry.realized || e.ci95 != self.entry.realized_ci95 || frames != self.entry.frames {
             return Err(format!(
                 "{}: seed {} re-simulates to {} {:?} over {frames} frames, the entry says {} {:?} over {}",
                 self.name(),
-                self.confirm_seed,
+                self.entry.confirm_seed,
                 e.value,
                 e.ci95,
-                self.realized,
-                self.realized_ci95,
-                self.frames
+                self.entry.realized,
+                self.entry.realized_ci95,
+                self.entry.frames
             ));
         }
         Ok(())
@@ -406,22 +394,22 @@ impl EntryView {
     /// tolerance of the target and agrees with the stored value within
     /// [`CONSISTENCY_Z`] combined standard errors.
     pub fn check_independent(&self) -> Result<(), String> {
-        let seed = stream_seed(self.confirm_seed, 1, "faultdb/verify");
+        let seed = stream_seed(self.entry.confirm_seed, 1, "faultdb/verify");
         let (e, _) = self.confirm(seed).map_err(|e| format!("{}: {e}", self.name()))?;
-        let rel = ((e.value - self.target) / self.target).abs();
+        let rel = ((e.value - self.entry.target) / self.entry.target).abs();
         if rel > super::TOLERANCE_REL {
             return Err(format!("{}: seed {seed} realizes {} ({:.3}% off)", self.name(), e.value, rel * 100.0));
         }
         let se = |ci: [f64; 2]| (ci[1] - ci[0]) / 2.0 / 1.96;
-        let combined = se(e.ci95).hypot(se(self.realized_ci95));
-        if (e.value - self.realized).abs() > CONSISTENCY_Z * combined {
+        let combined = se(e.ci95).hypot(se(self.entry.realized_ci95));
+        if (e.value - self.entry.realized).abs() > CONSISTENCY_Z * combined {
             return Err(format!(
                 "{}: seed {seed} realizes {} {:?}, inconsistent with the stored {} {:?}",
                 self.name(),
                 e.value,
                 e.ci95,
-                self.realized,
-                self.realized_ci95
+                self.entry.realized,
+                self.entry.realized_ci95
             ));
         }
         Ok(())
@@ -436,7 +424,7 @@ impl EntryView {
 
     fn confirm(&self, seed: u64) -> Result<(super::Estimate, u64), FitError> {
         let interval = (1e9 / super::DEFAULT_FRAME_RATE_HZ).round() as u64;
-        let mut c = super::Confirmation::new(&self.spec, &[self.kind.primary()], seed, interval)?;
+        let mut c = super::Confirmation::new(&self.entry.params, &[self.kind.primary()], seed, interval)?;
         c.run_serial();
         Ok((c.estimates()[0], c.frames()))
     }

@@ -10,6 +10,7 @@
 //! of the run's phases and of its control events.
 
 use super::HtmlError;
+use crate::trace::{Column, Header};
 use hdrhistogram::Histogram;
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -113,32 +114,9 @@ pub struct TraceSummary {
     open_run: u64,
 }
 
-/// The columns read, by name (the header decides their positions).
-struct Columns {
-    send: usize,
-    ingress: usize,
-    fate: usize,
-    delay: usize,
-    release_sched: usize,
-    release: usize,
-    recv: usize,
-}
-
-impl Columns {
-    fn from_header(header: &str) -> Option<Columns> {
-        let names: Vec<&str> = header.trim_end().split(',').collect();
-        let at = |n: &str| names.iter().position(|c| *c == n);
-        Some(Columns {
-            send: at("send_ns")?,
-            ingress: at("ingress_ns")?,
-            fate: at("fate")?,
-            delay: at("delay_ns")?,
-            release_sched: at("release_sched_ns")?,
-            release: at("release_ns")?,
-            recv: at("recv_ns")?,
-        })
-    }
-}
+/// The columns read, by name (the header decides their positions): a
+/// header without one of them is not a trace's.
+const READ: [Column; 7] = [Column::SendNs, Column::IngressNs, Column::Fate, Column::DelayNs, Column::ReleaseSchedNs, Column::ReleaseNs, Column::RecvNs];
 
 impl TraceSummary {
     /// An empty summary whose first bin is `bin_ns` wide, of a run of one
@@ -203,8 +181,10 @@ pub fn summarize(path: &Path, bin_ns: u64, stretches_ns: &[u64]) -> Result<Trace
     let file = crate::load::open_regular(path).map_err(|e| HtmlError::read(path, e))?;
     let mut lines = std::io::BufReader::with_capacity(1 << 16, file).lines();
     let header = lines.next().transpose().map_err(|e| HtmlError::read(path, e))?.unwrap_or_default();
-    let cols = Columns::from_header(&header)
-        .ok_or_else(|| HtmlError::malformed(path, "line 1: not a trace header (send_ns, fate, delay_ns and recv_ns expected)"))?;
+    let cols = Header::parse(&header);
+    if READ.iter().any(|c| cols.get(*c).is_none()) {
+        return Err(HtmlError::malformed(path, "line 1: not a trace header (send_ns, fate, delay_ns and recv_ns expected)"));
+    }
     let mut s = TraceSummary::with_stretches(bin_ns, stretches_ns);
     let mut t0: Option<u64> = None;
     for (n, line) in lines.enumerate() {
@@ -304,28 +284,28 @@ struct Row {
 }
 
 impl Row {
-    fn parse(line: &str, c: &Columns) -> Result<Row, String> {
+    fn parse(line: &str, h: &Header) -> Result<Row, String> {
         let cells: Vec<&str> = line.split(',').collect();
-        let cell = |i: usize, name: &str| cells.get(i).copied().ok_or_else(|| format!("no {name} column ({} cells)", cells.len()));
-        let number = |i: usize, name: &str| -> Result<Option<u64>, String> {
-            let v = cell(i, name)?;
+        let cell = |c: Column| h.get(c).and_then(|i| cells.get(i).copied()).ok_or_else(|| format!("no {c} column ({} cells)", cells.len()));
+        let number = |c: Column| -> Result<Option<u64>, String> {
+            let v = cell(c)?;
             if v.is_empty() {
                 return Ok(None);
             }
-            v.parse().map(Some).map_err(|_| format!("{name} {v:?} is not a count of ns"))
+            v.parse().map(Some).map_err(|_| format!("{c} {v:?} is not a count of ns"))
         };
-        let fate = cell(c.fate, "fate")?;
+        let fate = cell(Column::Fate)?;
         if !matches!(fate, "delivered" | "dropped" | "held") {
             return Err(format!("fate {fate:?} (delivered, dropped or held expected)"));
         }
         Ok(Row {
-            send_ns: number(c.send, "send_ns")?.ok_or("send_ns is empty")?,
-            ingress_ns: number(c.ingress, "ingress_ns")?.ok_or("ingress_ns is empty")?,
+            send_ns: number(Column::SendNs)?.ok_or("send_ns is empty")?,
+            ingress_ns: number(Column::IngressNs)?.ok_or("ingress_ns is empty")?,
             dropped: fate == "dropped",
             delivered: fate == "delivered",
-            delay_ns: number(c.delay, "delay_ns")?,
-            release: number(c.release_sched, "release_sched_ns")?.zip(number(c.release, "release_ns")?),
-            recv_ns: number(c.recv, "recv_ns")?,
+            delay_ns: number(Column::DelayNs)?,
+            release: number(Column::ReleaseSchedNs)?.zip(number(Column::ReleaseNs)?),
+            recv_ns: number(Column::RecvNs)?,
         })
     }
 }

@@ -2,6 +2,9 @@
 //! share: the packets a payload is cut into, the queue limit (tail drop,
 //! reason `link_queue`), the packets still queued, and the link's counters.
 //!
+//! A decision is written once ([`LinkStage::admit`]); a stage says only how
+//! it serves one packet ([`LinkStage::serve`]).
+//!
 //! A payload of `L` bytes goes as `⌈L / mtu_bytes⌉` packets, every one
 //! `mtu_bytes` long but the last, each carrying `overhead_bytes` more on the
 //! wire. The payload shares its packets' fate: it is admitted whole, when
@@ -14,7 +17,7 @@
 //! allocated in `new` for the most packets the limit admits of the stage's
 //! payload size, so a decision allocates nothing.
 
-use super::ParamError;
+use super::{ParamError, Verdict};
 use hdrhistogram::Histogram;
 use std::collections::VecDeque;
 
@@ -277,6 +280,63 @@ impl Backlog {
     /// Wire bytes queued (as of the last [`Backlog::advance`]).
     pub fn bytes(&self) -> u64 {
         self.bytes
+    }
+}
+
+/// What a link stage keeps besides its own service: how a payload is cut,
+/// the packets queued, and the counters.
+#[derive(Debug, Clone)]
+pub struct LinkQueue {
+    pub packets: Packets,
+    pub backlog: Backlog,
+    pub stats: LinkStats,
+}
+
+impl LinkQueue {
+    pub fn new(packets: Packets) -> LinkQueue {
+        LinkQueue { packets, backlog: Backlog::new(&packets), stats: LinkStats::default() }
+    }
+
+    /// The queue now (as of the last frame): packets and wire bytes.
+    pub fn queued(&self) -> (u64, u64) {
+        (self.backlog.packets(), self.backlog.bytes())
+    }
+}
+
+/// A link stage (`rate`, `trace`): how it serves one packet. The rest of
+/// its decision, the same for both, is [`LinkStage::admit`].
+pub trait LinkStage {
+    /// The stage's packets, queue and counters.
+    fn queue(&mut self) -> &mut LinkQueue;
+
+    /// Serves one packet of `bytes` wire bytes of a payload that reached
+    /// the stage at `t_ns`, behind everything admitted before it: when the
+    /// packet leaves the queue, and when its last byte has left the link.
+    fn serve(&mut self, t_ns: u64, bytes: u64) -> (u64, u64);
+
+    /// Decides a payload of `len` bytes reaching the stage at `t_ns`:
+    /// dropped whole when the queue cannot take all its packets, else
+    /// each packet served in turn and queued; it leaves with its last.
+    #[inline]
+    fn admit(&mut self, t_ns: u64, len: u64) -> Verdict {
+        let q = self.queue();
+        q.backlog.advance(t_ns);
+        let n = q.packets.count(len);
+        let wire = q.packets.payload_wire_bytes(len);
+        if !q.backlog.fits(n, wire) {
+            q.stats.dropped(t_ns, n);
+            return Verdict::Drop;
+        }
+        let mut departure_ns = t_ns;
+        for i in 0..n {
+            let bytes = self.queue().packets.packet_bytes(len, i);
+            let (leave_ns, last_ns) = self.serve(t_ns, bytes);
+            departure_ns = last_ns;
+            self.queue().backlog.push(leave_ns, bytes);
+        }
+        let q = self.queue();
+        q.stats.admitted(t_ns, n, wire, departure_ns, &q.backlog);
+        Verdict::Pass { delay_ns: departure_ns.saturating_sub(t_ns) }
     }
 }
 

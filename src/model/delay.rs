@@ -264,26 +264,6 @@ impl Delay {
         }
         0.5 * (lo + hi)
     }
-
-    /// Draws one delay `D` in ns (without the `fifo` hold).
-    #[inline]
-    pub fn sample_ns(&self, rng: &mut StageRng) -> u64 {
-        let x_ms = match &self.jitter {
-            Jitter::None => return self.min_ns,
-            Jitter::Hyperexp { components, pick_thresholds, mean_ms } => {
-                let i = if *components == 1 {
-                    0
-                } else {
-                    let r = u53(rng);
-                    pick_thresholds.iter().take(components - 1).filter(|&&t| r >= t).count()
-                };
-                let e: f64 = rng.sample(rand_distr::Exp1);
-                e * mean_ms[i]
-            }
-            Jitter::Uniform { width_ms } => rng.random::<f64>() * width_ms,
-        };
-        self.min_ns.saturating_add(ms_to_ns(x_ms))
-    }
 }
 
 /// Validates the hyperexponential's lists; returns the sampler and `Σ w_i/λ_i`.
@@ -368,11 +348,49 @@ impl Releases {
     }
 }
 
-impl Model for Delay {
+/// A stage that only delays (`delay`, `jitter`): it draws a delay, and
+/// its [`Releases`] hold the frame under `fifo`. Its decision is that,
+/// written once ([`Model`] for every such stage).
+pub(crate) trait DelayStage {
+    /// Draws one delay in ns (without the `fifo` hold).
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64;
+
+    /// The stage's release order and last release.
+    fn releases(&mut self) -> &mut Releases;
+}
+
+impl<M: DelayStage> Model for M {
     #[inline]
     fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let delay_ns = self.sample_ns(rng);
-        self.releases.pass(t_ns, delay_ns)
+        let delay_ns = self.draw_ns(rng);
+        self.releases().pass(t_ns, delay_ns)
+    }
+}
+
+impl DelayStage for Delay {
+    /// Draws one delay `D` in ns (without the `fifo` hold).
+    #[inline]
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
+        let x_ms = match &self.jitter {
+            Jitter::None => return self.min_ns,
+            Jitter::Hyperexp { components, pick_thresholds, mean_ms } => {
+                let i = if *components == 1 {
+                    0
+                } else {
+                    let r = u53(rng);
+                    pick_thresholds.iter().take(components - 1).filter(|&&t| r >= t).count()
+                };
+                let e: f64 = rng.sample(rand_distr::Exp1);
+                e * mean_ms[i]
+            }
+            Jitter::Uniform { width_ms } => rng.random::<f64>() * width_ms,
+        };
+        self.min_ns.saturating_add(ms_to_ns(x_ms))
+    }
+
+    #[inline]
+    fn releases(&mut self) -> &mut Releases {
+        &mut self.releases
     }
 }
 
@@ -539,9 +557,9 @@ mod tests {
     #[test]
     fn zero_weight_component_is_never_picked() {
         // Component 0 has weight 0 and a huge mean; component 1 a mean of 1 ns.
-        let d = Delay::new(&hyper(0.0, &[0.0, 1.0], &[1e-9, 1e6], Order::Reorder)).unwrap();
+        let mut d = Delay::new(&hyper(0.0, &[0.0, 1.0], &[1e-9, 1e6], Order::Reorder)).unwrap();
         let mut rng = StageRng::seed_from_u64(4);
-        assert!((0..100_000).all(|_| d.sample_ns(&mut rng) < 1_000_000));
+        assert!((0..100_000).all(|_| d.draw_ns(&mut rng) < 1_000_000));
     }
 
     #[test]

@@ -65,9 +65,9 @@
 //! With `sd_ms = 0` the delay is the constant `mean_ms` and the stage draws
 //! nothing. Otherwise one standard normal (ziggurat) per frame.
 
-use super::delay::{Order, Releases};
+use super::delay::{DelayStage, Order, Releases};
 use super::units::{at_most_ms, ms_to_ns, MAX_DURATION_MS};
-use super::{Millis, Model, ParamError, Probability, StageRng, Verdict};
+use super::{Millis, ParamError, Probability, StageRng};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
@@ -441,11 +441,13 @@ impl Jitter {
         }
         sum * step / 3.0
     }
+}
 
+impl DelayStage for Jitter {
     /// Draws one delay in ns (without the `fifo` hold), moving the AR(1)
     /// state.
     #[inline]
-    pub fn sample_ns(&mut self, rng: &mut StageRng) -> u64 {
+    fn draw_ns(&mut self, rng: &mut StageRng) -> u64 {
         if self.sd_ms == 0.0 {
             return ms_to_ns(self.mean_ms);
         }
@@ -456,19 +458,17 @@ impl Jitter {
         // `clamp` keeps NaN out: h is finite or +∞ for finite z.
         ms_to_ns(d_ms.clamp(0.0, MAX_DRAW_MS))
     }
-}
 
-impl Model for Jitter {
     #[inline]
-    fn decide(&mut self, t_ns: u64, rng: &mut StageRng) -> Verdict {
-        let delay_ns = self.sample_ns(rng);
-        self.releases.pass(t_ns, delay_ns)
+    fn releases(&mut self) -> &mut Releases {
+        &mut self.releases
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::{Model, Verdict};
     use rand::SeedableRng;
 
     fn jitter(mean_ms: f64, sd_ms: f64, dist: JitterDist) -> JitterParams {
@@ -645,7 +645,7 @@ mod tests {
     fn delays_are_never_negative() {
         let mut j = Jitter::new(&jitter(1.0, 50.0, JitterDist::Paretonormal).with_correlation(0.5).unwrap()).unwrap();
         let mut rng = StageRng::seed_from_u64(9);
-        let zeros = (0..10_000).filter(|_| j.sample_ns(&mut rng) == 0).count();
+        let zeros = (0..10_000).filter(|_| j.draw_ns(&mut rng) == 0).count();
         // P(D = 0) is about 0.45 here; all that matters is that the clamp bites.
         assert!(zeros > 1000, "{zeros}");
     }

@@ -35,7 +35,7 @@
 //! and it refuses a packet larger than one opportunity (here a packet spans
 //! opportunities, and a payload larger than the MTU goes as several).
 
-use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, Backlog, LinkStats, PacketParams, Packets};
+use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, LinkQueue, LinkStage, LinkStats, PacketParams, Packets};
 use super::{Model, ParamError, StageRng, Verdict};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -178,15 +178,13 @@ impl LinkTraceParams {
 pub struct LinkTrace {
     schedule: Arc<Schedule>,
     opportunity_bytes: u64,
-    packets: Packets,
     /// The trace's time 0 (the first frame's arrival).
     base_ns: Option<u64>,
     /// The opportunity the last packet left at, and the bytes it has left.
     cursor: Option<(u64, u64)>,
     /// The opportunity the first frame could use (for the utilisation).
     first_k: u64,
-    backlog: Backlog,
-    stats: LinkStats,
+    queue: LinkQueue,
 }
 
 impl LinkTrace {
@@ -204,12 +202,10 @@ impl LinkTrace {
         Ok(LinkTrace {
             schedule,
             opportunity_bytes: p.opportunity_bytes,
-            packets,
             base_ns: None,
             cursor: None,
             first_k: 0,
-            backlog: Backlog::new(&packets),
-            stats: LinkStats::default(),
+            queue: LinkQueue::new(packets),
         })
     }
 
@@ -222,15 +218,15 @@ impl LinkTrace {
     }
 
     pub fn packets(&self) -> &Packets {
-        &self.packets
+        &self.queue.packets
     }
 
     pub fn stats(&self) -> &LinkStats {
-        &self.stats
+        &self.queue.stats
     }
 
     pub(crate) fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
+        &mut self.queue.stats
     }
 
     /// The trace's time 0, once a frame has come.
@@ -240,7 +236,7 @@ impl LinkTrace {
 
     /// The queue now (as of the last frame): packets and wire bytes.
     pub fn queued(&self) -> (u64, u64) {
-        (self.backlog.packets(), self.backlog.bytes())
+        self.queue.queued()
     }
 
     /// The time of opportunity `k`, ns (after the first frame).
@@ -261,13 +257,13 @@ impl LinkTrace {
     /// The bytes carried over the opportunities offered from the first frame
     /// to the last departure.
     pub fn utilisation(&self) -> f64 {
-        if self.stats.first_ns.is_none() {
+        if self.queue.stats.first_ns.is_none() {
             return 0.0;
         }
-        let last = self.first_after(self.stats.last_departure_ns);
+        let last = self.first_after(self.queue.stats.last_departure_ns);
         let offered = last.saturating_sub(self.first_k) as f64 * self.opportunity_bytes as f64;
         if offered > 0.0 {
-            self.stats.bytes as f64 / offered
+            self.queue.stats.bytes as f64 / offered
         } else {
             0.0
         }
@@ -280,30 +276,14 @@ impl LinkTrace {
             self.base_ns = Some(t_ns);
             self.first_k = self.first_after(t_ns);
         }
-        self.backlog.advance(t_ns);
-        let n = self.packets.count(len);
-        let wire = self.packets.payload_wire_bytes(len);
-        if !self.backlog.fits(n, wire) {
-            self.stats.dropped(t_ns, n);
-            return Verdict::Drop;
-        }
-        let mut departure_ns = t_ns;
-        for i in 0..n {
-            let bytes = self.packets.packet_bytes(len, i);
-            let (start_k, end_k, left) = self.serve(t_ns, bytes);
-            self.cursor = Some((end_k, left));
-            departure_ns = self.opportunity_ns(end_k);
-            self.backlog.push(self.opportunity_ns(start_k), bytes);
-        }
-        self.stats.admitted(t_ns, n, wire, departure_ns, &self.backlog);
-        Verdict::Pass { delay_ns: departure_ns.saturating_sub(t_ns) }
+        self.admit(t_ns, len)
     }
 
-    /// Serves one packet of `bytes` arriving at `t_ns` behind everything
+    /// Carries one packet of `bytes` arriving at `t_ns` behind everything
     /// admitted: the opportunities carrying its first and last byte, and the
     /// bytes the last one has left.
     #[inline]
-    fn serve(&self, t_ns: u64, bytes: u64) -> (u64, u64, u64) {
+    fn carry(&self, t_ns: u64, bytes: u64) -> (u64, u64, u64) {
         let (k, left) = match self.cursor {
             // The last packet's opportunity is still to come and has room.
             Some((k, left)) if left > 0 && self.opportunity_ns(k) > t_ns => (k, left),
@@ -320,10 +300,26 @@ impl LinkTrace {
     }
 }
 
+impl LinkStage for LinkTrace {
+    #[inline]
+    fn queue(&mut self) -> &mut LinkQueue {
+        &mut self.queue
+    }
+
+    /// A packet leaves the queue when the opportunity that starts carrying
+    /// it comes, and the link with the one that carries its last byte.
+    #[inline]
+    fn serve(&mut self, t_ns: u64, bytes: u64) -> (u64, u64) {
+        let (start_k, end_k, left) = self.carry(t_ns, bytes);
+        self.cursor = Some((end_k, left));
+        (self.opportunity_ns(start_k), self.opportunity_ns(end_k))
+    }
+}
+
 impl Model for LinkTrace {
     #[inline]
     fn decide(&mut self, t_ns: u64, _rng: &mut StageRng) -> Verdict {
-        self.decide_len(t_ns, self.packets.payload_bytes)
+        self.decide_len(t_ns, self.queue.packets.payload_bytes)
     }
 }
 

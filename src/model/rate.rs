@@ -38,7 +38,7 @@
 //! than the MTU is cut into packets that share its fate (netem sends
 //! whatever the socket gave it, GSO segments included).
 
-use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, Backlog, LinkStats, PacketParams, Packets};
+use super::backlog::{default_mtu, default_payload, is_default_mtu, is_default_payload, is_zero, link_params, LinkQueue, LinkStage, LinkStats, PacketParams, Packets};
 use super::{Model, ParamError, StageRng, Verdict};
 use serde::{Deserialize, Serialize};
 
@@ -73,14 +73,12 @@ impl RateParams {
 pub struct Rate {
     rate_bit_s: u64,
     cell: Option<(u64, u64)>,
-    packets: Packets,
     /// When the link has sent everything admitted, in units of `1/R` ns
     /// (so a packet of `c` bits takes exactly `c · 10^9` of them).
     free_tick: u128,
     /// The link's busy time so far, in the same units.
     busy_ticks: u128,
-    backlog: Backlog,
-    stats: LinkStats,
+    queue: LinkQueue,
 }
 
 impl Rate {
@@ -109,7 +107,7 @@ impl Rate {
             Some(c) => Some((c, p.cell_overhead_bytes)),
         };
         let packets = Packets::new(&p.packet_params())?;
-        Ok(Rate { rate_bit_s: r as u64, cell, packets, free_tick: 0, busy_ticks: 0, backlog: Backlog::new(&packets), stats: LinkStats::default() })
+        Ok(Rate { rate_bit_s: r as u64, cell, free_tick: 0, busy_ticks: 0, queue: LinkQueue::new(packets) })
     }
 
     pub fn rate_bit_s(&self) -> u64 {
@@ -117,7 +115,7 @@ impl Rate {
     }
 
     pub fn packets(&self) -> &Packets {
-        &self.packets
+        &self.queue.packets
     }
 
     /// netem's cells, if any: (`cellsize`, `celloverhead`).
@@ -126,16 +124,16 @@ impl Rate {
     }
 
     pub fn stats(&self) -> &LinkStats {
-        &self.stats
+        &self.queue.stats
     }
 
     pub(crate) fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
+        &mut self.queue.stats
     }
 
     /// The queue now (as of the last frame): packets and wire bytes.
     pub fn queued(&self) -> (u64, u64) {
-        (self.backlog.packets(), self.backlog.bytes())
+        self.queue.queued()
     }
 
     /// The bits a packet of `bytes` wire bytes costs (netem's cells).
@@ -150,8 +148,8 @@ impl Rate {
     /// The fraction of time the link was sending, from the first frame to
     /// the last departure.
     pub fn utilisation(&self) -> f64 {
-        let Some(first) = self.stats.first_ns else { return 0.0 };
-        let span_ns = self.stats.last_departure_ns.saturating_sub(first);
+        let Some(first) = self.queue.stats.first_ns else { return 0.0 };
+        let span_ns = self.queue.stats.last_departure_ns.saturating_sub(first);
         if span_ns == 0 {
             return 0.0;
         }
@@ -161,35 +159,34 @@ impl Rate {
     /// Decides a payload of `len` bytes reaching the stage at `t_ns`.
     #[inline]
     pub fn decide_len(&mut self, t_ns: u64, len: u64) -> Verdict {
-        self.backlog.advance(t_ns);
-        let n = self.packets.count(len);
-        let wire = self.packets.payload_wire_bytes(len);
-        if !self.backlog.fits(n, wire) {
-            self.stats.dropped(t_ns, n);
-            return Verdict::Drop;
-        }
+        self.admit(t_ns, len)
+    }
+}
+
+impl LinkStage for Rate {
+    #[inline]
+    fn queue(&mut self) -> &mut LinkQueue {
+        &mut self.queue
+    }
+
+    /// A packet is sent after everything admitted before it (from now, if
+    /// the link is idle), and leaves the queue when its last bit is sent.
+    #[inline]
+    fn serve(&mut self, t_ns: u64, bytes: u64) -> (u64, u64) {
         let r = u128::from(self.rate_bit_s);
-        let mut free = self.free_tick.max(u128::from(t_ns) * r);
-        let mut departure_ns = t_ns;
-        for i in 0..n {
-            let bytes = self.packets.packet_bytes(len, i);
-            let ticks = u128::from(self.cost_bits(bytes)) * 1_000_000_000;
-            free += ticks;
-            self.busy_ticks += ticks;
-            // Rounded up: a frame never leaves before its last bit.
-            departure_ns = u64::try_from(free.div_ceil(r)).unwrap_or(u64::MAX);
-            self.backlog.push(departure_ns, bytes);
-        }
-        self.free_tick = free;
-        self.stats.admitted(t_ns, n, wire, departure_ns, &self.backlog);
-        Verdict::Pass { delay_ns: departure_ns - t_ns }
+        let ticks = u128::from(self.cost_bits(bytes)) * 1_000_000_000;
+        self.free_tick = self.free_tick.max(u128::from(t_ns) * r) + ticks;
+        self.busy_ticks += ticks;
+        // Rounded up: a frame never leaves before its last bit.
+        let departure_ns = u64::try_from(self.free_tick.div_ceil(r)).unwrap_or(u64::MAX);
+        (departure_ns, departure_ns)
     }
 }
 
 impl Model for Rate {
     #[inline]
     fn decide(&mut self, t_ns: u64, _rng: &mut StageRng) -> Verdict {
-        self.decide_len(t_ns, self.packets.payload_bytes)
+        self.decide_len(t_ns, self.queue.packets.payload_bytes)
     }
 }
 

@@ -7,6 +7,7 @@
 //!
 //! | file | what |
 //! |---|---|
+//! | `ended` | why a process's stream or loop ended (`ended_by`) |
 //! | `path` | the account every link keeps, what it measured, a path's report |
 //! | `paths` | what each direction adds to its path's report |
 //! | `emulator` | `emulator.json`: the shaping, the process, the reverse paths; several streams |
@@ -17,11 +18,13 @@
 //! `simulator.json`) stand beside their services.
 
 pub mod emulator;
+pub mod ended;
 pub mod path;
 pub mod paths;
 pub mod ros2;
 pub mod run;
 
 pub use emulator::{BadInput, EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, LoopBusy, PeerEvent, Shaping, WithPaths};
+pub use ended::Ended;
 pub use path::{Account, LinkMeasures, PathReport};
 pub use paths::ForwardExtra;

@@ -54,11 +54,6 @@ pub fn stop_requested() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
-/// Requests a stop from inside the process (tests, fatal peer loss).
-pub fn request_stop() {
-    STOP.store(true, Ordering::Relaxed);
-}
-
 /// A stop check for a busy loop: this process's own flag on every call, and
 /// a second, costlier source (iceoryx2's latched termination request, which
 /// costs a `nanosleep(0)` system call — a trip through the scheduler) only

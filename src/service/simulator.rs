@@ -23,6 +23,7 @@ use crate::transport::FrameSource;
 use crate::service::signals;
 use crate::transport::{Port, Role};
 use crate::service::error::{RobotError, ServiceError};
+use crate::service::schema::Ended;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::PathBuf;
@@ -51,7 +52,7 @@ pub struct SimulatorReport {
     /// Robot (emulated stream) vs console (direct stream) kinematics.
     pub kinematics: Option<serde_json::Value>,
     /// `end_marker` or `signal`.
-    pub ended_by: String,
+    pub ended_by: Ended,
     pub duration_s: f64,
     pub receive_errors: u64,
     pub steal_ms: u64,
@@ -219,7 +220,7 @@ impl Robot {
 
     /// Writes `received.csv`'s end and the histogram logs' last
     /// intervals, and reports.
-    fn finish(mut self, args: &SimulatorArgs, ended_by: &str, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport, RobotError> {
+    fn finish(mut self, args: &SimulatorArgs, ended_by: Ended, t_start: u64, t_end: u64, steal: crate::host::Steal) -> Result<SimulatorReport, RobotError> {
         self.received_log.finish()?;
         let duration_s = (t_end - t_start) as f64 / 1e9;
         let e2e_hlog = args.out.join("end_to_end.hlog");
@@ -237,7 +238,7 @@ impl Robot {
             direct_hop_ns: hop.summary(),
             delay_seen_ns: self.seen.summary(),
             kinematics: serde_json::to_value(self.kin.report()).ok(),
-            ended_by: ended_by.into(),
+            ended_by,
             duration_s,
             receive_errors: self.receive_errors,
             steal_ms: steal.ms,
@@ -305,13 +306,13 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
         if iter % 1024 == 0 {
             robot.tick(now_ns());
             if robot.released_by_emulator.is_some() && (robot.direct_ended || direct.peers_connected() == 0) {
-                break "end_marker";
+                break Ended::EndMarker;
             }
             if stop_at.is_none() && stop.requested() {
                 stop_at = Some(now_ns());
             }
             if stop_at.is_some() && (robot.released_by_emulator.is_some() || now_ns().saturating_sub(robot.last_frame_ns) > 200_000_000) {
-                break "signal";
+                break Ended::Signal;
             }
         }
     };

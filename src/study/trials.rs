@@ -241,6 +241,7 @@ pub fn trial_figures(out: &Path, report: &serde_json::Value) -> Result<FiguresFi
 
 /// The frames of a run's `trace.csv` that outages need (copies left out).
 fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
+    use crate::trace::{Column, Header};
     use std::io::BufRead;
     let bad = |problem: String| StudyError::Read { path: path.to_path_buf(), problem };
     let f = match std::fs::File::open(path) {
@@ -252,18 +253,18 @@ fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
     };
     let mut lines = std::io::BufReader::new(f).lines();
     let header = lines.next().transpose().map_err(|e| bad(e.to_string()))?.unwrap_or_default();
-    let cols: Vec<&str> = header.split(',').collect();
-    let col = |n: &str| cols.iter().position(|c| *c == n).ok_or_else(|| bad(format!("no `{n}` column")));
-    let (ix, ns, reason, copy) = (col("ingress_index")?, col("ingress_ns")?, col("reason")?, col("copy")?);
+    let cols = Header::parse(&header);
+    let col = |c: Column| cols.get(c).ok_or_else(|| bad(format!("no `{c}` column")));
+    let (ix, ns, reason, copy) = (col(Column::IngressIndex)?, col(Column::IngressNs)?, col(Column::Reason)?, col(Column::Copy)?);
     let mut frames = Vec::new();
     for (k, line) in lines.enumerate() {
         let line = line.map_err(|e| bad(e.to_string()))?;
         let f: Vec<&str> = line.split(',').collect();
-        let num = |i: usize| f.get(i).and_then(|v| v.parse::<u64>().ok()).ok_or_else(|| bad(format!("line {}: column {} is not a number", k + 2, cols[i])));
+        let num = |i: usize, c: Column| f.get(i).and_then(|v| v.parse::<u64>().ok()).ok_or_else(|| bad(format!("line {}: column {c} is not a number", k + 2)));
         if f.get(copy).is_some_and(|c| *c != "0" && !c.is_empty()) {
             continue;
         }
-        frames.push(TraceFrame { ingress_index: num(ix)?, ingress_ns: num(ns)?, outage: f.get(reason) == Some(&"outage") });
+        frames.push(TraceFrame { ingress_index: num(ix, Column::IngressIndex)?, ingress_ns: num(ns, Column::IngressNs)?, outage: f.get(reason) == Some(&"outage") });
     }
     Ok(outages(frames))
 }

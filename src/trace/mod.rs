@@ -40,6 +40,8 @@
 //! the rows with `copy` 0, `duplicated` the other rows plus the sum of
 //! `copies_dropped`, and `dropped` the `dropped` rows plus that sum.
 //!
+//! The columns ([`Column`], the header line generated from them):
+//!
 //! | column | meaning |
 //! |---|---|
 //! | `ingress_index` | the emulator's count of frames that entered (0, 1, …); a copy has its original's |
@@ -67,15 +69,17 @@
 //! Times are integers; empty cells are missing values. `pandas.read_csv` and
 //! `polars.read_csv` read it as it is.
 
+mod column;
 mod csv_log;
 mod ring;
 mod row;
 mod table;
 mod writer;
 
+pub use column::{Column, Header, CSV_HEADER};
 pub use csv_log::CsvLog;
 pub use ring::{TraceEvent, TraceSink, RING_CAPACITY};
-pub use row::{format_row, write_csv, CSV_HEADER, RECV_COLUMN};
+pub use row::{format_row, write_csv};
 pub use table::{CopyRow, Row, Tap, MAX_PENDING_ROWS};
 pub use writer::{start, TraceError, TraceWriter, Written};
 

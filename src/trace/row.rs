@@ -1,26 +1,23 @@
 //! The rows as text: one CSV line a frame (or a copy), formatted in place.
 
+use super::column::{Column, CSV_HEADER};
 use super::table::{CopyRow, Row};
 use crate::durable::PartialFile;
 use crate::injector::DropCause;
 use std::io::Write;
 use std::path::Path;
 
-/// The CSV's header line.
-pub const CSV_HEADER: &str =
-    "ingress_index,sequence,console_index,send_ns,ingress_ns,fate,reason,phase,stage,delay_ns,release_sched_ns,release_ns,recv_ns,copy,copies_dropped,corrupted";
-
-/// The index of `recv_ns` among the CSV's columns: the emulator leaves it
-/// empty and the runner fills it in.
-pub const RECV_COLUMN: usize = 12;
-
 /// One CSV line built in place: integers by `itoa`, nothing allocated. At a
 /// million frames a second the trace writer formats a million rows, on a
 /// core it shares with the emulator's peers; the `write!` of before (with a
 /// `String` per empty-or-number field) cost it about a third of that core.
+/// Each cell is written under its [`Column`], in the columns' order
+/// (checked in debug builds), so the rows stay under the header.
 struct Line {
     buf: [u8; Line::CAP],
     len: usize,
+    /// Cells written so far.
+    cells: usize,
 }
 
 impl Line {
@@ -29,34 +26,44 @@ impl Line {
     const CAP: usize = 384;
 
     fn new() -> Line {
-        Line { buf: [0; Line::CAP], len: 0 }
+        Line { buf: [0; Line::CAP], len: 0, cells: 0 }
     }
 
-    fn text(&mut self, t: &str) {
+    fn raw(&mut self, t: &str) {
         self.buf[self.len..self.len + t.len()].copy_from_slice(t.as_bytes());
         self.len += t.len();
     }
 
-    fn num(&mut self, v: u64) {
-        let mut b = itoa::Buffer::new();
-        self.text(b.format(v));
-    }
-
-    fn opt(&mut self, v: Option<u64>) {
-        if let Some(v) = v {
-            self.num(v);
+    /// Starts column `c`'s cell: a comma before every cell but the first.
+    #[inline]
+    fn cell(&mut self, c: Column) {
+        debug_assert_eq!(c.index(), self.cells, "the trace's cell {c} written out of the columns' order");
+        self.cells += 1;
+        if c.index() > 0 {
+            self.raw(",");
         }
     }
 
-    /// A comma, then the field.
-    fn then_text(&mut self, t: &str) {
-        self.text(",");
-        self.text(t);
+    /// Column `c`'s cell: the text `t`.
+    fn text(&mut self, c: Column, t: &str) {
+        self.cell(c);
+        self.raw(t);
     }
 
-    fn then_opt(&mut self, v: Option<u64>) {
-        self.text(",");
-        self.opt(v);
+    /// Column `c`'s cell: the number `v`, or empty.
+    fn num(&mut self, c: Column, v: Option<u64>) {
+        self.cell(c);
+        if let Some(v) = v {
+            let mut b = itoa::Buffer::new();
+            self.raw(b.format(v));
+        }
+    }
+
+    /// The line's end, after every column's cell.
+    fn end(&mut self) -> &[u8] {
+        debug_assert_eq!(self.cells, Column::COUNT, "a trace row has a cell in every column");
+        self.raw("\n");
+        &self.buf[..self.len]
     }
 }
 
@@ -84,24 +91,23 @@ pub fn format_row(w: &mut impl Write, i: u64, r: &Row, copy: Option<&CopyRow>, r
         Some(c) => (u64::from(c.copy), None),
     };
     let mut l = Line::new();
-    l.num(i);
-    l.then_opt(r.sequence.map(u64::from));
-    for v in [r.console_index, r.send_ns, r.ingress_ns] {
-        l.then_opt(Some(v));
-    }
-    l.then_text(fate);
-    l.then_text(reason);
-    l.then_opt(where_.map(|w| w.0));
-    l.then_opt(where_.map(|w| w.1));
-    l.then_opt(scheduled.then(|| sched.saturating_sub(r.ingress_ns)));
-    l.then_opt(scheduled.then_some(sched));
-    l.then_opt(released);
-    l.then_opt(recv);
-    l.then_opt(Some(copy_no));
-    l.then_opt(copies_dropped);
-    l.then_opt(scheduled.then_some(u64::from(corrupted)));
-    l.text("\n");
-    w.write_all(&l.buf[..l.len])
+    l.num(Column::IngressIndex, Some(i));
+    l.num(Column::Sequence, r.sequence.map(u64::from));
+    l.num(Column::ConsoleIndex, Some(r.console_index));
+    l.num(Column::SendNs, Some(r.send_ns));
+    l.num(Column::IngressNs, Some(r.ingress_ns));
+    l.text(Column::Fate, fate);
+    l.text(Column::Reason, reason);
+    l.num(Column::Phase, where_.map(|w| w.0));
+    l.num(Column::Stage, where_.map(|w| w.1));
+    l.num(Column::DelayNs, scheduled.then(|| sched.saturating_sub(r.ingress_ns)));
+    l.num(Column::ReleaseSchedNs, scheduled.then_some(sched));
+    l.num(Column::ReleaseNs, released);
+    l.num(Column::RecvNs, recv);
+    l.num(Column::Copy, Some(copy_no));
+    l.num(Column::CopiesDropped, copies_dropped);
+    l.num(Column::Corrupted, scheduled.then_some(u64::from(corrupted)));
+    w.write_all(l.end())
 }
 
 /// Writes a table as CSV, joined with receive times (`recv_ns[i]` for

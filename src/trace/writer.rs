@@ -3,7 +3,8 @@
 //! and its handle, [`TraceWriter`].
 
 use super::ring::{ring, TraceEvent, TraceSink};
-use super::row::{format_row, CSV_HEADER};
+use super::column::CSV_HEADER;
+use super::row::format_row;
 use super::table::{CopyRow, Row, Table, Tap};
 use super::FLUSH_EVERY;
 use crate::durable::{DurableError, PartialFile};

@@ -125,7 +125,7 @@ impl<T: IpcPayload> FrameSource<T> for FrameSubscriber<T> {
                 Ok(true)
             }
             Ok(None) => Ok(false),
-            Err(e) => Err(PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() }),
+            Err(e) => Err(PortError { port: self.run_id().resource_name(self.channel()), message: e.to_string() }),
         }
     }
 
@@ -139,7 +139,7 @@ impl<T: IpcPayload> FrameSink<T> for FramePublisher<T> {
     fn send_with(&mut self, sample: &T, stamp: impl FnOnce(&mut T)) -> Result<Option<usize>, PortError> {
         FramePublisher::send_from(self, sample, stamp)
             .map(Some)
-            .map_err(|e: FrameSendError| PortError { port: format!("netfi/{}/{}", self.run_id(), self.channel()), message: e.to_string() })
+            .map_err(|e: FrameSendError| PortError { port: self.run_id().resource_name(self.channel()), message: e.to_string() })
     }
 
     fn peers(&mut self) -> Option<usize> {

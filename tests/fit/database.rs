@@ -39,7 +39,7 @@ fn the_database_parses_and_covers_its_grid() {
     assert_eq!((db.loss.len(), db.delay.len(), db.outage.len()), (95, 260, 95));
     let entries = db.entries();
     for g in GRIDS {
-        let targets: Vec<f64> = entries.iter().filter(|e| e.kind == g.kind).map(|e| e.target).collect();
+        let targets: Vec<f64> = entries.iter().filter(|e| e.kind == g.kind).map(|e| e.entry.target).collect();
         assert_eq!(targets, g.targets(), "{:?}", g.kind);
     }
     for e in &db.loss {
@@ -104,8 +104,8 @@ fn sampled_entries_regenerate_from_their_seeds() {
     let fits: Vec<_> = run::fit_many(&reqs, 2, &|_, _| {}).into_iter().map(Result::unwrap).collect();
     let again = Database::from_results(db.seed, &fits).unwrap();
     for e in again.entries() {
-        let stored = db.entries().into_iter().find(|s| s.kind == e.kind && s.target == e.target).unwrap();
-        assert_eq!(e, stored, "{:?} {}", e.kind, e.target);
+        let stored = db.entries().into_iter().find(|s| s.kind == e.kind && s.entry.target == e.entry.target).unwrap();
+        assert_eq!(e, stored, "{:?} {}", e.kind, e.entry.target);
     }
 }
 

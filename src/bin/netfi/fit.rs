@@ -194,7 +194,7 @@ fn verify(path: &Path, args: &FitDbArgs) -> Result<()> {
     let missing: Vec<String> = db::GRIDS
         .iter()
         .flat_map(|g| g.targets().into_iter().map(move |t| (g, t)))
-        .filter(|(g, t)| !entries.iter().any(|e| e.kind == g.kind && g.index_of(e.target) == g.index_of(*t)))
+        .filter(|(g, t)| !entries.iter().any(|e| e.kind == g.kind && g.index_of(e.entry.target) == g.index_of(*t)))
         .map(|(g, t)| format!("{} {}", g.kind.name(), Grid::of(g.kind).show(t)))
         .collect();
     let bar = indicatif::ProgressBar::new(entries.len() as u64);

@@ -3,6 +3,7 @@
 //! per recent command to compare it with.
 
 use super::ConsoleFeedback;
+use crate::service::schema::Ended;
 use crate::clock::now_ns;
 use crate::frame::{ItpFrame, ItpView};
 use crate::kinematics::{Integrator, KinematicsConfig, KinematicsConfigError};
@@ -104,14 +105,14 @@ impl FeedbackIn {
         )
     }
 
-    pub(super) fn report(&self, ended_by: &str, out: &std::path::Path, duration_s: f64) -> ConsoleFeedback {
+    pub(super) fn report(&self, ended_by: Ended, out: &std::path::Path, duration_s: f64) -> ConsoleFeedback {
         let hlog = out.join("round_trip.hlog");
         let round_trip_hlog = self.rtt.write_log(&hlog, "round_trip", 0.0, duration_s).ok().map(|_| hlog);
         ConsoleFeedback {
             received: self.received,
             sent_by_emulator: self.sent_by_emulator,
             unknown_command: self.unknown_command,
-            ended_by: ended_by.into(),
+            ended_by,
             round_trip_ns: self.rtt.summary(),
             emulator_share_ns: self.share.summary(),
             divergence_final_mm: self.div_final,

@@ -27,6 +27,7 @@ use crate::transport::FrameSink;
 use crate::service::signals;
 use crate::transport::{Port, Role};
 use crate::service::error::ServiceError;
+use crate::service::schema::Ended;
 use serde::{Deserialize, Serialize};
 use feedback::FeedbackIn;
 use script::Script;
@@ -55,7 +56,7 @@ pub struct ConsoleReport {
     pub direct_sent: u64,
     /// `done`, `signal`, or `emulator_ended` (the emulator ended the
     /// feedback early: the robot died).
-    pub ended_by: String,
+    pub ended_by: Ended,
     pub steal_ms: u64,
     pub steal_fraction: f64,
     /// The robot's feedback as it came back through the emulator.
@@ -86,24 +87,24 @@ fn wait_for_emulator(port: &crate::transport::FramePublisher, node: &crate::tran
 /// After the last frame: takes the feedback still coming until the
 /// emulator's feedback end marker, while an emulator publishes feedback, at
 /// most `--feedback-wait-s`. How it ended.
-fn wait_for_feedback(fb: &mut FeedbackIn, sent: u64, args: &ConsoleArgs, stop: &mut signals::StopCheck<impl FnMut() -> bool>) -> &'static str {
+fn wait_for_feedback(fb: &mut FeedbackIn, sent: u64, args: &ConsoleArgs, stop: &mut signals::StopCheck<impl FnMut() -> bool>) -> Ended {
     let deadline = now_ns() + (args.feedback_wait_s * 1e9) as u64;
     let mut turns = 0u64;
     loop {
         fb.poll(sent);
         if fb.sent_by_emulator.is_some() {
-            return "end_marker";
+            return Ended::EndMarker;
         }
         if fb.port.peers_connected() == 0 {
             fb.poll(sent);
-            return if fb.sent_by_emulator.is_some() { "end_marker" } else { "no_emulator" };
+            return if fb.sent_by_emulator.is_some() { Ended::EndMarker } else { Ended::NoEmulator };
         }
         if now_ns() > deadline {
-            return "timeout";
+            return Ended::Timeout;
         }
         turns += 1;
         if turns % 1024 == 0 && stop.requested() {
-            return "signal";
+            return Ended::Signal;
         }
         wait(args).relax();
     }
@@ -130,7 +131,7 @@ struct Streamer<'a> {
 
 /// How a stream went: how it ended, and when it started and ended.
 struct Streamed {
-    ended_by: &'static str,
+    ended_by: Ended,
     t_start: u64,
     t_end: u64,
 }
@@ -150,7 +151,7 @@ impl Streamer<'_> {
         let slack_ns = if period_ns < 50_000.0 { u64::MAX / 4 } else if self.args.nap_us.is_some() { 0 } else { 200_000 };
         let wait = wait(self.args);
         let t_start = now_ns() + 1_000_000;
-        let mut ended_by = "done";
+        let mut ended_by = Ended::Done;
         let mut sample = FrameSample::ZERO;
         sample.len = ITP_FRAME_LEN as u32;
         let mut next_live = 0u64;
@@ -159,7 +160,7 @@ impl Streamer<'_> {
             let target = t_start + offset_ns;
             if target > now_ns() + slack_ns && stop.requested() {
                 // Only a console about to sleep checks for a stop: often enough.
-                ended_by = "signal";
+                ended_by = Ended::Signal;
                 break;
             }
             if self.fb.port.peers_connected() > 0 {
@@ -190,11 +191,11 @@ impl Streamer<'_> {
             if self.fb.sent_by_emulator.is_some() {
                 // The emulator ended the feedback early: its robot is gone.
                 // Stop, so the stream ends with an end marker it will take.
-                ended_by = "emulator_ended";
+                ended_by = Ended::EmulatorEnded;
                 break;
             }
             if i % 1024 == 1023 && stop.requested() {
-                ended_by = "signal";
+                ended_by = Ended::Signal;
                 break;
             }
         }
@@ -227,7 +228,7 @@ impl Streamer<'_> {
     }
 
     /// The console's report.
-    fn report(&self, source: String, seed: u64, s: &Streamed, fb_ended: &str, steal: crate::host::Steal) -> ConsoleReport {
+    fn report(&self, source: String, seed: u64, s: &Streamed, fb_ended: Ended, steal: crate::host::Steal) -> ConsoleReport {
         let duration_s = (s.t_end.saturating_sub(s.t_start)) as f64 / 1e9;
         ConsoleReport {
             frames_sent: self.sent,
@@ -240,7 +241,7 @@ impl Streamer<'_> {
             send_errors: self.send_errors,
             sent_unsubscribed: self.sent_unsubscribed,
             direct_sent: self.direct_sent,
-            ended_by: s.ended_by.into(),
+            ended_by: s.ended_by,
             steal_ms: steal.ms,
             steal_fraction: steal.fraction,
             feedback: Some(self.fb.report(fb_ended, &self.args.out, duration_s)),

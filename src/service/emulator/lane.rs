@@ -182,17 +182,6 @@ impl<F: ForwardChannel> Lane<F> {
         }
         self.peers = now;
     }
-
-    /// Keeps every trace writer of the lane off `core`; what could not be
-    /// kept off, by name.
-    pub fn keep_traces_off_core(&self, core: usize) -> Vec<&'static str> {
-        let mut stuck = Vec::new();
-        if !self.forward.keep_trace_off_core(core) {
-            stuck.push("forward");
-        }
-        stuck.extend(self.reverse.iter().filter(|r| !r.keep_trace_off_core(core)).map(|r| r.name()));
-        stuck
-    }
 }
 
 #[cfg(test)]

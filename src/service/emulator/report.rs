@@ -7,7 +7,7 @@ use crate::host::isolate::IsolationSummary;
 use crate::service::control::ControlEvent;
 use crate::service::schema::ForwardExtra;
 use crate::service::emulator::spin::LoopEnd;
-use crate::service::schema::{EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, LoopBusy, PathReport, PeerEvent, Shaping, WithPaths};
+use crate::service::schema::{EmulatorFrames, EmulatorProcess, EmulatorReport, EmulatorStream, EmulatorStreams, Ended, LoopBusy, PathReport, PeerEvent, Shaping, WithPaths};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -60,7 +60,7 @@ pub fn lane_report(fwd: PathReport<ForwardExtra>, paths: BTreeMap<String, serde_
             bad_input: fwd.extra.bad_input,
             delivered_unsubscribed: fwd.delivered_unsubscribed,
         },
-        ended_by: run.end.lane_ended_by(lane.robot_died).to_string(),
+        ended_by: run.end.lane_ended_by(lane.robot_died),
         dead_peers: lane.dead_peers,
         duration_s: duration_ns as f64 / 1e9,
         loop_iterations: rounds,
@@ -76,7 +76,7 @@ pub fn lane_report(fwd: PathReport<ForwardExtra>, paths: BTreeMap<String, serde_
 }
 
 /// The joint report of the lanes' reports; their run ids and directories.
-pub fn joint(reports: &[EmulatorReport], run_ids: &[String], dirs: &[PathBuf], ended_by: &str) -> EmulatorStreams {
+pub fn joint(reports: &[EmulatorReport], run_ids: &[String], dirs: &[PathBuf], ended_by: Ended) -> EmulatorStreams {
     let mut total = EmulatorFrames { sent_by_console: Some(0), ..EmulatorFrames::default() };
     let mut streams = Vec::new();
     for (k, r) in reports.iter().enumerate() {
@@ -101,7 +101,7 @@ pub fn joint(reports: &[EmulatorReport], run_ids: &[String], dirs: &[PathBuf], e
         total,
         balanced: reports.iter().all(|r| r.process.frames.account.closes()),
         core: p.core,
-        ended_by: ended_by.to_string(),
+        ended_by,
         duration_s: p.duration_s,
         loop_rounds: p.loop_iterations,
         loop_round_ns_mean: p.loop_iteration_ns_mean,

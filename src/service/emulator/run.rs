@@ -124,7 +124,7 @@ fn conclude<F: ForwardChannel + 'static>(
 
 /// Writes `<out>/emulator.json` of several lanes: every lane's account and
 /// their total.
-fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: &str) -> Result<(), WriteError> {
+fn write_joint(cfg: &EmulatorConfig, reports: &[EmulatorReport], ended_by: crate::service::schema::Ended) -> Result<(), WriteError> {
     let run_ids: Vec<String> = cfg.lanes.iter().map(|l| l.args.run_id.clone().unwrap_or_default()).collect();
     let dirs: Vec<_> = cfg.lanes.iter().map(|l| l.out_dir.clone()).collect();
     let joint = report::joint(reports, &run_ids, &dirs, ended_by);

@@ -12,6 +12,7 @@
 use crate::clock::now_ns;
 use crate::service::control::ControlPort;
 use crate::service::emulator::{lane::Lane, path::ForwardChannel};
+use crate::service::schema::Ended;
 use crate::transport::{IpcNode, Role};
 
 /// What the loop's look off the hot path (every 4096 rounds) found.
@@ -26,8 +27,8 @@ pub enum Look {
 /// How the loop ended.
 #[derive(Debug, Clone)]
 pub struct LoopEnd {
-    /// `end_marker`, `signal` or `peer_died`.
-    pub ended_by: &'static str,
+    /// `EndMarker`, `Signal` or `PeerDied`.
+    pub ended_by: Ended,
     /// Rounds of the loop.
     pub rounds: u64,
     pub t_start: u64,
@@ -37,11 +38,11 @@ pub struct LoopEnd {
 impl LoopEnd {
     /// How a lane ended within a loop that ended so: a stop, its robot's
     /// death, or its end marker.
-    pub fn lane_ended_by(&self, robot_died: bool) -> &'static str {
+    pub fn lane_ended_by(&self, robot_died: bool) -> Ended {
         match (self.ended_by, robot_died) {
-            ("signal", _) => "signal",
-            (_, true) => "peer_died",
-            _ => "end_marker",
+            (Ended::Signal, _) => Ended::Signal,
+            (_, true) => Ended::PeerDied,
+            _ => Ended::EndMarker,
         }
     }
 
@@ -112,7 +113,7 @@ pub fn spin<F: ForwardChannel>(
             c.poll(&mut lanes[0].forward.link);
         }
         if look(&mut died) == Look::Stop {
-            break "signal";
+            break Ended::Signal;
         }
         let now = now_ns();
         for (l, d) in lanes.iter_mut().zip(died.iter_mut()) {
@@ -127,7 +128,7 @@ pub fn spin<F: ForwardChannel>(
         }
         // Every lane is asked, so each sends its end markers once drained.
         if lanes.iter_mut().fold(true, |all, l| l.finished(now) && all) {
-            break if lanes.iter().any(|l| l.robot_died) { "peer_died" } else { "end_marker" };
+            break if lanes.iter().any(|l| l.robot_died) { Ended::PeerDied } else { Ended::EndMarker };
         }
     };
     LoopEnd { ended_by, rounds, t_start, t_end: now_ns() }

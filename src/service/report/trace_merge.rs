@@ -10,6 +10,7 @@
 use super::delay::Delays;
 use super::files::{partial_path, WriteError};
 use super::phases::Fates;
+use crate::trace::Column;
 use std::collections::BTreeMap;
 use std::io::{BufRead, Write};
 use std::path::{Path, PathBuf};
@@ -20,15 +21,6 @@ pub const EMULATOR_TRACE: &str = "trace_emulator.csv";
 pub const RECEIVED: &str = "received.csv";
 /// The joined trace.
 pub const TRACE: &str = "trace.csv";
-
-/// Columns of a trace row (see `crate::trace::CSV_HEADER`).
-const SEND_COLUMN: usize = 3;
-const INGRESS_COLUMN: usize = 4;
-const FATE_COLUMN: usize = 5;
-const REASON_COLUMN: usize = 6;
-const DELAY_COLUMN: usize = 9;
-const RELEASE_SCHED_COLUMN: usize = 10;
-const COPY_COLUMN: usize = 13;
 
 /// Why the trace could not be joined.
 #[derive(Debug, thiserror::Error)]
@@ -190,12 +182,12 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
         };
         let mut cols: Vec<&str> = line.split(',').collect();
         let t_text = t.to_string();
-        if let Some(c) = cols.get_mut(crate::trace::RECV_COLUMN) {
+        if let Some(c) = cols.get_mut(Column::RecvNs.index()) {
             *c = &t_text;
         }
         writeln!(w, "{}", cols.join(",")).map_err(write_err)?;
-        if let (Some(send), Some(delay)) = (column(&cols, SEND_COLUMN), column(&cols, DELAY_COLUMN)) {
-            delays.ingress_ns.push(column(&cols, INGRESS_COLUMN).unwrap_or(0));
+        if let (Some(send), Some(delay)) = (number(&cols, Column::SendNs), number(&cols, Column::DelayNs)) {
+            delays.ingress_ns.push(number(&cols, Column::IngressNs).unwrap_or(0));
             delays.injected.push(delay);
             delays.seen.push(t.saturating_sub(send));
         }
@@ -213,12 +205,12 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
 /// that does not parse add nothing.
 fn fate(line: &str, fates: &mut Fates) {
     let cols: Vec<&str> = line.split(',').collect();
-    let original = cols.get(COPY_COLUMN).is_none_or(|c| c.is_empty() || *c == "0");
-    let malformed = cols.get(REASON_COLUMN).is_some_and(|r| crate::injector::Invalid::of_reason(r).is_some());
-    if let (true, Some(t), Some(f)) = (original, column(&cols, INGRESS_COLUMN), cols.get(FATE_COLUMN)) {
+    let original = Column::Copy.of(&cols).is_none_or(|c| c.is_empty() || c == "0");
+    let malformed = Column::Reason.of(&cols).is_some_and(|r| crate::injector::Invalid::of_reason(r).is_some());
+    if let (true, Some(t), Some(f)) = (original, number(&cols, Column::IngressNs), Column::Fate.of(&cols)) {
         match malformed {
             true => fates.entered(t),
-            false => fates.push(t, *f == "dropped"),
+            false => fates.push(t, f == "dropped"),
         }
     }
 }
@@ -226,15 +218,16 @@ fn fate(line: &str, fates: &mut Fates) {
 /// The receipt of a delivered trace row, taken from `recv`.
 fn receipt(line: &str, recv: &mut Receipts) -> Option<u64> {
     let cols: Vec<&str> = line.split(',').collect();
-    if cols.get(FATE_COLUMN) != Some(&"delivered") {
+    if Column::Fate.of(&cols) != Some("delivered") {
         return None;
     }
-    let index: usize = cols[0].parse().ok()?;
-    recv.take(index, column(&cols, RELEASE_SCHED_COLUMN))
+    let index: usize = Column::IngressIndex.of(&cols)?.parse().ok()?;
+    recv.take(index, number(&cols, Column::ReleaseSchedNs))
 }
 
-fn column(cols: &[&str], k: usize) -> Option<u64> {
-    cols.get(k).and_then(|x| x.parse().ok())
+/// The number in column `c` of a row's cells, if it has one.
+fn number(cols: &[&str], c: Column) -> Option<u64> {
+    c.of(cols).and_then(|x| x.parse().ok())
 }
 
 /// The delays of the received rows of a joined trace, and every frame's fate.
@@ -246,9 +239,9 @@ fn read_delays(path: &Path) -> Result<(Delays, Fates), MergeError> {
         let line = line.map_err(read_err)?;
         fate(&line, &mut fates);
         let cols: Vec<&str> = line.split(',').collect();
-        let at = |k| column(&cols, k);
-        if let (Some(send), Some(delay), Some(t)) = (at(SEND_COLUMN), at(DELAY_COLUMN), at(crate::trace::RECV_COLUMN)) {
-            delays.ingress_ns.push(at(INGRESS_COLUMN).unwrap_or(0));
+        let at = |c| number(&cols, c);
+        if let (Some(send), Some(delay), Some(t)) = (at(Column::SendNs), at(Column::DelayNs), at(Column::RecvNs)) {
+            delays.ingress_ns.push(at(Column::IngressNs).unwrap_or(0));
             delays.injected.push(delay);
             delays.seen.push(t.saturating_sub(send));
         }
@@ -284,7 +277,7 @@ mod tests {
     const RECEIVED_ROWS: &str = "ingress_index,recv_ns,release_sched_ns\n0,1510\n2,3950,3900\n2,3120,3100\n";
 
     fn recv_of(trace: &str) -> Vec<String> {
-        trace.lines().skip(1).map(|l| l.split(',').nth(crate::trace::RECV_COLUMN).unwrap_or("-").to_string()).collect()
+        trace.lines().skip(1).map(|l| l.split(',').nth(Column::RecvNs.index()).unwrap_or("-").to_string()).collect()
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! reverse path's report under its channel's name), and the joint report
 //! of several streams.
 
+use super::ended::Ended;
 use super::path::{Account, LinkMeasures, PathReport};
 use crate::host::isolate::IsolationSummary;
 use crate::metrics::Summary;
@@ -150,7 +151,7 @@ pub struct EmulatorProcess {
     pub frames: EmulatorFrames,
     /// Why the loop ended: `end_marker` (the console finished and every held
     /// frame was released), `signal`, or `peer_died` (see `dead_peers`).
-    pub ended_by: String,
+    pub ended_by: Ended,
     /// Peers of the run found dead by the emulator (role, executable, pid).
     #[serde(default)]
     pub dead_peers: Vec<String>,
@@ -324,7 +325,8 @@ pub struct EmulatorStreams {
     /// Every stream's account closes.
     pub balanced: bool,
     pub core: Option<usize>,
-    pub ended_by: String,
+    /// Why the one loop ended: `end_marker`, `signal` or `peer_died`.
+    pub ended_by: Ended,
     pub duration_s: f64,
     /// Rounds of the loop (each turns every stream once), and the mean
     /// time of one.

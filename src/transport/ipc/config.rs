@@ -70,12 +70,12 @@ impl IpcConfig {
 
     /// The service name of `channel`: `netfi/<run>/<channel>`.
     pub fn service_name(&self, channel: Port) -> String {
-        format!("netfi/{}/{}", self.run, channel)
+        self.run.resource_name(channel)
     }
 
     /// The node name of a process with `role`: `netfi/<run>/<role>`.
     pub fn node_name(&self, role: Role) -> String {
-        format!("netfi/{}/{}", self.run, role)
+        self.run.resource_name(role)
     }
 
     /// The role encoded in a node name of this run, if it is one.

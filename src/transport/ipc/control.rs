@@ -154,11 +154,11 @@ pub enum RequestError {
 }
 
 fn service_name(config: &IpcConfig, what: &str) -> ServiceName {
-    ServiceName::new(&format!("netfi/{}/{what}", config.run_id())).expect("a validated run id always forms a valid service name")
+    ServiceName::new(&config.run_id().resource_name(what)).expect("a validated run id always forms a valid service name")
 }
 
 fn side_err(config: &IpcConfig, what: &str, e: impl core::fmt::Debug) -> SideOpenError {
-    SideOpenError::Service { service: format!("netfi/{}/{what}", config.run_id()), run: config.run_id().to_string(), detail: format!("{e:?}") }
+    SideOpenError::Service { service: config.run_id().resource_name(what), run: config.run_id().to_string(), detail: format!("{e:?}") }
 }
 
 fn control_service(node: &IpcNode, create: bool) -> Result<ReqResFactory<Ipc, [u8], (), [u8], ()>, SideOpenError> {

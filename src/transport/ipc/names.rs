@@ -45,6 +45,12 @@ impl RunId {
     pub fn as_str(&self) -> &str {
         &self.0
     }
+
+    /// The name of the run's iceoryx2 resource `leaf` (a channel's service,
+    /// a role's node, a side service): `netfi/<run>/<leaf>`.
+    pub fn resource_name(&self, leaf: impl fmt::Display) -> String {
+        format!("netfi/{}/{leaf}", self.0)
+    }
 }
 
 impl fmt::Display for RunId {

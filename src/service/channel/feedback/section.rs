@@ -47,7 +47,7 @@ pub struct ConsoleFeedback {
     pub unknown_command: u64,
     /// `end_marker`, `no_emulator` (nobody published feedback), `timeout`
     /// or `signal`.
-    pub ended_by: String,
+    pub ended_by: crate::service::schema::Ended,
     /// Command sent → the robot's feedback naming it received.
     pub round_trip_ns: Summary,
     /// The emulator's own share of each round trip: both directions'
