@@ -37,6 +37,9 @@ pub enum ArgsError {
         /// The streams asked for.
         streams: u32,
     },
+    /// A capture's limit without a capture.
+    #[error("--capture-max-records bounds --capture, and none was given")]
+    CaptureLimitAlone,
     /// A run that would last longer than a run may.
     #[error("--frames {frames} at {rate_hz} Hz would stream for {seconds} s; a run lasts at most a week ({max_s} s)")]
     TooLong {

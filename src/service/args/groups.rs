@@ -60,7 +60,7 @@ pub struct SourceArgs {
     /// The most records of --capture read, 1 to 2^32 (default 4194304, 2^22:
     /// 70 min at 1 kHz, about 600 MB in memory); a capture with more is
     /// refused before more of it is read.
-    #[arg(long, value_name = "RECORDS", requires = "capture", value_parser = values::capture_max_records())]
+    #[arg(long, value_name = "RECORDS", value_parser = values::capture_max_records())]
     pub capture_max_records: Option<u64>,
 }
 
@@ -68,6 +68,9 @@ impl SourceArgs {
     /// How long the stream is planned to last (s), and the frames expected;
     /// a stream longer than a run may last is an error.
     pub fn planned(&self) -> Result<(f64, u64), ArgsError> {
+        if self.capture_max_records.is_some() && self.capture.is_none() {
+            return Err(ArgsError::CaptureLimitAlone);
+        }
         let rate_hz = self.rate_hz.unwrap_or(DEFAULT_RATE_HZ);
         let planned = match (&self.capture, self.frames, self.duration_s) {
             (_, Some(n), _) => (n as f64 / rate_hz, n),
