@@ -90,6 +90,9 @@ pub trait Transport: 'static {
     /// How an endpoint of it is written, for the message that lists what
     /// an endpoint may be.
     const SYNTAX: &'static str;
+    /// Whether that message lists it (a transport built for tests only is
+    /// not).
+    const LISTED: bool = true;
     /// What follows the scheme.
     type Addr: Clone + PartialEq + fmt::Debug + 'static;
     /// `text` as an endpoint of this transport; `None` when it is not one.
@@ -187,47 +190,52 @@ pub enum NoReport {}
 /// Makes the registry's values from the list of transports, each
 /// `Variant(field): Type` where `Type: Transport`.
 macro_rules! transports {
-    ($( $(#[$doc:meta])* $V:ident($field:ident): $T:ty ),+ $(,)?) => {
+    ($( $(#[doc = $doc:literal])* $([cfg($cfg:meta)])? $V:ident($field:ident): $T:ty ),+ $(,)?) => {
         use $crate::transport::declare::{Lane, LaneFlags, Sides, Transport, Wiring};
 
         /// One side of the emulator, of any transport: where frames come
         /// from, or go to.
         #[derive(Debug, Clone, PartialEq)]
         pub enum Endpoint {
-            $( $(#[$doc])* $V(<$T as Transport>::Addr), )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? $V(<$T as Transport>::Addr), )+
         }
 
-        /// What every endpoint may be, for messages.
-        pub const ENDPOINT_SYNTAX: &[&str] = &[$( <$T as Transport>::SYNTAX, )+];
+        /// What every endpoint may be, for messages: the listed
+        /// transports' syntax.
+        pub fn endpoint_syntax() -> Vec<&'static str> {
+            let mut out = Vec::new();
+            $( $(#[cfg($cfg)])? { if <$T as Transport>::LISTED { out.push(<$T as Transport>::SYNTAX); } } )+
+            out
+        }
 
         impl std::str::FromStr for Endpoint {
             type Err = $crate::transport::EndpointError;
             fn from_str(text: &str) -> Result<Self, Self::Err> {
-                $( if let Some(a) = <$T as Transport>::parse(text) { return a.map(Endpoint::$V); } )+
+                $( $(#[cfg($cfg)])? { if let Some(a) = <$T as Transport>::parse(text) { return a.map(Endpoint::$V); } } )+
                 Err($crate::transport::EndpointError::Scheme { text: text.into() })
             }
         }
 
         impl std::fmt::Display for Endpoint {
             fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-                match self { $( Endpoint::$V(a) => <$T as Transport>::show(a, f), )+ }
+                match self { $( $(#[cfg($cfg)])? Endpoint::$V(a) => <$T as Transport>::show(a, f), )+ }
             }
         }
 
         impl Endpoint {
             /// Its transport's scheme.
             pub fn scheme(&self) -> &'static str {
-                match self { $( Endpoint::$V(_) => <$T as Transport>::SCHEME, )+ }
+                match self { $( $(#[cfg($cfg)])? Endpoint::$V(_) => <$T as Transport>::SCHEME, )+ }
             }
 
             /// Its address, when it is of transport `X`.
             pub fn of<X: Transport>(&self) -> Option<&X::Addr> {
-                match self { $( Endpoint::$V(a) => (a as &dyn std::any::Any).downcast_ref::<X::Addr>(), )+ }
+                match self { $( $(#[cfg($cfg)])? Endpoint::$V(a) => (a as &dyn std::any::Any).downcast_ref::<X::Addr>(), )+ }
             }
 
             /// The socket address it names, where it names one.
             pub fn socket_addr(&self) -> Option<std::net::SocketAddr> {
-                match self { $( Endpoint::$V(a) => <$T as Transport>::socket_addr(a), )+ }
+                match self { $( $(#[cfg($cfg)])? Endpoint::$V(a) => <$T as Transport>::socket_addr(a), )+ }
             }
 
             /// Which of `ingress` and `egress` are of transport `X`.
@@ -238,50 +246,50 @@ macro_rules! transports {
 
         /// Where the emulator takes frames from.
         pub enum Ingress {
-            $( $(#[$doc])* $V(<$T as Transport>::Source), )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? $V(<$T as Transport>::Source), )+
         }
 
         /// Where the emulator sends what it releases.
         pub enum Egress {
-            $( $(#[$doc])* $V(<$T as Transport>::Sink), )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? $V(<$T as Transport>::Sink), )+
         }
 
         impl Ingress {
             /// The source, when it is of transport `X`.
             pub fn of<X: Transport>(&self) -> Option<&X::Source> {
-                match self { $( Ingress::$V(s) => (s as &dyn std::any::Any).downcast_ref::<X::Source>(), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(s) => (s as &dyn std::any::Any).downcast_ref::<X::Source>(), )+ }
             }
         }
 
         impl Egress {
             /// The sink, when it is of transport `X`.
             pub fn of<X: Transport>(&self) -> Option<&X::Sink> {
-                match self { $( Egress::$V(s) => (s as &dyn std::any::Any).downcast_ref::<X::Sink>(), )+ }
+                match self { $( $(#[cfg($cfg)])? Egress::$V(s) => (s as &dyn std::any::Any).downcast_ref::<X::Sink>(), )+ }
             }
         }
 
         impl $crate::transport::FrameSource for Ingress {
             #[inline]
             fn try_recv(&mut self, out: &mut $crate::sample::FrameSample) -> Result<bool, $crate::transport::PortError> {
-                match self { $( Ingress::$V(p) => $crate::transport::FrameSource::try_recv(p, out), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(p) => $crate::transport::FrameSource::try_recv(p, out), )+ }
             }
 
             fn peers(&mut self) -> Option<usize> {
-                match self { $( Ingress::$V(p) => $crate::transport::FrameSource::peers(p), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(p) => $crate::transport::FrameSource::peers(p), )+ }
             }
 
             #[inline]
             fn dropped(&mut self, sample: &$crate::sample::FrameSample) {
-                match self { $( Ingress::$V(p) => $crate::transport::FrameSource::dropped(p, sample), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(p) => $crate::transport::FrameSource::dropped(p, sample), )+ }
             }
 
             #[inline]
             fn sender(&self) -> Option<std::net::SocketAddr> {
-                match self { $( Ingress::$V(p) => $crate::transport::FrameSource::sender(p), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(p) => $crate::transport::FrameSource::sender(p), )+ }
             }
 
             fn senders(&mut self) -> Vec<String> {
-                match self { $( Ingress::$V(p) => $crate::transport::FrameSource::senders(p), )+ }
+                match self { $( $(#[cfg($cfg)])? Ingress::$V(p) => $crate::transport::FrameSource::senders(p), )+ }
             }
         }
 
@@ -292,34 +300,34 @@ macro_rules! transports {
                 sample: &$crate::sample::FrameSample,
                 stamp: impl FnOnce(&mut $crate::sample::FrameSample),
             ) -> Result<Option<usize>, $crate::transport::PortError> {
-                match self { $( Egress::$V(p) => $crate::transport::FrameSink::send_with(p, sample, stamp), )+ }
+                match self { $( $(#[cfg($cfg)])? Egress::$V(p) => $crate::transport::FrameSink::send_with(p, sample, stamp), )+ }
             }
 
             fn peers(&mut self) -> Option<usize> {
-                match self { $( Egress::$V(p) => $crate::transport::FrameSink::peers(p), )+ }
+                match self { $( $(#[cfg($cfg)])? Egress::$V(p) => $crate::transport::FrameSink::peers(p), )+ }
             }
 
             fn unsubscribed(&self) -> u64 {
-                match self { $( Egress::$V(p) => $crate::transport::FrameSink::unsubscribed(p), )+ }
+                match self { $( $(#[cfg($cfg)])? Egress::$V(p) => $crate::transport::FrameSink::unsubscribed(p), )+ }
             }
         }
 
         /// Every transport's flags.
         #[derive(Debug, Clone, Default, PartialEq, clap::Args)]
         pub struct TransportArgs {
-            $( #[doc = concat!("The ", stringify!($field), " transport's flags.")] #[command(flatten)] pub $field: <$T as Transport>::Args, )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " transport's flags.")] #[command(flatten)] pub $field: <$T as Transport>::Args, )+
         }
 
         impl $crate::flags::Render for TransportArgs {
             fn render(&self, a: &mut $crate::flags::Argv) {
-                $( a.group(&self.$field); )+
+                $( $(#[cfg($cfg)])? a.group(&self.$field); )+
             }
         }
 
         /// Why a transport's flags do not fit the lane.
         #[derive(Debug, thiserror::Error)]
         pub enum TransportArgsError {
-            $( #[doc = concat!("The ", stringify!($field), " transport's.")] #[error(transparent)] $V(<$T as Transport>::ArgsError), )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " transport's.")] #[error(transparent)] $V(<$T as Transport>::ArgsError), )+
         }
 
         impl TransportArgs {
@@ -327,23 +335,29 @@ macro_rules! transports {
             /// `egress` and its other `flags`.
             pub fn check(&self, ingress: &Endpoint, egress: &Endpoint, flags: LaneFlags<'_>) -> Result<(), TransportArgsError> {
                 $(
-                    let lane = Lane { sides: Endpoint::sides::<$T>(ingress, egress), ends: (ingress, egress), flags };
-                    <$T as Transport>::check(&self.$field, lane).map_err(TransportArgsError::$V)?;
+                    $(#[cfg($cfg)])? {
+                        let lane = Lane { sides: Endpoint::sides::<$T>(ingress, egress), ends: (ingress, egress), flags };
+                        <$T as Transport>::check(&self.$field, lane).map_err(TransportArgsError::$V)?;
+                    }
                 )+
                 Ok(())
             }
 
             /// Whether a sample of the lane may carry an opaque payload.
             pub fn opaque(&self, ingress: &Endpoint, egress: &Endpoint) -> bool {
-                false $( || (Endpoint::sides::<$T>(ingress, egress).any() && <$T as Transport>::opaque(&self.$field)) )+
+                let mut any = false;
+                $( $(#[cfg($cfg)])? { any |= Endpoint::sides::<$T>(ingress, egress).any() && <$T as Transport>::opaque(&self.$field); } )+
+                any
             }
 
             /// The stages the lane's transports cannot apply.
             pub fn unsupported(&self, ingress: &Endpoint, egress: &Endpoint) -> &'static [$crate::model::ModelKind] {
                 $(
-                    let u = <$T as Transport>::unsupported(&self.$field);
-                    if Endpoint::sides::<$T>(ingress, egress).any() && !u.is_empty() {
-                        return u;
+                    $(#[cfg($cfg)])? {
+                        let u = <$T as Transport>::unsupported(&self.$field);
+                        if Endpoint::sides::<$T>(ingress, egress).any() && !u.is_empty() {
+                            return u;
+                        }
                     }
                 )+
                 &[]
@@ -353,6 +367,7 @@ macro_rules! transports {
             /// transport of it has its own.
             pub fn default_queue_capacity(&self, ingress: &Endpoint, egress: &Endpoint) -> Option<usize> {
                 $(
+                    $(#[cfg($cfg)])?
                     if Endpoint::sides::<$T>(ingress, egress).any() {
                         if let Some(c) = <$T as Transport>::default_queue_capacity(&self.$field) {
                             return Some(c);
@@ -365,13 +380,13 @@ macro_rules! transports {
 
         /// What a lane keeps open of each transport either side is of.
         pub struct Sessions {
-            $( #[doc = concat!("The ", stringify!($field), " transport's, when a side is of it.")] pub $field: Option<<$T as Transport>::Session>, )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " transport's, when a side is of it.")] pub $field: Option<<$T as Transport>::Session>, )+
         }
 
         /// Why a lane's transports could not be opened.
         #[derive(Debug, thiserror::Error)]
         pub enum OpenError {
-            $( #[doc = concat!("The ", stringify!($field), " transport's.")] #[error(transparent)] $V(<$T as Transport>::OpenError), )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " transport's.")] #[error(transparent)] $V(<$T as Transport>::OpenError), )+
             /// No receiver came in time (`--wait-for-peer-s`).
             #[error("no robot subscribed to the emulator → simulator port within {wait_s} s")]
             NoRobot {
@@ -400,6 +415,7 @@ macro_rules! transports {
         pub fn open(ingress: &Endpoint, egress: &Endpoint, args: &TransportArgs, w: &Wiring) -> Result<Transports, OpenError> {
             let mut sessions = Sessions {
                 $(
+                    $(#[cfg($cfg)])?
                     $field: {
                         let sides = Endpoint::sides::<$T>(ingress, egress);
                         match sides.any() {
@@ -411,6 +427,7 @@ macro_rules! transports {
             };
             let mut egress = match egress {
                 $(
+                    $(#[cfg($cfg)])?
                     Endpoint::$V(a) => {
                         let s = sessions.$field.as_mut().expect("a session is open for each side's transport");
                         Egress::$V(<$T as Transport>::sink(s, a, &args.$field, w).map_err(OpenError::$V)?)
@@ -423,6 +440,7 @@ macro_rules! transports {
             }
             let ingress = match ingress {
                 $(
+                    $(#[cfg($cfg)])?
                     Endpoint::$V(a) => {
                         let s = sessions.$field.as_mut().expect("a session is open for each side's transport");
                         Ingress::$V(<$T as Transport>::source(s, a, &args.$field, w).map_err(OpenError::$V)?)
@@ -437,6 +455,7 @@ macro_rules! transports {
             pub fn describe(&self, args: &TransportArgs, ends: (&dyn std::fmt::Display, &dyn std::fmt::Display)) -> Option<String> {
                 let mut said: Option<String> = None;
                 $(
+                    $(#[cfg($cfg)])?
                     if let Some(s) = self.$field.as_ref().and_then(|s| <$T as Transport>::describe(s, &args.$field, ends)) {
                         said = Some(match said { Some(d) => format!("{d}; {s}"), None => s });
                     }
@@ -446,13 +465,16 @@ macro_rules! transports {
 
             /// Whether a transport's library latched a request to stop.
             pub fn termination_requested(&self) -> bool {
-                false $( || self.$field.as_ref().is_some_and(<$T as Transport>::termination_requested) )+
+                let mut any = false;
+                $( $(#[cfg($cfg)])? { any |= self.$field.as_ref().is_some_and(<$T as Transport>::termination_requested); } )+
+                any
             }
 
             /// What each transport says once open, as `(file, value)`.
             pub fn at_start(&self) -> Vec<(&'static str, serde_json::Value)> {
                 let mut out = Vec::new();
                 $(
+                    $(#[cfg($cfg)])?
                     if let (Some(file), Some(v)) = (<$T as Transport>::START_FILE, self.$field.as_ref().and_then(<$T as Transport>::at_start)) {
                         out.push((file, v));
                     }
@@ -465,6 +487,7 @@ macro_rules! transports {
             pub fn reports(&self, args: &TransportArgs, ends: (&dyn std::fmt::Display, &dyn std::fmt::Display), ingress: &Ingress, egress: &Egress) -> TransportReports {
                 TransportReports {
                     $(
+                        $(#[cfg($cfg)])?
                         $field: self.$field.as_ref().and_then(|s| <$T as Transport>::report(s, &args.$field, ends, ingress.of::<$T>(), egress.of::<$T>())),
                     )+
                 }
@@ -477,6 +500,7 @@ macro_rules! transports {
         #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
         pub struct TransportReports {
             $(
+                $(#[cfg($cfg)])?
                 #[doc = concat!("The ", stringify!($field), " transport's, when a side is of it.")]
                 #[serde(default, skip_serializing_if = "Option::is_none")]
                 pub $field: Option<<$T as Transport>::Report>,
@@ -488,6 +512,7 @@ macro_rules! transports {
             pub fn files(&self) -> Vec<(&'static str, serde_json::Value)> {
                 let mut out = Vec::new();
                 $(
+                    $(#[cfg($cfg)])?
                     if let Some(r) = &self.$field {
                         out.push((<$T as Transport>::REPORT_FILE, serde_json::to_value(r).expect("a report serializes")));
                     }
@@ -502,6 +527,7 @@ macro_rules! transports {
                 let mut bad = Vec::new();
                 let r = TransportReports {
                     $(
+                        $(#[cfg($cfg)])?
                         $field: $crate::transport::declare::read_report::<<$T as Transport>::Report>(dir, <$T as Transport>::REPORT_FILE)
                             .unwrap_or_else(|why| {
                                 bad.push((<$T as Transport>::REPORT_FILE, <$T as Transport>::SCHEME, why));
@@ -515,18 +541,20 @@ macro_rules! transports {
             /// Adds what each transport says of the lane's reverse paths
             /// (their reports by channel name).
             pub fn attach(&mut self, paths: &std::collections::BTreeMap<String, serde_json::Value>) {
-                $( if let Some(r) = self.$field.as_mut() { <$T as Transport>::attach(r, paths); } )+
+                $( $(#[cfg($cfg)])? if let Some(r) = self.$field.as_mut() { <$T as Transport>::attach(r, paths); } )+
             }
 
             /// Whether no transport has a report.
             pub fn is_empty(&self) -> bool {
-                true $( && self.$field.is_none() )+
+                let mut none = true;
+                $( $(#[cfg($cfg)])? { none &= self.$field.is_none(); } )+
+                none
             }
 
             /// What each report adds to the log line at the lane's end.
             pub fn summary(&self) -> String {
                 let mut s = String::new();
-                $( if let Some(r) = &self.$field { s += &<$T as Transport>::summary(r); } )+
+                $( $(#[cfg($cfg)])? if let Some(r) = &self.$field { s += &<$T as Transport>::summary(r); } )+
                 s
             }
 
@@ -534,14 +562,14 @@ macro_rules! transports {
             /// transport's scheme.
             pub fn lines(&self) -> Vec<(&'static str, String)> {
                 let mut out = Vec::new();
-                $( if let Some(l) = self.$field.as_ref().and_then(<$T as Transport>::line) { out.push((<$T as Transport>::SCHEME, l)); } )+
+                $( $(#[cfg($cfg)])? if let Some(l) = self.$field.as_ref().and_then(<$T as Transport>::line) { out.push((<$T as Transport>::SCHEME, l)); } )+
                 out
             }
 
             /// What the reports say went wrong.
             pub fn faults(&self) -> Vec<String> {
                 let mut out = Vec::new();
-                $( if let Some(r) = &self.$field { out.extend(<$T as Transport>::faults(r)); } )+
+                $( $(#[cfg($cfg)])? if let Some(r) = &self.$field { out.extend(<$T as Transport>::faults(r)); } )+
                 out
             }
         }

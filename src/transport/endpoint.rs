@@ -6,7 +6,7 @@
 #[derive(Debug, thiserror::Error)]
 pub enum EndpointError {
     /// No transport's scheme.
-    #[error("`{text}`: expected {}", super::ENDPOINT_SYNTAX.join(" or "))]
+    #[error("`{text}`: expected {}", super::endpoint_syntax().join(" or "))]
     Scheme {
         /// What was given.
         text: String,
