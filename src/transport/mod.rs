@@ -44,6 +44,8 @@ pub mod ports;
 pub mod registry;
 pub mod ros2;
 pub mod udp;
+#[cfg(debug_assertions)]
+pub mod unixgram;
 
 pub use declare::{LaneFlags, Sides, Transport, Wiring};
 pub use endpoint::EndpointError;

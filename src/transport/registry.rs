@@ -11,6 +11,8 @@ transports! {
     Iceoryx2(iceoryx2): super::ipc::Iceoryx2,
     /// A UDP socket (`udp://ADDR:PORT`).
     Udp(udp): super::udp::Udp,
+    /// A Unix datagram socket (`unixgram:PATH`), in test builds.
+    [cfg(debug_assertions)] Unixgram(unixgram): super::unixgram::Unixgram,
 }
 
 #[cfg(test)]

@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 mod deaths;
 mod faults;
 mod integrity;
+mod registered;
 mod shipped;
 mod streams;
 mod video;

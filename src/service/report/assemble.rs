@@ -78,6 +78,8 @@ pub(super) struct Parts {
     /// missing where absent.
     pub transports: TransportReports,
     pub missing: Vec<(&'static str, String, Option<String>)>,
+    /// The robot was the lab's own program: no report of its own.
+    pub lab_robot: bool,
 }
 
 impl Parts {
@@ -91,7 +93,7 @@ impl Parts {
         for (file, scheme, why) in unread {
             missing.push((file, format!("emulator's {} side", scheme.to_uppercase()), Some(why)));
         }
-        Parts { console, emulator, simulator, transports, missing }
+        Parts { console, emulator, simulator, transports, missing, lab_robot: false }
     }
 
     /// A fault for each report the runner expected and did not find.
@@ -159,12 +161,15 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
-    let Parts { console, emulator, simulator, transports, missing } = parts;
+    let Parts { console, emulator, simulator, transports, missing, lab_robot } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
     };
-    let frames = join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref());
+    let frames = match (lab_robot, &simulator) {
+        (true, None) => join::account_to_lab_robot(console.as_ref(), emulator.as_deref()),
+        _ => join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref()),
+    };
     let (console_json, simulator_json) = (console.as_ref().and_then(|c| serde_json::to_value(c).ok()), simulator.as_ref().and_then(|s| serde_json::to_value(s).ok()));
     let sources = Sources { emulator: emulator.as_ref(), console: console_json.as_ref(), simulator: simulator_json.as_ref(), stopped };
     let channels = ChannelSections::join(sources);
@@ -247,8 +252,9 @@ impl RunReport {
     /// interruption, a trace that could not be joined and cut files to the
     /// faults. The emulator's trace is joined into `trace.csv` and removed.
     pub fn assemble_run(facts: &RunFacts, mut runner: RunnerView) -> RunReport {
-        let parts = Parts::read(facts.out, None);
+        let mut parts = Parts::read(facts.out, None);
         let lab = std::mem::take(&mut runner.lab);
+        parts.lab_robot = lab.contains(&"simulator");
         runner.faults.extend(parts.faults_but(&lab));
         assemble(facts, parts, runner, Source::Consume)
     }

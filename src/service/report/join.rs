@@ -35,6 +35,16 @@ pub fn account(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProces
     }
 }
 
+/// [`account`] of a run whose robot was the lab's own program: what it
+/// received is not netfi's to know, so the account closes at the
+/// emulator's release (every frame the console sent entered, and each was
+/// delivered, dropped or held).
+pub fn account_to_lab_robot(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>) -> FrameAccount {
+    let mut f = account(console, emulator, None);
+    f.balanced = emulator.is_some_and(|e| e.frames.account.closes()) && f.sent == f.entered;
+    f
+}
+
 /// What `corrupt` stages did against what the robot's checksum caught;
 /// `None` when nothing was corrupted. Frames that already had a bad
 /// checksum when they entered are not counted as caught, and no more can

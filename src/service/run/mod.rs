@@ -65,8 +65,8 @@ fn resolve(args: &RunArgs, run_id: &str) -> Result<(Resolved, u64)> {
         Scenario::new(s, seeds::stream(seed, k)).map_err(|e| RunnerError::StreamSeed(k, e))?;
         crate::transport::RunId::new(&streams::run_id(run_id, k)).map_err(|e| RunnerError::StreamRunId(k, e))?;
     }
-    let (ends, transports) = (crate::service::args::EndsArgs::default(), crate::transport::TransportArgs::default());
-    let shape = crate::service::channel::LaneShape { ingress: &ends.ingress, egress: &ends.egress, transports: &transports, streams: args.stream.streams };
+    let p = &args.peers;
+    let shape = crate::service::channel::LaneShape { ingress: &p.ends.ingress, egress: &p.ends.egress, transports: &p.transports, streams: args.stream.streams };
     let paths = args.channels.wants(&shape).into_iter().map(|(c, w)| Ok((c, resolve_path(w.flag, w.scenario.as_deref())?, w))).collect::<Result<Vec<_>>>()?;
     let paths = paths.into_iter().map(|(c, spec, w)| (c, w, spec)).collect();
     Ok((Resolved { streams: specs, paths }, seed))
