@@ -110,3 +110,101 @@ fn a_test_only_transport_carries_a_lab_run_with_the_fates_scenario_check_gives()
     assert!(!ingress.exists(), "the ingress socket is removed with the run");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Retries `f` until it gives a value (the run's services appear once its
+/// emulator is up), within a minute.
+fn retry<T, E: std::fmt::Debug>(what: &str, mut f: impl FnMut() -> Result<T, E>) -> T {
+    let t0 = Instant::now();
+    loop {
+        match f() {
+            Ok(v) => return v,
+            Err(e) if t0.elapsed() > Duration::from_secs(60) => panic!("{what}: {e:?}"),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
+
+#[test]
+fn a_test_only_channel_carries_its_samples_through_its_own_scenario_in_a_real_run() {
+    use netfi::sample::FrameSample;
+    use netfi::service::channel::haptic::{HapticSample, HAPTIC, HAPTIC_OUT};
+    use netfi::transport::{open_node, Port, Role};
+
+    let _guard = machine::alone();
+    let dir = super::out_dir("haptic");
+    let out = dir.join("out");
+    let run_id = format!("hap{}", std::process::id());
+    let mut run = spawn_run(
+        &out,
+        &["Normal", "--console", "lab", "--robot", "lab", "--run-id", &run_id, "--haptic", "--haptic-scenario", "PLM-2", "--haptic-seed", "5"],
+    );
+    // The lab's robot and console, both this test: frames in, frames out,
+    // force readings back.
+    let robot = retry("the robot's node", || open_node(&run_id, Role::Simulator));
+    let mut frames_out = retry("the robot's frame port", || robot.subscriber(Port::EMULATOR));
+    let mut forces = retry("the robot's haptic port", || robot.publisher_of::<HapticSample>(HAPTIC));
+    let console = retry("the console's node", || open_node(&run_id, Role::Console));
+    let mut haptic_out = retry("the console's haptic port", || console.subscriber_of::<HapticSample>(HAPTIC_OUT));
+    let mut frames_in = retry("the console's frame port", || console.publisher(Port::CONSOLE));
+    let ready = out.join("emulator.ready");
+    let t0 = Instant::now();
+    while !ready.exists() {
+        assert!(run.try_wait().unwrap().is_none(), "the run ended before its emulator was ready");
+        assert!(t0.elapsed() < Duration::from_secs(60), "no emulator within 60 s");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+
+    let n = 1000u64;
+    let (mut forwarded, mut came_back) = (0u64, Vec::new());
+    let take_back = |haptic_out: &mut netfi::transport::FrameSubscriber<HapticSample>, came_back: &mut Vec<u64>| -> bool {
+        while let Some(s) = haptic_out.try_recv().unwrap() {
+            if s.is_end() {
+                return true;
+            }
+            came_back.push(s.robot_index);
+        }
+        false
+    };
+    for i in 0..n {
+        let mut f = FrameSample { console_index: i, send_ns: netfi::clock::now_ns(), ..FrameSample::ZERO };
+        netfi::frame::ItpFrame::parse(&ItpView::new_unchecked(&itp(i as u32)[..])).unwrap().write_to_sample(&mut f);
+        frames_in.send(&f).unwrap();
+        let reading = HapticSample { send_ns: netfi::clock::now_ns(), robot_index: i, force_mn: [i as i32, -1, 2], ..HapticSample::default() };
+        forces.send(&reading).unwrap();
+        while frames_out.try_recv().unwrap().is_some() {
+            forwarded += 1;
+        }
+        take_back(&mut haptic_out, &mut came_back);
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    forces.send(&HapticSample::end_marker(n)).unwrap();
+    frames_in.send(&FrameSample::end_marker(n)).unwrap();
+    let t0 = Instant::now();
+    let mut ended = false;
+    while !ended && t0.elapsed() < Duration::from_secs(30) {
+        while frames_out.try_recv().unwrap().is_some_and(|f| !f.is_end()) {
+            forwarded += 1;
+        }
+        ended = take_back(&mut haptic_out, &mut came_back);
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(ended, "the console hears the haptic path's end");
+    let o = run.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"));
+
+    assert_eq!(u(&r["frames"]["delivered"]), n, "Normal delivers every frame");
+    assert_eq!(forwarded, n, "the robot got every frame");
+    let h = &r["haptic"];
+    assert_eq!((u(&h["entered"]), u(&h["sent_by_robot"]), &h["balanced"]), (n, n, &Value::Bool(true)), "{h}");
+    assert_eq!(u(&h["delivered"]), came_back.len() as u64, "{h}");
+    // The haptic path's own scenario and seed decided each reading's fate,
+    // as scenario check decides them.
+    let fates = check_fates("PLM-2", 5, n, &dir);
+    let expected: Vec<u64> = (0..n).filter(|&i| fates[i as usize] == "delivered").collect();
+    assert!(expected.len() < n as usize, "PLM-2 drops some of {n}");
+    assert_eq!(came_back, expected);
+    drop((frames_in, haptic_out, console, frames_out, forces, robot));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -68,7 +68,7 @@ fn an_emulator_parses_back_what_it_renders() {
         expected_frames: 1234,
         out: "o/e".into(),
         wait_for_peer_s: Some(1.5),
-        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video(), ..Default::default() },
         ends: EndsArgs::default(),
         transports: Default::default(),
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: true },
@@ -81,7 +81,7 @@ fn an_emulator_parses_back_what_it_renders() {
     let streams = StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] };
     let e2 = EmulatorArgs {
         stream: streams,
-        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, ..Default::default() },
         placement: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: false },
         ..e.clone()
     };
@@ -151,7 +151,7 @@ fn a_run_parses_back_what_it_renders() {
         report_json: Some("o/r.json".into()),
         run_id: Some("r9".into()),
         json: true,
-        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video() },
+        channels: ChannelArgs { feedback: ReturnArgs { return_scenario: Some("DLM-1".into()), return_seed: Some(8), no_feedback: false }, video: video(), ..Default::default() },
         no_direct: true,
         control: ControlArgs { telemetry_ms: 250, reorder_queue: true, fifo_queue: false, no_control: false },
         stream: StreamArgs::default(),
@@ -165,7 +165,7 @@ fn a_run_parses_back_what_it_renders() {
         scenario: ScenarioArgs::named("-odd.toml"),
         source: SourceArgs { frames: Some(17), duration_s: None, ..r.source.clone() },
         placement: RunPlacement { emulator: EmulatorPlacement { core: None, no_pin: true, rt_priority: None, isolate: true }, ..Default::default() },
-        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, video: Default::default() },
+        channels: ChannelArgs { feedback: ReturnArgs { no_feedback: true, ..Default::default() }, ..Default::default() },
         stream: StreamArgs { streams: 3, stream_scenario: vec!["1=PLM-1".into(), "2=x.toml".into()] },
         ..r
     };

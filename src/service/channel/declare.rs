@@ -131,8 +131,10 @@ pub enum ChannelOpen<E: std::error::Error + 'static> {
     Own(E),
 }
 
-/// A channel of which netfi's own console and robot take no flags.
+/// A channel of which netfi's own console and robot take no flags (no
+/// group of its own: several channels flatten it).
 #[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
+#[group(skip)]
 pub struct NoEndArgs {}
 
 impl Render for NoEndArgs {
@@ -140,38 +142,39 @@ impl Render for NoEndArgs {
 }
 
 /// Makes the registry's values from the list of channels, each
-/// `field: Type` where `Type: ReverseChannel`.
+/// `field: Type` where `Type: ReverseChannel`; an entry marked
+/// `[cfg(...)]` (a channel built for tests only) exists where that holds.
 macro_rules! channels {
-    ($( $(#[$doc:meta])* $field:ident: $T:ty ),+ $(,)?) => {
+    ($( $(#[doc = $doc:literal])* $([cfg($cfg:meta)])? $field:ident: $T:ty ),+ $(,)?) => {
 
         /// Every reverse channel's flags.
         #[derive(Debug, Clone, Default, PartialEq, clap::Args)]
         pub struct ChannelArgs {
-            $( $(#[$doc])* #[command(flatten)] pub $field: <$T as $crate::service::channel::declare::ReverseChannel>::Args, )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? #[command(flatten)] pub $field: <$T as $crate::service::channel::declare::ReverseChannel>::Args, )+
         }
 
         /// What netfi's own console and robot take of every channel's flags.
         #[derive(Debug, Clone, Default, PartialEq, clap::Args)]
         pub struct ChannelEndArgs {
-            $( $(#[$doc])* #[command(flatten)] pub $field: <$T as $crate::service::channel::declare::ReverseChannel>::EndArgs, )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? #[command(flatten)] pub $field: <$T as $crate::service::channel::declare::ReverseChannel>::EndArgs, )+
         }
 
         impl $crate::flags::Render for ChannelArgs {
             fn render(&self, a: &mut $crate::flags::Argv) {
-                $( a.group(&self.$field); )+
+                $( $(#[cfg($cfg)])? a.group(&self.$field); )+
             }
         }
 
         impl $crate::flags::Render for ChannelEndArgs {
             fn render(&self, a: &mut $crate::flags::Argv) {
-                $( a.group(&self.$field); )+
+                $( $(#[cfg($cfg)])? a.group(&self.$field); )+
             }
         }
 
         /// Why a channel's flags do not fit the lane.
         #[derive(Debug, thiserror::Error)]
         pub enum ChannelArgsError {
-            $( #[doc = concat!("The ", stringify!($field), " channel's.")] #[error(transparent)] #[allow(non_camel_case_types)] $field(<$T as $crate::service::channel::declare::ReverseChannel>::ArgsError), )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " channel's.")] #[error(transparent)] #[allow(non_camel_case_types)] $field(<$T as $crate::service::channel::declare::ReverseChannel>::ArgsError), )+
         }
 
         /// Why a channel's path could not be opened.
@@ -180,18 +183,18 @@ macro_rules! channels {
             /// Its scenario, queue or link.
             #[error(transparent)]
             Path(#[from] $crate::service::emulator::opening::OpenError),
-            $( #[doc = concat!("The ", stringify!($field), " channel's own.")] #[error(transparent)] #[allow(non_camel_case_types)] $field(<$T as $crate::service::channel::declare::ReverseChannel>::OpenError), )+
+            $( $(#[cfg($cfg)])? #[doc = concat!("The ", stringify!($field), " channel's own.")] #[error(transparent)] #[allow(non_camel_case_types)] $field(<$T as $crate::service::channel::declare::ReverseChannel>::OpenError), )+
         }
 
         impl ChannelArgs {
             /// What netfi's own console and robot take of these flags.
             pub fn end_args(&self) -> ChannelEndArgs {
-                ChannelEndArgs { $( $field: <$T as $crate::service::channel::declare::ReverseChannel>::end_args(&self.$field), )+ }
+                ChannelEndArgs { $( $(#[cfg($cfg)])? $field: <$T as $crate::service::channel::declare::ReverseChannel>::end_args(&self.$field), )+ }
             }
 
             /// Checks every channel's flags against `lane`.
             pub fn check(&self, lane: &$crate::service::channel::declare::LaneShape) -> Result<(), ChannelArgsError> {
-                $( <$T as $crate::service::channel::declare::ReverseChannel>::check(&self.$field, lane).map_err(ChannelArgsError::$field)?; )+
+                $( $(#[cfg($cfg)])? <$T as $crate::service::channel::declare::ReverseChannel>::check(&self.$field, lane).map_err(ChannelArgsError::$field)?; )+
                 Ok(())
             }
 
@@ -199,27 +202,28 @@ macro_rules! channels {
             /// registry), in the order a lane polls them.
             pub fn wants(&self, lane: &$crate::service::channel::declare::LaneShape) -> Vec<(&'static str, $crate::service::channel::declare::Want)> {
                 let mut out = Vec::new();
-                $( if let Some(w) = <$T as $crate::service::channel::declare::ReverseChannel>::want(&self.$field, lane) { out.push((stringify!($field), w)); } )+
+                $( $(#[cfg($cfg)])? if let Some(w) = <$T as $crate::service::channel::declare::ReverseChannel>::want(&self.$field, lane) { out.push((stringify!($field), w)); } )+
                 out
             }
 
             /// The seed channel `field`'s flags give.
             pub fn seed_mut(&mut self, field: &str) -> Option<&mut Option<u64>> {
                 match field {
-                    $( stringify!($field) => Some(<$T as $crate::service::channel::declare::ReverseChannel>::seed(&mut self.$field)), )+
+                    $( $(#[cfg($cfg)])? stringify!($field) => Some(<$T as $crate::service::channel::declare::ReverseChannel>::seed(&mut self.$field)), )+
                     _ => None,
                 }
             }
 
             /// Each seed given, mapped by `f` (a lane's of a run's).
             pub fn map_seeds(&mut self, f: impl Fn(u64) -> u64) {
-                $( let s = <$T as $crate::service::channel::declare::ReverseChannel>::seed(&mut self.$field); *s = s.map(&f); )+
+                $( $(#[cfg($cfg)])? { let s = <$T as $crate::service::channel::declare::ReverseChannel>::seed(&mut self.$field); *s = s.map(&f); } )+
             }
 
             /// Opens each reverse path `lane` has, in order.
             pub fn open_all(&self, lane: &$crate::service::channel::declare::LaneShape, o: &$crate::service::emulator::opening::Opening) -> Result<Vec<Box<dyn $crate::service::emulator::path::Reverse>>, ChannelOpenError> {
                 let mut out = Vec::new();
                 $(
+                    $(#[cfg($cfg)])?
                     if let Some(w) = <$T as $crate::service::channel::declare::ReverseChannel>::want(&self.$field, lane) {
                         let plan = w.plan(o.seed)?;
                         let path = <$T as $crate::service::channel::declare::ReverseChannel>::open(&self.$field, &w, &plan, o).map_err(|e| match e {
@@ -236,33 +240,33 @@ macro_rules! channels {
         /// Every iceoryx2 port of the channels, in the registry's order.
         pub fn channel_ports() -> Vec<$crate::transport::Port> {
             let mut out = Vec::new();
-            $( out.extend_from_slice(<$T as $crate::service::channel::declare::ReverseChannel>::PORTS); )+
+            $( $(#[cfg($cfg)])? out.extend_from_slice(<$T as $crate::service::channel::declare::ReverseChannel>::PORTS); )+
             out
         }
 
         /// Each channel's section of the run report, where the run had it.
         #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
         pub struct ChannelSections {
-            $( $(#[$doc])* #[serde(default)] pub $field: Option<<$T as $crate::service::channel::declare::ReverseChannel>::Section>, )+
+            $( $(#[doc = $doc])* $(#[cfg($cfg)])? #[serde(default)] pub $field: Option<<$T as $crate::service::channel::declare::ReverseChannel>::Section>, )+
         }
 
         impl ChannelSections {
             /// Joins each channel's section from `sources`.
             pub fn join(sources: $crate::service::channel::declare::Sources) -> ChannelSections {
-                ChannelSections { $( $field: <$T as $crate::service::channel::declare::ReverseChannel>::section(sources), )+ }
+                ChannelSections { $( $(#[cfg($cfg)])? $field: <$T as $crate::service::channel::declare::ReverseChannel>::section(sources), )+ }
             }
 
             /// The sections as lines of the run's text report.
             pub fn text(&self) -> String {
                 let mut s = String::new();
-                $( if let Some(x) = &self.$field { s += &<$T as $crate::service::channel::declare::ReverseChannel>::text(x); } )+
+                $( $(#[cfg($cfg)])? if let Some(x) = &self.$field { s += &<$T as $crate::service::channel::declare::ReverseChannel>::text(x); } )+
                 s
             }
 
             /// What the sections say went wrong.
             pub fn faults(&self) -> Vec<String> {
                 let mut out = Vec::new();
-                $( if let Some(x) = &self.$field { out.extend(<$T as $crate::service::channel::declare::ReverseChannel>::faults(x)); } )+
+                $( $(#[cfg($cfg)])? if let Some(x) = &self.$field { out.extend(<$T as $crate::service::channel::declare::ReverseChannel>::faults(x)); } )+
                 out
             }
 
@@ -270,6 +274,7 @@ macro_rules! channels {
             pub fn files(&self, sources: $crate::service::channel::declare::Sources) -> std::collections::BTreeMap<String, std::path::PathBuf> {
                 let mut out = std::collections::BTreeMap::new();
                 $(
+                    $(#[cfg($cfg)])?
                     if let Some(x) = &self.$field {
                         out.extend(<$T as $crate::service::channel::declare::ReverseChannel>::files(x, sources).into_iter().map(|(k, v)| (k.to_string(), v)));
                     }

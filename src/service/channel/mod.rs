@@ -10,9 +10,12 @@
 //! |---|---|
 //! | `feedback` | the return path: the robot's feedback over iceoryx2, what the robot sends back over UDP |
 //! | `video` | a camera's video, robot → console |
+//! | `haptic` | force readings, robot → console (test builds only) |
 
 pub mod declare;
 pub mod feedback;
+#[cfg(debug_assertions)]
+pub mod haptic;
 pub mod video;
 
 pub use declare::{ChannelOpen, LaneShape, NoEndArgs, ReverseChannel, Sources, Want};
@@ -22,4 +25,6 @@ declare::channels! {
     feedback: feedback::Return,
     /// The video stream (`--video-mbps`, …).
     video: video::Video,
+    /// A haptic force channel, in test builds (`--haptic`).
+    [cfg(debug_assertions)] haptic: haptic::Haptic,
 }
