@@ -16,6 +16,7 @@ pub mod declare;
 pub mod feedback;
 #[cfg(debug_assertions)]
 pub mod haptic;
+pub mod relay;
 pub mod video;
 
 pub use declare::{ChannelOpen, LaneShape, NoEndArgs, ReverseChannel, Sources, Want};

@@ -10,13 +10,13 @@
 
 use crate::model::ModelKind;
 use crate::sample::FeedbackSample;
-use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use super::{FeedbackExtra, ReturnOpenError};
+use crate::service::channel::relay::{Relay, Relayed};
+use crate::service::emulator::path::Reverse;
+use super::ReturnOpenError;
 use crate::service::channel::declare::ChannelOpen;
 use crate::service::emulator::opening::{Opening, PathPlan};
-use crate::service::link::{Arrival, Carried};
-use crate::service::schema::Account;
-use crate::transport::{FramePublisher, FrameSink, FrameSource, FrameSubscriber, Port, PortError, Role};
+use crate::service::link::Carried;
+use crate::transport::{FramePublisher, FrameSubscriber, Port, Role};
 
 /// The feedback path's name: its key in `emulator.json`'s paths.
 pub const NAME: &str = "feedback";
@@ -37,73 +37,52 @@ impl Carried for FeedbackSample {
     }
 }
 
-/// The feedback direction's ports: the robot's iceoryx2 ports, or any
-/// source and sink of feedback samples (tests drive in-memory ones).
-pub struct Feedback<S = FrameSubscriber<FeedbackSample>, K = FramePublisher<FeedbackSample>> {
-    source: S,
-    sink: K,
-    sample: FeedbackSample,
-}
-
-impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Feedback<S, K> {
-    /// The feedback channel from `source` to `sink`.
-    pub fn new(source: S, sink: K) -> Feedback<S, K> {
-        Feedback { source, sink, sample: FeedbackSample::ZERO }
-    }
-
-    /// The two ports.
-    pub fn ports_mut(&mut self) -> (&mut S, &mut K) {
-        (&mut self.source, &mut self.sink)
-    }
-}
-
-impl<S: FrameSource<FeedbackSample>, K: FrameSink<FeedbackSample>> Channel for Feedback<S, K> {
-    type Item = FeedbackSample;
-    type Extra = FeedbackExtra;
+impl Relayed for FeedbackSample {
     const NAME: &'static str = NAME;
     const TRACE_FILE: &'static str = "trace_feedback.csv";
-    const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
+
+    fn end_marker(sent: u64) -> FeedbackSample {
+        FeedbackSample::end_marker(sent)
+    }
 
     #[inline]
-    fn take(&mut self, next_ingress_index: u64, clock: &mut impl FnMut() -> u64) -> Take<FeedbackSample> {
-        let s = &mut self.sample;
-        match self.source.try_recv(s) {
-            Ok(true) if s.is_end() => Take::End(s.robot_index),
-            Ok(true) => {
-                s.ingress_index = next_ingress_index;
-                s.ingress_ns = clock();
-                Take::Item(*s, None, Arrival { sequence: Some(s.sequence), console_index: s.robot_index, send_ns: s.send_ns })
-            }
-            Ok(false) => Take::Nothing,
-            Err(e) => Take::Failed(e),
-        }
+    fn is_end(&self) -> bool {
+        FeedbackSample::is_end(self)
     }
 
-    /// Feedback is released stamped with its scheduled and actual release
-    /// times and its injected delay.
     #[inline]
-    fn release(&mut self, item: &FeedbackSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        crate::service::emulator::path::release_stamped!(self.sink, item, scheduled_ns, stamp)
+    fn sender_index(&self) -> u64 {
+        self.robot_index
     }
 
-    fn send_end(&mut self, released: u64) {
-        let _ = self.sink.send_with(&FeedbackSample::end_marker(released), |_| {});
+    #[inline]
+    fn send_ns(&self) -> u64 {
+        self.send_ns
     }
 
-    fn senders(&mut self) -> Option<usize> {
-        self.source.peers()
+    #[inline]
+    fn sequence(&self) -> Option<u32> {
+        Some(self.sequence)
     }
 
-    fn unsubscribed(&self) -> u64 {
-        self.sink.unsubscribed()
+    #[inline]
+    fn taken(&mut self, ingress_index: u64, ingress_ns: u64) {
+        self.ingress_index = ingress_index;
+        self.ingress_ns = ingress_ns;
     }
 
-    /// Balanced also asks that every feedback sample the robot said it sent
-    /// entered.
-    fn finish(&mut self, account: &Account, sent: Option<u64>) -> (FeedbackExtra, bool) {
-        (FeedbackExtra { sent_by_robot: sent }, sent.is_none_or(|n| n == account.entered))
+    #[inline]
+    fn released(&mut self, scheduled_ns: u64, release_ns: impl FnOnce() -> u64) -> u64 {
+        self.release_sched_ns = scheduled_ns;
+        self.injected_delay_ns = scheduled_ns - self.ingress_ns;
+        self.release_ns = release_ns();
+        self.release_ns
     }
 }
+
+/// The feedback direction's ports: the robot's iceoryx2 ports, or any
+/// source and sink of feedback samples (tests drive in-memory ones).
+pub type Feedback<S = FrameSubscriber<FeedbackSample>, K = FramePublisher<FeedbackSample>> = Relay<FeedbackSample, S, K>;
 
 /// The feedback path of a lane with iceoryx2 on both sides, as `plan`
 /// settled it.

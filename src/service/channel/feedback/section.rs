@@ -10,12 +10,9 @@ use crate::service::schema::PathReport;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// What the feedback channel adds to its path's report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeedbackExtra {
-    /// Feedback samples the robot said it sent (from its end marker).
-    pub sent_by_robot: Option<u64>,
-}
+/// What the feedback channel adds to its path's report: the feedback
+/// samples the robot said it sent (from its end marker).
+pub type FeedbackExtra = crate::service::channel::relay::RelayExtra;
 
 /// What the UDP return channel adds to its path's report: `received =
 /// entered + unroutable`.

@@ -15,11 +15,12 @@ use super::declare::{ChannelOpen, LaneShape, NoEndArgs, ReverseChannel, Sources,
 use crate::flags::{Argv, Render};
 use crate::sample::Payload;
 use crate::service::emulator::opening::{Opening, PathPlan};
-use crate::service::emulator::path::{Channel, Ending, Reverse, Take, GRACE_NS};
-use crate::service::link::{Arrival, Carried};
-use crate::service::schema::{Account, PathReport};
+use super::relay::{Relay, RelayExtra, Relayed};
+use crate::service::emulator::path::Reverse;
+use crate::service::link::Carried;
+use crate::service::schema::PathReport;
 use crate::transport::ipc::Iceoryx2;
-use crate::transport::{FramePublisher, FrameSink, FrameSource, FrameSubscriber, Port, PortError, PublisherOpenError, Role, SubscriberOpenError};
+use crate::transport::{Port, PublisherOpenError, Role, SubscriberOpenError};
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -80,6 +81,37 @@ impl Carried for HapticSample {
     }
 }
 
+impl Relayed for HapticSample {
+    const NAME: &'static str = NAME;
+    const TRACE_FILE: &'static str = "trace_haptic.csv";
+
+    fn end_marker(sent: u64) -> HapticSample {
+        HapticSample::end_marker(sent)
+    }
+
+    fn is_end(&self) -> bool {
+        HapticSample::is_end(self)
+    }
+
+    fn sender_index(&self) -> u64 {
+        self.robot_index
+    }
+
+    fn send_ns(&self) -> u64 {
+        self.send_ns
+    }
+
+    fn taken(&mut self, ingress_index: u64, ingress_ns: u64) {
+        (self.ingress_index, self.ingress_ns) = (ingress_index, ingress_ns);
+    }
+
+    fn released(&mut self, scheduled_ns: u64, release_ns: impl FnOnce() -> u64) -> u64 {
+        (self.release_sched_ns, self.injected_delay_ns) = (scheduled_ns, scheduled_ns - self.ingress_ns);
+        self.release_ns = release_ns();
+        self.release_ns
+    }
+}
+
 /// Its flags, hidden from help: the channel exists for tests.
 #[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
 pub struct HapticArgs {
@@ -114,61 +146,6 @@ pub enum HapticOpenError {
     Out(#[source] PublisherOpenError),
     #[error("opening the robot → emulator haptic port: {0}")]
     In(#[source] SubscriberOpenError),
-}
-
-/// The emulator's side of the channel.
-pub struct HapticPorts<S = FrameSubscriber<HapticSample>, K = FramePublisher<HapticSample>> {
-    source: S,
-    sink: K,
-    sample: HapticSample,
-}
-
-/// What the path's report adds: how many readings the robot said it sent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HapticExtra {
-    pub sent_by_robot: Option<u64>,
-}
-
-impl<S: FrameSource<HapticSample>, K: FrameSink<HapticSample>> Channel for HapticPorts<S, K> {
-    type Item = HapticSample;
-    type Extra = HapticExtra;
-    const NAME: &'static str = NAME;
-    const TRACE_FILE: &'static str = "trace_haptic.csv";
-    const ENDING: Ending = Ending::AfterForward { grace_ns: GRACE_NS };
-
-    fn take(&mut self, next_ingress_index: u64, clock: &mut impl FnMut() -> u64) -> Take<HapticSample> {
-        let s = &mut self.sample;
-        match self.source.try_recv(s) {
-            Ok(true) if s.is_end() => Take::End(s.robot_index),
-            Ok(true) => {
-                s.ingress_index = next_ingress_index;
-                s.ingress_ns = clock();
-                Take::Item(*s, None, Arrival { sequence: None, console_index: s.robot_index, send_ns: s.send_ns })
-            }
-            Ok(false) => Take::Nothing,
-            Err(e) => Take::Failed(e),
-        }
-    }
-
-    fn release(&mut self, item: &HapticSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        crate::service::emulator::path::release_stamped!(self.sink, item, scheduled_ns, stamp)
-    }
-
-    fn send_end(&mut self, released: u64) {
-        let _ = self.sink.send_with(&HapticSample::end_marker(released), |_| {});
-    }
-
-    fn senders(&mut self) -> Option<usize> {
-        self.source.peers()
-    }
-
-    fn unsubscribed(&self) -> u64 {
-        self.sink.unsubscribed()
-    }
-
-    fn finish(&mut self, account: &Account, sent: Option<u64>) -> (HapticExtra, bool) {
-        (HapticExtra { sent_by_robot: sent }, sent.is_none_or(|n| n == account.entered))
-    }
 }
 
 /// The channel's section of the run report.
@@ -225,8 +202,7 @@ impl ReverseChannel for Haptic {
         let node = o.sessions.iceoryx2.as_ref().expect("the haptic path is asked for with iceoryx2 on both sides");
         let sink = node.publisher_of::<HapticSample>(HAPTIC_OUT).map_err(|e| ChannelOpen::Own(HapticOpenError::Out(e)))?;
         let source = node.subscriber_of::<HapticSample>(HAPTIC).map_err(|e| ChannelOpen::Own(HapticOpenError::In(e)))?;
-        let ports = HapticPorts { source, sink, sample: HapticSample::default() };
-        Ok(Box::new(plan.open(ports, o.expected_frames, o.out_dir)?))
+        Ok(Box::new(plan.open(Relay::new(source, sink), o.expected_frames, o.out_dir)?))
     }
 
     const PORTS: &'static [Port] = &[HAPTIC, HAPTIC_OUT];
@@ -234,7 +210,7 @@ impl ReverseChannel for Haptic {
     type Section = HapticSection;
 
     fn section(s: Sources) -> Option<HapticSection> {
-        let p: PathReport<HapticExtra> = s.emulator?.path(NAME)?;
+        let p: PathReport<RelayExtra> = s.emulator?.path(NAME)?;
         let a = p.account;
         Some(HapticSection {
             scenario: p.scenario,
