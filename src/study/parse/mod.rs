@@ -126,7 +126,7 @@ fn measures(ctx: &Ctx, raw: &[Spanned<RawMeasure>], participants: &[Participant]
         let field = format!("measure[{}].name", i + 1);
         let name = m.get_ref().name.get_ref();
         let at = Some(m.get_ref().name.span());
-        check_attribute(name).map_err(|p| ctx.err(at.clone(), &field, p.replace("attribute", "measure")))?;
+        check_attribute(name).map_err(|p| ctx.err(at.clone(), &field, p.replace("an attribute", "a measure").replace("the attribute", "the measure")))?;
         if out.iter().any(|x| &x.name == name) {
             return Err(ctx.err(at, field, format!("`{name}` twice: every measure once")));
         }
