@@ -14,7 +14,7 @@
 //! hide_condition = true           # the participant's view never names the condition
 //!
 //! [trial]                         # how each trial's `netfi run` is started
-//! duration_s = 600                # the longest a trial runs; the experimenter stops it sooner
+//! duration_s = 600                # the longest a trial runs (s, or "10min"); the experimenter stops it sooner
 //! capture = "console.bin"         # replay a recording instead of the synthetic console
 //! rate_hz = 1000
 //! run_args = ["--no-isolate"]     # any other `netfi run` options, as `netfi run` reads them
@@ -22,11 +22,16 @@
 //! [order]
 //! blocks = "latin"                # latin (balanced Latin square) | table | fixed
 //! within = "shuffle"              # conditions shuffled within a block | fixed
+//! first = "free"                  # a block everyone takes first (latin only)
 //!
 //! [questionnaires]
 //! sus = "start"                   # start | none
 //! tlx = "block"                   # block (after each block) | trial | none
+//! tlx_weighting = "raw"           # raw | pairwise (the 15 pairwise choices weight the scales)
 //!
+//! [[measure]]                     # what the experimenter counts in each trial
+//! name = "drops"
+//! label = "Pegs dropped"
 //! [[condition]]                   # conditions that are not presets
 //! name = "loss-30"
 //! stage = [{ loss = "30%" }]      # inline stages, as in a scenario file

@@ -57,7 +57,8 @@ fn refusal(s: &OpenStudy, p: usize, next: &Next) -> String {
             "the System Usability Scale of `{id}` is due before trial 1: `netfi study answer {file} --participant {id} sus ITEM…` (ten answers 1–5), or `--missing REASON`"
         ),
         Next::Questionnaire(Due::Tlx { after, .. }) => format!(
-            "the NASA-TLX of `{id}` after trial {after} is due: `netfi study answer {file} --participant {id} tlx MENTAL PHYSICAL TEMPORAL PERFORMANCE EFFORT FRUSTRATION` (0–100 each), or `--missing REASON`"
+            "the NASA-TLX of `{id}` after trial {after} is due: `netfi study answer {file} --participant {id} tlx MENTAL PHYSICAL TEMPORAL PERFORMANCE EFFORT FRUSTRATION` (0–100 each{}), or `--missing REASON`",
+            if s.study.questionnaires.tlx_weighting == super::file::TlxWeighting::Pairwise { ", and `--pairs` with the scale chosen in each of the 15 pairs" } else { "" }
         ),
         Next::Finished => format!("`{id}` has finished every trial"),
         Next::Trial { .. } => String::new(),
