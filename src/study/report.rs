@@ -624,10 +624,11 @@ fn paper_cell(r: &ReportFile, c: Option<&super::summary::ConditionStat>) -> Mark
     html! { td class=[marked.then_some("sig")] title=[p.map(|p| format!("p Holm {}", fmt_p(Some(p))))] { (short(c.mean.unwrap_or_default())) @if marked { sup { "*" } } small { (sd) } } }
 }
 
-/// A number to three significant digits, as a table shows it.
+/// A number to about three significant digits, as a table shows it.
 fn short(x: f64) -> String {
     match x.abs() {
         a if a == 0.0 => "0".into(),
+        a if a < 0.01 => format!("{x:.2e}"),
         a if a >= 100.0 => format!("{x:.0}"),
         a if a >= 10.0 => format!("{x:.1}"),
         a if a >= 1.0 => format!("{x:.2}"),

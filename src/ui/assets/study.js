@@ -32,7 +32,7 @@ const study = {
       trial: `Trial ${n.trial} (attempt ${n.attempt}): ${n.condition}, block ${n.block}`,
       running: `Trial ${n.trial} is running: ${n.condition}`,
       unmarked: `Trial ${n.trial} (${n.condition}) ran: mark it`,
-      questionnaire: `Questionnaire due: ${n.questionnaire === "sus" ? "System Usability Scale" : "NASA-TLX after block " + n.block}`,
+      questionnaire: `Questionnaire due: ${n.title}`,
       finished: "Every trial is done.",
     }[n.kind];
     if (v.busy && !v.started_here) text += ` (busy: ${v.busy})`;
