@@ -627,7 +627,7 @@ fn paper_cell(r: &ReportFile, c: Option<&super::summary::ConditionStat>) -> Mark
 /// A number to about three significant digits, as a table shows it.
 fn short(x: f64) -> String {
     match x.abs() {
-        a if a == 0.0 => "0".into(),
+        0.0 => "0".into(),
         a if a < 0.01 => format!("{x:.2e}"),
         a if a >= 100.0 => format!("{x:.0}"),
         a if a >= 10.0 => format!("{x:.1}"),

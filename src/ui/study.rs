@@ -367,7 +367,7 @@ fn stop_elsewhere(s: &OpenStudy, id: &str) -> Result<(), String> {
     let pid = running.runner_pid.ok_or_else(|| format!("trial {} of `{id}` names no runner", running.trial))?;
     let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
     let words: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
-    let is_runner = words.windows(2).any(|w| w[0] == b"study" && w[1] == b"next") && words.iter().any(|w| *w == id.as_bytes());
+    let is_runner = words.windows(2).any(|w| w[0] == b"study" && w[1] == b"next") && words.contains(&id.as_bytes());
     if !is_runner {
         return Err(format!("trial {} of `{id}`: its runner (pid {pid}) is gone", running.trial));
     }

@@ -237,6 +237,7 @@ fn a_questionnaire_is_refused_until_every_item_is_answered_then_recorded() {
     let listed = js(&runs, &format!("document.querySelector('tr.run[data-id=\"{run_id}\"] a[href=\"/runs/{run_id}/report\"]') !== null"));
     assert_eq!(listed, serde_json::Value::Bool(true), "{run_id} in /runs:\n{}", js(&runs, "document.body.innerText"));
     runs.navigate_to(&format!("{}/runs/{run_id}/report", ui.base)).unwrap().wait_until_navigated().unwrap();
-    assert!(js(&runs, "document.title").as_str().unwrap_or_default().len() > 0);
+    let report = js(&runs, "document.body.innerText").as_str().unwrap_or_default().to_string();
+    assert!(report.contains("PLM-2"), "the trial's run report:\n{report}");
     assert_eq!(js(&tab, &format!("document.querySelector('#trials a[href=\"/runs/{run_id}/report\"]') !== null")), serde_json::Value::Bool(true));
 }

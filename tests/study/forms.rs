@@ -118,8 +118,8 @@ fn a_block_kept_first_leaves_the_others_counterbalanced() {
     // Three other blocks: a square of 6 rows, each block in positions 2–4 twice.
     let counts = position_counts(&s);
     assert_eq!(counts[0], [6, 0, 0, 0]);
-    for b in 1..4 {
-        assert_eq!(counts[b], [0, 2, 2, 2], "block {b}");
+    for (b, row) in counts.iter().enumerate().skip(1) {
+        assert_eq!(row, &[0, 2, 2, 2], "block {b}");
     }
     let said = balance(&s);
     assert!(said.starts_with("`free` first for everyone, then balanced Latin square of 6 rows"), "{said}");
