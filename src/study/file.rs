@@ -14,7 +14,7 @@
 //! hide_condition = true           # the participant's view never names the condition
 //!
 //! [trial]                         # how each trial's `netfi run` is started
-//! duration_s = 600                # the longest a trial runs; the experimenter stops it sooner
+//! duration_s = 600                # the longest a trial runs (s, or "10min"); the experimenter stops it sooner
 //! capture = "console.bin"         # replay a recording instead of the synthetic console
 //! rate_hz = 1000
 //! run_args = ["--no-isolate"]     # any other `netfi run` options, as `netfi run` reads them
@@ -22,11 +22,16 @@
 //! [order]
 //! blocks = "latin"                # latin (balanced Latin square) | table | fixed
 //! within = "shuffle"              # conditions shuffled within a block | fixed
+//! first = "free"                  # a block everyone takes first (latin only)
 //!
 //! [questionnaires]
 //! sus = "start"                   # start | none
 //! tlx = "block"                   # block (after each block) | trial | none
+//! tlx_weighting = "raw"           # raw | pairwise (the 15 pairwise choices weight the scales)
 //!
+//! [[measure]]                     # what the experimenter counts in each trial
+//! name = "drops"
+//! label = "Pegs dropped"
 //! [[condition]]                   # conditions that are not presets
 //! name = "loss-30"
 //! stage = [{ loss = "30%" }]      # inline stages, as in a scenario file
@@ -121,6 +126,11 @@ pub struct Study {
     pub order: BlockOrder,
     pub within: Within,
     pub questionnaires: Questionnaires,
+    /// What the experimenter counts in each trial (`[[measure]]`).
+    pub measures: Vec<Measure>,
+    /// The block every participant takes first (`order.first`), the
+    /// others counterbalanced after it.
+    pub first_block: Option<usize>,
 }
 
 /// How each trial's `netfi run` is started.
@@ -238,5 +248,41 @@ pub struct Questionnaires {
     /// A System Usability Scale before the first trial.
     pub sus: bool,
     pub tlx: TlxWhen,
+    /// How the TLX is scored (`questionnaires.tlx_weighting`).
+    pub tlx_weighting: TlxWeighting,
 }
 
+
+/// A measure only a person can count (errors, drops, failed attempts),
+/// entered per trial by the experimenter: a column of the study's table,
+/// compared across the conditions like every figure.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Measure {
+    /// Its column name (letters, digits, `_`).
+    pub name: String,
+    /// What it counts, for the page and the report.
+    pub label: String,
+}
+
+/// The largest count a measure takes.
+pub const MAX_COUNT: u32 = 1_000_000;
+
+/// How the NASA-TLX is scored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TlxWeighting {
+    /// The raw TLX: the unweighted mean of the six scales.
+    #[default]
+    Raw,
+    /// Hart and Staveland's weighting: the participant also chooses, in
+    /// each of the 15 pairs of scales, the one that mattered more; a
+    /// scale's weight is how often it was chosen (0–5), the score
+    /// Σ weight × rating / 15.
+    Pairwise,
+}
+
+impl Study {
+    /// The measure `name`, if the study declares it.
+    pub fn measure(&self, name: &str) -> Option<&Measure> {
+        self.measures.iter().find(|m| m.name == name)
+    }
+}

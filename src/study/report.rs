@@ -9,14 +9,28 @@
 //! - `sus.csv`, `tlx.csv`: one row per questionnaire;
 //! - `summary.json`: per condition (and group) mean ± sd and the tests
 //!   against the baseline ([`super::summary`]), the questionnaires' means;
-//! - `report.html`: one self-contained page, a plot per metric across the
-//!   conditions (inline SVG) beside its table, and the questionnaires.
+//! - `table.csv`: the paper's table: per condition (all participants, then
+//!   each group) every column's mean, sd and the Holm-adjusted p of the
+//!   paired t-test against the baseline;
+//! - `questionnaires.csv`: the TLX scales against the baseline's block (or
+//!   condition) in the same long shape as `summary.csv`;
+//! - `summary.csv`: `summary.json`'s comparison, one row per group, column
+//!   and condition;
+//! - `correlations.csv`: Pearson's r, p and n between every column of the
+//!   table and each TLX scale, one observation per TLX answered (the
+//!   participant's mean of the done trials it follows);
+//! - `report.html`: one self-contained page: the paper's tables (marked
+//!   where the paired test against the baseline is significant), a plot per
+//!   metric across the conditions (inline SVG) beside its full table, the
+//!   questionnaires against the baseline, and the correlations.
 
 use super::metrics::METRICS;
 use super::questionnaire::{self, Answer, Instrument, TLX_SCALES};
 use super::stats::{mean, sd};
 use super::store::{load_state, now_utc, write_json, AttemptState, OpenStudy, StudyError};
-use super::summary::{summarize, Row, Summary};
+use super::summary::{summarize_columns, Column, MetricSummary, Row, Summary};
+use super::stats::{pearson, Pearson};
+use std::borrow::Cow;
 use super::trials::load_figures;
 use maud::{html, Markup, PreEscaped, DOCTYPE};
 use serde::Serialize;
@@ -39,6 +53,61 @@ pub struct ReportFile {
     pub sus: QuestionnaireStat,
     /// The TLX per block.
     pub tlx: Vec<TlxStat>,
+    /// What a TLX follows (a block, or the condition of its trial) that is
+    /// the baseline of the questionnaires' comparison.
+    pub questionnaire_baseline: Option<String>,
+    /// The TLX's scales compared as the trials' columns are: all
+    /// participants, then each group. Each participant counts by the mean
+    /// of their answers after each block (or condition).
+    pub questionnaires: Vec<Summary>,
+    /// Every column of the table against each TLX scale.
+    pub correlations: Vec<Correlation>,
+    /// The level below which a Holm-adjusted p marks a difference in the
+    /// tables.
+    pub alpha: f64,
+}
+
+/// A column of the trials' table against a TLX scale, over the TLX answers.
+#[derive(Debug, Clone, Serialize)]
+pub struct Correlation {
+    pub metric: String,
+    pub label: String,
+    pub scale: String,
+    /// Answers with both.
+    pub n: usize,
+    pub pearson: Option<Pearson>,
+}
+
+/// The level of the tables' marks.
+pub const ALPHA: f64 = 0.05;
+
+/// The table's numeric columns: every metric of a run, then the study's
+/// `[[measure]]`s.
+pub fn columns(s: &OpenStudy) -> Vec<Column> {
+    let mut c = Column::metrics();
+    c.extend(s.study.measures.iter().map(|m| Column { name: Cow::Owned(m.name.clone()), label: Cow::Owned(m.label.clone()) }));
+    c
+}
+
+/// The questionnaires' columns: the raw TLX, the weighted one when the
+/// study weights it, and the six scales.
+pub fn questionnaire_columns(s: &OpenStudy) -> Vec<Column> {
+    let mut c = vec![Column { name: "tlx_raw".into(), label: "Raw TLX (0-100)".into() }];
+    if s.study.questionnaires.tlx_weighting == super::file::TlxWeighting::Pairwise {
+        c.push(Column { name: "tlx_weighted".into(), label: "Weighted TLX (0-100)".into() });
+    }
+    c.extend(questionnaire::TLX_FORM.iter().map(|f| Column { name: format!("tlx_{}", f.key).into(), label: format!("TLX {} (0-100)", f.title).into() }));
+    c
+}
+
+/// An answer's values in [`questionnaire_columns`]' order.
+fn tlx_figures(a: &Answer, weighted: bool) -> Vec<Option<f64>> {
+    let mut v = vec![a.score];
+    if weighted {
+        v.push(a.weighted);
+    }
+    v.extend((0..TLX_SCALES.len()).map(|i| a.values.get(i).map(|&x| f64::from(x))));
+    v
 }
 
 /// A questionnaire score's mean ± sd.
@@ -66,7 +135,8 @@ pub const METHOD: &str = "Trials marked done count; a participant's value for a 
 mean ± sd are over participants (sd with n − 1). Each condition is compared with the baseline, paired by participant: a two-sided \
 paired t-test and a two-sided Wilcoxon signed-rank test (exact below 50 pairs without ties or zero differences, else the normal \
 approximation with tie and continuity corrections). p-values are adjusted by Holm's method over the conditions of each metric \
-(within each group).";
+(within each group). The measures the experimenter counted are columns like the run's metrics. The NASA-TLX scales are compared \
+the same way, by what each TLX follows (a block, or the condition of its trial) against the one holding the baseline.";
 
 /// Every attempt of every participant as the table's rows.
 pub fn rows(s: &OpenStudy) -> Result<Vec<Row>, StudyError> {
@@ -96,7 +166,11 @@ pub fn rows(s: &OpenStudy) -> Result<Vec<Row>, StudyError> {
                 started_utc: a.started_utc.clone(),
                 trial_dir: Path::new(&part.id).join(&a.dir).display().to_string(),
                 note: a.note.clone(),
-                figures: figures.unwrap_or_else(|| vec![None; METRICS.len()]),
+                figures: {
+                    let mut f = figures.unwrap_or_else(|| vec![None; METRICS.len()]);
+                    f.extend(s.study.measures.iter().map(|m| a.counts.get(&m.name).map(|&c| f64::from(c))));
+                    f
+                },
             });
         }
     }
@@ -123,11 +197,11 @@ fn attribute_names(s: &OpenStudy) -> Vec<String> {
 }
 
 /// The rows as `trials.csv`.
-pub fn trials_csv(rows: &[Row], attributes: &[String]) -> String {
+pub fn trials_csv(rows: &[Row], attributes: &[String], columns: &[Column]) -> String {
     let mut header: Vec<String> = vec!["participant".into()];
     header.extend(attributes.iter().cloned());
     header.extend(super::metrics::FIXED_COLUMNS[1..].iter().map(|c| c.to_string()));
-    header.extend(METRICS.iter().map(|m| m.name.to_string()));
+    header.extend(columns.iter().map(|m| m.name.to_string()));
     let mut out = header.iter().map(|h| field(h)).collect::<Vec<_>>().join(",") + "\n";
     for r in rows {
         let mut cells = vec![field(&r.participant)];
@@ -208,7 +282,7 @@ pub fn write(s: &OpenStudy, out: Option<&Path>, group: Option<&str>) -> Result<P
     std::fs::create_dir_all(&out).map_err(|source| StudyError::Io { path: out.clone(), source })?;
     let rows = rows(s)?;
     let attributes = attribute_names(s);
-    crate::durable::write_whole(&out.join("trials.csv"), trials_csv(&rows, &attributes).as_bytes())?;
+    crate::durable::write_whole(&out.join("trials.csv"), trials_csv(&rows, &attributes, &columns(s)).as_bytes())?;
     let mut answers = Vec::new();
     for p in 0..s.study.participants.len() {
         answers.extend(questionnaire::load(s, p)?);
@@ -217,6 +291,10 @@ pub fn write(s: &OpenStudy, out: Option<&Path>, group: Option<&str>) -> Result<P
     crate::durable::write_whole(&out.join("tlx.csv"), answers_csv(s, &answers, Instrument::Tlx, &attributes).as_bytes())?;
     let report = compute(s, &rows, &answers, group)?;
     write_json(&out.join("summary.json"), &report)?;
+    crate::durable::write_whole(&out.join("summary.csv"), summary_csv(&report.summaries, &report.group_by).as_bytes())?;
+    crate::durable::write_whole(&out.join("questionnaires.csv"), summary_csv(&report.questionnaires, &report.group_by).as_bytes())?;
+    crate::durable::write_whole(&out.join("table.csv"), table_csv(&report).as_bytes())?;
+    crate::durable::write_whole(&out.join("correlations.csv"), correlations_csv(&report.correlations).as_bytes())?;
     crate::durable::write_whole(&out.join("report.html"), page(&report).into_string().as_bytes())?;
     Ok(out)
 }
@@ -227,14 +305,26 @@ pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&s
     let baseline = s.study.baseline.map(|b| conditions[b].clone());
     let group_by = group_by(s, group)?;
     let all: Vec<&Row> = rows.iter().collect();
-    let mut summaries = vec![summarize(&all, &conditions, baseline.as_deref(), None)];
-    if let Some(g) = &group_by {
-        let values: BTreeSet<&String> = s.study.participants.iter().filter_map(|p| p.attributes.get(g)).collect();
-        for v in values {
+    let cols = columns(s);
+    let groups: Vec<String> = match &group_by {
+        Some(g) => s.study.participants.iter().filter_map(|p| p.attributes.get(g)).collect::<BTreeSet<&String>>().into_iter().cloned().collect(),
+        None => Vec::new(),
+    };
+    let by_group = |rows: &[Row], columns: &[Column], units: &[String], base: Option<&str>| -> Vec<Summary> {
+        let all: Vec<&Row> = rows.iter().collect();
+        let mut out = vec![summarize_columns(&all, columns, units, base, None)];
+        for v in &groups {
+            let g = group_by.as_deref().unwrap_or_default();
             let these: Vec<&Row> = rows.iter().filter(|r| r.attributes.get(g) == Some(v)).collect();
-            summaries.push(summarize(&these, &conditions, baseline.as_deref(), Some(v.clone())));
+            out.push(summarize_columns(&these, columns, units, base, Some(v.clone())));
         }
-    }
+        out
+    };
+    let summaries = by_group(rows, &cols, &conditions, baseline.as_deref());
+    let _ = all;
+    let (units, unit_baseline, tlx_rows) = tlx_units(s, answers);
+    let questionnaires = if tlx_rows.is_empty() { Vec::new() } else { by_group(&tlx_rows, &questionnaire_columns(s), &units, unit_baseline.as_deref()) };
+    let correlations = correlations(s, rows, answers, &cols);
     let sus_scores: Vec<f64> = answers.iter().filter(|a| a.instrument == Instrument::Sus).filter_map(|a| a.score).collect();
     let sus_missing = answers.iter().filter(|a| a.instrument == Instrument::Sus && a.missing.is_some()).count();
     let mut blocks: BTreeMap<String, Vec<&Answer>> = BTreeMap::new();
@@ -263,7 +353,162 @@ pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&s
         summaries,
         sus: stat(&sus_scores, sus_missing),
         tlx,
+        questionnaire_baseline: unit_baseline,
+        questionnaires,
+        correlations,
+        alpha: ALPHA,
     })
+}
+
+/// What each TLX follows, as the unit its scales are compared by: the
+/// block (`tlx = "block"`) or the condition of its trial (`tlx =
+/// "trial"`); the baseline's unit (the block holding the baseline
+/// condition, or the baseline); and every answered TLX as a row of its
+/// participant and unit.
+fn tlx_units(s: &OpenStudy, answers: &[Answer]) -> (Vec<String>, Option<String>, Vec<Row>) {
+    let per_trial = s.study.questionnaires.tlx == super::file::TlxWhen::Trial;
+    let weighted = s.study.questionnaires.tlx_weighting == super::file::TlxWeighting::Pairwise;
+    let (units, base): (Vec<String>, Option<String>) = if per_trial {
+        (s.study.conditions.iter().map(|c| c.name.clone()).collect(), s.study.baseline.map(|b| s.study.conditions[b].name.clone()))
+    } else {
+        let base = s.study.baseline.and_then(|b| s.study.blocks.iter().find(|bl| bl.conditions.contains(&b))).map(|bl| bl.name.clone());
+        (s.study.blocks.iter().map(|b| b.name.clone()).collect(), base)
+    };
+    let rows = answers
+        .iter()
+        .filter(|a| a.instrument == Instrument::Tlx && a.score.is_some())
+        .filter_map(|a| {
+            let unit = if per_trial { a.conditions.first()?.clone() } else { a.block.clone()? };
+            let part = s.study.participants.iter().find(|p| p.id == a.participant)?;
+            Some(Row {
+                participant: a.participant.clone(),
+                attributes: part.attributes.clone(),
+                trial: a.after_trial.unwrap_or(0),
+                attempt: 1,
+                outcome: "done".into(),
+                block: a.block.clone().unwrap_or_default(),
+                block_position: 0,
+                condition: unit,
+                repetition: 1,
+                seed: 0,
+                stopped: false,
+                started_utc: a.answered_utc.clone(),
+                trial_dir: String::new(),
+                note: String::new(),
+                figures: tlx_figures(a, weighted),
+            })
+        })
+        .collect();
+    (units, base, rows)
+}
+
+/// Pearson's r between every column and each TLX scale: one observation
+/// per TLX answered, its participant's mean of the column over the done
+/// trials it follows (the block's trials up to it, or its trial).
+fn correlations(s: &OpenStudy, rows: &[Row], answers: &[Answer], cols: &[Column]) -> Vec<Correlation> {
+    let weighted = s.study.questionnaires.tlx_weighting == super::file::TlxWeighting::Pairwise;
+    let qcols = questionnaire_columns(s);
+    let per_trial = s.study.questionnaires.tlx == super::file::TlxWhen::Trial;
+    // Each answered TLX: its values, and the done rows it follows.
+    let observations: Vec<(Vec<Option<f64>>, Vec<&Row>)> = answers
+        .iter()
+        .filter(|a| a.instrument == Instrument::Tlx && a.score.is_some())
+        .filter_map(|a| {
+            let after = a.after_trial?;
+            let followed: Vec<&Row> = rows
+                .iter()
+                .filter(|r| r.participant == a.participant && r.outcome == "done")
+                .filter(|r| if per_trial { r.trial == after } else { Some(&r.block) == a.block.as_ref() && r.trial <= after })
+                .collect();
+            Some((tlx_figures(a, weighted), followed))
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (k, c) in cols.iter().enumerate() {
+        for (q, qc) in qcols.iter().enumerate() {
+            let pairs: Vec<(f64, f64)> = observations
+                .iter()
+                .filter_map(|(tlx, followed)| {
+                    let xs: Vec<f64> = followed.iter().filter_map(|r| r.figures.get(k).copied().flatten()).collect();
+                    Some((mean(&xs)?, tlx.get(q).copied().flatten()?))
+                })
+                .collect();
+            out.push(Correlation { metric: c.name.to_string(), label: c.label.to_string(), scale: qc.name.to_string(), n: pairs.len(), pearson: pearson(&pairs) });
+        }
+    }
+    out
+}
+
+/// A summary's rows as CSV: one per group, column and condition.
+pub fn summary_csv(summaries: &[Summary], group_by: &Option<String>) -> String {
+    let mut out = String::from(
+        "group_by,group,metric,condition,participants,trials,mean,sd,pairs,mean_difference,t,df,p,p_holm,wilcoxon_v,wilcoxon_p,wilcoxon_p_holm\n",
+    );
+    for sm in summaries {
+        for m in &sm.metrics {
+            for c in &m.conditions {
+                let v = c.versus_baseline.as_ref();
+                let t = v.and_then(|v| v.t_test);
+                let w = v.and_then(|v| v.wilcoxon);
+                let cells = [
+                    field(if sm.group.is_some() { group_by.as_deref().unwrap_or("") } else { "" }),
+                    field(sm.group.as_deref().unwrap_or("all")),
+                    field(&m.metric),
+                    field(&c.condition),
+                    c.participants.to_string(),
+                    c.trials.to_string(),
+                    number(c.mean),
+                    number(c.sd),
+                    v.map(|v| v.pairs.to_string()).unwrap_or_default(),
+                    number(t.map(|t| t.mean_difference)),
+                    number(t.map(|t| t.t)),
+                    number(t.map(|t| t.df)),
+                    number(t.map(|t| t.p)),
+                    number(v.and_then(|v| v.t_p_holm)),
+                    number(w.map(|w| w.v)),
+                    number(w.map(|w| w.p)),
+                    number(v.and_then(|v| v.wilcoxon_p_holm)),
+                ];
+                out += &cells.join(",");
+                out.push('\n');
+            }
+        }
+    }
+    out
+}
+
+/// The paper's table as CSV: a row per group and condition, each column's
+/// mean, sd and Holm-adjusted paired t-test p against the baseline.
+pub fn table_csv(r: &ReportFile) -> String {
+    let Some(first) = r.summaries.first() else { return String::new() };
+    let mut header = vec!["group".to_string(), "condition".to_string(), "participants".to_string()];
+    for m in &first.metrics {
+        header.extend([format!("{}_mean", m.metric), format!("{}_sd", m.metric), format!("{}_p_holm", m.metric)]);
+    }
+    let mut out = header.iter().map(|h| field(h)).collect::<Vec<_>>().join(",") + "\n";
+    for sm in &r.summaries {
+        for (i, c) in r.conditions.iter().enumerate() {
+            let mut cells = vec![field(sm.group.as_deref().unwrap_or("all")), field(c)];
+            cells.push(sm.metrics.iter().map(|m| m.conditions.get(i).map_or(0, |x| x.participants)).max().unwrap_or(0).to_string());
+            for m in &sm.metrics {
+                let x = m.conditions.get(i);
+                cells.extend([number(x.and_then(|x| x.mean)), number(x.and_then(|x| x.sd)), number(x.and_then(|x| x.versus_baseline.as_ref()?.t_p_holm))]);
+            }
+            out += &cells.join(",");
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The correlations as CSV.
+pub fn correlations_csv(c: &[Correlation]) -> String {
+    let mut out = String::from("metric,scale,n,r,p\n");
+    for x in c {
+        out += &[field(&x.metric), field(&x.scale), x.n.to_string(), number(x.pearson.map(|p| p.r)), number(x.pearson.map(|p| p.p))].join(",");
+        out.push('\n');
+    }
+    out
 }
 
 fn fmt(v: Option<f64>) -> String {
@@ -301,7 +546,7 @@ fn fmt_p(p: Option<f64>) -> String {
 const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1100px;padding:0 1em;color:#222}\
 table{border-collapse:collapse;margin:.5em 0 1em}td,th{border:1px solid #ccc;padding:.2em .5em;text-align:right}\
 th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}svg.plot{width:100%;max-width:760px;height:auto}\
-.method{font-size:.9em;color:#444;max-width:60em}.sig{font-weight:bold}";
+.method{font-size:.9em;color:#444;max-width:60em}.sig{font-weight:bold}.wide{overflow-x:auto}td small{color:#555}";
 
 /// The report page.
 pub fn page(r: &ReportFile) -> Markup {
@@ -317,6 +562,12 @@ pub fn page(r: &ReportFile) -> Markup {
                 h1 { "Study report: " (r.study) }
                 p { "Generated " (r.generated_utc) ". Baseline: " b { (r.baseline.as_deref().unwrap_or("none (no tests)")) } "." }
                 p class="method" { (r.method) }
+                @for summary in &r.summaries {
+                    (paper_table(r, summary))
+                }
+                @if r.summaries.len() > 1 {
+                    (group_tables(r))
+                }
                 @if r.sus.n + r.sus.missing > 0 || !r.tlx.is_empty() {
                 section id="questionnaires" {
                     h2 { "Questionnaires" }
@@ -333,7 +584,20 @@ pub fn page(r: &ReportFile) -> Markup {
                             }
                         }
                     }
+                    @for summary in &r.questionnaires {
+                        section class="questionnaire-summary" {
+                            h3 { "NASA-TLX against " (r.questionnaire_baseline.as_deref().unwrap_or("–")) ": "
+                                 @match &summary.group { None => { "all participants" } Some(g) => { (r.group_by.as_deref().unwrap_or("group")) " = " (g) } }
+                                 " (" (summary.participants) ")" }
+                            @for m in &summary.metrics {
+                                (metric_section_as("q", r.questionnaire_baseline.as_deref(), summary, m))
+                            }
+                        }
+                    }
                 }
+                }
+                @if r.correlations.iter().any(|c| c.pearson.is_some()) {
+                    (correlation_table(r))
                 }
                 @for summary in &r.summaries {
                     section class="summary" {
@@ -349,15 +613,133 @@ pub fn page(r: &ReportFile) -> Markup {
     }
 }
 
-fn metric_section(r: &ReportFile, summary: &Summary, m: &super::summary::MetricSummary) -> Markup {
-    let id = format!("{}-{}", summary.group.as_deref().unwrap_or("all").replace(' ', "_"), m.metric);
+/// A condition's cell of the paper's tables: mean (± sd), marked `*`
+/// where the Holm-adjusted paired t-test against the baseline is below
+/// the report's α.
+fn paper_cell(r: &ReportFile, c: Option<&super::summary::ConditionStat>) -> Markup {
+    let Some(c) = c.filter(|c| c.mean.is_some()) else { return html! { td { "–" } } };
+    let p = c.versus_baseline.as_ref().and_then(|v| v.t_p_holm);
+    let marked = p.is_some_and(|p| p < r.alpha);
+    let sd = c.sd.map(|s| format!(" (±{})", short(s))).unwrap_or_default();
+    html! { td class=[marked.then_some("sig")] title=[p.map(|p| format!("p Holm {}", fmt_p(Some(p))))] { (short(c.mean.unwrap_or_default())) @if marked { sup { "*" } } small { (sd) } } }
+}
+
+/// A number to about three significant digits, as a table shows it.
+fn short(x: f64) -> String {
+    match x.abs() {
+        0.0 => "0".into(),
+        a if a < 0.01 => format!("{x:.2e}"),
+        a if a >= 100.0 => format!("{x:.0}"),
+        a if a >= 10.0 => format!("{x:.1}"),
+        a if a >= 1.0 => format!("{x:.2}"),
+        _ => format!("{x:.3}"),
+    }
+}
+
+/// The paper's table for one set of participants: a row per condition, a
+/// column per metric with a value.
+fn paper_table(r: &ReportFile, summary: &Summary) -> Markup {
+    let shown: Vec<&MetricSummary> = summary.metrics.iter().filter(|m| m.conditions.iter().any(|c| c.mean.is_some())).collect();
+    let id = format!("table-{}", summary.group.as_deref().unwrap_or("all").replace(' ', "_"));
+    html! {
+        section class="paper-table" id=(id) {
+            h2 { "Conditions: " @match &summary.group { None => { "all participants" } Some(g) => { (r.group_by.as_deref().unwrap_or("group")) " = " (g) } }
+                 " (" (summary.participants) ")" }
+            p class="method" { "Mean (± sd) over participants; * where the paired t-test against " (r.baseline.as_deref().unwrap_or("the baseline"))
+                ", Holm-adjusted over the conditions of the column, gives p < " (r.alpha) "." }
+            div class="wide" {
+                table {
+                    tr { th { "condition" } @for m in &shown { th title=(m.label) { (m.metric) } } }
+                    @for (i, c) in r.conditions.iter().enumerate() {
+                        tr { td { (c) } @for m in &shown { (paper_cell(r, m.conditions.get(i))) } }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One table per metric: a row per condition, all participants then each
+/// group (the paper's table by proficiency).
+fn group_tables(r: &ReportFile) -> Markup {
+    let all = &r.summaries[0];
+    html! {
+        section id="by-group" {
+            h2 { "By " (r.group_by.as_deref().unwrap_or("group")) }
+            @for (k, m) in all.metrics.iter().enumerate().filter(|(_, m)| m.conditions.iter().any(|c| c.mean.is_some())) {
+                div class="group-table" id={ "group-" (m.metric) } {
+                    h3 { (m.label) }
+                    table {
+                        tr { th { "condition" } @for s in &r.summaries { th { (s.group.as_deref().unwrap_or("all")) " (" (s.participants) ")" } } }
+                        @for (i, c) in r.conditions.iter().enumerate() {
+                            tr { td { (c) } @for s in &r.summaries { (paper_cell(r, s.metrics.get(k).and_then(|m| m.conditions.get(i)))) } }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Every column against each TLX scale: r (p, n).
+fn correlation_table(r: &ReportFile) -> Markup {
+    let scales: Vec<&str> = r.correlations.iter().map(|c| c.scale.as_str()).collect::<BTreeSet<_>>().into_iter().collect();
+    let mut metrics: Vec<(&str, &str)> = Vec::new();
+    for c in &r.correlations {
+        if !metrics.iter().any(|(m, _)| *m == c.metric) && r.correlations.iter().any(|x| x.metric == c.metric && x.pearson.is_some()) {
+            metrics.push((&c.metric, &c.label));
+        }
+    }
+    let scales: Vec<&str> = {
+        // In the questionnaire's own order, as the CSV gives them.
+        let mut ordered: Vec<&str> = Vec::new();
+        for c in &r.correlations {
+            if scales.contains(&c.scale.as_str()) && !ordered.contains(&c.scale.as_str()) {
+                ordered.push(&c.scale);
+            }
+        }
+        ordered
+    };
+    html! {
+        section id="correlations" {
+            h2 { "Task metrics and workload" }
+            p class="method" { "Pearson's r (two-sided p, n) between each column and each NASA-TLX scale, one observation per TLX answered: \
+                the participant's mean of the column over the done trials the TLX follows. Bold where p < " (r.alpha) " (not adjusted)." }
+            div class="wide" {
+                table {
+                    tr { th { "" } @for s in &scales { th { (s) } } }
+                    @for (m, label) in &metrics {
+                        tr { td title=(label) { (m) }
+                            @for s in &scales {
+                                @let c = r.correlations.iter().find(|c| c.metric == *m && c.scale == *s);
+                                @match c.and_then(|c| c.pearson) {
+                                    Some(p) => { td class=[(p.p < r.alpha).then_some("sig")] { (format!("{:.2}", p.r)) small { " (" (fmt_p(Some(p.p))) ", " (p.n) ")" } } }
+                                    None => { td { "–" small { " (n " (c.map_or(0, |c| c.n)) ")" } } }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn metric_section(r: &ReportFile, summary: &Summary, m: &MetricSummary) -> Markup {
+    metric_section_as("", r.baseline.as_deref(), summary, m)
+}
+
+/// A metric's table and plot; `prefix` sets its ids apart (`q`: the
+/// questionnaires), `baseline` names what it is compared with.
+fn metric_section_as(prefix: &str, baseline: Option<&str>, summary: &Summary, m: &MetricSummary) -> Markup {
+    let id = format!("{prefix}{}{}-{}", if prefix.is_empty() { "" } else { "-" }, summary.group.as_deref().unwrap_or("all").replace(' ', "_"), m.metric);
     let svg = plot(&id, m).unwrap_or_default();
     html! {
         div class="metric" id=(id) {
             h3 { (m.label) }
             table {
                 tr { th { "condition" } th { "participants" } th { "trials" } th { "mean ± sd" }
-                     th { "Δ vs " (r.baseline.as_deref().unwrap_or("–")) } th { "t (df)" } th { "p" } th { "p Holm" }
+                     th { "Δ vs " (baseline.unwrap_or("–")) } th { "t (df)" } th { "p" } th { "p Holm" }
                      th { "Wilcoxon V" } th { "p" } th { "p Holm" } }
                 @for c in &m.conditions {
                     @let v = c.versus_baseline.as_ref();
@@ -399,7 +781,7 @@ fn plot(id: &str, m: &super::summary::MetricSummary) -> Option<String> {
     {
         let root = SVGBackend::with_string(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).ok()?;
-        let mut chart = crate::html::plot::chart_on(&root, m.label)
+        let mut chart = crate::html::plot::chart_on(&root, &m.label)
             .build_cartesian_2d(-0.5..n - 0.5, lo..hi)
             .ok()?;
         let label = |v: &f64| crate::html::plot::whole(*v).and_then(|i| names.get(usize::try_from(i).ok()?).cloned()).unwrap_or_default();
@@ -409,7 +791,7 @@ fn plot(id: &str, m: &super::summary::MetricSummary) -> Option<String> {
             .x_label_formatter(&label)
             .y_label_formatter(&crate::html::plot::short)
             .x_desc("condition")
-            .y_desc(m.label)
+            .y_desc(m.label.as_ref())
             .disable_x_mesh()
             .light_line_style(RGBColor(235, 235, 235))
             .draw()

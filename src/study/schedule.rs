@@ -131,11 +131,21 @@ pub fn schedule(study: &Study, p: usize) -> Schedule {
     let participant = &study.participants[p];
     let key = fnv1a(participant.id.as_bytes());
     let (square_row, blocks) = match study.order {
-        BlockOrder::Latin => {
-            let square = balanced_latin_square(study.blocks.len());
-            let row = p % square.len();
-            (Some(row), square[row].clone())
-        }
+        BlockOrder::Latin => match study.first_block {
+            None => {
+                let square = balanced_latin_square(study.blocks.len());
+                let row = p % square.len();
+                (Some(row), square[row].clone())
+            }
+            // The first block, then a square of the others, in the file's order.
+            Some(first) => {
+                let rest: Vec<usize> = (0..study.blocks.len()).filter(|&b| b != first).collect();
+                let square = square_of(rest.len());
+                let row = p % square.len();
+                let order = std::iter::once(first).chain(square.get(row).into_iter().flatten().map(|&k| rest[k])).collect();
+                (Some(row), order)
+            }
+        },
         BlockOrder::Table => (None, participant.blocks.clone().expect("the parser requires a table row of every participant")),
         BlockOrder::Fixed => (None, (0..study.blocks.len()).collect()),
     };
@@ -179,6 +189,15 @@ pub fn schedule(study: &Study, p: usize) -> Schedule {
     Schedule { participant: p, square_row, blocks, trials, due }
 }
 
+/// The balanced Latin square of `n` blocks; one empty row for none.
+fn square_of(n: usize) -> Vec<Vec<usize>> {
+    if n == 0 {
+        vec![Vec::new()]
+    } else {
+        balanced_latin_square(n)
+    }
+}
+
 /// How often each block stands in each position across the participants'
 /// schedules: `counts[block][position]`.
 pub fn position_counts(study: &Study) -> Vec<Vec<u32>> {
@@ -196,12 +215,20 @@ pub fn position_counts(study: &Study) -> Vec<Vec<u32>> {
 /// every block stands in every position equally often.
 pub fn balance(study: &Study) -> String {
     let counts = position_counts(study);
-    let all: Vec<u32> = counts.iter().flatten().copied().collect();
+    // A block everyone takes first stands apart: the balance is of the others.
+    let first = study.first_block;
+    let all: Vec<u32> = counts
+        .iter()
+        .enumerate()
+        .filter(|(b, _)| Some(*b) != first)
+        .flat_map(|(_, row)| row.iter().skip(usize::from(first.is_some())).copied())
+        .collect();
     let (lo, hi) = (all.iter().min().copied().unwrap_or(0), all.iter().max().copied().unwrap_or(0));
     let m = study.participants.len();
     let rule = match study.order {
         BlockOrder::Latin => {
-            let rows = balanced_latin_square(study.blocks.len()).len();
+            let counterbalanced = study.blocks.len() - usize::from(study.first_block.is_some());
+            let rows = square_of(counterbalanced).len();
             let whole = m / rows;
             let rest = m % rows;
             if rest == 0 {
@@ -216,6 +243,10 @@ pub fn balance(study: &Study) -> String {
         }
         BlockOrder::Table => format!("each participant's own order ({m} participants)"),
         BlockOrder::Fixed => format!("the file's order for all {m} participants"),
+    };
+    let rule = match first {
+        Some(b) => format!("`{}` first for everyone, then {rule}", study.blocks[b].name),
+        None => rule,
     };
     if lo == hi {
         format!("{rule}: every block in every position {lo} time(s)")

@@ -155,3 +155,43 @@ pub fn holm(p: &[f64]) -> Vec<f64> {
     }
     adjusted
 }
+
+/// A Pearson correlation of paired values.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Pearson {
+    pub n: usize,
+    pub r: f64,
+    /// Two-sided, from t = r √(n − 2) / √(1 − r²) with n − 2 degrees of
+    /// freedom (R's `cor.test`).
+    pub p: f64,
+}
+
+/// The Pearson correlation of the pairs `(x, y)`; `None` below three
+/// pairs or when either side is constant (r is then undefined).
+pub fn pearson(pairs: &[(f64, f64)]) -> Option<Pearson> {
+    let n = pairs.len();
+    if n < 3 {
+        return None;
+    }
+    let mx = pairs.iter().map(|p| p.0).sum::<f64>() / n as f64;
+    let my = pairs.iter().map(|p| p.1).sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for &(x, y) in pairs {
+        sxy += (x - mx) * (y - my);
+        sxx += (x - mx) * (x - mx);
+        syy += (y - my) * (y - my);
+    }
+    if sxx == 0.0 || syy == 0.0 || !(sxx * syy).is_finite() {
+        return None;
+    }
+    // Rounding can take |r| an ulp past 1; the quotient is otherwise exact to it.
+    let r = (sxy / (sxx.sqrt() * syy.sqrt())).clamp(-1.0, 1.0);
+    let df = (n - 2) as f64;
+    let p = if r.abs() == 1.0 {
+        0.0
+    } else {
+        let t = r * df.sqrt() / (1.0 - r * r).sqrt();
+        (2.0 * StudentsT::new(0.0, 1.0, df).ok()?.sf(t.abs())).min(1.0)
+    };
+    Some(Pearson { n, r, p })
+}

@@ -10,6 +10,7 @@
 //! method.
 
 use super::metrics::{Figures, METRICS};
+use std::borrow::Cow;
 use super::stats::{holm, mean, paired_t, sd, wilcoxon, TTest, Wilcoxon};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -34,8 +35,24 @@ pub struct Row {
     pub started_utc: String,
     pub trial_dir: String,
     pub note: String,
-    /// In [`METRICS`]' order.
+    /// In the order of the table's columns ([`Column`]): [`METRICS`], then
+    /// the study's measures.
     pub figures: Figures,
+}
+
+/// A numeric column the comparison is made of: a metric of the runs, a
+/// measure the experimenter counted, a questionnaire's scale.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Column {
+    pub name: Cow<'static, str>,
+    pub label: Cow<'static, str>,
+}
+
+impl Column {
+    /// Every metric of a run, in [`METRICS`]' order.
+    pub fn metrics() -> Vec<Column> {
+        METRICS.iter().map(|m| Column { name: Cow::Borrowed(m.name), label: Cow::Borrowed(m.label) }).collect()
+    }
 }
 
 /// One condition's figure for one metric.
@@ -67,8 +84,8 @@ pub struct Comparison {
 /// One metric across the conditions.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MetricSummary {
-    pub metric: &'static str,
-    pub label: &'static str,
+    pub metric: Cow<'static, str>,
+    pub label: Cow<'static, str>,
     pub conditions: Vec<ConditionStat>,
 }
 
@@ -95,15 +112,21 @@ fn participant_means(rows: &[&Row], metric: usize) -> BTreeMap<(String, String),
 }
 
 /// The summary of `rows` over `conditions` (in the study's order), against
-/// `baseline` if given.
+/// `baseline` if given, for every metric of a run.
 pub fn summarize(rows: &[&Row], conditions: &[String], baseline: Option<&str>, group: Option<String>) -> Summary {
+    summarize_columns(rows, &Column::metrics(), conditions, baseline, group)
+}
+
+/// The summary of `rows`' figures in `columns`' order (any numeric
+/// columns) over `conditions`, against `baseline` if given.
+pub fn summarize_columns(rows: &[&Row], columns: &[Column], conditions: &[String], baseline: Option<&str>, group: Option<String>) -> Summary {
     let participants = {
         let mut ids: Vec<&str> = rows.iter().map(|r| r.participant.as_str()).collect();
         ids.sort_unstable();
         ids.dedup();
         ids.len()
     };
-    let metrics = METRICS
+    let metrics = columns
         .iter()
         .enumerate()
         .map(|(k, m)| {
@@ -135,7 +158,7 @@ pub fn summarize(rows: &[&Row], conditions: &[String], baseline: Option<&str>, g
                 })
                 .collect();
             adjust(&mut stats);
-            MetricSummary { metric: m.name, label: m.label, conditions: stats }
+            MetricSummary { metric: m.name.clone(), label: m.label.clone(), conditions: stats }
         })
         .collect();
     Summary { group, participants, metrics }

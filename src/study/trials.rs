@@ -9,7 +9,8 @@
 //! runner dies (`PR_SET_PDEATHSIG`), so no run outlives the trial it
 //! belongs to.
 
-use super::file::{ConditionSource, TrialSpec};
+use super::file::{ConditionSource, TrialSpec, MAX_COUNT};
+use std::collections::BTreeMap;
 use super::metrics::{figures, outages, Figures, TraceFrame, METRICS};
 use super::questionnaire;
 use super::schedule::Due;
@@ -37,7 +38,7 @@ impl FiguresFile {
 /// The run id of an attempt: unique to the study's data folder, the
 /// participant, the trial and the attempt (iceoryx2's names: at most 48
 /// characters of `[A-Za-z0-9_-]`).
-fn run_id(s: &OpenStudy, p: usize, trial: u32, attempt: u32) -> String {
+pub fn run_id(s: &OpenStudy, p: usize, trial: u32, attempt: u32) -> String {
     let key = super::schedule::fnv1a(format!("{}\0{}", s.data.display(), s.study.participants[p].id).as_bytes());
     format!("study-{key:016x}-t{trial:03}a{attempt}")
 }
@@ -56,7 +57,8 @@ fn refusal(s: &OpenStudy, p: usize, next: &Next) -> String {
             "the System Usability Scale of `{id}` is due before trial 1: `netfi study answer {file} --participant {id} sus ITEM…` (ten answers 1–5), or `--missing REASON`"
         ),
         Next::Questionnaire(Due::Tlx { after, .. }) => format!(
-            "the NASA-TLX of `{id}` after trial {after} is due: `netfi study answer {file} --participant {id} tlx MENTAL PHYSICAL TEMPORAL PERFORMANCE EFFORT FRUSTRATION` (0–100 each), or `--missing REASON`"
+            "the NASA-TLX of `{id}` after trial {after} is due: `netfi study answer {file} --participant {id} tlx MENTAL PHYSICAL TEMPORAL PERFORMANCE EFFORT FRUSTRATION` (0–100 each{}), or `--missing REASON`",
+            if s.study.questionnaires.tlx_weighting == super::file::TlxWeighting::Pairwise { ", and `--pairs` with the scale chosen in each of the 15 pairs" } else { "" }
         ),
         Next::Finished => format!("`{id}` has finished every trial"),
         Next::Trial { .. } => String::new(),
@@ -75,6 +77,7 @@ pub fn peek(s: &OpenStudy, p: usize) -> Result<Next, StudyError> {
 /// once its run is started. Returns the attempt as recorded.
 pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, started: impl FnOnce(&Attempt)) -> Result<Attempt, StudyError> {
     s.record_schedules()?;
+    s.record_inputs()?;
     let (lock, mut state) = claim(s, p, "netfi study next")?;
     let next = super::store::next_step(s, p, &state, &questionnaire::answered(s, p));
     let Next::Trial { trial, attempt } = next else { return Err(StudyError::State(refusal(s, p, &next))) };
@@ -100,6 +103,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
         report: false,
         faults: Vec::new(),
         note: String::new(),
+        counts: Default::default(),
     };
     state.attempts.push(a.clone());
     save_state(&dir, &state)?;
@@ -284,6 +288,13 @@ pub enum Mark {
 /// Marks participant `p`'s attempt (the last of trial `trial`, or the one
 /// waiting for its mark) `done`, `failed` or `repeat`, with a note.
 pub fn mark(s: &OpenStudy, p: usize, trial: Option<u32>, how: Mark, note: &str) -> Result<Attempt, StudyError> {
+    mark_counting(s, p, trial, how, note, &BTreeMap::new())
+}
+
+/// As [`mark`], recording the study's `[[measure]]`s the experimenter
+/// counted in the trial (`counts`: by measure name).
+pub fn mark_counting(s: &OpenStudy, p: usize, trial: Option<u32>, how: Mark, note: &str, counts: &BTreeMap<String, u32>) -> Result<Attempt, StudyError> {
+    check_counts(s, counts)?;
     let (lock, mut state) = claim(s, p, "netfi study mark")?;
     let id = &s.study.participants[p].id;
     let index = match trial {
@@ -316,10 +327,65 @@ pub fn mark(s: &OpenStudy, p: usize, trial: Option<u32>, how: Mark, note: &str) 
     if !note.is_empty() {
         a.note = note.to_string();
     }
+    a.counts.extend(counts.iter().map(|(k, v)| (k.clone(), *v)));
     let marked = a.clone();
     save_state(&s.participant_dir(p), &state)?;
     lock.release();
     Ok(marked)
+}
+
+/// Refuses a count of no `[[measure]]` of the study, or beyond [`MAX_COUNT`].
+fn check_counts(s: &OpenStudy, counts: &BTreeMap<String, u32>) -> Result<(), StudyError> {
+    for (name, v) in counts {
+        if s.study.measure(name).is_none() {
+            let known: Vec<&str> = s.study.measures.iter().map(|m| m.name.as_str()).collect();
+            let known = if known.is_empty() { "none: declare it as a `[[measure]]` of the study file".to_string() } else { known.join(", ") };
+            return Err(StudyError::State(format!("`{name}` is no measure of this study (its measures: {known})")));
+        }
+        if *v > MAX_COUNT {
+            return Err(StudyError::State(format!("{name} = {v}: a count is 0 to {MAX_COUNT}")));
+        }
+    }
+    Ok(())
+}
+
+/// Records the study's `[[measure]]`s counted in participant `p`'s trial
+/// (the last attempt of `trial`, or the last that ran), without changing
+/// its mark. Returns the attempt as recorded.
+pub fn count(s: &OpenStudy, p: usize, trial: Option<u32>, counts: &BTreeMap<String, u32>) -> Result<Attempt, StudyError> {
+    check_counts(s, counts)?;
+    let (lock, mut state) = claim(s, p, "netfi study count")?;
+    let id = &s.study.participants[p].id;
+    let index = match trial {
+        Some(n) => state.attempts.iter().rposition(|a| a.trial == n).ok_or_else(|| StudyError::State(format!("trial {n} of `{id}` has not run")))?,
+        None => state
+            .attempts
+            .iter()
+            .rposition(|a| a.state != AttemptState::Running && a.state != AttemptState::Interrupted)
+            .ok_or_else(|| StudyError::State(format!("no trial of `{id}` has run")))?,
+    };
+    let a = &mut state.attempts[index];
+    if matches!(a.state, AttemptState::Running | AttemptState::Interrupted) {
+        return Err(StudyError::State(format!("trial {} of `{id}` is {}: count what a trial that ran shows", a.trial, a.state.as_str())));
+    }
+    a.counts.extend(counts.iter().map(|(k, v)| (k.clone(), *v)));
+    let counted = a.clone();
+    save_state(&s.participant_dir(p), &state)?;
+    lock.release();
+    Ok(counted)
+}
+
+/// `NAME=COUNT` words as the command line gives them.
+pub fn parse_counts(words: &[String]) -> Result<BTreeMap<String, u32>, String> {
+    let mut out = BTreeMap::new();
+    for w in words {
+        let (k, v) = w.split_once('=').ok_or_else(|| format!("`{w}`: write a count as NAME=COUNT (e.g. drops=2)"))?;
+        let v: u32 = v.trim().parse().map_err(|_| format!("`{w}`: a count is a whole number ≥ 0"))?;
+        if out.insert(k.trim().to_string(), v).is_some() {
+            return Err(format!("`{}` twice", k.trim()));
+        }
+    }
+    Ok(out)
 }
 
 /// A trial folder's figures: `figures.json`, or computed from its report

@@ -24,6 +24,10 @@ pub struct TrialView {
     pub stopped: bool,
     pub faults: Vec<String>,
     pub note: String,
+    /// The last attempt's run id (its run in `netfi ui`'s `/runs`).
+    pub run_id: Option<String>,
+    /// The last attempt's counts of the study's measures.
+    pub counts: BTreeMap<String, u32>,
 }
 
 /// What comes next, for people.
@@ -38,6 +42,8 @@ pub struct NextView {
     /// `sus` or `tlx`, and the key it is stored under.
     pub questionnaire: Option<&'static str>,
     pub key: Option<String>,
+    /// A questionnaire's title, naming the trial or block it follows.
+    pub title: Option<String>,
 }
 
 /// A participant's progress.
@@ -55,6 +61,8 @@ pub struct ParticipantView {
     pub busy: Option<String>,
     pub questionnaires_answered: Vec<String>,
     pub questionnaires_due: Vec<String>,
+    /// The study's input files that changed after participants began.
+    pub study_changed: Vec<String>,
 }
 
 /// Participant `p`'s progress. An attempt whose runner died is marked
@@ -78,7 +86,9 @@ pub fn participant(s: &OpenStudy, p: usize) -> Result<ParticipantView, StudyErro
     };
     let answered = questionnaire::answered(s, p);
     let next = super::store::next_step(s, p, &state, &answered);
-    Ok(view(s, p, &state, &next, busy, answered))
+    let mut v = view(s, p, &state, &next, busy, answered);
+    v.study_changed = s.changed_inputs()?;
+    Ok(v)
 }
 
 fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Option<String>, answered: Vec<String>) -> ParticipantView {
@@ -102,6 +112,8 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
                 stopped: last.is_some_and(|a| a.stopped),
                 faults: last.map(|a| a.faults.clone()).unwrap_or_default(),
                 note: last.map(|a| a.note.clone()).unwrap_or_default(),
+                run_id: last.map(|a| super::trials::run_id(s, p, a.trial, a.attempt)),
+                counts: last.map(|a| a.counts.clone()).unwrap_or_default(),
             }
         })
         .collect();
@@ -112,7 +124,7 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
     let name = |t: u32| sch.trials.iter().find(|x| x.number == t).map(|x| (s.study.conditions[x.condition].name.clone(), s.study.blocks[x.block].name.clone()));
     let nv = |kind, trial: Option<u32>, attempt| {
         let (condition, block) = trial.and_then(name).map_or((None, None), |(c, b)| (Some(c), Some(b)));
-        NextView { kind, trial, attempt, condition, block, questionnaire: None, key: None }
+        NextView { kind, trial, attempt, condition, block, questionnaire: None, key: None, title: None }
     };
     let next = match next {
         Next::Trial { trial, attempt } => nv("trial", Some(trial.number), Some(*attempt)),
@@ -123,7 +135,8 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
                 Due::Sus => ("sus", None),
                 Due::Tlx { block, .. } => ("tlx", Some(s.study.blocks[*block].name.clone())),
             };
-            NextView { kind: "questionnaire", trial: None, attempt: None, condition: None, block, questionnaire: Some(q), key: Some(d.key()) }
+            let title = questionnaire_title(s, p, d);
+            NextView { kind: "questionnaire", trial: None, attempt: None, condition: None, block, questionnaire: Some(q), key: Some(d.key()), title: Some(title) }
         }
         Next::Finished => nv("finished", None, None),
     };
@@ -139,5 +152,25 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
         busy,
         questionnaires_answered: answered,
         questionnaires_due: due,
+        study_changed: Vec::new(),
+    }
+}
+
+/// A questionnaire's title: the instrument, and the trial or block (with
+/// its trials) it follows.
+pub fn questionnaire_title(s: &OpenStudy, p: usize, d: &Due) -> String {
+    let sch = &s.schedules[p];
+    match d {
+        Due::Sus => "System Usability Scale, before trial 1".to_string(),
+        Due::Tlx { after, block } if s.study.questionnaires.tlx == super::file::TlxWhen::Trial => {
+            let c = sch.trials.iter().find(|t| t.number == *after).map(|t| s.study.conditions[t.condition].name.as_str()).unwrap_or("?");
+            format!("NASA-TLX after trial {after} ({c}, block {})", s.study.blocks[*block].name)
+        }
+        Due::Tlx { after, block } => {
+            let numbers: Vec<u32> = sch.trials.iter().filter(|t| t.block == *block).map(|t| t.number).collect();
+            let (first, last) = (numbers.first().copied().unwrap_or(*after), numbers.last().copied().unwrap_or(*after));
+            let span = if first == last { format!("trial {first}") } else { format!("trials {first}–{last}") };
+            format!("NASA-TLX after block {} ({span})", s.study.blocks[*block].name)
+        }
     }
 }

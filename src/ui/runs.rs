@@ -21,6 +21,9 @@ pub(crate) struct Runs {
     /// The CPU mask the server was started with: its runs get it back (the
     /// server itself keeps off the emulator's core).
     mask: CpuMask,
+    /// The trials of the studies opened on the study page, by run id: their
+    /// folders, read from their reports like runs earlier servers left.
+    study: Mutex<BTreeMap<String, PathBuf>>,
 }
 
 /// A CPU affinity mask.
@@ -185,7 +188,7 @@ fn check_run_args(run: &RunArgs) -> Result<(), UiError> {
 
 impl Runs {
     pub fn new(mask: CpuMask) -> Runs {
-        Runs { runs: Mutex::default(), next: AtomicU64::new(0), mask }
+        Runs { runs: Mutex::default(), next: AtomicU64::new(0), mask, study: Mutex::default() }
     }
 
     /// Validates the scenario (the parser's own errors) and the options (as
@@ -243,7 +246,18 @@ impl Runs {
         if let Some(r) = self.runs.lock().expect("runs lock").get(id) {
             return Some(r.out.clone());
         }
-        past_run_dir(parent, id)
+        past_run_dir(parent, id).or_else(|| self.study_dir(id))
+    }
+
+    /// Makes a study's trials runs of this server (their run ids and
+    /// folders): listed in `/runs`, each with its page and report.
+    pub fn add_study_runs(&self, trials: impl IntoIterator<Item = (String, PathBuf)>) {
+        self.study.lock().expect("study runs lock").extend(trials);
+    }
+
+    /// A study trial's folder, once it holds a report.
+    fn study_dir(&self, id: &str) -> Option<PathBuf> {
+        self.study.lock().expect("study runs lock").get(id).filter(|d| d.join("report.json").is_file()).cloned()
     }
 
     /// Whether the run `id` is one this server started and still going.
@@ -254,7 +268,7 @@ impl Runs {
     /// The run's state now: one this server started, or one an earlier
     /// server left in `parent`.
     pub fn status(&self, parent: &Path, id: &str) -> Option<Status> {
-        self.status_here(id).or_else(|| past_status(parent, id))
+        self.status_here(id).or_else(|| past_status(parent, id)).or_else(|| past_status_in(&self.study_dir(id)?, id))
     }
 
     fn status_here(&self, id: &str) -> Option<Status> {
@@ -307,6 +321,8 @@ impl Runs {
             .filter(|id| !ids.contains(id))
             .filter_map(|id| past_status(parent, &id))
             .collect();
+        let study: Vec<(String, PathBuf)> = self.study.lock().expect("study runs lock").iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+        past.extend(study.iter().filter(|(id, _)| !ids.contains(id)).filter_map(|(id, dir)| past_status_in(dir, id)));
         past.sort_by_key(|s| std::cmp::Reverse(s.started_unix_s));
         here.extend(past);
         here
@@ -377,7 +393,15 @@ fn past_run_dir(parent: &Path, id: &str) -> Option<PathBuf> {
 
 /// The state of a run an earlier server left in `parent`, from its report.
 fn past_status(parent: &Path, id: &str) -> Option<Status> {
-    let dir = past_run_dir(parent, id)?;
+    past_status_in(&past_run_dir(parent, id)?, id)
+}
+
+/// The state of the run `id` whose folder is `dir`, from its report.
+fn past_status_in(dir: &Path, id: &str) -> Option<Status> {
+    let dir = dir.to_path_buf();
+    if !dir.join("report.json").is_file() {
+        return None;
+    }
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).ok()?).ok()?;
     let started = report["provenance"]["started_utc"].as_str().and_then(|t| humantime::parse_rfc3339(t).ok());
     let started = started.or_else(|| std::fs::metadata(dir.join("report.json")).ok()?.modified().ok());

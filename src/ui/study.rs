@@ -13,7 +13,8 @@
 //! participant's lock. The child is told to stop if the server ends
 //! (`PR_SET_PDEATHSIG`), so no trial outlives the page that started it.
 
-use crate::study::questionnaire::{self, Instrument, TLX_SCALES};
+use crate::study::file::TlxWeighting;
+use crate::study::questionnaire::{self, tlx_pairs, Instrument, SUS_SCALE, SUS_STATEMENTS, TLX_FORM};
 use crate::study::store::{claim, OpenStudy};
 use crate::study::trials::{self, Mark};
 use crate::study::view;
@@ -68,8 +69,11 @@ pub async fn page(Query(w): Query<Which>) -> Markup {
 
 fn study_body(s: &OpenStudy, chosen: Option<&str>) -> Markup {
     let st = &s.study;
+    let weighted = st.questionnaires.tlx_weighting == TlxWeighting::Pairwise;
+    let changed = s.changed_inputs().unwrap_or_else(|e| vec![e.to_string()]);
     html! {
         h2 id="study-name" { (st.name) }
+        ul id="study-changed" class="error" hidden[changed.is_empty()] { @for c in &changed { li { (c) } } }
         p { (st.participants.len()) " participants · " (st.conditions.len()) " conditions · seed " (st.seed) " · data in " code { (s.data.display()) } }
         section id="participant-box" {
             label { "participant "
@@ -91,26 +95,55 @@ fn study_body(s: &OpenStudy, chosen: Option<&str>) -> Markup {
             }
             div id="mark-controls" {
                 label { "note " input id="mark-note" size="40"; }
+                @for m in &st.measures {
+                    " " label { (m.label) " " input class="measure" data-name=(m.name) type="number" min="0" step="1" size="4"; }
+                }
                 button id="mark-done" { "done" }
                 button id="mark-failed" { "failed" }
                 button id="mark-repeat" { "repeat" }
             }
             pre id="study-action-error" class="error" {}
         }
-        section id="sus-box" hidden {
-            h3 { "System Usability Scale" }
-            p { "1 = strongly disagree … 5 = strongly agree" }
-            @for i in 1..=questionnaire::SUS_ITEMS {
-                label class="q" { (format!("item {i} ")) select class="sus-item" { @for v in 1..=5 { option value=(v) selected[v == 3] { (v) } } } }
+        section id="sus-box" class="form" hidden {
+            h3 id="sus-title" { "System Usability Scale" }
+            p class="hint" { "Every statement answered, 1 (" (SUS_SCALE[0]) ") to 5 (" (SUS_SCALE[4]) "); none is chosen beforehand." }
+            table id="sus-form" {
+                tr { th { "" } @for (v, words) in SUS_SCALE.iter().enumerate() { th { (v + 1) br; small { (words) } } } }
+                @for (i, statement) in SUS_STATEMENTS.iter().enumerate() {
+                    tr class="sus-item" data-item=(i + 1) {
+                        td { (i + 1) ". " (statement) }
+                        @for v in 1..=5 { td { input type="radio" name={ "sus-" (i + 1) } value=(v) aria-label={ (i + 1) ": " (SUS_SCALE[v - 1]) }; } }
+                    }
+                }
             }
-            button id="sus-submit" { "record SUS" }
+            p class="unanswered" id="sus-unanswered" {}
+            button id="sus-submit" disabled { "record SUS" }
         }
-        section id="tlx-box" hidden {
-            h3 { "NASA-TLX " span id="tlx-block" {} }
-            @for s in TLX_SCALES {
-                label class="q" { (s.replace('_', " ")) " " input class="tlx-scale" type="range" min="0" max="100" step="5" value="50"; output {} }
+        section id="tlx-box" class="form" hidden {
+            h3 id="tlx-title" { "NASA-TLX" }
+            p class="hint" { "Every scale marked, 0 to 100 in steps of 5; none is marked beforehand." }
+            @for (k, scale) in TLX_FORM.iter().enumerate() {
+                fieldset class="tlx-scale" data-scale=(scale.key) {
+                    legend { b { (scale.title) } " — " (scale.question) }
+                    span class="anchor" { (scale.low) }
+                    @for v in (0..=100).step_by(5) { input type="radio" name={ "tlx-" (k) } value=(v) title=(v) aria-label={ (scale.title) " " (v) }; }
+                    span class="anchor" { (scale.high) }
+                }
             }
-            button id="tlx-submit" { "record NASA-TLX" }
+            @if weighted {
+                fieldset id="tlx-pairs" {
+                    legend { "Which of the two contributed more to the workload of the task?" }
+                    @for (k, (a, b)) in tlx_pairs().into_iter().enumerate() {
+                        div class="tlx-pair" data-pair=(k + 1) {
+                            label { input type="radio" name={ "pair-" (k) } value=(a); " " (TLX_FORM[a].title) }
+                            " or "
+                            label { input type="radio" name={ "pair-" (k) } value=(b); " " (TLX_FORM[b].title) }
+                        }
+                    }
+                }
+            }
+            p class="unanswered" id="tlx-unanswered" {}
+            button id="tlx-submit" disabled { "record NASA-TLX" }
         }
         section id="missing-box" hidden {
             label { "not given, because " input id="missing-reason" size="40"; }
@@ -164,12 +197,14 @@ pub async fn participant_view(Query(w): Query<Which>) -> Response {
 
 /// `GET /api/study/status?file=…&participant=…`: the participant's
 /// progress (JSON), and whether this server runs their trial.
-pub async fn status(Query(w): Query<Which>) -> Response {
+pub async fn status(State(ui): State<Arc<super::Ui>>, Query(w): Query<Which>) -> Response {
     let got = tokio::task::spawn_blocking(move || -> Result<serde_json::Value, String> {
         let s = open(w.file.as_deref())?;
         let id = w.participant.unwrap_or_default();
         let p = s.participant(&id).map_err(|e| e.to_string())?;
         let v = view::participant(&s, p).map_err(|e| e.to_string())?;
+        let dir = s.participant_dir(p);
+        ui.runs.add_study_runs(v.trials.iter().filter_map(|t| Some((t.run_id.clone()?, dir.join(t.dir.as_ref()?)))));
         let mine = reap(&s.data, &id);
         let mut j = serde_json::to_value(&v).map_err(|e| e.to_string())?;
         j["started_here"] = serde_json::Value::Bool(mine);
@@ -213,10 +248,17 @@ pub struct Action {
     /// `answer`: sus or tlx.
     #[serde(default)]
     instrument: Option<String>,
+    /// The answers; an item the participant left untouched is null.
     #[serde(default)]
-    values: Vec<u32>,
+    values: Vec<Option<u32>>,
+    /// A weighted TLX's 15 pairwise choices (the scale chosen in each).
+    #[serde(default)]
+    pairs: Option<Vec<Option<usize>>>,
     #[serde(default)]
     missing: Option<String>,
+    /// `mark`: the study's measures counted in the trial.
+    #[serde(default)]
+    counts: BTreeMap<String, u32>,
 }
 
 /// `POST /api/study/start`: starts the participant's next trial (a
@@ -307,8 +349,34 @@ pub async fn stop(Json(a): Json<Action>) -> Response {
             unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
             StatusCode::NO_CONTENT.into_response()
         }
-        None => (StatusCode::CONFLICT, format!("no trial of `{}` was started from this page", a.participant)).into_response(),
+        None => match stop_elsewhere(&s, &a.participant) {
+            Ok(()) => StatusCode::NO_CONTENT.into_response(),
+            Err(why) => (StatusCode::CONFLICT, why).into_response(),
+        },
     }
+}
+
+/// Stops a trial started elsewhere (a terminal's `netfi study next`, or
+/// another server) as Ctrl-C would: SIGINT to the runner its attempt
+/// names, once `/proc` shows that process is `netfi study next` of this
+/// participant (a pid the kernel gave again is left alone).
+fn stop_elsewhere(s: &OpenStudy, id: &str) -> Result<(), String> {
+    let p = s.participant(id).map_err(|e| e.to_string())?;
+    let state = crate::study::store::load_state(&s.participant_dir(p)).map_err(|e| e.to_string())?.unwrap_or_default();
+    let running = state.attempts.iter().find(|a| a.state == crate::study::AttemptState::Running).ok_or_else(|| format!("no trial of `{id}` is running"))?;
+    let pid = running.runner_pid.ok_or_else(|| format!("trial {} of `{id}` names no runner", running.trial))?;
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+    let words: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
+    let is_runner = words.windows(2).any(|w| w[0] == b"study" && w[1] == b"next") && words.contains(&id.as_bytes());
+    if !is_runner {
+        return Err(format!("trial {} of `{id}`: its runner (pid {pid}) is gone", running.trial));
+    }
+    let pid = libc::pid_t::try_from(pid).map_err(|_| format!("pid {pid}"))?;
+    // SAFETY: kill with a pid just checked to be this participant's runner.
+    if unsafe { libc::kill(pid, libc::SIGINT) } != 0 {
+        return Err(format!("stopping pid {pid}: {}", std::io::Error::last_os_error()));
+    }
+    Ok(())
 }
 
 /// `POST /api/study/mark` `{file, participant, how, note}`.
@@ -322,7 +390,7 @@ pub async fn mark(Json(a): Json<Action>) -> Response {
             Some("repeat") => Mark::Repeat,
             other => return Err(format!("how: done, failed or repeat, not {other:?}")),
         };
-        let marked = trials::mark(&s, p, None, how, a.note.as_deref().unwrap_or_default()).map_err(|e| e.to_string())?;
+        let marked = trials::mark_counting(&s, p, None, how, a.note.as_deref().unwrap_or_default(), &a.counts).map_err(|e| e.to_string())?;
         serde_json::to_value(marked).map_err(|e| e.to_string())
     })
     .await;
@@ -343,9 +411,26 @@ pub async fn answer(Json(a): Json<Action>) -> Response {
             Some("tlx") => Instrument::Tlx,
             other => return Err(format!("instrument: sus or tlx, not {other:?}")),
         };
+        // A form with an item left untouched is refused here too, not
+        // only by the page: nothing is recorded that was not answered.
+        let values = match a.missing {
+            Some(_) if a.values.is_empty() => Vec::new(),
+            Some(_) => return Err("either answers or a reason it is missing, not both".into()),
+            None => questionnaire::complete(instrument, &a.values)?,
+        };
+        let pairs: Option<Vec<usize>> = match &a.pairs {
+            None => None,
+            Some(chosen) => {
+                let open: Vec<String> = chosen.iter().enumerate().filter(|(_, c)| c.is_none()).map(|(k, _)| (k + 1).to_string()).collect();
+                if !open.is_empty() {
+                    return Err(format!("not answered: NASA-TLX pair {} (every pair is answered; none has a default)", open.join(", ")));
+                }
+                Some(chosen.iter().flatten().copied().collect())
+            }
+        };
         let (lock, state) = claim(&s, p, "netfi ui: a questionnaire").map_err(|e| e.to_string())?;
         let due = questionnaire::due_now(&s, p, instrument, |t| state.finished(t)).ok_or("that questionnaire is not due now")?;
-        let path = questionnaire::record(&s, p, &due, &a.values, a.missing.as_deref()).map_err(|e| e.to_string())?;
+        let path = questionnaire::record(&s, p, &due, &values, pairs.as_deref(), a.missing.as_deref()).map_err(|e| e.to_string())?;
         lock.release();
         Ok(path.display().to_string())
     })

@@ -7,7 +7,9 @@
 //! parts (squares, schedules, the file's errors, the statistics) are in
 //! `pure.rs`.
 
+mod analysis;
 mod browser;
+mod forms;
 mod pure;
 
 use crate::common::machine;

@@ -66,6 +66,25 @@ pub enum StudyCmd {
         /// A note kept with the trial (in the table's `note` column).
         #[arg(long, default_value = "")]
         note: String,
+        /// A `[[measure]]` of the study counted in the trial, NAME=COUNT
+        /// (e.g. `--count drops=2`); again for each.
+        #[arg(long = "count", value_name = "NAME=COUNT")]
+        counts: Vec<String>,
+    },
+    /// Record the study's `[[measure]]`s counted in a trial (the last that
+    /// ran, or --trial N), without changing its mark.
+    Count {
+        /// The study file (TOML).
+        file: PathBuf,
+        /// The participant's id.
+        #[arg(long, short)]
+        participant: String,
+        /// The trial (default: the last that ran).
+        #[arg(long)]
+        trial: Option<u32>,
+        /// NAME=COUNT for each measure (e.g. `drops=2 errors=0`).
+        #[arg(required = true, value_name = "NAME=COUNT")]
+        counts: Vec<String>,
     },
     /// Record a questionnaire due now: `sus` with ten answers 1–5, or
     /// `tlx` with six scales 0–100 (mental, physical, temporal, performance,
@@ -83,6 +102,13 @@ pub enum StudyCmd {
         /// Record it as not given, for this reason.
         #[arg(long, value_name = "REASON")]
         missing: Option<String>,
+        /// A weighted NASA-TLX's 15 choices, in the order of the pairs
+        /// (mental–physical, mental–temporal, mental–performance,
+        /// mental–effort, mental–frustration, physical–temporal, …,
+        /// effort–frustration): the scale chosen in each (mental, physical,
+        /// temporal, performance, effort or frustration), comma-separated.
+        #[arg(long, value_name = "SCALE,…", value_delimiter = ',')]
+        pairs: Option<Vec<String>>,
     },
     /// Each participant's progress (trials done, what comes next).
     Status {
@@ -127,7 +153,7 @@ pub fn run(args: StudyArgs) -> Result<()> {
     match args.command {
         StudyCmd::Plan { file, participant, write, json } => plan(&OpenStudy::open(&file)?, participant.as_deref(), write, json),
         StudyCmd::Next { file, participant, netfi } => next(&OpenStudy::open(&file)?, &participant, netfi),
-        StudyCmd::Mark { file, participant, how, trial, note } => {
+        StudyCmd::Mark { file, participant, how, trial, note, counts } => {
             let s = OpenStudy::open(&file)?;
             let p = s.participant(&participant)?;
             let how = match how {
@@ -135,11 +161,21 @@ pub fn run(args: StudyArgs) -> Result<()> {
                 MarkArg::Failed => Mark::Failed,
                 MarkArg::Repeat => Mark::Repeat,
             };
-            let a = trials::mark(&s, p, trial, how, &note)?;
+            let counts = trials::parse_counts(&counts).map_err(anyhow::Error::msg)?;
+            let a = trials::mark_counting(&s, p, trial, how, &note, &counts)?;
             println!("{participant}: trial {} ({}, attempt {}) marked {}", a.trial, a.condition, a.attempt, a.state.as_str());
             Ok(())
         }
-        StudyCmd::Answer { file, participant, instrument, values, missing } => answer(&file, &participant, instrument, &values, missing.as_deref()),
+        StudyCmd::Count { file, participant, trial, counts } => {
+            let s = OpenStudy::open(&file)?;
+            let p = s.participant(&participant)?;
+            let counts = trials::parse_counts(&counts).map_err(anyhow::Error::msg)?;
+            let a = trials::count(&s, p, trial, &counts)?;
+            let said: Vec<String> = a.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+            println!("{participant}: trial {} ({}, attempt {}): {}", a.trial, a.condition, a.attempt, said.join(", "));
+            Ok(())
+        }
+        StudyCmd::Answer { file, participant, instrument, values, missing, pairs } => answer(&file, &participant, instrument, &values, pairs.as_deref(), missing.as_deref()),
         StudyCmd::Status { file, participant, json } => status(&OpenStudy::open(&file)?, participant.as_deref(), json),
         StudyCmd::Report { file, out, group } => {
             let s = OpenStudy::open(&file)?;
@@ -175,6 +211,9 @@ fn plan(s: &OpenStudy, only: Option<&str>, write: bool, json: bool) -> Result<()
         s.data.display()
     );
     println!("order: {}", balance(st));
+    for c in s.changed_inputs()? {
+        println!("CHANGED: {c}");
+    }
     for c in &st.conditions {
         let base = if st.baseline.is_some_and(|b| st.conditions[b].name == c.name) { "  (baseline)" } else { "" };
         let what = match &c.source {
@@ -239,7 +278,7 @@ fn next(s: &OpenStudy, participant: &str, netfi: Option<PathBuf>) -> Result<()> 
     Ok(())
 }
 
-fn answer(file: &std::path::Path, participant: &str, instrument: InstrumentArg, values: &[u32], missing: Option<&str>) -> Result<()> {
+fn answer(file: &std::path::Path, participant: &str, instrument: InstrumentArg, values: &[u32], pairs: Option<&[String]>, missing: Option<&str>) -> Result<()> {
     let s = OpenStudy::open(file)?;
     let p = s.participant(participant)?;
     let (lock, state) = netfi::study::store::claim(&s, p, "netfi study answer")?;
@@ -253,7 +292,15 @@ fn answer(file: &std::path::Path, participant: &str, instrument: InstrumentArg, 
             Instrument::Tlx => "NASA-TLX",
         }, file.display());
     };
-    let path = questionnaire::record(&s, p, &due, values, missing)?;
+    let pairs: Option<Vec<usize>> = pairs
+        .map(|words| {
+            words
+                .iter()
+                .map(|w| questionnaire::tlx_scale_named(w).ok_or_else(|| anyhow::anyhow!("--pairs: `{w}` is no TLX scale (mental, physical, temporal, performance, effort, frustration)")))
+                .collect::<Result<Vec<_>>>()
+        })
+        .transpose()?;
+    let path = questionnaire::record(&s, p, &due, values, pairs.as_deref(), missing)?;
     lock.release();
     println!("{participant}: {} recorded in {}", due.key(), path.display());
     Ok(())
@@ -268,6 +315,11 @@ fn status(s: &OpenStudy, only: Option<&str>, json: bool) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(&views)?);
         return Ok(());
+    }
+    if let Some(v) = views.first() {
+        for c in &v.study_changed {
+            println!("CHANGED: {c}");
+        }
     }
     for v in &views {
         let counts: Vec<String> = v.counts.iter().map(|(k, n)| format!("{n} {k}")).collect();
@@ -285,6 +337,7 @@ fn status(s: &OpenStudy, only: Option<&str>, json: bool) -> Result<()> {
                 let extra = [
                     (t.attempts > 1).then(|| format!("{} attempts", t.attempts)),
                     t.stopped.then(|| "stopped".to_string()),
+                    (!t.counts.is_empty()).then(|| t.counts.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")),
                     (!t.note.is_empty()).then(|| t.note.clone()),
                 ];
                 let extra: Vec<String> = extra.into_iter().flatten().chain(t.faults.iter().map(|f| format!("fault: {f}"))).collect();

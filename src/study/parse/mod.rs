@@ -5,8 +5,8 @@ mod ctx;
 mod raw;
 
 use super::file::{
-    BlockOrder, Condition, ConditionSource, Block, Participant, Questionnaires, Study, StudyFileError, TlxWhen, TrialSpec, Within,
-    MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, STUDY_RUN_ARGS,
+    BlockOrder, Condition, ConditionSource, Block, Measure, Participant, Questionnaires, Study, StudyFileError, TlxWeighting, TlxWhen, TrialSpec,
+    Within, MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, STUDY_RUN_ARGS,
 };
 use super::square::MAX_BLOCKS;
 use crate::scenario::{canonical_name, PRESET_NAMES};
@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use toml::Spanned;
 use ctx::Ctx;
-use raw::{Raw, RawBlock, RawCondition, RawOrder, RawQuestionnaires, RawTrial};
+use raw::{Raw, RawBlock, RawCondition, RawMeasure, RawOrder, RawQuestionnaires, RawTrial, TimeValue};
 
 /// A name that becomes a folder and a CSV value: letters, digits, `-`,
 /// `_`, `.`, `+`, spaces inside; not empty, not starting with `.`.
@@ -51,11 +51,14 @@ pub fn parse_study(text: &str, origin: &str, default_name: &str) -> Result<Study
         Some(t) => trials_count(&ctx, t, "trials")?,
     };
     let trial = trial_spec(&ctx, raw.trial)?;
+    let first = raw.order.as_ref().and_then(|o| o.first.clone());
     let (order, within) = order(&ctx, raw.order)?;
     let questionnaires = questionnaires(&ctx, raw.questionnaires)?;
     let defined = defined_conditions(&ctx, &raw.condition)?;
     let (conditions, blocks) = blocks(&ctx, &raw.block, &defined, trials_default)?;
     let participants = participants(&ctx, &raw.participant, &blocks, order)?;
+    let first_block = first_block(&ctx, first.as_ref(), &blocks, order)?;
+    let measures = measures(&ctx, &raw.measure, &participants)?;
     let per_participant: usize = blocks.iter().map(|b| b.conditions.len() * b.trials as usize).sum();
     if per_participant > MAX_TRIALS_PER_PARTICIPANT {
         return Err(ctx.err(None, "block", format!("{per_participant} trials per participant: at most {MAX_TRIALS_PER_PARTICIPANT}")));
@@ -97,7 +100,43 @@ pub fn parse_study(text: &str, origin: &str, default_name: &str) -> Result<Study
         order,
         within,
         questionnaires,
+        measures,
+        first_block,
     })
+}
+
+/// `order.first`: the block everyone takes first, the others
+/// counterbalanced after it (with a Latin square; a table gives each
+/// participant's whole order, and fixed is the file's).
+fn first_block(ctx: &Ctx, first: Option<&Spanned<String>>, blocks: &[Block], order: BlockOrder) -> Result<Option<usize>, StudyFileError> {
+    let Some(first) = first else { return Ok(None) };
+    if order != BlockOrder::Latin {
+        return Err(ctx.err(Some(first.span()), "order.first", "only with `order.blocks = \"latin\"` (a table gives each participant's whole order; fixed is the file's order)"));
+    }
+    let names: Vec<&str> = blocks.iter().map(|b| b.name.as_str()).collect();
+    names.iter().position(|n| n == first.get_ref()).map(Some).ok_or_else(|| {
+        ctx.err(Some(first.span()), "order.first", format!("`{}` is not a block (blocks: {})", first.get_ref(), names.join(", ")))
+    })
+}
+
+/// The `[[measure]]`s: column names of the study's table, each once.
+fn measures(ctx: &Ctx, raw: &[Spanned<RawMeasure>], participants: &[Participant]) -> Result<Vec<Measure>, StudyFileError> {
+    let mut out: Vec<Measure> = Vec::new();
+    for (i, m) in raw.iter().enumerate() {
+        let field = format!("measure[{}].name", i + 1);
+        let name = m.get_ref().name.get_ref();
+        let at = Some(m.get_ref().name.span());
+        check_attribute(name).map_err(|p| ctx.err(at.clone(), &field, p.replace("an attribute", "a measure").replace("the attribute", "the measure")))?;
+        if out.iter().any(|x| &x.name == name) {
+            return Err(ctx.err(at, field, format!("`{name}` twice: every measure once")));
+        }
+        if participants.iter().any(|p| p.attributes.contains_key(name)) {
+            return Err(ctx.err(at, field, format!("`{name}` is also a participant's attribute: both would be a column of that name")));
+        }
+        let label = m.get_ref().label.clone().filter(|l| !l.trim().is_empty()).unwrap_or_else(|| name.replace('_', " "));
+        out.push(Measure { name: name.clone(), label });
+    }
+    Ok(out)
 }
 
 fn trials_count(ctx: &Ctx, t: &Spanned<i64>, field: &str) -> Result<u32, StudyFileError> {
@@ -111,10 +150,18 @@ fn trials_count(ctx: &Ctx, t: &Spanned<i64>, field: &str) -> Result<u32, StudyFi
 fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileError> {
     let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new() }) };
     let duration_s = match raw.duration_s {
-        Some(d) if !(d.get_ref().is_finite() && *d.get_ref() > 0.0 && *d.get_ref() <= MAX_TRIAL_S) => {
-            return Err(ctx.err(Some(d.span()), "trial.duration_s", format!("{}: a trial lasts more than 0 and at most {MAX_TRIAL_S} s", d.get_ref())));
+        None => None,
+        Some(d) => {
+            let at = Some(d.span());
+            let s = match d.get_ref() {
+                TimeValue::Number(v) => *v,
+                TimeValue::Text(t) => crate::model::parse_duration(t, crate::model::TimeUnit::S).map_err(|p| ctx.err(at.clone(), "trial.duration_s", p))?,
+            };
+            if !(s.is_finite() && s > 0.0 && s <= MAX_TRIAL_S) {
+                return Err(ctx.err(at, "trial.duration_s", format!("{s} s: a trial lasts more than 0 and at most {MAX_TRIAL_S} s (a day)")));
+            }
+            Some(s)
         }
-        d => d.map(Spanned::into_inner),
     };
     let rate_hz = match raw.rate_hz {
         Some(r) if !(r.get_ref().is_finite() && (0.001..=10e6).contains(r.get_ref())) => {
@@ -194,7 +241,7 @@ fn order(ctx: &Ctx, raw: Option<RawOrder>) -> Result<(BlockOrder, Within), Study
 }
 
 fn questionnaires(ctx: &Ctx, raw: Option<RawQuestionnaires>) -> Result<Questionnaires, StudyFileError> {
-    let Some(raw) = raw else { return Ok(Questionnaires { sus: false, tlx: TlxWhen::None }) };
+    let Some(raw) = raw else { return Ok(Questionnaires { sus: false, tlx: TlxWhen::None, tlx_weighting: TlxWeighting::Raw }) };
     let sus = ctx.choice(
         raw.sus.as_ref(),
         "questionnaires.sus",
@@ -207,7 +254,13 @@ fn questionnaires(ctx: &Ctx, raw: Option<RawQuestionnaires>) -> Result<Questionn
         &[("none", TlxWhen::None), ("block", TlxWhen::Block), ("trial", TlxWhen::Trial)],
         "block (a NASA-TLX after each block), trial (after each trial) or none",
     )?;
-    Ok(Questionnaires { sus, tlx })
+    let tlx_weighting = ctx.choice(
+        raw.tlx_weighting.as_ref(),
+        "questionnaires.tlx_weighting",
+        &[("raw", TlxWeighting::Raw), ("pairwise", TlxWeighting::Pairwise)],
+        "raw (the unweighted mean of the six scales) or pairwise (the 15 pairwise choices weight the scales)",
+    )?;
+    Ok(Questionnaires { sus, tlx, tlx_weighting })
 }
 
 /// The `[[condition]]` tables by name: their span and source.

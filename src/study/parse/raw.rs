@@ -24,12 +24,30 @@ pub(super) struct Raw {
     pub(super) block: Vec<Spanned<RawBlock>>,
     #[serde(default)]
     pub(super) participant: Vec<Spanned<toml::Table>>,
+    #[serde(default)]
+    pub(super) measure: Vec<Spanned<RawMeasure>>,
+}
+
+/// A time as a file writes it: a number in the field's unit, or text with
+/// its own (`"10min"`, `"90 s"`), as scenario files take times.
+#[derive(Deserialize)]
+#[serde(untagged)]
+pub(super) enum TimeValue {
+    Number(f64),
+    Text(String),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawMeasure {
+    pub(super) name: Spanned<String>,
+    pub(super) label: Option<String>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawTrial {
-    pub(super) duration_s: Option<Spanned<f64>>,
+    pub(super) duration_s: Option<Spanned<TimeValue>>,
     pub(super) capture: Option<String>,
     pub(super) rate_hz: Option<Spanned<f64>>,
     #[serde(default)]
@@ -41,6 +59,7 @@ pub(super) struct RawTrial {
 pub(super) struct RawOrder {
     pub(super) blocks: Option<Spanned<String>>,
     pub(super) within: Option<Spanned<String>>,
+    pub(super) first: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -48,6 +67,7 @@ pub(super) struct RawOrder {
 pub(super) struct RawQuestionnaires {
     pub(super) sus: Option<Spanned<String>>,
     pub(super) tlx: Option<Spanned<String>>,
+    pub(super) tlx_weighting: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]

@@ -218,6 +218,103 @@ impl OpenStudy {
     }
 }
 
+/// One input file of the study (the study file, a condition's scenario
+/// file, the capture) as it was at the study's first trial.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputPrint {
+    /// What it is to the study: `study file`, `condition NAME`, `capture`.
+    pub what: String,
+    pub path: String,
+    pub bytes: u64,
+    /// The 64-bit FNV-1a hash of its bytes, hex.
+    pub fnv1a: String,
+}
+
+/// The study's inputs at its first trial (`DATA/inputs.json`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Inputs {
+    pub recorded_utc: String,
+    pub files: Vec<InputPrint>,
+}
+
+impl OpenStudy {
+    /// The study's input files now: the study file (as read), each
+    /// condition's scenario file, the capture.
+    pub fn input_prints(&self) -> Vec<InputPrint> {
+        let print = |what: String, path: &Path, bytes: Option<Vec<u8>>| {
+            let bytes = bytes.unwrap_or_default();
+            InputPrint {
+                what,
+                path: path.display().to_string(),
+                bytes: bytes.len() as u64,
+                fnv1a: format!("{:016x}", super::schedule::fnv1a(&bytes)),
+            }
+        };
+        let dir = self.file.parent().map(Path::to_path_buf).unwrap_or_default();
+        let mut files = vec![print("study file".into(), &self.file, Some(self.text.as_bytes().to_vec()))];
+        for c in &self.study.conditions {
+            if let ConditionSource::File(f) = &c.source {
+                let path = dir.join(f);
+                files.push(print(format!("condition `{}`", c.name), &path, std::fs::read(&path).ok()));
+            }
+        }
+        if let Some(c) = &self.capture {
+            files.push(print("capture".into(), c, std::fs::read(c).ok()));
+        }
+        files
+    }
+
+    /// Records the inputs' prints and the study file's text
+    /// (`DATA/study-at-first-trial.toml`) before the study's first trial;
+    /// later calls keep what the first recorded.
+    pub fn record_inputs(&self) -> Result<(), StudyError> {
+        let path = self.data.join("inputs.json");
+        let _guard = StudyLock::take(&self.data.join("schedule.lock"))?;
+        if path.exists() {
+            return Ok(());
+        }
+        write_whole(&self.data.join("study-at-first-trial.toml"), self.text.as_bytes())?;
+        write_json(&path, &Inputs { recorded_utc: now_utc(), files: self.input_prints() })
+    }
+
+    /// The input files that changed since the study's first trial, in
+    /// words naming each; empty before the first trial.
+    pub fn changed_inputs(&self) -> Result<Vec<String>, StudyError> {
+        let path = self.data.join("inputs.json");
+        if !path.exists() {
+            return Ok(Vec::new());
+        }
+        let then: Inputs = read_json(&path)?;
+        let now = self.input_prints();
+        let mut changed = Vec::new();
+        for before in &then.files {
+            match now.iter().find(|n| n.what == before.what) {
+                Some(n) if n.bytes == before.bytes && n.fnv1a == before.fnv1a => {}
+                Some(n) => changed.push(format!(
+                    "the {} {} changed after participants began (at the first trial, {}: {} bytes, FNV-1a {}; now {} bytes, FNV-1a {}){}",
+                    before.what,
+                    n.path,
+                    then.recorded_utc,
+                    before.bytes,
+                    before.fnv1a,
+                    n.bytes,
+                    n.fnv1a,
+                    if before.what == "study file" {
+                        format!("; as it was: {}", self.data.join("study-at-first-trial.toml").display())
+                    } else {
+                        String::new()
+                    },
+                )),
+                None => changed.push(format!("the {} {} of the first trial ({}) is no longer the study's", before.what, before.path, then.recorded_utc)),
+            }
+        }
+        for n in now.iter().filter(|n| !then.files.iter().any(|b| b.what == n.what)) {
+            changed.push(format!("the {} {} was added after participants began ({})", n.what, n.path, then.recorded_utc));
+        }
+        Ok(changed)
+    }
+}
+
 /// One participant's schedule as `schedule.json` keeps it (names, not
 /// indices, so a reordered file is still compared trial by trial).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -71,6 +71,9 @@ pub struct Attempt {
     pub faults: Vec<String>,
     #[serde(default)]
     pub note: String,
+    /// The study's `[[measure]]`s as the experimenter counted them.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub counts: std::collections::BTreeMap<String, u32>,
 }
 
 /// A participant's state: every attempt, in the order they began.
