@@ -65,7 +65,7 @@ pub fn run<F: ForwardChannel + 'static>(
     // in at once. Said before the set-up, frames queued at the ingress for
     // its length (0.1–0.3 s with a cleared core and a queue and trace sized
     // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
-    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").map_err(RunError::Ready)?;
+    crate::durable::write_whole(&cfg.out_dir.join("emulator.ready"), b"").map_err(|e| RunError::Ready(std::io::Error::other(e)))?;
     let term = nodes.first().copied().flatten();
     let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
     let mut reaper = spin::Reaper::new(nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());

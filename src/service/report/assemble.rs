@@ -181,6 +181,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         seed: facts.seed,
         duration_s,
         stopped,
+        interrupted: false,
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
@@ -194,6 +195,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         channels,
         processes,
         faults,
+        notes: Vec::new(),
         missing: missing.iter().map(|(file, _, _)| file.to_string()).collect(),
         peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),
         events: e.map(|e| e.events.clone()).unwrap_or_default(),
@@ -310,8 +312,15 @@ impl RunReport {
         // Without a runner, a missing console or robot report is no fault
         // (a foreign client writes none); one that cannot be read is.
         let faults = parts.faults().zip(&parts.missing).filter(|(_, (_, _, why))| why.is_some()).map(|(f, _)| f).collect();
+        let mut faults: Vec<String> = faults;
+        // A runner that was killed (or failed) leaves its mark: the run is
+        // not whole, whatever its processes wrote.
+        let unfinished = files::unfinished(dir);
+        faults.extend(unfinished.clone());
         let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false };
-        Ok(assemble(&facts, parts, runner, Source::Keep))
+        let mut r = assemble(&facts, parts, runner, Source::Keep);
+        r.interrupted = unfinished.is_some();
+        Ok(r)
     }
 }
 
