@@ -61,7 +61,7 @@ impl Dir {
             .custom_flags(libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC)
             .open(at)
             .map_err(|e| match e.raw_os_error() {
-                Some(libc::ELOOP) if at.symlink_metadata().is_ok_and(|m| m.file_type().is_symlink()) => io::Error::new(
+                Some(libc::ELOOP | libc::ENOTDIR) if at.symlink_metadata().is_ok_and(|m| m.file_type().is_symlink()) => io::Error::new(
                     io::ErrorKind::InvalidInput,
                     format!("{} is a symbolic link: netfi writes into a directory only by its own name (give the directory the link points to)", at.display()),
                 ),
@@ -236,6 +236,15 @@ pub enum DurableError {
     },
 }
 
+/// Creates `path` anew for a child process's output (a log that another
+/// process writes and this one does not see the end of): whatever was at
+/// its name, a symbolic link included, removed first, never followed.
+pub fn create_fresh(path: &Path) -> io::Result<File> {
+    let (dir, name) = Dir::of(path)?;
+    dir.remove(&name)?;
+    dir.create_new(&name, FILE_MODE)
+}
+
 /// The name a file of `path` has while it is written (and if it is cut).
 pub fn partial_path(path: &Path) -> PathBuf {
     let mut p = path.as_os_str().to_owned();
@@ -300,14 +309,29 @@ impl PartialFile {
     /// returns that name. Call after the last write, and after flushing any
     /// buffer around it.
     pub fn commit(self) -> Result<PathBuf, DurableError> {
-        self.file.sync_all().map_err(|source| DurableError::Write { path: self.partial.clone(), source })?;
-        self.dir
-            .rename(&partial_name(&self.name), &self.name)
-            .map_err(|source| DurableError::Rename { from: self.partial.clone(), to: self.path.clone(), source })?;
+        self.sync_and_rename()?;
         // The rename is in the directory: without its sync a crash could
         // bring back the old name.
         self.dir.sync();
         Ok(self.path)
+    }
+
+    /// [`PartialFile::commit`] but for the directory's sync, left to a
+    /// later commit in the same directory (which persists every name in it,
+    /// this one's too): a writer of many files in one directory (a lane's
+    /// traces, then its report) syncs the directory once. Until then a
+    /// crash of the machine may bring back the `.partial` name, never a
+    /// whole name over a cut file.
+    pub fn commit_unsynced_name(self) -> Result<PathBuf, DurableError> {
+        self.sync_and_rename()?;
+        Ok(self.path)
+    }
+
+    fn sync_and_rename(&self) -> Result<(), DurableError> {
+        self.file.sync_all().map_err(|source| DurableError::Write { path: self.partial.clone(), source })?;
+        self.dir
+            .rename(&partial_name(&self.name), &self.name)
+            .map_err(|source| DurableError::Rename { from: self.partial.clone(), to: self.path.clone(), source })
     }
 }
 
@@ -427,6 +451,44 @@ mod tests {
         assert_eq!(whole_name(&cut[0]), Some(path));
         assert_eq!(std::fs::read(d.join("report.json")).unwrap(), b"{}");
         assert!(!is_partial(Path::new(".partial")) && is_partial(Path::new("x.partial")));
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn links_planted_at_a_files_names_are_removed_never_followed() {
+        let d = dir("links");
+        let victim = d.join("victim");
+        std::fs::write(&victim, b"secret\n").unwrap();
+        for name in ["report.json", "report.json.partial", "console.log", "console.log.partial"] {
+            std::os::unix::fs::symlink(&victim, d.join(name)).unwrap();
+        }
+        write_whole(&d.join("report.json"), b"{}").unwrap();
+        let mut log = PartialFile::create(&d.join("console.log")).unwrap();
+        log.write_all(b"started\n").unwrap();
+        log.commit().unwrap();
+        assert_eq!(std::fs::read(&victim).unwrap(), b"secret\n", "a link was written through");
+        for name in ["report.json", "console.log"] {
+            let m = std::fs::symlink_metadata(d.join(name)).unwrap();
+            assert!(m.file_type().is_file(), "{name} is not a file of its own");
+        }
+        std::os::unix::fs::symlink(&victim, d.join("run.out")).unwrap();
+        create_fresh(&d.join("run.out")).unwrap().write_all(b"x").unwrap();
+        assert_eq!(std::fs::read(&victim).unwrap(), b"secret\n");
+        let lock = Dir::open(&d).unwrap();
+        std::os::unix::fs::symlink(&victim, d.join("run.lock")).unwrap();
+        let e = lock.open_or_create("run.lock".as_ref(), FILE_MODE).unwrap_err();
+        assert!(e.to_string().contains("is a symbolic link"), "{e}");
+        std::fs::remove_dir_all(&d).ok();
+    }
+
+    #[test]
+    fn a_directory_that_is_a_link_is_refused() {
+        let d = dir("dirlink");
+        std::fs::create_dir_all(d.join("real")).unwrap();
+        std::os::unix::fs::symlink(d.join("real"), d.join("stream-1")).unwrap();
+        let e = write_whole(&d.join("stream-1").join("report.json"), b"{}").unwrap_err();
+        assert!(e.to_string().contains("is a symbolic link"), "{e}");
+        assert!(std::fs::read_dir(d.join("real")).unwrap().next().is_none(), "written through the link");
         std::fs::remove_dir_all(&d).ok();
     }
 

@@ -76,10 +76,11 @@ fn an_interval_log_streams_one_interval_per_second_and_totals_them() {
         log.record_signed(v as i64 - 2_000);
         whole.record_signed(v as i64 - 2_000);
     }
-    // Before the end, the full intervals are on disk already.
+    // Before the end, the full intervals are on disk already, under the
+    // log's cut name until it is whole.
     let mut on_disk = 0;
     for _ in 0..200 {
-        on_disk = read_intervals(&path).len();
+        on_disk = read_intervals(&crate::durable::partial_path(&path)).len();
         if on_disk == 3 {
             break;
         }
@@ -87,6 +88,7 @@ fn an_interval_log_streams_one_interval_per_second_and_totals_them() {
     }
     assert_eq!(on_disk, 3);
     let total = log.finish(5 * s + 3_500_000_000).unwrap();
+    assert!(!crate::durable::partial_path(&path).exists(), "the whole log keeps a cut name");
     let intervals = read_intervals(&path);
     std::fs::remove_file(&path).ok();
     assert_eq!(intervals.len(), 4);

@@ -84,13 +84,28 @@ pub fn run<F: ForwardChannel + 'static>(
     let dead = std::mem::take(&mut reaper.dead);
     let mut lane0 = Some((isolation, events));
     let mut reports = Vec::with_capacity(lanes.len());
-    for (k, ((lane, dead), l)) in lanes.into_iter().zip(dead).zip(&cfg.lanes).enumerate() {
+    // Every lane closed before any is finished: their traces are written
+    // and synced at once, not one lane after another.
+    let afters: Vec<After> = lanes
+        .iter_mut()
+        .enumerate()
+        .map(|(k, lane)| {
+            let after = before_finish(k, lane);
+            lane.close();
+            after
+        })
+        .collect();
+    for (lane, dead) in lanes.into_iter().zip(dead) {
         let (isolation, events) = lane0.take().unwrap_or_default();
-        let after = before_finish(k, &lane);
-        let r = conclude(lane, dead, isolation, events, &run)?;
-        write_json(&l.out_dir.join("emulator.json"), &r)?;
-        after(&r)?;
-        reports.push(r);
+        reports.push(conclude(lane, dead, isolation, events, &run)?);
+    }
+    // Each lane's report, written (and synced) beside the others'.
+    std::thread::scope(|s| {
+        let writing: Vec<_> = reports.iter().zip(&cfg.lanes).map(|(r, l)| s.spawn(move || write_json(&l.out_dir.join("emulator.json"), r))).collect();
+        writing.into_iter().try_for_each(|w| w.join().expect("a report writer panicked"))
+    })?;
+    for (r, after) in reports.iter().zip(afters) {
+        after(r)?;
     }
     if several {
         write_joint(cfg, &reports, end.ended_by)?;

@@ -218,6 +218,9 @@ pub enum DirError {
         dir.display(), report.display(), emulator.display()
     )]
     NotARun { dir: PathBuf, report: PathBuf, emulator: PathBuf },
+    /// The run's runner did not finish it and its emulator left no report.
+    #[error("{}: no run's report here: {said}; and the emulator left no report ({})", dir.display(), emulator.display())]
+    Unfinished { dir: PathBuf, said: String, emulator: PathBuf },
     /// The run's report is there but cannot be read.
     #[error("{what}")]
     Report { what: String },
@@ -285,6 +288,9 @@ impl RunReport {
         let emulator_json = dir.join("emulator.json");
         let emulator = match Found::<serde_json::Value>::read(&emulator_json) {
             Found::Absent => {
+                if let Some(said) = files::unfinished(dir) {
+                    return Err(DirError::Unfinished { dir: dir.to_path_buf(), said, emulator: emulator_json });
+                }
                 return Err(DirError::NotARun { dir: dir.to_path_buf(), report: dir.join("report.json"), emulator: emulator_json });
             }
             Found::Unreadable(what) => return Err(DirError::Emulator { what }),
