@@ -53,6 +53,10 @@ pub struct IntervalLog {
     empty: std::sync::mpsc::Receiver<LatencyHistogram>,
     thread: std::thread::JoinHandle<std::io::Result<LatencyHistogram>>,
     path: std::path::PathBuf,
+    /// Set by [`IntervalLog::finish`]: only then is the log whole. A log
+    /// dropped without it (its process failed first) keeps its `.partial`
+    /// name, its last interval missing.
+    finished: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl IntervalLog {
@@ -75,9 +79,11 @@ impl IntervalLog {
             let _ = empty_tx.send(LatencyHistogram::new());
         }
         let tag = tag.to_string();
+        let finished = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let whole = finished.clone();
         let thread = std::thread::Builder::new()
             .name("netfi-hlog".into())
-            .spawn(move || interval_writer(file, &tag, full_rx, empty_tx))
+            .spawn(move || interval_writer(file, &tag, full_rx, empty_tx, &whole))
             .map_err(named)?;
         Ok(IntervalLog {
             current: LatencyHistogram::new(),
@@ -87,6 +93,7 @@ impl IntervalLog {
             empty: empty_rx,
             thread,
             path: path.to_path_buf(),
+            finished,
         })
     }
 
@@ -131,7 +138,8 @@ impl IntervalLog {
         if let Ok(empty) = self.empty.recv() {
             self.hand_over(empty, now_ns);
         }
-        let IntervalLog { full, thread, path, .. } = self;
+        let IntervalLog { full, thread, path, finished, .. } = self;
+        finished.store(true, std::sync::atomic::Ordering::Release);
         drop(full);
         let result = thread.join().unwrap_or_else(|_| Err(std::io::Error::other("the interval log writer panicked")));
         result.map_err(|source| IntervalLogError { path: crate::durable::partial_path(&path), source })
@@ -140,14 +148,16 @@ impl IntervalLog {
 
 /// The writer thread of an [`IntervalLog`]: appends each full interval,
 /// flushes, adds it to the total, and sends the histogram back emptied;
-/// at the end syncs the log and gives it its own name. After a failed
-/// write it keeps taking intervals (so the recorder never waits) and
-/// returns the error at the end, the log left cut.
+/// at the end, once `finished` says the last interval came, syncs the log
+/// and gives it its own name. After a failed write it keeps taking
+/// intervals (so the recorder never waits) and returns the error at the
+/// end, the log left cut (as one whose recorder was dropped unfinished).
 fn interval_writer(
     file: PartialFile,
     tag: &str,
     full: std::sync::mpsc::Receiver<FullInterval>,
     empty: std::sync::mpsc::SyncSender<LatencyHistogram>,
+    finished: &std::sync::atomic::AtomicBool,
 ) -> std::io::Result<LatencyHistogram> {
     // Unbuffered: an interval is a few writes once a second, on disk as
     // soon as it is written.
@@ -168,6 +178,7 @@ fn interval_writer(
     }
     let written = match (log, failed) {
         (Err(e), _) | (_, Some(e)) => Err(e),
+        (Ok(_), None) if !finished.load(std::sync::atomic::Ordering::Acquire) => Err(std::io::Error::other("the log was dropped before its last interval")),
         (Ok(_), None) => Ok(()),
     };
     written.and_then(|()| out.commit().map(|_| total).map_err(std::io::Error::other))

@@ -115,3 +115,26 @@ fn read_intervals(path: &Path) -> Vec<(f64, f64, u64)> {
         })
         .collect()
 }
+
+#[test]
+fn an_interval_log_dropped_unfinished_stays_cut() {
+    let path = std::env::temp_dir().join(format!("netfi-hlog-dropped-{}.hlog", std::process::id()));
+    let mut log = IntervalLog::create(&path, "t", 0).unwrap();
+    log.record(5);
+    log.tick(2_000_000_000);
+    drop(log);
+    let cut = crate::durable::partial_path(&path);
+    // The writer thread ends on its own once the log is dropped.
+    for _ in 0..200 {
+        if !read_intervals(&cut).is_empty() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let (whole, intervals) = (path.exists(), read_intervals(&cut).len());
+    std::fs::remove_file(&cut).ok();
+    std::fs::remove_file(&path).ok();
+    assert!(!whole, "a log whose last interval never came is under its own name");
+    assert_eq!(intervals, 1, "what was written is kept");
+}

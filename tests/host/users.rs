@@ -353,6 +353,8 @@ fn a_run_never_follows_links_another_user_planted_in_its_directory() {
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
     let kept = std::fs::read(&victim).unwrap();
+    // The lock the run left, replaced by a link.
+    std::fs::remove_file(out.join("run.lock")).unwrap();
     plant(&["run.lock".to_string()]);
     let locked = run(&["--out-owned-by-other"]);
     let kept_after_lock = std::fs::read(&victim).unwrap();
