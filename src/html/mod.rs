@@ -75,18 +75,11 @@ pub fn write(dir: &Path) -> Result<PathBuf, HtmlError> {
     Ok(path)
 }
 
-/// Writes through a temporary file renamed into place, so a failed write
-/// never leaves half a page where a whole one was.
+/// Writes as `NAME.partial` renamed into place once whole
+/// ([`crate::durable`]: never through a link planted at either name), so
+/// a failed write never leaves half a page where a whole one was.
 fn write_file(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let tmp = path.with_extension("html.tmp");
-    let mut f = std::fs::OpenOptions::new().write(true).create(true).truncate(true).mode(0o644).open(&tmp)?;
-    let done = f.write_all(bytes).and_then(|_| f.sync_all()).and_then(|_| std::fs::rename(&tmp, path));
-    if done.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    done
+    crate::durable::write_whole_mode(path, bytes, 0o644).map_err(std::io::Error::other)
 }
 
 /// `text` with `&`, `<`, `>`, `"` and `'` escaped, for an attribute or text.

@@ -3,7 +3,6 @@
 use super::{begin_interval_log, Summary, ERROR_FRACTION_MAX, MAX_NS};
 use hdrhistogram::serialization::V2DeflateSerializer;
 use hdrhistogram::Histogram;
-use std::io::Write;
 use std::path::Path;
 
 /// A latency histogram in ns.
@@ -94,9 +93,11 @@ impl LatencyHistogram {
     }
 
     /// Writes the histogram as one interval of an HdrHistogram log, tagged
-    /// `tag`, covering `[start_s, start_s + duration_s)`.
+    /// `tag`, covering `[start_s, start_s + duration_s)`: as
+    /// `path.partial`, renamed to `path` once whole (see
+    /// [`crate::durable`]); a failed write leaves it cut and is an error.
     pub fn write_log(&self, path: &Path, tag: &str, start_s: f64, duration_s: f64) -> std::io::Result<()> {
-        let mut file = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut file = std::io::BufWriter::new(crate::durable::PartialFile::create(path).map_err(std::io::Error::other)?);
         let mut ser = V2DeflateSerializer::new();
         {
             let mut w = begin_interval_log(&mut file, &mut ser, &format!("netfi {tag} latency, ns"))?;
@@ -110,7 +111,8 @@ impl LatencyHistogram {
             )
             .map_err(std::io::Error::other)?;
         }
-        file.flush()
+        let file = file.into_inner().map_err(|e| e.into_error())?;
+        file.commit().map(|_| ()).map_err(std::io::Error::other)
     }
 }
 

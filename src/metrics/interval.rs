@@ -2,6 +2,7 @@
 //! second, by a writer thread.
 
 use super::{begin_interval_log, LatencyHistogram};
+use crate::durable::PartialFile;
 use hdrhistogram::serialization::V2DeflateSerializer;
 use std::path::{Path, PathBuf};
 
@@ -52,15 +53,22 @@ pub struct IntervalLog {
     empty: std::sync::mpsc::Receiver<LatencyHistogram>,
     thread: std::thread::JoinHandle<std::io::Result<LatencyHistogram>>,
     path: std::path::PathBuf,
+    /// Set by [`IntervalLog::finish`]: only then is the log whole. A log
+    /// dropped without it (its process failed first) keeps its `.partial`
+    /// name, its last interval missing.
+    finished: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl IntervalLog {
-    /// Creates `path` (an error at once if it cannot be) and starts its
-    /// writer thread; intervals are tagged `tag` and timed from `origin_ns`
-    /// (a clock reading, ns), the first starting there.
+    /// Creates `path` as `path.partial` (an error at once if it cannot
+    /// be; see [`crate::durable`]) and starts its writer thread; intervals
+    /// are tagged `tag` and timed from `origin_ns` (a clock reading, ns),
+    /// the first starting there. [`IntervalLog::finish`] gives the log its
+    /// own name once whole; a log whose writer failed or was killed keeps
+    /// its `.partial` name.
     pub fn create(path: &Path, tag: &str, origin_ns: u64) -> Result<IntervalLog, IntervalLogError> {
-        let named = |source| IntervalLogError { path: path.to_path_buf(), source };
-        let file = std::fs::File::create(path).map_err(named)?;
+        let named = |source| IntervalLogError { path: crate::durable::partial_path(path), source };
+        let file = PartialFile::create(path).map_err(|e| named(std::io::Error::other(e)))?;
         let tag_ok = hdrhistogram::serialization::interval_log::Tag::new(tag).is_some();
         if !tag_ok {
             return Err(named(std::io::Error::other(format!("invalid histogram tag {tag}"))));
@@ -71,9 +79,11 @@ impl IntervalLog {
             let _ = empty_tx.send(LatencyHistogram::new());
         }
         let tag = tag.to_string();
+        let finished = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let whole = finished.clone();
         let thread = std::thread::Builder::new()
             .name("netfi-hlog".into())
-            .spawn(move || interval_writer(file, &tag, full_rx, empty_tx))
+            .spawn(move || interval_writer(file, &tag, full_rx, empty_tx, &whole))
             .map_err(named)?;
         Ok(IntervalLog {
             current: LatencyHistogram::new(),
@@ -83,6 +93,7 @@ impl IntervalLog {
             empty: empty_rx,
             thread,
             path: path.to_path_buf(),
+            finished,
         })
     }
 
@@ -120,28 +131,33 @@ impl IntervalLog {
     }
 
     /// Ends the last interval at `now_ns`, waits for the writer, and
-    /// returns the run's total (the sum of every interval written). A
-    /// failed write is an error naming the file.
+    /// returns the run's total (the sum of every interval written), the
+    /// log whole under its own name. A failed write is an error naming the
+    /// file, which keeps its `.partial` name (cut).
     pub fn finish(mut self, now_ns: u64) -> Result<LatencyHistogram, IntervalLogError> {
         if let Ok(empty) = self.empty.recv() {
             self.hand_over(empty, now_ns);
         }
-        let IntervalLog { full, thread, path, .. } = self;
+        let IntervalLog { full, thread, path, finished, .. } = self;
+        finished.store(true, std::sync::atomic::Ordering::Release);
         drop(full);
         let result = thread.join().unwrap_or_else(|_| Err(std::io::Error::other("the interval log writer panicked")));
-        result.map_err(|source| IntervalLogError { path, source })
+        result.map_err(|source| IntervalLogError { path: crate::durable::partial_path(&path), source })
     }
 }
 
 /// The writer thread of an [`IntervalLog`]: appends each full interval,
-/// flushes, adds it to the total, and sends the histogram back emptied.
-/// After a failed write it keeps taking intervals (so the recorder never
-/// waits) and returns the error at the end.
+/// flushes, adds it to the total, and sends the histogram back emptied;
+/// at the end, once `finished` says the last interval came, syncs the log
+/// and gives it its own name. After a failed write it keeps taking
+/// intervals (so the recorder never waits) and returns the error at the
+/// end, the log left cut (as one whose recorder was dropped unfinished).
 fn interval_writer(
-    file: std::fs::File,
+    file: PartialFile,
     tag: &str,
     full: std::sync::mpsc::Receiver<FullInterval>,
     empty: std::sync::mpsc::SyncSender<LatencyHistogram>,
+    finished: &std::sync::atomic::AtomicBool,
 ) -> std::io::Result<LatencyHistogram> {
     // Unbuffered: an interval is a few writes once a second, on disk as
     // soon as it is written.
@@ -160,9 +176,11 @@ fn interval_writer(
         f.h.reset();
         let _ = empty.send(f.h);
     }
-    match (log, failed) {
+    let written = match (log, failed) {
         (Err(e), _) | (_, Some(e)) => Err(e),
-        (Ok(_), None) => Ok(total),
-    }
+        (Ok(_), None) if !finished.load(std::sync::atomic::Ordering::Acquire) => Err(std::io::Error::other("the log was dropped before its last interval")),
+        (Ok(_), None) => Ok(()),
+    };
+    written.and_then(|()| out.commit().map(|_| total).map_err(std::io::Error::other))
 }
 

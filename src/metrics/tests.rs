@@ -76,10 +76,11 @@ fn an_interval_log_streams_one_interval_per_second_and_totals_them() {
         log.record_signed(v as i64 - 2_000);
         whole.record_signed(v as i64 - 2_000);
     }
-    // Before the end, the full intervals are on disk already.
+    // Before the end, the full intervals are on disk already, under the
+    // log's cut name until it is whole.
     let mut on_disk = 0;
     for _ in 0..200 {
-        on_disk = read_intervals(&path).len();
+        on_disk = read_intervals(&crate::durable::partial_path(&path)).len();
         if on_disk == 3 {
             break;
         }
@@ -87,6 +88,7 @@ fn an_interval_log_streams_one_interval_per_second_and_totals_them() {
     }
     assert_eq!(on_disk, 3);
     let total = log.finish(5 * s + 3_500_000_000).unwrap();
+    assert!(!crate::durable::partial_path(&path).exists(), "the whole log keeps a cut name");
     let intervals = read_intervals(&path);
     std::fs::remove_file(&path).ok();
     assert_eq!(intervals.len(), 4);
@@ -112,4 +114,27 @@ fn read_intervals(path: &Path) -> Vec<(f64, f64, u64)> {
             _ => None,
         })
         .collect()
+}
+
+#[test]
+fn an_interval_log_dropped_unfinished_stays_cut() {
+    let path = std::env::temp_dir().join(format!("netfi-hlog-dropped-{}.hlog", std::process::id()));
+    let mut log = IntervalLog::create(&path, "t", 0).unwrap();
+    log.record(5);
+    log.tick(2_000_000_000);
+    drop(log);
+    let cut = crate::durable::partial_path(&path);
+    // The writer thread ends on its own once the log is dropped.
+    for _ in 0..200 {
+        if !read_intervals(&cut).is_empty() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let (whole, intervals) = (path.exists(), read_intervals(&cut).len());
+    std::fs::remove_file(&cut).ok();
+    std::fs::remove_file(&path).ok();
+    assert!(!whole, "a log whose last interval never came is under its own name");
+    assert_eq!(intervals, 1, "what was written is kept");
 }

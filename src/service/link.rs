@@ -179,6 +179,13 @@ impl<T: Carried> Link<T> {
         self.writer.keep_off_core(core)
     }
 
+    /// Asks the trace writer to finish once it has written what was pushed
+    /// so far, without waiting ([`TraceWriter::close`]); push nothing
+    /// after. [`Link::finish`] then waits for it.
+    pub fn close_trace(&self) {
+        self.writer.close();
+    }
+
     /// The ingress index the next frame will get.
     #[inline]
     pub fn next_ingress_index(&self) -> u64 {

@@ -65,7 +65,7 @@ pub fn standalone_args<A: clap::Args + clap::FromArgMatches>(name: &'static str,
 pub fn write_pid(out: &std::path::Path, role: &str) -> Result<(), PidError> {
     std::fs::create_dir_all(out).map_err(|source| PidError { what: "creating", path: out.to_path_buf(), source })?;
     let path = out.join(format!("{role}.pid"));
-    std::fs::write(&path, std::process::id().to_string()).map_err(|source| PidError { what: "writing", path, source })
+    crate::durable::write_whole(&path, std::process::id().to_string().as_bytes()).map_err(|e| PidError { what: "writing", path, source: std::io::Error::other(e) })
 }
 
 /// Why a report file was not written.

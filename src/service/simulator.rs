@@ -270,7 +270,7 @@ pub fn main(args: &SimulatorArgs) -> Result<SimulatorReport, ServiceError> {
     };
     let mut robot = Robot::new(args)?;
     let steal_timer = StealTimer::start();
-    std::fs::write(args.out.join("simulator.ready"), b"").map_err(|e| ServiceError::Ready("simulator.ready", e))?;
+    crate::durable::write_whole(&args.out.join("simulator.ready"), b"").map_err(|e| ServiceError::Ready("simulator.ready", std::io::Error::other(e)))?;
     let t_start = now_ns();
     let mut s = FrameSample::ZERO;
     let mut d = FrameSample::ZERO;

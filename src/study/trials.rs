@@ -36,11 +36,34 @@ impl FiguresFile {
 }
 
 /// The run id of an attempt: unique to the study's data folder, the
-/// participant, the trial and the attempt (iceoryx2's names: at most 48
-/// characters of `[A-Za-z0-9_-]`).
+/// participant, the trial and the attempt, and ending in 8 hex digits from
+/// the kernel's random generator: the rest can be told from a running
+/// study's command lines, and another user who knew the whole could take
+/// the run's names (its shared-memory files) first and so block the
+/// trial. iceoryx2's names: at most 48 characters of `[A-Za-z0-9_-]`.
 pub fn run_id(s: &OpenStudy, p: usize, trial: u32, attempt: u32) -> String {
     let key = super::schedule::fnv1a(format!("{}\0{}", s.data.display(), s.study.participants[p].id).as_bytes());
-    format!("study-{key:016x}-t{trial:03}a{attempt}")
+    run_id_of(key, trial, attempt, unguessable())
+}
+
+/// `study-` and 10 hex digits of `key` (40 bits: the data folder and the
+/// participant), the trial and attempt, 8 random hex digits: at most 48
+/// characters whatever the numbers.
+fn run_id_of(key: u64, trial: u32, attempt: u32, random: u32) -> String {
+    format!("study-{:010x}-t{trial:03}a{attempt}-{random:08x}", key & 0xff_ffff_ffff)
+}
+
+/// 32 bits from the kernel's random generator (`getrandom(2)`); where it
+/// cannot give them, from a hasher keyed by it (std's `RandomState`).
+fn unguessable() -> u32 {
+    let mut b = [0u8; 4];
+    // SAFETY: getrandom writes at most `b.len()` bytes into `b`.
+    let n = unsafe { libc::getrandom(b.as_mut_ptr().cast(), b.len(), 0) };
+    if n == b.len() as isize {
+        return u32::from_ne_bytes(b);
+    }
+    use std::hash::BuildHasher;
+    std::collections::hash_map::RandomState::new().hash_one(std::process::id()) as u32
 }
 
 /// What to tell the experimenter when no trial can start.
@@ -98,6 +121,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
         ended_utc: None,
         runner_pid: Some(std::process::id()),
         run_pid: None,
+        run_id: Some(run_id(s, p, trial.number, attempt)),
         run_status: None,
         stopped: false,
         report: false,
@@ -107,7 +131,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
     };
     state.attempts.push(a.clone());
     save_state(&dir, &state)?;
-    let mut cmd = run_command(s, netfi, &scenario, &out, trial.seed, &run_id(s, p, trial.number, attempt))?;
+    let mut cmd = run_command(s, netfi, &scenario, &out, trial.seed, a.run_id.as_deref().expect("set above"))?;
     let mut child = match cmd.spawn() {
         Ok(c) => c,
         Err(e) => {
@@ -168,7 +192,7 @@ fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u6
     let run = trial_run(&s.study.trial, scenario, capture.as_deref(), out, seed, run_id)?;
     let mut cmd = Command::new(netfi);
     cmd.arg("run").args(run.to_argv());
-    let file = |n: &str| std::fs::File::create(out.join(n)).map_err(|source| StudyError::Io { path: out.join(n), source });
+    let file = |n: &str| crate::durable::create_fresh(&out.join(n)).map_err(|source| StudyError::Io { path: out.join(n), source });
     cmd.stdin(Stdio::null()).stdout(file("run.stdout")?).stderr(file("run.stderr")?).process_group(0);
     // SAFETY: prctl is async-signal-safe; it only sets this child's parent-death signal.
     unsafe {
@@ -405,6 +429,14 @@ pub fn load_figures(out: &Path) -> Option<Figures> {
 mod tests {
     use super::*;
     use crate::study::file::STUDY_RUN_ARGS;
+
+    #[test]
+    fn an_attempts_run_id_is_a_valid_one_that_no_one_can_tell_ahead() {
+        let longest = run_id_of(u64::MAX, u32::MAX, u32::MAX, u32::MAX);
+        assert!(crate::transport::RunId::new(&longest).is_ok(), "{longest} ({} characters)", longest.len());
+        // Equal by chance once in 2^32.
+        assert_ne!(unguessable(), unguessable());
+    }
 
     #[test]
     fn what_a_study_sets_for_each_trial_is_what_run_args_may_not_give() {

@@ -112,7 +112,7 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
                 stopped: last.is_some_and(|a| a.stopped),
                 faults: last.map(|a| a.faults.clone()).unwrap_or_default(),
                 note: last.map(|a| a.note.clone()).unwrap_or_default(),
-                run_id: last.map(|a| super::trials::run_id(s, p, a.trial, a.attempt)),
+                run_id: last.and_then(|a| a.run_id.clone()),
                 counts: last.map(|a| a.counts.clone()).unwrap_or_default(),
             }
         })

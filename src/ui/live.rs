@@ -267,7 +267,7 @@ pub fn control(netfi: &Path, run_id: &str, out: &Path, req: &Control) -> Result<
                 .map(|n| out.join(format!("switch-{n}.toml")))
                 .find(|p| !p.exists())
                 .ok_or_else(|| format!("the run was switched to {SWITCH_FILES_MAX} scenarios already"))?;
-            std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+            crate::durable::write_whole(&path, text.as_bytes()).map_err(|e| e.to_string())?;
             ["switch".to_string()].into_iter().chain(at(when)).chain(["--".to_string(), path.display().to_string()]).collect()
         }
         Control::Switch { .. } => return Err("switch: give a preset or the scenario's text, one of them".into()),

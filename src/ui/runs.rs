@@ -207,10 +207,10 @@ impl Runs {
         let out = opts.out_dir.join(&id);
         std::fs::create_dir_all(&out).map_err(|e| UiError::Create { path: out.clone(), cause: e })?;
         let input = out.join("scenario.input.toml");
-        std::fs::write(&input, &req.toml).map_err(|e| UiError::Write { path: input.clone(), cause: e })?;
+        crate::durable::write_whole(&input, req.toml.as_bytes()).map_err(|e| UiError::Write { path: input.clone(), cause: std::io::Error::other(e) })?;
         let log = |name: &str| {
             let p = out.join(name);
-            std::fs::File::create(&p).map_err(|e| UiError::Create { path: p, cause: e })
+            crate::durable::create_fresh(&p).map_err(|e| UiError::Create { path: p, cause: e })
         };
         let mut cmd = Command::new(&opts.netfi);
         run.scenario.scenario = input.display().to_string();

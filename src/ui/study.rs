@@ -291,7 +291,7 @@ pub async fn start(State(ui): State<Arc<super::Ui>>, Json(a): Json<Action>) -> R
     if reap(&s.data, &a.participant) {
         return (StatusCode::CONFLICT, "this page is already running a trial of this participant").into_response();
     }
-    let log = match std::fs::File::create(dir.join("ui-next.log")) {
+    let log = match crate::durable::create_fresh(&dir.join("ui-next.log")) {
         Ok(f) => f,
         Err(e) => return unprocessable(format!("{}: {e}", dir.join("ui-next.log").display())),
     };

@@ -209,3 +209,164 @@ fn directories_taken_first_by_another_user_do_not_lock_a_user_out() {
     assert_eq!(replacements.len(), 2, "{replacements:?}");
     assert!(private.iter().all(|p| *p), "{replacements:?}");
 }
+
+/// What another user polling `/dev/shm` does while runs start: tries to
+/// open read-write, as fast as it can, the run's management segment (its
+/// name follows from the run id, which `ps` shows) and, every 64 tries,
+/// every file of the run it lists. Prints whether it could open a 0666
+/// decoy (the method works), its tries, the run's files it saw, and what
+/// it opened.
+const POLLER: &str = r#"
+import os, sys
+mgmt, needle, decoy, stop = sys.argv[1:5]
+def opens(p):
+    try:
+        fd = os.open(p, os.O_RDWR | os.O_NOFOLLOW)
+    except OSError:
+        return False
+    os.close(fd)
+    return True
+decoy_ok, tries, seen, opened = opens(decoy), 0, set(), set()
+print("started", flush=True)
+while not os.path.exists(stop):
+    tries += 1
+    if opens(mgmt):
+        opened.add(mgmt)
+    if tries % 64 == 0:
+        for n in os.listdir("/dev/shm"):
+            if needle in n:
+                seen.add(n)
+                if opens("/dev/shm/" + n):
+                    opened.add(n)
+print(decoy_ok, tries, len(seen), sorted(opened))
+"#;
+
+/// A run's shared memory is private from its first instant: another user
+/// polling `/dev/shm` while runs start never opens one of its files
+/// read-write (iceoryx2 makes the run's management segment 0666 for a
+/// moment, unless netfi made it first).
+#[test]
+fn another_user_polling_dev_shm_never_opens_a_runs_segment_read_write() {
+    use std::io::BufRead;
+    if skip_unless_other_users() {
+        return;
+    }
+    let _guard = machine::alone();
+    let python = if Path::new("/usr/bin/python3").exists() { "/usr/bin/python3" } else { "python3" };
+    let decoy = format!("/dev/shm/netfi-decoy-{}", std::process::id());
+    std::fs::write(&decoy, b"").unwrap();
+    std::fs::set_permissions(&decoy, std::os::unix::fs::PermissionsExt::from_mode(0o666)).unwrap();
+    let mut results = Vec::new();
+    for attempt in 0..3 {
+        let run_id = format!("polled{attempt}x{}", std::process::id());
+        let prefix = netfi::transport::IpcConfig::new(netfi::transport::RunId::new(&run_id).unwrap()).prefix().to_string();
+        let mgmt = netfi::transport::ipc::mgmt_segment_path(&prefix);
+        let stop = std::env::temp_dir().join(format!("netfi-poll-stop-{}-{attempt}", std::process::id()));
+        let _ = std::fs::remove_file(&stop);
+        let mut poller = Reaped(
+            Command::new("setpriv")
+                .args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", python, "-c", POLLER])
+                .args([mgmt.to_str().unwrap(), &run_id, &decoy, stop.to_str().unwrap()])
+                .current_dir("/tmp")
+                .stdout(std::process::Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let mut lines = std::io::BufReader::new(poller.0.stdout.take().unwrap()).lines();
+        assert_eq!(lines.next().and_then(Result::ok).as_deref(), Some("started"), "the poller did not start ({python})");
+        let out = out_dir(&format!("polled{attempt}"));
+        let o = netfi().args(["run", "Normal", "--duration-s", "1", "--seed", "4", "--no-isolate", "--run-id", &run_id, "--out"]).arg(&out).output().unwrap();
+        std::fs::write(&stop, b"").unwrap();
+        let said = lines.next().and_then(Result::ok).unwrap_or_default();
+        let _ = poller.0.wait();
+        let _ = std::fs::remove_file(&stop);
+        let _ = std::fs::remove_dir_all(&out);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        results.push(said);
+    }
+    let _ = std::fs::remove_file(&decoy);
+    remove_netfi_for_nobody();
+    for said in &results {
+        let mut words = said.splitn(4, ' ');
+        let (decoy_ok, tries, seen, opened) = (words.next(), words.next(), words.next(), words.next().unwrap_or(""));
+        assert_eq!(decoy_ok, Some("True"), "the poller could not open even a 0666 file: {results:?}");
+        assert!(tries.and_then(|t| t.parse::<u64>().ok()).is_some_and(|t| t > 0), "{results:?}");
+        assert!(seen.and_then(|n| n.parse::<u64>().ok()).is_some_and(|n| n > 0), "the poller never saw the run's files: {results:?}");
+        assert_eq!(opened, "[]", "another user opened a run's shared memory read-write: {results:?}");
+    }
+}
+
+/// Root's `netfi run` into a directory another user owns: refused unless
+/// asked (`--out-owned-by-other`); asked, it follows none of the links
+/// that user planted at every name a run writes and at each one's
+/// `.partial`, and writes around them; a link at the lock's name is
+/// refused.
+#[test]
+fn a_run_never_follows_links_another_user_planted_in_its_directory() {
+    if skip_unless_other_users() {
+        return;
+    }
+    let _guard = machine::alone();
+    let pid = std::process::id();
+    // Every name a run leaves in its directory, from a run of root's own,
+    // and those it writes and removes on its way.
+    let reference = out_dir("names");
+    let o = netfi().args(["run", "Normal", "--duration-s", "1", "--seed", "4", "--no-isolate", "--run-id", &format!("names{pid}"), "--out"]).arg(&reference).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run_id = format!("planted{pid}x");
+    let mut names: Vec<String> = std::fs::read_dir(&reference).unwrap().filter_map(|e| e.ok()?.file_name().into_string().ok()).collect();
+    names.extend(["trace_emulator.csv", "run.unfinished", "report.json"].map(String::from));
+    names.push(format!("scenario.{run_id}.toml"));
+    names.retain(|n| n != "run.lock");
+    names.sort();
+    names.dedup();
+    let _ = std::fs::remove_dir_all(&reference);
+    assert!(names.len() >= 20, "{names:?}");
+    let victims = out_dir("victim");
+    std::fs::create_dir_all(&victims).unwrap();
+    let victim = victims.join("secret");
+    std::fs::write(&victim, b"root's own\n").unwrap();
+    std::fs::set_permissions(&victim, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
+    let out = out_dir("planted-links");
+    std::fs::create_dir_all(&out).unwrap();
+    std::os::unix::fs::chown(&out, Some(NOBODY), Some(NOBODY)).unwrap();
+    let plant = |names: &[String]| {
+        let o = Command::new("setpriv")
+            .args([&format!("--reuid={NOBODY}"), &format!("--regid={NOBODY}"), "--clear-groups", "sh", "-c", r#"v="$1"; shift; for n in "$@"; do ln -s "$v" "$n" && ln -s "$v" "$n.partial" || exit 1; done"#, "plant"])
+            .arg(&victim)
+            .args(names)
+            .current_dir(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    plant(&names);
+    let run = |extra: &[&str]| {
+        netfi().args(["run", "Normal", "--duration-s", "1", "--seed", "4", "--no-isolate", "--run-id", &run_id, "--out"]).arg(&out).args(extra).output().unwrap()
+    };
+    let refused = run(&[]);
+    let asked = run(&["--out-owned-by-other"]);
+    let links: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_symlink()))
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    let kept = std::fs::read(&victim).unwrap();
+    // The lock the run left, replaced by a link.
+    std::fs::remove_file(out.join("run.lock")).unwrap();
+    plant(&["run.lock".to_string()]);
+    let locked = run(&["--out-owned-by-other"]);
+    let kept_after_lock = std::fs::read(&victim).unwrap();
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&victims);
+    remove_netfi_for_nobody();
+    let text = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!refused.status.success(), "a directory of uid {NOBODY} was written into unasked");
+    assert!(text(&refused).contains(&format!("belongs to uid {NOBODY}")) && text(&refused).contains("--out-owned-by-other"), "{}", text(&refused));
+    assert!(asked.status.success(), "{}", text(&asked));
+    assert_eq!(kept, b"root's own\n", "a planted link was written through");
+    assert!(links.is_empty(), "links left where the run wrote (each should have been removed, not followed): {links:?} of {names:?}");
+    assert!(!locked.status.success() && text(&locked).contains("run.lock is a symbolic link"), "{}", text(&locked));
+    assert_eq!(kept_after_lock, b"root's own\n");
+}

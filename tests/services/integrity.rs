@@ -115,6 +115,62 @@ fn a_full_disk_names_the_files_not_written_and_the_report_still_prints() {
     assert!(!o.status.success(), "a run that could not write its files must fail:\n{stdout}\n{stderr}");
     assert!(stdout.contains("frames") && stdout.contains("sent"), "the text report prints:\n{stdout}\n{stderr}");
     assert!(stdout.contains("trace_emulator.csv") && stdout.contains("No space left on device"), "the trace is named as not written:\n{stdout}");
+    // No file is cut under its own name: each histogram log there decodes
+    // whole, each CSV ends its last row; every file left `.partial` is
+    // named as cut in the report.
+    let mut cut = 0;
+    for e in std::fs::read_dir(&out).unwrap().filter_map(|e| e.ok()) {
+        let (path, name) = (e.path(), e.file_name().to_string_lossy().into_owned());
+        if name.ends_with(".partial") {
+            cut += 1;
+            assert!(stdout.contains(&format!("cut file: {}", path.display())), "{name} is not named as cut:\n{stdout}");
+        } else if name.ends_with(".hlog") {
+            assert!(netfi::html::inputs::read_hlog(&path).is_ok(), "{name} is cut under its own name ({} bytes)", std::fs::metadata(&path).unwrap().len());
+        } else if name.ends_with(".csv") {
+            let text = std::fs::read(&path).unwrap();
+            assert!(text.ends_with(b"\n"), "{name} is cut under its own name ({} bytes)", text.len());
+        }
+    }
+    assert!(cut > 0, "a disk this small cuts some file");
+    // The last words name the report as it is on disk.
+    let report = out.join("report.json");
+    if !report.exists() {
+        assert!(!stderr.contains(&format!("(its report: {})", report.display())), "a report not written is named as written:\n{stderr}");
+    }
+}
+
+/// kill -9 of the runner mid-run: its processes end with it, and `netfi
+/// report` on what they left says the run was interrupted, in its text and
+/// its faults, rather than rebuilding it as if it were whole.
+#[test]
+fn a_killed_runner_leaves_a_directory_reported_as_interrupted() {
+    let _guard = machine::alone();
+    let out = out_dir("kill-runner");
+    let mut child = spawn_run(&out, &["Normal", "--duration-s", "6", "--seed", "9", "--no-isolate"]);
+    let emulator = wait_pid(&out, "emulator");
+    wait_pid(&out, "console");
+    std::thread::sleep(Duration::from_secs(1));
+    child.kill().unwrap();
+    let _ = child.wait();
+    // Its processes die with it (a parent-death signal): wait for the
+    // emulator, which writes its report on the way out.
+    let t0 = Instant::now();
+    while std::path::Path::new(&format!("/proc/{emulator}")).exists() && t0.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(out.join("run.unfinished").exists(), "no mark of the unfinished run");
+    assert!(!out.join("report.json").exists(), "a report of a run its runner never finished");
+    let o = netfi().arg("report").arg(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("INTERRUPTED"), "the report does not say the run was interrupted:\n{text}");
+    assert!(text.contains("FAULT      interrupted: the runner of this run did not finish it (netfi run"), "{text}");
+    // A run that ends has no mark left.
+    let o = netfi().args(["run", "Normal", "--frames", "200", "--seed", "3", "--no-isolate", "--out"]).arg(&out).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join("run.unfinished").exists());
+    let o = netfi().arg("report").arg(&out).output().unwrap();
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("INTERRUPTED"));
 }
 
 /// kill -9 of the emulator mid-run: its trace and histogram logs are on

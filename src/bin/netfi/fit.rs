@@ -175,7 +175,7 @@ fn generate(args: &FitDbArgs) -> Result<()> {
     eprintln!("{} entries in {secs:.1} s on {threads} threads ({frames} frames confirmed); steal {steal}", fits.len());
     match &args.out {
         Some(path) => {
-            std::fs::write(path, database.to_toml()).with_context(|| format!("writing {}", path.display()))?;
+            netfi::durable::write_whole(path, database.to_toml().as_bytes())?;
             eprintln!("wrote {}", path.display());
         }
         None => print!("{}", database.to_toml()),

@@ -66,7 +66,7 @@ fn run(args: &netfi::service::args::RunArgs) -> anyhow::Result<()> {
     if !report.frames.balanced || !report.faults.is_empty() {
         // Named here, not "above": stdout may be a file, or a page's log.
         let said = if report.faults.is_empty() { "not every frame is accounted for".to_string() } else { report.faults.join("; ") };
-        anyhow::bail!("the run had faults: {said} (its report: {})", report.files.report_json.display());
+        anyhow::bail!("the run had faults: {said} (its report: {})", netfi::service::report::files::report_said(&report.files.report_json));
     }
     Ok(())
 }

@@ -268,7 +268,7 @@ fn print_stage(s: &StageReport) {
 
 /// `scenario check --trace FILE`: every frame's fate as a run's trace row.
 struct TraceOut {
-    w: std::io::BufWriter<std::fs::File>,
+    w: std::io::BufWriter<netfi::durable::PartialFile>,
     path: std::path::PathBuf,
     failed: Option<std::io::Error>,
 }
@@ -276,7 +276,8 @@ struct TraceOut {
 impl TraceOut {
     fn create(path: &std::path::Path) -> Result<TraceOut> {
         use std::io::Write;
-        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        // `NAME.partial` until whole (netfi::durable).
+        let file = netfi::durable::PartialFile::create(path)?;
         let mut w = std::io::BufWriter::with_capacity(1 << 16, file);
         writeln!(w, "{}", netfi::trace::CSV_HEADER).with_context(|| format!("writing {}", path.display()))?;
         Ok(TraceOut { w, path: path.to_path_buf(), failed: None })
@@ -313,8 +314,11 @@ impl TraceOut {
         use std::io::Write;
         let flushed = self.w.flush();
         match self.failed.take().map_or(flushed, Err) {
-            Ok(()) => Ok(()),
-            Err(e) => Err(anyhow::Error::new(e).context(format!("writing {}", self.path.display()))),
+            Ok(()) => {}
+            Err(e) => return Err(anyhow::Error::new(e).context(format!("writing {}", netfi::durable::partial_path(&self.path).display()))),
         }
+        let file = self.w.into_inner().map_err(|e| anyhow::Error::new(e.into_error()).context(format!("writing {}", self.path.display())))?;
+        file.commit()?;
+        Ok(())
     }
 }

@@ -72,6 +72,11 @@ pub struct RunArgs {
     /// Output directory (default: out/<run-id>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write into an output directory that belongs to another user (or
+    /// lies in one): refused otherwise, as that user could plant files or
+    /// links there.
+    #[arg(long)]
+    pub out_owned_by_other: bool,
     /// Also write the report as JSON here (always written to <out>/report.json).
     #[arg(long)]
     pub report_json: Option<PathBuf>,
@@ -126,6 +131,7 @@ impl Render for RunArgs {
             .group(&self.placement)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
             .opt("--out", self.out.as_ref().map(|p| p.display()))
+            .switch("--out-owned-by-other", self.out_owned_by_other)
             .opt("--report-json", self.report_json.as_ref().map(|p| p.display()))
             .opt("--run-id", self.run_id.as_ref())
             .switch("--json", self.json)
@@ -159,6 +165,7 @@ impl RunArgs {
             placement: RunPlacement::default(),
             drop_bad_checksum: false,
             out: None,
+            out_owned_by_other: false,
             report_json: None,
             run_id: None,
             json: false,

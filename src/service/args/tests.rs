@@ -148,6 +148,7 @@ fn a_run_parses_back_what_it_renders() {
         },
         drop_bad_checksum: true,
         out: Some("o/r".into()),
+        out_owned_by_other: true,
         report_json: Some("o/r.json".into()),
         run_id: Some("r9".into()),
         json: true,

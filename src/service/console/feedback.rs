@@ -107,7 +107,14 @@ impl FeedbackIn {
 
     pub(super) fn report(&self, ended_by: Ended, out: &std::path::Path, duration_s: f64) -> ConsoleFeedback {
         let hlog = out.join("round_trip.hlog");
-        let round_trip_hlog = self.rtt.write_log(&hlog, "round_trip", 0.0, duration_s).ok().map(|_| hlog);
+        let (round_trip_hlog, round_trip_hlog_error) = match self.rtt.write_log(&hlog, "round_trip", 0.0, duration_s) {
+            Ok(()) => (Some(hlog), None),
+            Err(e) => {
+                // Not `eprintln!`: on a full disk the log cannot take it either.
+                let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("console: {} not written: {e}\n", hlog.display()));
+                (None, Some(e.to_string()))
+            }
+        };
         ConsoleFeedback {
             received: self.received,
             sent_by_emulator: self.sent_by_emulator,
@@ -118,6 +125,7 @@ impl FeedbackIn {
             divergence_final_mm: self.div_final,
             divergence_max_mm: self.div_max,
             round_trip_hlog,
+            round_trip_hlog_error,
         }
     }
 }

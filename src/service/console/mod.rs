@@ -274,7 +274,7 @@ pub fn main(args: &ConsoleArgs) -> Result<ConsoleReport, ServiceError> {
     };
     eprintln!("console: {n} frames from {source}, seed {seed}");
     // `netfi run` names a console that never gets here.
-    std::fs::write(args.out.join("console.ready"), b"").map_err(|e| ServiceError::Ready("console.ready", e))?;
+    crate::durable::write_whole(&args.out.join("console.ready"), b"").map_err(|e| ServiceError::Ready("console.ready", std::io::Error::other(e)))?;
     let mut s = Streamer { args, port, direct, fb, lateness: LatencyHistogram::new(), send_errors: 0, sent_unsubscribed: 0, direct_sent: 0, sent: 0 };
     let steal_timer = StealTimer::start();
     let mut stop = signals::StopCheck::new(64, || node.termination_requested());

@@ -162,6 +162,13 @@ impl<F: ForwardChannel> Lane<F> {
         self.reverse.iter_mut().for_each(|r| r.end(now));
     }
 
+    /// After the loop: closes every path of the lane ([`Path::close`]),
+    /// so that their traces are written while the other lanes close.
+    pub fn close(&mut self) {
+        self.forward.close();
+        self.reverse.iter_mut().for_each(|r| r.close());
+    }
+
     /// Off the hot path: names who sent the bad input seen since the last
     /// look.
     pub fn look_at_bad_input(&mut self) {
@@ -420,4 +427,39 @@ mod tests {
         assert_eq!(fwd.loop_busy().frames, 1);
     }
 
+
+    /// The loop looks (for a stop, dead peers, each lane's end) every 4096
+    /// lane turns whatever the lanes: with 64 lanes every 64 rounds, not
+    /// every 4096 (a stop was then seen 64 times later). A stop asked for
+    /// at a look ends the loop at that very round.
+    #[test]
+    fn the_loop_looks_every_4096_lane_turns_whatever_the_lanes() {
+        use crate::service::emulator::spin::{self, look_every_rounds, Look, LOOK_EVERY_TURNS};
+        let dir = crate::scratch::dir("looks");
+        for n in [1usize, 3, 64] {
+            // Lanes whose console has sent nothing yet: they never end.
+            let mut lanes: Vec<_> = (0..n)
+                .map(|k| {
+                    let d = dir.join(format!("{n}-{k}"));
+                    std::fs::create_dir_all(&d).unwrap();
+                    let chan = Forward::new(MemoryPort::with_capacity(1), MemoryPort::with_capacity(1), false, false);
+                    Lane::new(Path::new(chan, scenario("", 1), 1, 64, 0, &d, false).unwrap(), Vec::new())
+                })
+                .collect();
+            let mut looks = 0u64;
+            let end = spin::spin(
+                &mut lanes,
+                |_| {
+                    looks += 1;
+                    if looks == 10 { Look::Stop } else { Look::Go }
+                },
+                None,
+            );
+            assert_eq!(end.ended_by, crate::service::schema::Ended::Signal, "{n} lanes");
+            assert_eq!(end.rounds, 10 * look_every_rounds(n), "{n} lanes: the stop was not taken at the look that saw it");
+            assert!(look_every_rounds(n) * n as u64 <= LOOK_EVERY_TURNS, "{n} lanes: more than {LOOK_EVERY_TURNS} turns between looks");
+            assert!(look_every_rounds(n) * (n as u64 + 1) > LOOK_EVERY_TURNS, "{n} lanes: looks more often than needed");
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

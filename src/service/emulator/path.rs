@@ -206,6 +206,8 @@ pub struct Path<C: Channel> {
     last_take_ns: u64,
     trace_path: PathBuf,
     hlogs: bool,
+    /// Closed after the loop ([`Path::close`]): nothing more goes through.
+    closed: bool,
 }
 
 /// The release side of a path: its channel, stamping at the clock.
@@ -249,7 +251,7 @@ impl<C: Channel> Path<C> {
     /// The path of `chan` around `link` as it is (tests drive links that do
     /// not stream); its trace is written to `trace_path` at the end.
     pub fn of(link: Link<C::Item>, chan: C, seed: u64, trace_path: PathBuf, hlogs: bool) -> Path<C> {
-        Path { link, chan, seed, sent: None, end_ns: None, unsubscribed: 0, receive_errors: 0, last_error: None, last_take_ns: 0, trace_path, hlogs }
+        Path { link, chan, seed, sent: None, end_ns: None, unsubscribed: 0, receive_errors: 0, last_error: None, last_take_ns: 0, trace_path, hlogs, closed: false }
     }
 
     /// The seed of the path's scenario.
@@ -377,13 +379,27 @@ impl<C: Channel> Path<C> {
     }
 
     /// After the loop: releases what is due, sends the end marker (unless
-    /// sent), stops the trace writer and writes the trace (and, with
-    /// hlogs, the histograms), checks that every item is accounted for,
-    /// and reports. `duration_ns` is the time the path ran.
+    /// sent), and asks the trace writer to finish writing without waiting
+    /// for it, so that many paths' traces are written and synced at once
+    /// (a stop with many lanes would otherwise wait for each in turn).
+    /// Nothing goes through the path after; [`Path::finish`] closes it if
+    /// it is not.
+    pub fn close(&mut self) {
+        if !self.closed {
+            let now = now_ns();
+            self.release_due(now);
+            self.end(now);
+            self.link.close_trace();
+            self.closed = true;
+        }
+    }
+
+    /// After the loop: closes the path ([`Path::close`]), waits for the
+    /// trace writer to have written the trace (and, with hlogs, the
+    /// histograms), checks that every item is accounted for, and reports.
+    /// `duration_ns` is the time the path ran.
     pub fn finish(mut self, duration_ns: u64) -> Result<PathReport<C::Extra>, PathError> {
-        let now = now_ns();
-        self.release_due(now);
-        self.end(now);
+        self.close();
         let hlogs = match self.hlogs {
             true => {
                 let dir = self.trace_path.parent().unwrap_or(FsPath::new("."));
@@ -433,6 +449,8 @@ pub trait Reverse {
     fn end(&mut self, now: u64);
     /// Keeps the trace writer off `core`.
     fn keep_trace_off_core(&self, core: usize) -> bool;
+    /// Closes the path after the loop ([`Path::close`]).
+    fn close(&mut self);
     /// Finishes the path; its report as JSON, under its channel's name.
     fn finish(self: Box<Self>, duration_ns: u64) -> Result<serde_json::Value, PathError>;
     /// The path itself, for those who know its channel (tests reach its
@@ -465,6 +483,10 @@ impl<C: Channel + 'static> Reverse for Path<C> {
 
     fn keep_trace_off_core(&self, core: usize) -> bool {
         Path::keep_trace_off_core(self, core)
+    }
+
+    fn close(&mut self) {
+        Path::close(self)
     }
 
     fn finish(self: Box<Self>, duration_ns: u64) -> Result<serde_json::Value, PathError> {

@@ -65,7 +65,7 @@ pub fn run<F: ForwardChannel + 'static>(
     // in at once. Said before the set-up, frames queued at the ingress for
     // its length (0.1–0.3 s with a cleared core and a queue and trace sized
     // for 10⁵–10⁶ frames/s) and beyond the subscriber's buffer were lost.
-    std::fs::write(cfg.out_dir.join("emulator.ready"), b"").map_err(RunError::Ready)?;
+    crate::durable::write_whole(&cfg.out_dir.join("emulator.ready"), b"").map_err(|e| RunError::Ready(std::io::Error::other(e)))?;
     let term = nodes.first().copied().flatten();
     let mut stop = signals::StopCheck::new(256, || term.is_some_and(|n| n.termination_requested()));
     let mut reaper = spin::Reaper::new(nodes, std::env::var_os(crate::host::isolate::RUNNER_PID_ENV).is_none());
@@ -84,13 +84,28 @@ pub fn run<F: ForwardChannel + 'static>(
     let dead = std::mem::take(&mut reaper.dead);
     let mut lane0 = Some((isolation, events));
     let mut reports = Vec::with_capacity(lanes.len());
-    for (k, ((lane, dead), l)) in lanes.into_iter().zip(dead).zip(&cfg.lanes).enumerate() {
+    // Every lane closed before any is finished: their traces are written
+    // and synced at once, not one lane after another.
+    let afters: Vec<After> = lanes
+        .iter_mut()
+        .enumerate()
+        .map(|(k, lane)| {
+            let after = before_finish(k, lane);
+            lane.close();
+            after
+        })
+        .collect();
+    for (lane, dead) in lanes.into_iter().zip(dead) {
         let (isolation, events) = lane0.take().unwrap_or_default();
-        let after = before_finish(k, &lane);
-        let r = conclude(lane, dead, isolation, events, &run)?;
-        write_json(&l.out_dir.join("emulator.json"), &r)?;
-        after(&r)?;
-        reports.push(r);
+        reports.push(conclude(lane, dead, isolation, events, &run)?);
+    }
+    // Each lane's report, written (and synced) beside the others'.
+    std::thread::scope(|s| {
+        let writing: Vec<_> = reports.iter().zip(&cfg.lanes).map(|(r, l)| s.spawn(move || write_json(&l.out_dir.join("emulator.json"), r))).collect();
+        writing.into_iter().try_for_each(|w| w.join().expect("a report writer panicked"))
+    })?;
+    for (r, after) in reports.iter().zip(afters) {
+        after(r)?;
     }
     if several {
         write_joint(cfg, &reports, end.ended_by)?;

@@ -4,9 +4,11 @@
 //! (the lane's `release_spin_ns`); with several, after each lane's turn, if
 //! any lane's earliest release is due, every lane's due frames go out at
 //! once, so a release waits behind at most one lane's turn, not a round.
-//! Everything else happens every 4096 rounds: live control (on lane 0), a
-//! look for a stop and for dead peers, who sent bad input, each lane's end,
-//! and every 65 536 rounds the peers connected. Nothing in a round
+//! Everything else happens every 4096 lane turns (4096 rounds of one
+//! lane, 64 rounds of 64: a stop is seen as soon with many lanes as with
+//! one): live control (on lane 0), a look for a stop and for dead peers,
+//! who sent bad input, each lane's end, and every 16th time the peers
+//! connected. Nothing in a round
 //! allocates or locks: the lanes are a slice fixed before the loop starts.
 
 use crate::clock::now_ns;
@@ -15,7 +17,23 @@ use crate::service::emulator::{lane::Lane, path::ForwardChannel};
 use crate::service::schema::Ended;
 use crate::transport::{IpcNode, Role};
 
-/// What the loop's look off the hot path (every 4096 rounds) found.
+/// Lane turns between two looks off the hot path: every 4096 rounds with
+/// one lane, every ⌈4096 / N⌉ rounds with N ([`look_every_rounds`]), so a
+/// stop, a dead peer or a lane's end is seen as soon whatever the lanes (a
+/// look asks every lane, so its share of the loop stays the same).
+pub const LOOK_EVERY_TURNS: u64 = 4096;
+
+/// Rounds between two looks with `lanes` lanes: [`LOOK_EVERY_TURNS`] lane
+/// turns, at least one round.
+pub fn look_every_rounds(lanes: usize) -> u64 {
+    (LOOK_EVERY_TURNS / lanes.max(1) as u64).max(1)
+}
+
+/// The peers connected are noted every this many looks.
+const WATCH_PEERS_EVERY_LOOKS: u64 = 16;
+
+/// What the loop's look off the hot path (every [`LOOK_EVERY_TURNS`]
+/// lane turns) found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Look {
     /// Nothing new: go on.
@@ -91,9 +109,10 @@ pub fn round<F: ForwardChannel>(lanes: &mut [Lane<F>], mut due: u64) -> u64 {
 }
 
 /// Turns the lanes until each has ended and drained, or a stop is
-/// requested. Every 4096 rounds: live control, the `look` (a stop; each
-/// lane whose robot died, marked in the slice it is given), who sent bad
-/// input, the lanes' end; every 65 536 rounds, the peers connected.
+/// requested. Every [`LOOK_EVERY_TURNS`] lane turns (4096 rounds of one
+/// lane, 64 of 64): live control, the `look` (a stop; each lane whose
+/// robot died, marked in the slice it is given), who sent bad input, the
+/// lanes' end; every 16th time, the peers connected.
 pub fn spin<F: ForwardChannel>(
     lanes: &mut [Lane<F>],
     mut look: impl FnMut(&mut [bool]) -> Look,
@@ -103,12 +122,17 @@ pub fn spin<F: ForwardChannel>(
     lanes.iter_mut().for_each(|l| l.watch_peers(None));
     let mut died = vec![false; lanes.len()];
     let (mut rounds, mut due) = (0u64, u64::MAX);
+    let every = look_every_rounds(lanes.len());
+    let (mut until_look, mut looks) = (every, 0u64);
     let ended_by = loop {
         due = round(lanes, due);
         rounds = rounds.wrapping_add(1);
-        if rounds % 4096 != 0 {
+        until_look -= 1;
+        if until_look != 0 {
             continue;
         }
+        until_look = every;
+        looks += 1;
         if let Some(c) = control.as_deref_mut() {
             c.poll(&mut lanes[0].forward.link);
         }
@@ -122,7 +146,7 @@ pub fn spin<F: ForwardChannel>(
             }
             l.look_at_bad_input();
         }
-        if rounds % (1 << 16) == 0 {
+        if looks % WATCH_PEERS_EVERY_LOOKS == 0 {
             let t_s = (now - t_start) as f64 / 1e9;
             lanes.iter_mut().for_each(|l| l.watch_peers(Some(t_s)));
         }

@@ -195,6 +195,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         seed: facts.seed,
         duration_s,
         stopped,
+        interrupted: false,
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
@@ -209,6 +210,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         channels,
         processes,
         faults,
+        notes: Vec::new(),
         missing: missing.iter().map(|(file, _, _)| file.to_string()).collect(),
         peer_events: e.map(|e| e.peer_events.clone()).unwrap_or_default(),
         events: e.map(|e| e.events.clone()).unwrap_or_default(),
@@ -231,6 +233,9 @@ pub enum DirError {
         dir.display(), report.display(), emulator.display()
     )]
     NotARun { dir: PathBuf, report: PathBuf, emulator: PathBuf },
+    /// The run's runner did not finish it and its emulator left no report.
+    #[error("{}: no run's report here: {said}; and the emulator left no report ({})", dir.display(), emulator.display())]
+    Unfinished { dir: PathBuf, said: String, emulator: PathBuf },
     /// The run's report is there but cannot be read.
     #[error("{what}")]
     Report { what: String },
@@ -300,6 +305,9 @@ impl RunReport {
         let emulator_json = dir.join("emulator.json");
         let emulator = match Found::<serde_json::Value>::read(&emulator_json) {
             Found::Absent => {
+                if let Some(said) = files::unfinished(dir) {
+                    return Err(DirError::Unfinished { dir: dir.to_path_buf(), said, emulator: emulator_json });
+                }
                 return Err(DirError::NotARun { dir: dir.to_path_buf(), report: dir.join("report.json"), emulator: emulator_json });
             }
             Found::Unreadable(what) => return Err(DirError::Emulator { what }),
@@ -327,8 +335,15 @@ impl RunReport {
         // Without a runner, a missing console or robot report is no fault
         // (a foreign client writes none); one that cannot be read is.
         let faults = parts.faults().zip(&parts.missing).filter(|(_, (_, _, why))| why.is_some()).map(|(f, _)| f).collect();
+        let mut faults: Vec<String> = faults;
+        // A runner that was killed (or failed) leaves its mark: the run is
+        // not whole, whatever its processes wrote.
+        let unfinished = files::unfinished(dir);
+        faults.extend(unfinished.clone());
         let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false, lab: Vec::new() };
-        Ok(assemble(&facts, parts, runner, Source::Keep))
+        let mut r = assemble(&facts, parts, runner, Source::Keep);
+        r.interrupted = unfinished.is_some();
+        Ok(r)
     }
 }
 

@@ -7,6 +7,44 @@
 pub use crate::durable::{cut_files, is_partial, partial_path, write_whole, DurableError as WriteError, PARTIAL_SUFFIX};
 use std::path::PathBuf;
 
+/// The mark `netfi run` leaves in each of its run's directories from its
+/// start until it has written the run's report: found without a report,
+/// it says the runner was killed (or failed) before the end.
+pub const UNFINISHED_MARK: &str = "run.unfinished";
+
+/// The fault a rebuilt report gives for a run whose runner left its
+/// [`UNFINISHED_MARK`] in `dir` (what the mark says of the runner with
+/// it), or `None` where there is no mark.
+pub fn unfinished(dir: &std::path::Path) -> Option<String> {
+    use std::io::Read;
+    let mark = dir.join(UNFINISHED_MARK);
+    let d = crate::durable::Dir::open(dir).ok()?;
+    d.entry(UNFINISHED_MARK.as_ref()).ok()??;
+    // Its first line only, and never through a link: a report may be made
+    // by another user than the directory's.
+    let mut said = String::new();
+    if let Ok(f) = d.open_read(UNFINISHED_MARK.as_ref()) {
+        let _ = f.take(200).read_to_string(&mut said);
+    }
+    let said = said.lines().next().unwrap_or("").trim();
+    let who = if said.is_empty() { String::new() } else { format!(" ({said})") };
+    Some(format!("interrupted: the runner of this run did not finish it{who}: it was killed, or failed before writing the run's report ({} is still there); this report is rebuilt from what the run's processes left and may be short", mark.display()))
+}
+
+/// Where a run's report is, as the run's text and its last words say it:
+/// `path` when whole; its cut `.partial` (named as cut) when only that is
+/// there; and that it was not written when neither is.
+pub fn report_said(path: &std::path::Path) -> String {
+    if path.exists() {
+        return path.display().to_string();
+    }
+    let cut = partial_path(path);
+    if cut.exists() {
+        return format!("{} (cut: not written whole)", cut.display());
+    }
+    format!("{} (not written)", path.display())
+}
+
 /// The faults a run's report gives for the cut files under `dir`, one
 /// each, or one saying the directory could not be searched.
 pub fn cut_faults(dir: &std::path::Path) -> Vec<String> {

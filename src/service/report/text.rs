@@ -18,6 +18,9 @@ impl RunReport {
         if self.stopped {
             s += &format!("ended      stopped on request after {:.2} s (Ctrl-C, SIGTERM or the UI's stop): a normal end\n", self.duration_s);
         }
+        if self.interrupted {
+            s += "ended      INTERRUPTED: the runner did not finish this run (killed, or failed before its report); rebuilt from what its processes left\n";
+        }
         if let Some(p) = &self.provenance {
             s += &p.to_text();
         }
@@ -49,6 +52,9 @@ impl RunReport {
         s += &happenings_text(&self.peer_events, &self.events);
         for fault in &self.faults {
             s += &format!("FAULT      {fault}\n");
+        }
+        for note in &self.notes {
+            s += &format!("note       {note}\n");
         }
         if !self.missing.is_empty() {
             s += &format!("missing    {} (what needs them is shown as ?)\n", self.missing.join(", "));
@@ -87,7 +93,7 @@ impl RunReport {
             let channel = name.split('_').next().unwrap_or(name);
             s += &format!("  {channel:<9} {}\n", v.display());
         }
-        s += &format!("  report    {}\n", f.report_json.display());
+        s += &format!("  report    {}\n", crate::service::report::files::report_said(&f.report_json));
         s
     }
 }

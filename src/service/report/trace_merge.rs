@@ -9,6 +9,7 @@
 
 use super::delay::Delays;
 use super::files::{partial_path, WriteError};
+use crate::durable::PartialFile;
 use super::phases::Fates;
 use crate::trace::Column;
 use std::collections::BTreeMap;
@@ -145,14 +146,10 @@ pub fn merge_trace(out: &Path, source: Source) -> Result<Merged, MergeError> {
         (false, false) => return Ok(Merged::default()),
     };
     let mut recv = Receipts::read(out)?;
-    let cut = partial_path(&joined);
-    let (delays, fates) = join_rows(&input, &cut, &mut recv)?;
-    let trace = if whole {
-        std::fs::rename(&cut, &joined).map_err(|e| WriteError::Rename { from: cut.clone(), to: joined.clone(), source: e })?;
-        Some(joined)
-    } else {
-        None
-    };
+    let output = PartialFile::create(&joined)?;
+    let (delays, fates, output) = join_rows(&input, output, &mut recv)?;
+    // A cut input gives a cut output: it keeps its `.partial` name.
+    let trace = if whole { Some(output.commit()?) } else { None };
     if source == Source::Consume {
         std::fs::remove_file(&input).map_err(|source| MergeError::Remove { path: input.clone(), source })?;
     }
@@ -162,11 +159,11 @@ pub fn merge_trace(out: &Path, source: Source) -> Result<Merged, MergeError> {
 /// Writes the rows of `input` to `output` (synced) with the receive time
 /// of each delivered row that has one, and returns their delays and every
 /// frame's fate.
-fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays, Fates), MergeError> {
-    let write_err = |source| MergeError::Write(WriteError::Write { path: output.to_path_buf(), source });
+fn join_rows(input: &Path, output: PartialFile, recv: &mut Receipts) -> Result<(Delays, Fates, PartialFile), MergeError> {
+    let cut = output.partial().to_path_buf();
+    let write_err = |source| MergeError::Write(WriteError::Write { path: cut.clone(), source });
     let read_err = |source| MergeError::Read { path: input.to_path_buf(), source };
-    let file = std::fs::File::create(output).map_err(write_err)?;
-    let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, output);
     let mut delays = Delays::default();
     let mut fates = Fates::default();
     let rows = std::io::BufReader::new(crate::load::open_regular(input).map_err(read_err)?).lines();
@@ -195,8 +192,7 @@ fn join_rows(input: &Path, output: &Path, recv: &mut Receipts) -> Result<(Delays
     // A failed flush or sync (a full disk) is an error too, not a cut file
     // under a whole one's name.
     let file = w.into_inner().map_err(|e| write_err(e.into_error()))?;
-    file.sync_all().map_err(write_err)?;
-    Ok((delays, fates))
+    Ok((delays, fates, file))
 }
 
 /// Adds a row's frame to `fates`: its ingress time and whether it was

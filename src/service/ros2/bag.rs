@@ -49,6 +49,10 @@ pub enum BagError {
     Create(PathBuf, #[source] std::io::Error),
     #[error("writing {}", .0.display())]
     Ready(PathBuf, #[source] std::io::Error),
+    /// The recording could not be written whole: it is left cut, as
+    /// `NAME.partial`.
+    #[error("writing {}", .0.display())]
+    Write(PathBuf, #[source] std::io::Error),
     #[error("reading {}", .0.display())]
     Read(PathBuf, #[source] std::io::Error),
     #[error("reading {}", .0.display())]
@@ -175,7 +179,9 @@ fn wait_until(node: &mut Ros2Node, wait: Duration, mut ready: impl FnMut(&Ros2No
 /// Records `a.topics` into `a.out`; the messages written.
 pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
     let mut node = Ros2Node::open(domain(a.ros2_domain)?)?;
-    let file = std::fs::File::create(&a.out).map_err(|e| BagError::Create(a.out.clone(), e))?;
+    // `NAME.partial` until the recording is whole (crate::durable).
+    let file = crate::durable::PartialFile::create(&a.out).map_err(|e| BagError::Create(a.out.clone(), std::io::Error::other(e)))?;
+    let partial = file.partial().to_path_buf();
     let mut out = mcap::Writer::new(std::io::BufWriter::new(file))?;
     let mut readers = Vec::new();
     for text in &a.topics {
@@ -194,7 +200,7 @@ pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
         readers.push((reader, channel));
     }
     if let Some(r) = &a.ready {
-        std::fs::write(r, b"").map_err(|e| BagError::Ready(r.clone(), e))?;
+        crate::durable::write_whole(r, b"").map_err(|e| BagError::Ready(r.clone(), std::io::Error::other(e)))?;
     }
     let slots = RefCell::new(Slots::new(1, a.max_bytes));
     let slot = slots.borrow_mut().alloc().expect("one slot");
@@ -231,6 +237,8 @@ pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
         std::thread::sleep(Duration::from_micros(200));
     }
     out.finish()?;
+    let file = out.into_inner().into_inner().map_err(|e| BagError::Write(partial.clone(), e.into_error()))?;
+    file.commit().map_err(|e| BagError::Write(partial, std::io::Error::other(e)))?;
     if skipped > 0 {
         eprintln!("ros2 record: {skipped} messages skipped (larger than --max-bytes, empty, or not little-endian CDR)");
     }

@@ -42,6 +42,14 @@ pub enum RunnerError {
     OpenLock(PathBuf, #[source] std::io::Error),
     #[error("locking {}", .0.display())]
     Lock(PathBuf, #[source] std::io::Error),
+    /// The output directory cannot be opened as one (a symbolic link at
+    /// its name is refused).
+    #[error("the output directory {}", .0.display())]
+    OutDir(PathBuf, #[source] std::io::Error),
+    /// The output directory is another user's, or inside one: that user
+    /// could plant files or links in it.
+    #[error("the output directory {}: {what} uid {uid}, not this user (uid {me}): its owner could plant files or links where the run writes; give a directory of your own, or --out-owned-by-other if this one is meant", .dir.display())]
+    OwnedByOther { dir: PathBuf, what: &'static str, uid: u32, me: u32 },
     #[error("the output directory {} is in use by another netfi run (pid {owner}); wait for it to end or give another --out", .out.display())]
     InUse { out: PathBuf, owner: String },
     #[error("locating the netfi executable")]

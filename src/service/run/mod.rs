@@ -80,11 +80,21 @@ fn check_paths(r: &Resolved, s: &Seeds) -> Result<()> {
     Ok(())
 }
 
+/// A run readied: its plan, its directories (each marked unfinished) and
+/// its lock on them, and what the run's report is to note.
+struct Prepared {
+    plan: Plan,
+    dirs: outdir::Dirs,
+    _lock: OutDirLock,
+    notes: Vec<String>,
+}
+
 /// Resolves the scenarios and the seeds, plans the run, and readies its
-/// output directory: locked for this run, stale files of an earlier run
-/// there removed, what an earlier emulator left moved put back, the
+/// output directory: refused if another user's, locked for this run, stale
+/// files of an earlier run there removed (its report, replaced, noted),
+/// marked unfinished, what an earlier emulator left moved put back, the
 /// scenarios written, dead processes' iceoryx2 resources removed.
-fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
+fn prepare(args: &RunArgs) -> Result<Prepared> {
     let run_id = args.run_id.clone().unwrap_or_else(fresh_run_id);
     let (resolved, seed) = resolve(args, &run_id)?;
     let host_cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
@@ -97,8 +107,10 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     let plan = Plan::new(args, &resolved, seed, run_id, &host_cores)?;
     check_paths(&resolved, &plan.seeds)?;
     std::fs::create_dir_all(&plan.out).map_err(|e| RunnerError::Create(plan.out.clone(), e))?;
-    let lock = OutDirLock::take(&plan.out)?;
-    outdir::clear_marks(&plan)?;
+    let out = outdir::open_checked(&plan.out, args.out_owned_by_other)?;
+    let lock = OutDirLock::take(&out)?;
+    let dirs = outdir::Dirs::open(&plan, out)?;
+    let notes = dirs.clear_and_mark(&plan.run_id)?;
     // What killed runs left (their owners and guardian all dead) is ended
     // and put back before anything else, as `netfi restore` does.
     if let Err(e) = crate::host::record::end_orphaned_runs() {
@@ -110,7 +122,7 @@ fn prepare(args: &RunArgs) -> Result<(Plan, OutDirLock)> {
     if cleaned > 0 {
         eprintln!("removed resources of {cleaned} dead process(es) of earlier runs");
     }
-    Ok((plan, lock))
+    Ok(Prepared { plan, dirs, _lock: lock, notes })
 }
 
 /// Where netfi's own end runs, or that the lab's program plays it.
@@ -166,7 +178,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     signals::install();
     let started = std::time::SystemTime::now();
     args.validate()?;
-    let (plan, _lock) = prepare(args)?;
+    let Prepared { plan, dirs, _lock, notes } = prepare(args)?;
     announce(&plan)?;
     let steal_timer = StealTimer::start();
     let t0 = now_ns();
@@ -174,6 +186,7 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     let mut guard = guard_run(&plan);
     let mut procs = procs::start(&plan, &mut guard)?;
     let interrupted = watch::supervise(&plan, &mut procs);
+    procs.all_mut().for_each(procs::Proc::settle_log);
     let duration_s = (now_ns() - t0) as f64 / 1e9;
     let steal = steal_timer.stop();
     // An emulator that died while its core was cleared could not put back
@@ -185,8 +198,10 @@ pub fn run(args: &RunArgs) -> Result<RunReport> {
     outdir::remove_own_scenarios(&plan.streams);
     let mut report = assemble::assemble(&plan, &procs, duration_s, steal, interrupted);
     report.provenance = Some(crate::service::report::Provenance::capture(started, plan.seed));
+    report.notes = notes;
     let paths: Vec<_> = std::iter::once(report.files.report_json.clone()).chain(args.report_json.clone()).collect();
     assemble::write(&mut report, &paths);
+    dirs.finished();
     Ok(report)
 }
 

@@ -4,6 +4,7 @@
 //! running when its handle is dropped is stopped, and killed if it does not
 //! end within [`KILL_GRACE`](crate::service::supervise::KILL_GRACE).
 
+use crate::durable::PartialFile;
 use crate::host::guardian::RunGuard;
 use crate::service::plan::Plan;
 use crate::service::report::ProcessEnd;
@@ -22,6 +23,11 @@ pub struct Proc {
     pub child: Child,
     pub core: Option<usize>,
     pub log: PathBuf,
+    /// The log while the process runs, as `<role>.log.partial`; given its
+    /// own name once the process has ended ([`Proc::settle_log`]).
+    pub log_file: Option<PartialFile>,
+    /// Why the log could not be given its own name.
+    pub log_error: Option<String>,
     pub status: Option<std::process::ExitStatus>,
     /// Why the runner stopped it, when it was stuck.
     pub stuck: Option<String>,
@@ -82,9 +88,23 @@ impl Proc {
         ProcessEnd { role: self.role.into(), pid: self.child.id(), core: self.core, status: self.status_text(), log: self.log.clone() }
     }
 
-    /// What went wrong with it: stuck, and how it ended.
+    /// What went wrong with it: stuck, how it ended, its log not whole.
     pub fn faults(&self) -> impl Iterator<Item = String> + '_ {
-        self.stuck.clone().into_iter().chain(self.died())
+        self.stuck.clone().into_iter().chain(self.died()).chain(self.log_error.clone())
+    }
+
+    /// Gives the log of a process that has ended its own name (synced):
+    /// nothing writes to it any more. A log that cannot be is left cut,
+    /// and said among the process's faults.
+    pub fn settle_log(&mut self) {
+        if !self.poll() {
+            return;
+        }
+        if let Some(f) = self.log_file.take() {
+            if let Err(e) = f.commit() {
+                self.log_error = Some(format!("the {}'s log is not whole: {e}", self.role));
+            }
+        }
     }
 
     /// Names a process stuck: what it is doing, as the kernel says (its
@@ -124,6 +144,7 @@ impl Drop for Proc {
     /// process of a run outlives its runner.
     fn drop(&mut self) {
         if self.poll() {
+            self.settle_log();
             return;
         }
         self.terminate();
@@ -132,17 +153,22 @@ impl Drop for Proc {
             std::thread::sleep(Duration::from_millis(5));
         }
         let _ = self.child.kill();
-        let _ = self.child.wait();
+        if let Ok(s) = self.child.wait() {
+            self.status = Some(s);
+        }
+        self.settle_log();
     }
 }
 
-/// Starts `netfi <role> <args>` with its log `<out>/<role>.log`, in a
-/// process group of its own (Ctrl-C reaches only the runner), telling it
-/// the runner's pid (it dies with the runner).
+/// Starts `netfi <role> <args>` with its log `<out>/<role>.log` (written
+/// as `<role>.log.partial` while it runs), in a process group of its own
+/// (Ctrl-C reaches only the runner), telling it the runner's pid (it dies
+/// with the runner).
 pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &Path, guard: &mut Option<RunGuard>) -> Result<Proc> {
     let exe = std::env::current_exe().map_err(RunnerError::Exe)?;
     let log = out.join(format!("{role}.log"));
-    let file = std::fs::File::create(&log).map_err(|e| RunnerError::Create(log.clone(), e))?;
+    let log_file = PartialFile::create(&log).map_err(|e| RunnerError::Create(log.clone(), std::io::Error::other(e)))?;
+    let file = log_file.file().try_clone().map_err(|e| RunnerError::Create(log.clone(), e))?;
     let stdout = file.try_clone().map_err(|e| RunnerError::Create(log.clone(), e))?;
     let child = Command::new(&exe)
         .arg(role)
@@ -158,7 +184,7 @@ pub fn spawn(role: &'static str, args: Vec<String>, core: Option<usize>, out: &P
     if let Some(Err(e)) = guard.as_mut().map(|g| g.add(child.id())) {
         eprintln!("WARNING: the {role} is not on the run's record ({e}): if the runner is killed, it ends by the parent-death signal only");
     }
-    Ok(Proc { role, child, core, log, status: None, stuck: None })
+    Ok(Proc { role, child, core, log, log_file: Some(log_file), log_error: None, status: None, stuck: None })
 }
 
 /// Waits for `<out>/<role>.ready`, failing early if the process ends.
@@ -178,9 +204,9 @@ fn wait_ready(p: &mut Proc, out: &Path, timeout: Duration) -> Result<()> {
     Ok(())
 }
 
-/// The last `lines` lines of a log.
+/// The last `lines` lines of a log (its `.partial` while it is written).
 pub fn tail(path: &Path, lines: usize) -> String {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let text = std::fs::read_to_string(path).or_else(|_| std::fs::read_to_string(crate::durable::partial_path(path))).unwrap_or_default();
     let all: Vec<&str> = text.lines().collect();
     all[all.len().saturating_sub(lines)..].join("\n")
 }
@@ -248,7 +274,7 @@ mod tests {
 
     fn sleeper() -> Proc {
         let child = Command::new("sleep").arg("60").spawn().unwrap();
-        Proc { role: "console", child, core: None, log: PathBuf::from("/nonexistent"), status: None, stuck: None }
+        Proc { role: "console", child, core: None, log: PathBuf::from("/nonexistent"), log_file: None, log_error: None, status: None, stuck: None }
     }
 
     fn gone(pid: u32) -> bool {
@@ -272,7 +298,7 @@ mod tests {
     #[test]
     fn a_process_that_ended_is_left_as_it_was() {
         let child = Command::new("true").spawn().unwrap();
-        let mut p = Proc { role: "simulator", child, core: None, log: PathBuf::from("/nonexistent"), status: None, stuck: None };
+        let mut p = Proc { role: "simulator", child, core: None, log: PathBuf::from("/nonexistent"), log_file: None, log_error: None, status: None, stuck: None };
         while !p.poll() {
             std::thread::sleep(Duration::from_millis(1));
         }

@@ -175,6 +175,12 @@ pub struct RunReport {
     /// was in flight at the stop accounted for.
     #[serde(default)]
     pub stopped: bool,
+    /// The run's runner did not finish it (it was killed, or failed before
+    /// writing the run's report): this report was rebuilt by `netfi
+    /// report` from what the run's processes left, and may be short of
+    /// what they would have written. Absent when false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub interrupted: bool,
     pub frames: FrameAccount,
     /// The whole run's realized loss: the scenario's drops over the frames
     /// it decided (malformed frames, dropped before it, are in neither);
@@ -216,6 +222,10 @@ pub struct RunReport {
     /// What went wrong: dead processes, frames lost between processes,
     /// files cut short (`NAME.partial`).
     pub faults: Vec<String>,
+    /// What the run did that is no fault but is worth saying: the report
+    /// of an earlier run in the same directory replaced.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
     /// The services' reports the run's directory does not have (as
     /// `console.json`: what the console wrote): the figures that need one
     /// are unknown. A run of foreign clients has no console or robot

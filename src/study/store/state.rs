@@ -57,6 +57,9 @@ pub struct Attempt {
     /// Its `netfi run`.
     #[serde(default)]
     pub run_pid: Option<u32>,
+    /// Its run id (`netfi ctl --run-id`; the page's link to the run).
+    #[serde(default)]
+    pub run_id: Option<String>,
     /// How the run ended (`exit 0`, `signal 9`).
     #[serde(default)]
     pub run_status: Option<String>,

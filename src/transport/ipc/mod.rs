@@ -80,6 +80,7 @@
 pub mod control;
 mod config;
 mod liveness;
+mod mgmt;
 mod names;
 mod node;
 mod publisher;
@@ -94,6 +95,7 @@ pub use liveness::{
     cleanup_dead_nodes, cleanup_dead_runs, remove_dead_run_files, remove_run_segment_if_unused, CleanupError, CleanupReport, DeadPeer,
     FailedCleanup,
 };
+pub use mgmt::mgmt_segment_path;
 pub use names::{Port, Role, RunId, RunIdError};
 pub use transport::{Iceoryx2, Iceoryx2Args, Iceoryx2ArgsError, Iceoryx2OpenError};
 pub use node::{IpcNode, NodeOpenError};

@@ -105,6 +105,9 @@ impl IpcNode {
                 source,
             })?;
 
+        // The run's management segment, made private before iceoryx2
+        // would make it open to all (see `mgmt`).
+        super::mgmt::create_private(config.prefix());
         // At most 6 + 48 + 1 + 9 bytes of [A-Za-z0-9_/-]: always a valid
         // node name.
         let node_name = NodeName::new(&config.node_name(role))

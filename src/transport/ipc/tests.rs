@@ -61,3 +61,27 @@ fn log_level_parses() {
     assert_eq!("WARN".parse::<IpcLogLevel>(), Ok(IpcLogLevel::Warn));
     assert!("loud".parse::<IpcLogLevel>().is_err());
 }
+
+/// netfi makes the run's management segment, private, before iceoryx2
+/// would make its own open to all: iceoryx2 takes netfi's (it numbers its
+/// nodes in it), so the segment never had any mode but the owner's. Fails
+/// on an iceoryx2 that names or lays the segment out otherwise.
+#[test]
+fn iceoryx2_takes_the_management_segment_netfi_made_private() {
+    use std::os::unix::fs::MetadataExt;
+    let run = RunId::new(&format!("mgmt{}", std::process::id())).unwrap();
+    let config = IpcConfig::new(run);
+    let path = mgmt_segment_path(config.prefix());
+    let _ = std::fs::remove_file(&path);
+    let counter = || std::fs::read(&path).ok().filter(|b| b.len() >= 12).map(|b| u32::from_ne_bytes(b[8..12].try_into().unwrap()));
+    let node = IpcNode::open(&config, Role::Console).unwrap();
+    let mode = std::fs::metadata(&path).map(|m| m.mode() & 0o777);
+    let first = counter();
+    let second_node = IpcNode::open(&config, Role::Simulator).unwrap();
+    let second = counter();
+    drop(second_node);
+    drop(node);
+    let _ = std::fs::remove_file(&path);
+    assert_eq!(mode.ok(), Some(0o600), "{} is not the segment iceoryx2 took, or not private", path.display());
+    assert_eq!((first, second), (Some(1), Some(2)), "iceoryx2 did not number its nodes in netfi's segment");
+}

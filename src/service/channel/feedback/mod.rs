@@ -156,6 +156,6 @@ impl ReverseChannel for Return {
     }
 
     fn faults(s: &FeedbackSection) -> Vec<String> {
-        s.fault().into_iter().collect()
+        s.faults()
     }
 }

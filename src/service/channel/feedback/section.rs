@@ -55,6 +55,10 @@ pub struct ConsoleFeedback {
     pub divergence_final_mm: [f64; 2],
     pub divergence_max_mm: [f64; 2],
     pub round_trip_hlog: Option<std::path::PathBuf>,
+    /// Why `round_trip.hlog` could not be written whole (it is then absent,
+    /// or left cut as `round_trip.hlog.partial`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_trip_hlog_error: Option<String>,
 }
 
 /// The feedback loop robot → emulator → console: what the return scenario
@@ -97,6 +101,9 @@ pub struct FeedbackSection {
     /// per arm, mm: at the last feedback, and the most seen.
     pub divergence_final_mm: Option<[f64; 2]>,
     pub divergence_max_mm: Option<[f64; 2]>,
+    /// Why the console's `round_trip.hlog` was not written whole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_trip_hlog_error: Option<String>,
 }
 
 /// The run's feedback section, where the emulator had a feedback path: the
@@ -152,11 +159,23 @@ impl FeedbackSection {
             emulator_share_ns: c.map(|c| c.emulator_share_ns).filter(|s| s.count > 0),
             divergence_final_mm: c.map(|c| c.divergence_final_mm),
             divergence_max_mm: c.map(|c| c.divergence_max_mm),
+            round_trip_hlog_error: c.and_then(|c| c.round_trip_hlog_error.clone()),
         }
     }
 
     /// What is wrong when the section does not balance.
     pub fn fault(&self) -> Option<String> {
+        self.unbalanced()
+    }
+
+    /// What is wrong with the section: it does not balance; the round
+    /// trip's histogram log was not written whole.
+    pub fn faults(&self) -> Vec<String> {
+        let hlog = self.round_trip_hlog_error.as_ref().map(|e| format!("the console's round_trip.hlog not written whole: {e}"));
+        self.unbalanced().into_iter().chain(hlog).collect()
+    }
+
+    fn unbalanced(&self) -> Option<String> {
         (!self.balanced).then(|| {
             format!(
                 "feedback not balanced: the robot sent {}, {} entered the emulator, {} were delivered, the console received {}",
