@@ -25,5 +25,5 @@ pub mod private_dir;
 pub mod process;
 pub mod record;
 
-pub use affinity::{cores_except, keep_thread_off_core};
+pub use affinity::{allowed_cores, cores_except, keep_thread_off_core};
 pub use cpu_time::{CpuTimes, Steal, StealTimer};

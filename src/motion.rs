@@ -45,6 +45,9 @@ pub const GRASP_STEP: i32 = 30;
 /// last draw is taken as is.
 const TARGET_ATTEMPTS: usize = 32;
 
+/// The highest frame rate a console streams at, Hz (a frame a microsecond).
+pub const MAX_RATE_HZ: f64 = 1e6;
+
 /// Parameters of the motion model. Ranges are `[min, max]` pairs drawn
 /// uniformly; positions are in ITP position units.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -121,7 +124,7 @@ impl MotionParams {
             }
         }
         positive("rate_hz", self.rate_hz)?;
-        if self.rate_hz > 1e6 {
+        if self.rate_hz > MAX_RATE_HZ {
             return Err(MotionParamError::new("rate_hz", format!("{}; expected at most 1e6 Hz", self.rate_hz)));
         }
         for (k, &w) in self.workspace_units.iter().enumerate() {

@@ -6,8 +6,10 @@
 use clap::builder::RangedU64ValueParser;
 use crate::model::units::show;
 
-/// The frame rates a run accepts, Hz: 0.001 Hz to 10 MHz.
-pub const RATE_HZ_RANGE: std::ops::RangeInclusive<f64> = 0.001..=10e6;
+/// The frame rates a run accepts, Hz: 0.001 Hz to the console's highest
+/// (1 MHz, [`crate::motion::MAX_RATE_HZ`]), so a rate the console would
+/// refuse is refused before anything starts.
+pub const RATE_HZ_RANGE: std::ops::RangeInclusive<f64> = 0.001..=crate::motion::MAX_RATE_HZ;
 
 /// Default frame rate of a run, Hz.
 pub const DEFAULT_RATE_HZ: f64 = 1000.0;
@@ -51,7 +53,7 @@ pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
     if r.is_finite() && RATE_HZ_RANGE.contains(&r) {
         Ok(r)
     } else {
-        Err(format!("--rate-hz must be between 0.001 Hz and 10 MHz (10000000 Hz), got {r}"))
+        Err(format!("--rate-hz must be between 0.001 Hz and 1 MHz (1000000 Hz), got {r}"))
     }
 }
 
@@ -91,6 +93,16 @@ pub fn wait_seconds(text: &str) -> Result<f64, String> {
         Ok(s)
     } else {
         Err(format!("must be from 0 to an hour ({} s), got {} s", show(MAX_WAIT_S), show(s)))
+    }
+}
+
+/// Parses a wait given in milliseconds (`--ros2-linger-ms`): 0 to an hour.
+pub fn wait_millis(text: &str) -> Result<f64, String> {
+    let ms = millis(text)?;
+    if ms <= MAX_WAIT_S * 1e3 {
+        Ok(ms)
+    } else {
+        Err(format!("must be from 0 to an hour ({} ms), got {} ms", show(MAX_WAIT_S * 1e3), show(ms)))
     }
 }
 

@@ -54,6 +54,11 @@ pub fn pin_current(core: usize) -> std::io::Result<()> {
     set_affinity(0, &BTreeSet::from([core]))
 }
 
+/// The cores this process may run on (its CPU mask), in order.
+pub fn allowed_cores() -> Vec<usize> {
+    core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect()
+}
+
 /// The set of this machine's cores without `core`, for keeping threads off
 /// a busy-polling loop's core; `None` where no other core exists.
 pub fn cores_except(core: usize) -> Option<libc::cpu_set_t> {

@@ -49,7 +49,7 @@ pub mod unixgram;
 
 pub use declare::{LaneFlags, Sides, Transport, Wiring};
 pub use endpoint::EndpointError;
-pub use open::{cleanup_stale, open_node, NodeError};
+pub use open::{cleanup_stale, names_taken, open_node, NodeError};
 pub use ports::{FrameSink, FrameSource, MemoryPort, PortError};
 pub use registry::{open, Egress, Endpoint, Ingress, OpenError, Sessions, TransportArgs, TransportArgsError, TransportReports, Transports, endpoint_syntax};
 pub use udp::Payload;

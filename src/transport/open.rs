@@ -41,3 +41,25 @@ pub fn cleanup_stale() -> Result<usize, CleanupError> {
     let reports = crate::transport::cleanup_dead_runs(|_| true)?;
     Ok(reports.iter().map(|(_, r)| r.removed.len()).sum())
 }
+
+/// The shared-memory files with run `run_id`'s names that another user
+/// made first (the names carry this user's uid: only a stranger planting
+/// them makes such a file someone else's). A run refuses to start over
+/// them. This user's own (the lab's programs joining the run, which may
+/// start first) are the run's.
+pub fn names_taken(run_id: &str) -> Vec<String> {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let me = unsafe { libc::geteuid() };
+    let Ok(run) = RunId::new(run_id) else { return Vec::new() };
+    let config = IpcConfig::new(run);
+    let prefix = config.prefix();
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else { return Vec::new() };
+    let mut taken: Vec<String> = entries.filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+        .filter(|e| std::fs::symlink_metadata(e.path()).is_ok_and(|m| m.uid() != me))
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    taken.sort();
+    taken
+}

@@ -12,6 +12,9 @@ pub enum UiError {
     Guard(#[from] super::guard::GuardError),
     #[error("reading this process's CPU mask: {0}")]
     Mask(std::io::Error),
+    /// `--emulator-core` names a core the runs could not be pinned to.
+    #[error(transparent)]
+    Core(crate::service::args::ArgsError),
     /// Keeping off the emulator's core.
     #[error(transparent)]
     Place(#[from] crate::host::placement::PlaceError),

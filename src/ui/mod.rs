@@ -64,6 +64,7 @@ pub fn serve(opts: UiOptions) -> Result<(), UiError> {
     // Checked before anything listens: no token is for loopback only.
     guard::Guard::new(opts.bind, token.clone(), opts.allow_hosts.clone())?;
     let mask = runs::CpuMask::current().map_err(UiError::Mask)?;
+    crate::service::args::check_core("--emulator-core", Some(opts.emulator_core), &crate::host::allowed_cores()).map_err(UiError::Core)?;
     keep_off_core(opts.emulator_core)?;
     if !opts.bind.ip().is_loopback() {
         eprintln!(

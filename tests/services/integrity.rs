@@ -203,3 +203,25 @@ fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
         assert!(faults.iter().any(|f| f.starts_with("cut file:") && f.contains(cut)), "{cut} not named as cut: {faults:?}");
     }
 }
+
+/// A pin that cannot be honoured is refused before any port opens: nothing
+/// of the run is left in /dev/shm.
+#[test]
+fn an_emulator_core_the_host_lacks_is_refused_before_any_port_opens() {
+    let run_id = format!("nocore{}", std::process::id());
+    let core = ::netfi::host::allowed_cores().iter().max().copied().unwrap_or(0) + 1;
+    let o = netfi()
+        .args(["emulator", "--run-id", &run_id, "--scenario", "Normal", "--core", &core.to_string()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(stderr.contains(&format!("--core {core}: this process may only run on CPU(s)")), "{stderr}");
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(&format!("_{run_id}_")))
+        .collect();
+    assert!(left.is_empty(), "left in /dev/shm: {left:?}");
+}

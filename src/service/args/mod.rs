@@ -30,7 +30,7 @@ pub use crate::flags::{argv, values};
 pub use crate::flags::{Argv, Render};
 pub use error::ArgsError;
 pub use groups::{ControlArgs, EmulatorPlacement, EndsArgs, PinArgs, ScenarioArgs, SourceArgs, StreamArgs};
-pub use run::{refusal, Peer, PeersArgs, RunArgs, RunPlacement};
+pub use run::{check_core, refusal, Peer, PeersArgs, RunArgs, RunPlacement};
 pub use services::{ConsoleArgs, EmulatorArgs, SimulatorArgs};
 pub use values::{millis, parse_rate_hz, seconds, MAX_STREAMS, RATE_HZ_RANGE};
 

@@ -46,11 +46,29 @@ impl RunPlacement {
     pub fn check_cores(&self, host: &[usize]) -> Result<(), ArgsError> {
         let named = [("--emulator-core", self.emulator.core), ("--console-core", self.console_core), ("--simulator-core", self.simulator_core)];
         for (flag, core) in named {
-            if let Some(core) = core.filter(|c| !host.contains(c)) {
-                return Err(ArgsError::CoreNotAllowed { flag, core, cores: host.to_vec() });
-            }
+            check_core(flag, core, host)?;
         }
         Ok(())
+    }
+
+    /// The loud words for a console or simulator pinned to the emulator's
+    /// own core (the run goes on: a one-core experiment may mean it).
+    pub fn shared_core_warnings(&self) -> Vec<String> {
+        let Some(e) = self.emulator.core else { return Vec::new() };
+        [("--console-core", self.console_core), ("--simulator-core", self.simulator_core)]
+            .into_iter()
+            .filter(|(_, c)| *c == Some(e))
+            .map(|(flag, _)| format!("WARNING: {flag} {e} is the emulator's core: the busy-waiting loop and that process share it, and every figure of netfi's own cost says so"))
+            .collect()
+    }
+}
+
+/// Checks that `core` (named by `flag`), if any, is one this process may
+/// run on (`host`): the one check of a named core, before anything starts.
+pub fn check_core(flag: &'static str, core: Option<usize>, host: &[usize]) -> Result<(), ArgsError> {
+    match core.filter(|c| !host.contains(c)) {
+        Some(core) => Err(ArgsError::CoreNotAllowed { flag, core, cores: host.to_vec() }),
+        None => Ok(()),
     }
 }
 

@@ -324,7 +324,7 @@ fn the_run_and_the_emulator_take_the_same_groups_each_with_its_help() {
 const OUT_OF_RANGE: &[(&str, &str, &[&str], &str)] = &[
     ("run", "--duration-s", &["0", "1e30", "604801"], "a week"),
     ("run", "--frames", &["0", "18446744073709551615"], "1..="),
-    ("run", "--rate-hz", &["0", "1e30"], "10 MHz"),
+    ("run", "--rate-hz", &["0", "2e6", "1e30"], "1 MHz"),
     ("run", "--queue-capacity", &["0", "16777217"], "1..=16777216"),
     ("run", "--emulator-core", &["1024"], "0..=1023"),
     ("run", "--console-core", &["18446744073709551615"], "0..=1023"),
@@ -343,6 +343,9 @@ const OUT_OF_RANGE: &[(&str, &str, &[&str], &str)] = &[
     ("emulator", "--wait-for-peer-s", &["1e30"], "an hour"),
     ("emulator", "--udp-buffer-bytes", &["0", "4294967296"], "1..=1073741824"),
     ("emulator", "--core", &["1024"], "0..=1023"),
+    ("emulator", "--ros2-discovery-s", &["1e300", "3601"], "an hour"),
+    ("emulator", "--ros2-linger-ms", &["1e300", "3600001"], "an hour"),
+    ("run", "--ros2-discovery-s", &["1e300"], "an hour"),
     ("emulator", "--queue-capacity", &["0"], "1..=16777216"),
     ("emulator", "--telemetry-ms", &["18446744073709551615"], "0..=3600000"),
     ("simulator", "--stall-ms", &["0", "1e30"], "an hour"),
@@ -372,4 +375,31 @@ fn the_largest_values_in_range_are_taken() {
     let Ok(Cmd::Run(r)) = ok else { panic!() };
     assert_eq!((r.source.duration_s, r.control.telemetry_ms, r.scenario.queue_capacity), (Some(604800.0), 3_600_000, Some(1 << 24)));
     r.validate().unwrap();
+}
+
+#[test]
+fn video_flags_without_video_are_refused() {
+    let argv = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    for flag in [["--video-hz", "30"], ["--video-gop", "10"], ["--video-key-ratio", "2"], ["--video-max-bytes", "10"], ["--video-seed", "3"]] {
+        let Ok(Cmd::Run(r)) = parse("run", &argv(&["Normal", flag[0], flag[1]])) else { panic!("{flag:?}") };
+        let e = r.validate().unwrap_err().to_string();
+        assert!(e.contains(flag[0]) && e.contains("need --video-mbps"), "{flag:?}: {e}");
+    }
+    let Ok(Cmd::Run(r)) = parse("run", &argv(&["Normal", "--video-mbps", "2", "--video-hz", "30"])) else { panic!() };
+    r.validate().unwrap();
+}
+
+#[test]
+fn a_core_is_checked_once_against_the_cores_this_process_may_use() {
+    use crate::service::args::check_core;
+    assert!(check_core("--core", Some(1), &[0, 1]).is_ok());
+    assert!(check_core("--core", None, &[0]).is_ok());
+    let e = check_core("--core", Some(2), &[0, 1]).unwrap_err().to_string();
+    assert!(e.contains("--core 2") && e.contains("[0, 1]"), "{e}");
+    let argv = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let Ok(Cmd::Run(r)) = parse("run", &argv(&["Normal", "--emulator-core", "1", "--console-core", "1"])) else { panic!() };
+    let w = r.placement.shared_core_warnings();
+    assert!(w.len() == 1 && w[0].contains("--console-core 1 is the emulator's core"), "{w:?}");
+    let Ok(Cmd::Run(r)) = parse("run", &argv(&["Normal", "--emulator-core", "1", "--console-core", "0"])) else { panic!() };
+    assert!(r.placement.shared_core_warnings().is_empty());
 }

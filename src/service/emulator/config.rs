@@ -142,6 +142,10 @@ impl EmulatorConfig {
     /// The emulator that `args` ask for (checked).
     pub fn of(args: &EmulatorArgs) -> Result<EmulatorConfig, ConfigError> {
         args.validate()?;
+        // Before any port opens: a core it cannot be pinned to leaves nothing behind.
+        if !args.placement.no_pin {
+            crate::service::args::check_core("--core", args.placement.core, &crate::host::allowed_cores())?;
+        }
         let lanes = if args.stream.several() {
             if args.run_id.is_none() {
                 return Err(ConfigError::StreamsNeedRunId);

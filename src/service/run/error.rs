@@ -11,6 +11,9 @@ use std::time::Duration;
 pub enum RunnerError {
     #[error(transparent)]
     Args(#[from] ArgsError),
+    /// Shared-memory files already bear the run's names.
+    #[error("run id `{run_id}`: /dev/shm holds {} file(s) with its names that another user made first ({}); choose another --run-id", files.len(), files.iter().take(3).cloned().collect::<Vec<_>>().join(", "))]
+    NamesTaken { run_id: String, files: Vec<String> },
     /// The run's own scenario.
     #[error(transparent)]
     Scenario(#[from] ScenarioError),

@@ -97,10 +97,13 @@ struct Prepared {
 fn prepare(args: &RunArgs) -> Result<Prepared> {
     let run_id = args.run_id.clone().unwrap_or_else(fresh_run_id);
     let (resolved, seed) = resolve(args, &run_id)?;
-    let host_cores: Vec<usize> = core_affinity::get_core_ids().unwrap_or_default().iter().map(|c| c.id).collect();
+    let host_cores = crate::host::allowed_cores();
     // A pin that cannot be honoured is an error when asked for, and a loud
     // warning (also in the report's isolation line) otherwise.
     args.placement.check_cores(&host_cores)?;
+    for w in args.placement.shared_core_warnings() {
+        eprintln!("{w}");
+    }
     if let (None, Some(w)) = (args.placement.emulator.core, crate::host::isolate::pin_problem()) {
         eprintln!("WARNING: {w}");
     }
@@ -121,6 +124,14 @@ fn prepare(args: &RunArgs) -> Result<Prepared> {
     let cleaned = crate::transport::cleanup_stale()?;
     if cleaned > 0 {
         eprintln!("removed resources of {cleaned} dead process(es) of earlier runs");
+    }
+    // Before any process starts: names already taken would fail a service
+    // only once the others are up.
+    for s in &plan.streams {
+        let files = crate::transport::names_taken(&s.run_id);
+        if !files.is_empty() {
+            return Err(RunnerError::NamesTaken { run_id: s.run_id.clone(), files }.into());
+        }
     }
     Ok(Prepared { plan, dirs, _lock: lock, notes })
 }

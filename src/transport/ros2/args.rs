@@ -3,7 +3,7 @@
 //! the domain and the limits. `crate::service::emulator::ros2` resolves
 //! them.
 
-use crate::flags::values::{millis, seconds};
+use crate::flags::values::{wait_millis, wait_seconds};
 use crate::flags::{Argv, Render};
 use clap::Args;
 
@@ -41,12 +41,12 @@ pub struct Ros2Args {
     pub ros2_max_bytes: usize,
     /// How long to wait at start for the publisher of each topic read, to
     /// learn its type and QoS (with `--ros2-type` given, the lane opens
-    /// without one after this).
-    #[arg(long, default_value = "10", value_parser = seconds, value_name = "S")]
+    /// without one after this); at most an hour.
+    #[arg(long, default_value = "10", value_parser = wait_seconds, value_name = "S")]
     pub ros2_discovery_s: f64,
     /// How long a lane's publishers may all be gone before its stream ends
-    /// (a node restarted within it continues the run).
-    #[arg(long, default_value = "1000", value_parser = millis, value_name = "MS")]
+    /// (a node restarted within it continues the run); at most an hour.
+    #[arg(long, default_value = "1000", value_parser = wait_millis, value_name = "MS")]
     pub ros2_linger_ms: f64,
 }
 

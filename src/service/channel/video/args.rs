@@ -12,7 +12,7 @@ pub enum VideoArgsError {
     #[error("--video-*: {0}")]
     Gop(#[from] GopError),
     /// A video option without the video stream.
-    #[error("--video-scenario and --video-seed need --video-mbps (the video stream is off)")]
+    #[error("--video-hz, --video-gop, --video-key-ratio, --video-max-bytes, --video-scenario and --video-seed need --video-mbps (the video stream is off)")]
     OptionsWithoutVideo,
     /// Video over another transport than iceoryx2.
     #[error("--video-mbps needs iceoryx2 on both sides: the video channels are iceoryx2's")]
@@ -94,7 +94,7 @@ impl VideoArgs {
     /// a maximum payload in range, and no video options without video.
     pub fn validate(&self) -> Result<(), VideoArgsError> {
         if !self.on() {
-            if self.video_scenario.is_some() || self.video_seed.is_some() {
+            if *self != VideoArgs::default() {
                 return Err(VideoArgsError::OptionsWithoutVideo);
             }
             return Ok(());
