@@ -53,6 +53,12 @@ pub fn main(cfg: &EmulatorConfig) -> Result<Vec<EmulatorReport>, super::Emulator
     let (mut lanes, mut sessions) = (Vec::with_capacity(cfg.lanes.len()), Vec::with_capacity(cfg.lanes.len()));
     let stop = crate::service::signals::stop_requested;
     for (k, l) in cfg.lanes.iter().enumerate() {
+        // A stop asked for while lanes open (64 take seconds) is acted on
+        // at once: the lanes open so far run their end as any stopped run's.
+        if stop() || sessions.iter().any(crate::transport::Sessions::termination_requested) {
+            eprintln!("emulator: stopped while opening its lanes: {k} of {} open; the others have no report", cfg.lanes.len());
+            break;
+        }
         let (lane, s) = open_lane(l, &stop).map_err(|cause| super::EmulatorError::Stream { stream: k, cause })?;
         say_lane(cfg, k, &s);
         lanes.push(lane);
