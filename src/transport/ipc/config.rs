@@ -68,6 +68,13 @@ impl IpcConfig {
         self.iceoryx2.global.prefix.as_str()
     }
 
+    /// The directory of the run's iceoryx2 files (this user's private root):
+    /// a client must use the same root and prefix to join the run.
+    pub fn root(&self) -> std::path::PathBuf {
+        use iceoryx2::prelude::SemanticString;
+        std::path::PathBuf::from(String::from_utf8_lossy(self.iceoryx2.global.root_path().as_bytes()).into_owned())
+    }
+
     /// The service name of `channel`: `netfi/<run>/<channel>`.
     pub fn service_name(&self, channel: Port) -> String {
         self.run.resource_name(channel)

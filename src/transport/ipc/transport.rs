@@ -103,6 +103,13 @@ impl Transport for Iceoryx2 {
         node.subscriber(Port::CONSOLE).map_err(Iceoryx2OpenError::Ingress)
     }
 
+    /// Where a client finds the run: its iceoryx2 root and prefix (a
+    /// client on another root or prefix sees no run at all).
+    fn describe(node: &IpcNode, _args: &Iceoryx2Args, _ends: (&dyn fmt::Display, &dyn fmt::Display)) -> Option<String> {
+        let c = node.config();
+        Some(format!("iceoryx2 root {} prefix {}", c.root().display(), c.prefix()))
+    }
+
     fn termination_requested(node: &IpcNode) -> bool {
         node.termination_requested()
     }
