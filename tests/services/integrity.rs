@@ -209,7 +209,7 @@ fn a_killed_emulator_leaves_its_trace_up_to_its_last_second() {
 #[test]
 fn an_emulator_core_the_host_lacks_is_refused_before_any_port_opens() {
     let run_id = format!("nocore{}", std::process::id());
-    let core = ::netfi::host::allowed_cores().iter().max().copied().unwrap_or(0) + 1;
+    let core = ::netfi::host::affinity::online_cpus().iter().max().copied().unwrap_or(0) + 1;
     let o = netfi()
         .args(["emulator", "--run-id", &run_id, "--scenario", "Normal", "--core", &core.to_string()])
         .output()

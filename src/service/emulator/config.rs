@@ -142,9 +142,12 @@ impl EmulatorConfig {
     /// The emulator that `args` ask for (checked).
     pub fn of(args: &EmulatorArgs) -> Result<EmulatorConfig, ConfigError> {
         args.validate()?;
-        // Before any port opens: a core it cannot be pinned to leaves nothing behind.
+        // Before any port opens: a core it cannot be pinned to leaves
+        // nothing behind. The host's online cores, not this process's mask:
+        // a runner started it with the mask the runner keeps off that core.
         if !args.placement.no_pin {
-            crate::service::args::check_core("--core", args.placement.core, &crate::host::allowed_cores())?;
+            let online: Vec<usize> = crate::host::affinity::online_cpus().into_iter().collect();
+            crate::service::args::check_core("--core", args.placement.core, &online)?;
         }
         let lanes = if args.stream.several() {
             if args.run_id.is_none() {
