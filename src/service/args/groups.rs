@@ -43,7 +43,7 @@ impl Render for ScenarioArgs {
 /// Where the frames come from and how many: `netfi run` and `netfi console`.
 #[derive(Debug, Clone, Default, PartialEq, Args)]
 pub struct SourceArgs {
-    /// Frame rate in Hz, 0.001 to 10e6 (default 1000; with --capture, the
+    /// Frame rate in Hz, 0.001 to 1e6 (default 1000; with --capture, the
     /// capture is replayed at this fixed rate instead of its own timing).
     #[arg(long, value_parser = values::parse_rate_hz)]
     pub rate_hz: Option<f64>,

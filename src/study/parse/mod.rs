@@ -164,8 +164,8 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
         }
     };
     let rate_hz = match raw.rate_hz {
-        Some(r) if !(r.get_ref().is_finite() && (0.001..=10e6).contains(r.get_ref())) => {
-            return Err(ctx.err(Some(r.span()), "trial.rate_hz", format!("{}: a frame rate of 0.001 to 10e6 Hz (as `netfi run --rate-hz`)", r.get_ref())));
+        Some(r) if !(r.get_ref().is_finite() && crate::flags::values::RATE_HZ_RANGE.contains(r.get_ref())) => {
+            return Err(ctx.err(Some(r.span()), "trial.rate_hz", format!("{}: a frame rate of 0.001 to 1e6 Hz (as `netfi run --rate-hz`)", r.get_ref())));
         }
         r => r.map(Spanned::into_inner),
     };
