@@ -68,6 +68,17 @@ fn what_the_robot_received_is_recorded_as_mcap_and_replays_at_its_timing() {
             (m.log_time, m.data.to_vec())
         })
         .collect();
+    // rosbag2's header profile, and each channel's publishers' QoS as
+    // rosbag2 writes it (the talker's: reliable, volatile).
+    let header = mcap::read::LinearReader::new(&bytes).unwrap().find_map(|r| match r.unwrap() {
+        mcap::records::Record::Header(h) => Some(h),
+        _ => None,
+    });
+    assert_eq!(header.map(|h| h.profile), Some("ros2".to_string()));
+    let channel = mcap::MessageStream::new(&bytes).unwrap().next().unwrap().unwrap().channel;
+    let qos = &channel.metadata["offered_qos_profiles"];
+    assert!(qos.starts_with("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  liveliness: 1\n"), "{qos}");
+    assert_eq!(qos.matches("- history").count(), 1, "one profile, the one publisher's (the emulator's writer): {qos}");
     let mut delivered: Vec<_> = trace(&c, "trace_emulator.csv").into_iter().filter(|r| r["fate"] == "delivered").collect();
     delivered.sort_by_key(|r| r["release_ns"].parse::<u64>().unwrap());
     let want: Vec<f64> = delivered.iter().map(|r| crate::index(r) as f64).collect();

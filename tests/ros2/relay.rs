@@ -22,6 +22,9 @@ fn plm2_drops_exactly_what_scenario_check_drops_and_the_listener_gets_the_rest()
     assert_eq!(r["forward"]["type"], "std_msgs/msg/String");
     assert!(r["forward"]["motion"].is_null(), "a String is no kinematic type");
     assert_eq!(r["forward"]["type_from"], "publisher");
+    // rclpy's publisher announces its type's hash in its user data.
+    let hash = r["forward"]["type_hash"].as_str().unwrap_or_default();
+    assert!(hash.starts_with("RIHS01_") && hash.len() == 7 + 64, "the publisher's type hash: {:#}", r["forward"]["type_hash"]);
     assert_eq!(r["forward"]["lost_before_ingress"], 0);
     assert_eq!(r["forward"]["ended"]["reason"], "publishers_gone");
     // ge_lomax decides per message: with every message entered, the very

@@ -15,6 +15,9 @@
 //!   from it (Foxglove, rosbags) read the messages without the type
 //!   installed; for any other type it is empty (netfi relays bytes and
 //!   carries no other definitions): tools that read by type name take it.
+//! - The file's profile is `ros2`; each channel's `offered_qos_profiles`
+//!   metadata is its publishers' QoS as rosbag2 writes it
+//!   ([`qos::rosbag2_profiles`]).
 //! - `log_time` is when the recorder took the message; `publish_time` is its
 //!   publisher's source timestamp (ns since the Unix epoch).
 //! - Replay keeps the recording's spacing by `log_time` (scaled by
@@ -182,7 +185,9 @@ pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
     // `NAME.partial` until the recording is whole (crate::durable).
     let file = crate::durable::PartialFile::create(&a.out).map_err(|e| BagError::Create(a.out.clone(), std::io::Error::other(e)))?;
     let partial = file.partial().to_path_buf();
-    let mut out = mcap::Writer::new(std::io::BufWriter::new(file))?;
+    // rosbag2's profile: readers that pick a decoder by it take the
+    // messages as ROS 2 CDR.
+    let mut out = mcap::WriteOptions::new().profile("ros2").create(std::io::BufWriter::new(file))?;
     let mut readers = Vec::new();
     for text in &a.topics {
         let topic = TopicName::parse(text).map_err(|cause| BagError::Topic { text: text.clone(), cause })?;
@@ -194,7 +199,8 @@ pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
         let reader = node.reader(&topic, &type_name, &qos::reader(&p.qos))?;
         let definition = crate::ros2msg::Kind::of(&type_name.ros()).map_or("", crate::ros2msg::Kind::definition);
         let schema = out.add_schema(&type_name.ros(), "ros2msg", definition.as_bytes())?;
-        let channel = out.add_channel(schema, topic.as_str(), "cdr", &BTreeMap::new())?;
+        let offered = qos::rosbag2_profiles(node.remotes(&topic, Role::Publisher).map(|r| &r.qos));
+        let channel = out.add_channel(schema, topic.as_str(), "cdr", &BTreeMap::from([("offered_qos_profiles".to_string(), offered)]))?;
         let why = if definition.is_empty() { ", schema without its definition: not a type netfi knows" } else { "" };
         eprintln!("ros2 record: {topic} ({type_name}{why})");
         readers.push((reader, channel));

@@ -144,9 +144,15 @@ impl std::str::FromStr for TypeName {
 
 /// The type hash a ROS 2 endpoint announces in its DDS user data
 /// (`typehash=RIHS01_…;`, from ROS 2 Iron on), if any.
+/// The user data comes as its parameter's value, a CDR sequence (a 4-byte
+/// length, the text, padding), so the key is looked for where it begins
+/// after that or after a `;`.
 pub fn type_hash(user_data: &[u8]) -> Option<String> {
-    let text = std::str::from_utf8(user_data).ok()?;
-    text.split(';').find_map(|kv| kv.strip_prefix("typehash=")).filter(|h| !h.is_empty()).map(str::to_string)
+    const KEY: &[u8] = b"typehash=";
+    let at = (0..user_data.len()).find(|&i| user_data[i..].starts_with(KEY) && (i == 0 || i == 4 || user_data[i - 1] == b';'))? + KEY.len();
+    let rest = &user_data[at..];
+    let hash = &rest[..rest.iter().position(|&b| b == b';' || b == 0).unwrap_or(rest.len())];
+    std::str::from_utf8(hash).ok().filter(|h| !h.is_empty()).map(str::to_string)
 }
 
 #[cfg(test)]
@@ -184,5 +190,11 @@ mod tests {
         assert_eq!(type_hash(b"enclave=/;typehash=RIHS01_x;"), Some("RIHS01_x".to_string()));
         assert_eq!(type_hash(b""), None);
         assert_eq!(type_hash(&[0xff, 0xfe]), None);
+        // As the parameter carries it: a CDR sequence's length, the text,
+        // then padding.
+        let mut cdr = vec![0x95, 0, 0, 0];
+        cdr.extend_from_slice(b"typehash=RIHS01_5f2d;\0\0\0");
+        assert_eq!(type_hash(&cdr), Some("RIHS01_5f2d".to_string()));
+        assert_eq!(type_hash(b"xtypehash=RIHS01_no;"), None);
     }
 }

@@ -102,6 +102,51 @@ pub fn writer(wanted: &QosPolicies) -> QosPolicies {
     }
 }
 
+/// The QoS profiles `offered` as rosbag2 writes them in an MCAP channel's
+/// `offered_qos_profiles` metadata: a YAML list, one profile a publisher,
+/// each policy by its number in `rmw_qos_profile_t`. Discovery does not
+/// announce a publisher's history, so it is `3` (unknown) with depth 0, as
+/// rosbag2 records a remote publisher; an infinite duration is
+/// `RMW_DURATION_INFINITE`.
+pub fn rosbag2_profiles<'a>(offered: impl IntoIterator<Item = &'a QosPolicies>) -> String {
+    use rustdds::policy::Liveliness;
+    let time = |d: Option<Duration>| match d.filter(|d| *d != Duration::INFINITE) {
+        Some(d) => {
+            let ns = d.to_nanoseconds().max(0);
+            (ns / 1_000_000_000, ns % 1_000_000_000)
+        }
+        None => (9_223_372_036, 854_775_807),
+    };
+    let mut yaml = String::new();
+    for q in offered {
+        let reliability = match q.reliability() {
+            Some(Reliability::BestEffort) => 2,
+            _ => 1,
+        };
+        let durability = match q.durability() {
+            Some(Durability::TransientLocal | Durability::Transient | Durability::Persistent) => 1,
+            _ => 2,
+        };
+        let (liveliness, lease) = match q.liveliness() {
+            Some(Liveliness::ManualByTopic { lease_duration }) => (3, Some(lease_duration)),
+            Some(Liveliness::Automatic { lease_duration } | Liveliness::ManualByParticipant { lease_duration }) => (1, Some(lease_duration)),
+            None => (1, None),
+        };
+        let times: String = [("deadline", q.deadline().map(|d| d.0)), ("lifespan", q.lifespan().map(|l| l.duration)), ("liveliness_lease_duration", lease)]
+            .into_iter()
+            .map(|(key, d)| {
+                let (sec, nsec) = time(d);
+                format!("  {key}:\n    sec: {sec}\n    nsec: {nsec}\n")
+            })
+            .collect();
+        yaml.push_str(&format!("- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {durability}\n  liveliness: {liveliness}\n{times}  avoid_ros_namespace_conventions: false\n"));
+    }
+    if yaml.is_empty() {
+        yaml.push_str("[]\n");
+    }
+    yaml
+}
+
 /// Why an offered and a requested QoS cannot match.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{policy}: {writer} offers {offered}, {reader} requests {requested}; DDS matches a writer with a reader only when the offer is at least the request")]
