@@ -57,8 +57,7 @@ pub fn names_taken(run_id: &str) -> Vec<String> {
     let Ok(entries) = std::fs::read_dir("/dev/shm") else { return Vec::new() };
     let mut taken: Vec<String> = entries.filter_map(|e| e.ok())
         .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
-        .filter(|e| std::fs::symlink_metadata(e.path()).is_ok_and(|m| m.uid() != me))
-        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter_map(|e| std::fs::symlink_metadata(e.path()).ok().filter(|m| m.uid() != me).map(|m| format!("{} belongs to uid {}", e.file_name().to_string_lossy(), m.uid())))
         .collect();
     taken.sort();
     taken
