@@ -233,6 +233,9 @@ fn emulator(args: &RunArgs, streams: &[StreamPlan], cores: Cores, seeds: &Seeds,
     e.transports = p.transports.clone();
     e.ros2 = p.ros2.clone();
     let robot_subscribes = p.ends.egress.of::<crate::transport::ipc::Iceoryx2>().is_some() && !p.ros2.on();
+    // The lab's programs report nothing of their own: the motion is
+    // followed where the emulator takes and releases the frames.
+    e.kinematics = p.lab();
     e.wait_for_peer_s = p.wait_for_peer_s.or((p.robot() == Peer::Lab && robot_subscribes).then_some(LAB_ROBOT_WAIT_S));
     e.stream.streams = streams.len() as u32;
     e.stream.stream_scenario = streams.iter().skip(1).map(|s| format!("{}={}", s.index, s.own_scenario.display())).collect();

@@ -15,9 +15,19 @@
 //!
 //! [trial]                         # how each trial's `netfi run` is started
 //! duration_s = 600                # the longest a trial runs (s, or "10min"); the experimenter stops it sooner
-//! capture = "console.bin"         # replay a recording instead of the synthetic console
+//! peers = "lab"                   # lab: the lab's console and robot, at [trial.lab]; synthetic (default): netfi's own, a dry run
+//! capture = "console.bin"         # synthetic only: replay a recording instead of the synthetic console
 //! rate_hz = 1000
 //! run_args = ["--no-isolate"]     # any other `netfi run` options, as `netfi run` reads them
+//!
+//! [trial.lab]                     # where the emulator meets the lab's programs: `netfi run`'s flags, without `--`
+//! ingress = "udp://127.0.0.1:47001"
+//! console-from = "first"
+//! egress = "udp://127.0.0.1:47002"
+//!
+//! [clean]                         # when a trial is `suspect` (what netfi and the host added)
+//! netfi_added_p99_ms = 1          # default 1 ms
+//! steal_fraction = 0.05           # default 5 % of the trial's CPU time stolen
 //!
 //! [order]
 //! blocks = "latin"                # latin (balanced Latin square) | table | fixed
@@ -75,7 +85,7 @@ pub const MAX_NAME_LEN: usize = 64;
 /// of [`RunArgs`]' fields, with the study file's field that gives each
 /// instead (`None`: the study sets it itself); `run_args` may not give
 /// them. Their flags are the command's ([`RunArgs::command`]).
-pub const STUDY_RUN_ARGS: [(&str, Option<&str>); 9] = [
+pub const STUDY_RUN_ARGS: [(&str, Option<&str>); 11] = [
     ("out", None),
     ("seed", None),
     ("run_id", None),
@@ -85,6 +95,8 @@ pub const STUDY_RUN_ARGS: [(&str, Option<&str>); 9] = [
     ("capture", Some("trial.capture")),
     ("report_json", None),
     ("rate_hz", Some("trial.rate_hz")),
+    ("console", Some("trial.peers")),
+    ("robot", Some("trial.peers")),
 ];
 
 /// A study file that could not be read, with where and why.
@@ -131,6 +143,38 @@ pub struct Study {
     /// The block every participant takes first (`order.first`), the
     /// others counterbalanced after it.
     pub first_block: Option<usize>,
+    /// When a trial is `suspect`.
+    pub clean: CleanRule,
+}
+
+/// When a trial is `suspect` rather than clean (`[clean]`): what netfi
+/// itself added, or the host took, beyond these; or frames lost before
+/// the emulator, or released while no robot listened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CleanRule {
+    /// The most netfi itself may add to a frame's delay at the 99th
+    /// percentile, ms (default 1).
+    pub netfi_added_p99_ms: f64,
+    /// The largest share of the trial's CPU time the host may steal
+    /// (default 0.05).
+    pub steal_fraction: f64,
+}
+
+impl Default for CleanRule {
+    fn default() -> Self {
+        CleanRule { netfi_added_p99_ms: 1.0, steal_fraction: 0.05 }
+    }
+}
+
+/// Who plays each trial's console and robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Peers {
+    /// netfi's own: the synthetic console (or the capture) and the
+    /// simulated robot; a dry run of the study.
+    #[default]
+    Synthetic,
+    /// The lab's own programs, met where `[trial.lab]` says.
+    Lab,
 }
 
 /// How each trial's `netfi run` is started.
@@ -146,6 +190,11 @@ pub struct TrialSpec {
     /// Other `netfi run` options, as given (checked as `netfi run` reads
     /// them when the file is read).
     pub run_args: Vec<String>,
+    /// Who plays the console and the robot.
+    pub peers: Peers,
+    /// `[trial.lab]` as `netfi run` flags: where the emulator meets the
+    /// lab's programs (used with [`Peers::Lab`] only).
+    pub lab_args: Vec<String>,
 }
 
 impl TrialSpec {
@@ -158,7 +207,23 @@ impl TrialSpec {
         own.source.duration_s = self.duration_s;
         own.source.rate_hz = self.rate_hz;
         own.source.capture = capture.map(Path::to_path_buf);
-        RunArgs::from_argv(own.to_argv().into_iter().chain(self.run_args.iter().cloned()))
+        let lab = match self.peers {
+            Peers::Synthetic => &[][..],
+            Peers::Lab => {
+                // Both ends the lab's, unless `[trial.lab]` keeps one of
+                // netfi's (`robot = "own"`).
+                let says = |flag: &str| self.lab_args.iter().any(|a| a == flag);
+                own.peers.console = (!says("--console")).then_some(crate::service::args::Peer::Lab);
+                own.peers.robot = (!says("--robot")).then_some(crate::service::args::Peer::Lab);
+                &self.lab_args[..]
+            }
+        };
+        RunArgs::from_argv(own.to_argv().into_iter().chain(lab.iter().cloned()).chain(self.run_args.iter().cloned()))
+    }
+
+    /// Whether a program of the lab's plays an end of each trial.
+    pub fn lab(&self) -> bool {
+        self.peers == Peers::Lab
     }
 }
 

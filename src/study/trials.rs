@@ -128,10 +128,12 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
         faults: Vec::new(),
         note: String::new(),
         counts: Default::default(),
+        waiting_for: None,
+        console_came_s: None,
     };
     state.attempts.push(a.clone());
     save_state(&dir, &state)?;
-    let mut cmd = run_command(s, netfi, &scenario, &out, trial.seed, a.run_id.as_deref().expect("set above"))?;
+    let (mut cmd, run) = run_command(s, netfi, &scenario, &out, trial.seed, a.run_id.as_deref().expect("set above"))?;
     let mut child = match cmd.spawn() {
         Ok(c) => c,
         Err(e) => {
@@ -145,15 +147,178 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
         }
     };
     a.run_pid = Some(child.id());
+    let mut watch = s.study.trial.lab().then(|| LabWatch::new(&run, &out));
+    if let Some(w) = &watch {
+        a.waiting_for = w.waiting_for.clone();
+    }
     *state.attempts.last_mut().expect("pushed above") = a.clone();
     save_state(&dir, &state)?;
+    let running = s.data.join(RUNNING_FILE);
+    let _ = write_json(&running, &Running { participant: s.study.participants[p].id.clone(), trial: a.trial, attempt: a.attempt, condition: a.condition.clone(), run_id: a.run_id.clone(), dir: out.clone(), started_utc: a.started_utc.clone() });
     started(&a);
-    let (status, asked) = wait(&mut child, &out, stop)?;
+    let mut seen = |w: &LabWatch| {
+        // The page and `status` show whom the trial waits for.
+        let last = state.attempts.last_mut().expect("pushed above");
+        if last.waiting_for != w.waiting_for {
+            last.waiting_for = w.waiting_for.clone();
+            last.console_came_s = w.console_came_s;
+            let _ = save_state(&dir, &state);
+        }
+    };
+    let waited = wait(&mut child, &out, stop, watch.as_mut(), &mut seen);
+    let _ = std::fs::remove_file(&running);
+    let (status, asked) = waited?;
     finish(&mut a, &out, status, asked);
+    if let Some(w) = &watch {
+        a.waiting_for = None;
+        a.console_came_s = w.console_came_s;
+        lab_outcome(&mut a, &out, w);
+    }
     *state.attempts.last_mut().expect("pushed above") = a.clone();
     save_state(&dir, &state)?;
     lock.release();
     Ok(a)
+}
+
+/// The file naming the trial running now (the last started), for the
+/// lab's programs: its run id (their iceoryx2 names), participant, trial
+/// and folder. Written when the trial starts, removed when it ends.
+pub const RUNNING_FILE: &str = "running.json";
+
+/// What [`RUNNING_FILE`] holds.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Running {
+    pub participant: String,
+    pub trial: u32,
+    pub attempt: u32,
+    pub condition: String,
+    pub run_id: Option<String>,
+    pub dir: PathBuf,
+    pub started_utc: String,
+}
+
+/// How long a trial waits for the lab's console's first frame when its
+/// `[trial.lab]` does not say (`wait-for-peer-s`), s.
+pub const LAB_CONSOLE_WAIT_S: f64 = args::run::LAB_ROBOT_WAIT_S;
+
+/// A trial with the lab's programs, watched while it runs: whom it waits
+/// for, when the console came, and a peer found dead (the run's log says
+/// so), which ends the trial.
+struct LabWatch {
+    out: PathBuf,
+    /// Whom the trial waits for now.
+    waiting_for: Option<String>,
+    robot: Option<String>,
+    console: String,
+    console_wait: Duration,
+    console_came_s: Option<f64>,
+    started: std::time::Instant,
+    next_look: std::time::Instant,
+    stderr_read: usize,
+    /// Why the trial is interrupted, once it is.
+    interrupted: Option<String>,
+}
+
+impl LabWatch {
+    fn new(run: &RunArgs, out: &Path) -> LabWatch {
+        let p = &run.peers;
+        let ros2 = p.ros2.on();
+        let console = if ros2 { "the ROS 2 topics".to_string() } else { p.ends.ingress.to_string() };
+        let robot_subscribes = p.robot() == args::Peer::Lab && !ros2 && p.ends.egress.of::<crate::transport::ipc::Iceoryx2>().is_some();
+        let robot = robot_subscribes.then(|| format!("the lab's robot at {}", p.ends.egress));
+        let now = std::time::Instant::now();
+        LabWatch {
+            out: out.to_path_buf(),
+            waiting_for: Some(robot.clone().unwrap_or_else(|| format!("the lab's console at {console}"))),
+            robot,
+            console,
+            console_wait: Duration::from_secs_f64(p.wait_for_peer_s.unwrap_or(LAB_CONSOLE_WAIT_S)),
+            console_came_s: None,
+            started: now,
+            next_look: now,
+            stderr_read: 0,
+            interrupted: None,
+        }
+    }
+
+    /// Looks at the trial's folder (4 times a second); whether the run
+    /// must be stopped (a peer died, or the console never came).
+    fn look(&mut self) -> bool {
+        let now = std::time::Instant::now();
+        if now < self.next_look || self.interrupted.is_some() {
+            return false;
+        }
+        self.next_look = now + Duration::from_millis(250);
+        // The run's log names a peer that died (the runner reaps the
+        // run's dead iceoryx2 peers).
+        if let Ok(text) = std::fs::read_to_string(self.out.join("run.stderr")) {
+            let new = text.get(self.stderr_read..).unwrap_or_default();
+            if let Some(line) = new.lines().find(|l| l.contains("reaped a dead peer") || l.contains("a peer died")) {
+                self.interrupted = Some(format!("a peer died mid-trial ({})", line.trim()));
+                return true;
+            }
+            // A line still being written is read again whole next time.
+            self.stderr_read = text.rfind('\n').map_or(0, |i| i + 1).max(self.stderr_read);
+        }
+        let ready = self.out.join("emulator.ready").exists();
+        if self.console_came_s.is_none() && ready && trace_has_rows(&self.out) {
+            self.console_came_s = Some(self.started.elapsed().as_secs_f64());
+        }
+        self.waiting_for = match (&self.robot, ready, self.console_came_s) {
+            (Some(r), false, _) => Some(r.clone()),
+            (_, _, None) => Some(format!("the lab's console at {}", self.console)),
+            _ => None,
+        };
+        if ready && self.console_came_s.is_none() && self.started.elapsed() > self.console_wait + Duration::from_secs(1) {
+            self.interrupted = Some(format!("the lab's console sent nothing to {} within {} s", self.console, self.console_wait.as_secs_f64()));
+            return true;
+        }
+        false
+    }
+}
+
+/// Whether a trace of the run (of any of its lanes) has a row: a frame of
+/// the console's reached the emulator.
+fn trace_has_rows(out: &Path) -> bool {
+    let rows = |dir: &Path| {
+        ["trace_emulator.csv.partial", "trace_emulator.csv"].iter().any(|n| {
+            std::fs::read(dir.join(n)).is_ok_and(|b| b.iter().filter(|c| **c == b'\n').count() >= 2)
+        })
+    };
+    rows(out) || std::fs::read_dir(out).into_iter().flatten().flatten().any(|e| e.path().is_dir() && rows(&e.path()))
+}
+
+/// A lab trial's outcome: `interrupted`, with the reason, when a peer was
+/// absent, died or was of the wrong type; never counted.
+fn lab_outcome(a: &mut Attempt, out: &Path, w: &LabWatch) {
+    let why = w.interrupted.clone().or_else(|| {
+        if a.state == AttemptState::Interrupted {
+            return None;
+        }
+        if !a.report {
+            // The run refused or lost a peer before it could report
+            // (the robot did not come; a peer of the wrong type).
+            return Some(format!("the run ended without a report: {}", a.faults.first().cloned().unwrap_or_default()));
+        }
+        let r: serde_json::Value = read_json(&out.join("report.json")).ok()?;
+        let entered = r.pointer("/frames/entered").and_then(serde_json::Value::as_u64).or_else(|| ros2_entered(&r));
+        let bad = r.pointer("/emulator/frames/bad_input").and_then(serde_json::Value::as_object).map_or(0, |b| b.values().filter_map(serde_json::Value::as_u64).sum::<u64>());
+        match entered {
+            Some(0) if bad > 0 => Some(format!("the lab's console sent {bad} datagrams, none an ITP frame (wrong size, or bad flags): a peer of the wrong type")),
+            Some(0) => Some(format!("the lab's console sent nothing to {}", w.console)),
+            _ => None,
+        }
+    });
+    if let Some(why) = why {
+        a.state = AttemptState::Interrupted;
+        a.note = why;
+    }
+}
+
+/// Messages that entered a ROS 2 run's lanes, summed.
+fn ros2_entered(r: &serde_json::Value) -> Option<u64> {
+    let lanes = r.get("ros2")?.get("lanes")?.as_array()?;
+    Some(lanes.iter().filter_map(|l| l.pointer("/frames/entered").and_then(serde_json::Value::as_u64)).sum())
 }
 
 /// What `netfi run` is given as the condition's scenario: a preset's name,
@@ -186,8 +351,8 @@ fn trial_run(spec: &TrialSpec, scenario: &str, capture: Option<&Path>, out: &Pat
 }
 
 /// The trial's `netfi run`: its own process group, its output in `out`,
-/// stopped (SIGTERM) if its runner dies.
-fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u64, run_id: &str) -> Result<Command, StudyError> {
+/// stopped (SIGTERM) if its runner dies; and the run it starts.
+fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u64, run_id: &str) -> Result<(Command, RunArgs), StudyError> {
     let capture = s.capture.as_deref().map(absolute);
     let run = trial_run(&s.study.trial, scenario, capture.as_deref(), out, seed, run_id)?;
     let mut cmd = Command::new(netfi);
@@ -203,18 +368,35 @@ fn run_command(s: &OpenStudy, netfi: &Path, scenario: &str, out: &Path, seed: u6
             Ok(())
         });
     }
-    Ok(cmd)
+    Ok((cmd, run))
 }
 
 /// Waits for the run to end, passing one SIGINT on once `stop()` turns
 /// true; how it ended, and whether it was asked to stop.
-fn wait(child: &mut std::process::Child, out: &Path, stop: impl Fn() -> bool) -> Result<(std::process::ExitStatus, bool), StudyError> {
+fn wait(
+    child: &mut std::process::Child,
+    out: &Path,
+    stop: impl Fn() -> bool,
+    mut watch: Option<&mut LabWatch>,
+    seen: &mut impl FnMut(&LabWatch),
+) -> Result<(std::process::ExitStatus, bool), StudyError> {
     let mut asked = false;
     loop {
         match child.try_wait() {
             Ok(Some(status)) => return Ok((status, asked)),
             Ok(None) => {}
             Err(e) => return Err(StudyError::Io { path: out.to_path_buf(), source: e }),
+        }
+        let lab_ends = watch.as_deref_mut().is_some_and(|w| {
+            let end = w.look();
+            seen(w);
+            end
+        });
+        if lab_ends && !asked {
+            // A peer died or never came: the run is stopped as Ctrl-C
+            // stops it, and the trial is interrupted (not `stopped`).
+            // SAFETY: signalling our own child, not yet reaped.
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
         }
         if stop() && !asked {
             asked = true;
@@ -440,7 +622,7 @@ mod tests {
 
     #[test]
     fn what_a_study_sets_for_each_trial_is_what_run_args_may_not_give() {
-        let spec = TrialSpec { duration_s: Some(60.0), capture: Some("c.lz4".into()), rate_hz: Some(500.0), run_args: vec![] };
+        let spec = TrialSpec { duration_s: Some(60.0), capture: Some("c.lz4".into()), rate_hz: Some(500.0), run_args: vec![], peers: Default::default(), lab_args: vec![] };
         let run = trial_run(&spec, "PLM-1", Some(Path::new("/data/c.lz4")), Path::new("/data/P1/trial-01"), 3, "study-r1").unwrap();
         let cmd = RunArgs::command();
         let m = cmd.clone().try_get_matches_from(run.to_argv()).unwrap();

@@ -91,6 +91,12 @@ pub struct EmulatorArgs {
     /// Drop frames with a wrong ITP checksum (default: count and pass them).
     #[arg(long)]
     pub drop_bad_checksum: bool,
+    /// Follow the motion in the ITP frames taken in (the console's) and
+    /// released (towards the robot): motion per arm, clutch activations,
+    /// stalls and their divergence, in `emulator.json` (`kinematics`).
+    /// `netfi run` sets it when the lab plays the console or the robot.
+    #[arg(long)]
+    pub kinematics: bool,
     /// Frames expected, 1 to 10^13 (sizes the trace table and the loss
     /// interval's batches).
     #[arg(long, default_value_t = 100_000, value_parser = values::expected_frames())]
@@ -126,6 +132,7 @@ impl Render for EmulatorArgs {
             .val("--expected-frames", self.expected_frames)
             .group(&self.placement)
             .switch("--drop-bad-checksum", self.drop_bad_checksum)
+            .switch("--kinematics", self.kinematics)
             .group(&self.channels)
             .opt("--wait-for-peer-s", self.wait_for_peer_s)
             .group(&self.ends)
@@ -145,6 +152,7 @@ impl EmulatorArgs {
             scenario: ScenarioArgs::named(scenario),
             placement: EmulatorPlacement::default(),
             drop_bad_checksum: false,
+            kinematics: false,
             expected_frames: 100_000,
             out: PathBuf::from("out"),
             wait_for_peer_s: None,

@@ -65,6 +65,7 @@ fn an_emulator_parses_back_what_it_renders() {
         scenario: ScenarioArgs { scenario: "PLM-2".into(), seed: Some(3), queue_capacity: Some(77) },
         placement: EmulatorPlacement { core: Some(1), no_pin: false, rt_priority: Some(5), isolate: true },
         drop_bad_checksum: true,
+        kinematics: true,
         expected_frames: 1234,
         out: "o/e".into(),
         wait_for_peer_s: Some(1.5),

@@ -3,7 +3,8 @@
 //! egress towards the robot. The stream ends on the console's end marker;
 //! the robot is sent the emulator's own once every held frame is out.
 
-use crate::frame::ItpView;
+use crate::frame::{ItpFrame, ItpView};
+use crate::kinematics::{Kinematics, KinematicsConfig};
 use crate::injector::{DropCause, Invalid};
 use crate::sample::{FrameSample, ITP_FRAME_LEN};
 use crate::service::emulator::path::ForwardChannel;
@@ -33,6 +34,10 @@ pub struct Forward<S, K> {
     bad_checksum_passed: u64,
     /// Bad input by kind.
     pub bad_input: BadInput,
+    /// The motion in the frames taken in (the console's side) and released
+    /// (the robot's), when followed: a frame's fields read and summed, tens
+    /// of ns, taken after the release is sent.
+    kinematics: Option<Box<Kinematics>>,
 }
 
 impl<S: FrameSource, K: FrameSink> Forward<S, K> {
@@ -48,8 +53,22 @@ impl<S: FrameSource, K: FrameSink> Forward<S, K> {
             accept_raw,
             bad_checksum_passed: 0,
             bad_input: BadInput::default(),
+            kinematics: None,
         }
     }
+
+    /// Follows the motion in the ITP frames taken in and released, when
+    /// `follow`.
+    pub fn following_motion(mut self, follow: bool) -> Forward<S, K> {
+        self.kinematics = follow.then(|| Box::new(Kinematics::new(KinematicsConfig::default()).expect("the default settings are valid")));
+        self
+    }
+}
+
+/// The ITP frame a sample carries, if it is one (not an opaque datagram).
+#[inline]
+fn itp(s: &FrameSample) -> Option<ItpFrame> {
+    (!s.is_raw() && s.len as usize == ITP_FRAME_LEN).then(|| ItpFrame::parse_unverified(&ItpView::new_unchecked(&s.wire[..])))
 }
 
 impl<S: FrameSource, K: FrameSink> ForwardChannel for Forward<S, K> {
@@ -90,6 +109,9 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
                 match classify(sample, self.drop_bad_checksum, self.accept_raw, &mut self.bad_input) {
                     Ok((seq, bad)) => {
                         self.bad_checksum_passed += u64::from(bad);
+                        if let (Some(k), Some(f)) = (self.kinematics.as_deref_mut(), itp(sample)) {
+                            k.console(t, &f);
+                        }
                         Take::Item(*sample, None, arrival(Some(seq)))
                     }
                     Err((why, seq)) => {
@@ -113,7 +135,11 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
     /// and its injected delay.
     #[inline]
     fn release(&mut self, item: &FrameSample, scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
-        crate::service::emulator::path::release_stamped!(self.sink, item, scheduled_ns, stamp)
+        let sent = crate::service::emulator::path::release_stamped!(self.sink, item, scheduled_ns, stamp);
+        if let (Some(k), Ok(t), Some(f)) = (self.kinematics.as_deref_mut(), &sent, itp(item)) {
+            k.robot(*t, &f);
+        }
+        sent
     }
 
     fn send_end(&mut self, released: u64) {
@@ -133,7 +159,12 @@ impl<S: FrameSource, K: FrameSink> Channel for Forward<S, K> {
     }
 
     fn finish(&mut self, _account: &Account, sent: Option<u64>) -> (ForwardExtra, bool) {
-        let extra = ForwardExtra { sent_by_console: sent, bad_checksum_passed: self.bad_checksum_passed, bad_input: std::mem::take(&mut self.bad_input) };
+        let extra = ForwardExtra {
+            sent_by_console: sent,
+            bad_checksum_passed: self.bad_checksum_passed,
+            bad_input: std::mem::take(&mut self.bad_input),
+            kinematics: self.kinematics.as_ref().map(|k| k.report()),
+        };
         (extra, true)
     }
 }

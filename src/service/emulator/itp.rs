@@ -43,7 +43,7 @@ fn open_lane(l: &LaneConfig, stop: &dyn Fn() -> bool) -> Result<(ItpLane, Sessio
         report::write_json(&l.out_dir.join(file), &value).map_err(OpenError::from)?;
     }
     let crate::transport::Transports { ingress, egress, sessions } = t;
-    let chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw());
+    let chan = Forward::new(ingress, egress, a.drop_bad_checksum, l.accept_raw()).following_motion(a.kinematics);
     let forward = Path::new(chan, scenario, l.seed, l.queue_capacity, a.expected_frames, &l.out_dir, true).map_err(OpenError::from)?;
     Ok((Lane::new(forward, reverse), sessions))
 }

@@ -71,6 +71,7 @@ pub fn lane_report(fwd: PathReport<ForwardExtra>, paths: BTreeMap<String, serde_
         steal_ms: run.steal.ms,
         steal_fraction: run.steal.fraction,
         busy: Some(lane.busy),
+        kinematics: fwd.extra.kinematics.and_then(|k| serde_json::to_value(k).ok()),
     };
     EmulatorReport { shaping, process: WithPaths { inner: process, paths } }
 }

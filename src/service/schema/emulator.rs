@@ -170,6 +170,11 @@ pub struct EmulatorProcess {
     /// The loop's time on frames, and the rate it implies ([`LoopBusy`]).
     #[serde(default)]
     pub busy: Option<LoopBusy>,
+    /// The motion in the frames taken in (the console's) and released
+    /// (towards the robot), with `--kinematics`: a
+    /// [`crate::kinematics::KinematicsReport`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinematics: Option<serde_json::Value>,
 }
 
 /// The emulator's own report, written as `emulator.json`: one flat JSON

@@ -11,4 +11,8 @@ pub struct ForwardExtra {
     pub sent_by_console: Option<u64>,
     pub bad_checksum_passed: u64,
     pub bad_input: BadInput,
+    /// The motion in the frames taken in and released, when followed
+    /// (`--kinematics`); carried into `emulator.json` by the lane's report.
+    #[serde(skip)]
+    pub kinematics: Option<crate::kinematics::KinematicsReport>,
 }

@@ -5,7 +5,7 @@ mod ctx;
 mod raw;
 
 use super::file::{
-    BlockOrder, Condition, ConditionSource, Block, Measure, Participant, Questionnaires, Study, StudyFileError, TlxWeighting, TlxWhen, TrialSpec,
+    CleanRule, Peers, BlockOrder, Condition, ConditionSource, Block, Measure, Participant, Questionnaires, Study, StudyFileError, TlxWeighting, TlxWhen, TrialSpec,
     Within, MAX_NAME_LEN, MAX_PARTICIPANTS, MAX_TRIALS_PER_CONDITION, MAX_TRIALS_PER_PARTICIPANT, MAX_TRIAL_S, STUDY_RUN_ARGS,
 };
 use super::square::MAX_BLOCKS;
@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use toml::Spanned;
 use ctx::Ctx;
-use raw::{Raw, RawBlock, RawCondition, RawMeasure, RawOrder, RawQuestionnaires, RawTrial, TimeValue};
+use raw::{Raw, RawBlock, RawClean, RawCondition, RawMeasure, RawOrder, RawQuestionnaires, RawTrial, TimeValue};
 
 /// A name that becomes a folder and a CSV value: letters, digits, `-`,
 /// `_`, `.`, `+`, spaces inside; not empty, not starting with `.`.
@@ -59,6 +59,7 @@ pub fn parse_study(text: &str, origin: &str, default_name: &str) -> Result<Study
     let participants = participants(&ctx, &raw.participant, &blocks, order)?;
     let first_block = first_block(&ctx, first.as_ref(), &blocks, order)?;
     let measures = measures(&ctx, &raw.measure, &participants)?;
+    let clean = clean_rule(&ctx, raw.clean)?;
     let per_participant: usize = blocks.iter().map(|b| b.conditions.len() * b.trials as usize).sum();
     if per_participant > MAX_TRIALS_PER_PARTICIPANT {
         return Err(ctx.err(None, "block", format!("{per_participant} trials per participant: at most {MAX_TRIALS_PER_PARTICIPANT}")));
@@ -102,6 +103,7 @@ pub fn parse_study(text: &str, origin: &str, default_name: &str) -> Result<Study
         questionnaires,
         measures,
         first_block,
+        clean,
     })
 }
 
@@ -148,7 +150,7 @@ fn trials_count(ctx: &Ctx, t: &Spanned<i64>, field: &str) -> Result<u32, StudyFi
 }
 
 fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileError> {
-    let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new() }) };
+    let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new(), peers: Peers::Synthetic, lab_args: Vec::new() }) };
     let duration_s = match raw.duration_s {
         None => None,
         Some(d) => {
@@ -175,9 +177,89 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
             return Err(ctx.err(None, "trial.capture", "empty: a capture file, relative to the study file"));
         }
     }
-    let spec = TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.iter().map(|a| a.get_ref().clone()).collect() };
-    check_run_args(ctx, &spec, &raw.run_args)?;
+    let lab_args = match &raw.lab {
+        Some(t) => lab_flags(ctx, t)?,
+        None => Vec::new(),
+    };
+    let peers = match &raw.peers {
+        None if raw.lab.is_some() => {
+            return Err(ctx.err(raw.lab.as_ref().map(|t| t.span()), "trial.peers", "missing: with a `[trial.lab]`, say who plays each trial: `peers = \"lab\"` (the lab's console and robot) or `peers = \"synthetic\"` (netfi's own, a dry run)"));
+        }
+        None => Peers::Synthetic,
+        Some(p) => match p.get_ref().as_str() {
+            "lab" => Peers::Lab,
+            "synthetic" => Peers::Synthetic,
+            other => return Err(ctx.err(Some(p.span()), "trial.peers", format!("`{other}`: lab (the lab's console and robot, met where `[trial.lab]` says) or synthetic (netfi's own console and robot: a dry run)"))),
+        },
+    };
+    if let (Peers::Lab, Some(_)) = (peers, &raw.capture) {
+        return Err(ctx.err(raw.peers.as_ref().map(|p| p.span()), "trial.capture", "a capture is replayed by netfi's own console; with `peers = \"lab\"` the lab's console plays (keep the capture for a dry run with `peers = \"synthetic\"`)"));
+    }
+    let spec = TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.iter().map(|a| a.get_ref().clone()).collect(), peers, lab_args };
+    check_run_args(ctx, &spec, &raw.run_args, raw.lab.as_ref().map(|t| t.span()))?;
     Ok(spec)
+}
+
+/// `[trial.lab]` as `netfi run` flags: each key a flag of where the
+/// emulator meets the lab's programs (`ingress`, `console-from`,
+/// `ros2-topic`, …; `_` or `-`), a value its value (a list repeats the
+/// flag, `true` gives a switch).
+fn lab_flags(ctx: &Ctx, table: &Spanned<toml::Table>) -> Result<Vec<String>, StudyFileError> {
+    use clap::Args as _;
+    let peers = crate::service::args::PeersArgs::augment_args(clap::Command::new("lab"));
+    let longs: Vec<&str> = peers.get_arguments().filter_map(|a| a.get_long()).collect();
+    let at = Some(table.span());
+    let mut out = Vec::new();
+    for (key, value) in table.get_ref() {
+        let long = key.replace('_', "-");
+        let field = format!("trial.lab.{key}");
+        if !longs.contains(&long.as_str()) {
+            return Err(ctx.err(at.clone(), &field, format!("`{key}` is not where a trial meets the lab's programs: one of {}", longs.join(", "))));
+        }
+        let flag = format!("--{long}");
+        let word = |v: &toml::Value| -> Result<String, StudyFileError> {
+            match v {
+                toml::Value::String(s) => Ok(s.clone()),
+                toml::Value::Integer(i) => Ok(i.to_string()),
+                toml::Value::Float(f) => Ok(f.to_string()),
+                _ => Err(ctx.err(at.clone(), &field, "a text, a number, `true`, or a list of texts (the flag given once for each)")),
+            }
+        };
+        match value {
+            toml::Value::Boolean(true) => out.push(flag),
+            toml::Value::Boolean(false) => {}
+            toml::Value::Array(items) => {
+                for v in items {
+                    out.push(flag.clone());
+                    out.push(word(v)?);
+                }
+            }
+            v => {
+                out.push(flag);
+                out.push(word(v)?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `[clean]`: when a trial is suspect.
+fn clean_rule(ctx: &Ctx, raw: Option<RawClean>) -> Result<CleanRule, StudyFileError> {
+    let mut rule = CleanRule::default();
+    let Some(raw) = raw else { return Ok(rule) };
+    if let Some(v) = raw.netfi_added_p99_ms {
+        if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) {
+            return Err(ctx.err(Some(v.span()), "clean.netfi_added_p99_ms", format!("{}: a time in ms, more than 0 (default 1)", v.get_ref())));
+        }
+        rule.netfi_added_p99_ms = *v.get_ref();
+    }
+    if let Some(v) = raw.steal_fraction {
+        if !(0.0..=1.0).contains(v.get_ref()) {
+            return Err(ctx.err(Some(v.span()), "clean.steal_fraction", format!("{}: a fraction 0 to 1 of the trial's CPU time (default 0.05)", v.get_ref())));
+        }
+        rule.steal_fraction = *v.get_ref();
+    }
+    Ok(rule)
 }
 
 /// Refuses a `run_args` word that gives what the study decides for each
@@ -207,8 +289,13 @@ fn refuse_what_the_study_sets(ctx: &Ctx, run_args: &[Spanned<String>]) -> Result
 /// Reads the trial's `netfi run` as `netfi run` will (a preset for its
 /// scenario): clap's refusal, at the word it names, else the run's own
 /// check.
-fn check_run_args(ctx: &Ctx, spec: &TrialSpec, run_args: &[Spanned<String>]) -> Result<(), StudyFileError> {
-    let Some(first) = run_args.first() else { return Ok(()) };
+fn check_run_args(ctx: &Ctx, spec: &TrialSpec, run_args: &[Spanned<String>], lab: Option<Range<usize>>) -> Result<(), StudyFileError> {
+    if run_args.is_empty() {
+        // The lab's endpoints, read as `netfi run` reads them.
+        let run = spec.run("Normal", None).map_err(|e| ctx.err(lab.clone(), "trial.lab", refusal(&e)))?;
+        return run.validate().map_err(|e| ctx.err(lab, "trial.lab", e.to_string()));
+    }
+    let first = &run_args[0];
     let capture = spec.capture.as_deref().map(std::path::Path::new);
     let at = |i: usize| (Some(run_args[i].span()), format!("trial.run_args[{}]", i + 1));
     let run = spec.run("Normal", capture).map_err(|e| {

@@ -26,6 +26,14 @@ pub(super) struct Raw {
     pub(super) participant: Vec<Spanned<toml::Table>>,
     #[serde(default)]
     pub(super) measure: Vec<Spanned<RawMeasure>>,
+    pub(super) clean: Option<RawClean>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawClean {
+    pub(super) netfi_added_p99_ms: Option<Spanned<f64>>,
+    pub(super) steal_fraction: Option<Spanned<f64>>,
 }
 
 /// A time as a file writes it: a number in the field's unit, or text with
@@ -52,6 +60,8 @@ pub(super) struct RawTrial {
     pub(super) rate_hz: Option<Spanned<f64>>,
     #[serde(default)]
     pub(super) run_args: Vec<Spanned<String>>,
+    pub(super) peers: Option<Spanned<String>>,
+    pub(super) lab: Option<Spanned<toml::Table>>,
 }
 
 #[derive(Deserialize)]

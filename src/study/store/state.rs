@@ -77,6 +77,15 @@ pub struct Attempt {
     /// The study's `[[measure]]`s as the experimenter counted them.
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub counts: std::collections::BTreeMap<String, u32>,
+    /// While it runs with the lab's programs: the peer it waits for
+    /// (`the lab's console at udp://…`); `None` once both came.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waiting_for: Option<String>,
+    /// With the lab's programs: seconds from the run's start until the
+    /// lab's console's first frame was seen (to within about a second:
+    /// the trace is written once a second).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub console_came_s: Option<f64>,
 }
 
 /// A participant's state: every attempt, in the order they began.

@@ -97,7 +97,7 @@ impl Direction for Forward {
     type Extra = ForwardExtra;
 
     fn extra(c: &Counts, sent: Option<u64>) -> ForwardExtra {
-        ForwardExtra { sent_by_console: sent, bad_checksum_passed: 0, bad_input: c.bad_input.clone() }
+        ForwardExtra { sent_by_console: sent, bad_checksum_passed: 0, bad_input: c.bad_input.clone(), kinematics: None }
     }
 }
 
