@@ -65,6 +65,10 @@ pub struct ReportFile {
     /// The level below which a Holm-adjusted p marks a difference in the
     /// tables.
     pub alpha: f64,
+    /// Done trials that were suspect (`[clean]`), and how many of them the
+    /// comparison left out (all, with `--leave-out-suspect`; else none).
+    pub suspect_done: usize,
+    pub suspect_left_out: usize,
 }
 
 /// A column of the trials' table against a TLX scale, over the TLX answers.
@@ -130,6 +134,15 @@ pub struct TlxStat {
     pub scales: Vec<QuestionnaireStat>,
 }
 
+/// What the report says of the suspect trials (`[clean]`).
+pub fn suspect_words(r: &ReportFile) -> String {
+    match (r.suspect_done, r.suspect_left_out) {
+        (0, _) => "No done trial is suspect: in each, netfi's own added delay and the host's steal were within the study's `[clean]` bounds, and no frame was lost before the emulator or released before the robot listened.".to_string(),
+        (n, 0) => format!("{n} done trials are suspect (trials.csv: `clean`, `suspect_because`) and are counted here; `netfi study report --leave-out-suspect` leaves them out."),
+        (n, _) => format!("{n} suspect done trials were left out of every comparison (trials.csv keeps them, marked `suspect`)."),
+    }
+}
+
 /// The words of the report's method.
 pub const METHOD: &str = "Trials marked done count; a participant's value for a condition is the mean of their done trials of it; \
 mean ± sd are over participants (sd with n − 1). Each condition is compared with the baseline, paired by participant: a two-sided \
@@ -151,12 +164,20 @@ pub fn rows(s: &OpenStudy) -> Result<Vec<Row>, StudyError> {
                 AttemptState::Running => None,
                 _ => load_figures(&dir.join(&a.dir)),
             };
+            let why = figures.as_ref().map(|f| super::metrics::suspect_because(f, &s.study.clean));
+            let clean = match &why {
+                None => "",
+                Some(w) if w.is_empty() => "clean",
+                Some(_) => "suspect",
+            };
             out.push(Row {
                 participant: part.id.clone(),
                 attributes: part.attributes.clone(),
                 trial: a.trial,
                 attempt: a.attempt,
                 outcome: a.state.as_str().to_string(),
+                clean: clean.to_string(),
+                suspect_because: why.map(|w| w.join("; ")).unwrap_or_default(),
                 block: s.study.blocks[t.block].name.clone(),
                 block_position: t.block_position,
                 condition: a.condition.clone(),
@@ -210,6 +231,8 @@ pub fn trials_csv(rows: &[Row], attributes: &[String], columns: &[Column]) -> St
             r.trial.to_string(),
             r.attempt.to_string(),
             r.outcome.clone(),
+            r.clean.clone(),
+            field(&r.suspect_because),
             field(&r.block),
             r.block_position.to_string(),
             field(&r.condition),
@@ -276,8 +299,9 @@ fn group_by(s: &OpenStudy, given: Option<&str>) -> Result<Option<String>, StudyE
     }
 }
 
-/// Writes the report into `out` (default `DATA/report/`); the folder.
-pub fn write(s: &OpenStudy, out: Option<&Path>, group: Option<&str>) -> Result<PathBuf, StudyError> {
+/// Writes the report into `out` (default `DATA/report/`); the folder, and
+/// what it says of the suspect trials.
+pub fn write(s: &OpenStudy, out: Option<&Path>, group: Option<&str>, leave_out_suspect: bool) -> Result<(PathBuf, String), StudyError> {
     let out = out.map(Path::to_path_buf).unwrap_or_else(|| s.data.join("report"));
     std::fs::create_dir_all(&out).map_err(|source| StudyError::Io { path: out.clone(), source })?;
     let rows = rows(s)?;
@@ -289,18 +313,26 @@ pub fn write(s: &OpenStudy, out: Option<&Path>, group: Option<&str>) -> Result<P
     }
     crate::durable::write_whole(&out.join("sus.csv"), answers_csv(s, &answers, Instrument::Sus, &attributes).as_bytes())?;
     crate::durable::write_whole(&out.join("tlx.csv"), answers_csv(s, &answers, Instrument::Tlx, &attributes).as_bytes())?;
-    let report = compute(s, &rows, &answers, group)?;
+    let report = compute(s, &rows, &answers, group, leave_out_suspect)?;
     write_json(&out.join("summary.json"), &report)?;
     crate::durable::write_whole(&out.join("summary.csv"), summary_csv(&report.summaries, &report.group_by).as_bytes())?;
     crate::durable::write_whole(&out.join("questionnaires.csv"), summary_csv(&report.questionnaires, &report.group_by).as_bytes())?;
     crate::durable::write_whole(&out.join("table.csv"), table_csv(&report).as_bytes())?;
     crate::durable::write_whole(&out.join("correlations.csv"), correlations_csv(&report.correlations).as_bytes())?;
     crate::durable::write_whole(&out.join("report.html"), page(&report).into_string().as_bytes())?;
-    Ok(out)
+    Ok((out, suspect_words(&report)))
 }
 
 /// The report's figures from the rows and answers.
-pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&str>) -> Result<ReportFile, StudyError> {
+pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&str>, leave_out_suspect: bool) -> Result<ReportFile, StudyError> {
+    let suspect_done = rows.iter().filter(|r| r.outcome == "done" && r.clean == "suspect").count();
+    let kept: Vec<Row>;
+    let rows = if leave_out_suspect {
+        kept = rows.iter().filter(|r| r.clean != "suspect").cloned().collect();
+        &kept[..]
+    } else {
+        rows
+    };
     let conditions: Vec<String> = s.study.conditions.iter().map(|c| c.name.clone()).collect();
     let baseline = s.study.baseline.map(|b| conditions[b].clone());
     let group_by = group_by(s, group)?;
@@ -357,6 +389,8 @@ pub fn compute(s: &OpenStudy, rows: &[Row], answers: &[Answer], group: Option<&s
         questionnaires,
         correlations,
         alpha: ALPHA,
+        suspect_done,
+        suspect_left_out: if leave_out_suspect { suspect_done } else { 0 },
     })
 }
 
@@ -386,6 +420,8 @@ fn tlx_units(s: &OpenStudy, answers: &[Answer]) -> (Vec<String>, Option<String>,
                 trial: a.after_trial.unwrap_or(0),
                 attempt: 1,
                 outcome: "done".into(),
+                clean: String::new(),
+                suspect_because: String::new(),
                 block: a.block.clone().unwrap_or_default(),
                 block_position: 0,
                 condition: unit,
@@ -562,6 +598,7 @@ pub fn page(r: &ReportFile) -> Markup {
                 h1 { "Study report: " (r.study) }
                 p { "Generated " (r.generated_utc) ". Baseline: " b { (r.baseline.as_deref().unwrap_or("none (no tests)")) } "." }
                 p class="method" { (r.method) }
+                p class="method" { (suspect_words(r)) }
                 @for summary in &r.summaries {
                     (paper_table(r, summary))
                 }

@@ -25,6 +25,11 @@ pub struct Row {
     /// `done`, `failed`, `repeat`, `interrupted`, `ran` (not yet marked)
     /// or `running`.
     pub outcome: String,
+    /// `clean`, `suspect` (netfi or the host got in the trial's way:
+    /// `[clean]`), or empty where the run gave no figures.
+    pub clean: String,
+    /// Why it is suspect.
+    pub suspect_because: String,
     pub block: String,
     pub block_position: u32,
     pub condition: String,

@@ -11,7 +11,7 @@
 
 use super::file::{ConditionSource, TrialSpec, MAX_COUNT};
 use std::collections::BTreeMap;
-use super::metrics::{figures, outages, Figures, TraceFrame, METRICS};
+use super::metrics::{figures, Figures, TraceFigures, TraceFrame, METRICS};
 use super::questionnaire;
 use super::schedule::Due;
 use crate::service::args::{self, RunArgs};
@@ -442,15 +442,27 @@ fn finish(a: &mut Attempt, out: &Path, status: std::process::ExitStatus, asked: 
     }
 }
 
-/// A trial folder's figures: from its `report.json` and `trace.csv`.
+/// A trial folder's figures: from its `report.json`, `trace.csv`, and the
+/// `ros2.json` of each ROS 2 lane.
 pub fn trial_figures(out: &Path, report: &serde_json::Value) -> Result<FiguresFile, StudyError> {
-    let o = read_outages(&out.join("trace.csv"))?;
-    let values = figures(report, &o);
+    let o = read_trace(&out.join("trace.csv"))?;
+    let values = figures(report, &o, &ros2_lanes(out));
     Ok(FiguresFile { figures: METRICS.iter().zip(values).map(|(m, v)| (m.name.to_string(), v)).collect() })
 }
 
-/// The frames of a run's `trace.csv` that outages need (copies left out).
-fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
+/// The `ros2.json` of each ROS 2 lane of the run in `out`, in lane order
+/// (one lane: in `out`; several: in its folders, by name).
+fn ros2_lanes(out: &Path) -> Vec<serde_json::Value> {
+    if let Ok(v) = read_json(&out.join("ros2.json")) {
+        return vec![v];
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(out).into_iter().flatten().flatten().map(|e| e.path()).filter(|p| p.join("ros2.json").is_file()).collect();
+    dirs.sort();
+    dirs.iter().filter_map(|d| read_json(&d.join("ros2.json")).ok()).collect()
+}
+
+/// The figures of a run's `trace.csv` (copies left out).
+fn read_trace(path: &Path) -> Result<TraceFigures, StudyError> {
     use crate::trace::{Column, Header};
     use std::io::BufRead;
     let bad = |problem: String| StudyError::Read { path: path.to_path_buf(), problem };
@@ -458,7 +470,7 @@ fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
         Ok(f) => f,
         // A run without a trace (a foreign layout) has no outage figures
         // to give; the count is then of nothing.
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(super::metrics::Outages::default()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(TraceFigures::default()),
         Err(e) => return Err(StudyError::Io { path: path.to_path_buf(), source: e }),
     };
     let mut lines = std::io::BufReader::new(f).lines();
@@ -476,7 +488,7 @@ fn read_outages(path: &Path) -> Result<super::metrics::Outages, StudyError> {
         }
         frames.push(TraceFrame { ingress_index: num(ix, Column::IngressIndex)?, ingress_ns: num(ns, Column::IngressNs)?, outage: f.get(reason) == Some(&"outage") });
     }
-    Ok(outages(frames))
+    Ok(TraceFigures::of(frames))
 }
 
 fn absolute(p: &Path) -> PathBuf {

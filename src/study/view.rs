@@ -28,6 +28,11 @@ pub struct TrialView {
     pub run_id: Option<String>,
     /// The last attempt's counts of the study's measures.
     pub counts: BTreeMap<String, u32>,
+    /// `clean` or `suspect` (the study's `[clean]`), once its run gave
+    /// figures; empty before.
+    pub clean: String,
+    /// Why it is suspect.
+    pub suspect_because: Vec<String>,
 }
 
 /// What comes next, for people.
@@ -44,6 +49,8 @@ pub struct NextView {
     pub key: Option<String>,
     /// A questionnaire's title, naming the trial or block it follows.
     pub title: Option<String>,
+    /// A running trial with the lab's programs: the peer it waits for.
+    pub waiting_for: Option<String>,
 }
 
 /// A participant's progress.
@@ -99,6 +106,8 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
         .iter()
         .map(|t| {
             let last = state.last_of(t.number);
+            let figures = last.filter(|a| !matches!(a.state, AttemptState::Running)).and_then(|a| super::trials::load_figures(&s.participant_dir(p).join(&a.dir)));
+            let why = figures.as_ref().map(|f| super::metrics::suspect_because(f, &s.study.clean));
             TrialView {
                 trial: t.number,
                 block: s.study.blocks[t.block].name.clone(),
@@ -114,6 +123,12 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
                 note: last.map(|a| a.note.clone()).unwrap_or_default(),
                 run_id: last.and_then(|a| a.run_id.clone()),
                 counts: last.map(|a| a.counts.clone()).unwrap_or_default(),
+                clean: match &why {
+                    None => String::new(),
+                    Some(w) if w.is_empty() => "clean".into(),
+                    Some(_) => "suspect".into(),
+                },
+                suspect_because: why.unwrap_or_default(),
             }
         })
         .collect();
@@ -124,11 +139,11 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
     let name = |t: u32| sch.trials.iter().find(|x| x.number == t).map(|x| (s.study.conditions[x.condition].name.clone(), s.study.blocks[x.block].name.clone()));
     let nv = |kind, trial: Option<u32>, attempt| {
         let (condition, block) = trial.and_then(name).map_or((None, None), |(c, b)| (Some(c), Some(b)));
-        NextView { kind, trial, attempt, condition, block, questionnaire: None, key: None, title: None }
+        NextView { kind, trial, attempt, condition, block, questionnaire: None, key: None, title: None, waiting_for: None }
     };
     let next = match next {
         Next::Trial { trial, attempt } => nv("trial", Some(trial.number), Some(*attempt)),
-        Next::Running(a) => nv("running", Some(a.trial), Some(a.attempt)),
+        Next::Running(a) => NextView { waiting_for: a.waiting_for.clone(), ..nv("running", Some(a.trial), Some(a.attempt)) },
         Next::Unmarked(a) => nv("unmarked", Some(a.trial), Some(a.attempt)),
         Next::Questionnaire(d) => {
             let (q, block) = match d {
@@ -136,7 +151,7 @@ fn view(s: &OpenStudy, p: usize, state: &ParticipantState, next: &Next, busy: Op
                 Due::Tlx { block, .. } => ("tlx", Some(s.study.blocks[*block].name.clone())),
             };
             let title = questionnaire_title(s, p, d);
-            NextView { kind: "questionnaire", trial: None, attempt: None, condition: None, block, questionnaire: Some(q), key: Some(d.key()), title: Some(title) }
+            NextView { kind: "questionnaire", trial: None, attempt: None, condition: None, block, questionnaire: Some(q), key: Some(d.key()), title: Some(title), waiting_for: None }
         }
         Next::Finished => nv("finished", None, None),
     };

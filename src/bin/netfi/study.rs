@@ -133,6 +133,10 @@ pub enum StudyCmd {
         /// (default: `group`, when every participant has one).
         #[arg(long)]
         group: Option<String>,
+        /// Leave the suspect trials (`[clean]`) out of the comparison; the
+        /// report says how many it left out.
+        #[arg(long)]
+        leave_out_suspect: bool,
     },
 }
 
@@ -177,9 +181,10 @@ pub fn run(args: StudyArgs) -> Result<()> {
         }
         StudyCmd::Answer { file, participant, instrument, values, missing, pairs } => answer(&file, &participant, instrument, &values, pairs.as_deref(), missing.as_deref()),
         StudyCmd::Status { file, participant, json } => status(&OpenStudy::open(&file)?, participant.as_deref(), json),
-        StudyCmd::Report { file, out, group } => {
+        StudyCmd::Report { file, out, group, leave_out_suspect } => {
             let s = OpenStudy::open(&file)?;
-            let dir = netfi::study::report::write(&s, out.as_deref(), group.as_deref())?;
+            let (dir, suspect) = netfi::study::report::write(&s, out.as_deref(), group.as_deref(), leave_out_suspect)?;
+            eprintln!("{suspect}");
             println!("{}", dir.display());
             Ok(())
         }
@@ -325,7 +330,10 @@ fn status(s: &OpenStudy, only: Option<&str>, json: bool) -> Result<()> {
         let counts: Vec<String> = v.counts.iter().map(|(k, n)| format!("{n} {k}")).collect();
         let next = match v.next.kind {
             "trial" => format!("next: trial {} ({}, block {})", v.next.trial.unwrap_or(0), v.next.condition.as_deref().unwrap_or("?"), v.next.block.as_deref().unwrap_or("?")),
-            "running" => format!("running: trial {}", v.next.trial.unwrap_or(0)),
+            "running" => match &v.next.waiting_for {
+                Some(w) => format!("running: trial {}, waiting for {w}", v.next.trial.unwrap_or(0)),
+                None => format!("running: trial {}", v.next.trial.unwrap_or(0)),
+            },
             "unmarked" => format!("trial {} waits for its mark", v.next.trial.unwrap_or(0)),
             "questionnaire" => format!("due: {}", v.next.key.as_deref().unwrap_or("?")),
             _ => "finished".into(),
@@ -337,6 +345,7 @@ fn status(s: &OpenStudy, only: Option<&str>, json: bool) -> Result<()> {
                 let extra = [
                     (t.attempts > 1).then(|| format!("{} attempts", t.attempts)),
                     t.stopped.then(|| "stopped".to_string()),
+                    (t.clean == "suspect").then(|| format!("SUSPECT: {}", t.suspect_because.join("; "))),
                     (!t.counts.is_empty()).then(|| t.counts.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")),
                     (!t.note.is_empty()).then(|| t.note.clone()),
                 ];

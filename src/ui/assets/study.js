@@ -30,7 +30,7 @@ const study = {
     const running = n.kind === "running";
     let text = {
       trial: `Trial ${n.trial} (attempt ${n.attempt}): ${n.condition}, block ${n.block}`,
-      running: `Trial ${n.trial} is running: ${n.condition}`,
+      running: `Trial ${n.trial} is running: ${n.condition}${n.waiting_for ? `; waiting for ${n.waiting_for}` : ""}`,
       unmarked: `Trial ${n.trial} (${n.condition}) ran: mark it`,
       questionnaire: `Questionnaire due: ${n.title}`,
       finished: "Every trial is done.",
@@ -56,7 +56,7 @@ const study = {
     $("study-changed").innerHTML = changed.map((c) => `<li>${esc(c)}</li>`).join("");
     const report = (t) => (t.run_id && !["pending", "running", "interrupted"].includes(t.state) ? `<a href="/runs/${encodeURIComponent(t.run_id)}/report">report</a>` : "");
     const counts = (t) => Object.entries(t.counts || {}).map(([k, c]) => `${esc(k)} ${c}`).join(", ");
-    const rows = v.trials.map((t) => `<tr data-state="${t.state}"><td>${t.trial}</td><td>${esc(t.block)}</td><td>${esc(t.condition)}</td><td>${t.state}${t.stopped ? " (stopped)" : ""}</td><td>${t.attempts}</td><td>${counts(t)}</td><td>${esc(t.note)}</td><td>${report(t)}</td></tr>`);
+    const rows = v.trials.map((t) => `<tr data-state="${t.state}"><td>${t.trial}</td><td>${esc(t.block)}</td><td>${esc(t.condition)}</td><td>${t.state}${t.stopped ? " (stopped)" : ""}${t.clean === "suspect" ? ` <span class="suspect">(suspect)</span>` : ""}</td><td>${t.attempts}</td><td>${counts(t)}</td><td>${esc(t.note)}${t.clean === "suspect" ? `<br><small>${esc((t.suspect_because || []).join("; "))}</small>` : ""}</td><td>${report(t)}</td></tr>`);
     $("trials").innerHTML = "<tr><th>trial</th><th>block</th><th>condition</th><th>state</th><th>attempts</th><th>counts</th><th>note</th><th></th></tr>" + rows.join("");
   },
 };
