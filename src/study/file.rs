@@ -16,6 +16,7 @@
 //! [trial]                         # how each trial's `netfi run` is started
 //! duration_s = 600                # the longest a trial runs (s, or "10min"); the experimenter stops it sooner
 //! peers = "lab"                   # lab: the lab's console and robot, at [trial.lab]; synthetic (default): netfi's own, a dry run
+//! peer_wait_s = 60                # lab: how long a trial waits for the console's first frame before it is interrupted
 //! capture = "console.bin"         # synthetic only: replay a recording instead of the synthetic console
 //! rate_hz = 1000
 //! run_args = ["--no-isolate"]     # any other `netfi run` options, as `netfi run` reads them
@@ -195,6 +196,9 @@ pub struct TrialSpec {
     /// `[trial.lab]` as `netfi run` flags: where the emulator meets the
     /// lab's programs (used with [`Peers::Lab`] only).
     pub lab_args: Vec<String>,
+    /// How long a trial waits for the lab's console's first frame, s
+    /// (`peer_wait_s`; default 60).
+    pub peer_wait_s: Option<f64>,
 }
 
 impl TrialSpec {

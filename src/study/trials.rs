@@ -147,7 +147,7 @@ pub fn run_next(s: &OpenStudy, p: usize, netfi: &Path, stop: impl Fn() -> bool, 
         }
     };
     a.run_pid = Some(child.id());
-    let mut watch = s.study.trial.lab().then(|| LabWatch::new(&run, &out));
+    let mut watch = s.study.trial.lab().then(|| LabWatch::new(&run, &out, s.study.trial.peer_wait_s));
     if let Some(w) = &watch {
         a.waiting_for = w.waiting_for.clone();
     }
@@ -197,9 +197,13 @@ pub struct Running {
     pub started_utc: String,
 }
 
-/// How long a trial waits for the lab's console's first frame when its
-/// `[trial.lab]` does not say (`wait-for-peer-s`), s.
+/// How long a trial waits for the lab's console's first frame when the
+/// study does not say (`[trial] peer_wait_s`), s.
 pub const LAB_CONSOLE_WAIT_S: f64 = args::run::LAB_ROBOT_WAIT_S;
+
+/// Whom a trial waits for before its emulator has opened its ports (a
+/// console that sends before then sends into nothing).
+const STARTING: &str = "netfi's emulator to open its ports";
 
 /// A trial with the lab's programs, watched while it runs: whom it waits
 /// for, when the console came, and a peer found dead (the run's log says
@@ -220,7 +224,7 @@ struct LabWatch {
 }
 
 impl LabWatch {
-    fn new(run: &RunArgs, out: &Path) -> LabWatch {
+    fn new(run: &RunArgs, out: &Path, console_wait_s: Option<f64>) -> LabWatch {
         let p = &run.peers;
         let ros2 = p.ros2.on();
         let console = if ros2 { "the ROS 2 topics".to_string() } else { p.ends.ingress.to_string() };
@@ -229,10 +233,10 @@ impl LabWatch {
         let now = std::time::Instant::now();
         LabWatch {
             out: out.to_path_buf(),
-            waiting_for: Some(robot.clone().unwrap_or_else(|| format!("the lab's console at {console}"))),
+            waiting_for: Some(robot.clone().unwrap_or_else(|| STARTING.to_string())),
             robot,
             console,
-            console_wait: Duration::from_secs_f64(p.wait_for_peer_s.unwrap_or(LAB_CONSOLE_WAIT_S)),
+            console_wait: Duration::from_secs_f64(console_wait_s.unwrap_or(LAB_CONSOLE_WAIT_S)),
             console_came_s: None,
             started: now,
             next_look: now,
@@ -266,7 +270,8 @@ impl LabWatch {
         }
         self.waiting_for = match (&self.robot, ready, self.console_came_s) {
             (Some(r), false, _) => Some(r.clone()),
-            (_, _, None) => Some(format!("the lab's console at {}", self.console)),
+            (None, false, _) => Some(STARTING.to_string()),
+            (_, true, None) => Some(format!("the lab's console at {}", self.console)),
             _ => None,
         };
         if ready && self.console_came_s.is_none() && self.started.elapsed() > self.console_wait + Duration::from_secs(1) {
@@ -634,7 +639,7 @@ mod tests {
 
     #[test]
     fn what_a_study_sets_for_each_trial_is_what_run_args_may_not_give() {
-        let spec = TrialSpec { duration_s: Some(60.0), capture: Some("c.lz4".into()), rate_hz: Some(500.0), run_args: vec![], peers: Default::default(), lab_args: vec![] };
+        let spec = TrialSpec { duration_s: Some(60.0), capture: Some("c.lz4".into()), rate_hz: Some(500.0), run_args: vec![], peers: Default::default(), lab_args: vec![], peer_wait_s: None };
         let run = trial_run(&spec, "PLM-1", Some(Path::new("/data/c.lz4")), Path::new("/data/P1/trial-01"), 3, "study-r1").unwrap();
         let cmd = RunArgs::command();
         let m = cmd.clone().try_get_matches_from(run.to_argv()).unwrap();

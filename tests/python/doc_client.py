@@ -189,6 +189,7 @@ def robot(run: str, out: str, ready: str, close_after: str = "") -> None:
     modes = [oct(os.stat(os.path.join("/dev/shm", n)).st_mode & 0o777) for n in mgmt]
     open(ready, "w").close()
     received = bad = 0
+    sequences = []
     marker = None
     deadline = time.monotonic() + 120
     while marker is None and time.monotonic() < deadline and not stopped(node):
@@ -204,6 +205,7 @@ def robot(run: str, out: str, ready: str, close_after: str = "") -> None:
             marker = s.console_index
         elif s.len == 124 and checksum_ok(bytes(s.wire)):
             received += 1
+            sequences.append(ITP.unpack(bytes(s.wire))[0])
         else:
             bad += 1
     while close_after and not os.path.exists(close_after) and time.monotonic() < deadline and not stopped(node):
@@ -211,7 +213,7 @@ def robot(run: str, out: str, ready: str, close_after: str = "") -> None:
     sub.delete()
     del sub, svc, node
     removed = close(c, run)
-    json.dump({"received": received, "bad": bad, "marker": marker, "mgmt_modes": modes, "removed_segment": removed}, open(out, "w"))
+    json.dump({"received": received, "bad": bad, "marker": marker, "sequences": sequences, "mgmt_modes": modes, "removed_segment": removed}, open(out, "w"))
 
 
 def console(run: str, frames: int, out: str) -> None:

@@ -27,7 +27,7 @@ fn root() -> PathBuf {
 }
 
 /// Whether python3 can import the bindings; prints why not when it cannot.
-fn python_ready() -> bool {
+pub(crate) fn python_ready() -> bool {
     let o = Command::new("python3").args(["-c", "import iceoryx2, lz4"]).output();
     let why = match o {
         Ok(o) if o.status.success() => return true,

@@ -8,6 +8,7 @@
 //! `pure.rs`.
 
 mod analysis;
+mod lab;
 mod browser;
 mod forms;
 mod pure;

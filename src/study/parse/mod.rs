@@ -150,7 +150,7 @@ fn trials_count(ctx: &Ctx, t: &Spanned<i64>, field: &str) -> Result<u32, StudyFi
 }
 
 fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileError> {
-    let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new(), peers: Peers::Synthetic, lab_args: Vec::new() }) };
+    let Some(raw) = raw else { return Ok(TrialSpec { duration_s: None, capture: None, rate_hz: None, run_args: Vec::new(), peers: Peers::Synthetic, lab_args: Vec::new(), peer_wait_s: None }) };
     let duration_s = match raw.duration_s {
         None => None,
         Some(d) => {
@@ -195,7 +195,13 @@ fn trial_spec(ctx: &Ctx, raw: Option<RawTrial>) -> Result<TrialSpec, StudyFileEr
     if let (Peers::Lab, Some(_)) = (peers, &raw.capture) {
         return Err(ctx.err(raw.peers.as_ref().map(|p| p.span()), "trial.capture", "a capture is replayed by netfi's own console; with `peers = \"lab\"` the lab's console plays (keep the capture for a dry run with `peers = \"synthetic\"`)"));
     }
-    let spec = TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.iter().map(|a| a.get_ref().clone()).collect(), peers, lab_args };
+    let peer_wait_s = match raw.peer_wait_s {
+        Some(w) if !(w.get_ref().is_finite() && *w.get_ref() > 0.0 && *w.get_ref() <= 3600.0) => {
+            return Err(ctx.err(Some(w.span()), "trial.peer_wait_s", format!("{}: seconds, more than 0 and at most an hour (default 60)", w.get_ref())));
+        }
+        w => w.map(Spanned::into_inner),
+    };
+    let spec = TrialSpec { duration_s, capture: raw.capture, rate_hz, run_args: raw.run_args.iter().map(|a| a.get_ref().clone()).collect(), peers, lab_args, peer_wait_s };
     check_run_args(ctx, &spec, &raw.run_args, raw.lab.as_ref().map(|t| t.span()))?;
     Ok(spec)
 }

@@ -61,6 +61,7 @@ pub(super) struct RawTrial {
     #[serde(default)]
     pub(super) run_args: Vec<Spanned<String>>,
     pub(super) peers: Option<Spanned<String>>,
+    pub(super) peer_wait_s: Option<Spanned<f64>>,
     pub(super) lab: Option<Spanned<toml::Table>>,
 }
 
