@@ -24,6 +24,7 @@ mod edges;
 mod hosts;
 mod motion;
 mod relay;
+mod study;
 
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};

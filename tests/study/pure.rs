@@ -169,8 +169,32 @@ fn bad_study_files_are_refused_naming_the_line_and_field() {
     let e = parse_study(&format!("{base}[trial]\nrun_args = [\"--seed=3\"]\n"), "s.toml", "s").unwrap_err().to_string();
     assert_eq!(
         e,
-        "s.toml:8: `trial.run_args[1]`: `--seed`: the study sets it for each trial (the study decides --out, --seed, --run-id, --json, --duration-s, --duration, --frames, --capture, --report-json, --rate-hz)"
+        "s.toml:8: `trial.run_args[1]`: `--seed`: the study sets it for each trial (the study decides --out, --seed, --run-id, --json, --duration-s, --duration, --frames, --capture, --report-json, --rate-hz, --console, --robot)"
     );
+    // Who plays the trials, and where the lab's programs are met.
+    let lab_cases: [(String, &str, &str); 8] = [
+        (format!("{base}[trial]\npeers = \"robots\"\n"), "s.toml:8: `trial.peers`", "lab (the lab's console and robot"),
+        (format!("{base}[trial.lab]\ningress = \"udp://127.0.0.1:9\"\n"), "s.toml:7: `trial.peers`", "say who plays each trial"),
+        (format!("{base}[trial]\npeers = \"lab\"\n[trial.lab]\nscenario = \"PLM-1\"\n"), "s.toml:9: `trial.lab.scenario`", "not where a trial meets the lab's programs"),
+        (format!("{base}[trial]\npeers = \"lab\"\n[trial.lab]\ningress = \"tcp://x\"\n"), "s.toml:9: `trial.lab`", "tcp://x"),
+        (format!("{base}[trial]\npeers = \"lab\"\ncapture = \"c.lz4\"\n"), "s.toml:8: `trial.capture`", "replayed by netfi's own console"),
+        (format!("{base}[trial]\npeers = \"lab\"\npeer_wait_s = 0\n"), "s.toml:9: `trial.peer_wait_s`", "more than 0"),
+        (format!("{base}[clean]\nnetfi_added_p99_ms = -1\n"), "s.toml:8: `clean.netfi_added_p99_ms`", "more than 0"),
+        (format!("{base}[trial]\nrun_args = [\"--console\", \"lab\"]\n"), "s.toml:8: `trial.run_args[1]`", "write it as `trial.peers`"),
+    ];
+    for (text, at, words) in &lab_cases {
+        let e = parse_study(text, "s.toml", "s").expect_err(text).to_string();
+        assert!(e.starts_with(at), "expected `{at}…`, got: {e}\n--- file:\n{text}");
+        assert!(e.contains(words), "expected `{words}` in: {e}");
+    }
+    let lab = parse_study(&format!("{base}[trial]\npeers = \"lab\"\n[trial.lab]\ningress = \"udp://127.0.0.1:9\"\nconsole_from = \"first\"\negress = \"udp://127.0.0.1:10\"\nno-return = true\n"), "s.toml", "s").unwrap();
+    let run = lab.trial.run("PLM-1", None).unwrap();
+    assert_eq!((run.peers.console(), run.peers.robot()), (netfi::service::args::Peer::Lab, netfi::service::args::Peer::Lab));
+    assert_eq!(run.peers.ends.ingress.to_string(), "udp://127.0.0.1:9");
+    // The same file as a dry run: netfi's own ends, the lab's left aside.
+    let dry = parse_study(&format!("{base}[trial]\npeers = \"synthetic\"\n[trial.lab]\ningress = \"udp://127.0.0.1:9\"\nconsole_from = \"first\"\n"), "s.toml", "s").unwrap();
+    let run = dry.trial.run("PLM-1", None).unwrap();
+    assert_eq!((run.peers.console(), run.peers.robot()), (netfi::service::args::Peer::Own, netfi::service::args::Peer::Own));
 }
 
 /// Student's sleep data (Cushny and Peebles, 1905), as R ships it

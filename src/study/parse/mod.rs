@@ -296,6 +296,13 @@ fn refuse_what_the_study_sets(ctx: &Ctx, run_args: &[Spanned<String>]) -> Result
 /// scenario): clap's refusal, at the word it names, else the run's own
 /// check.
 fn check_run_args(ctx: &Ctx, spec: &TrialSpec, run_args: &[Spanned<String>], lab: Option<Range<usize>>) -> Result<(), StudyFileError> {
+    if spec.peers == Peers::Synthetic && lab.is_some() {
+        // A dry run leaves `[trial.lab]` aside; it is still read, so the
+        // lab's run does not fail on the day.
+        let as_lab = TrialSpec { peers: Peers::Lab, capture: None, run_args: Vec::new(), ..spec.clone() };
+        let run = as_lab.run("Normal", None).map_err(|e| ctx.err(lab.clone(), "trial.lab", refusal(&e)))?;
+        run.validate().map_err(|e| ctx.err(lab.clone(), "trial.lab", e.to_string()))?;
+    }
     if run_args.is_empty() {
         // The lab's endpoints, read as `netfi run` reads them.
         let run = spec.run("Normal", None).map_err(|e| ctx.err(lab.clone(), "trial.lab", refusal(&e)))?;
