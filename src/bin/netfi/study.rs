@@ -216,6 +216,11 @@ fn plan(s: &OpenStudy, only: Option<&str>, write: bool, json: bool) -> Result<()
         s.data.display()
     );
     println!("order: {}", balance(st));
+    match st.trial.peers {
+        netfi::study::file::Peers::Lab => println!("peers: the lab's console and robot ({})", if st.trial.lab_args.is_empty() { "iceoryx2, each trial's run id in DATA/running.json".to_string() } else { st.trial.lab_args.join(" ") }),
+        netfi::study::file::Peers::Synthetic if st.trial.capture.is_some() => println!("peers: netfi's own console replaying the capture, and its simulated robot (a dry run)"),
+        netfi::study::file::Peers::Synthetic => println!("peers: netfi's own synthetic console and simulated robot (a dry run)"),
+    }
     for c in s.changed_inputs()? {
         println!("CHANGED: {c}");
     }
