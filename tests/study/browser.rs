@@ -241,3 +241,60 @@ fn a_questionnaire_is_refused_until_every_item_is_answered_then_recorded() {
     assert!(report.contains("PLM-2"), "the trial's run report:\n{report}");
     assert_eq!(js(&tab, &format!("document.querySelector('#trials a[href=\"/runs/{run_id}/report\"]') !== null")), serde_json::Value::Bool(true));
 }
+
+/// The page drives a trial with the lab's console and robot (the test's
+/// UDP sockets): it says whom the trial waits for, the console streams,
+/// the experimenter stops the trial and marks it, and its motion is what
+/// the console sent.
+#[test]
+fn the_study_page_drives_a_trial_with_the_labs_console() {
+    let Some(browser) = browser_or_skip() else { return };
+    let _one = machine::alone();
+    let dir = Scratch::new("page-lab");
+    let robot = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let console = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let ingress = std::net::UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    let file = dir.file(
+        "study.toml",
+        &format!(
+            "name = \"page-lab\"\nseed = 3\ndata = \"data\"\n[trial]\nduration_s = 60\npeers = \"lab\"\n\
+             [trial.lab]\ningress = \"udp://{ingress}\"\nconsole-from = \"{}\"\negress = \"udp://{}\"\n\
+             [questionnaires]\nsus = \"none\"\ntlx = \"none\"\n[[block]]\nname = \"only\"\nconditions = [\"Normal\"]\n[[participant]]\nid = \"P8\"\n",
+            console.local_addr().unwrap(),
+            robot.local_addr().unwrap()
+        ),
+    );
+    let ui = Ui::start(&dir.0.join("runs"));
+    let tab = browser.new_tab().unwrap();
+    tab.navigate_to(&format!("{}/study?file={}", ui.base, file.display())).unwrap().wait_until_navigated().unwrap();
+    until(&tab, "document.getElementById('study-name')?.textContent === 'page-lab'", 20);
+    js(&tab, "(() => { const s = document.getElementById('participant'); s.value = 'P8'; s.dispatchEvent(new Event('change')); return true; })()");
+    until(&tab, "document.getElementById('next-text').dataset.kind === 'trial'", 20);
+    click(&tab, "#start-btn");
+    until(&tab, "document.getElementById('next-text').textContent.includes(\"waiting for the lab's console\")", 60);
+    let mut sent = 0.0;
+    for s in 0..300u32 {
+        let mut b = [0u8; 124];
+        let mut v = netfi::frame::ItpView::new_unchecked(&mut b[..]);
+        v.set_sequence(s);
+        v.set_delx([3, 0]);
+        v.set_dely([4, 0]);
+        v.set_surgeon_mode(1);
+        v.fill_checksum();
+        console.send_to(&b, ingress).unwrap();
+        sent += 0.05;
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    until(&tab, "document.getElementById('next-text').dataset.kind === 'running' && !document.getElementById('next-text').textContent.includes('waiting')", 30);
+    click(&tab, "#stop-btn");
+    until(&tab, "document.getElementById('next-text').dataset.kind === 'unmarked'", 60);
+    click(&tab, "#mark-done");
+    until(&tab, "document.getElementById('next-text').dataset.kind === 'finished'", 20);
+    let state: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.0.join("data/P8/state.json")).unwrap()).unwrap();
+    let a = &state["attempts"][0];
+    assert_eq!((a["state"].as_str(), a["stopped"].as_bool()), (Some("done"), Some(true)), "{a}");
+    let figures: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.0.join("data/P8").join(a["dir"].as_str().unwrap()).join("figures.json")).unwrap()).unwrap();
+    // Each frame moves arm 0 by a 3-4-5 step: 5 units, 0.05 mm.
+    let got = figures["figures"]["console_motion_arm0_mm"].as_f64().unwrap();
+    assert!((got - sent).abs() < 1e-9, "console motion {got} mm, the test's console sent {sent} mm");
+}
