@@ -206,9 +206,11 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         links: e.map(|e| e.link.links.clone()).unwrap_or_default(),
         injected_delay_ns: e.map(|e| e.link.injected_delay_ns),
         overhead_ns: join::overhead(e.map(|e| &e.link), simulator.as_ref()),
-        // netfi's robot measures what it received; without it, the
-        // emulator measures what it released (`--kinematics`).
-        kinematics: simulator.as_ref().and_then(|s| s.kinematics.clone()).or_else(|| emulator.as_ref().and_then(|p| p.kinematics.clone())),
+        // With a program of the lab's at either end the emulator measures
+        // the frames it took in and released (`--kinematics`: the lab's
+        // console sends netfi's robot no direct copy); else netfi's robot
+        // measures what it received beside the console's direct copy.
+        kinematics: emulator.as_ref().and_then(|p| p.kinematics.clone()).or_else(|| simulator.as_ref().and_then(|s| s.kinematics.clone())),
         channels,
         processes,
         faults,
