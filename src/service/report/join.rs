@@ -45,6 +45,18 @@ pub fn account_to_lab_robot(console: Option<&ConsoleReport>, emulator: Option<&E
     f
 }
 
+/// [`account`] of a run no runner started (an emulator started by hand,
+/// its clients of any make): a count no report gives (a client of another
+/// make writes none, and may send no end marker) is not known, not wrong,
+/// so the account balances on the counts there are: the emulator's own
+/// closes, and what the console sent and the robot received, where known,
+/// is what entered and what was delivered.
+pub fn account_by_hand(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>, simulator: Option<&SimulatorReport>) -> FrameAccount {
+    let mut f = account(console, emulator, simulator);
+    f.balanced = emulator.is_some_and(|e| e.frames.account.closes()) && f.sent.is_none_or(|s| Some(s) == f.entered) && f.received.is_none_or(|r| Some(r) == f.delivered);
+    f
+}
+
 /// What `corrupt` stages did against what the robot's checksum caught;
 /// `None` when nothing was corrupted. Frames that already had a bad
 /// checksum when they entered are not counted as caught, and no more can

@@ -14,7 +14,13 @@ use std::collections::BTreeMap;
 impl RunReport {
     /// The report as a person reads it.
     pub fn to_text(&self) -> String {
-        let mut s = format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        let mut s = match self.by_hand {
+            true => format!(
+                "netfi emulator {}: scenario {} (seed {}), {:.2} s; started without `netfi run`: reported from what the emulator and its clients left\n",
+                self.run_id, self.scenario, self.seed, self.duration_s
+            ),
+            false => format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s),
+        };
         if self.stopped {
             s += &format!("ended      stopped on request after {:.2} s (Ctrl-C, SIGTERM or the UI's stop): a normal end\n", self.duration_s);
         }
@@ -93,7 +99,10 @@ impl RunReport {
             let channel = name.split('_').next().unwrap_or(name);
             s += &format!("  {channel:<9} {}\n", v.display());
         }
-        s += &format!("  report    {}\n", crate::service::report::files::report_said(&f.report_json));
+        // A run no runner started has no run report but the one printed.
+        if !self.by_hand {
+            s += &format!("  report    {}\n", crate::service::report::files::report_said(&f.report_json));
+        }
         s
     }
 }
@@ -122,15 +131,25 @@ fn frames_text(f: &FrameAccount) -> String {
             opt(c.passed)
         );
     }
-    s += &format!(
-        "accounting {}\n",
-        if f.balanced {
-            BALANCED.to_string()
-        } else {
-            format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator))
-        }
-    );
+    s += &format!("accounting {}\n", accounting(f));
     s
+}
+
+/// Whether the frames balance, and where: a balanced account with a count
+/// no report gives (a client of another make, the lab's own program)
+/// balances at the emulator, and says what is not known.
+fn accounting(f: &FrameAccount) -> String {
+    if !f.balanced {
+        return format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator));
+    }
+    let unknown: Vec<&str> = [(f.sent.is_none(), "what the console sent"), (f.received.is_none(), "what the robot received")]
+        .into_iter()
+        .filter_map(|(unknown, what)| unknown.then_some(what))
+        .collect();
+    match unknown.is_empty() {
+        true => BALANCED.to_string(),
+        false => format!("balanced at the emulator{}; not known: {} (no report gives it)", &BALANCED["balanced".len()..], unknown.join(", ")),
+    }
 }
 
 pub(super) const BALANCED: &str = "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end";

@@ -181,6 +181,13 @@ pub struct RunReport {
     /// what they would have written. Absent when false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub interrupted: bool,
+    /// No `netfi run` started this run: an emulator started by hand, with
+    /// clients of any make, reported by `netfi report` from what it and
+    /// they left. What no report gives (a foreign client's counts) is not
+    /// known, and the frames balance on the counts there are. Absent when
+    /// false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub by_hand: bool,
     pub frames: FrameAccount,
     /// The whole run's realized loss: the scenario's drops over the frames
     /// it decided (malformed frames, dropped before it, are in neither);
