@@ -6,7 +6,7 @@
 use super::delay::delay_check;
 use super::phases::{self, RunTimeline};
 use super::trace_merge::{merge_trace, Source};
-use super::{files, join, Files, ProcessEnd, RunReport, RunStream, RunStreams};
+use super::{files, join, Files, ProcessEnd, Ros2Topics, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
 use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
@@ -82,6 +82,16 @@ pub(super) struct Parts {
     pub lab_robot: bool,
     /// No runner started the run ([`RunReport::by_hand`]).
     pub by_hand: bool,
+    /// A ROS 2 run's forward topics, and whether `ros2.json` says its
+    /// messages balance.
+    pub ros2: Option<(Ros2Topics, bool)>,
+}
+
+/// What the report reads of `ros2.json`.
+#[derive(serde::Deserialize)]
+struct Ros2Json {
+    balanced: bool,
+    forward: Ros2Topics,
 }
 
 impl Parts {
@@ -95,7 +105,20 @@ impl Parts {
         for (file, scheme, why) in unread {
             missing.push((file, format!("emulator's {} side", scheme.to_uppercase()), Some(why)));
         }
-        Parts { console, emulator, simulator, transports, missing, lab_robot: false, by_hand: false }
+        let ros2 = match Found::<Ros2Json>::read(&out.join("ros2.json")) {
+            Found::Read(r) => Some((r.forward, r.balanced)),
+            Found::Absent => None,
+            Found::Unreadable(why) => {
+                missing.push(("ros2.json", "emulator's ROS 2 side".to_string(), Some(why)));
+                None
+            }
+        };
+        // No ROS 2 node writes a report of netfi's: the console's and the
+        // robot's are not missing there.
+        if ros2.is_some() {
+            missing.retain(|(file, _, why)| why.is_some() || !["console.json", "simulator.json"].contains(file));
+        }
+        Parts { console, emulator, simulator, transports, missing, lab_robot: false, by_hand: false, ros2 }
     }
 
     /// A fault for each report the runner expected and did not find.
@@ -163,12 +186,13 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
-    let Parts { console, emulator, simulator, transports, missing, lab_robot, by_hand } = parts;
+    let Parts { console, emulator, simulator, transports, missing, lab_robot, by_hand, ros2 } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
     };
     let frames = match (lab_robot, &simulator) {
+        _ if ros2.is_some() => join::account_of_topics(emulator.as_deref(), ros2.as_ref().map(|(t, b)| (t, *b))),
         _ if by_hand => join::account_by_hand(console.as_ref(), emulator.as_deref(), simulator.as_ref()),
         (true, None) => join::account_to_lab_robot(console.as_ref(), emulator.as_deref()),
         _ => join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref()),
@@ -177,7 +201,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
     let sources = Sources { emulator: emulator.as_ref(), console: console_json.as_ref(), simulator: simulator_json.as_ref(), stopped };
     let channels = ChannelSections::join(sources);
     let mut faults = channels.faults();
-    faults.extend(join::faults(&frames));
+    faults.extend(if ros2.is_some() { join::faults_of_topics(&frames) } else { join::faults(&frames) });
     faults.extend(transports.faults());
     let e = shaping.as_ref();
     let files = Files {
@@ -200,6 +224,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         stopped,
         interrupted: false,
         by_hand,
+        ros2: ros2.map(|(t, _)| t),
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
