@@ -225,8 +225,12 @@ fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicN
             n.poll(now);
             let found = n.remotes(to, Role::Subscriber).find(|s| s.dds_type == o.type_name.dds()).map(|s| s.guid);
             if let Some(s) = found {
+                let came = match now.saturating_sub(t0) {
+                    0..=50_000_000 => "is there".to_string(),
+                    waited => format!("came after {:.1} s", waited as f64 / 1e9),
+                };
                 let name = named(&mut n, s);
-                eprintln!("emulator: the subscriber {name} of {to} came after {:.1} s: reading {from}", now.saturating_sub(t0) as f64 / 1e9);
+                eprintln!("emulator: the subscriber {name} of {to} {came}: reading {from}");
                 break;
             }
             // A subscriber that came meanwhile with another type is refused

@@ -305,7 +305,8 @@ impl<D: Direction> Topic<D> {
     /// Says each change on the lane's topics once, in order, naming the
     /// node: an endpoint's node is named by its participant's
     /// `ros_discovery_info`, which may come after the endpoint itself, so an
-    /// event (and those after it) waits for it up to [`NAME_WAIT_NS`];
+    /// endpoint's coming (and what follows it) waits for it up to
+    /// [`NAME_WAIT_NS`];
     /// `all` says what is left, by GUID where no name came.
     fn say_events(&mut self, now: u64, all: bool) {
         let node = self.node.borrow();
@@ -317,7 +318,10 @@ impl<D: Direction> Topic<D> {
                 said += 1;
                 continue;
             }
-            if !all && node.node_of(e.guid).is_none() && now.saturating_sub(e.t_ns) < NAME_WAIT_NS {
+            // A node that leaves nameless was nameless when it came: its
+            // leaving waits for nothing.
+            let waits = !matches!(e.happened, Happened::Left { .. });
+            if !all && waits && node.node_of(e.guid).is_none() && now.saturating_sub(e.t_ns) < NAME_WAIT_NS {
                 break;
             }
             said += 1;
