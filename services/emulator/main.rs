@@ -3,6 +3,6 @@
 fn main() -> anyhow::Result<()> {
     let args: netfi::service::args::EmulatorArgs = netfi::service::standalone_args("netfi-emulator", "The netfi emulator service")?;
     let report = netfi::service::emulator::main(&args)?;
-    print!("{}", netfi::service::report::emulator_text(&report));
+    print!("{}", netfi::service::report::emulator_text(&report, &netfi::service::emulator::words(&args)));
     Ok(())
 }

@@ -439,6 +439,43 @@ fn python_console_through_the_emulator_to_the_python_robot() {
     assert_feedback_balanced(&e, &r, &c, delivered);
 }
 
+/// A stand-alone emulator between the Python console and robot, which
+/// write no report of netfi's: `netfi report DIR` heads it as the
+/// emulator's, balances its frames at the emulator with what only the
+/// clients know said as not known, lists no `report.json`, and exits 0;
+/// the same directory with a file cut short (a real fault) exits 1.
+#[test]
+fn a_stand_alone_emulators_report_says_what_it_knows_and_fails_only_on_a_fault() {
+    let _guard = machine::alone();
+    let Some(run) = Run::ready("alone") else { return };
+    let robot = run.python_robot();
+    let emu = run.emulator("PLM-2", &["--seed", "3", "--expected-frames", "2000"]);
+    let mut console = python("examples/console.py", &run);
+    console.args(["--run-id", &run.id, "--frames", "2000", "--rate-hz", "2000", "--out"]).arg(run.out.join("py_console.json"));
+    run_ok(console, "python console");
+    emu.finish("emulator", Duration::from_secs(60));
+    robot.finish("robot", Duration::from_secs(60));
+    assert_emulator_balanced(&run.json("emulator.json"), 2000);
+    let o = netfi().arg("report").arg(&run.out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.starts_with(&format!("netfi emulator {}: scenario PLM-2 (seed 3)", run.out.file_name().unwrap().to_string_lossy())), "{text}");
+    assert!(text.contains("started without `netfi run`"), "{text}");
+    assert!(text.contains("frames     sent 2000  entered 2000  delivered "), "{text}");
+    assert!(text.contains("accounting balanced at the emulator: ") && text.contains("not known: what the robot received"), "{text}");
+    assert!(text.contains("  accounting balanced; loss"), "the feedback loop balances on the counts there are: {text}");
+    for never in ["NOT balanced", "FAULT", "report.json", "netfi run "] {
+        assert!(!text.contains(never), "{never}: {text}");
+    }
+    // A file cut short is a real fault: said, and the exit status is 1.
+    std::fs::write(run.out.join("trace_feedback.csv.partial"), b"ingress_index\n").unwrap();
+    let o = netfi().arg("report").arg(&run.out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!o.status.success(), "a run with a cut file reported as whole:\n{text}");
+    assert!(text.contains("FAULT      cut file: "), "{text}");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("had faults: cut file: "), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 /// Robot → emulator → console: the robot sent one feedback per command it
 /// received, each entered the emulator's feedback path and, through a
 /// Normal return scenario, reached the console, which measured its round

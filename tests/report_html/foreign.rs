@@ -125,11 +125,15 @@ fn a_run_of_foreign_clients_says_what_is_missing_and_names_cut_files() {
         std::fs::remove_file(dir.join(f)).unwrap();
     }
     std::fs::rename(dir.join("received.csv"), dir.join("received.csv.partial")).unwrap();
-    let text = report_text(&dir);
+    // A cut file is a fault: the text report says so and fails.
+    let o = netfi().arg("report").arg(&dir).output().unwrap();
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(!o.status.success(), "a run with a cut file reported as whole:\n{text}");
+    let cut = dir.join("received.csv.partial");
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("cut file: {}", cut.display())), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("missing    console.json, simulator.json (what needs them is shown as ?)\n"), "{text}");
     assert!(text.contains("frames     sent 1000  entered 1000  delivered 1000  received ?  held at end 0\n"), "{text}");
-    assert!(text.contains("NOT balanced (lost before emulator 0, after emulator ?)"), "{text}");
-    let cut = dir.join("received.csv.partial");
+    assert!(text.contains("accounting balanced at the emulator: ") && text.contains("not known: what the robot received"), "{text}");
     assert!(text.contains(&format!("FAULT      cut file: {}", cut.display())), "{text}");
     // The cut receipts are still read: the seen delays are there.
     assert!(text.lines().any(|l| l.starts_with("  q0.5 ")), "{text}");

@@ -58,14 +58,24 @@ fn a_type_that_differs_from_the_one_given_or_expected_is_refused_with_both_types
     for says in ["type mismatch on /x", "--ros2-type gives geometry_msgs/msg/PoseStamped", "the publisher /talker publishes std_msgs/msg/String"] {
         assert!(log.contains(says), "{says}: {log}");
     }
-    // A subscriber of the topic written that expects another type.
+    // A subscriber of the topic written that expects another type, there
+    // before the emulator: refused at start, named by its node, with or
+    // without waiting for the robot's reader.
     let _sub = c.listener("listener", "/y", &["--type", "pose", "--timeout-s", "60"]);
-    // (Waiting for the robot's reader: the subscriber may be discovered
-    // only after the lane is settled, and is refused then.)
-    let log = refused(&c, &["--scenario", "Normal", "--ros2-topic", "/x=/y", "--wait-for-peer-s", "30"]);
-    for says in ["type mismatch on /y", "the subscriber /listener expects geometry_msgs/msg/PoseStamped", "the lane relays std_msgs/msg/String"] {
-        assert!(log.contains(says), "{says}: {log}");
+    for wait in [&[][..], &["--wait-for-peer-s", "30"][..]] {
+        let log = refused(&c, &[&["--scenario", "Normal", "--ros2-topic", "/x=/y"][..], wait].concat());
+        for says in ["type mismatch on /y", "the subscriber /listener expects geometry_msgs/msg/PoseStamped", "the lane relays std_msgs/msg/String"] {
+            assert!(log.contains(says), "{wait:?}: {says}: {log}");
+        }
+        assert_no_guid(&log);
     }
+}
+
+/// No DDS GUID (32 hex digits, as ROS 2's tools print a gid) in `log`:
+/// nodes are named.
+pub(crate) fn assert_no_guid(log: &str) {
+    let guid = log.split(|c: char| !c.is_ascii_hexdigit()).find(|w| w.len() == 32);
+    assert!(guid.is_none(), "a GUID ({}) where a node's name was due:\n{log}", guid.unwrap_or_default());
 }
 
 #[test]

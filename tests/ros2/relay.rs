@@ -35,6 +35,23 @@ fn plm2_drops_exactly_what_scenario_check_drops_and_the_listener_gets_the_rest()
     assert!(t.iter().enumerate().all(|(k, r)| index(r) == k as u64), "messages entered in the talker's order");
     assert_listener_got_what_was_delivered(&t, &c.received("listener"));
     assert_loss_is_the_models(&e);
+    // What the emulator said, at the end and as it ran, and `netfi report`
+    // on its directory: of topics and messages, nodes by name.
+    let log = emu.log();
+    crate::edges::assert_no_guid(&log);
+    assert!(log.contains("netfi emulator: ROS 2 /chatter → /chatter_out, scenario PLM-2 (seed 3)"), "{log}");
+    assert!(log.contains(&format!("messages   published {N}  entered {N}  delivered ")), "{log}");
+    let o = crate::netfi().arg("report").arg(c.dir.join("out")).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{text}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.starts_with("netfi emulator out: ROS 2 /chatter → /chatter_out (std_msgs/msg/String), scenario PLM-2 (seed 3)"), "{text}");
+    assert!(text.contains(&format!("messages   published {N}  entered {N}  delivered {}  received ?", u(&f["delivered"]))), "{text}");
+    assert!(text.contains("accounting balanced at the emulator: every message that entered"), "{text}");
+    assert!(text.contains("not known: what the subscribers of /chatter_out received"), "{text}");
+    assert!(text.contains(&format!("the scenario's drops of the {N} messages it decided")), "{text}");
+    for never in ["frame", "console", "simulator", "robot", "missing", "FAULT", "report.json"] {
+        assert!(!text.contains(never), "{never}: {text}");
+    }
 }
 
 /// A reliable message whose datagram was lost on the way out is sent again
@@ -72,6 +89,12 @@ fn dlm1_delays_seen_by_the_listener_are_the_injected_ones() {
     let mut emu = c.emulator(&["--scenario", "DLM-1", "--seed", "5", "--wait-for-peer-s", "60", "--ros2-topic", "/MTMR/measured_cp=/PSM1/servo_cp"]);
     let e = c.finish(&mut [&mut talker, &mut emu, &mut listener]);
     assert_eq!(u(&e["frames"]["delivered"]), N as u64, "DLM-1 drops nothing");
+    // The emulator said what it waited for, and who came.
+    let log = emu.log();
+    let wait = "waiting up to 60.0 s for a subscriber of /PSM1/servo_cp (geometry_msgs/msg/PoseStamped) before reading /MTMR/measured_cp";
+    let came = log.lines().any(|l| l.starts_with("emulator: the subscriber /listener of /PSM1/servo_cp ") && l.ends_with(": reading /MTMR/measured_cp"));
+    assert!(log.contains(wait) && came, "{log}");
+    crate::edges::assert_no_guid(&log);
     assert_eq!(c.json("ros2.json")["forward"]["type"], "geometry_msgs/msg/PoseStamped");
     let t = trace(&c, "trace_emulator.csv");
     let got = c.received("listener");

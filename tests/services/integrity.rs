@@ -162,7 +162,8 @@ fn a_killed_runner_leaves_a_directory_reported_as_interrupted() {
     assert!(!out.join("report.json").exists(), "a report of a run its runner never finished");
     let o = netfi().arg("report").arg(&out).output().unwrap();
     let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!o.status.success(), "an interrupted run reported as whole:\n{text}");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("interrupted: the runner of this run did not finish it"), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("INTERRUPTED"), "the report does not say the run was interrupted:\n{text}");
     assert!(text.contains("FAULT      interrupted: the runner of this run did not finish it (netfi run"), "{text}");
     // A run that ends has no mark left.

@@ -30,7 +30,7 @@ fn main() -> std::process::ExitCode {
         cli::Command::Scenario(cmd) => scenario::run(cmd),
         cli::Command::Run(a) => run(&a),
         cli::Command::Console(a) => netfi::service::console::main(&a).map(|_| ()).map_err(Into::into),
-        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r))).map_err(Into::into),
+        cli::Command::Emulator(a) => netfi::service::emulator::main(&a).map(|r| print!("{}", netfi::service::report::emulator_text(&r, &netfi::service::emulator::words(&a)))).map_err(Into::into),
         cli::Command::Simulator(a) => netfi::service::simulator::main(&a).map(|_| ()).map_err(Into::into),
         cli::Command::Fit(cmd) => fit::run(cmd),
         cli::Command::Export(cmd) => export::run(cmd),

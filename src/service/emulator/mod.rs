@@ -83,6 +83,16 @@ pub enum EmulatorError {
 /// Wires the emulator: arguments → lanes → the loop → each lane's report
 /// (and the joint one of several, and `udp.json` where a side is UDP).
 /// Returns lane 0's report.
+/// The words the emulator's report speaks of its stream in: lane 0's
+/// topics and their messages with `--ros2-topic`, else ITP frames.
+pub fn words(args: &EmulatorArgs) -> crate::service::report::Words {
+    let topics = args.ros2.on().then(|| ros2::plan::Plan::of(args).ok()).flatten();
+    match topics.as_ref().and_then(|p| p.lanes.first()) {
+        Some(l) => crate::service::report::Words::ros2(&l.forward.0.to_string(), &l.forward.1.to_string()),
+        None => crate::service::report::Words::itp(),
+    }
+}
+
 pub fn main(args: &EmulatorArgs) -> Result<EmulatorReport, EmulatorError> {
     if args.ros2.on() {
         return Ok(ros2::main(args)?.swap_remove(0));

@@ -6,7 +6,7 @@
 use super::delay::delay_check;
 use super::phases::{self, RunTimeline};
 use super::trace_merge::{merge_trace, Source};
-use super::{files, join, Files, ProcessEnd, RunReport, RunStream, RunStreams};
+use super::{files, join, Files, ProcessEnd, Ros2Topics, RunReport, RunStream, RunStreams};
 use crate::host::Steal;
 use crate::scenario::ScenarioSpec;
 use crate::service::console::ConsoleReport;
@@ -80,6 +80,18 @@ pub(super) struct Parts {
     pub missing: Vec<(&'static str, String, Option<String>)>,
     /// The robot was the lab's own program: no report of its own.
     pub lab_robot: bool,
+    /// No runner started the run ([`RunReport::by_hand`]).
+    pub by_hand: bool,
+    /// A ROS 2 run's forward topics, and whether `ros2.json` says its
+    /// messages balance.
+    pub ros2: Option<(Ros2Topics, bool)>,
+}
+
+/// What the report reads of `ros2.json`.
+#[derive(serde::Deserialize)]
+struct Ros2Json {
+    balanced: bool,
+    forward: Ros2Topics,
 }
 
 impl Parts {
@@ -93,7 +105,20 @@ impl Parts {
         for (file, scheme, why) in unread {
             missing.push((file, format!("emulator's {} side", scheme.to_uppercase()), Some(why)));
         }
-        Parts { console, emulator, simulator, transports, missing, lab_robot: false }
+        let ros2 = match Found::<Ros2Json>::read(&out.join("ros2.json")) {
+            Found::Read(r) => Some((r.forward, r.balanced)),
+            Found::Absent => None,
+            Found::Unreadable(why) => {
+                missing.push(("ros2.json", "emulator's ROS 2 side".to_string(), Some(why)));
+                None
+            }
+        };
+        // No ROS 2 node writes a report of netfi's: the console's and the
+        // robot's are not missing there.
+        if ros2.is_some() {
+            missing.retain(|(file, _, why)| why.is_some() || !["console.json", "simulator.json"].contains(file));
+        }
+        Parts { console, emulator, simulator, transports, missing, lab_robot: false, by_hand: false, ros2 }
     }
 
     /// A fault for each report the runner expected and did not find.
@@ -161,12 +186,14 @@ pub(super) fn assemble(facts: &RunFacts, parts: Parts, runner: RunnerView, sourc
 /// trace, no delay check): every figure the reports give, and the
 /// faults their join shows.
 fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, processes: Vec<ProcessEnd>, stopped: bool) -> RunReport {
-    let Parts { console, emulator, simulator, transports, missing, lab_robot } = parts;
+    let Parts { console, emulator, simulator, transports, missing, lab_robot, by_hand, ros2 } = parts;
     let (shaping, emulator) = match emulator {
         Some(EmulatorReport { shaping, process }) => (Some(shaping), Some(process)),
         None => (None, None),
     };
     let frames = match (lab_robot, &simulator) {
+        _ if ros2.is_some() => join::account_of_topics(emulator.as_deref(), ros2.as_ref().map(|(t, b)| (t, *b))),
+        _ if by_hand => join::account_by_hand(console.as_ref(), emulator.as_deref(), simulator.as_ref()),
         (true, None) => join::account_to_lab_robot(console.as_ref(), emulator.as_deref()),
         _ => join::account(console.as_ref(), emulator.as_deref(), simulator.as_ref()),
     };
@@ -174,7 +201,7 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
     let sources = Sources { emulator: emulator.as_ref(), console: console_json.as_ref(), simulator: simulator_json.as_ref(), stopped };
     let channels = ChannelSections::join(sources);
     let mut faults = channels.faults();
-    faults.extend(join::faults(&frames));
+    faults.extend(if ros2.is_some() { join::faults_of_topics(&frames) } else { join::faults(&frames) });
     faults.extend(transports.faults());
     let e = shaping.as_ref();
     let files = Files {
@@ -196,6 +223,8 @@ fn join_parts(facts: &RunFacts, parts: Parts, duration_s: f64, steal: Steal, pro
         duration_s,
         stopped,
         interrupted: false,
+        by_hand,
+        ros2: ros2.map(|(t, _)| t),
         frames,
         loss_rate: e.map(|e| e.link.loss_rate),
         loss_rate_ci95: e.map(|e| e.link.loss_rate_ci95),
@@ -335,14 +364,16 @@ impl RunReport {
         let p = &emulator.process;
         let steal = Steal { ms: p.steal_ms, fraction: p.steal_fraction };
         let duration_s = p.duration_s;
-        let parts = Parts::read(dir, Some(Found::Read(emulator)));
+        let mut parts = Parts::read(dir, Some(Found::Read(emulator)));
         // Without a runner, a missing console or robot report is no fault
         // (a foreign client writes none); one that cannot be read is.
         let faults = parts.faults().zip(&parts.missing).filter(|(_, (_, _, why))| why.is_some()).map(|(f, _)| f).collect();
         let mut faults: Vec<String> = faults;
         // A runner that was killed (or failed) leaves its mark: the run is
-        // not whole, whatever its processes wrote.
+        // not whole, whatever its processes wrote. Without it, no runner
+        // started the run.
         let unfinished = files::unfinished(dir);
+        parts.by_hand = unfinished.is_none();
         faults.extend(unfinished.clone());
         let runner = RunnerView { duration_s, steal, processes: Vec::new(), faults, interrupted: false, lab: Vec::new() };
         let mut r = assemble(&facts, parts, runner, Source::Keep);
@@ -395,12 +426,29 @@ mod tests {
         assert_eq!(r.missing, ["console.json", "simulator.json"]);
         assert_eq!(r.faults, Vec::<String>::new(), "a foreign client's missing report is no fault");
         assert_eq!((r.frames.sent, r.frames.entered, r.frames.received), (Some(10), Some(10), None));
-        assert!(!r.frames.balanced, "what the robot received is unknown");
+        assert!(r.by_hand, "no runner's mark: an emulator started by hand");
+        assert!(r.frames.balanced, "what the robot received is not known, not wrong: {:?}", r.frames);
         assert_eq!(r.loss_rate, Some(0.3));
         assert_eq!(r.files.scenario, None);
         let text = r.to_text();
+        let head = format!("netfi emulator {}: scenario PLM-2 (seed 7), 1.00 s; started without `netfi run`", r.run_id);
+        assert!(text.starts_with(&head), "{text}");
         assert!(text.contains("missing    console.json, simulator.json (what needs them is shown as ?)"), "{text}");
         assert!(text.contains("frames     sent 10  entered 10  delivered 6  received ?  held at end 1"), "{text}");
+        assert!(text.contains("accounting balanced at the emulator: every frame that entered"), "{text}");
+        assert!(text.contains("; not known: what the robot received (no report gives it)\n"), "{text}");
+        assert!(!text.contains("report.json") && !text.contains("FAULT"), "{text}");
+        // The console's word, where it gave one, must be what entered.
+        write(&d.join("emulator.json"), &emulator_json(Some(12)));
+        let r = RunReport::of_dir(&d).unwrap();
+        assert!(!r.frames.balanced && r.faults == ["2 frames sent by the console never entered the emulator"], "{:?} {:?}", r.frames, r.faults);
+        assert!(r.to_text().contains("accounting NOT balanced (lost before emulator 2, after emulator ?)"));
+        // Without an end marker, what the console sent is not known either.
+        write(&d.join("emulator.json"), &emulator_json(None));
+        let r = RunReport::of_dir(&d).unwrap();
+        assert!(r.frames.balanced && r.faults.is_empty(), "{:?} {:?}", r.frames, r.faults);
+        assert!(r.to_text().contains("; not known: what the console sent, what the robot received (no report gives it)\n"), "{}", r.to_text());
+        write(&d.join("emulator.json"), &emulator_json(Some(10)));
         // With the robot's report, and one from a console that cannot be read.
         write(&d.join("simulator.json"), &simulator(6, 0));
         std::fs::write(d.join("console.json"), b"{\"frames_sent\": ").unwrap();

@@ -45,6 +45,31 @@ pub fn account_to_lab_robot(console: Option<&ConsoleReport>, emulator: Option<&E
     f
 }
 
+/// [`account`] of a run no runner started (an emulator started by hand,
+/// its clients of any make): a count no report gives (a client of another
+/// make writes none, and may send no end marker) is not known, not wrong,
+/// so the account balances on the counts there are: the emulator's own
+/// closes, and what the console sent and the robot received, where known,
+/// is what entered and what was delivered.
+pub fn account_by_hand(console: Option<&ConsoleReport>, emulator: Option<&EmulatorProcess>, simulator: Option<&SimulatorReport>) -> FrameAccount {
+    let mut f = account(console, emulator, simulator);
+    f.balanced = emulator.is_some_and(|e| e.frames.account.closes()) && f.sent.is_none_or(|s| Some(s) == f.entered) && f.received.is_none_or(|r| Some(r) == f.delivered);
+    f
+}
+
+/// [`account`] of a run of ROS 2 topics (`topics`, and whether
+/// `ros2.json` says its messages balance): the publishers' own count
+/// (their sequence numbers) stands for the console's, and what they sent
+/// before the emulator listened or lost on the way to it is accounted
+/// there, not lost; what the subscribers received no report gives.
+pub fn account_of_topics(emulator: Option<&EmulatorProcess>, topics: Option<(&super::Ros2Topics, bool)>) -> FrameAccount {
+    let mut f = account(None, emulator, None);
+    let before = topics.map_or(0, |(t, _)| t.sent_before_emulator + t.lost_before_ingress);
+    f.lost_before_emulator = f.sent.zip(f.entered).map(|(s, e)| s.saturating_sub(e + before));
+    f.balanced = emulator.is_some_and(|e| e.frames.account.closes()) && topics.is_some_and(|(_, b)| b);
+    f
+}
+
 /// What `corrupt` stages did against what the robot's checksum caught;
 /// `None` when nothing was corrupted. Frames that already had a bad
 /// checksum when they entered are not counted as caught, and no more can
@@ -90,6 +115,13 @@ pub fn faults(frames: &FrameAccount) -> Vec<String> {
         faults.push(format!("{n} frames released by the emulator never reached the simulator"));
     }
     faults
+}
+
+/// [`faults`] of a run of ROS 2 topics: messages the publishers' count
+/// says they sent, neither entered, sent before the emulator listened, nor
+/// lost on the way to it.
+pub fn faults_of_topics(frames: &FrameAccount) -> Vec<String> {
+    frames.lost_before_emulator.filter(|n| *n > 0).map(|n| format!("{n} messages the publishers sent are unaccounted for: they did not enter the emulator, and were neither sent before it listened nor missing from their sequence numbers")).into_iter().collect()
 }
 
 impl RunStream {
@@ -180,6 +212,20 @@ pub(super) mod tests {
             "receive_errors": 0, "send_errors": 0, "trace_overflowed": 0, "steal_ms": 0, "steal_fraction": 0.0
         }))
         .unwrap()
+    }
+
+    #[test]
+    fn a_ros2_run_accounts_what_was_published_before_the_emulator_and_balances_at_it() {
+        let topics = |before, lost| super::super::Ros2Topics { from: "/x".into(), to: "/y".into(), type_name: "std_msgs/msg/String".into(), lost_before_ingress: lost, sent_before_emulator: before };
+        // 12 published: 2 before the emulator listened, 10 entered.
+        let e = emulator(10, 6, 3, 1, Some(12));
+        let f = account_of_topics(Some(&e), Some((&topics(2, 0), true)));
+        assert!(f.balanced && f.lost_before_emulator == Some(0) && f.received.is_none(), "{f:?}");
+        assert!(faults_of_topics(&f).is_empty());
+        // 1 missing that nothing explains: a fault, and not balanced.
+        let f = account_of_topics(Some(&e), Some((&topics(1, 0), false)));
+        assert!(!f.balanced && f.lost_before_emulator == Some(1), "{f:?}");
+        assert_eq!(faults_of_topics(&f).len(), 1);
     }
 
     #[test]

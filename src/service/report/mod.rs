@@ -32,7 +32,7 @@ pub use delay::Law;
 pub use phases::RunTimeline;
 pub use files::{cut_files, write_whole, WriteError};
 pub use join::{account, corruption, difference, overhead};
-pub use text::{busy_text, dropped_list, line, opt, phase_title};
+pub use text::{busy_text, dropped_list, line, opt, phase_title, Words};
 pub use emulator_text::emulator_text;
 
 use crate::host::Steal;

@@ -14,7 +14,18 @@ use std::collections::BTreeMap;
 impl RunReport {
     /// The report as a person reads it.
     pub fn to_text(&self) -> String {
-        let mut s = format!("netfi run {}: scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s);
+        let w = self.words();
+        let what = match &self.ros2 {
+            Some(t) => format!("ROS 2 {} → {} ({}), ", t.from, t.to, t.type_name),
+            None => String::new(),
+        };
+        let mut s = match self.by_hand {
+            true => format!(
+                "netfi emulator {}: {what}scenario {} (seed {}), {:.2} s; started without `netfi run`: reported from what the emulator and its clients left\n",
+                self.run_id, self.scenario, self.seed, self.duration_s
+            ),
+            false => format!("netfi run {}: {what}scenario {} (seed {}), {:.2} s\n", self.run_id, self.scenario, self.seed, self.duration_s),
+        };
         if self.stopped {
             s += &format!("ended      stopped on request after {:.2} s (Ctrl-C, SIGTERM or the UI's stop): a normal end\n", self.duration_s);
         }
@@ -24,32 +35,38 @@ impl RunReport {
         if let Some(p) = &self.provenance {
             s += &p.to_text();
         }
-        s += &frames_text(&self.frames);
+        s += &frames_text(&self.frames, &w);
+        if let Some(t) = self.ros2.as_ref().filter(|t| t.lost_before_ingress + t.sent_before_emulator > 0) {
+            s += &format!(
+                "           of the published, {} before the emulator subscribed and {} lost before it (gaps in the publishers' sequence numbers)\n",
+                t.sent_before_emulator, t.lost_before_ingress
+            );
+        }
         for (scheme, line) in self.transports.lines() {
             s += &format!("{scheme:<10} {line}\n");
         }
         if let Some((rate, ci95)) = self.loss_rate.zip(self.loss_rate_ci95) {
             let f = &self.frames;
-            s += &LossLine { rate, ci95, unseen: self.loss_rate_unseen_model, entered: f.entered, dropped: &f.dropped, stages: &self.stages }.text();
+            s += &LossLine { rate, ci95, unseen: self.loss_rate_unseen_model, entered: f.entered, dropped: &f.dropped, stages: &self.stages }.text_in(&w);
         }
         s += &stages_text(&self.stages, &self.links);
         if !self.phases.is_empty() {
-            s += &phases_text(&self.phases);
+            s += &phases_text(&self.phases, &w);
         }
         if let Some(why) = &self.phases_unknown {
             s += &format!("phases     not told apart: {why}\n");
         }
         s += &injected_text(&self.injected_delay_ns);
-        s += &overhead_text(&self.overhead_ns, self.emulator.as_ref().and_then(|e| e.busy.as_ref()));
+        s += &overhead_text(&self.overhead_ns, self.emulator.as_ref().and_then(|e| e.busy.as_ref()), &w);
         if let Some(dc) = &self.delay_check {
-            s += &delay_law_text(dc);
+            s += &delay_law_text(dc, &w);
         }
         if let Some(k) = &self.kinematics {
             s += &kinematics_text(k);
         }
         s += &self.channels.text();
         s += &self.host_text();
-        s += &happenings_text(&self.peer_events, &self.events);
+        s += &happenings_text(&self.peer_events, &self.events, &w);
         for fault in &self.faults {
             s += &format!("FAULT      {fault}\n");
         }
@@ -93,16 +110,84 @@ impl RunReport {
             let channel = name.split('_').next().unwrap_or(name);
             s += &format!("  {channel:<9} {}\n", v.display());
         }
-        s += &format!("  report    {}\n", crate::service::report::files::report_said(&f.report_json));
+        // A run no runner started has no run report but the one printed.
+        if !self.by_hand {
+            s += &format!("  report    {}\n", crate::service::report::files::report_said(&f.report_json));
+        }
         s
+    }
+}
+
+/// The words a report speaks of its stream in: ITP frames a console sends
+/// a robot, or ROS 2 messages a topic's publishers send another's
+/// subscribers.
+#[derive(Debug, Clone)]
+pub struct Words {
+    /// `frames`, `messages`.
+    pub unit: &'static str,
+    /// `frame`, `message`.
+    pub one: &'static str,
+    /// `sent`, `published`.
+    pub sent: &'static str,
+    /// Who sends: `the console`, `the publishers of /x`.
+    pub sender: String,
+    /// Who receives: `the robot`, `the subscribers of /y`.
+    pub receiver: String,
+    /// ROS 2 topics: no robot's figures, and the peers are the topics'
+    /// publishers and subscribers.
+    pub ros2: bool,
+    /// What the stream is, before its scenario in a heading: empty, or
+    /// `ROS 2 /x → /y, `.
+    pub stream: String,
+    /// When a release goes nowhere: `no robot was subscribed`.
+    pub unsubscribed: String,
+}
+
+impl Words {
+    /// ITP frames from a console to a robot.
+    pub fn itp() -> Words {
+        let (sender, receiver, unsubscribed) = ("the console".into(), "the robot".into(), "no robot was subscribed".into());
+        Words { unit: "frames", one: "frame", sent: "sent", sender, receiver, ros2: false, stream: String::new(), unsubscribed }
+    }
+
+    /// ROS 2 messages from `from`'s publishers to `to`'s subscribers.
+    pub fn ros2(from: &str, to: &str) -> Words {
+        Words {
+            unit: "messages",
+            one: "message",
+            sent: "published",
+            sender: format!("the publishers of {from}"),
+            receiver: format!("the subscribers of {to}"),
+            ros2: true,
+            stream: format!("ROS 2 {from} → {to}, "),
+            unsubscribed: format!("no subscriber of {to} was there"),
+        }
+    }
+
+    /// A peer event's peer (`console`, `simulator`) in these words.
+    fn peer<'a>(&'a self, peer: &'a str) -> &'a str {
+        match peer {
+            "console" if self.ros2 => &self.sender["the ".len()..],
+            "simulator" if self.ros2 => &self.receiver["the ".len()..],
+            other => other,
+        }
+    }
+}
+
+impl RunReport {
+    /// The words of this run's stream.
+    pub fn words(&self) -> Words {
+        self.ros2.as_ref().map_or_else(Words::itp, |t| Words::ros2(&t.from, &t.to))
     }
 }
 
 /// Every frame from the console to the robot, what was dropped, corrupted,
 /// and whether it all balances.
-fn frames_text(f: &FrameAccount) -> String {
+fn frames_text(f: &FrameAccount, w: &Words) -> String {
     let mut s = format!(
-        "frames     sent {}  entered {}  delivered {}  received {}  held at end {}\n",
+        "{:<10} {} {}  entered {}  delivered {}  received {}  held at end {}\n",
+        w.unit,
+        w.sent,
         opt(f.sent),
         opt(f.entered),
         opt(f.delivered),
@@ -122,15 +207,31 @@ fn frames_text(f: &FrameAccount) -> String {
             opt(c.passed)
         );
     }
-    s += &format!(
-        "accounting {}\n",
-        if f.balanced {
-            BALANCED.to_string()
-        } else {
-            format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator))
-        }
-    );
+    s += &format!("accounting {}\n", accounting(f, w));
     s
+}
+
+/// Whether the frames balance, and where: a balanced account with a count
+/// no report gives (a client of another make, the lab's own program)
+/// balances at the emulator, and says what is not known.
+fn accounting(f: &FrameAccount, w: &Words) -> String {
+    if !f.balanced {
+        return format!("NOT balanced (lost before emulator {}, after emulator {})", opt(f.lost_before_emulator), opt(f.lost_after_emulator));
+    }
+    let unknown: Vec<String> = [(f.sent.is_none(), format!("what {} {}", w.sender, w.sent)), (f.received.is_none(), format!("what {} received", w.receiver))]
+        .into_iter()
+        .filter_map(|(unknown, what)| unknown.then_some(what))
+        .collect();
+    let balanced = balanced_in(w);
+    match unknown.is_empty() {
+        true => balanced,
+        false => format!("balanced at the emulator{}; not known: {} (no report gives it)", &balanced["balanced".len()..], unknown.join(", ")),
+    }
+}
+
+/// [`BALANCED`] in `w`'s words.
+pub(super) fn balanced_in(w: &Words) -> String {
+    BALANCED.replace("every frame", &format!("every {}", w.one))
 }
 
 pub(super) const BALANCED: &str = "balanced: every frame that entered (and every copy made) was delivered, dropped by the scenario, or held at the end";
@@ -151,11 +252,18 @@ pub(super) struct LossLine<'a> {
 }
 
 impl LossLine<'_> {
+    #[cfg(test)]
     pub fn text(&self) -> String {
+        self.text_in(&Words::itp())
+    }
+
+    /// The line in `w`'s words.
+    pub fn text_in(&self, w: &Words) -> String {
+        let unit = w.unit;
         let [lo, hi] = self.ci95;
         let malformed: Vec<(&String, &u64)> = self.dropped.iter().filter(|(k, n)| crate::injector::Invalid::of_reason(k).is_some() && **n > 0).collect();
         let refused: u64 = malformed.iter().map(|(_, n)| **n).sum();
-        let decided = self.entered.map_or(String::new(), |e| format!(" of the {} frames it decided", e.saturating_sub(refused)));
+        let decided = self.entered.map_or(String::new(), |e| format!(" of the {} {unit} it decided", e.saturating_sub(refused)));
         let model = self.model().map_or(String::new(), |m| format!("; model {m:.4}"));
         let mut s = format!("loss       {:.4} realized: the scenario's drops{decided}, 95% CI [{}, {}]{model}\n", self.rate, fmt_rate(lo, 4), fmt_rate(hi, 4));
         if let Some(u) = self.unseen.filter(|u| *u >= 0.00005) {
@@ -163,7 +271,7 @@ impl LossLine<'_> {
         }
         if refused > 0 {
             let each: Vec<String> = malformed.iter().map(|(k, n)| format!("{n} {k}")).collect();
-            s += &format!("           {refused} malformed frames ({}) were dropped before the scenario: not in this figure\n", each.join(", "));
+            s += &format!("           {refused} malformed {unit} ({}) were dropped before the scenario: not in this figure\n", each.join(", "));
         }
         s
     }
@@ -215,10 +323,11 @@ pub(super) fn stages_text(stages: &[StageReport], links: &[LinkReport]) -> Strin
 
 /// Each stretch of the run under one condition: its loss with its
 /// interval against its model, and its delays against its own law.
-fn phases_text(phases: &[PhaseFigures]) -> String {
+fn phases_text(phases: &[PhaseFigures], w: &Words) -> String {
+    let unit = w.unit;
     let mut s = "phases     each stretch under one condition (the whole-run loss above mixes them)\n".to_string();
     for p in phases {
-        s += &format!("  {}  {}: {} frames, dropped {}, loss {:.4} [{}, {}]{}\n",
+        s += &format!("  {}  {}: {} {unit}, dropped {}, loss {:.4} [{}, {}]{}\n",
             span_text(p),
             phase_title(p),
             p.frames,
@@ -242,7 +351,7 @@ fn phases_text(phases: &[PhaseFigures]) -> String {
                 Some(false) => "; NOT every drawn quantile within the law's 95% band",
                 None => "",
             };
-            s += &format!("      delay {} frames: {}{verdict}\n", dc.frames, parts.join("; "));
+            s += &format!("      delay {} {unit}: {}{verdict}\n", dc.frames, parts.join("; "));
         }
     }
     s
@@ -280,10 +389,13 @@ pub(super) fn injected_text(d: &Option<Summary>) -> String {
 
 /// What netfi itself adds: the emulator's own figures, the end to end
 /// ones against the direct hop, and the loop's time on frames.
-fn overhead_text(o: &Overhead, busy: Option<&LoopBusy>) -> String {
+fn overhead_text(o: &Overhead, busy: Option<&LoopBusy>, w: &Words) -> String {
     let mut s = emulator_overhead_text(&o.ingress_wait, &o.decision, &o.release_lateness);
-    s += &format!("  end-to-end extra  {}\n", line(&o.end_to_end_extra));
-    s += &format!("  direct hop        {}\n", line(&o.direct_hop));
+    // A robot's figures: no ROS 2 subscriber reports them.
+    if !w.ros2 || o.end_to_end_extra.is_some() || o.direct_hop.is_some() {
+        s += &format!("  end-to-end extra  {}\n", line(&o.end_to_end_extra));
+        s += &format!("  direct hop        {}\n", line(&o.direct_hop));
+    }
     if let Some(a) = &o.added_over_direct {
         let at = |k: &str| a.get(k).map_or("?".to_string(), |v| fmt_ns_signed(*v));
         s += &format!("  added over direct p50 {}  p99 {}  p99.9 {}\n", at("p50"), at("p99"), at("p999"));
@@ -292,7 +404,7 @@ fn overhead_text(o: &Overhead, busy: Option<&LoopBusy>) -> String {
         }
     }
     if let Some(b) = busy {
-        s += &busy_text(b);
+        s += &busy_text_in(b, w);
     }
     s
 }
@@ -308,12 +420,18 @@ pub(super) fn emulator_overhead_text(ingress_wait: &Option<Summary>, decision: &
 
 /// The emulator loop's time on frames, as a line of the overhead part.
 pub fn busy_text(b: &LoopBusy) -> String {
+    busy_text_in(b, &Words::itp())
+}
+
+/// [`busy_text`] in `w`'s words.
+pub(super) fn busy_text_in(b: &LoopBusy, w: &Words) -> String {
+    let (one, unit) = (w.one, w.unit);
     let (per, cap) = match (b.busy_ns_per_frame, b.capacity_frames_per_s) {
-        (Some(p), Some(c)) => (format!("{p:.0} ns a frame"), format!("{c:.0} frames/s")),
+        (Some(p), Some(c)) => (format!("{p:.0} ns a {one}"), format!("{c:.0} {unit}/s")),
         _ => ("-".into(), "-".into()),
     };
     let mut s = format!(
-        "  emulator loop     {} of {} turns busy, {:.3} ms on {} frames: {per}, capacity {cap} (busy time is an upper bound on the cost)\n",
+        "  emulator loop     {} of {} turns busy, {:.3} ms on {} {unit}: {per}, capacity {cap} (busy time is an upper bound on the cost)\n",
         b.busy_turns,
         b.turns,
         b.busy_ns as f64 / 1e6,
@@ -321,7 +439,7 @@ pub fn busy_text(b: &LoopBusy) -> String {
     );
     if let (Some(p), Some(c)) = (b.short_turns_ns_per_frame, b.short_turns_capacity_frames_per_s) {
         s += &format!(
-            "    without the {} turns over 200 µs ({:.3} ms; the core most likely lost): {p:.0} ns a frame, capacity {c:.0} frames/s\n",
+            "    without the {} turns over 200 µs ({:.3} ms; the core most likely lost): {p:.0} ns a {one}, capacity {c:.0} {unit}/s\n",
             b.long_turns,
             b.long_ns as f64 / 1e6
         );
@@ -330,8 +448,8 @@ pub fn busy_text(b: &LoopBusy) -> String {
 }
 
 /// The delays seen against the drawn and the model's law, by quantile.
-fn delay_law_text(dc: &DelayCheck) -> String {
-    let mut s = format!("delay law  {} frames; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames);
+fn delay_law_text(dc: &DelayCheck, w: &Words) -> String {
+    let mut s = format!("delay law  {} {}; quantile  model  [95% band]  drawn  seen  seen−drawn\n", dc.frames, w.unit);
     for q in &dc.quantiles {
         let model = match (q.model_ms, q.model_band_ms) {
             (Some(m), Some([lo, hi])) => format!("{m:9.3} [{lo:.3}, {hi:.3}]"),
@@ -369,10 +487,10 @@ fn kinematics_text(k: &serde_json::Value) -> String {
 }
 
 /// Peers coming and going, and live control actions.
-pub(super) fn happenings_text(peers: &[PeerEvent], events: &[ControlEvent]) -> String {
+pub(super) fn happenings_text(peers: &[PeerEvent], events: &[ControlEvent], w: &Words) -> String {
     let mut s = String::new();
     for e in peers {
-        s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, e.peer, e.connected);
+        s += &format!("peer       t={:.3}s {} connected: {}\n", e.t_s, w.peer(&e.peer), e.connected);
     }
     for e in events {
         s += &format!("control    t={:.3}s {}\n", e.t_s, e.what);
@@ -459,7 +577,7 @@ mod tests {
     fn what_netfi_adds_over_the_direct_hop_reads_in_the_report_s_units() {
         let added: BTreeMap<String, i64> = [("p50".to_string(), 106), ("p99".to_string(), 1_038_200), ("p999".to_string(), -4_702_720)].into();
         let o = Overhead { ingress_wait: None, decision: None, release_lateness: None, end_to_end_extra: None, direct_hop: None, added_over_direct: Some(added) };
-        let text = overhead_text(&o, None);
+        let text = overhead_text(&o, None, &Words::itp());
         assert!(text.contains("  added over direct p50 106 ns  p99 1.038 ms  p99.9 -4.703 ms\n"), "{text}");
         assert!(text.contains("negative\n     where the direct hop's own tail is longer"), "{text}");
     }

@@ -181,6 +181,13 @@ pub struct RunReport {
     /// what they would have written. Absent when false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub interrupted: bool,
+    /// No `netfi run` started this run: an emulator started by hand, with
+    /// clients of any make, reported by `netfi report` from what it and
+    /// they left. What no report gives (a foreign client's counts) is not
+    /// known, and the frames balance on the counts there are. Absent when
+    /// false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub by_hand: bool,
     pub frames: FrameAccount,
     /// The whole run's realized loss: the scenario's drops over the frames
     /// it decided (malformed frames, dropped before it, are in neither);
@@ -250,10 +257,29 @@ pub struct RunReport {
     /// refused).
     #[serde(flatten)]
     pub transports: crate::transport::TransportReports,
+    /// A run of ROS 2 topics (`--ros2-topic`): the forward topics, from
+    /// `ros2.json`; the report then speaks of messages, publishers and
+    /// subscribers. Absent for ITP frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<Ros2Topics>,
     /// A run of several streams (`--streams N`): each stream and the
     /// total; the fields above are then stream 0's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streams: Option<RunStreams>,
+}
+
+/// The forward topics of a ROS 2 run, as its `ros2.json` says.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Ros2Topics {
+    pub from: String,
+    pub to: String,
+    #[serde(rename = "type")]
+    pub type_name: String,
+    /// Messages missing from the publishers' sequences before the
+    /// emulator: lost on the DDS hop or by the reader's history.
+    pub lost_before_ingress: u64,
+    /// Messages the publishers sent before the emulator heard from them.
+    pub sent_before_emulator: u64,
 }
 
 /// One stretch of a run under one condition: a phase of the run's

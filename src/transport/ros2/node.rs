@@ -38,6 +38,12 @@ pub enum OpenError {
     },
 }
 
+/// How long a message that names a node waits for its name: a node's
+/// name comes in its participant's `ros_discovery_info`, which Fast DDS
+/// sends a reader that joined later on its writer's next heartbeat (every
+/// 3 s).
+pub const NAME_WAIT_NS: u64 = 4_000_000_000;
+
 /// Most graph events kept; later ones are counted, not kept.
 pub const EVENTS_MAX: usize = 10_000;
 
@@ -150,6 +156,9 @@ pub struct Ros2Node {
     pub events: Vec<GraphEvent>,
     /// Events past [`EVENTS_MAX`], not kept.
     pub events_dropped: u64,
+    /// When the last participant or endpoint new to the emulator was
+    /// discovered (0: none yet).
+    pub last_discovery_ns: u64,
 }
 
 fn prefix(g: GUID) -> [u8; 12] {
@@ -191,6 +200,7 @@ impl Ros2Node {
             remotes: BTreeMap::new(),
             events: Vec::new(),
             events_dropped: 0,
+            last_discovery_ns: 0,
         })
     }
 
@@ -287,6 +297,10 @@ impl Ros2Node {
                 self.left(guid, reason, t_ns);
                 return;
             }
+            E::ParticipantDiscovered { .. } => {
+                self.last_discovery_ns = t_ns;
+                return;
+            }
             E::ParticipantLost { id, reason } => {
                 let gone: Vec<GUID> = self.remotes.keys().filter(|g| g.prefix == id).copied().collect();
                 gone.into_iter().for_each(|g| self.left(g, reason.clone(), t_ns));
@@ -310,6 +324,7 @@ impl Ros2Node {
         let Some(topic) = TopicName::from_dds(&d.topic_name) else { return };
         let r = Remote { guid, role, topic: topic.clone(), dds_type: d.type_name.clone(), type_hash: type_hash(&d.user_data), qos: d.qos.clone() };
         self.remotes.insert(guid, r);
+        self.last_discovery_ns = t_ns;
         self.push(GraphEvent { t_ns, guid, role, topic, dds_type: d.type_name, happened: Happened::Joined });
     }
 

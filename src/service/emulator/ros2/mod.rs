@@ -26,6 +26,7 @@ use crate::service::schema::ros2::{EndpointSeen, EventRow, Ros2Report, TopicRepo
 use crate::service::schema::EmulatorReport;
 use crate::service::seeds;
 use crate::transport::ros2::qos::{self, Summary};
+use crate::transport::ros2::node::NAME_WAIT_NS;
 use crate::transport::ros2::{Happened, Remote, Role, Ros2Node, TopicName, TypeName};
 use crate::service::emulator::opening::OpenError;
 use crate::transport::ros2::qos::QosParseError;
@@ -101,11 +102,31 @@ fn discover(node: &mut Ros2Node, topic: &TopicName, wait_ns: u64) -> Vec<Remote>
     }
 }
 
-/// How long a refusal waits for the name of the node it names: a node's
-/// name comes in its participant's `ros_discovery_info`, which Fast DDS
-/// sends a reader that joined later on its writer's next heartbeat (every
-/// 3 s).
-const NAME_WAIT_NS: u64 = 4_000_000_000;
+
+/// How long discovery must have been quiet (no participant or endpoint new
+/// to the emulator) before the subscribers of a lane's topic are taken as
+/// those there at start: a participant's endpoints come soon after the
+/// participant, but one participant's may come well after another's (the
+/// publisher's), and a subscriber of another type found only after the
+/// lane opened would be logged, not refused.
+const QUIET_NS: u64 = 1_000_000_000;
+
+/// The longest that wait, in a domain where nodes keep coming.
+const QUIET_MAX_NS: u64 = 5_000_000_000;
+
+/// Polls the graph until discovery has been quiet for [`QUIET_NS`], or
+/// [`QUIET_MAX_NS`] has passed.
+fn quiet(node: &mut Ros2Node) {
+    let t0 = crate::clock::now_ns();
+    loop {
+        let now = crate::clock::now_ns();
+        node.poll(now);
+        if now.saturating_sub(node.last_discovery_ns) >= QUIET_NS || now - t0 >= QUIET_MAX_NS {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
 
 /// The node of `guid`, waiting for its name up to [`NAME_WAIT_NS`]; else
 /// the GUID. Only where a message names it: a refusal.
@@ -173,6 +194,7 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
         Some(text) => qos::parse(text, &base)?,
         None => base,
     };
+    quiet(node);
     let subs: Vec<Remote> = node.remotes(to, Role::Subscriber).cloned().collect();
     for s in &subs {
         let bad = s.dds_type != type_name.dds() || qos::check(&qos::writer(&writer_qos), &s.qos, "", "").is_err();
@@ -195,12 +217,20 @@ fn settle(node: &mut Ros2Node, plan: &Plan, from: &TopicName, to: &TopicName) ->
 fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicName, &TopicName), slots: usize, idle_end_ns: Option<u64>, wait_ns: Option<u64>) -> Result<TopicPorts, TopicError> {
     let writer = node.borrow().writer(to, &o.type_name, &o.writer_qos)?;
     if let Some(wait_ns) = wait_ns {
+        eprintln!("emulator: waiting up to {:.1} s for a subscriber of {to} ({}) before reading {from}", wait_ns as f64 / 1e9, o.type_name);
         let t0 = crate::clock::now_ns();
         loop {
             let now = crate::clock::now_ns();
             let mut n = node.borrow_mut();
             n.poll(now);
-            if n.remotes(to, Role::Subscriber).any(|s| s.dds_type == o.type_name.dds()) {
+            let found = n.remotes(to, Role::Subscriber).find(|s| s.dds_type == o.type_name.dds()).map(|s| s.guid);
+            if let Some(s) = found {
+                let came = match now.saturating_sub(t0) {
+                    0..=50_000_000 => "is there".to_string(),
+                    waited => format!("came after {:.1} s", waited as f64 / 1e9),
+                };
+                let name = named(&mut n, s);
+                eprintln!("emulator: the subscriber {name} of {to} {came}: reading {from}");
                 break;
             }
             // A subscriber that came meanwhile with another type is refused
@@ -217,6 +247,9 @@ fn ports(node: &RefCell<Ros2Node>, plan: &Plan, o: &Opened, (from, to): (&TopicN
             drop(n);
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
+    }
+    if wait_ns.is_none() && !node.borrow().remotes(to, Role::Subscriber).any(|s| s.dds_type == o.type_name.dds()) {
+        eprintln!("emulator: no subscriber of {to} yet: what is released before one comes goes nowhere (delivered_unsubscribed; --wait-for-peer-s S waits for one)");
     }
     let reader = node.borrow().reader(from, &o.type_name, &o.reader_qos)?;
     Ok(TopicPorts {

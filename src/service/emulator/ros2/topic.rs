@@ -42,6 +42,7 @@ use crate::service::link::{Arrival, Carried};
 use crate::service::schema::ros2::{ReturnExtra, StreamEnd};
 use crate::service::schema::{Account, BadInput, ForwardExtra};
 use crate::transport::ros2::senders::Senders;
+use crate::transport::ros2::node::NAME_WAIT_NS;
 use crate::transport::ros2::{Happened, Payload, Reader, Role, Ros2Node, Slots, TopicName, TypeName, Writer};
 use crate::transport::PortError;
 use serde::Serialize;
@@ -296,12 +297,34 @@ impl<D: Direction> Topic<D> {
         let ours = self.type_name.dds();
         self.publishers = node.remotes(&self.from, Role::Publisher).filter(|r| r.dds_type == ours).count();
         self.subscribers = node.remotes(&self.to, Role::Subscriber).filter(|r| r.dds_type == ours).count();
-        // Each change on the lane's topics, said once.
+        drop(node);
+        self.say_events(now, false);
+        self.look_for_end(now);
+    }
+
+    /// Says each change on the lane's topics once, in order, naming the
+    /// node: an endpoint's node is named by its participant's
+    /// `ros_discovery_info`, which may come after the endpoint itself, so an
+    /// endpoint's coming (and what follows it) waits for it up to
+    /// [`NAME_WAIT_NS`];
+    /// `all` says what is left, by GUID where no name came.
+    fn say_events(&mut self, now: u64, all: bool) {
+        let node = self.node.borrow();
+        let ours = self.type_name.dds();
+        let mut said = self.events_seen;
         for e in &node.events[self.events_seen..] {
             let mine = (e.role == Role::Publisher && e.topic == self.from) || (e.role == Role::Subscriber && e.topic == self.to);
             if !mine {
+                said += 1;
                 continue;
             }
+            // A node that leaves nameless was nameless when it came: its
+            // leaving waits for nothing.
+            let waits = !matches!(e.happened, Happened::Left { .. });
+            if !all && waits && node.node_of(e.guid).is_none() && now.saturating_sub(e.t_ns) < NAME_WAIT_NS {
+                break;
+            }
+            said += 1;
             let who = format!("{} {} of {}", e.role.name(), node.name(e.guid), e.topic);
             let t_s = (e.t_ns.saturating_sub(self.t_start_ns)) as f64 / 1e9;
             match &e.happened {
@@ -316,9 +339,7 @@ impl<D: Direction> Topic<D> {
                 Happened::QosIncompatible(m) => eprintln!("emulator: {}: ERROR at {t_s:.3} s: the {who} cannot match: {m}", D::NAME),
             }
         }
-        self.events_seen = node.events.len();
-        drop(node);
-        self.look_for_end(now);
+        self.events_seen = said;
     }
 
     fn look_for_end(&mut self, now: u64) {
@@ -468,6 +489,7 @@ impl<D: Direction> Channel for Topic<D> {
         // Named now, not when the bad input came: a node's name arrives
         // with `ros_discovery_info`, which may come after its first message.
         self.note_bad_sender();
+        self.say_events(now_ns(), true);
         let node = self.node.borrow();
         self.counts.bad_input.from = self.bad_senders.iter().map(|g| node.name(*g)).collect();
         drop(node);
