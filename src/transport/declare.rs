@@ -167,8 +167,9 @@ pub trait Transport: 'static {
     /// Its report at the end of the lane, of the lane's ports of it.
     fn report(s: &Self::Session, args: &Self::Args, ends: (&dyn fmt::Display, &dyn fmt::Display), source: Option<&Self::Source>, sink: Option<&Self::Sink>) -> Option<Self::Report>;
     /// Adds to its report what it says of the lane's reverse paths (their
-    /// reports by channel name), once they have finished.
-    fn attach(_r: &mut Self::Report, _paths: &std::collections::BTreeMap<String, serde_json::Value>) {}
+    /// reports by channel name) and of its forward stream's release
+    /// lateness, once they have finished.
+    fn attach(_r: &mut Self::Report, _paths: &std::collections::BTreeMap<String, serde_json::Value>, _forward_lateness: &crate::metrics::Summary) {}
     /// What the log line at the lane's end adds from its report.
     fn summary(_r: &Self::Report) -> String {
         String::new()
@@ -539,9 +540,10 @@ macro_rules! transports {
             }
 
             /// Adds what each transport says of the lane's reverse paths
-            /// (their reports by channel name).
-            pub fn attach(&mut self, paths: &std::collections::BTreeMap<String, serde_json::Value>) {
-                $( $(#[cfg($cfg)])? if let Some(r) = self.$field.as_mut() { <$T as Transport>::attach(r, paths); } )+
+            /// (their reports by channel name) and of its forward stream's
+            /// release lateness.
+            pub fn attach(&mut self, paths: &std::collections::BTreeMap<String, serde_json::Value>, forward_lateness: &$crate::metrics::Summary) {
+                $( $(#[cfg($cfg)])? if let Some(r) = self.$field.as_mut() { <$T as Transport>::attach(r, paths, forward_lateness); } )+
             }
 
             /// Whether no transport has a report.

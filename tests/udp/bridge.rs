@@ -549,6 +549,12 @@ fn raw_mode_forwards_any_datagram_and_the_return_path_relays_untouched() {
     assert_eq!(u(&r["send_errors"]), 0);
     assert_eq!(back.len() as u64, sent, "the console got every reply");
     assert!(back.iter().all(|b| *b == feedback));
+    // netfi's own time per datagram each way: each path's release lateness.
+    let own = &udp["own_time_ns"];
+    for (way, lateness) in [("forward", &e["release_lateness_ns"]), ("return", &r["release_lateness_ns"])] {
+        assert_eq!(u(&own[way]["count"]), sent, "{way}: {own}");
+        assert_eq!((&own[way]["p50"], &own[way]["p99"]), (&lateness["p50"], &lateness["p99"]), "{way}: {own}");
+    }
 }
 
 #[test]

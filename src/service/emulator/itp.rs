@@ -75,7 +75,7 @@ pub fn main(cfg: &EmulatorConfig) -> Result<Vec<EmulatorReport>, super::Emulator
             if t.is_empty() {
                 return Ok(());
             }
-            t.attach(&r.process.paths);
+            t.attach(&r.process.paths, &r.shaping.link.release_lateness_ns);
             for (file, value) in t.files() {
                 report::write_json(&dir.join(file), &value)?;
             }

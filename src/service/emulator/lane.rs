@@ -26,7 +26,9 @@ pub const RELEASE_SPIN_NS: u64 = 1_000;
 /// as much as the rest of an idle turn, and the reverse paths are not the
 /// command stream: while they are quiet, what comes on them waits at most
 /// three turns more (well under a microsecond); once one is busy, they are
-/// polled every turn again.
+/// polled every turn again. A path may ask for more ([`Reverse::quiet_poll_every`]):
+/// the UDP return, whose idle turns are a system call each, is polled every
+/// turn.
 pub const REVERSE_EVERY: u32 = 4;
 
 /// One stream of the emulator.
@@ -55,11 +57,16 @@ pub struct Lane<F: ForwardChannel> {
     reverse_busy: bool,
     /// Turns since the reverse paths were last polled.
     reverse_wait: u32,
+    /// Quiet reverse paths are polled every this many turns: the least
+    /// any of them asks ([`Reverse::quiet_poll_every`]), [`REVERSE_EVERY`]
+    /// at most.
+    reverse_every: u32,
 }
 
 impl<F: ForwardChannel> Lane<F> {
     /// The stream of `forward` and its `reverse` paths.
     pub fn new(forward: Path<F>, reverse: Vec<Box<dyn Reverse>>) -> Self {
+        let reverse_every = reverse.iter().map(|r| r.quiet_poll_every()).fold(REVERSE_EVERY, u32::min).max(1);
         Lane {
             forward,
             reverse,
@@ -72,13 +79,15 @@ impl<F: ForwardChannel> Lane<F> {
             bad_seen: 0,
             reverse_busy: false,
             reverse_wait: 0,
+            reverse_every,
         }
     }
 
     /// One turn: every forward release that is due, oldest first (or, when
     /// idle with a release within `release_spin_ns`, that release prepared
     /// and sent on its time); each reverse path's poll (every
-    /// [`REVERSE_EVERY`]th turn while they are quiet); every frame waiting
+    /// [`REVERSE_EVERY`]th turn while they are quiet, unless one asks for
+    /// more); every frame waiting
     /// at the ingress, up to the forward channel's batch.
     #[inline]
     pub fn turn(&mut self) {
@@ -92,7 +101,7 @@ impl<F: ForwardChannel> Lane<F> {
             _ => self.forward.release_due(now),
         }
         self.reverse_wait += 1;
-        if self.reverse_busy || self.reverse_wait >= REVERSE_EVERY {
+        if self.reverse_busy || self.reverse_wait >= self.reverse_every {
             self.reverse_wait = 0;
             let mut busy = false;
             for r in self.reverse.iter_mut() {
@@ -427,6 +436,72 @@ mod tests {
         assert_eq!(fwd.loop_busy().frames, 1);
     }
 
+
+    /// A reverse channel that counts the polls of its port, polled while
+    /// quiet every `EVERY` turns, and delivers what its inbox holds.
+    #[derive(Default)]
+    struct Asked<const EVERY: u32> {
+        asked: u64,
+        inbox: VecDeque<u64>,
+        outbox: Vec<Note>,
+    }
+
+    impl<const EVERY: u32> Channel for Asked<EVERY> {
+        type Item = Note;
+        type Extra = NotesExtra;
+        const NAME: &'static str = "asked";
+        const TRACE_FILE: &'static str = "trace_asked.csv";
+        const ENDING: Ending = Ending::WithForward;
+        const QUIET_POLL_EVERY: u32 = EVERY;
+
+        fn take(&mut self, _next: u64, clock: &mut impl FnMut() -> u64) -> Take<Note> {
+            self.asked += 1;
+            match self.inbox.pop_front() {
+                Some(n) => {
+                    let t = clock();
+                    Take::Item(Note { n, ingress_ns: t }, None, Arrival { sequence: None, console_index: n, send_ns: t })
+                }
+                None => Take::Nothing,
+            }
+        }
+
+        fn release(&mut self, item: &Note, _scheduled_ns: u64, stamp: impl FnOnce() -> u64) -> Result<u64, (u64, PortError)> {
+            self.outbox.push(*item);
+            Ok(stamp())
+        }
+
+        fn send_end(&mut self, _released: u64) {}
+
+        fn finish(&mut self, _account: &Account, _sent: Option<u64>) -> (NotesExtra, bool) {
+            (NotesExtra { out: self.outbox.len() }, true)
+        }
+    }
+
+    fn asked<const EVERY: u32>(l: &mut Lane<Forward<MemoryPort, MemoryPort>>) -> &mut Path<Asked<EVERY>> {
+        l.reverse[0].as_any_mut().downcast_mut::<Path<Asked<EVERY>>>().unwrap()
+    }
+
+    /// Quiet reverse paths are polled every 4th turn, unless one asks for
+    /// every turn (the UDP return: its quiet poll costs what the forward's
+    /// does); an item with no delay goes out in the poll that took it.
+    #[test]
+    fn a_reverse_path_that_asks_is_polled_every_turn_and_releases_what_it_took_at_once() {
+        let link = || Link::new(scenario("", 1), 16, 16).unwrap();
+        let unused = || std::env::temp_dir().join("netfi-lane-unused.csv");
+        let quiet = Path::of(link(), Asked::<4>::default(), 1, unused(), false);
+        let mut l = Lane::new(normal_loop().forward, vec![Box::new(quiet)]);
+        (0..100).for_each(|_| l.turn());
+        assert_eq!(asked::<4>(&mut l).chan.asked, 25);
+        let eager = Path::of(link(), Asked::<1>::default(), 1, unused(), false);
+        let mut l = Lane::new(normal_loop().forward, vec![Box::new(eager)]);
+        (0..100).for_each(|_| l.turn());
+        assert_eq!(asked::<1>(&mut l).chan.asked, 100);
+        asked::<1>(&mut l).chan.inbox.push_back(7);
+        l.turn();
+        let p = asked::<1>(&mut l);
+        assert_eq!(p.chan.outbox.iter().map(|n| n.n).collect::<Vec<_>>(), [7], "taken and released in one poll");
+        assert_eq!((p.link.released(), p.link.held()), (1, 0));
+    }
 
     /// The loop looks (for a stop, dead peers, each lane's end) every 4096
     /// lane turns whatever the lanes: with 64 lanes every 64 rounds, not

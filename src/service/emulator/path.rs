@@ -123,6 +123,10 @@ pub trait Channel {
     const NAME: &'static str;
     /// Its trace file, in the run's directory.
     const TRACE_FILE: &'static str;
+    /// As a reverse path, how often it is polled while the lane's reverse
+    /// paths are quiet: every this many turns (see
+    /// [`crate::service::emulator::lane::REVERSE_EVERY`], the default).
+    const QUIET_POLL_EVERY: u32 = crate::service::emulator::lane::REVERSE_EVERY;
     /// How its path ends.
     const ENDING: Ending;
     /// The most items one poll takes in. A burst taken whole pays the
@@ -260,11 +264,17 @@ impl<C: Channel> Path<C> {
     }
 
     /// One poll: every due release, then what waits at the port (up to
-    /// [`Channel::TAKE_MAX`]). Returns whether nothing waited.
+    /// [`Channel::TAKE_MAX`]), then what of it is due already: an item with
+    /// no delay goes out in the poll that took it, not a turn later behind
+    /// the lane's other ports. Returns whether nothing waited.
     #[inline]
     pub fn poll(&mut self) -> bool {
         self.release_due(now_ns());
-        self.take(now_ns)
+        let idle = self.take(now_ns);
+        if !idle && self.link.next_release_ns().is_some_and(|due| due <= self.last_take_ns) {
+            self.release_due(self.last_take_ns);
+        }
+        idle
     }
 
     /// Releases every item due at `now`, oldest first.
@@ -441,6 +451,9 @@ pub trait Reverse {
     fn name(&self) -> &'static str;
     /// How the path ends.
     fn ending(&self) -> Ending;
+    /// How often it is polled while the lane's reverse paths are quiet
+    /// ([`Channel::QUIET_POLL_EVERY`]).
+    fn quiet_poll_every(&self) -> u32;
     /// One poll ([`Path::poll`]); whether it took or released anything.
     fn poll(&mut self) -> bool;
     /// Whether the path has ended ([`Path::finished`]).
@@ -465,6 +478,10 @@ impl<C: Channel + 'static> Reverse for Path<C> {
 
     fn ending(&self) -> Ending {
         C::ENDING
+    }
+
+    fn quiet_poll_every(&self) -> u32 {
+        C::QUIET_POLL_EVERY
     }
 
     #[inline]

@@ -41,7 +41,7 @@ pub mod report;
 pub mod transport;
 pub use args::{Payload, UdpArgs, UdpArgsError};
 pub use frames::{Arena, UdpSink, UdpSource, ARENA_SLOT_BYTES};
-pub use report::{BoundEndpoints, ForeignSender, UdpReport};
+pub use report::{BoundEndpoints, ForeignSender, OwnPercentiles, OwnTime, UdpReport};
 pub use transport::{ConsoleAddr, ConsoleUnnamed, Udp, UdpSession, UdpSideError, RAW_DEFAULT_QUEUE_CAPACITY};
 
 /// The name of the return path (what the robot sends back, relayed to the

@@ -41,6 +41,48 @@ pub struct UdpReport {
     pub arena_high_water: Option<usize>,
     /// The return path's report (the path `return` of `emulator.json`).
     pub return_path: Option<serde_json::Value>,
+    /// netfi's own time per datagram, each way: from the moment its
+    /// receive returned to the moment its send began, beyond the delay the
+    /// scenario injected (each path's release lateness). What netfi adds
+    /// over a relay that sends each datagram on as it takes it; the
+    /// system calls themselves, the wait in the socket for the loop's next
+    /// receive and the hop to the other end are not in it.
+    #[serde(default)]
+    pub own_time_ns: Option<OwnTime>,
+}
+
+/// netfi's own time per datagram, each way ([`UdpReport::own_time_ns`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OwnTime {
+    /// Console → robot.
+    pub forward: OwnPercentiles,
+    /// Robot → console, where there is a return path.
+    #[serde(rename = "return")]
+    pub return_path: Option<OwnPercentiles>,
+}
+
+/// A distribution's count, median and 99th percentile, ns (each at most
+/// 0.1 % above the exact value: the histograms' precision).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OwnPercentiles {
+    /// Datagrams sent.
+    pub count: u64,
+    /// The median.
+    pub p50: u64,
+    /// The 99th percentile.
+    pub p99: u64,
+}
+
+impl OwnPercentiles {
+    /// Those of `s`.
+    pub fn of(s: &crate::metrics::Summary) -> OwnPercentiles {
+        OwnPercentiles { count: s.count, p50: s.p50, p99: s.p99 }
+    }
+
+    fn text(&self) -> String {
+        use crate::metrics::fmt_ns;
+        format!("p50 {}, p99 {}", fmt_ns(self.p50), fmt_ns(self.p99))
+    }
 }
 
 /// The endpoints as bound, written to `udp_endpoints.json` before
@@ -90,6 +132,12 @@ impl UdpReport {
                 s += &format!(" and {} from others", u.foreign_unnamed);
             }
         }
+        if let Some(own) = u.own_time_ns.filter(|o| o.forward.count > 0) {
+            s += &format!("; netfi's own time per datagram (receive → send, beyond the injected delay): forward {}", own.forward.text());
+            if let Some(back) = own.return_path.filter(|b| b.count > 0) {
+                s += &format!(", return {}", back.text());
+            }
+        }
         s
     }
 
@@ -126,5 +174,41 @@ impl UdpReport {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_line_shows_netfis_own_time_each_way_once_datagrams_went_through() {
+        let mut r = UdpReport {
+            ingress: "udp://127.0.0.1:5000".into(),
+            egress: "udp://127.0.0.1:6000".into(),
+            payload: crate::transport::udp::Payload::Raw,
+            ingress_local: None,
+            egress_local: None,
+            datagrams_in: Some(10),
+            ingress_kernel_drops: Some(0),
+            ingress_buffer_bytes: None,
+            console: None,
+            foreign_sender: 0,
+            foreign_senders: Vec::new(),
+            foreign_unnamed: 0,
+            arena_slots: None,
+            arena_high_water: None,
+            return_path: None,
+            own_time_ns: None,
+        };
+        assert!(!r.line().contains("own time"), "{}", r.line());
+        let forward = OwnPercentiles { count: 10, p50: 213, p99: 1_741 };
+        r.own_time_ns = Some(OwnTime { forward, return_path: None });
+        assert!(r.line().ends_with("; netfi's own time per datagram (receive → send, beyond the injected delay): forward p50 213 ns, p99 1.74 µs"), "{}", r.line());
+        r.own_time_ns = Some(OwnTime { forward, return_path: Some(OwnPercentiles { count: 10, p50: 140, p99: 1_534 }) });
+        assert!(r.line().ends_with("forward p50 213 ns, p99 1.74 µs, return p50 140 ns, p99 1.53 µs"), "{}", r.line());
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["own_time_ns"]["return"]["p99"], 1_534);
+        assert_eq!(serde_json::from_value::<UdpReport>(json).unwrap(), r);
     }
 }

@@ -4,7 +4,7 @@
 //! payloads, the store of datagrams both share; at the end, `udp.json`.
 
 use super::args::{Payload, UdpArgs, UdpArgsError};
-use super::report::{BoundEndpoints, ForeignSender, UdpReport};
+use super::report::{BoundEndpoints, ForeignSender, OwnPercentiles, OwnTime, UdpReport};
 use super::{Arena, ConsolePolicy, UdpOpenError, UdpOptions, UdpPort, UdpSink, UdpSource};
 use crate::model::ModelKind;
 use crate::transport::declare::{Lane, Sides, Transport, Wiring};
@@ -218,12 +218,16 @@ impl Transport for Udp {
             arena_slots: arena.as_ref().map(|a| a.slots()),
             arena_high_water: arena.as_ref().map(|a| a.high_water()),
             return_path: None,
+            own_time_ns: None,
         })
     }
 
-    /// The return path's report (the path `return`).
-    fn attach(r: &mut UdpReport, paths: &BTreeMap<String, serde_json::Value>) {
+    /// The return path's report (the path `return`), and netfi's own time
+    /// per datagram each way (each path's release lateness).
+    fn attach(r: &mut UdpReport, paths: &BTreeMap<String, serde_json::Value>, forward_lateness: &crate::metrics::Summary) {
         r.return_path = paths.get(super::RETURN_PATH).cloned();
+        let back = r.return_path.as_ref().and_then(|p| serde_json::from_value::<crate::metrics::Summary>(p["release_lateness_ns"].clone()).ok());
+        r.own_time_ns = Some(OwnTime { forward: OwnPercentiles::of(forward_lateness), return_path: back.as_ref().map(OwnPercentiles::of) });
     }
 
     fn summary(r: &UdpReport) -> String {

@@ -78,6 +78,9 @@ impl Channel for UdpReturn {
     const NAME: &'static str = crate::transport::udp::RETURN_PATH;
     const TRACE_FILE: &'static str = "trace_return.csv";
     const ENDING: Ending = Ending::WithForward;
+    /// Every turn: a quiet poll is one `recvfrom`, as the forward's is, and
+    /// a reply is as pressing as the command it answers.
+    const QUIET_POLL_EVERY: u32 = 1;
 
     #[inline]
     fn take(&mut self, _next_ingress_index: u64, clock: &mut impl FnMut() -> u64) -> Take<Held> {
