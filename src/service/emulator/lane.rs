@@ -6,7 +6,7 @@
 
 use crate::clock::now_ns;
 use crate::service::emulator::busy::BusyClock;
-use crate::service::emulator::path::{Ending, ForwardChannel, Path, Reverse};
+use crate::service::emulator::path::{Ending, ForwardChannel, Path, Reverse, REVERSE_EVERY};
 use crate::service::schema::{LoopBusy, PeerEvent};
 
 /// How close a release must be for an idle loop of one stream to prepare
@@ -21,15 +21,6 @@ use crate::service::schema::{LoopBusy, PeerEvent};
 /// later.
 pub const RELEASE_SPIN_NS: u64 = 1_000;
 
-/// How often a lane whose reverse paths were quiet at their last poll polls
-/// them again: every 4th turn. A poll of an empty iceoryx2 port costs about
-/// as much as the rest of an idle turn, and the reverse paths are not the
-/// command stream: while they are quiet, what comes on them waits at most
-/// three turns more (well under a microsecond); once one is busy, they are
-/// polled every turn again. A path may ask for more ([`Reverse::quiet_poll_every`]):
-/// the UDP return, whose idle turns are a system call each, is polled every
-/// turn.
-pub const REVERSE_EVERY: u32 = 4;
 
 /// One stream of the emulator.
 pub struct Lane<F: ForwardChannel> {

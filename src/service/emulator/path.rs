@@ -112,6 +112,16 @@ pub const GRACE_NS: u64 = 2_000_000_000;
 /// this long (a sender that just left may still have items in flight).
 const GONE_QUIET_NS: u64 = 50_000_000;
 
+/// How often a lane whose reverse paths were quiet at their last poll polls
+/// them again: every 4th turn. A poll of an empty iceoryx2 port costs about
+/// as much as the rest of an idle turn, and the reverse paths are not the
+/// command stream: while they are quiet, what comes on them waits at most
+/// three turns more (well under a microsecond); once one is busy, they are
+/// polled every turn again. A path may ask for more ([`Reverse::quiet_poll_every`]):
+/// the UDP return, whose idle turns are a system call each, is polled every
+/// turn.
+pub const REVERSE_EVERY: u32 = 4;
+
 /// What differs between the directions of the emulator.
 pub trait Channel {
     /// What the link holds.
@@ -125,8 +135,8 @@ pub trait Channel {
     const TRACE_FILE: &'static str;
     /// As a reverse path, how often it is polled while the lane's reverse
     /// paths are quiet: every this many turns (see
-    /// [`crate::service::emulator::lane::REVERSE_EVERY`], the default).
-    const QUIET_POLL_EVERY: u32 = crate::service::emulator::lane::REVERSE_EVERY;
+    /// [`REVERSE_EVERY`], the default).
+    const QUIET_POLL_EVERY: u32 = REVERSE_EVERY;
     /// How its path ends.
     const ENDING: Ending;
     /// The most items one poll takes in. A burst taken whole pays the
