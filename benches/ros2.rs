@@ -357,6 +357,26 @@ fn relayed(csv: &Path, direct: &Path) -> Seen {
     rows(csv).into_iter().filter_map(|(i, _, r)| Some((i, r - source.get(&i)?))).collect()
 }
 
+/// CPU ticks (user + system) of `pid`'s threads, summed by thread name.
+fn ticks_by_name(pid: u32) -> std::collections::BTreeMap<String, u64> {
+    let mut by = std::collections::BTreeMap::new();
+    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return by };
+    for e in dir.filter_map(|e| e.ok()) {
+        let Ok(s) = std::fs::read_to_string(e.path().join("stat")) else { continue };
+        let (Some(open), Some(close)) = (s.find('('), s.rfind(')')) else { continue };
+        let f: Vec<&str> = s[close + 2..].split_whitespace().collect();
+        let (Some(u), Some(k)) = (f.get(11).and_then(|x| x.parse::<u64>().ok()), f.get(12).and_then(|x| x.parse::<u64>().ok())) else { continue };
+        *by.entry(s[open + 1..close].to_string()).or_insert(0) += u + k;
+    }
+    by
+}
+
+/// CPU (ns) a message of each thread name of `pid` between `before` and
+/// `after`.
+fn per_name(before: &std::collections::BTreeMap<String, u64>, after: &std::collections::BTreeMap<String, u64>, tick_ns: f64, messages: f64) -> Value {
+    after.iter().map(|(n, t)| (n.clone(), json!(t.saturating_sub(before.get(n).copied().unwrap_or(0)) as f64 * tick_ns / messages))).collect::<serde_json::Map<_, _>>().into()
+}
+
 fn received(csv: &Path) -> Vec<(u64, i64)> {
     std::fs::read_to_string(csv)
         .unwrap_or_default()
@@ -545,6 +565,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     let steal = netfi::host::StealTimer::start();
     let ticks0 = thread_ticks(pid, pid);
     let rdds_ticks0 = thread_ticks(rdds_pid, 0);
+    let (names0, rdds_names0) = (ticks_by_name(pid), ticks_by_name(rdds_pid));
     match talker_kind {
         Talker::Rclpy => {
             let mut t = node(&["talker.py", "/bench", &n, "--rate-hz", &a.rate_hz.to_string(), "--wait-subs", &subscribers.to_string(), "--depth", "1000"], "talker.log")?;
@@ -554,6 +575,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     }
     let ticks1 = thread_ticks(pid, pid);
     let rdds_ticks1 = thread_ticks(rdds_pid, 0);
+    let (names1, rdds_names1) = (ticks_by_name(pid), ticks_by_name(rdds_pid));
     let steal = steal.stop();
     wait(&mut emu, "the emulator", Duration::from_secs(60))?;
     wait(&mut relay, "the rclpy relay node", Duration::from_secs(60))?;
@@ -573,10 +595,12 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         "rclpy_listener": routes(&received(&direct_csv), &received(&through_csv), &relayed(&relay_csv, &direct_csv), &relayed(&rdds_csv, &direct_csv)),
         "emulator_loop_busy_ns_per_message": e["busy"]["busy_ns_per_frame"],
         "emulator_other_threads_cpu_ns_per_message": (ticks1.saturating_sub(ticks0)) as f64 * tick_ns / delivered,
+        "emulator_threads_cpu_ns_per_message": per_name(&names0, &names1, tick_ns, delivered),
         "release_lateness_ns": e["release_lateness_ns"],
         "rustdds_relay": r,
         "rustdds_relay_thread_cpu_ns_per_message": r["relay_thread_cpu_ns"].as_f64().unwrap_or(f64::NAN) / rdds_relayed,
         "rustdds_relay_all_threads_cpu_ns_per_message": (rdds_ticks1.saturating_sub(rdds_ticks0)) as f64 * tick_ns / rdds_relayed,
+        "rustdds_relay_threads_cpu_ns_per_message": per_name(&rdds_names0, &rdds_names1, tick_ns, rdds_relayed),
         "steal_fraction": steal.fraction,
         "steal_ms": steal.ms,
     });
