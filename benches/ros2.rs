@@ -33,9 +33,11 @@
 //!   share is the busy time the emulator itself reports per message
 //!   (`emulator.json` `busy`); its other threads (RustDDS's receive,
 //!   discovery and send threads, the trace writer) are read from
-//!   `/proc/<pid>/task` over the run. The RustDDS relay's: its relaying
-//!   thread's CPU time from the first message, and all its threads' from
-//!   `/proc` over the run, per message relayed.
+//!   `/proc/<pid>/task` over the run (the scheduler's run time of each
+//!   thread, `sched`'s `se.sum_exec_runtime`; `stat`'s sampled ticks only
+//!   where there is none), also by thread name. The RustDDS relay's: its
+//!   relaying thread's CPU time from the first message, and all its
+//!   threads' from `/proc` over the run, per message relayed.
 //! - **Allocation.** RustDDS allocates per message: a counting allocator
 //!   counts, on the calling thread only, what one `take` off a reader (into
 //!   netfi's slot) and one `write` cost, between two participants of this
@@ -321,18 +323,46 @@ fn wait(c: &mut Kill, what: &str, timeout: Duration) -> anyhow::Result<()> {
     anyhow::bail!("{what} did not end within {timeout:?}")
 }
 
-/// CPU ticks (user + system) of each thread of `pid` but `skip`.
-fn thread_ticks(pid: u32, skip: u32) -> u64 {
-    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return 0 };
-    dir.filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy() != skip.to_string())
-        .filter_map(|e| std::fs::read_to_string(e.path().join("stat")).ok())
-        .filter_map(|s| {
-            let rest = &s[s.rfind(')')? + 2..];
-            let f: Vec<&str> = rest.split_whitespace().collect();
-            Some(f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?)
-        })
-        .sum()
+/// A thread's CPU time (ns): the scheduler's own sum of its run time
+/// (`se.sum_exec_runtime` in `/proc/<pid>/task/<tid>/sched`, in ms to the
+/// ns), else user + system time from `stat` in clock ticks. The ticks are
+/// sampled: a thread that runs in short bursts between them (a DDS
+/// receive thread) is undercounted there several times over.
+fn task_cpu_ns(task: &Path) -> Option<(String, f64)> {
+    let stat = std::fs::read_to_string(task.join("stat")).ok()?;
+    let (open, close) = (stat.find('(')?, stat.rfind(')')?);
+    let name = stat[open + 1..close].to_string();
+    let sched = std::fs::read_to_string(task.join("sched")).ok();
+    let exact = sched.as_deref().and_then(|s| s.lines().find(|l| l.trim_start().starts_with("se.sum_exec_runtime"))?.split(':').nth(1)?.trim().parse::<f64>().ok());
+    if let Some(ms) = exact {
+        return Some((name, ms * 1e6));
+    }
+    let f: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+    Some((name, ticks as f64 * 1e7))
+}
+
+/// CPU time (ns) of each thread of `pid`, by thread id: its name and time.
+fn threads_cpu_ns(pid: u32) -> std::collections::BTreeMap<String, (String, f64)> {
+    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return Default::default() };
+    dir.filter_map(|e| e.ok()).filter_map(|e| Some((e.file_name().to_string_lossy().into_owned(), task_cpu_ns(&e.path())?))).collect()
+}
+
+/// CPU (ns) a message between `before` and `after` of process `pid`'s
+/// threads: of all of them (but its main thread with `but_main`), and by
+/// thread name (the main thread's marked `(main)`).
+fn cpu_per_message(before: &std::collections::BTreeMap<String, (String, f64)>, after: &std::collections::BTreeMap<String, (String, f64)>, pid: u32, but_main: bool, messages: f64) -> (f64, Value) {
+    let mut by = std::collections::BTreeMap::<String, f64>::new();
+    let mut all = 0.0;
+    for (tid, (name, ns)) in after {
+        let d = ns - before.get(tid).map_or(0.0, |b| b.1);
+        let main = *tid == pid.to_string();
+        *by.entry(if main { format!("{name} (main)") } else { name.clone() }).or_insert(0.0) += d / messages;
+        if !(main && but_main) {
+            all += d;
+        }
+    }
+    (all / messages, json!(by))
 }
 
 /// Each row's index, source and reception times (ns).
@@ -355,26 +385,6 @@ fn rows(csv: &Path) -> Vec<(u64, i64, i64)> {
 fn relayed(csv: &Path, direct: &Path) -> Seen {
     let source: std::collections::BTreeMap<u64, i64> = rows(direct).into_iter().map(|(i, s, _)| (i, s)).collect();
     rows(csv).into_iter().filter_map(|(i, _, r)| Some((i, r - source.get(&i)?))).collect()
-}
-
-/// CPU ticks (user + system) of `pid`'s threads, summed by thread name.
-fn ticks_by_name(pid: u32) -> std::collections::BTreeMap<String, u64> {
-    let mut by = std::collections::BTreeMap::new();
-    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else { return by };
-    for e in dir.filter_map(|e| e.ok()) {
-        let Ok(s) = std::fs::read_to_string(e.path().join("stat")) else { continue };
-        let (Some(open), Some(close)) = (s.find('('), s.rfind(')')) else { continue };
-        let f: Vec<&str> = s[close + 2..].split_whitespace().collect();
-        let (Some(u), Some(k)) = (f.get(11).and_then(|x| x.parse::<u64>().ok()), f.get(12).and_then(|x| x.parse::<u64>().ok())) else { continue };
-        *by.entry(s[open + 1..close].to_string()).or_insert(0) += u + k;
-    }
-    by
-}
-
-/// CPU (ns) a message of each thread name of `pid` between `before` and
-/// `after`.
-fn per_name(before: &std::collections::BTreeMap<String, u64>, after: &std::collections::BTreeMap<String, u64>, tick_ns: f64, messages: f64) -> Value {
-    after.iter().map(|(n, t)| (n.clone(), json!(t.saturating_sub(before.get(n).copied().unwrap_or(0)) as f64 * tick_ns / messages))).collect::<serde_json::Map<_, _>>().into()
 }
 
 fn received(csv: &Path) -> Vec<(u64, i64)> {
@@ -563,9 +573,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     // listener(s), the two relays and the emulator.
     let subscribers = if rust.is_some() { 5 } else { 4 };
     let steal = netfi::host::StealTimer::start();
-    let ticks0 = thread_ticks(pid, pid);
-    let rdds_ticks0 = thread_ticks(rdds_pid, 0);
-    let (names0, rdds_names0) = (ticks_by_name(pid), ticks_by_name(rdds_pid));
+    let (cpu0, rdds_cpu0) = (threads_cpu_ns(pid), threads_cpu_ns(rdds_pid));
     match talker_kind {
         Talker::Rclpy => {
             let mut t = node(&["talker.py", "/bench", &n, "--rate-hz", &a.rate_hz.to_string(), "--wait-subs", &subscribers.to_string(), "--depth", "1000"], "talker.log")?;
@@ -573,9 +581,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         }
         Talker::Rust => rust_talker(domain, messages, a.rate_hz, subscribers).join().map_err(|_| anyhow::anyhow!("the Rust talker panicked"))??,
     }
-    let ticks1 = thread_ticks(pid, pid);
-    let rdds_ticks1 = thread_ticks(rdds_pid, 0);
-    let (names1, rdds_names1) = (ticks_by_name(pid), ticks_by_name(rdds_pid));
+    let (cpu1, rdds_cpu1) = (threads_cpu_ns(pid), threads_cpu_ns(rdds_pid));
     let steal = steal.stop();
     wait(&mut emu, "the emulator", Duration::from_secs(60))?;
     wait(&mut relay, "the rclpy relay node", Duration::from_secs(60))?;
@@ -586,21 +592,24 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         wait(l, what, Duration::from_secs(60))?;
     }
     let e: Value = serde_json::from_slice(&std::fs::read(dir.join("out/emulator.json"))?)?;
-    let tick_ns = 1e9 / 100.0;
     let delivered = e["frames"]["delivered"].as_u64().unwrap_or(0).max(1) as f64;
+    // The emulator's loop (its main thread) busy-polls: its share is the
+    // busy time it reports, not its CPU time.
+    let (emulator_other, emulator_threads) = cpu_per_message(&cpu0, &cpu1, pid, true, delivered);
+    let (rdds_all, rdds_threads) = cpu_per_message(&rdds_cpu0, &rdds_cpu1, rdds_pid, false, rdds_relayed);
     let mut out = json!({
         "talker": if talker_kind == Talker::Rclpy { "rclpy" } else { "rust" },
         "messages": messages,
         "rate_hz": a.rate_hz,
         "rclpy_listener": routes(&received(&direct_csv), &received(&through_csv), &relayed(&relay_csv, &direct_csv), &relayed(&rdds_csv, &direct_csv)),
         "emulator_loop_busy_ns_per_message": e["busy"]["busy_ns_per_frame"],
-        "emulator_other_threads_cpu_ns_per_message": (ticks1.saturating_sub(ticks0)) as f64 * tick_ns / delivered,
-        "emulator_threads_cpu_ns_per_message": per_name(&names0, &names1, tick_ns, delivered),
+        "emulator_other_threads_cpu_ns_per_message": emulator_other,
+        "emulator_threads_cpu_ns_per_message": emulator_threads,
         "release_lateness_ns": e["release_lateness_ns"],
         "rustdds_relay": r,
         "rustdds_relay_thread_cpu_ns_per_message": r["relay_thread_cpu_ns"].as_f64().unwrap_or(f64::NAN) / rdds_relayed,
-        "rustdds_relay_all_threads_cpu_ns_per_message": (rdds_ticks1.saturating_sub(rdds_ticks0)) as f64 * tick_ns / rdds_relayed,
-        "rustdds_relay_threads_cpu_ns_per_message": per_name(&rdds_names0, &rdds_names1, tick_ns, rdds_relayed),
+        "rustdds_relay_all_threads_cpu_ns_per_message": rdds_all,
+        "rustdds_relay_threads_cpu_ns_per_message": rdds_threads,
         "steal_fraction": steal.fraction,
         "steal_ms": steal.ms,
     });
