@@ -37,7 +37,8 @@
 //!   thread, `sched`'s `se.sum_exec_runtime`; `stat`'s sampled ticks only
 //!   where there is none), also by thread name. The RustDDS relay's: its
 //!   relaying thread's CPU time from the first message, and all its
-//!   threads' from `/proc` over the run, per message relayed.
+//!   threads' from `/proc` from its subscribing to its last message (read
+//!   by the relay itself), per message relayed.
 //! - **Allocation.** RustDDS allocates per message: a counting allocator
 //!   counts, on the calling thread only, what one `take` off a reader (into
 //!   netfi's slot) and one `write` cost, between two participants of this
@@ -257,6 +258,10 @@ fn rustdds_relay(domain: u16, n: usize, ready: Option<&Path>) -> anyhow::Result<
     if let Some(r) = ready {
         std::fs::write(r, "")?;
     }
+    // Every thread's CPU from here to the last message, read by the relay
+    // itself: it may be gone before the bench looks again.
+    let pid = std::process::id();
+    let cpu0 = threads_cpu_ns(pid);
     let buf = RefCell::new(Vec::with_capacity(64 * 1024));
     let waker = std::task::Waker::from(Arc::new(Unpark(std::thread::current())));
     let (mut relayed, mut failed, mut first, mut last) = (0usize, 0u64, None::<u64>, None::<Instant>);
@@ -284,7 +289,8 @@ fn rustdds_relay(domain: u16, n: usize, ready: Option<&Path>) -> anyhow::Result<
         }
     }
     let cpu_ns = thread_cpu_ns() - first.unwrap_or(0);
-    println!("{}", json!({ "relayed": relayed, "write_failures": failed, "relay_thread_cpu_ns": cpu_ns }));
+    let (all, threads) = cpu_per_message(&cpu0, &threads_cpu_ns(pid), pid, false, relayed.max(1) as f64);
+    println!("{}", json!({ "relayed": relayed, "write_failures": failed, "relay_thread_cpu_ns": cpu_ns, "all_threads_cpu_ns_per_message": all, "threads_cpu_ns_per_message": threads }));
     // Reliable resends to a late acknowledgement.
     std::thread::sleep(Duration::from_secs(1));
     Ok(())
@@ -531,7 +537,6 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
             .stdin(Stdio::null())
             .spawn()?,
     );
-    let rdds_pid = rdds.0.id();
     wait_file(&rdds_ready);
     let rust = match talker_kind {
         Talker::Rclpy => {
@@ -573,7 +578,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     // listener(s), the two relays and the emulator.
     let subscribers = if rust.is_some() { 5 } else { 4 };
     let steal = netfi::host::StealTimer::start();
-    let (cpu0, rdds_cpu0) = (threads_cpu_ns(pid), threads_cpu_ns(rdds_pid));
+    let cpu0 = threads_cpu_ns(pid);
     match talker_kind {
         Talker::Rclpy => {
             let mut t = node(&["talker.py", "/bench", &n, "--rate-hz", &a.rate_hz.to_string(), "--wait-subs", &subscribers.to_string(), "--depth", "1000"], "talker.log")?;
@@ -581,7 +586,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         }
         Talker::Rust => rust_talker(domain, messages, a.rate_hz, subscribers).join().map_err(|_| anyhow::anyhow!("the Rust talker panicked"))??,
     }
-    let (cpu1, rdds_cpu1) = (threads_cpu_ns(pid), threads_cpu_ns(rdds_pid));
+    let cpu1 = threads_cpu_ns(pid);
     let steal = steal.stop();
     wait(&mut emu, "the emulator", Duration::from_secs(60))?;
     wait(&mut relay, "the rclpy relay node", Duration::from_secs(60))?;
@@ -596,20 +601,20 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     // The emulator's loop (its main thread) busy-polls: its share is the
     // busy time it reports, not its CPU time.
     let (emulator_other, emulator_threads) = cpu_per_message(&cpu0, &cpu1, pid, true, delivered);
-    let (rdds_all, rdds_threads) = cpu_per_message(&rdds_cpu0, &rdds_cpu1, rdds_pid, false, rdds_relayed);
     let mut out = json!({
         "talker": if talker_kind == Talker::Rclpy { "rclpy" } else { "rust" },
         "messages": messages,
         "rate_hz": a.rate_hz,
         "rclpy_listener": routes(&received(&direct_csv), &received(&through_csv), &relayed(&relay_csv, &direct_csv), &relayed(&rdds_csv, &direct_csv)),
         "emulator_loop_busy_ns_per_message": e["busy"]["busy_ns_per_frame"],
+        "emulator_busy": e["busy"],
         "emulator_other_threads_cpu_ns_per_message": emulator_other,
         "emulator_threads_cpu_ns_per_message": emulator_threads,
         "release_lateness_ns": e["release_lateness_ns"],
         "rustdds_relay": r,
         "rustdds_relay_thread_cpu_ns_per_message": r["relay_thread_cpu_ns"].as_f64().unwrap_or(f64::NAN) / rdds_relayed,
-        "rustdds_relay_all_threads_cpu_ns_per_message": rdds_all,
-        "rustdds_relay_threads_cpu_ns_per_message": rdds_threads,
+        "rustdds_relay_all_threads_cpu_ns_per_message": r["all_threads_cpu_ns_per_message"],
+        "rustdds_relay_threads_cpu_ns_per_message": r["threads_cpu_ns_per_message"],
         "steal_fraction": steal.fraction,
         "steal_ms": steal.ms,
     });
