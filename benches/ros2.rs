@@ -15,7 +15,7 @@
 //!   emulator keeps the source timestamp): for rclpy both are taken by the
 //!   DDS layer (Fast DDS's), so neither Python's executor nor its timers
 //!   are in it; the Rust subscriber polls every 20 µs and takes its time
-//!   when it takes the message. Reported: p50 and p99 of each route and of
+//!   when it takes the message. Reported: p50, p99 and max of each route and of
 //!   their difference, message for message (`added`: what netfi adds).
 //!   Beside netfi, in the same run, two reference relays take `/bench`
 //!   from the same talker: a plain rclpy relay node
