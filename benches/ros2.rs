@@ -1,8 +1,8 @@
 //! What the emulator adds between ROS 2 nodes, and what relaying a message
 //! costs it.
 //!
-//! `cargo bench --bench ros2` (about half a minute; `-- --quick` for a few
-//! seconds) measures, in one run:
+//! `cargo bench --bench ros2` (about a minute; `-- --quick` for half a
+//! minute) measures, in one run:
 //!
 //! - **Latency.** A talker publishes on `/bench` at `--rate-hz`; one
 //!   subscriber takes `/bench` straight from it (the direct hop), another
