@@ -160,8 +160,8 @@ fn allocation_part(messages: usize) -> anyhow::Result<Value> {
     let topic = TopicName::parse("/alloc")?;
     let ty = TypeName::parse("std_msgs/msg/String")?;
     let q = qos::relay(None);
-    let writer = a.writer(&topic, &ty, &q)?;
-    let reader = b.reader(&topic, &ty, &qos::reader(&q))?;
+    let mut writer = a.writer(&topic, &ty, &q)?;
+    let mut reader = b.reader(&topic, &ty, &qos::reader(&q))?;
     let slots = RefCell::new(Slots::new(2, 1024));
     let message = string_cdr("0123456789abcdef");
     std::thread::sleep(Duration::from_secs(2));
@@ -432,14 +432,14 @@ fn rust_listener(domain: u16, n: usize, ready: Arc<AtomicBool>) -> std::thread::
         let mut node = Ros2Node::open(domain)?;
         let ty = TypeName::parse("std_msgs/msg/String")?;
         let q = qos::reader(&qos::relay(None));
-        let readers = [node.reader(&TopicName::parse("/bench")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_out")?, &ty, &q)?];
+        let mut readers = [node.reader(&TopicName::parse("/bench")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_out")?, &ty, &q)?];
         let slots = RefCell::new(Slots::new(1, 1024));
         let slot = slots.borrow_mut().alloc().expect("a slot");
         let mut seen: [Seen; 2] = [Vec::with_capacity(n), Vec::with_capacity(n)];
         ready.store(true, Ordering::Release);
         let (t0, mut last, mut polls) = (Instant::now(), None::<Instant>, 0u64);
         while seen.iter().any(|s| s.len() < n) && !last.is_some_and(|l| l.elapsed() > Duration::from_secs(5)) && t0.elapsed() < Duration::from_secs(600) {
-            for (r, s) in readers.iter().zip(seen.iter_mut()) {
+            for (r, s) in readers.iter_mut().zip(seen.iter_mut()) {
                 while let Some(m) = r.take(&slots, slot)? {
                     let now = unix_ns(rustdds::Timestamp::now()) as i64;
                     if let (Payload::Stored { len }, Some(src)) = (m.payload, m.source) {
@@ -469,7 +469,7 @@ fn rust_talker(domain: u16, n: usize, rate_hz: f64, subscribers: usize) -> std::
     std::thread::spawn(move || {
         let mut node = Ros2Node::open(domain)?;
         let topic = TopicName::parse("/bench")?;
-        let writer = node.writer(&topic, &TypeName::parse("std_msgs/msg/String")?, &qos::relay(None))?;
+        let mut writer = node.writer(&topic, &TypeName::parse("std_msgs/msg/String")?, &qos::relay(None))?;
         let t0 = Instant::now();
         loop {
             node.poll(netfi::clock::now_ns());

@@ -5,7 +5,9 @@
 //!   emulator's busy core), or left to the scheduler.
 //! - The emulator's loop ([`place_loop`]) is pinned to its core; the loop's
 //!   own other threads (trace writers, the control thread: anything that
-//!   is [`KeepOff`]) are moved off that core; with `isolate`, everything
+//!   is [`KeepOff`]) are moved off that core, and with `keep_process_off`
+//!   every other thread of the process too (a DDS library's own threads),
+//!   each listed where it may run ([`ThreadPlace`]) and put back after; with `isolate`, everything
 //!   else that may run elsewhere is moved off it for the run
 //!   ([`super::isolate`]), loudly when it cannot be; with a real-time
 //!   priority the loop runs at SCHED_FIFO, with a warning when the
@@ -16,8 +18,11 @@
 //! What cannot be honoured is said on stderr, prefixed with the role, and
 //! kept in [`Placement::warnings`].
 
-use super::affinity::{keep_current_off, pin_current};
+use super::affinity::{format_list, get_affinity, keep_current_off, pin_current, set_affinity};
 use super::isolate::{isolate, pin_problem, Isolation, IsolationSummary};
+use super::process::{comm, numeric_entries};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
 
 /// One of a loop's own threads that can be moved off the loop's core.
 pub trait KeepOff {
@@ -83,6 +88,24 @@ pub struct LoopPlacement {
     pub isolate: bool,
     /// SCHED_FIFO priority (1–99) for the loop (`--rt-priority`).
     pub rt_priority: Option<i32>,
+    /// Move every other thread of the process off the loop's core, not only
+    /// those it names (a library's threads: RustDDS's receive, discovery
+    /// and send threads), and list where each may run.
+    pub keep_process_off: bool,
+}
+
+/// Threads of the loop's process of one name, and where they may run once
+/// the loop was placed.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ThreadPlace {
+    /// Their name (the kernel's `comm`: at most 15 bytes).
+    pub name: String,
+    /// How many of that name.
+    pub threads: usize,
+    /// The CPUs they may use, as a list (`0,2-3`).
+    pub cpus: String,
+    /// Whether they were moved off the loop's core for the run.
+    pub moved_off_loop_core: bool,
 }
 
 /// How the loop was placed.
@@ -95,12 +118,30 @@ pub struct Placement {
     pub realtime_priority: Option<i32>,
     /// What could not be honoured, as said on stderr.
     pub warnings: Vec<String>,
+    /// The process's other threads and where they may run, with
+    /// `keep_process_off` (else empty).
+    pub threads: Vec<ThreadPlace>,
+    /// The threads moved off the loop's core, with the CPUs each had.
+    moved: Vec<(i32, BTreeSet<usize>)>,
 }
 
 impl Placement {
-    /// Puts back what the isolation moved; its summary for the report.
+    /// Puts back what the isolation moved, and the process's threads moved
+    /// off the loop's core; the isolation's summary for the report.
     pub fn restore(&mut self) -> Option<IsolationSummary> {
+        for (tid, cpus) in self.moved.drain(..) {
+            // A thread gone since is nothing to put back.
+            let _ = set_affinity(tid, &cpus);
+        }
         self.isolation.as_mut().map(Isolation::restore)
+    }
+}
+
+impl Drop for Placement {
+    fn drop(&mut self) {
+        for (tid, cpus) in self.moved.drain(..) {
+            let _ = set_affinity(tid, &cpus);
+        }
     }
 }
 
@@ -122,6 +163,9 @@ pub fn place_loop(role: &str, want: &LoopPlacement, keep_off: &[&dyn KeepOff]) -
                 );
             }
         }
+        if want.keep_process_off {
+            keep_process_off(role, core, &mut placement);
+        }
     }
     // After pinning: the loop's own threads are placed; everything else that
     // may run elsewhere leaves the core until the run ends.
@@ -138,6 +182,38 @@ pub fn place_loop(role: &str, want: &LoopPlacement, keep_off: &[&dyn KeepOff]) -
         placement.realtime_priority = realtime(role, p, &mut placement.warnings);
     }
     Ok(placement)
+}
+
+/// Moves every other thread of this process that may run on `core` and
+/// elsewhere off `core` (each keeps the rest of its own set), remembering
+/// its set to put back; a thread that may run on `core` alone is a warning.
+/// Lists every other thread, by name, where it may run now.
+fn keep_process_off(role: &str, core: usize, placement: &mut Placement) {
+    // SAFETY: gettid has no preconditions.
+    let me = unsafe { libc::gettid() };
+    let mut by: std::collections::BTreeMap<(String, String, bool), usize> = Default::default();
+    for tid in numeric_entries(std::path::Path::new("/proc/self/task")) {
+        let tid = tid as i32;
+        let Some(cpus) = get_affinity(tid).filter(|_| tid != me) else { continue };
+        let name = comm(tid);
+        let mut now = cpus.clone();
+        let mut moved = false;
+        if cpus.contains(&core) {
+            now.remove(&core);
+            if now.is_empty() {
+                warn(placement, role, format!("its thread {name} may run on core {core} only: the loop loses its core whenever that thread runs"));
+                now = cpus.clone();
+            } else if let Err(e) = set_affinity(tid, &now) {
+                warn(placement, role, format!("could not move its thread {name} off core {core} ({e}): the loop loses its core whenever that thread runs"));
+                now = cpus.clone();
+            } else {
+                placement.moved.push((tid, cpus));
+                moved = true;
+            }
+        }
+        *by.entry((name, format_list(&now), moved)).or_default() += 1;
+    }
+    placement.threads = by.into_iter().map(|((name, cpus, moved_off_loop_core), threads)| ThreadPlace { name, threads, cpus, moved_off_loop_core }).collect();
 }
 
 fn warn(placement: &mut Placement, role: &str, warning: String) {
@@ -236,6 +312,46 @@ mod tests {
         assert_eq!(placement.warnings.len(), 1, "{:?}", placement.warnings);
         assert!(placement.warnings[0].starts_with("the control thread could not be kept off core"), "{:?}", placement.warnings);
         assert!(placement.isolation.is_none() && placement.realtime_priority.is_none());
+    }
+
+    /// With `keep_process_off`, another thread of the process that could
+    /// run on the loop's core cannot while the loop is placed, is listed
+    /// by name, and may again once the placement is restored.
+    #[test]
+    fn the_processs_other_threads_leave_the_loops_core_and_come_back() {
+        let mine = get_affinity(0).unwrap();
+        if mine.len() < 2 {
+            eprintln!("skipped: one CPU, no core to keep a thread off");
+            return;
+        }
+        let core = *mine.iter().next_back().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel::<()>();
+        let other = std::thread::Builder::new()
+            .name("netfi-sleeper".into())
+            .spawn(move || {
+                // SAFETY: gettid has no preconditions.
+                let tid = unsafe { libc::gettid() };
+                let _ = rx.recv();
+                tid
+            })
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        let (during, after, threads) = std::thread::spawn(move || {
+            let want = LoopPlacement { core: Some(core), keep_process_off: true, ..Default::default() };
+            let mut p = place_loop("emulator", &want, &[]).unwrap();
+            let sleeper: Vec<i32> = numeric_entries(std::path::Path::new("/proc/self/task")).into_iter().map(|t| t as i32).filter(|&t| comm(t) == "netfi-sleeper").collect();
+            let during = get_affinity(sleeper[0]).unwrap();
+            p.restore();
+            (during, get_affinity(sleeper[0]).unwrap(), p.threads.clone())
+        })
+        .join()
+        .unwrap();
+        tx.send(()).unwrap();
+        other.join().unwrap();
+        assert!(!during.contains(&core) && !during.is_empty(), "{during:?}");
+        assert_eq!(after, mine, "put back");
+        let t = threads.iter().find(|t| t.name == "netfi-sleeper").expect("listed");
+        assert!(t.moved_off_loop_core && t.cpus == format_list(&during), "{t:?}");
     }
 
     /// `--isolate` without a core to clear is said, and reported as not

@@ -150,7 +150,7 @@ fn malformed_empty_and_oversized_messages_from_a_raw_dds_writer_are_counted_drop
     // bytes it is given as PoseStamped.
     let mut node = Ros2Node::open(c.domain).unwrap();
     let topic = TopicName::parse("/in").unwrap();
-    let writer = node.writer(&topic, &TypeName::parse("geometry_msgs/msg/PoseStamped").unwrap(), &qos::relay(None)).unwrap();
+    let mut writer = node.writer(&topic, &TypeName::parse("geometry_msgs/msg/PoseStamped").unwrap(), &qos::relay(None)).unwrap();
     let mut emu = c.emulator(&["--scenario", "Normal", "--ros2-topic", "/in=/out", "--ros2-max-bytes", "512"]);
     // The emulator's reader, seen from here.
     let t0 = Instant::now();

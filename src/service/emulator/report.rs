@@ -18,6 +18,8 @@ pub struct Run<'a> {
     pub end: &'a LoopEnd,
     pub core: Option<usize>,
     pub realtime_priority: Option<i32>,
+    /// The process's other threads and where they ran.
+    pub threads: Vec<crate::host::placement::ThreadPlace>,
     pub steal: crate::host::Steal,
 }
 
@@ -50,6 +52,7 @@ pub fn lane_report(fwd: PathReport<ForwardExtra>, paths: BTreeMap<String, serde_
         seed: fwd.seed,
         core: run.core,
         realtime_priority: run.realtime_priority,
+        threads: run.threads.clone(),
         isolation: lane.isolation,
         queue_order: fwd.queue_order,
         queue_capacity: fwd.queue_capacity,

@@ -80,7 +80,7 @@ pub fn run<F: ForwardChannel + 'static>(
     let end = spin::spin(&mut lanes, look, control.as_mut().map(|(p, _)| p));
     let events = control.map(|(_, h)| h.finish()).unwrap_or_default();
     let isolation = placement.restore();
-    let run = report::Run { end: &end, core: cfg.core, realtime_priority: placement.realtime_priority, steal: steal_timer.stop() };
+    let run = report::Run { end: &end, core: cfg.core, realtime_priority: placement.realtime_priority, threads: std::mem::take(&mut placement.threads), steal: steal_timer.stop() };
     let dead = std::mem::take(&mut reaper.dead);
     let mut lane0 = Some((isolation, events));
     let mut reports = Vec::with_capacity(lanes.len());
@@ -206,6 +206,8 @@ fn place<F: ForwardChannel + 'static>(cfg: &EmulatorConfig, lanes: &[Lane<F>], c
         threads.push(Box::new(KeepOffFn("the control thread", |c| h.keep_off_core(c))));
     }
     let keep_off: Vec<&dyn KeepOff> = threads.iter().map(|t| t.as_ref()).collect();
-    let want = LoopPlacement { core: cfg.core, isolate: cfg.isolate, rt_priority: cfg.rt_priority };
+    // Every thread of the emulator's process off the loop's core, a DDS
+    // library's own among them.
+    let want = LoopPlacement { core: cfg.core, isolate: cfg.isolate, rt_priority: cfg.rt_priority, keep_process_off: true };
     place_loop("emulator", &want, &keep_off)
 }

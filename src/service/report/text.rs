@@ -93,6 +93,14 @@ impl RunReport {
         if let Some(i) = self.emulator.as_ref().and_then(|e| e.isolation.as_ref()) {
             s += &format!("isolation  {i}\n");
         }
+        if let Some(e) = self.emulator.as_ref().filter(|e| !e.threads.is_empty()) {
+            let each: Vec<String> = e.threads.iter().map(|t| format!("{}{} on {}", t.name, if t.threads > 1 { format!(" ×{}", t.threads) } else { String::new() }, t.cpus)).collect();
+            let moved = match (e.core, e.threads.iter().any(|t| t.moved_off_loop_core)) {
+                (Some(c), true) => format!(" (moved off the loop's core {c} for the run)"),
+                _ => String::new(),
+            };
+            s += &format!("threads    the emulator's: {}{moved}\n", each.join(", "));
+        }
         s
     }
 

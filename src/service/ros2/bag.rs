@@ -215,7 +215,7 @@ pub fn record(a: &RecordArgs) -> Result<u64, BagError> {
     let mut data = Vec::with_capacity(a.max_bytes + 4);
     'run: loop {
         let mut any = false;
-        for (reader, channel) in &readers {
+        for (reader, channel) in &mut readers {
             while let Some(t) = reader.take(&slots, slot)? {
                 any = true;
                 let Payload::Stored { .. } = t.payload else {

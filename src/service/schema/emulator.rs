@@ -142,6 +142,11 @@ pub struct EmulatorProcess {
     pub core: Option<usize>,
     /// SCHED_FIFO priority the loop ran at, if any.
     pub realtime_priority: Option<i32>,
+    /// The process's other threads (trace writers, the control thread, a
+    /// DDS library's threads), by name, and the CPUs they could use: off
+    /// the loop's core where another one was there.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub threads: Vec<crate::host::placement::ThreadPlace>,
     /// What was moved off the loop's core for the run (`--isolate`), and
     /// put back after.
     #[serde(default)]

@@ -29,4 +29,4 @@ pub mod senders;
 pub use args::{Ros2Args, DEFAULT_MAX_BYTES};
 pub use names::{NameError, TopicName, TypeName};
 pub use node::{GraphEvent, Happened, OpenError, Remote, Role, Ros2Node};
-pub use port::{unix_ns, Payload, Reader, Slots, TakeError, Taken, WriteFailure, Writer};
+pub use port::{unix_ns, OutBuffers, Payload, Reader, Slots, TakeError, Taken, WriteFailure, Writer};

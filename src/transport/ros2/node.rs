@@ -222,7 +222,7 @@ impl Ros2Node {
             .subscriber
             .create_simple_datareader_no_key::<super::port::Payload, RawCdr>(&t, Some(q.clone()))
             .map_err(|e| OpenError::Endpoint { what: "reader", topic: topic.to_string(), reason: e.to_string() })?;
-        Ok(Reader { inner, topic: topic.to_string() })
+        Ok(Reader::new(inner, topic.to_string()))
     }
 
     /// A writer of `topic`'s messages of `type_name`, offering `q` (a
@@ -234,7 +234,7 @@ impl Ros2Node {
             .publisher
             .create_datawriter_no_key::<rustdds::bytes::Bytes, RawOut>(&t, Some(q))
             .map_err(|e| OpenError::Endpoint { what: "writer", topic: topic.to_string(), reason: e.to_string() })?;
-        Ok(Writer { inner, topic: topic.to_string() })
+        Ok(Writer::new(inner, topic.to_string()))
     }
 
     /// The remote endpoints of `topic` in `role` known now.

@@ -8,11 +8,18 @@
 //! allocates on receive (its cache change, its buffers) and on send (the
 //! payload it keeps for resends, its cache change), and its reader takes a
 //! lock on its cache. What netfi does around it allocates nothing: the
-//! decoder writes into a slot fixed at start-up.
+//! decoder writes into a slot fixed at start-up, the writer copies into
+//! buffers it reuses once the DDS layer has let go of them ([`OutBuffers`]),
+//! and the reader's cache is looked at only after the DDS layer said it
+//! changed (a flag its receive thread sets), not on every turn of the loop.
 
 use rustdds::no_key::{Decode, DeserializerAdapter, SerializerAdapter};
+use rustdds::bytes::{Bytes, BytesMut};
 use rustdds::{RTPSEntity, RepresentationIdentifier, Timestamp, GUID};
 use std::cell::RefCell;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::task::{Wake, Waker};
 
 /// Serialized messages held by the emulator, in slots of a fixed size
 /// allocated once. A slot is taken for each message the reader hands over
@@ -197,14 +204,14 @@ impl<'de> Decode<'de, Payload> for IntoSlot<'_> {
 /// The writer's adapter: a message's serialized bytes, as they are.
 pub struct RawOut;
 
-impl SerializerAdapter<rustdds::bytes::Bytes> for RawOut {
+impl SerializerAdapter<Bytes> for RawOut {
     type Error = Never;
 
     fn output_encoding() -> RepresentationIdentifier {
         RELAYED
     }
 
-    fn to_bytes(value: &rustdds::bytes::Bytes) -> Result<rustdds::bytes::Bytes, Never> {
+    fn to_bytes(value: &Bytes) -> Result<Bytes, Never> {
         // A reference count, not a copy.
         Ok(value.clone())
     }
@@ -241,16 +248,56 @@ pub struct TakeError {
     pub source: rustdds::dds::ReadError,
 }
 
+/// Set by the DDS layer's receive thread when a reader's cache changed.
+struct Changed(AtomicBool);
+
+impl Wake for Changed {
+    fn wake(self: Arc<Self>) {
+        self.0.store(true, Ordering::Release);
+    }
+
+    fn wake_by_ref(self: &Arc<Self>) {
+        self.0.store(true, Ordering::Release);
+    }
+}
+
 /// The emulator's reader of one topic.
+///
+/// The DDS layer's receive thread puts a message in the reader's cache
+/// under a lock and then wakes the reader's waker, once (it takes it). A
+/// loop that took the lock on every turn to find the cache empty would
+/// contend with that thread on every message; this reader looks at one
+/// flag instead, and takes the lock only from the flag's setting until the
+/// cache is empty again, setting the waker anew before it looks (a message
+/// that comes after the look then sets the flag).
 pub struct Reader {
-    pub(super) inner: rustdds::no_key::SimpleDataReader<Payload, RawCdr>,
-    pub(super) topic: String,
+    inner: rustdds::no_key::SimpleDataReader<Payload, RawCdr>,
+    topic: String,
+    changed: Arc<Changed>,
+    waker: Waker,
+    /// The cache may hold a message not yet taken.
+    looking: bool,
 }
 
 impl Reader {
+    pub(super) fn new(inner: rustdds::no_key::SimpleDataReader<Payload, RawCdr>, topic: String) -> Reader {
+        // Set: what came before the waker was first set is looked for.
+        let changed = Arc::new(Changed(AtomicBool::new(true)));
+        Reader { inner, topic, waker: Waker::from(changed.clone()), changed, looking: false }
+    }
+
     /// Takes the next message, if one waits, into `slot` of `slots`.
     #[inline]
-    pub fn take(&self, slots: &RefCell<Slots>, slot: u32) -> Result<Option<Taken>, TakeError> {
+    pub fn take(&mut self, slots: &RefCell<Slots>, slot: u32) -> Result<Option<Taken>, TakeError> {
+        if !self.looking {
+            if !self.changed.0.load(Ordering::Acquire) {
+                return Ok(None);
+            }
+            self.changed.0.store(false, Ordering::Relaxed);
+            // Before the look: a message put in after it wakes this waker.
+            self.inner.set_waker(Some(self.waker.clone()));
+            self.looking = true;
+        }
         match self.inner.try_take_one_with(IntoSlot { slots, slot }) {
             Ok(Some(c)) => Ok(Some(Taken {
                 payload: c.sample,
@@ -258,15 +305,21 @@ impl Reader {
                 sequence: i64::from(c.sequence_number),
                 source: c.write_options.source_timestamp(),
             })),
-            Ok(None) => Ok(None),
+            Ok(None) => {
+                self.looking = false;
+                Ok(None)
+            }
             Err(source) => Err(TakeError { topic: self.topic.clone(), source }),
         }
     }
 
-    /// Empties the reader's wake-up channel (off the hot path: the emulator
-    /// polls, it does not wait on it).
-    pub fn drain_notifications(&self) {
+    /// Empties the reader's wake-up channel and has the next take look at
+    /// the cache whatever the flag says (off the hot path, every few
+    /// thousand turns: a change the DDS layer did not wake for, such as a
+    /// reliable gap filled, is found then).
+    pub fn drain_notifications(&mut self) {
         self.inner.drain_read_notifications();
+        self.looking = true;
     }
 
     /// The reader's GUID.
@@ -295,19 +348,80 @@ pub enum WriteFailure {
     },
 }
 
+/// The buffers the writer copies messages into: a ring of arenas, each a
+/// [`BytesMut`] a message is appended to and split off as [`Bytes`] for the
+/// DDS layer, which keeps it until it may no longer have to resend it. An
+/// arena is reused once every message split off it has been let go of; a
+/// new one is allocated only while the DDS layer holds on to more than the
+/// arenas so far (its history), so in steady state nothing is allocated.
+pub struct OutBuffers {
+    ring: Vec<BytesMut>,
+    at: usize,
+}
+
+impl Default for OutBuffers {
+    fn default() -> OutBuffers {
+        OutBuffers::new()
+    }
+}
+
+impl OutBuffers {
+    /// Arenas of at least this many bytes.
+    pub const ARENA_BYTES: usize = 64 * 1024;
+
+    /// Two arenas of [`ARENA_BYTES`](Self::ARENA_BYTES); a message larger
+    /// than an arena gets one of its own size, kept for the next.
+    pub fn new() -> OutBuffers {
+        OutBuffers { ring: (0..2).map(|_| BytesMut::with_capacity(Self::ARENA_BYTES)).collect(), at: 0 }
+    }
+
+    /// `message`, copied into an arena.
+    #[inline]
+    pub fn copy(&mut self, message: &[u8]) -> Bytes {
+        let n = message.len();
+        for _ in 0..self.ring.len() {
+            let a = &mut self.ring[self.at];
+            // Room at its end, or every message split off it let go of.
+            if a.try_reclaim(n) {
+                a.extend_from_slice(message);
+                return a.split().freeze();
+            }
+            self.at = (self.at + 1) % self.ring.len();
+        }
+        // After the newest, before the oldest: the ring stays in the order
+        // its arenas were filled, which is the order they come free.
+        let mut a = BytesMut::with_capacity(Self::ARENA_BYTES.max(n));
+        a.extend_from_slice(message);
+        let b = a.split().freeze();
+        self.at += 1;
+        self.ring.insert(self.at, a);
+        b
+    }
+
+    /// Arenas in the ring.
+    pub fn arenas(&self) -> usize {
+        self.ring.len()
+    }
+}
+
 /// The emulator's writer of one topic.
 pub struct Writer {
-    pub(super) inner: rustdds::no_key::DataWriter<rustdds::bytes::Bytes, RawOut>,
-    pub(super) topic: String,
+    inner: rustdds::no_key::DataWriter<Bytes, RawOut>,
+    topic: String,
+    buffers: OutBuffers,
 }
 
 impl Writer {
+    pub(super) fn new(inner: rustdds::no_key::DataWriter<Bytes, RawOut>, topic: String) -> Writer {
+        Writer { inner, topic, buffers: OutBuffers::new() }
+    }
+
     /// Writes `message` (serialized, without its encapsulation header),
     /// stamped with `source` (the original writer's time, so that the
     /// receiver's message info says when the message was first sent).
     #[inline]
-    pub fn write(&self, message: &[u8], source: Option<Timestamp>) -> Result<(), WriteFailure> {
-        let bytes = rustdds::bytes::Bytes::copy_from_slice(message);
+    pub fn write(&mut self, message: &[u8], source: Option<Timestamp>) -> Result<(), WriteFailure> {
+        let bytes = self.buffers.copy(message);
         match self.inner.write(bytes, source) {
             Ok(()) => Ok(()),
             Err(rustdds::dds::WriteError::WouldBlock { .. }) => Err(WriteFailure::WindowFull { topic: self.topic.clone() }),
@@ -318,6 +432,11 @@ impl Writer {
     /// The writer's GUID.
     pub fn guid(&self) -> GUID {
         self.inner.guid()
+    }
+
+    /// The arenas its messages were copied into.
+    pub fn arenas(&self) -> usize {
+        self.buffers.arenas()
     }
 }
 
