@@ -2,14 +2,16 @@
 //! costs it.
 //!
 //! `cargo bench --bench ros2` (about a minute; `-- --quick` for half a
-//! minute) measures, in one run:
+//! minute; `-- --netfi PATH` relays through another build's emulator, for
+//! an A/B on the same machine) measures, in one run:
 //!
 //! - **Latency.** A talker publishes on `/bench` at `--rate-hz`; one
 //!   subscriber takes `/bench` straight from it (the direct hop), another
 //!   takes `/bench_out` through `netfi emulator --scenario Normal
 //!   --ros2-topic /bench=/bench_out`: the same messages at the same moments
 //!   on both routes. Two runs: an rclpy talker, with rclpy listeners and a
-//!   Rust subscriber (RustDDS, in this process) on both topics; then a Rust
+//!   Rust subscriber (RustDDS, in this process) on both topics (and on the
+//!   RustDDS relay's, so that both relays write to the same subscribers); then a Rust
 //!   talker (RustDDS, in this process) with the rclpy listeners. A
 //!   message's latency is its reception less its source timestamp (the
 //!   emulator keeps the source timestamp): for rclpy both are taken by the
@@ -119,6 +121,10 @@ struct Args {
     python: Option<PathBuf>,
     #[arg(long, default_value = "target/netfi-bench/ros2")]
     out: PathBuf,
+    /// The netfi whose emulator relays (default: this build's), for an A/B
+    /// against another build on the same machine.
+    #[arg(long, value_name = "PATH")]
+    netfi: Option<PathBuf>,
     /// Run as the minimal RustDDS relay in domain D (a child of the bench):
     /// `/bench` → `/bench_rdds` until --messages came, or none for 5 s
     /// after the first.
@@ -423,19 +429,21 @@ fn index_of(cdr: &[u8]) -> Option<u64> {
     text.trim_end_matches('\0').split(' ').next()?.parse().ok()
 }
 
-/// A Rust subscriber of `/bench` (direct) and `/bench_out` (through the
-/// emulator) in a thread of this process, until `n` messages came on each
-/// or none for 5 s after the first: what each saw. A message's latency is when the thread
+/// A Rust subscriber of `/bench` (direct), `/bench_out` (through the
+/// emulator) and `/bench_rdds` (through the minimal RustDDS relay, so that
+/// both relays write to the same subscribers) in a thread of this process,
+/// until `n` messages came on each or none for 5 s after the first: what
+/// each saw. A message's latency is when the thread
 /// took it (it polls every 20 µs) less its source timestamp.
-fn rust_listener(domain: u16, n: usize, ready: Arc<AtomicBool>) -> std::thread::JoinHandle<anyhow::Result<[Seen; 2]>> {
+fn rust_listener(domain: u16, n: usize, ready: Arc<AtomicBool>) -> std::thread::JoinHandle<anyhow::Result<[Seen; 3]>> {
     std::thread::spawn(move || {
         let mut node = Ros2Node::open(domain)?;
         let ty = TypeName::parse("std_msgs/msg/String")?;
         let q = qos::reader(&qos::relay(None));
-        let mut readers = [node.reader(&TopicName::parse("/bench")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_out")?, &ty, &q)?];
+        let mut readers = [node.reader(&TopicName::parse("/bench")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_out")?, &ty, &q)?, node.reader(&TopicName::parse("/bench_rdds")?, &ty, &q)?];
         let slots = RefCell::new(Slots::new(1, 1024));
         let slot = slots.borrow_mut().alloc().expect("a slot");
-        let mut seen: [Seen; 2] = [Vec::with_capacity(n), Vec::with_capacity(n)];
+        let mut seen: [Seen; 3] = [Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n)];
         ready.store(true, Ordering::Release);
         let (t0, mut last, mut polls) = (Instant::now(), None::<Instant>, 0u64);
         while seen.iter().any(|s| s.len() < n) && !last.is_some_and(|l| l.elapsed() > Duration::from_secs(5)) && t0.elapsed() < Duration::from_secs(600) {
@@ -565,7 +573,7 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     emulator.placement.no_pin = cores < 2;
     let f = std::fs::File::create(dir.join("emulator.log"))?;
     let mut emu = Kill(
-        Command::new(env!("CARGO_BIN_EXE_netfi"))
+        Command::new(a.netfi.clone().unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_netfi"))))
             .arg("emulator")
             .args(emulator.to_argv())
             .env(UDP_ONLY.0, UDP_ONLY.1)
@@ -593,8 +601,14 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     wait(&mut rdds, "the RustDDS relay", Duration::from_secs(60))?;
     let r: Value = serde_json::from_str(std::fs::read_to_string(&rdds_out)?.trim())?;
     let rdds_relayed = r["relayed"].as_u64().unwrap_or(0).max(1) as f64;
-    for (l, what) in listeners.iter_mut().zip(["the direct listener", "the listener through the emulator", "the listener through the rclpy relay node", "the listener through the RustDDS relay"]) {
-        wait(l, what, Duration::from_secs(60))?;
+    let whats = ["the direct listener", "the listener through the emulator", "the listener through the rclpy relay node", "the listener through the RustDDS relay"];
+    for ((l, what), csv) in listeners.iter_mut().zip(whats).zip([&direct_csv, &through_csv, &relay_csv, &rdds_csv]) {
+        // A listener that wrote what it received but hangs in rclpy's
+        // shutdown is stopped (by its drop), not a failed run.
+        if let Err(e) = wait(l, what, Duration::from_secs(60)) {
+            anyhow::ensure!(!rows(csv).is_empty(), e);
+            eprintln!("{e}, after writing what it received: stopped");
+        }
     }
     let e: Value = serde_json::from_slice(&std::fs::read(dir.join("out/emulator.json"))?)?;
     let delivered = e["frames"]["delivered"].as_u64().unwrap_or(0).max(1) as f64;
@@ -611,6 +625,8 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         "emulator_other_threads_cpu_ns_per_message": emulator_other,
         "emulator_threads_cpu_ns_per_message": emulator_threads,
         "release_lateness_ns": e["release_lateness_ns"],
+        "emulator_core": e["core"],
+        "emulator_threads_placement": e["threads"],
         "rustdds_relay": r,
         "rustdds_relay_thread_cpu_ns_per_message": r["relay_thread_cpu_ns"].as_f64().unwrap_or(f64::NAN) / rdds_relayed,
         "rustdds_relay_all_threads_cpu_ns_per_message": r["all_threads_cpu_ns_per_message"],
@@ -619,8 +635,9 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
         "steal_ms": steal.ms,
     });
     if let Some(h) = rust {
-        let [direct, through] = h.join().map_err(|_| anyhow::anyhow!("the Rust listener panicked"))??;
+        let [direct, through, rdds] = h.join().map_err(|_| anyhow::anyhow!("the Rust listener panicked"))??;
         out["rust_listener"] = both(&direct, &through);
+        out["rust_listener"]["through_rustdds_relay"] = summary(rdds.iter().map(|d| d.1).collect());
     }
     Ok(out)
 }
