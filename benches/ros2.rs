@@ -121,6 +121,10 @@ struct Args {
     python: Option<PathBuf>,
     #[arg(long, default_value = "target/netfi-bench/ros2")]
     out: PathBuf,
+    /// Leave the emulator's core as it is (by default it is cleared for the
+    /// run, as `netfi run` does).
+    #[arg(long)]
+    no_isolate: bool,
     /// The netfi whose emulator relays (default: this build's), for an A/B
     /// against another build on the same machine.
     #[arg(long, value_name = "PATH")]
@@ -571,6 +575,8 @@ fn route(a: &Args, py: &Path, talker_kind: Talker, messages: usize, domain: u16)
     emulator.out = dir.join("out");
     emulator.placement.core = (cores >= 2).then(|| cores - 1);
     emulator.placement.no_pin = cores < 2;
+    // As `netfi run` places it: its core cleared of everything else.
+    emulator.placement.isolate = cores >= 2 && !a.no_isolate;
     let f = std::fs::File::create(dir.join("emulator.log"))?;
     let mut emu = Kill(
         Command::new(a.netfi.clone().unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_netfi"))))

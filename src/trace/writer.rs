@@ -20,8 +20,36 @@ use std::time::{Duration, Instant};
 /// Rows the writer has room for at first when streaming.
 const PENDING_ROWS_START: usize = 4096;
 
-/// How long the writer sleeps between two looks at the ring.
-const TICK: Duration = Duration::from_millis(5);
+/// The shortest and the longest the writer sleeps between two looks at
+/// the ring.
+const TICK_MIN: Duration = Duration::from_millis(5);
+const TICK_MAX: Duration = Duration::from_millis(100);
+
+/// How long the writer sleeps: long, because each wake takes a core from
+/// whatever else runs there (at a wake every 5 ms, a sockperf ping-pong
+/// through the UDP bridge lost about 4 µs at p99 to the two writers on its
+/// core), but no longer than would fill a quarter of the ring at the rate
+/// just seen. A jump from nothing to 10⁶ frames/s within the longest sleep
+/// (2·10⁵ events) still fits in the ring. [`TraceWriter`]'s `close` and
+/// `finish` wake it at once.
+struct Pace {
+    last: Instant,
+}
+
+impl Pace {
+    fn new() -> Pace {
+        Pace { last: Instant::now() }
+    }
+
+    /// Sleeps after a look that found `events` waiting.
+    fn sleep(&mut self, events: usize) {
+        let now = Instant::now();
+        let per_s = events as f64 / now.duration_since(self.last).as_secs_f64().max(1e-6);
+        self.last = now;
+        let quarter = Duration::from_secs_f64((super::ring::RING_CAPACITY / 4) as f64 / per_s.max(1.0));
+        std::thread::park_timeout(quarter.clamp(TICK_MIN, TICK_MAX));
+    }
+}
 
 /// Why the trace could not be written whole. Each names the file as it is
 /// on disk: cut, it keeps its `.partial` name.
@@ -119,8 +147,10 @@ fn writer(mut rx: rtrb::Consumer<TraceEvent>, out_rx: mpsc::Receiver<Output>, st
 /// writer is stopped (or its handle dropped) first: nowhere to write, the
 /// rows are dropped with the thread.
 fn wait_for_files(rx: &mut rtrb::Consumer<TraceEvent>, out_rx: &mpsc::Receiver<Output>, stop: &AtomicBool, table: &mut Table) -> Option<Output> {
+    let mut pace = Pace::new();
     loop {
         let stopping = stop.load(Ordering::Acquire);
+        let events = rx.slots();
         table.take(rx);
         match out_rx.try_recv() {
             Ok(out) => return Some(out),
@@ -131,7 +161,7 @@ fn wait_for_files(rx: &mut rtrb::Consumer<TraceEvent>, out_rx: &mpsc::Receiver<O
         if stopping {
             return None;
         }
-        std::thread::sleep(TICK);
+        pace.sleep(events);
     }
 }
 
@@ -141,8 +171,10 @@ fn stream(rx: &mut rtrb::Consumer<TraceEvent>, stop: &AtomicBool, table: &mut Ta
     let t0 = Instant::now();
     let mut interval_start = Duration::ZERO;
     let mut last_flush = Instant::now();
+    let mut pace = Pace::new();
     loop {
         let stopping = stop.load(Ordering::Acquire);
+        let events = rx.slots();
         table.take(rx);
         table.drain(stopping, |i, row, copy, forced| csv.row(i, row, copy, forced));
         if stopping || last_flush.elapsed() >= FLUSH_EVERY {
@@ -164,7 +196,7 @@ fn stream(rx: &mut rtrb::Consumer<TraceEvent>, stop: &AtomicBool, table: &mut Ta
         if stopping {
             break;
         }
-        std::thread::sleep(TICK);
+        pace.sleep(events);
     }
 }
 
@@ -320,6 +352,7 @@ impl TraceWriter {
         let paths = hlogs.as_ref().map(|[d, l]| [d.path().to_path_buf(), l.path().to_path_buf()]);
         // The thread is alive until `finish`; a send cannot fail before.
         let _ = tx.send(Output { csv, hlogs });
+        self.thread.thread().unpark();
         Ok(paths)
     }
 
@@ -338,6 +371,7 @@ impl TraceWriter {
     pub fn close(&self) {
         if self.output.is_none() {
             self.stop.store(true, Ordering::Release);
+            self.thread.thread().unpark();
         }
     }
 
@@ -349,6 +383,7 @@ impl TraceWriter {
     pub fn finish(mut self, csv_path: &Path) -> Result<Written, TraceError> {
         self.stream_to(csv_path, None)?;
         self.stop.store(true, Ordering::Release);
+        self.thread.thread().unpark();
         self.thread.join().expect("the trace writer thread panicked")
     }
 }
