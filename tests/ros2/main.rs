@@ -177,6 +177,7 @@ impl Case {
         }
         let e = self.json("emulator.json");
         assert_balanced(&e["frames"]);
+        assert_off_the_loops_core(&e);
         e
     }
 
@@ -342,4 +343,16 @@ pub(crate) fn assert_listener_got_what_was_delivered(t: &[BTreeMap<String, Strin
     let want: Vec<u64> = delivered.iter().map(|r| index(r)).collect();
     let have: Vec<u64> = got.iter().map(|r| r.index).collect();
     assert_eq!(have, want, "the listener got the delivered messages, in release order");
+}
+
+/// A pinned emulator's other threads, RustDDS's among them, are listed in
+/// `emulator.json` and none may run on the loop's core.
+fn assert_off_the_loops_core(e: &Value) {
+    let Some(core) = e["core"].as_u64() else { return };
+    let threads = e["threads"].as_array().unwrap_or_else(|| panic!("no threads listed: {e}"));
+    assert!(threads.iter().any(|t| t["name"].as_str().is_some_and(|n| n.starts_with("RustDDS"))), "RustDDS's threads not listed: {threads:?}");
+    for t in threads {
+        let cpus = netfi::host::isolate::parse_list(t["cpus"].as_str().unwrap()).unwrap();
+        assert!(!cpus.contains(&(core as usize)), "{t} may run on the loop's core {core}");
+    }
 }
