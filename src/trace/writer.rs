@@ -23,15 +23,16 @@ const PENDING_ROWS_START: usize = 4096;
 /// The shortest and the longest the writer sleeps between two looks at
 /// the ring.
 const TICK_MIN: Duration = Duration::from_millis(5);
-const TICK_MAX: Duration = Duration::from_millis(100);
+const TICK_MAX: Duration = Duration::from_millis(20);
 
 /// How long the writer sleeps: long, because each wake takes a core from
 /// whatever else runs there (at a wake every 5 ms, a sockperf ping-pong
-/// through the UDP bridge lost about 4 µs at p99 to the two writers on its
-/// core), but no longer than would fill a quarter of the ring at the rate
-/// just seen. A jump from nothing to 10⁶ frames/s within the longest sleep
-/// (2·10⁵ events) still fits in the ring. [`TraceWriter`]'s `close` and
-/// `finish` wake it at once.
+/// through the UDP bridge lost about 10 µs at p99 to the two writers on its
+/// core; every 100 ms, the longer batches cost its p99.99 instead), but no
+/// longer than would fill a quarter of the ring at the rate just seen. A
+/// jump from nothing to 10⁶ frames/s within the longest sleep (4·10⁴
+/// events) still fits in the ring. [`TraceWriter`]'s `close` and `finish`
+/// wake it at once.
 struct Pace {
     last: Instant,
 }
