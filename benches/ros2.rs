@@ -403,16 +403,9 @@ fn relayed(csv: &Path, direct: &Path) -> Seen {
     rows(csv).into_iter().filter_map(|(i, _, r)| Some((i, r - source.get(&i)?))).collect()
 }
 
+/// Each row's index and latency (reception less source, ns).
 fn received(csv: &Path) -> Vec<(u64, i64)> {
-    std::fs::read_to_string(csv)
-        .unwrap_or_default()
-        .lines()
-        .skip(1)
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            Some((f[0].parse().ok()?, f[2].parse::<i64>().ok()? - f[1].parse::<i64>().ok()?))
-        })
-        .collect()
+    rows(csv).into_iter().map(|(i, s, r)| (i, r - s)).collect()
 }
 
 /// Who publishes `/bench` in a run.

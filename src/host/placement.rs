@@ -129,19 +129,22 @@ impl Placement {
     /// Puts back what the isolation moved, and the process's threads moved
     /// off the loop's core; the isolation's summary for the report.
     pub fn restore(&mut self) -> Option<IsolationSummary> {
+        self.put_threads_back();
+        self.isolation.as_mut().map(Isolation::restore)
+    }
+
+    /// Gives each thread moved off the loop's core its CPUs back, once.
+    fn put_threads_back(&mut self) {
         for (tid, cpus) in self.moved.drain(..) {
             // A thread gone since is nothing to put back.
             let _ = set_affinity(tid, &cpus);
         }
-        self.isolation.as_mut().map(Isolation::restore)
     }
 }
 
 impl Drop for Placement {
     fn drop(&mut self) {
-        for (tid, cpus) in self.moved.drain(..) {
-            let _ = set_affinity(tid, &cpus);
-        }
+        self.put_threads_back();
     }
 }
 
